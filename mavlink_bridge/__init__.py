@@ -1,0 +1,1 @@
+"""Companion-computer side: MAVLink telemetry in, filtered state and policy setpoints out."""

@@ -1,0 +1,561 @@
+"""Tests of the learner (tssac_core.algos): losses by hand, multiplier, transfer, round trips."""
+
+from __future__ import annotations
+
+import copy
+import io
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from tssac_core.algos import losses
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, qc_limit
+from tssac_core.algos.networks import (
+    LOG_STD_MAX,
+    LOG_STD_MIN,
+    Critic,
+    SquashedGaussianActor,
+    tanh_log_abs_det_jacobian,
+)
+from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
+from tssac_core.algos.sac_lagrangian import (
+    TRANSFERRED_NETWORKS,
+    SacConfig,
+    SacLagrangian,
+    Variant,
+    transfer,
+)
+
+torch.set_num_threads(1)
+
+OBS_DIM, ACT_DIM = 5, 2
+SMALL = (32, 32)
+
+
+def t(*values: float) -> torch.Tensor:
+    return torch.tensor(values, dtype=torch.float64)
+
+
+def small_config(**overrides: object) -> SacConfig:
+    fields: dict[str, object] = dict(hidden_sizes=SMALL, episode_steps=100)
+    fields.update(overrides)
+    return SacConfig(**fields)  # type: ignore[arg-type]
+
+
+def random_batch(seed: int, n: int = 16, obs_dim: int = OBS_DIM) -> ReplaySamples:
+    g = torch.Generator().manual_seed(seed)
+    return ReplaySamples(
+        observations=torch.randn(n, obs_dim, generator=g),
+        actions=torch.rand(n, ACT_DIM, generator=g) * 2 - 1,
+        rewards=torch.randn(n, generator=g),
+        costs=(torch.rand(n, generator=g) < 0.5).float(),
+        next_observations=torch.randn(n, obs_dim, generator=g),
+        terminated=(torch.rand(n, generator=g) < 0.2).float(),
+    )
+
+
+def all_tensors(agent: SacLagrangian) -> dict[str, torch.Tensor]:
+    out = {
+        f"{name}.{key}": value
+        for name, net in agent.networks().items()
+        for key, value in net.state_dict().items()
+    }
+    out["alpha"] = agent.alpha.detach()
+    out["beta"] = agent.multiplier.beta
+    return out
+
+
+def assert_same_tensors(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+# --- losses, against values computed by hand -------------------------------------------------
+
+
+def test_soft_value_and_critic_target_by_hand() -> None:
+    next_q_r = torch.tensor([[1.0, 4.0], [2.0, 3.0]], dtype=torch.float64)  # (members, batch)
+    next_log_pi = t(0.5, -1.0)
+    # min over members: [1, 3]; minus alpha * log_pi = 0.2 * [0.5, -1] -> [0.9, 3.2]
+    v = losses.soft_value(next_q_r, next_log_pi, torch.tensor(0.2, dtype=torch.float64))
+    torch.testing.assert_close(v, t(0.9, 3.2))
+    # r + gamma (1 - terminated) V: [1 + 0.9 * 0.9, 0.5 + 0] = [1.81, 0.5]
+    y = losses.critic_target(t(1.0, 0.5), t(0.0, 1.0), v, gamma=0.9)
+    torch.testing.assert_close(y, t(1.81, 0.5))
+    # A truncated (not terminated) transition bootstraps: terminated = 0 for both.
+    y_trunc = losses.critic_target(t(1.0, 0.5), t(0.0, 0.0), v, gamma=0.9)
+    torch.testing.assert_close(y_trunc, t(1.81, 0.5 + 0.9 * 3.2))
+    # Cost critic: no entropy term, V_c = Q_c(s', a'): c + gamma (1 - d) Q_c' = [1 + 0.9*2, 0]
+    y_c = losses.critic_target(t(1.0, 0.0), t(0.0, 1.0), t(2.0, 7.0), gamma=0.9)
+    torch.testing.assert_close(y_c, t(2.8, 0.0))
+
+
+def test_critic_loss_by_hand() -> None:
+    q = torch.tensor([[1.0, 2.0], [4.0, 1.0]], dtype=torch.float64)
+    target = t(2.0, 1.0)
+    # member 0: 0.5 * mean(1, 1) = 0.5; member 1: 0.5 * mean(4, 0) = 1.0; sum 1.5
+    torch.testing.assert_close(losses.critic_loss(q, target), torch.tensor(1.5, dtype=torch.float64))
+
+
+def test_actor_loss_by_hand() -> None:
+    log_pi = t(-1.0, 0.5)
+    q_r = torch.tensor([[2.0, 1.0], [3.0, 0.0]], dtype=torch.float64)  # min: [2, 0]
+    q_c = t(0.4, 1.0)
+    alpha = torch.tensor(0.1, dtype=torch.float64)
+    # eq. 12 with beta = 2: [-0.1 - 2 + 0.8, 0.05 - 0 + 2] = [-1.3, 2.05] -> mean 0.375
+    loss = losses.actor_loss(log_pi, q_r, q_c, alpha, torch.tensor(2.0, dtype=torch.float64))
+    torch.testing.assert_close(loss, torch.tensor(0.375, dtype=torch.float64))
+    # eq. 16 with beta - xi = 2 - (-1) = 3: [-0.1 - 2 + 1.2, 0.05 + 3] = [-0.9, 3.05] -> 1.075
+    loss16 = losses.actor_loss(log_pi, q_r, q_c, alpha, torch.tensor(3.0, dtype=torch.float64))
+    torch.testing.assert_close(loss16, torch.tensor(1.075, dtype=torch.float64))
+
+
+def test_alpha_loss_by_hand() -> None:
+    alpha = torch.tensor(0.3, dtype=torch.float64, requires_grad=True)
+    log_pi = torch.tensor([-1.0, 0.5], dtype=torch.float64, requires_grad=True)
+    # mean(-log_pi - H0) with H0 = -1: mean(2, 0.5) = 1.25; times 0.3 = 0.375
+    loss = losses.alpha_loss(alpha, log_pi, target_entropy=-1.0)
+    torch.testing.assert_close(loss, torch.tensor(0.375, dtype=torch.float64))
+    loss.backward()
+    # Entropy 0.25 above H0 -> positive gradient -> gradient descent lowers alpha.
+    torch.testing.assert_close(alpha.grad, torch.tensor(1.25, dtype=torch.float64))
+    assert log_pi.grad is None  # log_pi is a constant in eq. 14
+
+
+def test_multiplier_loss_and_damping_by_hand() -> None:
+    beta = torch.tensor(2.0, dtype=torch.float64)
+    qc_mean = torch.tensor(0.5, dtype=torch.float64)
+    # eq. 15: 2 * (0.3 - 0.5) = -0.4 ; eq. 17: 10 * (0.3 - 0.5) = -2
+    torch.testing.assert_close(
+        losses.multiplier_loss(beta, qc_mean, cost_limit=0.3), torch.tensor(-0.4, dtype=torch.float64)
+    )
+    torch.testing.assert_close(
+        losses.damping(qc_mean, cost_limit=0.3, k_d=10.0), torch.tensor(-2.0, dtype=torch.float64)
+    )
+
+
+# --- networks --------------------------------------------------------------------------------
+
+
+def test_tanh_correction_matches_naive_formula_and_stays_finite() -> None:
+    u = torch.linspace(-4.0, 4.0, 81, dtype=torch.float64)
+    naive = torch.log(1.0 - torch.tanh(u) ** 2 + 1e-15)
+    torch.testing.assert_close(tanh_log_abs_det_jacobian(u), naive, atol=1e-9, rtol=1e-9)
+    # Far in the tails the naive float32 formula saturates at log(eps); the identity does not.
+    big = torch.tensor([-30.0, 20.0])
+    exact = torch.tensor([2 * math.log(2) - 60.0, 2 * math.log(2) - 40.0])
+    torch.testing.assert_close(tanh_log_abs_det_jacobian(big), exact)
+    naive32 = torch.log(1.0 - torch.tanh(big) ** 2 + 1e-6)
+    assert (naive32 - exact).abs().min() > 20.0
+
+
+def test_actor_log_prob_is_change_of_variables_of_a_gaussian() -> None:
+    torch.manual_seed(0)
+    actor = SquashedGaussianActor(OBS_DIM, ACT_DIM, SMALL).double()
+    obs = torch.randn(64, OBS_DIM, dtype=torch.float64)
+    action, log_pi = actor(obs)
+    mean, log_std = actor.mean_log_std(obs)
+    u = torch.atanh(action)
+    expected = torch.distributions.Normal(mean, log_std.exp()).log_prob(u) - torch.log(1 - action**2)
+    torch.testing.assert_close(log_pi, expected.sum(-1), atol=1e-6, rtol=1e-6)
+    assert action.shape == (64, ACT_DIM) and log_pi.shape == (64,)
+    det_action, _ = actor(obs, deterministic=True)
+    torch.testing.assert_close(det_action, torch.tanh(mean))
+
+
+def test_actor_log_std_is_clamped() -> None:
+    actor = SquashedGaussianActor(OBS_DIM, ACT_DIM, SMALL)
+    with torch.no_grad():
+        actor.net[-1].bias[ACT_DIM:] = 100.0
+    _, log_std = actor.mean_log_std(torch.zeros(3, OBS_DIM))
+    assert torch.all(log_std == LOG_STD_MAX)
+    with torch.no_grad():
+        actor.net[-1].bias[ACT_DIM:] = -100.0
+    _, log_std = actor.mean_log_std(torch.zeros(3, OBS_DIM))
+    assert torch.all(log_std == LOG_STD_MIN)
+
+
+def test_critic_members_are_independent_mlps() -> None:
+    torch.manual_seed(0)
+    critic = Critic(OBS_DIM, ACT_DIM, SMALL, n_members=2)
+    obs, act = torch.randn(7, OBS_DIM), torch.rand(7, ACT_DIM)
+    q = critic(obs, act)
+    assert q.shape == (2, 7)
+    for m in range(2):  # the same member computed with plain matmuls
+        h = torch.cat([obs, act], -1)
+        for i, (w, b) in enumerate(zip(critic.weights, critic.biases)):
+            h = h @ w[m] + b[m]
+            h = torch.relu(h) if i < len(critic.weights) - 1 else h
+        torch.testing.assert_close(q[m], h.squeeze(-1))
+    assert not torch.allclose(q[0], q[1])
+
+
+# --- the multiplier ---------------------------------------------------------------------------
+
+
+def test_beta_rises_above_limit_falls_below_and_never_goes_negative() -> None:
+    rising = DampedLagrangeMultiplier(cost_limit=0.5, k_d=0.0, beta_init=1.0, lr=0.1)
+    falling = DampedLagrangeMultiplier(cost_limit=0.5, k_d=0.0, beta_init=1.0, lr=0.1)
+    up, down = [1.0], [1.0]
+    for _ in range(10):
+        rising.update(torch.tensor(0.9))  # Q^c above the limit
+        falling.update(0.1)  # below it
+        up.append(float(rising.beta))
+        down.append(float(falling.beta))
+    assert all(b2 > b1 for b1, b2 in zip(up, up[1:]))
+    assert all(b2 < b1 for b1, b2 in zip(down, down[1:]))
+    assert down[-1] == pytest.approx(0.0, abs=1e-6)  # reached 0 ...
+    for _ in range(100):  # ... and stays there however long the constraint holds
+        falling.update(0.1)
+        assert float(falling.beta) >= 0.0
+    assert float(falling.beta) == 0.0
+    # After a long violation Adam's momentum carries beta up a little further, then it falls to 0.
+    betas = []
+    for _ in range(200):
+        rising.update(0.1)
+        betas.append(float(rising.beta))
+    assert min(betas) == 0.0 and betas[-1] == 0.0
+
+
+def test_multiplier_update_matches_its_docstring_rule() -> None:
+    """First Adam step: step = lr * g / (|g| + eps) = lr * sign(g), g = C - qc_mean = -0.4."""
+    m = DampedLagrangeMultiplier(cost_limit=0.5, k_d=0.0, beta_init=1.0, lr=0.1)
+    loss = m.update(0.9)
+    torch.testing.assert_close(loss, torch.tensor(1.0 * (0.5 - 0.9)))
+    torch.testing.assert_close(m.beta, torch.tensor(1.1))
+
+
+def test_xi_sign_and_magnitude() -> None:
+    m = DampedLagrangeMultiplier(cost_limit=0.3, k_d=10.0)
+    torch.testing.assert_close(m.damping(0.5), torch.tensor(-2.0))  # violated: xi < 0
+    torch.testing.assert_close(m.damping(0.1), torch.tensor(2.0))  # satisfied: xi > 0
+    torch.testing.assert_close(m.damping(0.3), torch.tensor(0.0))
+    # violated -> effective multiplier beta - xi exceeds beta by k_d (Q^c - C)
+    torch.testing.assert_close(m.effective(0.5), m.beta + 2.0)
+
+
+def test_effective_multiplier_clamping() -> None:
+    clamped = DampedLagrangeMultiplier(cost_limit=0.3, k_d=10.0, beta_init=0.5)
+    raw = DampedLagrangeMultiplier(cost_limit=0.3, k_d=10.0, beta_init=0.5, clamp_effective=False)
+    # Q^c = 0.1 < C: xi = 2, beta - xi = -1.5
+    torch.testing.assert_close(raw.effective(0.1), torch.tensor(-1.5))
+    torch.testing.assert_close(clamped.effective(0.1), torch.tensor(0.0))
+    # above the limit the clamp changes nothing: 0.5 - 10 * (0.3 - 0.5) = 2.5
+    torch.testing.assert_close(raw.effective(0.5), torch.tensor(2.5))
+    torch.testing.assert_close(clamped.effective(0.5), torch.tensor(2.5))
+
+
+def _toy_lagrangian_run(k_d: float, steps: int = 1500) -> np.ndarray:
+    """max_x r(x) = x s.t. c(x) = x <= 0.5: gradient ascent on x - m c(x), m from eq. 15 (+17)."""
+    m = DampedLagrangeMultiplier(cost_limit=0.5, k_d=k_d, beta_init=0.0, lr=0.05)
+    x, xs = 0.0, []
+    for _ in range(steps):
+        x += 0.05 * (1.0 - float(m.effective(x)))  # d/dx [r(x) - m c(x)] = 1 - m
+        m.update(x)  # the measured cost c(x) = x
+        xs.append(x)
+    return np.array(xs)
+
+
+def test_damped_multiplier_oscillates_less_than_plain_one() -> None:
+    plain = _toy_lagrangian_run(k_d=0.0)
+    damped = _toy_lagrangian_run(k_d=10.0)
+    tail = slice(len(plain) // 2, None)
+    plain_amplitude = np.ptp(plain[tail])
+    damped_amplitude = np.ptp(damped[tail])
+    assert plain_amplitude > 1.0  # the plain multiplier really does oscillate around the limit
+    assert damped_amplitude < 0.01 * plain_amplitude
+    assert abs(damped[tail].mean() - 0.5) < 0.01  # and the damped one settles on it
+
+
+def test_qc_limit() -> None:
+    # 3 * (1 - 0.9^100) / (0.1 * 100)
+    assert qc_limit(3.0, 0.9, 100) == pytest.approx(0.3 * (1 - 0.9**100), rel=1e-12)
+    assert qc_limit(3.0, 0.99, 4000) == pytest.approx(0.075, rel=1e-9)
+    # it is the discounted sum of the budget spent uniformly, C / T per step
+    assert qc_limit(2.0, 0.95, 37) == pytest.approx(sum(0.95**k * 2.0 / 37 for k in range(37)))
+    assert qc_limit(3.0, 0.0, 1) == pytest.approx(3.0)
+    with pytest.raises(ValueError):
+        qc_limit(3.0, 1.0, 10)
+
+
+# --- the learner ----------------------------------------------------------------------------
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ValueError, match="penalty"):
+        SacConfig(variant=Variant.SAC, penalty=-10.0)
+    with pytest.raises(ValueError, match="penalty"):
+        SacConfig(variant=Variant.SAC_PENALTY, penalty=5.0)
+    with pytest.raises(ValueError, match="gamma"):
+        SacConfig(gamma=1.0)
+    cfg = SacConfig()
+    assert cfg.hidden_sizes == (256, 256) and cfg.lr == 1e-3 and cfg.polyak == 0.995
+    assert cfg.alpha_init == 0.0 and cfg.beta_init == 0.0 and cfg.k_d == 10.0
+    assert cfg.beta_lr > cfg.lr
+    assert cfg.qc_limit == pytest.approx(qc_limit(3.0, 0.99, 4000))
+
+
+def test_act_shapes_and_bounds() -> None:
+    torch.manual_seed(0)
+    agent = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    obs = np.random.default_rng(0).normal(size=(4, OBS_DIM)) * 100
+    for deterministic in (True, False):
+        a = agent.act(obs, deterministic)
+        assert a.shape == (4, ACT_DIM) and a.dtype == np.float32
+        assert np.all(np.abs(a) <= 1.0)
+    assert agent.act(obs[0], True).shape == (ACT_DIM,)
+    np.testing.assert_array_equal(agent.act(obs, True), agent.act(obs, True))
+
+
+def test_variants_multiplier_terms() -> None:
+    batch = random_batch(0)
+    stats = {}
+    for variant in Variant:
+        torch.manual_seed(0)
+        agent = SacLagrangian(OBS_DIM, ACT_DIM, small_config(variant=variant, beta_init=0.5))
+        stats[variant] = agent.update(batch)
+    for variant in (Variant.SAC, Variant.SAC_PENALTY):
+        s = stats[variant]
+        assert s.beta == s.xi == s.beta_minus_xi == s.beta_loss == 0.0
+    c = qc_limit(3.0, 0.99, 100)
+    lag = stats[Variant.SAC_LAG]
+    assert lag.beta == pytest.approx(0.5) and lag.xi == 0.0 and lag.beta_minus_xi == pytest.approx(0.5)
+    ts = stats[Variant.TSSAC]
+    assert ts.xi == pytest.approx(10.0 * (c - ts.qc_mean), rel=1e-5)
+    assert ts.beta_minus_xi == pytest.approx(max(0.0, 0.5 - ts.xi), rel=1e-5, abs=1e-7)
+
+
+def test_sac_penalty_is_sac_on_shaped_rewards() -> None:
+    batch = random_batch(1)
+    shaped = batch._replace(rewards=batch.rewards + (-15.0) * batch.costs)
+    torch.manual_seed(3)
+    penalised = SacLagrangian(OBS_DIM, ACT_DIM, small_config(variant=Variant.SAC_PENALTY, penalty=-15.0))
+    torch.manual_seed(3)
+    plain = SacLagrangian(OBS_DIM, ACT_DIM, small_config(variant=Variant.SAC))
+    torch.manual_seed(4)
+    s_pen = penalised.update(batch)
+    torch.manual_seed(4)
+    s_plain = plain.update(shaped)
+    assert s_pen == s_plain
+    torch.manual_seed(4)
+    s_unshaped = SacLagrangian(OBS_DIM, ACT_DIM, small_config(variant=Variant.SAC)).update(batch)
+    assert s_unshaped.q_r_loss != s_pen.q_r_loss
+
+
+def test_two_seeded_runs_are_identical() -> None:
+    def run() -> tuple[list[object], dict[str, torch.Tensor]]:
+        torch.manual_seed(7)
+        agent = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+        stats = [agent.update(random_batch(i)) for i in range(3)]
+        return stats, all_tensors(agent)
+
+    stats_a, tensors_a = run()
+    stats_b, tensors_b = run()
+    assert stats_a == stats_b
+    assert_same_tensors(tensors_a, tensors_b)
+
+
+def test_update_changes_what_it_should() -> None:
+    torch.manual_seed(0)
+    agent = SacLagrangian(OBS_DIM, ACT_DIM, small_config(alpha_init=0.1))
+    before = {k: v.clone() for k, v in all_tensors(agent).items()}
+    agent.update(random_batch(0))
+    after = all_tensors(agent)
+    for key in before:
+        if key == "beta":
+            continue  # may sit at its 0 projection
+        assert not torch.equal(before[key], after[key]), key
+    # Polyak: target <- 0.995 target + 0.005 online (the online weights after their step).
+    for key in before:
+        if "_target." not in key:
+            continue
+        online_key = key.replace("_target.", ".")
+        assert torch.equal(before[key], before[online_key])  # targets start as copies
+        expected = 0.995 * before[key].double() + 0.005 * after[online_key].double()
+        torch.testing.assert_close(after[key].double(), expected, atol=1e-7, rtol=0)
+        assert not torch.allclose(after[key], after[online_key])
+
+
+def test_state_dict_round_trip_gives_same_actions_and_same_next_update() -> None:
+    torch.manual_seed(0)
+    agent = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    for i in range(3):
+        agent.update(random_batch(i))
+    buffer = io.BytesIO()
+    torch.save(agent.state_dict(), buffer)
+    buffer.seek(0)
+    state = torch.load(buffer, weights_only=True)
+
+    torch.manual_seed(123)  # a differently initialised learner
+    restored = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    obs = np.random.default_rng(1).normal(size=(5, OBS_DIM))
+    assert not np.array_equal(restored.act(obs, True), agent.act(obs, True))
+    restored.load_state_dict(state)
+    np.testing.assert_array_equal(restored.act(obs, True), agent.act(obs, True))
+    assert_same_tensors(all_tensors(restored), all_tensors(agent))
+
+    batch = random_batch(10)
+    torch.manual_seed(5)
+    s_agent = agent.update(batch)
+    torch.manual_seed(5)
+    s_restored = restored.update(batch)
+    assert s_agent == s_restored
+    assert_same_tensors(all_tensors(restored), all_tensors(agent))
+
+
+def test_in_memory_load_does_not_share_optimiser_moments() -> None:
+    torch.manual_seed(0)
+    a = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    a.update(random_batch(0))
+    b = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    b.load_state_dict(copy.deepcopy(a.state_dict()))
+    c = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    c.load_state_dict(a.state_dict())  # live references
+    a.update(random_batch(1))  # must not move c's Adam moments
+    assert_same_tensors(
+        {str(i): v for i, v in enumerate(b.critic_optim.state_dict()["state"][0].values())},
+        {str(i): v for i, v in enumerate(c.critic_optim.state_dict()["state"][0].values())},
+    )
+
+
+def test_transfer_copies_networks_and_resets_the_rest() -> None:
+    torch.manual_seed(0)
+    source = SacLagrangian(OBS_DIM, ACT_DIM, small_config(variant=Variant.SAC_LAG))
+    for i in range(2):
+        source.update(random_batch(i))
+    source_state = copy.deepcopy(source.state_dict())
+
+    torch.manual_seed(1)
+    target = SacLagrangian(OBS_DIM, ACT_DIM, small_config(alpha_init=0.2, beta_init=0.5))
+    for i in range(2):
+        target.update(random_batch(10 + i))
+    assert float(target.alpha.detach()) != 0.2 and float(target.multiplier.beta) != 0.5
+    assert len(target.actor_optim.state) > 0
+
+    copied = transfer(target, source_state)
+
+    expected = {
+        f"{name}.{key}" for name in TRANSFERRED_NETWORKS for key in source_state[name]
+    }
+    assert set(copied) == expected and len(copied) == len(expected)
+    target_tensors = all_tensors(target)
+    for name in copied:
+        net, key = name.split(".", 1)
+        assert torch.equal(target_tensors[name], source_state[net][key]), name
+    assert float(target.alpha.detach()) == pytest.approx(0.2)
+    assert float(target.multiplier.beta) == pytest.approx(0.5)
+    for optim in (target.actor_optim, target.critic_optim, target.alpha_optim):
+        assert len(optim.state) == 0
+    assert target.multiplier.state_dict()["optim"]["state"] == {}
+    # training continues from the transferred weights
+    stats = target.update(random_batch(20))
+    assert math.isfinite(stats.actor_loss)
+
+
+def test_learns_a_constrained_bandit() -> None:
+    """One-step task: reward a_0, cost (a_0 + 1) / 2, limit 0.25, so the constrained optimum is
+    a_0 = -0.5; SAC ignores the cost and goes to a_0 -> 1. Terminated every step, so
+    qc_limit(C, gamma, 1) = C and Q^c(s, a) = c(a)."""
+    rng = np.random.default_rng(0)
+    n = 2048
+    buf = ReplayBuffer(1, 1, n)
+    actions = rng.uniform(-1, 1, size=(n, 1))
+    obs = rng.normal(size=(n, 1))
+    buf.add_batch(obs, actions, actions[:, 0], (actions[:, 0] + 1) / 2, obs, np.ones(n))
+    final = {}
+    for variant in (Variant.SAC, Variant.TSSAC):
+        torch.manual_seed(0)
+        cfg = SacConfig(
+            variant=variant,
+            hidden_sizes=(32, 32),
+            lr=3e-3,
+            beta_lr=3e-2,
+            cost_limit=0.25,
+            episode_steps=1,
+            alpha_init=0.05,
+        )
+        agent = SacLagrangian(1, 1, cfg)
+        for _ in range(600):
+            agent.update(buf.sample(128, rng))
+        final[variant] = float(agent.act(np.zeros((1, 1)), deterministic=True)[0, 0])
+    assert final[Variant.SAC] > 0.8
+    assert -0.75 < final[Variant.TSSAC] < -0.25
+
+
+# --- replay buffer ----------------------------------------------------------------------------
+
+
+def _transitions(start: int, n: int) -> tuple[np.ndarray, ...]:
+    idx = np.arange(start, start + n, dtype=np.float32)
+    return (
+        np.stack([idx, -idx], axis=1),  # obs
+        np.stack([idx / 100, idx / 100], axis=1),  # actions
+        idx,  # rewards
+        idx % 2,  # costs
+        np.stack([idx + 0.5, -idx], axis=1),  # next obs
+        (idx % 3 == 0).astype(np.float32),  # terminated
+    )
+
+
+def test_replay_wraps_around() -> None:
+    buf = ReplayBuffer(2, 2, capacity=5)
+    buf.add_batch(*_transitions(0, 3))
+    assert len(buf) == 3
+    buf.add_batch(*_transitions(3, 4))  # 3, 4 at rows 3, 4; 5, 6 wrap to rows 0, 1
+    assert len(buf) == 5
+    state = buf.state_dict()
+    np.testing.assert_array_equal(state["rewards"].numpy(), [5, 6, 2, 3, 4])
+    np.testing.assert_array_equal(state["observations"].numpy()[:, 1], [-5, -6, -2, -3, -4])
+    np.testing.assert_array_equal(state["costs"].numpy(), [1, 0, 0, 1, 0])
+    np.testing.assert_array_equal(state["terminated"].numpy(), [0, 1, 0, 1, 0])
+    assert state["ptr"] == 2
+    buf.add_batch(*_transitions(100, 12))  # more than the capacity: the last 5 survive
+    assert sorted(buf.state_dict()["rewards"].tolist()) == [107, 108, 109, 110, 111]
+
+
+def test_replay_sample_types_and_consistency() -> None:
+    buf = ReplayBuffer(2, 2, capacity=50)
+    buf.add_batch(*_transitions(0, 20))
+    s = buf.sample(64, np.random.default_rng(0))
+    assert isinstance(s, ReplaySamples)
+    assert s.observations.shape == (64, 2) and s.actions.shape == (64, 2)
+    assert s.rewards.shape == s.costs.shape == s.terminated.shape == (64,)
+    assert all(x.dtype == torch.float32 for x in s)
+    # each row is one transition: every field is a function of the same index
+    torch.testing.assert_close(s.observations[:, 0], s.rewards)
+    torch.testing.assert_close(s.next_observations[:, 0], s.rewards + 0.5)
+    torch.testing.assert_close(s.costs, s.rewards % 2)
+    assert s.rewards.max() < 20
+
+
+def test_replay_state_dict_round_trip() -> None:
+    buf = ReplayBuffer(2, 2, capacity=8)
+    buf.add_batch(*_transitions(0, 11))
+    state = buf.state_dict()
+    data = io.BytesIO()
+    torch.save(state, data)
+    data.seek(0)
+    restored = ReplayBuffer(2, 2, capacity=8)
+    restored.load_state_dict(torch.load(data, weights_only=True))
+    assert len(restored) == len(buf)
+    a = buf.sample(32, np.random.default_rng(3))
+    b = restored.sample(32, np.random.default_rng(3))
+    for x, y in zip(a, b):
+        assert torch.equal(x, y)
+    buf.add_batch(*_transitions(50, 3))
+    restored.add_batch(*_transitions(50, 3))
+    for key, value in buf.state_dict().items():
+        if isinstance(value, torch.Tensor):
+            assert torch.equal(value, restored.state_dict()[key]), key
+    # a partly filled buffer saves only its filled rows and loads into a larger one
+    part = ReplayBuffer(2, 2, capacity=100)
+    part.add_batch(*_transitions(0, 4))
+    assert len(part.state_dict()["rewards"]) == 4
+    bigger = ReplayBuffer(2, 2, capacity=200)
+    bigger.load_state_dict(part.state_dict())
+    assert len(bigger) == 4
+    with pytest.raises(ValueError):
+        ReplayBuffer(2, 2, capacity=20).load_state_dict(state)  # was full at capacity 8

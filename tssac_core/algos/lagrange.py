@@ -1,0 +1,118 @@
+"""The cost multiplier of SAC-Lagrangian (eq. 15) and its damped form used by TSSAC (eq. 16-17)."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import torch
+
+from tssac_core.algos import losses
+
+
+def qc_limit(cost_per_episode: float, gamma: float, episode_steps: int) -> float:
+    """Convert a per-episode cost budget C into the scale of Q^c: C (1 - gamma^T) / ((1 - gamma) T).
+
+    Q^c(s, a) estimates a discounted cost-to-go, while the paper's threshold C (Table 3: 3) is an
+    undiscounted sum of costs per episode of T steps. Spending the budget uniformly, C / T per step,
+    gives the discounted sum  sum_{t<T} gamma^t C / T = C (1 - gamma^T) / ((1 - gamma) T), the value
+    the constraint compares Q^c with. The same conversion as WCSAC's `saclag.py` (TU Delft,
+    https://github.com/AlgTUDelft/WCSAC). It is approximate: costs are not uniform along an
+    episode, and Q^c is a cost-to-go from every state of the buffer, not from the start state.
+    """
+    if not 0.0 <= gamma < 1.0:
+        raise ValueError(f"gamma must be in [0, 1), got {gamma}")
+    if episode_steps < 1:
+        raise ValueError(f"episode_steps must be >= 1, got {episode_steps}")
+    return cost_per_episode * (1.0 - gamma**episode_steps) / ((1.0 - gamma) * episode_steps)
+
+
+class DampedLagrangeMultiplier:
+    """beta >= 0 learned by projected Adam on eq. 15, plus the damping term xi of eq. 17.
+
+    One call of `update(qc_mean)`, where qc_mean is the batch mean of Q^c measured by the caller
+    (a constant here) and C = cost_limit on the scale of Q^c (see `qc_limit`):
+
+        J(beta) = beta * (C - qc_mean)                 eq. 15, `losses.multiplier_loss`
+        beta    <- Adam step on J(beta)                gradient dJ/dbeta = C - qc_mean
+        beta    <- max(0, beta)                        projection
+
+    so beta rises while qc_mean > C and falls, down to 0, while qc_mean < C: an integral term on the
+    constraint error. Adam normalises the step, so beta moves by about `lr` per update.
+
+    `effective(qc_mean)` is the multiplier of Q^c in the actor loss (eq. 16):
+
+        xi        = k_d * (C - qc_mean)                eq. 17, `losses.damping`
+        effective = max(0, beta - xi)                  if clamp_effective (default)
+        effective = beta - xi                          otherwise
+
+    -xi = k_d (qc_mean - C) is a proportional term on the same error, which damps the oscillation of
+    the plain multiplier (Stooke et al. 2020, "Responsive Safety in Reinforcement Learning by PID
+    Lagrangian Methods"). k_d = 0 gives plain SAC-Lagrangian (eq. 12).
+
+    Decision, clamp_effective = True: while the constraint is satisfied with margin and beta is
+    near 0, beta - xi is negative, and a negative multiplier of Q^c would *reward* the policy for
+    seeking hazards. The paper does not say; like the PID Lagrangian, which projects its summed
+    multiplier (K_P error + K_I integral + K_D derivative) onto >= 0 (Stooke et al. 2020), we
+    clamp it. clamp_effective = False keeps the paper's formula literally.
+    """
+
+    def __init__(
+        self,
+        cost_limit: float,
+        k_d: float,
+        beta_init: float = 0.0,
+        lr: float = 1e-2,
+        clamp_effective: bool = True,
+    ) -> None:
+        if beta_init < 0.0:
+            raise ValueError(f"beta_init must be >= 0, got {beta_init}")
+        if k_d < 0.0:
+            raise ValueError(f"k_d must be >= 0, got {k_d}")
+        self.cost_limit = cost_limit
+        self.k_d = k_d
+        self.beta_init = beta_init
+        self.lr = lr
+        self.clamp_effective = clamp_effective
+        self._beta = torch.tensor(float(beta_init), requires_grad=True)
+        self._optim = torch.optim.Adam([self._beta], lr=lr)
+
+    @property
+    def beta(self) -> torch.Tensor:
+        """The current beta, a 0-d tensor (a copy: later updates do not change it)."""
+        return self._beta.detach().clone()
+
+    def damping(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
+        """xi = k_d (C - qc_mean), eq. 17."""
+        return losses.damping(torch.as_tensor(qc_mean), self.cost_limit, self.k_d)
+
+    def effective(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
+        """The multiplier of Q^c in eq. 16: beta - xi, clamped at >= 0 if clamp_effective."""
+        multiplier = self.beta - self.damping(qc_mean)
+        return multiplier.clamp(min=0.0) if self.clamp_effective else multiplier
+
+    def update(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
+        """One projected Adam step on J(beta) = beta (C - qc_mean), eq. 15; returns J (pre-step)."""
+        loss = losses.multiplier_loss(self._beta, torch.as_tensor(qc_mean), self.cost_limit)
+        self._optim.zero_grad()
+        loss.backward()
+        self._optim.step()
+        with torch.no_grad():
+            self._beta.clamp_(min=0.0)
+        return loss.detach()
+
+    def reset(self) -> None:
+        """beta back to beta_init and a fresh optimiser state."""
+        with torch.no_grad():
+            self._beta.fill_(self.beta_init)
+        self._optim = torch.optim.Adam([self._beta], lr=self.lr)
+
+    def state_dict(self) -> dict[str, Any]:
+        """beta and the optimiser state."""
+        return {"beta": self.beta.clone(), "optim": self._optim.state_dict()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what `state_dict` returned."""
+        with torch.no_grad():
+            self._beta.copy_(state["beta"])
+        self._optim.load_state_dict(copy.deepcopy(state["optim"]))  # never share Adam moments

@@ -1,0 +1,122 @@
+"""Replay memory M of Algorithm 1: a preallocated ring buffer of transitions with their costs."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+
+
+class ReplaySamples(NamedTuple):
+    """A minibatch, float32 tensors; `terminated` is 1.0 where the episode ended by termination."""
+
+    observations: torch.Tensor  # (batch, obs_dim)
+    actions: torch.Tensor  # (batch, act_dim), in [-1, 1]
+    rewards: torch.Tensor  # (batch,)
+    costs: torch.Tensor  # (batch,), eq. 11
+    next_observations: torch.Tensor  # (batch, obs_dim)
+    terminated: torch.Tensor  # (batch,), 0.0 or 1.0; truncation is *not* termination
+
+
+_FIELDS = ReplaySamples._fields
+
+
+class ReplayBuffer:
+    """Fixed-capacity FIFO of (obs, action, reward, cost, next_obs, terminated), stored as float32.
+
+    Once full, the oldest transitions are overwritten. `add_batch` takes the transitions of a
+    batched environment (one row per sub-environment) in one call.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError(f"capacity must be >= 1, got {capacity}")
+        self.obs_dim = obs_dim
+        self.act_dim = act_dim
+        self.capacity = capacity
+        self._arrays: dict[str, np.ndarray] = {
+            "observations": np.zeros((capacity, obs_dim), dtype=np.float32),
+            "actions": np.zeros((capacity, act_dim), dtype=np.float32),
+            "rewards": np.zeros(capacity, dtype=np.float32),
+            "costs": np.zeros(capacity, dtype=np.float32),
+            "next_observations": np.zeros((capacity, obs_dim), dtype=np.float32),
+            "terminated": np.zeros(capacity, dtype=np.float32),
+        }
+        self._ptr = 0  # next row to write
+        self._size = 0
+
+    def __len__(self) -> int:
+        return self._size
+
+    def add_batch(
+        self,
+        observations: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        costs: np.ndarray,
+        next_observations: np.ndarray,
+        terminated: np.ndarray,
+    ) -> None:
+        """Append n transitions (leading axis n); if n > capacity, only the last `capacity`."""
+        values = dict(
+            zip(
+                _FIELDS,
+                (observations, actions, rewards, costs, next_observations, terminated),
+            )
+        )
+        n = len(rewards)
+        for name, value in values.items():
+            if len(value) != n:
+                raise ValueError(f"{name} has {len(value)} rows, rewards has {n}")
+        if n > self.capacity:
+            values = {name: value[n - self.capacity :] for name, value in values.items()}
+            n = self.capacity
+        # At most two contiguous slices: up to the end of the arrays, then from the start.
+        first = min(n, self.capacity - self._ptr)
+        for name, value in values.items():
+            array = self._arrays[name]
+            array[self._ptr : self._ptr + first] = value[:first]
+            array[: n - first] = value[first:]
+        self._ptr = (self._ptr + n) % self.capacity
+        self._size = min(self._size + n, self.capacity)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> ReplaySamples:
+        """batch_size transitions drawn uniformly with replacement."""
+        if self._size == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        idx = rng.integers(0, self._size, size=batch_size)
+        # Fancy indexing already copies; from_numpy then shares that copy without another one.
+        return ReplaySamples(*(torch.from_numpy(self._arrays[name][idx]) for name in _FIELDS))
+
+    def state_dict(self) -> dict[str, Any]:
+        """The filled rows (tensors, in storage order), the write position and the capacity."""
+        state: dict[str, Any] = {
+            name: torch.from_numpy(array[: self._size].copy())
+            for name, array in self._arrays.items()
+        }
+        state.update(ptr=self._ptr, size=self._size, capacity=self.capacity)
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what `state_dict` returned; the storage layout (and so sampling) is identical.
+
+        A buffer that was full can only be loaded into one of the same capacity (its ring order
+        would be lost otherwise); a partly filled one into any capacity >= its size.
+        """
+        size = int(state["size"])
+        ptr = int(state["ptr"])
+        saved_capacity = int(state["capacity"])
+        if size > self.capacity:
+            raise ValueError(f"saved buffer holds {size} transitions, capacity is {self.capacity}")
+        if size == saved_capacity and saved_capacity != self.capacity:
+            raise ValueError(
+                f"saved buffer was full at capacity {saved_capacity}; this one has {self.capacity}"
+            )
+        for name, array in self._arrays.items():
+            rows = state[name].numpy()
+            if rows.shape[1:] != array.shape[1:] or len(rows) != size:
+                raise ValueError(f"{name}: saved {tuple(rows.shape)} does not fit {array.shape}")
+            array[:size] = rows
+        self._ptr = ptr % self.capacity
+        self._size = size

@@ -1,0 +1,359 @@
+"""SAC, SAC with a hazard penalty, SAC-Lagrangian and TSSAC's learner (paper section 4, eq. 12-17).
+
+One flat class, `SacLagrangian`, owns the networks, their targets, the optimisers, alpha and the
+multiplier; `update` reads like the paper: targets (eq. 13) -> critic losses (eq. 13) -> actor loss
+(eq. 12 / 16) -> alpha (eq. 14) -> multiplier (eq. 15, 17) -> Polyak averaging of the targets.
+The four variants differ only in the multiplier of Q^c in the actor loss and in the reward:
+
+| variant     | reward          | multiplier of Q^c in the actor loss             |
+| ----------- | --------------- | ----------------------------------------------- |
+| SAC         | r               | 0 (cost critic still trained, for logging)      |
+| SAC_PENALTY | r + penalty * c | 0 (cost critic still trained, for logging)      |
+| SAC_LAG     | r               | beta (eq. 12, 15)                               |
+| TSSAC       | r               | beta - xi, xi = k_d (C - Q^c) (eq. 16, 17)      |
+
+TSSAC's transfer (Algorithm 1, N1 -> N2 -> N3) is `transfer`.
+"""
+
+from __future__ import annotations
+
+import copy
+import enum
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from tssac_core.algos import losses
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, qc_limit
+from tssac_core.algos.networks import Critic, SquashedGaussianActor
+from tssac_core.algos.replay import ReplaySamples
+
+logger = logging.getLogger(__name__)
+
+
+class Variant(enum.Enum):
+    """Which algorithm of the paper's comparison the learner runs."""
+
+    SAC = "sac"
+    SAC_PENALTY = "sac_penalty"
+    SAC_LAG = "sac_lag"
+    TSSAC = "tssac"
+
+
+@dataclass(frozen=True)
+class SacConfig:
+    """Hyperparameters; defaults are the paper's Table 3 unless a field says otherwise."""
+
+    variant: Variant = Variant.TSSAC
+    """The algorithm (see the module docstring's table)."""
+
+    hidden_sizes: tuple[int, ...] = (256, 256)
+    """Hidden layer sizes of the actor and of every critic (Table 3: 256, 256, ReLU)."""
+
+    lr: float = 1e-3
+    """Adam learning rate eta of the actor, the critics and alpha (Table 3)."""
+
+    gamma: float = 0.99
+    """Discount factor gamma of rewards and costs (Table 3)."""
+
+    polyak: float = 0.995
+    """Target averaging: target <- polyak * target + (1 - polyak) * online (Table 3)."""
+
+    batch_size: int = 256
+    """Minibatch size; read by the training loop when it samples the replay buffer (Table 3)."""
+
+    replay_size: int = 1_000_000
+    """Replay capacity M; read by the training loop when it builds the buffer (Table 3)."""
+
+    target_entropy: float = -1.0
+    """Entropy target H0 of eq. 14, in nats, for the whole action (not per dimension) (Table 3)."""
+
+    alpha_init: float = 0.0
+    """Initial entropy coefficient (Table 3: 0). alpha is learned directly and projected onto
+    >= 0 after each Adam step (like beta), so 0 is a valid start: alpha stays 0 until the policy's
+    entropy falls below H0, then rises. A log-alpha parametrisation could not start at 0."""
+
+    beta_init: float = 0.0
+    """Initial cost multiplier beta (Table 3: 0)."""
+
+    beta_lr: float = 1e-2
+    """Adam learning rate of beta (not in the paper; 10 x lr, as DESIGN.md section 2 asks for a
+    larger one). Adam moves beta by about beta_lr per update, so from 0 it can reach ~10 within
+    ~1,000 updates (a quarter of a 4,000-step epoch) and fall back as fast once the constraint
+    holds; at lr = 1e-3 that would take 2.5 of the paper's 50 epochs."""
+
+    k_d: float = 10.0
+    """Damping scale factor k_d of eq. 17 (Table 3); used by TSSAC only (SAC_LAG runs with 0)."""
+
+    cost_limit: float = 3.0
+    """Cost threshold C per episode, an undiscounted sum of eq. 11's costs (Table 3). Converted to
+    the scale of Q^c with `qc_limit(cost_limit, gamma, episode_steps)`."""
+
+    episode_steps: int = 4000
+    """Episode length T used to convert cost_limit for Q^c (Table 3: max 4,000 steps)."""
+
+    penalty: float = 0.0
+    """SAC_PENALTY only: reward r + penalty * c, penalty <= 0 (paper's experiment: 0, -10, -15,
+    -50). Must be 0 for the other variants."""
+
+    clamp_effective: bool = True
+    """Clamp the effective multiplier beta - xi of eq. 16 at >= 0 (see DampedLagrangeMultiplier)."""
+
+    def __post_init__(self) -> None:
+        checks = [
+            (0.0 <= self.gamma < 1.0, f"gamma must be in [0, 1), got {self.gamma}"),
+            (0.0 <= self.polyak <= 1.0, f"polyak must be in [0, 1], got {self.polyak}"),
+            (self.lr > 0.0, f"lr must be > 0, got {self.lr}"),
+            (self.beta_lr > 0.0, f"beta_lr must be > 0, got {self.beta_lr}"),
+            (self.alpha_init >= 0.0, f"alpha_init must be >= 0, got {self.alpha_init}"),
+            (self.beta_init >= 0.0, f"beta_init must be >= 0, got {self.beta_init}"),
+            (self.k_d >= 0.0, f"k_d must be >= 0, got {self.k_d}"),
+            (self.cost_limit >= 0.0, f"cost_limit must be >= 0, got {self.cost_limit}"),
+            (self.episode_steps >= 1, f"episode_steps must be >= 1, got {self.episode_steps}"),
+            (self.batch_size >= 1, f"batch_size must be >= 1, got {self.batch_size}"),
+            (self.replay_size >= 1, f"replay_size must be >= 1, got {self.replay_size}"),
+            (len(self.hidden_sizes) >= 1, "hidden_sizes must not be empty"),
+            (self.penalty <= 0.0, f"penalty must be <= 0 (r + penalty * c), got {self.penalty}"),
+            (
+                self.penalty == 0.0 or self.variant is Variant.SAC_PENALTY,
+                f"penalty is used only by variant sac_penalty, got {self.penalty} with "
+                f"{self.variant.value}",
+            ),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    @property
+    def qc_limit(self) -> float:
+        """The cost limit C on the scale of Q^c (see `lagrange.qc_limit`)."""
+        return qc_limit(self.cost_limit, self.gamma, self.episode_steps)
+
+
+@dataclass(frozen=True)
+class UpdateStats:
+    """Scalars of one `update`. alpha, beta, xi and beta_minus_xi are the values *used* in this
+    update's losses (before alpha's and beta's own steps)."""
+
+    q_r_loss: float
+    """Eq. 13 summed over the two reward critics."""
+    q_c_loss: float
+    """Eq. 13 of the cost critic."""
+    actor_loss: float
+    """Eq. 12 / 16."""
+    alpha_loss: float
+    """Eq. 14."""
+    beta_loss: float
+    """Eq. 15 (0 for SAC and SAC_PENALTY, whose beta is not learned)."""
+    alpha: float
+    beta: float
+    xi: float
+    """Eq. 17 (0 unless TSSAC)."""
+    beta_minus_xi: float
+    """The effective multiplier of Q^c in the actor loss, after the clamp if clamp_effective."""
+    q_r_mean: float
+    """Batch mean of min_i Q^r_i(s, a~pi)."""
+    qc_mean: float
+    """Batch mean of Q^c(s, a~pi): the measured cost fed to eq. 15 and 17."""
+    entropy: float
+    """Batch mean of -log pi(a|s), a ~ pi."""
+
+
+class SacLagrangian:
+    """The learner of all four variants: actor, twin reward critics, cost critic, targets,
+    optimisers, alpha and the multiplier. Deterministic given `torch.manual_seed` (construction
+    and every `update` draw from torch's global generator)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, config: SacConfig) -> None:
+        self.obs_dim = obs_dim
+        self.act_dim = act_dim
+        self.config = config
+        hidden = config.hidden_sizes
+        self.actor = SquashedGaussianActor(obs_dim, act_dim, hidden)
+        self.q_r = Critic(obs_dim, act_dim, hidden, n_members=2)
+        self.q_c = Critic(obs_dim, act_dim, hidden, n_members=1)
+        self.q_r_target = copy.deepcopy(self.q_r).requires_grad_(False)
+        self.q_c_target = copy.deepcopy(self.q_c).requires_grad_(False)
+        self.alpha = torch.tensor(config.alpha_init, requires_grad=True)
+        self.uses_multiplier = config.variant in (Variant.SAC_LAG, Variant.TSSAC)
+        self.multiplier = DampedLagrangeMultiplier(
+            cost_limit=config.qc_limit,
+            k_d=config.k_d if config.variant is Variant.TSSAC else 0.0,
+            beta_init=config.beta_init if self.uses_multiplier else 0.0,
+            lr=config.beta_lr,
+            clamp_effective=config.clamp_effective,
+        )
+        self._actor_params = list(self.actor.parameters())
+        self._critic_params = [*self.q_r.parameters(), *self.q_c.parameters()]
+        self._target_pairs = [
+            *zip(self.q_r_target.parameters(), self.q_r.parameters()),
+            *zip(self.q_c_target.parameters(), self.q_c.parameters()),
+        ]
+        self.reset_optimisers()
+
+    def reset_optimisers(self) -> None:
+        """Fresh Adam optimisers (no moments) for the actor, the critics and alpha."""
+        # One optimiser for all three critics: Adam is elementwise, so this equals one per critic
+        # with the summed loss, and costs one backward pass and one step.
+        self.actor_optim = torch.optim.Adam(self._actor_params, lr=self.config.lr)
+        self.critic_optim = torch.optim.Adam(self._critic_params, lr=self.config.lr)
+        self.alpha_optim = torch.optim.Adam([self.alpha], lr=self.config.lr)
+
+    def networks(self) -> dict[str, nn.Module]:
+        """The networks by name, as they appear in `state_dict` and `transfer`."""
+        return {
+            "actor": self.actor,
+            "q_r": self.q_r,
+            "q_c": self.q_c,
+            "q_r_target": self.q_r_target,
+            "q_c_target": self.q_c_target,
+        }
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
+        """Actions in [-1, 1]: obs (n, obs_dim) -> (n, act_dim), or (obs_dim,) -> (act_dim,)."""
+        obs_t = torch.as_tensor(obs, dtype=torch.float32)
+        action, _ = self.actor(obs_t.unsqueeze(0) if obs_t.ndim == 1 else obs_t, deterministic)
+        return action.squeeze(0).numpy() if obs_t.ndim == 1 else action.numpy()
+
+    def update(self, batch: ReplaySamples) -> UpdateStats:
+        """One gradient step of every part (Algorithm 1, line 13)."""
+        cfg = self.config
+        obs, actions, rewards, costs, next_obs, terminated = batch
+        if cfg.variant is Variant.SAC_PENALTY:
+            rewards = rewards + cfg.penalty * costs
+        alpha = self.alpha.detach().clone()  # the value used below, kept for the stats
+
+        # Targets, eq. 13: soft value with the min of the twin target critics; no entropy in cost.
+        with torch.no_grad():
+            next_actions, next_log_pi = self.actor(next_obs)
+            next_q_r = self.q_r_target(next_obs, next_actions)
+            next_v_r = losses.soft_value(next_q_r, next_log_pi, alpha)
+            y_r = losses.critic_target(rewards, terminated, next_v_r, cfg.gamma)
+            next_v_c = self.q_c_target(next_obs, next_actions)[0]
+            y_c = losses.critic_target(costs, terminated, next_v_c, cfg.gamma)
+
+        # Critic losses, eq. 13.
+        q_r_loss = losses.critic_loss(self.q_r(obs, actions), y_r)
+        q_c_loss = losses.critic_loss(self.q_c(obs, actions), y_c)
+        self.critic_optim.zero_grad()
+        (q_r_loss + q_c_loss).backward()
+        self.critic_optim.step()
+
+        # Actor loss, eq. 12 (SAC_LAG) / eq. 16 (TSSAC); the multiplier uses Q^c at the policy's
+        # own actions, the cost-to-go of the current policy that eq. 4's g(pi) constrains.
+        pi_actions, log_pi = self.actor(obs)
+        q_r_pi = self.q_r(obs, pi_actions)
+        q_c_pi = self.q_c(obs, pi_actions)[0]
+        qc_mean = q_c_pi.detach().mean()
+        beta = self.multiplier.beta
+        if self.uses_multiplier:
+            xi = self.multiplier.damping(qc_mean)
+            multiplier = self.multiplier.effective(qc_mean)
+        else:
+            xi = multiplier = torch.zeros(())
+        actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
+        self.actor_optim.zero_grad()
+        # inputs=: no gradients for the critics' weights, which the actor loss must not train.
+        actor_loss.backward(inputs=self._actor_params)
+        self.actor_optim.step()
+
+        # Temperature, eq. 14; alpha projected onto >= 0 (see SacConfig.alpha_init).
+        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
+        self.alpha_optim.zero_grad()
+        alpha_loss.backward()
+        self.alpha_optim.step()
+        with torch.no_grad():
+            self.alpha.clamp_(min=0.0)
+
+        # Multiplier, eq. 15 (projected onto >= 0 inside).
+        beta_loss = self.multiplier.update(qc_mean) if self.uses_multiplier else torch.zeros(())
+
+        # Soft target update: target <- polyak * target + (1 - polyak) * online.
+        with torch.no_grad():
+            for target, online in self._target_pairs:
+                target.lerp_(online, 1.0 - cfg.polyak)
+
+        scalars = torch.stack(
+            [
+                q_r_loss.detach(),
+                q_c_loss.detach(),
+                actor_loss.detach(),
+                alpha_loss.detach(),
+                beta_loss,
+                alpha,
+                beta,
+                xi,
+                multiplier,
+                q_r_pi.detach().min(dim=0).values.mean(),
+                qc_mean,
+                -log_pi.detach().mean(),
+            ]
+        ).tolist()  # one synchronisation for all statistics
+        return UpdateStats(*scalars)
+
+    def state_dict(self) -> dict[str, Any]:
+        """All needed to resume: networks, targets, optimiser states, alpha, the multiplier.
+
+        As with torch's own `state_dict`, the tensors share storage with the live learner: save it
+        (`torch.save`) or `copy.deepcopy` it to keep a snapshot while training goes on.
+        """
+        state: dict[str, Any] = {name: net.state_dict() for name, net in self.networks().items()}
+        state.update(
+            actor_optim=self.actor_optim.state_dict(),
+            critic_optim=self.critic_optim.state_dict(),
+            alpha=self.alpha.detach().clone(),
+            alpha_optim=self.alpha_optim.state_dict(),
+            multiplier=self.multiplier.state_dict(),
+            variant=self.config.variant.value,
+        )
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what `state_dict` returned (same sizes; a different variant is logged)."""
+        if state.get("variant") != self.config.variant.value:
+            logger.warning(
+                "loading a %s checkpoint into a %s learner",
+                state.get("variant"),
+                self.config.variant.value,
+            )
+        for name, net in self.networks().items():
+            net.load_state_dict(state[name])
+        # Optimiser.load_state_dict keeps the given moment tensors (no copy); copy them so that
+        # two learners loaded from one in-memory state never share (and update) the same moments.
+        self.actor_optim.load_state_dict(copy.deepcopy(state["actor_optim"]))
+        self.critic_optim.load_state_dict(copy.deepcopy(state["critic_optim"]))
+        with torch.no_grad():
+            self.alpha.copy_(state["alpha"])
+        self.alpha_optim.load_state_dict(copy.deepcopy(state["alpha_optim"]))
+        self.multiplier.load_state_dict(state["multiplier"])
+
+
+TRANSFERRED_NETWORKS = ("actor", "q_r", "q_c", "q_r_target", "q_c_target")
+"""What `transfer` copies: all network weights. Everything else is reset."""
+
+
+def transfer(target: SacLagrangian, source_state: dict[str, Any]) -> list[str]:
+    """TSSAC's parameter transfer N_k -> N_k+1 (Algorithm 1, lines 17 and 19).
+
+    Copied from `source_state` (a `SacLagrangian.state_dict()`): the weights of the actor, the
+    reward critics, the cost critic and their targets (TRANSFERRED_NETWORKS).
+    Reset to `target.config`: the optimiser states (fresh Adam moments), alpha (alpha_init) and
+    beta (beta_init, with a fresh optimiser), since the new task has its own entropy and cost
+    balance. Returns the names of the copied tensors, "<network>.<parameter>".
+    """
+    copied: list[str] = []
+    nets = target.networks()
+    for name in TRANSFERRED_NETWORKS:
+        nets[name].load_state_dict(source_state[name])
+        copied += [f"{name}.{key}" for key in source_state[name]]
+    with torch.no_grad():
+        target.alpha.fill_(target.config.alpha_init)
+    target.reset_optimisers()
+    target.multiplier.reset()
+    logger.info("transferred %d tensors; optimisers, alpha and beta reset", len(copied))
+    return copied

@@ -1,0 +1,216 @@
+"""The constrained MDP of one UAV role: a batched task for training, and a ``gymnasium.Env`` over it.
+
+:class:`RoleTask` runs N worlds for one learning role (decoy, detect or strike) with its teammates
+flown by given pilots (:mod:`tssac_core.team`), resetting finished worlds itself; the training loop
+uses it directly. :class:`UavRoleEnv` is the same task with N = 1 behind the gymnasium API, registered
+as ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from tssac_core.guidance import Guidance
+from tssac_core.observation import ObservationMode, observation_bounds, observe
+from tssac_core.reward import RewardConfig, reward
+from tssac_core.scenario import ROLES, Role, Scenario, load, sample_layout
+from tssac_core.team import GUIDANCE, Pilot, check_pilot, team_actions
+from tssac_core.world import StepResult, World
+
+DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
+
+Teammates = str | Mapping[str, Pilot] | None
+
+
+def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
+    """Pilots for the three vehicles; the learner's own slot is ``"learner"``.
+
+    ``teammates`` is ``"guidance"`` (all teammates flown by the guidance controller), ``"none"`` or
+    None (the learner flies alone, as the decoy is trained), or a mapping role name -> pilot; roles
+    missing from the mapping are parked.
+    """
+    if teammates == GUIDANCE:
+        table: Mapping[str, Pilot] = {r.value: GUIDANCE for r in ROLES}
+    elif teammates is None or teammates == "none":
+        table = {}
+    elif isinstance(teammates, Mapping):
+        table = teammates
+        for name in table:
+            if name not in [r.value for r in ROLES]:
+                raise ValueError(f"teammates: unknown role {name!r}")
+    else:
+        raise ValueError(f"teammates must be 'guidance', 'none' or a mapping role -> pilot, got {teammates!r}")
+    pilots: list[Pilot] = []
+    for r in ROLES:
+        if r is role:
+            pilots.append("learner")
+        else:
+            pilot = table.get(r.value)
+            check_pilot(pilot, r.value)
+            pilots.append(pilot)
+    return pilots
+
+
+@dataclass
+class TaskStep:
+    """One step of a RoleTask, every array (N, ...)."""
+
+    obs: np.ndarray
+    """Observation after the step; for worlds that ended, the first one of the new episode."""
+    final_obs: np.ndarray
+    """Observation after the step before any reset (what the replay buffer stores as s')."""
+    reward: np.ndarray
+    cost: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episode_return: np.ndarray
+    """For worlds that ended this step: the episode's return (else 0)."""
+    episode_cost: np.ndarray
+    episode_success: np.ndarray
+    """For worlds that ended: the mission succeeded (target hit)."""
+    episode_task: np.ndarray
+    """For worlds that ended: the learning role's task was completed (eq. 9)."""
+
+
+class RoleTask:
+    """N worlds in which one role learns; finished worlds are reset with a new layout."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        role: Role,
+        n: int = 1,
+        observation: ObservationMode = ObservationMode.EXTENDED,
+        teammates: Teammates = GUIDANCE,
+        seed: int | None = None,
+        reward_config: RewardConfig = RewardConfig(),
+    ) -> None:
+        self.scenario = scenario
+        self.role = role
+        self.j = role.index
+        self.mode = observation
+        self.pilots = resolve_pilots(role, teammates)
+        self.active = tuple(p is not None for p in self.pilots)
+        self.reward_config = reward_config
+        self.world = World(scenario, n)
+        self.guidance = Guidance()
+        self.rng = np.random.default_rng(seed)
+        self.ep_return = np.zeros(n)
+        self.ep_cost = np.zeros(n)
+
+    @property
+    def n(self) -> int:
+        return self.world.n
+
+    def reset(self, index: Sequence[int] | np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Reset worlds (all if ``index`` is None) and return every world's observation."""
+        idx = np.arange(self.n) if index is None else np.asarray(index)
+        gen = rng if rng is not None else self.rng
+        self.world.reset(idx, [sample_layout(self.scenario, gen) for _ in idx], self.active)
+        self.ep_return[idx] = 0.0
+        self.ep_cost[idx] = 0.0
+        return observe(self.world, self.j, self.mode)
+
+    def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
+        """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
+        actions = team_actions(self.world, self.pilots, self.mode, self.guidance, skip=self.j)
+        actions[:, self.j] = action
+        moving = self.world.active & self.world.running[:, None]
+        result = self.world.step(actions)
+        r = reward(result, moving, self.reward_config)[:, self.j]
+        cost = result.cost[:, self.j]
+        self.ep_return += r
+        self.ep_cost += cost
+        return result, r, cost
+
+    def step(self, action: np.ndarray, rng: np.random.Generator | None = None) -> TaskStep:
+        """Step all worlds with the learner's ``action`` (N, 2); reset those that end."""
+        result, r, cost = self.advance(action)
+        final_obs = observe(self.world, self.j, self.mode)
+        ended = result.terminated | result.truncated
+        ep_return = np.where(ended, self.ep_return, 0.0)
+        ep_cost = np.where(ended, self.ep_cost, 0.0)
+        success = ended & self.world.hit
+        task = ended & self.world.task_done[:, self.j]
+        obs = final_obs
+        if ended.any():
+            obs = self.reset(np.flatnonzero(ended), rng)
+        return TaskStep(obs, final_obs, r, cost, result.terminated, result.truncated, ep_return, ep_cost, success, task)
+
+
+class UavRoleEnv(gym.Env):
+    """One UAV of the air-to-surface mission as a constrained MDP (paper section 3.3).
+
+    **Action** (eq. 8), ``Box(-1, 1, (2,))``: [omega, u], scaled to the vehicle's turn-rate and
+    acceleration limits (scenario file), e.g. +-5 deg/s and +-10 m/s^2.
+
+    **Observation**: ``observation="extended"`` (default, 22 values) or ``"paper"`` (eq. 7, 5 values);
+    the table is in :mod:`tssac_core.observation`.
+
+    **Reward** (eq. 10, Table 2, plus a zone-holding term and a leaving penalty): see
+    :mod:`tssac_core.reward`.
+
+    **Cost** (eq. 11): ``info["cost"]`` is 1 for a step inside any radar's disk, else 0; the budget is
+    the scenario's ``cost_limit`` (C = 3) per episode.
+
+    **Start**: a layout from the scenario (fixed, or drawn from its ``random:`` ranges with
+    ``self.np_random``); speeds at their initial values.
+
+    **Termination**: the target is hit (mission success), or any flying UAV leaves the area.
+    **Truncation**: the scenario's episode cap (4,000 steps of 0.1 s).
+
+    ``teammates``: ``"guidance"`` (default), ``"none"``, or a mapping role name -> pilot
+    (``"guidance"``, a callable obs -> action, or None to park that UAV).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        role: str | Role = Role.DECOY,
+        scenario: str | Path | Scenario = DEFAULT_SCENARIO,
+        observation: str | ObservationMode = ObservationMode.EXTENDED,
+        teammates: Teammates = GUIDANCE,
+        reward_config: RewardConfig = RewardConfig(),
+    ) -> None:
+        super().__init__()
+        self.scenario = scenario if isinstance(scenario, Scenario) else load(scenario)
+        self.role = Role(role)
+        self.mode = ObservationMode(observation)
+        self.task = RoleTask(self.scenario, self.role, 1, self.mode, teammates, reward_config=reward_config)
+        low, high = observation_bounds(self.mode)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self._needs_reset = True
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        obs = self.task.reset(rng=self.np_random)
+        self._needs_reset = False
+        return obs[0], self._info()
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._needs_reset:
+            raise RuntimeError("call reset() before step() (the episode has ended)")
+        result, r, cost = self.task.advance(np.asarray(action, dtype=np.float64).reshape(1, 2))
+        terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
+        self._needs_reset = terminated or truncated
+        info = self._info()
+        info["cost"] = float(cost[0])
+        return observe(self.task.world, self.task.j, self.mode)[0], float(r[0]), terminated, truncated, info
+
+    def _info(self) -> dict[str, Any]:
+        w = self.task.world
+        return {
+            "cost": 0.0,
+            "radar_on": bool(w.radar_on[0]),
+            "identified": bool(w.identified[0]),
+            "hit": bool(w.hit[0]),
+            "task_done": bool(w.task_done[0, self.task.j]),
+            "in_hazard": bool(w.in_hazard[0, self.task.j]),
+        }

@@ -1,0 +1,177 @@
+"""The observation: one function, used by training, evaluation and the MAVLink bridge alike.
+
+Two modes (DESIGN.md section 2):
+
+``paper`` (eq. 7), 5 values: ``[x, y, v, phi, l]``
+
+    ==  =====================  ===========================================  =========
+    i   name                   definition                                   range
+    ==  =====================  ===========================================  =========
+    0   x                      x / area                                     [0, 1]
+    1   y                      y / area                                     [0, 1]
+    2   v                      (v - v_min) / (v_max - v_min)                [0, 1]
+    3   phi                    heading / pi                                 [-1, 1]
+    4   l                      distance to the target / area                [0, 1.5]
+    ==  =====================  ===========================================  =========
+
+``extended`` (default), 22 values: eq. 7 (with the heading as cos/sin, which has no jump at +-pi),
+then what a UAV needs to fly around hazards whose positions change from layout to layout, and the
+mission flags it can know in flight. The layout is the same for all three roles, so that parameters
+transfer between them; only the zone edges differ (each role's own zone).
+
+    ======  ======================  =============================================================  =======
+    i       name                    definition                                                     range
+    ======  ======================  =============================================================  =======
+    0-1     x, y                    position / area                                                [0, 1]
+    2       v                       (v - v_min) / (v_max - v_min)                                  [0, 1]
+    3-4     cos phi, sin phi        heading                                                        [-1, 1]
+    5       l                       distance to the target / area                                  [0, 1.5]
+    6-7     sam cos, sin            bearing of the SAM relative to the heading                     [-1, 1]
+    8       sam range               D / area                                                       [0, 1.5]
+    9       zone outer              (D - outer edge of own zone) / LOCAL_SCALE, clipped            [-1, 1]
+    10      zone inner              (D - inner edge of own zone) / LOCAL_SCALE, clipped            [-1, 1]
+    11-19   radars (x3)             nearest first: (range - radius) / LOCAL_SCALE clipped,         [-1, 1]
+                                    cos and sin of the bearing relative to the heading
+    20      radar on                the SAM radar is on (the decoy holds its ring)                 {0, 1}
+    21      identified              the target has been identified                                 {0, 1}
+    ======  ======================  =============================================================  =======
+
+A layout with fewer radars pads with "far away" (range 1, bearing dead ahead).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+from tssac_core.world import World, WorldConstants
+
+LOCAL_SCALE_M = 20_000.0
+"""Scale of the local (zone and hazard) ranges: the SAM's detection range R4."""
+N_RADAR_FEATURES = 3
+EXTENDED_SIZE = 11 + 3 * N_RADAR_FEATURES + 2
+PAPER_SIZE = 5
+
+
+class ObservationMode(enum.Enum):
+    PAPER = "paper"
+    EXTENDED = "extended"
+
+    @property
+    def size(self) -> int:
+        return PAPER_SIZE if self is ObservationMode.PAPER else EXTENDED_SIZE
+
+
+def observation_bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of every observation entry (the gymnasium Box)."""
+    if mode is ObservationMode.PAPER:
+        low = np.array([0, 0, 0, -1, 0], dtype=np.float32)
+        high = np.array([1, 1, 1, 1, 1.5], dtype=np.float32)
+        return low, high
+    low = np.full(EXTENDED_SIZE, -1.0, dtype=np.float32)
+    high = np.ones(EXTENDED_SIZE, dtype=np.float32)
+    low[[0, 1, 2, 5, 8, 20, 21]] = 0.0
+    high[[5, 8]] = 1.5
+    return low, high
+
+
+def build_observation(
+    role_index: int,
+    mode: ObservationMode,
+    c: WorldConstants,
+    x_m: np.ndarray,
+    y_m: np.ndarray,
+    v_m_s: np.ndarray,
+    phi_rad: np.ndarray,
+    sam_m: np.ndarray,
+    target_m: np.ndarray,
+    radar_m: np.ndarray,
+    radar_r_m: np.ndarray,
+    radar_on: np.ndarray,
+    identified: np.ndarray,
+) -> np.ndarray:
+    """Observations of one role in N worlds, (N, mode.size) float32.
+
+    Vehicle arrays are (N,) for the observing UAV; ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
+    ``radar_r_m`` (N, K); flags (N,). This is the only place observations are made.
+    """
+    j = role_index
+    area = c.area_m
+    low, high = observation_bounds(mode)
+    speed = (v_m_s - c.speed_min_m_s[j]) / (c.speed_max_m_s[j] - c.speed_min_m_s[j])
+    l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
+    if mode is ObservationMode.PAPER:
+        obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area], axis=1)
+        return np.clip(obs, low, high).astype(np.float32)
+
+    n = x_m.shape[0]
+    out = np.empty((n, EXTENDED_SIZE))
+    cos_phi, sin_phi = np.cos(phi_rad), np.sin(phi_rad)
+    out[:, 0] = x_m / area
+    out[:, 1] = y_m / area
+    out[:, 2] = speed
+    out[:, 3] = cos_phi
+    out[:, 4] = sin_phi
+    out[:, 5] = l_m / area
+    dx, dy = sam_m[:, 0] - x_m, sam_m[:, 1] - y_m
+    d_sam = np.hypot(dx, dy)
+    _relative_bearing(dx, dy, d_sam, cos_phi, sin_phi, out[:, 6:8])
+    out[:, 8] = d_sam / area
+    out[:, 9] = (d_sam - c.zone_outer_m[j]) / LOCAL_SCALE_M
+    out[:, 10] = (d_sam - c.zone_inner_m[j]) / LOCAL_SCALE_M
+
+    rdx = radar_m[:, :, 0] - x_m[:, None]
+    rdy = radar_m[:, :, 1] - y_m[:, None]
+    rd = np.hypot(rdx, rdy)
+    edge = (rd - radar_r_m) / LOCAL_SCALE_M
+    edge = np.where(radar_r_m > 0, edge, np.inf)  # padding slots are far away
+    k = radar_m.shape[1]
+    order = np.argsort(edge, axis=1)[:, :N_RADAR_FEATURES]
+    rows = np.arange(n)[:, None]
+    feats = np.empty((n, N_RADAR_FEATURES, 3))
+    feats[:, :, 0] = 1.0
+    feats[:, :, 1] = 1.0
+    feats[:, :, 2] = 0.0
+    m = min(k, N_RADAR_FEATURES)
+    sel_edge = edge[rows, order[:, :m]]
+    sel_dx, sel_dy, sel_d = rdx[rows, order[:, :m]], rdy[rows, order[:, :m]], rd[rows, order[:, :m]]
+    bearing = np.empty((n, m, 2))
+    _relative_bearing(sel_dx, sel_dy, sel_d, cos_phi[:, None], sin_phi[:, None], bearing)
+    real = np.isfinite(sel_edge)
+    feats[:, :m, 0] = np.where(real, sel_edge, 1.0)
+    feats[:, :m, 1] = np.where(real, bearing[..., 0], 1.0)
+    feats[:, :m, 2] = np.where(real, bearing[..., 1], 0.0)
+    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = feats.reshape(n, -1)
+    out[:, 20] = radar_on
+    out[:, 21] = identified
+    return np.clip(out, low, high).astype(np.float32)
+
+
+def _relative_bearing(dx: np.ndarray, dy: np.ndarray, d: np.ndarray, cos_phi: np.ndarray, sin_phi: np.ndarray, out: np.ndarray) -> None:
+    """cos and sin of (bearing of (dx, dy)) - heading, written into out[..., 0:2]."""
+    safe = np.where(d > 0, d, 1.0)
+    ux, uy = np.where(d > 0, dx / safe, 1.0), np.where(d > 0, dy / safe, 0.0)
+    # Rotate the unit vector by -phi.
+    out[..., 0] = ux * cos_phi + uy * sin_phi
+    out[..., 1] = uy * cos_phi - ux * sin_phi
+
+
+def observe(world: World, role_index: int, mode: ObservationMode) -> np.ndarray:
+    """Observations of one role in every world of ``world``, (N, mode.size) float32."""
+    j = role_index
+    return build_observation(
+        j,
+        mode,
+        world.c,
+        world.x_m[:, j],
+        world.y_m[:, j],
+        world.v_m_s[:, j],
+        world.phi_rad[:, j],
+        world.sam_m,
+        world.target_m,
+        world.radar_m,
+        world.radar_r_m,
+        world.radar_on,
+        world.identified,
+    )

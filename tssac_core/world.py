@@ -1,0 +1,289 @@
+"""The simulated world: kinematics (eq. 5-6), mission logic (eq. 9, Table 1) and hazard cost (eq. 11).
+
+One source of truth for physics and mission logic, used by training, evaluation and the SITL
+vehicles. Pure numpy and batched: a :class:`World` holds N independent worlds of three UAVs each, and
+one :meth:`World.step` advances all of them with a handful of array operations.
+
+Frames and units: x east, y north in metres from the area's south-west corner; heading phi in radians,
+counter-clockwise from east (eq. 5's frame); speed v in m/s. Vehicle index = role order
+(decoy, detect, strike).
+
+Kinematics (eq. 5) are integrated exactly over a step for a constant turn rate (the arc of a circle at
+the step's mean speed), so a constant-rate circle closes on itself and a straight flight is exact:
+
+    phi' = phi + omega dt
+    x'   = x + v_m / omega * (sin phi' - sin phi)        (x' = v cos phi integrated)
+    y'   = y - v_m / omega * (cos phi' - cos phi)        (y' = v sin phi integrated)
+    v'   = clip(v + u dt, v_min, v_max)                  (eq. 6 speed bounds; v_m = (v + v') / 2)
+
+Mission logic (DESIGN.md section 2, eq. 9 read as simultaneous conditions), D_i = distance of UAV i
+from the SAM:
+    SAM radar on     <=> R3 < D1 <= R4                    (decoy holds its ring; not latched)
+    identified       latched once radar on and R1 < D2 <= R2
+    hit              identified, radar on, R1 < D2 <= R2 and D3 < R1, all at once -> mission success
+Leaving the area (eq. 6 position bounds) terminates the world; so does the hit. The episode cap
+truncates it. Cost (eq. 11): 1 per step for a UAV inside any radar's radius, else 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tssac_core.scenario import ROLES, Layout, Role, Scenario
+
+KM = 1000.0
+N_ROLES = len(ROLES)
+# Turn rates below this (rad/s) are flown as this: the arc formula divides by omega, and an arc of
+# 1e-6 rad/s differs from a straight line by under a micrometre per step.
+_MIN_TURN_RATE = 1e-6
+
+
+@dataclass(frozen=True)
+class WorldConstants:
+    """Per-scenario constants in SI units, per role where they differ (arrays of shape (3,))."""
+
+    dt_s: float
+    area_m: float
+    episode_steps: int
+    r1_m: float
+    r2_m: float
+    r3_m: float
+    r4_m: float
+    speed_min_m_s: np.ndarray
+    speed_max_m_s: np.ndarray
+    speed_init_m_s: np.ndarray
+    turn_rate_max_rad_s: np.ndarray
+    accel_max_m_s2: np.ndarray
+    zone_inner_m: np.ndarray
+    """Each role's zone is inner < D <= outer (strike: D < R1, so inner = -inf)."""
+    zone_outer_m: np.ndarray
+
+    @staticmethod
+    def from_scenario(s: Scenario) -> WorldConstants:
+        specs = [s.vehicle(role) for role in ROLES]
+        r = s.ranges
+        r1, r2, r3, r4 = (r.strike_launch_km * KM, r.detect_km * KM, r.sam_launch_km * KM, r.sam_detect_km * KM)
+        return WorldConstants(
+            dt_s=s.dt_s,
+            area_m=s.area_km * KM,
+            episode_steps=s.episode_steps,
+            r1_m=r1,
+            r2_m=r2,
+            r3_m=r3,
+            r4_m=r4,
+            speed_min_m_s=np.array([v.speed_min_m_s for v in specs]),
+            speed_max_m_s=np.array([v.speed_max_m_s for v in specs]),
+            speed_init_m_s=np.array([v.speed_init_m_s for v in specs]),
+            turn_rate_max_rad_s=np.radians([v.turn_rate_max_deg_s for v in specs]),
+            accel_max_m_s2=np.array([v.accel_max_m_s2 for v in specs]),
+            zone_inner_m=np.array([r3, r1, -np.inf]),
+            # D3 < R1 is strict: the largest float below R1 makes "<=" mean "<".
+            zone_outer_m=np.array([r4, r2, np.nextafter(r1, 0.0)]),
+        )
+
+
+@dataclass
+class StepResult:
+    """What one step did, per world (N,) or per world and vehicle (N, 3)."""
+
+    cost: np.ndarray
+    """Eq. 11 cost of this step, (N, 3) float."""
+    zone_dist_prev_m: np.ndarray
+    """Distance to the role's zone before the step, (N, 3)."""
+    zone_dist_m: np.ndarray
+    """Distance to the role's zone after the step (0 inside it), (N, 3)."""
+    in_zone: np.ndarray
+    """Vehicle holds its zone after the step, (N, 3) bool."""
+    task_completed: np.ndarray
+    """The role's task was completed for the first time this step, (N, 3) bool (eq. 9)."""
+    out_of_area: np.ndarray
+    """Vehicle left the area this step, (N, 3) bool."""
+    hazard_entered: np.ndarray
+    """Vehicle entered a radar's disk this step, (N, 3) bool."""
+    radar_on_changed: np.ndarray
+    """The SAM radar switched on or off this step, (N,) bool (the new state is World.radar_on)."""
+    identified_now: np.ndarray
+    """The target was identified this step, (N,) bool."""
+    hit_now: np.ndarray
+    """The target was hit this step (mission success), (N,) bool."""
+    terminated: np.ndarray
+    """The world ended this step by a hit or a vehicle leaving the area, (N,) bool."""
+    truncated: np.ndarray
+    """The world reached the episode cap this step without terminating, (N,) bool."""
+
+
+class World:
+    """N worlds of three UAVs, stepped together.
+
+    State arrays (public, read them freely; write only through reset/step): ``x_m, y_m, v_m_s,
+    phi_rad`` (N, 3); layout ``sam_m`` (N, 2), ``target_m`` (N, 2), ``radar_m`` (N, K, 2),
+    ``radar_r_m`` (N, K); flags ``active`` (N, 3) (inactive vehicles are parked: they neither move
+    nor count), ``running`` (N,) (a finished world is frozen until reset), ``radar_on``,
+    ``identified``, ``hit`` (N,), ``task_done`` (N, 3), ``in_hazard`` (N, 3), ``steps`` (N,),
+    ``cost_total`` (N, 3).
+    """
+
+    def __init__(self, scenario: Scenario, n: int, max_radars: int | None = None) -> None:
+        self.scenario = scenario
+        self.c = WorldConstants.from_scenario(scenario)
+        self.n = n
+        k = max_radars if max_radars is not None else _max_radar_count(scenario)
+        self.x_m = np.zeros((n, N_ROLES))
+        self.y_m = np.zeros((n, N_ROLES))
+        self.v_m_s = np.zeros((n, N_ROLES))
+        self.phi_rad = np.zeros((n, N_ROLES))
+        self._sin_phi = np.zeros((n, N_ROLES))
+        self._cos_phi = np.ones((n, N_ROLES))
+        self.sam_m = np.zeros((n, 2))
+        self.target_m = np.zeros((n, 2))
+        # Unused radar slots sit far outside the area with zero radius: they never cost anything.
+        self.radar_m = np.full((n, k, 2), -1e9)
+        self.radar_r_m = np.zeros((n, k))
+        self.active = np.zeros((n, N_ROLES), dtype=bool)
+        self.running = np.zeros(n, dtype=bool)
+        self.radar_on = np.zeros(n, dtype=bool)
+        self.identified = np.zeros(n, dtype=bool)
+        self.hit = np.zeros(n, dtype=bool)
+        self.task_done = np.zeros((n, N_ROLES), dtype=bool)
+        self.in_hazard = np.zeros((n, N_ROLES), dtype=bool)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.cost_total = np.zeros((n, N_ROLES))
+        self.zone_dist_m = np.zeros((n, N_ROLES))
+        self.sam_dist_m = np.zeros((n, N_ROLES))
+        self.layout_id = np.full(n, -1, dtype=np.int64)
+        """Changes whenever a world gets a new layout (lets controllers cache per-layout work)."""
+        self._resets = 0
+
+    @property
+    def max_radars(self) -> int:
+        return self.radar_r_m.shape[1]
+
+    def reset(self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, bool, bool] = (True, True, True)) -> None:
+        """Start worlds ``index`` afresh with the given layouts (one per index)."""
+        idx = np.asarray(index, dtype=np.int64)
+        if len(idx) != len(layouts):
+            raise ValueError(f"{len(idx)} worlds but {len(layouts)} layouts")
+        for i, lay in zip(idx, layouts):
+            if len(lay.radars) > self.max_radars:
+                raise ValueError(f"layout has {len(lay.radars)} radars; this world holds {self.max_radars}")
+            self.sam_m[i] = np.multiply(lay.sam_km, KM)
+            self.target_m[i] = np.multiply(lay.target_km, KM)
+            self.radar_m[i] = -1e9
+            self.radar_r_m[i] = 0.0
+            for k, radar in enumerate(lay.radars):
+                self.radar_m[i, k] = np.multiply(radar.position_km, KM)
+                self.radar_r_m[i, k] = radar.radius_km * KM
+            for j, role in enumerate(ROLES):
+                start = lay.starts[role.value]
+                self.x_m[i, j] = start.position_km[0] * KM
+                self.y_m[i, j] = start.position_km[1] * KM
+                self.phi_rad[i, j] = _wrap(math.radians(start.heading_deg))
+        self.layout_id[idx] = self._resets + np.arange(len(idx))
+        self._resets += len(idx)
+        self.v_m_s[idx] = self.c.speed_init_m_s
+        self._sin_phi[idx] = np.sin(self.phi_rad[idx])
+        self._cos_phi[idx] = np.cos(self.phi_rad[idx])
+        self.active[idx] = active
+        self.running[idx] = True
+        self.radar_on[idx] = False
+        self.identified[idx] = False
+        self.hit[idx] = False
+        self.task_done[idx] = False
+        self.steps[idx] = 0
+        self.cost_total[idx] = 0.0
+        self.sam_dist_m[idx] = np.hypot(self.x_m[idx] - self.sam_m[idx, 0:1], self.y_m[idx] - self.sam_m[idx, 1:2])
+        self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c)
+        self.in_hazard[idx] = self._inside_radar(idx) & self.active[idx]
+
+    def step(self, action: np.ndarray) -> StepResult:
+        """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
+        c = self.c
+        a = np.clip(action, -1.0, 1.0)
+        moving = self.active & self.running[:, None]
+        dt = c.dt_s * moving  # parked vehicles and finished worlds do not move
+        omega = a[..., 0] * c.turn_rate_max_rad_s
+        omega = np.where(np.abs(omega) < _MIN_TURN_RATE, _MIN_TURN_RATE, omega)
+        # eq. 5-6: speed first (clipped to its bounds), then the exact arc at the step's mean speed.
+        v_new = np.clip(self.v_m_s + a[..., 1] * c.accel_max_m_s2 * dt, c.speed_min_m_s, c.speed_max_m_s)
+        phi_new = self.phi_rad + omega * dt
+        sin_new, cos_new = np.sin(phi_new), np.cos(phi_new)
+        radius = 0.5 * (self.v_m_s + v_new) / omega
+        self.x_m += radius * (sin_new - self._sin_phi)
+        self.y_m -= radius * (cos_new - self._cos_phi)
+        self.v_m_s = v_new
+        self.phi_rad = _wrap(phi_new)
+        self._sin_phi, self._cos_phi = sin_new, cos_new
+
+        # Mission logic (eq. 9, Table 1), all conditions at once.
+        self.sam_dist_m = np.hypot(self.x_m - self.sam_m[:, 0:1], self.y_m - self.sam_m[:, 1:2])
+        zone_dist_prev = self.zone_dist_m
+        self.zone_dist_m = _zone_distance(self.sam_dist_m, c)
+        in_zone = (self.sam_dist_m > c.zone_inner_m) & (self.sam_dist_m <= c.zone_outer_m) & moving
+        radar_on = in_zone[:, 0]
+        radar_on_changed = radar_on != self.radar_on
+        self.radar_on = radar_on
+        identified_now = radar_on & in_zone[:, 1] & ~self.identified
+        self.identified |= identified_now
+        hit_now = self.identified & radar_on & in_zone[:, 1] & in_zone[:, 2] & ~self.hit
+        self.hit |= hit_now
+        task_completed = np.stack([in_zone[:, 0] & ~self.task_done[:, 0], identified_now, hit_now], axis=1)
+        self.task_done |= task_completed
+
+        # eq. 11 cost and eq. 6 position bounds.
+        inside = self._inside_radar(slice(None)) & moving
+        hazard_entered = inside & ~self.in_hazard
+        self.in_hazard = inside
+        cost = inside.astype(np.float64)
+        self.cost_total += cost
+        out = moving & ((self.x_m < 0) | (self.x_m > c.area_m) | (self.y_m < 0) | (self.y_m > c.area_m))
+
+        self.steps += self.running
+        terminated = self.running & (hit_now | out.any(axis=1))
+        truncated = self.running & ~terminated & (self.steps >= c.episode_steps)
+        self.running &= ~(terminated | truncated)
+        return StepResult(
+            cost=cost,
+            zone_dist_prev_m=zone_dist_prev,
+            zone_dist_m=self.zone_dist_m,
+            in_zone=in_zone,
+            task_completed=task_completed,
+            out_of_area=out,
+            hazard_entered=hazard_entered,
+            radar_on_changed=radar_on_changed,
+            identified_now=identified_now,
+            hit_now=hit_now,
+            terminated=terminated,
+            truncated=truncated,
+        )
+
+    def _inside_radar(self, idx: np.ndarray | slice) -> np.ndarray:
+        dx = self.x_m[idx][:, :, None] - self.radar_m[idx][:, None, :, 0]
+        dy = self.y_m[idx][:, :, None] - self.radar_m[idx][:, None, :, 1]
+        r = self.radar_r_m[idx][:, None, :]
+        return (dx * dx + dy * dy < r * r).any(axis=2)
+
+
+def _zone_distance(sam_dist_m: np.ndarray, c: WorldConstants) -> np.ndarray:
+    """Distance from each UAV to its role's zone around the SAM (0 inside it)."""
+    outside = sam_dist_m - c.zone_outer_m
+    inside = c.zone_inner_m - sam_dist_m
+    return np.maximum(np.maximum(outside, inside), 0.0)
+
+
+def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
+    """Wrap an angle to [-pi, pi) (eq. 6 heading bounds)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _max_radar_count(s: Scenario) -> int:
+    if s.layout is not None:
+        return max(1, len(s.layout.radars))
+    assert s.random is not None
+    return max(1, s.random.radar_count)
+
+
+def role_index(role: Role | str) -> int:
+    return ROLES.index(Role(role))
