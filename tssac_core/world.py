@@ -11,10 +11,12 @@ counter-clockwise from east (eq. 5's frame); speed v in m/s. Vehicle index = rol
 Kinematics (eq. 5) are integrated exactly over a step for a constant turn rate (the arc of a circle at
 the step's mean speed), so a constant-rate circle closes on itself and a straight flight is exact:
 
-    phi' = phi + omega dt
-    x'   = x + v_m / omega * (sin phi' - sin phi)        (x' = v cos phi integrated)
-    y'   = y - v_m / omega * (cos phi' - cos phi)        (y' = v sin phi integrated)
     v'   = clip(v + u dt, v_min, v_max)                  (eq. 6 speed bounds; v_m = (v + v') / 2)
+    phi' = phi + omega dt
+    x'   = x + v_m dt sinc(omega dt / 2) cos(phi + omega dt / 2)   (x' = v cos phi integrated)
+    y'   = y + v_m dt sinc(omega dt / 2) sin(phi + omega dt / 2)   (y' = v sin phi integrated)
+
+(sinc(a) = sin(a) / a: the chord of the arc; exact for omega = 0 too).
 
 Mission logic (DESIGN.md section 2, eq. 9 read as simultaneous conditions), D_i = distance of UAV i
 from the SAM:
@@ -36,9 +38,6 @@ from tssac_core.scenario import ROLES, Layout, Role, Scenario
 
 KM = 1000.0
 N_ROLES = len(ROLES)
-# Turn rates below this (rad/s) are flown as this: the arc formula divides by omega, and an arc of
-# 1e-6 rad/s differs from a straight line by under a micrometre per step.
-_MIN_TURN_RATE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -135,8 +134,6 @@ class World:
         self.y_m = np.zeros((n, N_ROLES))
         self.v_m_s = np.zeros((n, N_ROLES))
         self.phi_rad = np.zeros((n, N_ROLES))
-        self._sin_phi = np.zeros((n, N_ROLES))
-        self._cos_phi = np.ones((n, N_ROLES))
         self.sam_m = np.zeros((n, 2))
         self.target_m = np.zeros((n, 2))
         # Unused radar slots sit far outside the area with zero radius: they never cost anything.
@@ -153,6 +150,7 @@ class World:
         self.cost_total = np.zeros((n, N_ROLES))
         self.zone_dist_m = np.zeros((n, N_ROLES))
         self.sam_dist_m = np.zeros((n, N_ROLES))
+        self._small_turns = float(self.c.turn_rate_max_rad_s.max()) * self.c.dt_s / 2 < 0.05
         self.layout_id = np.full(n, -1, dtype=np.int64)
         """Changes whenever a world gets a new layout (lets controllers cache per-layout work)."""
         self._resets = 0
@@ -184,8 +182,6 @@ class World:
         self.layout_id[idx] = self._resets + np.arange(len(idx))
         self._resets += len(idx)
         self.v_m_s[idx] = self.c.speed_init_m_s
-        self._sin_phi[idx] = np.sin(self.phi_rad[idx])
-        self._cos_phi[idx] = np.cos(self.phi_rad[idx])
         self.active[idx] = active
         self.running[idx] = True
         self.radar_on[idx] = False
@@ -204,21 +200,24 @@ class World:
         a = np.clip(action, -1.0, 1.0)
         moving = self.active & self.running[:, None]
         dt = c.dt_s * moving  # parked vehicles and finished worlds do not move
-        omega = a[..., 0] * c.turn_rate_max_rad_s
-        omega = np.where(np.abs(omega) < _MIN_TURN_RATE, _MIN_TURN_RATE, omega)
-        # eq. 5-6: speed first (clipped to its bounds), then the exact arc at the step's mean speed.
+        theta = a[..., 0] * c.turn_rate_max_rad_s * dt
+        # eq. 5-6: speed first (clipped to its bounds), then the exact arc at the step's mean speed:
+        # the chord of an arc of angle theta has length v dt sinc(theta / 2) along phi + theta / 2.
         v_new = np.clip(self.v_m_s + a[..., 1] * c.accel_max_m_s2 * dt, c.speed_min_m_s, c.speed_max_m_s)
-        phi_new = self.phi_rad + omega * dt
-        sin_new, cos_new = np.sin(phi_new), np.cos(phi_new)
-        radius = 0.5 * (self.v_m_s + v_new) / omega
-        self.x_m += radius * (sin_new - self._sin_phi)
-        self.y_m -= radius * (cos_new - self._cos_phi)
+        half = 0.5 * theta
+        chord = 0.5 * (self.v_m_s + v_new) * dt * self._sinc(half)
+        mid = self.phi_rad + half
+        self.x_m += chord * np.cos(mid)
+        self.y_m += chord * np.sin(mid)
         self.v_m_s = v_new
-        self.phi_rad = _wrap(phi_new)
-        self._sin_phi, self._cos_phi = sin_new, cos_new
+        # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices.
+        phi = self.phi_rad + theta
+        phi = np.where(phi >= math.pi, phi - 2 * math.pi, phi)
+        self.phi_rad = np.where(phi < -math.pi, phi + 2 * math.pi, phi)
 
         # Mission logic (eq. 9, Table 1), all conditions at once.
-        self.sam_dist_m = np.hypot(self.x_m - self.sam_m[:, 0:1], self.y_m - self.sam_m[:, 1:2])
+        sx, sy = self.x_m - self.sam_m[:, 0:1], self.y_m - self.sam_m[:, 1:2]
+        self.sam_dist_m = np.sqrt(sx * sx + sy * sy)
         zone_dist_prev = self.zone_dist_m
         self.zone_dist_m = _zone_distance(self.sam_dist_m, c)
         in_zone = (self.sam_dist_m > c.zone_inner_m) & (self.sam_dist_m <= c.zone_outer_m) & moving
@@ -260,10 +259,21 @@ class World:
         )
 
     def _inside_radar(self, idx: np.ndarray | slice) -> np.ndarray:
-        dx = self.x_m[idx][:, :, None] - self.radar_m[idx][:, None, :, 0]
-        dy = self.y_m[idx][:, :, None] - self.radar_m[idx][:, None, :, 1]
-        r = self.radar_r_m[idx][:, None, :]
-        return (dx * dx + dy * dy < r * r).any(axis=2)
+        x, y = self.x_m[idx], self.y_m[idx]
+        radar, r = self.radar_m[idx], self.radar_r_m[idx]
+        inside = np.zeros(x.shape, dtype=bool)
+        for k in range(r.shape[1]):  # a few radars: a loop of (N, 3) operations beats (N, 3, K) temporaries
+            dx = x - radar[:, k, 0:1]
+            dy = y - radar[:, k, 1:2]
+            inside |= dx * dx + dy * dy < r[:, k : k + 1] ** 2
+        return inside
+
+    def _sinc(self, half: np.ndarray) -> np.ndarray:
+        """sin(h) / h; a Taylor series when every |h| is small (error < h^6 / 5040, under 1e-12)."""
+        if self._small_turns:
+            h2 = half * half
+            return 1.0 - h2 * (1.0 / 6.0 - h2 * (1.0 / 120.0))
+        return np.sinc(half / np.pi)
 
 
 def _zone_distance(sam_dist_m: np.ndarray, c: WorldConstants) -> np.ndarray:

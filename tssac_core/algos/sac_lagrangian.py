@@ -276,7 +276,7 @@ class SacLagrangian:
         # Soft target update: target <- polyak * target + (1 - polyak) * online.
         with torch.no_grad():
             for target, online in self._target_pairs:
-                target.lerp_(online, 1.0 - cfg.polyak)
+                target.lerp_(online, cfg.polyak)
 
         scalars = torch.stack(
             [

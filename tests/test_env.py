@@ -1,0 +1,186 @@
+"""The gymnasium CMDP environment: API, reward terms, observations, determinism, pickling."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tssac_core  # noqa: F401  (registers the environments)
+from tssac_core.env import RoleTask
+from tssac_core.observation import EXTENDED_SIZE, ObservationMode, observation_bounds
+from tssac_core.reward import RewardConfig, reward
+from tssac_core.scenario import Role, load
+from tssac_core.world import KM, StepResult
+
+
+@pytest.mark.parametrize("role", ["Decoy", "Detect", "Strike"])
+@pytest.mark.parametrize("observation", ["paper", "extended"])
+def test_check_env(role, observation):
+    env = gym.make(f"tssac/{role}-v0", observation=observation)
+    check_env(env.unwrapped)
+    assert env.observation_space.shape == ((5,) if observation == "paper" else (EXTENDED_SIZE,))
+
+
+def rollout(env, seed, steps=300):
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    trace = [obs]
+    for _ in range(steps):
+        obs, r, term, trunc, info = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
+        trace.append(np.concatenate([obs, [r, info["cost"], term, trunc]]))
+        if term or trunc:
+            obs, _ = env.reset()
+    return np.concatenate(trace)
+
+
+def test_same_seed_same_rollout():
+    a = rollout(gym.make("tssac/Detect-v0"), 11)
+    b = rollout(gym.make("tssac/Detect-v0"), 11)
+    c = rollout(gym.make("tssac/Detect-v0"), 12)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_pickle_round_trip():
+    env = gym.make("tssac/Strike-v0", scenario="scenarios/strike.yaml").unwrapped
+    env.reset(seed=3)
+    for _ in range(20):
+        env.step(np.array([0.3, -0.2], dtype=np.float32))
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(50):
+        a = np.array([0.1, 0.5], dtype=np.float32)
+        o1, r1, *_ = env.step(a)
+        o2, r2, *_ = clone.step(a)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+
+
+def test_observations_stay_in_bounds_and_paper_layout(random_path):
+    s = load(random_path)
+    for mode in ObservationMode:
+        task = RoleTask(s, Role.DETECT, n=16, observation=mode, seed=0)
+        low, high = observation_bounds(mode)
+        obs = task.reset()
+        rng = np.random.default_rng(0)
+        for _ in range(400):
+            assert obs.dtype == np.float32 and obs.shape == (16, mode.size)
+            assert (obs >= low).all() and (obs <= high).all()
+            obs = task.step(rng.uniform(-1, 1, (16, 2))).obs
+    # Paper mode is eq. 7: [x, y, v, phi, l] normalised.
+    task = RoleTask(s, Role.DECOY, n=1, observation=ObservationMode.PAPER, seed=1)
+    obs = task.reset()[0]
+    w = task.world
+    assert obs[0] == pytest.approx(w.x_m[0, 0] / (100 * KM), abs=1e-6)
+    assert obs[1] == pytest.approx(w.y_m[0, 0] / (100 * KM), abs=1e-6)
+    assert obs[2] == pytest.approx((250 - 150) / 150, abs=1e-6)
+    assert obs[3] == pytest.approx(w.phi_rad[0, 0] / math.pi, abs=1e-6)
+    assert obs[4] == pytest.approx(math.dist((w.x_m[0, 0], w.y_m[0, 0]), w.target_m[0]) / (100 * KM), abs=1e-6)
+
+
+def test_extended_observation_geometry(strike_path):
+    task = RoleTask(load(strike_path), Role.STRIKE, n=1, seed=0)
+    obs = task.reset()[0]
+    w = task.world
+    # SAM bearing relative to heading: strike at (12, 12) km heading 45 deg, SAM at (65, 65): dead ahead.
+    assert obs[6] == pytest.approx(1.0, abs=1e-6) and obs[7] == pytest.approx(0.0, abs=1e-6)
+    d_sam = math.dist((12, 12), (65, 65)) * KM
+    assert obs[8] == pytest.approx(d_sam / (100 * KM), abs=1e-6)
+    assert obs[9] == pytest.approx(1.0)  # far outside the strike zone: clipped
+    # Nearest radar first: (30, 21) is 20.1 km away, edge 8.1 km -> 0.406 of the 20 km scale.
+    assert obs[11] == pytest.approx((math.dist((12, 12), (30, 21)) - 12) / 20, abs=1e-5)
+    assert obs[14] >= obs[11] and obs[17] >= obs[14]
+    assert obs[20] == 0.0 and obs[21] == 0.0
+    assert w.radar_on[0] == 0
+
+
+def result(**kw) -> StepResult:
+    z = np.zeros((1, 3))
+    zb = np.zeros((1, 3), dtype=bool)
+    base = dict(cost=z, zone_dist_prev_m=z, zone_dist_m=z, in_zone=zb, task_completed=zb, out_of_area=zb, hazard_entered=zb,
+                radar_on_changed=np.zeros(1, bool), identified_now=np.zeros(1, bool), hit_now=np.zeros(1, bool),
+                terminated=np.zeros(1, bool), truncated=np.zeros(1, bool))
+    base.update(kw)
+    return StepResult(**base)
+
+
+MOVING = np.ones((1, 3), dtype=bool)
+
+
+def test_reward_terms():
+    cfg = RewardConfig()
+    # Step penalty alone (eq. 10, k3 r_step).
+    np.testing.assert_allclose(reward(result(), MOVING, cfg), [[-0.1, -0.1, -0.1]])
+    # Approach: 25 m closer to the zone is +0.025 (km); moving away is negative.
+    r = reward(result(zone_dist_prev_m=np.array([[1000.0, 1000.0, 1000.0]]), zone_dist_m=np.array([[975.0, 1025.0, 1000.0]])), MOVING, cfg)
+    np.testing.assert_allclose(r, [[-0.075, -0.125, -0.1]])
+    # Success +10 to the role whose task completed (eq. 9).
+    done = np.array([[False, True, False]])
+    np.testing.assert_allclose(reward(result(task_completed=done), MOVING, cfg), [[-0.1, 9.9, -0.1]])
+    # Holding the zone cancels the step penalty.
+    np.testing.assert_allclose(reward(result(in_zone=np.array([[True, False, True]])), MOVING, cfg), [[0.0, -0.1, 0.0]])
+    # Leaving the area.
+    np.testing.assert_allclose(reward(result(out_of_area=np.array([[False, False, True]])), MOVING, cfg), [[-0.1, -0.1, -20.1]])
+    # Weights scale their terms.
+    k = RewardConfig(k1=2.0, k3=0.5)
+    np.testing.assert_allclose(reward(result(task_completed=done), MOVING, k), [[-0.05, 19.95, -0.05]])
+    # Parked vehicles get nothing.
+    np.testing.assert_allclose(reward(result(), np.array([[True, False, False]]), cfg), [[-0.1, 0.0, 0.0]])
+
+
+def test_approach_reward_matches_distance_to_sam_outside_the_zone(strike_path):
+    """Outside its zone the approach term equals the paper's d_{t-1} - d_t to the SAM, in km."""
+    task = RoleTask(load(strike_path), Role.DECOY, n=1, teammates="none", seed=0)
+    task.reset()
+    w = task.world
+    d0 = w.sam_dist_m[0, 0]
+    _, r, _ = task.advance(np.array([[0.0, 0.0]]))
+    d1 = w.sam_dist_m[0, 0]
+    assert r[0] == pytest.approx((d0 - d1) / KM - 0.1, abs=1e-9)
+
+
+def test_teammates_alone_and_callable(strike_path):
+    s = load(strike_path)
+    alone = RoleTask(s, Role.DECOY, n=1, teammates="none", seed=0)
+    alone.reset()
+    assert alone.world.active[0].tolist() == [True, False, False]
+    calls = []
+
+    def straight(obs):
+        calls.append(obs.shape)
+        return np.zeros((obs.shape[0], 2))
+
+    task = RoleTask(s, Role.STRIKE, n=2, teammates={"decoy": straight, "detect": "guidance"}, seed=0)
+    task.reset()
+    x0 = task.world.x_m.copy()
+    task.step(np.zeros((2, 2)))
+    assert calls == [(2, EXTENDED_SIZE)]
+    assert task.world.active[0].tolist() == [True, True, True]
+    assert (task.world.x_m != x0).all()
+    with pytest.raises(ValueError, match="unknown role"):
+        RoleTask(s, Role.STRIKE, teammates={"bomber": "guidance"})
+    with pytest.raises(ValueError, match="must be 'guidance', None or a callable"):
+        RoleTask(s, Role.STRIKE, teammates={"decoy": 3})
+
+
+def test_guidance_team_completes_the_fixed_mission(strike_path):
+    env = gym.make("tssac/Strike-v0", scenario=strike_path)
+    obs, _ = env.reset(seed=0)
+    # The strike UAV flown by hand: straight at the SAM, then circle inside R1.
+    total_cost, steps = 0.0, 0
+    from tssac_core.guidance import Guidance
+
+    g = Guidance()
+    while True:
+        action = g.actions(env.unwrapped.task.world)[0, 2]
+        obs, r, term, trunc, info = env.step(action.astype(np.float32))
+        total_cost += info["cost"]
+        steps += 1
+        if term or trunc:
+            break
+    assert term and info["hit"] and total_cost == 0.0
+    assert steps < 4000

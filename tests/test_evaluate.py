@@ -1,0 +1,37 @@
+"""The evaluation command and the guidance controller over random layouts."""
+
+from __future__ import annotations
+
+import json
+
+from tssac_core.evaluate import main
+from tssac_core.missions import fly_missions
+from tssac_core.scenario import load
+from tssac_core.team import GUIDANCE
+
+
+def test_guidance_solves_random_layouts(random_path):
+    s = load(random_path)
+    results = fly_missions(s, [GUIDANCE] * 3, episodes=30, seed=2024)
+    summary = results.summary(s.cost_limit)
+    assert summary["success_rate"] >= 0.9
+    assert summary["mean_cost"] <= 0.5
+    assert summary["episodes"] == 30
+
+
+def test_evaluate_writes_json(tmp_path, strike_path, capsys):
+    out = tmp_path / "r" / "eval.json"
+    assert main(["--controller", "guidance", "--scenario", str(strike_path), "--episodes", "2", "--seed", "1", "--json", str(out), "--no-progress"]) == 0
+    data = json.loads(out.read_text())
+    assert data["success_rate"] == 1.0 and data["episodes"] == 2 and data["mean_cost"] == 0.0
+    assert set(data["roles"]) == {"decoy", "detect", "strike"}
+    assert data["roles"]["strike"]["task_success_rate"] == 1.0
+    assert "success rate 100.0%" in capsys.readouterr().out
+
+
+def test_parked_team_never_succeeds(strike_path):
+    s = load(strike_path)
+    results = fly_missions(s, [GUIDANCE, None, GUIDANCE], episodes=1, seed=0)
+    assert not results.success.any()  # nobody identifies the target
+    assert results.task_done[0].tolist() == [True, False, False]
+    assert results.time_s[0] == s.episode_steps * s.dt_s

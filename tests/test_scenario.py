@@ -1,0 +1,148 @@
+"""Scenario files: load/dump round trip, random layouts, and one clear error per kind of mistake."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tssac_core.scenario import Layout, Radar, ScenarioError, dump, from_dict, infeasibility, load, sample_layout, to_dict
+
+
+@pytest.mark.parametrize("name", ["strike.yaml", "random.yaml"])
+def test_shipped_scenarios_round_trip(name, tmp_path):
+    path = Path(__file__).resolve().parent.parent / "scenarios" / name
+    s = load(path)
+    dump(s, tmp_path / "copy.yaml")
+    assert load(tmp_path / "copy.yaml") == s
+    assert load(tmp_path / "copy.yaml").digest() == s.digest()
+
+
+def test_random_layouts_are_feasible_and_seeded(random_path):
+    s = load(random_path)
+    a = [sample_layout(s, np.random.default_rng(3)) for _ in range(2)]
+    assert a[0] == a[1]
+    rng = np.random.default_rng(4)
+    r4 = s.ranges.sam_detect_km
+    for _ in range(40):
+        lay = sample_layout(s, rng)
+        assert infeasibility(s, lay, s.random.clearance_km) is None
+        for radar in lay.radars:
+            # zones stay clear of hazards
+            assert math.dist(radar.position_km, lay.sam_km) >= r4 + radar.radius_km - 1e-9
+            for start in lay.starts.values():
+                assert math.dist(start.position_km, radar.position_km) > radar.radius_km + s.random.clearance_km
+
+
+def test_walled_in_start_is_infeasible(strike_path):
+    s = load(strike_path)
+    lay = s.layout
+    # Ring the strike UAV's start with overlapping radars: no way out.
+    cx, cy = lay.starts["strike"].position_km
+    ring = tuple(Radar((cx + 9 * math.cos(a), cy + 9 * math.sin(a)), 5.0) for a in np.linspace(0, 2 * math.pi, 12, endpoint=False))
+    walled = Layout(lay.sam_km, lay.target_km, ring, lay.starts)
+    assert infeasibility(s, lay, 0.0) is None
+    problem = infeasibility(s, walled, 0.0)
+    assert problem is not None and problem[0].startswith("layout.starts.")
+
+
+def base(strike_path) -> dict:
+    return yaml.safe_load(Path(strike_path).read_text())
+
+
+def error_of(data, tmp_path) -> str:
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ScenarioError) as info:
+        load(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path))
+    return message
+
+
+def test_unknown_key(strike_path, tmp_path):
+    data = base(strike_path)
+    data["vehicles"]["decoy"]["speed_maximum"] = 3
+    assert "vehicles.decoy.speed_maximum: unknown key" in error_of(data, tmp_path)
+
+
+def test_wrong_type(strike_path, tmp_path):
+    data = base(strike_path)
+    data["episode_steps"] = "many"
+    assert "episode_steps: expected an integer" in error_of(data, tmp_path)
+    data = base(strike_path)
+    data["layout"]["sam_km"] = [1.0]
+    assert "layout.sam_km: expected a list of 2 numbers" in error_of(data, tmp_path)
+
+
+def test_radius_out_of_range(strike_path, tmp_path):
+    data = base(strike_path)
+    data["layout"]["radars"][1]["radius_km"] = -4.0
+    assert "layout.radars[1].radius_km: out of range" in error_of(data, tmp_path)
+    data = base(strike_path)
+    data["layout"]["radars"][0]["radius_km"] = 60.0
+    assert "layout.radars[0].radius_km: out of range" in error_of(data, tmp_path)
+
+
+def test_inconsistent_ranges(strike_path, tmp_path):
+    data = base(strike_path)
+    data["ranges"]["detect_km"] = 18.0
+    assert "ranges: inconsistent: need R1" in error_of(data, tmp_path)
+
+
+def test_start_inside_radar(strike_path, tmp_path):
+    data = base(strike_path)
+    data["layout"]["starts"]["detect"]["position_km"] = [38.0, 40.0]
+    assert "layout.starts.detect: starts inside" in error_of(data, tmp_path)
+
+
+def test_missing_and_exclusive_sections(strike_path, tmp_path):
+    data = base(strike_path)
+    del data["vehicles"]["strike"]
+    assert "vehicles.strike: missing required vehicle" in error_of(data, tmp_path)
+    data = base(strike_path)
+    data["random"] = {}
+    assert "give exactly one of 'layout' (fixed) or 'random'" in error_of(data, tmp_path)
+
+
+def test_bad_probability_and_empty_range(random_path, tmp_path):
+    data = yaml.safe_load(Path(random_path).read_text())
+    data["link"]["packet_loss"] = 1.5
+    assert "link.packet_loss: must be a probability" in error_of(data, tmp_path)
+    data = yaml.safe_load(Path(random_path).read_text())
+    data["random"]["sam_x_km"] = [70.0, 60.0]
+    assert "random.sam_x_km: range is empty" in error_of(data, tmp_path)
+
+
+def test_not_yaml_and_missing_file(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("name: [unclosed\n")
+    with pytest.raises(ScenarioError, match="not valid YAML at line"):
+        load(path)
+    with pytest.raises(ScenarioError, match="cannot read file"):
+        load(tmp_path / "absent.yaml")
+    with pytest.raises(ScenarioError, match="expected a mapping"):
+        from_dict(["a", "list"], "x.yaml")
+
+
+def test_cli_reports_bad_scenario_in_one_line(strike_path, tmp_path):
+    data = base(strike_path)
+    data["ranges"]["sam_launch_km"] = "far"
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    proc = subprocess.run([sys.executable, "-m", "tssac_core.evaluate", "--scenario", str(path), "--episodes", "1"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "ranges.sam_launch_km: expected a number" in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_to_dict_is_plain_data(strike_path):
+    data = to_dict(load(strike_path))
+    yaml.safe_dump(data)  # raises on anything but plain data
+    assert data["layout"]["radars"][0]["radius_km"] == 12.0
