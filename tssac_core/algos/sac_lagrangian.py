@@ -150,7 +150,9 @@ class UpdateStats:
     beta_loss: float
     """Eq. 15 (0 for SAC and SAC_PENALTY, whose beta is not learned)."""
     alpha: float
+    """Entropy coefficient of eq. 12-14."""
     beta: float
+    """Cost multiplier of eq. 12 / 15 (0 for SAC and SAC_PENALTY)."""
     xi: float
     """Eq. 17 (0 unless TSSAC)."""
     beta_minus_xi: float
@@ -244,8 +246,9 @@ class SacLagrangian:
         (q_r_loss + q_c_loss).backward()
         self.critic_optim.step()
 
-        # Actor loss, eq. 12 (SAC_LAG) / eq. 16 (TSSAC); the multiplier uses Q^c at the policy's
-        # own actions, the cost-to-go of the current policy that eq. 4's g(pi) constrains.
+        # Actor loss, eq. 12 (SAC_LAG) / eq. 16 (TSSAC). The multiplier measures Q^c at the
+        # policy's own actions, the cost-to-go of the current policy that eq. 4's g(pi) constrains
+        # (WCSAC's saclag.py uses the replayed actions instead).
         pi_actions, log_pi = self.actor(obs)
         q_r_pi = self.q_r(obs, pi_actions)
         q_c_pi = self.q_c(obs, pi_actions)[0]
@@ -276,7 +279,7 @@ class SacLagrangian:
         # Soft target update: target <- polyak * target + (1 - polyak) * online.
         with torch.no_grad():
             for target, online in self._target_pairs:
-                target.lerp_(online, cfg.polyak)
+                target.lerp_(online, 1.0 - cfg.polyak)
 
         scalars = torch.stack(
             [

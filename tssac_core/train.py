@@ -1,0 +1,367 @@
+"""``python -m tssac_core.train``: train the team, role by role (Algorithm 1).
+
+Examples::
+
+    python -m tssac_core.train --algo tssac --seed 0 --out runs/tssac-0
+    python -m tssac_core.train --algo sac_lag --seed 1 --epochs 20 --out runs/sac_lag-1
+    python -m tssac_core.train --out runs/tssac-0 --resume        # after a crash or kill -9
+
+The curriculum trains decoy, then detect (with the trained decoy flying), then strike (with both
+flying). TSSAC initialises each role from the previous role's networks (transfer N1 -> N2 -> N3);
+every other algorithm trains each role from scratch with the same kind of teammates (its own earlier
+roles). Output in ``--out``: ``config.json``, ``metrics.csv`` (one row per role and epoch), one
+checkpoint per role (``decoy.pt``, ``detect.pt``, ``strike.pt``), ``fig7_return_cost.png`` and
+``fig8_multiplier.png``, and ``resume/`` (the last completed epoch: learner, replay buffer, worlds and
+random states), from which ``--resume`` continues, losing at most the epoch that was running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import io
+import json
+import logging
+import math
+import pickle
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from tssac_core.algos.replay import ReplayBuffer
+from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStats, Variant, transfer
+from tssac_core.cli import UsageError, run, write_json
+from tssac_core.env import RoleTask
+from tssac_core.observation import ObservationMode
+from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint
+from tssac_core.scenario import ROLES, Role, Scenario, load
+from tssac_core.team import Pilot
+
+logger = logging.getLogger(__name__)
+DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
+SAC_FAMILY = {v.value: v for v in Variant}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run: an algorithm, a seed, the role curriculum."""
+
+    algo: str = "tssac"
+    """tssac, sac_lag, sac or sac_penalty."""
+    scenario: str = str(DEFAULT_SCENARIO)
+    """Scenario file (random layouts: every episode a new one, section 5.2.3)."""
+    seed: int = 0
+    epochs: int = 50
+    """Epochs per role (Table 3: 50)."""
+    steps_per_epoch: int = 4000
+    """Environment steps per epoch, summed over the parallel worlds (Table 3: 4,000)."""
+    roles: tuple[str, ...] = ("decoy", "detect", "strike")
+    """Roles to train, in curriculum order; earlier roles must already be in --out."""
+    envs: int = 4
+    """Parallel worlds collecting experience (one batched world)."""
+    update_every: int = 1
+    """Gradient updates happen once per this many environment steps (1: one update per step, as Algorithm 1)."""
+    start_steps: int = 4000
+    """From-scratch roles act uniformly at random for this many steps first (not after transfer)."""
+    update_after: int = 1000
+    """No updates before the buffer holds this many transitions."""
+    observation: str = "extended"
+    penalty: float = 0.0
+    """sac_penalty: reward r + penalty * c."""
+    threads: int = 2
+    """torch threads (this machine has 2 cores)."""
+    sac: dict[str, Any] = field(default_factory=dict)
+    """Overrides of SacConfig fields (Table 3 defaults)."""
+
+
+def teammates_for(role: Role, out: Path) -> dict[str, Pilot]:
+    """Earlier roles fly their trained policies (the judgement condition); later ones are parked."""
+    pilots: dict[str, Pilot] = {}
+    for earlier in ROLES[: role.index]:
+        pilots[earlier.value] = Policy.load(out / f"{earlier.value}.pt", earlier)
+    return pilots
+
+
+def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
+    fields = {"variant": SAC_FAMILY[cfg.algo], "cost_limit": scenario.cost_limit, "episode_steps": scenario.episode_steps}
+    if cfg.algo == "sac_penalty":
+        fields["penalty"] = cfg.penalty
+    fields.update(cfg.sac)
+    if "hidden_sizes" in fields:
+        fields["hidden_sizes"] = tuple(fields["hidden_sizes"])
+    return SacConfig(**fields)
+
+
+@dataclass
+class EpochLog:
+    """Accumulates one epoch's figures."""
+
+    returns: list[float] = field(default_factory=list)
+    costs: list[float] = field(default_factory=list)
+    tasks: list[float] = field(default_factory=list)
+    successes: list[float] = field(default_factory=list)
+    stats: list[UpdateStats] = field(default_factory=list)
+    env_time: float = 0.0
+    update_time: float = 0.0
+
+    def row(self, role: Role, epoch: int, env_steps: int, updates: int, steps: int) -> dict[str, Any]:
+        def mean(xs: list[float]) -> float:
+            return float(np.mean(xs)) if xs else math.nan
+
+        row: dict[str, Any] = {
+            "role": role.value,
+            "epoch": epoch,
+            "env_steps": env_steps,
+            "episodes": len(self.returns),
+            "return": mean(self.returns),
+            "cost": mean(self.costs),
+            "task_success": mean(self.tasks),
+            "mission_success": mean(self.successes),
+        }
+        for f in dataclasses.fields(UpdateStats):
+            row[f.name] = mean([getattr(s, f.name) for s in self.stats])
+        row["env_steps_per_s"] = steps / self.env_time if self.env_time > 0 else math.nan
+        row["updates_per_s"] = len(self.stats) / self.update_time if self.update_time > 0 else math.nan
+        row["updates"] = updates
+        return row
+
+
+def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resume: bool, bar: tqdm) -> None:
+    """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``."""
+    mode = ObservationMode(cfg.observation)
+    state_path = out / "resume" / f"{role.value}.pt"
+    sac_cfg = sac_config(cfg, scenario)
+    learner = SacLagrangian(mode.size, 2, sac_cfg)
+    buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
+    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates_for(role, out), seed=cfg.seed * 1000 + role.index)
+    rng = np.random.default_rng([cfg.seed, role.index])
+    torch.manual_seed(cfg.seed * 1000 + role.index)
+    transferred = False
+    start_epoch, env_steps, updates = 0, 0, 0
+    obs = task.reset()
+    if resume and state_path.is_file():
+        saved = torch.load(io.BytesIO(state_path.read_bytes()), map_location="cpu", weights_only=False)
+        learner.load_state_dict(saved["learner"])
+        buffer.load_state_dict(saved["buffer"])
+        task.world, task.rng, task.ep_return, task.ep_cost = pickle.loads(saved["task"])
+        obs = saved["obs"]
+        rng.bit_generator.state = saved["rng"]
+        torch.set_rng_state(saved["torch_rng"])
+        start_epoch, env_steps, updates, transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
+        logger.info("%s: resuming after epoch %d (%d env steps)", role.value, start_epoch, env_steps)
+    elif cfg.algo == "tssac" and role.index > 0:
+        source = out / f"{ROLES[role.index - 1].value}.pt"
+        copied = transfer(learner, read_checkpoint(source)["learner"])
+        transferred = True
+        logger.info("%s: transferred %d tensors from %s", role.value, len(copied), source)
+    bar.n = (role_position(cfg, role) * cfg.epochs + start_epoch) * cfg.steps_per_epoch
+    bar.refresh()
+
+    iters = max(1, cfg.steps_per_epoch // cfg.envs)
+    for epoch in range(start_epoch + 1, cfg.epochs + 1):
+        log = EpochLog()
+        for _ in range(iters):
+            t0 = time.perf_counter()
+            if env_steps < cfg.start_steps and not transferred:
+                action = rng.uniform(-1.0, 1.0, (cfg.envs, 2))
+            else:
+                action = learner.act(obs, deterministic=False)
+            step = task.step(action)
+            buffer.add_batch(obs, action, step.reward, step.cost, step.final_obs, step.terminated)
+            obs = step.obs
+            env_steps += cfg.envs
+            ended = step.terminated | step.truncated
+            if ended.any():
+                log.returns += step.episode_return[ended].tolist()
+                log.costs += step.episode_cost[ended].tolist()
+                log.tasks += step.episode_task[ended].astype(float).tolist()
+                log.successes += step.episode_success[ended].astype(float).tolist()
+            t1 = time.perf_counter()
+            log.env_time += t1 - t0
+            if len(buffer) >= cfg.update_after:
+                due = env_steps // cfg.update_every - updates
+                for _ in range(due):
+                    log.stats.append(learner.update(buffer.sample(sac_cfg.batch_size, rng)))
+                updates += max(due, 0)
+                log.update_time += time.perf_counter() - t1
+            bar.update(cfg.envs)
+        row = log.row(role, epoch, env_steps, updates, iters * cfg.envs)
+        append_metrics(out / "metrics.csv", row)
+        bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
+        save_resume_state(state_path, learner, buffer, task, obs, rng, epoch, env_steps, updates, transferred)
+
+    info = CheckpointInfo(
+        role=role,
+        algo=cfg.algo,
+        observation_mode=mode,
+        obs_dim=mode.size,
+        act_dim=2,
+        hidden_sizes=sac_cfg.hidden_sizes,
+        scenario_digest=scenario.digest(),
+        versions=package_versions(),
+        metrics={"env_steps": env_steps, "updates": updates},
+    )
+    save_role_checkpoint(out / f"{role.value}.pt", info, learner.actor.state_dict(), learner.state_dict())
+
+
+def role_position(cfg: TrainConfig, role: Role) -> int:
+    return list(cfg.roles).index(role.value)
+
+
+def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, task: RoleTask, obs: np.ndarray, rng: np.random.Generator,
+                      epoch: int, env_steps: int, updates: int, transferred: bool) -> None:
+    """Everything needed to continue after this epoch, written atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {
+        "learner": learner.state_dict(),
+        "buffer": buffer.state_dict(),
+        "task": pickle.dumps((task.world, task.rng, task.ep_return, task.ep_cost)),
+        "obs": obs,
+        "rng": rng.bit_generator.state,
+        "torch_rng": torch.get_rng_state(),
+        "epoch": epoch,
+        "env_steps": env_steps,
+        "updates": updates,
+        "transferred": transferred,
+    }
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    tmp.replace(path)
+
+
+METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
+                 *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates"]
+
+
+def append_metrics(path: Path, row: dict[str, Any]) -> None:
+    new = not path.is_file()
+    with path.open("a", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=METRIC_FIELDS)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:
+    """On resume, drop rows of epochs that were not checkpointed (they will be run again)."""
+    if not path.is_file():
+        return
+    with path.open() as fh:
+        rows = [r for r in csv.DictReader(fh) if (r["role"], int(r["epoch"])) in keep]
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=METRIC_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def completed_epochs(out: Path, role: str) -> int:
+    """Epochs of ``role`` that a resume can skip: all if its checkpoint exists, else the resume state's."""
+    if (out / f"{role}.pt").is_file():
+        return -1
+    state = out / "resume" / f"{role}.pt"
+    if state.is_file():
+        return int(torch.load(io.BytesIO(state.read_bytes()), map_location="cpu", weights_only=False)["epoch"])
+    return 0
+
+
+def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
+    p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=__doc__.split("\n")[0])
+    p.add_argument("--algo", choices=sorted(SAC_FAMILY), default="tssac")
+    p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--epochs", type=int, default=50)
+    p.add_argument("--steps-per-epoch", type=int, default=4000)
+    p.add_argument("--roles", default="decoy,detect,strike", help="comma-separated, in curriculum order")
+    p.add_argument("--envs", type=int, default=4, help="parallel worlds (default 4)")
+    p.add_argument("--update-every", type=int, default=1)
+    p.add_argument("--start-steps", type=int, default=4000)
+    p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended")
+    p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a SacConfig field, e.g. --set lr=3e-4")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
+    p.add_argument("--no-progress", action="store_true")
+    a = p.parse_args(argv)
+    roles = tuple(r.strip() for r in a.roles.split(",") if r.strip())
+    for r in roles:
+        if r not in [x.value for x in ROLES]:
+            raise UsageError(f"--roles: unknown role {r!r}")
+    if list(roles) != [x.value for x in ROLES if x.value in roles]:
+        raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
+    if a.epochs <= 0 or a.steps_per_epoch <= 0 or a.envs <= 0 or a.update_every <= 0:
+        raise UsageError("--epochs, --steps-per-epoch, --envs and --update-every must be positive")
+    overrides: dict[str, Any] = {}
+    names = {f.name for f in dataclasses.fields(SacConfig)}
+    for item in a.set:
+        key, _, value = item.partition("=")
+        if key not in names or key == "variant":
+            raise UsageError(f"--set: unknown SacConfig field {key!r}")
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise UsageError(f"--set {key}: value {value!r} is not a number, list or boolean") from None
+    cfg = TrainConfig(a.algo, str(a.scenario), a.seed, a.epochs, a.steps_per_epoch, roles, a.envs, a.update_every, a.start_steps,
+                      1000, a.observation, a.penalty, a.threads, overrides)
+    return cfg, a.out, a.resume, a.no_progress
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    cfg, out, resume, quiet = parse_args(argv)
+    config_path = out / "config.json"
+    if resume:
+        if not config_path.is_file():
+            raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
+        saved = json.loads(config_path.read_text())
+        cfg = TrainConfig(**{**saved, "roles": tuple(saved["roles"])})
+    elif config_path.is_file():
+        raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
+    scenario = load(cfg.scenario)
+    try:
+        sac_config(cfg, scenario)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"invalid learner settings: {exc}") from None
+    for role_name in cfg.roles:
+        role = Role(role_name)
+        for earlier in ROLES[: role.index]:
+            if earlier.value not in cfg.roles and not (out / f"{earlier.value}.pt").is_file():
+                raise UsageError(f"training {role.value} needs {out / (earlier.value + '.pt')} (train {earlier.value} first)")
+    out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+    torch.set_num_threads(cfg.threads)
+    keep = set()
+    for role_name in cfg.roles:
+        done = completed_epochs(out, role_name)
+        keep |= {(role_name, e) for e in range(1, (cfg.epochs if done < 0 else done) + 1)}
+    truncate_metrics(out / "metrics.csv", keep)
+    total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
+    start = time.perf_counter()
+    with tqdm(total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05) as bar:
+        for role_name in cfg.roles:
+            role = Role(role_name)
+            if (out / f"{role_name}.pt").is_file():
+                logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
+                continue
+            train_role(cfg, scenario, role, out, resume, bar)
+            write_plots(out, scenario.cost_limit)
+    write_plots(out, scenario.cost_limit)
+    print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")
+    return 0
+
+
+def write_plots(out: Path, cost_limit: float) -> None:
+    from tssac_core.plots import plot_training
+
+    plot_training(out / "metrics.csv", out, cost_limit)
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))
