@@ -138,11 +138,11 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
     sac_cfg = sac_config(cfg, scenario)
+    torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = SacLagrangian(mode.size, 2, sac_cfg)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates_for(role, out), seed=cfg.seed * 1000 + role.index)
     rng = np.random.default_rng([cfg.seed, role.index])
-    torch.manual_seed(cfg.seed * 1000 + role.index)
     transferred = False
     start_epoch, env_steps, updates = 0, 0, 0
     obs = task.reset()
@@ -282,6 +282,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--envs", type=int, default=4, help="parallel worlds (default 4)")
     p.add_argument("--update-every", type=int, default=1)
     p.add_argument("--start-steps", type=int, default=4000)
+    p.add_argument("--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions")
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
     p.add_argument("--threads", type=int, default=2)
@@ -309,7 +310,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         except json.JSONDecodeError:
             raise UsageError(f"--set {key}: value {value!r} is not a number, list or boolean") from None
     cfg = TrainConfig(a.algo, str(a.scenario), a.seed, a.epochs, a.steps_per_epoch, roles, a.envs, a.update_every, a.start_steps,
-                      1000, a.observation, a.penalty, a.threads, overrides)
+                      a.update_after, a.observation, a.penalty, a.threads, overrides)
     return cfg, a.out, a.resume, a.no_progress
 
 

@@ -1,0 +1,138 @@
+"""The training command: outputs, determinism, resume after kill -9, checkpoints and the policy face."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from tssac_core.policy import CheckpointError, Policy, load_team
+from tssac_core.train import main
+
+TINY = ["--epochs", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
+        "--set", "hidden_sizes=[32,32]", "--set", "batch_size=32", "--threads", "1", "--no-progress"]
+
+
+def rows(out: Path) -> list[dict[str, str]]:
+    with (out / "metrics.csv").open() as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("run") / "tssac"
+    assert main(["--algo", "tssac", "--seed", "3", "--out", str(out), *TINY]) == 0
+    return out
+
+
+def test_outputs(trained):
+    for name in ("config.json", "metrics.csv", "decoy.pt", "detect.pt", "strike.pt", "fig7_return_cost.png", "fig8_multiplier.png"):
+        assert (trained / name).is_file(), name
+    r = rows(trained)
+    assert [(x["role"], int(x["epoch"])) for x in r] == [(role, e) for role in ("decoy", "detect", "strike") for e in (1, 2)]
+    assert float(r[-1]["updates"]) > 0 and float(r[-1]["updates_per_s"]) > 0
+    assert all(x["beta_minus_xi"] not in ("", "nan") for x in r[1:])
+
+
+def test_same_seed_same_run(trained, tmp_path):
+    out = tmp_path / "again"
+    assert main(["--algo", "tssac", "--seed", "3", "--out", str(out), "--roles", "decoy", *TINY]) == 0
+    a = torch.load(trained / "decoy.pt", weights_only=False)["actor"]
+    b = torch.load(out / "decoy.pt", weights_only=False)["actor"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_transfer_initialises_the_next_role(tmp_path):
+    """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
+    out = tmp_path / "t"
+    args = ["--epochs", "1", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000", "--set", "hidden_sizes=[16]", "--no-progress", "--threads", "1"]
+    assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
+    a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
+    b = torch.load(out / "detect.pt", weights_only=False)["actor"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    out2 = tmp_path / "s"
+    assert main(["--algo", "sac_lag", "--out", str(out2), *args]) == 0
+    c = torch.load(out2 / "decoy.pt", weights_only=False)["actor"]
+    d = torch.load(out2 / "detect.pt", weights_only=False)["actor"]
+    assert not all(torch.equal(c[k], d[k]) for k in c)  # sac_lag starts every role from scratch
+
+
+def test_checkpoint_round_trip_and_team(trained):
+    team = load_team(trained)
+    obs = np.random.default_rng(0).uniform(0, 1, (5, 22)).astype(np.float32)
+    again = load_team(trained)
+    for p, q in zip(team, again):
+        np.testing.assert_array_equal(p.act(obs), q.act(obs))
+        assert p.act(obs).shape == (5, 2) and np.abs(p.act(obs)).max() <= 1.0
+        np.testing.assert_allclose(p.act(obs[0]), p.act(obs)[0], atol=1e-6)
+    assert team[2].info.role.value == "strike" and team[2].info.algo == "tssac"
+    assert team[0].info.versions["torch"] == torch.__version__
+
+
+def test_bad_checkpoints_fail_with_one_line(trained, tmp_path):
+    with pytest.raises(CheckpointError, match="checkpoint not found"):
+        Policy.load(tmp_path / "missing.pt")
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(os.urandom(300))
+    with pytest.raises(CheckpointError, match="not a readable checkpoint"):
+        Policy.load(junk)
+    with pytest.raises(CheckpointError, match="is for the decoy UAV, not the strike"):
+        Policy.load(trained / "decoy.pt", "strike")
+    data = torch.load(trained / "decoy.pt", weights_only=False)
+    data["obs_dim"] = 5
+    torch.save(data, tmp_path / "wrong.pt")
+    with pytest.raises(CheckpointError, match="does not fit"):
+        Policy.load(tmp_path / "wrong.pt")
+    with pytest.raises(ValueError, match="observation has 5 values"):
+        Policy.load(trained / "decoy.pt").act(np.zeros(5))
+    proc = subprocess.run([sys.executable, "-m", "tssac_core.evaluate", "--models", str(tmp_path), "--episodes", "1"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "checkpoint not found" in proc.stderr
+
+
+def test_evaluate_flies_trained_models(trained, tmp_path):
+    from tssac_core.evaluate import main as evaluate
+
+    assert evaluate(["--models", str(trained), "--scenario", "scenarios/strike.yaml", "--episodes", "2", "--json", str(tmp_path / "e.json"), "--no-progress"]) == 0
+    assert (tmp_path / "e.json").is_file()
+
+
+def test_resume_after_kill_continues_identically(tmp_path):
+    """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
+    args = ["--algo", "sac_lag", "--seed", "5", "--roles", "decoy", "--epochs", "4", "--steps-per-epoch", "300", "--start-steps", "100",
+            "--update-after", "100", "--envs", "2", "--set", "hidden_sizes=[64,64]", "--set", "batch_size=64", "--threads", "1", "--no-progress"]
+    whole = tmp_path / "whole"
+    assert main([*args, "--out", str(whole)]) == 0
+    cut = tmp_path / "cut"
+    proc = subprocess.Popen([sys.executable, "-m", "tssac_core.train", *args, "--out", str(cut)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    state = cut / "resume" / "decoy.pt"
+    while time.monotonic() < deadline and not state.is_file():
+        time.sleep(0.05)
+    time.sleep(0.2)  # into the second epoch
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert not (cut / "decoy.pt").is_file(), "the run finished before it could be killed"
+    assert main(["--out", str(cut), "--resume", "--no-progress"]) == 0
+    a = torch.load(whole / "decoy.pt", weights_only=False)["actor"]
+    b = torch.load(cut / "decoy.pt", weights_only=False)["actor"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert [r["epoch"] for r in rows(cut)] == ["1", "2", "3", "4"]
+    assert [r["return"] for r in rows(cut)] == [r["return"] for r in rows(whole)]
+
+
+def test_bad_arguments(tmp_path, capsys):
+    from tssac_core.cli import run
+
+    assert run(main, ["--out", str(tmp_path / "x"), "--roles", "strike,decoy"]) == 2
+    assert "curriculum order" in capsys.readouterr().err
+    assert run(main, ["--out", str(tmp_path / "y"), "--resume"]) == 2
+    assert run(main, ["--out", str(tmp_path / "z"), "--roles", "detect"]) == 2
+    assert "train decoy first" in capsys.readouterr().err
