@@ -64,7 +64,12 @@ class ObservationMode(enum.Enum):
 
 
 def observation_bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of every observation entry (the gymnasium Box)."""
+    """Lower and upper bounds of every observation entry (the gymnasium Box); copies, free to modify."""
+    low, high = _BOUNDS[mode]
+    return low.copy(), high.copy()
+
+
+def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
     if mode is ObservationMode.PAPER:
         low = np.array([0, 0, 0, -1, 0], dtype=np.float32)
         high = np.array([1, 1, 1, 1, 1.5], dtype=np.float32)
@@ -74,6 +79,9 @@ def observation_bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
     low[[0, 1, 2, 5, 8, 20, 21]] = 0.0
     high[[5, 8]] = 1.5
     return low, high
+
+
+_BOUNDS = {mode: _bounds(mode) for mode in ObservationMode}
 
 
 def build_observation(
@@ -98,12 +106,12 @@ def build_observation(
     """
     j = role_index
     area = c.area_m
-    low, high = observation_bounds(mode)
+    low, high = _BOUNDS[mode]
     speed = (v_m_s - c.speed_min_m_s[j]) / (c.speed_max_m_s[j] - c.speed_min_m_s[j])
     l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
     if mode is ObservationMode.PAPER:
         obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area], axis=1)
-        return np.clip(obs, low, high).astype(np.float32)
+        return np.minimum(np.maximum(obs, low), high).astype(np.float32)
 
     n = x_m.shape[0]
     out = np.empty((n, EXTENDED_SIZE))
@@ -145,13 +153,13 @@ def build_observation(
     out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = feats.reshape(n, -1)
     out[:, 20] = radar_on
     out[:, 21] = identified
-    return np.clip(out, low, high).astype(np.float32)
+    return np.minimum(np.maximum(out, low), high).astype(np.float32)
 
 
 def _relative_bearing(dx: np.ndarray, dy: np.ndarray, d: np.ndarray, cos_phi: np.ndarray, sin_phi: np.ndarray, out: np.ndarray) -> None:
     """cos and sin of (bearing of (dx, dy)) - heading, written into out[..., 0:2]."""
-    safe = np.where(d > 0, d, 1.0)
-    ux, uy = np.where(d > 0, dx / safe, 1.0), np.where(d > 0, dy / safe, 0.0)
+    inv = 1.0 / np.maximum(d, 1e-9)  # at d = 0 (on the point itself) the bearing is (0, 0)
+    ux, uy = dx * inv, dy * inv
     # Rotate the unit vector by -phi.
     out[..., 0] = ux * cos_phi + uy * sin_phi
     out[..., 1] = uy * cos_phi - ux * sin_phi

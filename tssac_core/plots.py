@@ -56,3 +56,48 @@ def plot_training(metrics: Path, out: Path, cost_limit: float) -> None:
     fig.tight_layout()
     fig.savefig(out / "fig8_multiplier.png", dpi=90)
     plt.close(fig)
+
+
+ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
+
+
+def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[float, float]]"], ranges_km: tuple[float, float, float, float],
+                 events: "list[tuple[str, float, float]]" = (), title: str = "", area_km: float = 100.0) -> None:
+    """Figure 9: one mission's trajectories over the radars, the SAM's rings and the zones, with events.
+
+    ``layout_`` is a :class:`tssac_core.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;
+    ``events`` are (label, x_km, y_km) markers (e.g. "radar on", "identified", "hit").
+    """
+    from tssac_core.scenario import Layout
+
+    assert isinstance(layout_, Layout)
+    lay = layout_
+    r1, r2, r3, r4 = ranges_km
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    for radar in lay.radars:
+        ax.add_patch(plt.Circle(radar.position_km, radar.radius_km, color="red", alpha=0.25, lw=0))
+        ax.plot(*radar.position_km, "r^")
+    ax.add_patch(plt.Circle(lay.sam_km, r4, fill=False, color="tab:orange", ls="--", label="SAM detection R4"))
+    ax.add_patch(plt.Circle(lay.sam_km, r3, fill=False, color="tab:orange", ls="-", label="SAM launch R3"))
+    ax.add_patch(plt.Circle(lay.sam_km, r2, fill=False, color="tab:green", ls=":", label="detect range R2"))
+    ax.add_patch(plt.Circle(lay.sam_km, r1, fill=False, color="black", ls=":", label="strike range R1"))
+    ax.plot(*lay.sam_km, "s", color="tab:orange", label="SAM")
+    ax.plot(*lay.target_km, "*", color="darkred", ms=12, label="target")
+    for role, pts in tracks_km.items():
+        if len(pts):
+            xs, ys = zip(*pts)
+            ax.plot(xs, ys, color=ROLE_COLOURS.get(role, None), lw=1.5, label=f"{role} UAV")
+            ax.plot(xs[0], ys[0], "o", color=ROLE_COLOURS.get(role, None))
+    for label, x, y in events:
+        ax.annotate(label, (x, y), fontsize=8, xytext=(4, 4), textcoords="offset points")
+        ax.plot(x, y, "kx")
+    ax.set_xlim(0, area_km)
+    ax.set_ylim(0, area_km)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east (km)")
+    ax.set_ylabel("north (km)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

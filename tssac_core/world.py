@@ -197,13 +197,13 @@ class World:
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
         c = self.c
-        a = np.clip(action, -1.0, 1.0)
+        a = np.minimum(np.maximum(action, -1.0), 1.0)
         moving = self.active & self.running[:, None]
         dt = c.dt_s * moving  # parked vehicles and finished worlds do not move
         theta = a[..., 0] * c.turn_rate_max_rad_s * dt
         # eq. 5-6: speed first (clipped to its bounds), then the exact arc at the step's mean speed:
         # the chord of an arc of angle theta has length v dt sinc(theta / 2) along phi + theta / 2.
-        v_new = np.clip(self.v_m_s + a[..., 1] * c.accel_max_m_s2 * dt, c.speed_min_m_s, c.speed_max_m_s)
+        v_new = np.minimum(np.maximum(self.v_m_s + a[..., 1] * c.accel_max_m_s2 * dt, c.speed_min_m_s), c.speed_max_m_s)
         half = 0.5 * theta
         chord = 0.5 * (self.v_m_s + v_new) * dt * self._sinc(half)
         mid = self.phi_rad + half
@@ -228,7 +228,10 @@ class World:
         self.identified |= identified_now
         hit_now = self.identified & radar_on & in_zone[:, 1] & in_zone[:, 2] & ~self.hit
         self.hit |= hit_now
-        task_completed = np.stack([in_zone[:, 0] & ~self.task_done[:, 0], identified_now, hit_now], axis=1)
+        task_completed = np.empty_like(in_zone)
+        task_completed[:, 0] = in_zone[:, 0] & ~self.task_done[:, 0]
+        task_completed[:, 1] = identified_now
+        task_completed[:, 2] = hit_now
         self.task_done |= task_completed
 
         # eq. 11 cost and eq. 6 position bounds.
@@ -237,7 +240,8 @@ class World:
         self.in_hazard = inside
         cost = inside.astype(np.float64)
         self.cost_total += cost
-        out = moving & ((self.x_m < 0) | (self.x_m > c.area_m) | (self.y_m < 0) | (self.y_m > c.area_m))
+        h = 0.5 * c.area_m
+        out = moving & (np.maximum(np.abs(self.x_m - h), np.abs(self.y_m - h)) > h)
 
         self.steps += self.running
         terminated = self.running & (hit_now | out.any(axis=1))
