@@ -571,3 +571,40 @@ def test_replay_state_dict_round_trip() -> None:
     assert len(bigger) == 4
     with pytest.raises(ValueError):
         ReplayBuffer(2, 2, capacity=20).load_state_dict(state)  # was full at capacity 8
+
+
+def test_sample_recent_draws_only_the_newest_rows() -> None:
+    buf = ReplayBuffer(obs_dim=1, act_dim=1, capacity=10)
+    for start in (0, 7):  # the second batch wraps around the end of the storage
+        n = 7
+        rows = np.arange(start, start + n, dtype=np.float32)[:, None]
+        buf.add_batch(rows, rows, rows[:, 0], rows[:, 0], rows, np.zeros(n, np.float32))
+    got = buf.sample_recent(200, window=4, rng=np.random.default_rng(0)).observations[:, 0].numpy()
+    assert set(got.tolist()) == {10.0, 11.0, 12.0, 13.0}
+
+
+def test_multiplier_measured_on_recent_batch() -> None:
+    """With a recent batch, beta's step follows Q^c on that batch, not on the training batch."""
+    torch.manual_seed(0)
+    cfg = SacConfig(variant=Variant.SAC_LAG, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100)
+    learner = SacLagrangian(2, 1, cfg)
+    obs = torch.zeros(4, 2)
+    batch = ReplaySamples(obs, torch.zeros(4, 1), torch.zeros(4), torch.zeros(4), obs, torch.zeros(4))
+    with torch.no_grad():
+        for p in learner.q_c.parameters():
+            p.zero_()
+        learner.q_c.biases[-1].fill_(100.0)  # Q^c = 100 everywhere: far above the limit
+    stats = learner.update(batch, recent=batch)
+    assert stats.qc_mean == pytest.approx(100.0, rel=1e-3)
+    assert learner.multiplier.beta.item() > 0.0
+
+
+def test_multiplier_upper_bound() -> None:
+    """beta and beta - xi stay in [0, upper]; without a bound xi alone would ask for k_d * excess."""
+    m = DampedLagrangeMultiplier(cost_limit=0.5, k_d=10.0, lr=1.0, upper=4.0)
+    for _ in range(20):
+        m.update(100.0)  # far above the limit: beta climbs by ~lr per step
+    assert m.beta.item() == pytest.approx(4.0)
+    assert m.effective(100.0).item() == pytest.approx(4.0)  # 4 + 10 * 99.5 unbounded
+    unbounded = DampedLagrangeMultiplier(cost_limit=0.5, k_d=10.0, lr=1.0)
+    assert unbounded.effective(100.0).item() == pytest.approx(995.0)

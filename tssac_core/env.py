@@ -15,11 +15,10 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
-from tssac_core.guidance import Guidance
 from tssac_core.observation import ObservationMode, observation_bounds, observe
 from tssac_core.reward import RewardConfig, reward
 from tssac_core.scenario import ROLES, Role, Scenario, load, sample_layout
-from tssac_core.team import GUIDANCE, Pilot, check_pilot, team_actions
+from tssac_core.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.world import StepResult, World
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
@@ -98,7 +97,7 @@ class RoleTask:
         self.active = tuple(p is not None for p in self.pilots)
         self.reward_config = reward_config
         self.world = World(scenario, n)
-        self.guidance = Guidance()
+        self.team = Team(self.pilots, observation)
         self.rng = np.random.default_rng(seed)
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
@@ -118,7 +117,7 @@ class RoleTask:
 
     def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
-        actions = team_actions(self.world, self.pilots, self.mode, self.guidance, skip=self.j)
+        actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
         moving = self.world.active & self.world.running[:, None]
         result = self.world.step(actions)
@@ -128,11 +127,20 @@ class RoleTask:
         self.ep_cost += cost
         return result, r, cost
 
-    def step(self, action: np.ndarray, rng: np.random.Generator | None = None) -> TaskStep:
-        """Step all worlds with the learner's ``action`` (N, 2); reset those that end."""
+    def step(self, action: np.ndarray, rng: np.random.Generator | None = None, repeat: int = 1) -> TaskStep:
+        """Step all worlds with the learner's ``action`` (N, 2) held for ``repeat`` world steps; reset those that end.
+
+        Rewards and costs are summed over the held steps (a world that ends part-way adds nothing more).
+        """
         result, r, cost = self.advance(action)
+        terminated, truncated = result.terminated.copy(), result.truncated.copy()
+        for _ in range(repeat - 1):
+            result, r_k, cost_k = self.advance(action)
+            r, cost = r + r_k, cost + cost_k
+            terminated |= result.terminated
+            truncated |= result.truncated
         final_obs = observe(self.world, self.j, self.mode)
-        ended = result.terminated | result.truncated
+        ended = terminated | truncated
         ep_return = np.where(ended, self.ep_return, 0.0)
         ep_cost = np.where(ended, self.ep_cost, 0.0)
         success = ended & self.world.hit
@@ -140,7 +148,7 @@ class RoleTask:
         obs = final_obs
         if ended.any():
             obs = self.reset(np.flatnonzero(ended), rng)
-        return TaskStep(obs, final_obs, r, cost, result.terminated, result.truncated, ep_return, ep_cost, success, task)
+        return TaskStep(obs, final_obs, r, cost, terminated, truncated, ep_return, ep_cost, success, task)
 
 
 class UavRoleEnv(gym.Env):

@@ -7,11 +7,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from tssac_core.guidance import Guidance
 from tssac_core.observation import ObservationMode
 from tssac_core.reward import RewardConfig, reward
 from tssac_core.scenario import ROLES, Layout, Scenario, sample_layout
-from tssac_core.team import Pilot, team_actions
+from tssac_core.team import Pilot, Team
 from tssac_core.world import World
 
 
@@ -75,14 +74,14 @@ def fly_missions(
     out = np.zeros((world.n, len(ROLES)), dtype=bool)
     track: list[np.ndarray] = []
     cfg = RewardConfig()
-    guidance = Guidance()
+    team = Team(pilots, mode)
     while world.running.any():
         if record:
             pos = np.stack([world.x_m, world.y_m], axis=-1)
             track.append(np.where(world.running[:, None, None], pos, np.nan))
         moving = world.active & world.running[:, None]
         was_running = world.running.copy()
-        result = world.step(team_actions(world, pilots, mode, guidance))
+        result = world.step(team.actions(world))
         returns += reward(result, moving, cfg)
         out |= result.out_of_area
         if progress is not None:

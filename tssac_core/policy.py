@@ -43,6 +43,8 @@ class CheckpointInfo:
     scenario_digest: str
     versions: dict[str, str]
     metrics: dict[str, float]
+    action_repeat: int = 1
+    """The decision interval it was trained with: hold each action for this many 0.1 s steps."""
 
 
 def package_versions() -> dict[str, str]:
@@ -72,6 +74,7 @@ def save_role_checkpoint(
         "scenario_digest": info.scenario_digest,
         "versions": info.versions,
         "metrics": info.metrics,
+        "action_repeat": info.action_repeat,
         "actor": actor_state,
         "learner": learner_state,
     }
@@ -109,6 +112,7 @@ def checkpoint_info(data: dict[str, Any], path: str | Path) -> CheckpointInfo:
             scenario_digest=str(data["scenario_digest"]),
             versions=dict(data["versions"]),
             metrics=dict(data.get("metrics") or {}),
+            action_repeat=int(data.get("action_repeat", 1)),
         )
     except (KeyError, ValueError, TypeError) as exc:
         raise CheckpointError(f"{path}: checkpoint metadata is damaged ({exc})") from None
@@ -118,7 +122,8 @@ class Policy:
     """A trained role: ``policy(obs)`` / ``policy.act(obs)`` maps observations to actions in [-1, 1].
 
     Deterministic by default (the mean action, tanh-squashed). Works on one observation (d,) or a
-    batch (n, d). ``observation_mode`` tells callers which observation to build.
+    batch (n, d). ``observation_mode`` tells callers which observation to build; ``action_repeat``
+    how many 0.1 s steps to hold each action (the decision interval it was trained with).
     """
 
     def __init__(self, info: CheckpointInfo, actor: SquashedGaussianActor, deterministic: bool = True) -> None:
@@ -126,6 +131,7 @@ class Policy:
         self.actor = actor.eval()
         self.deterministic = deterministic
         self.observation_mode = info.observation_mode
+        self.action_repeat = info.action_repeat
 
     @staticmethod
     def load(path: str | Path, role: Role | str | None = None, deterministic: bool = True) -> Policy:

@@ -4,7 +4,8 @@ A *pilot* is one of:
 - ``"guidance"``: the rule-based controller (:mod:`tssac_core.guidance`);
 - a callable ``obs (N, d) -> action (N, 2)`` on the observations of its role; if it has an attribute
   ``observation_mode`` (an :class:`ObservationMode`, as trained policies do), it gets observations in
-  that mode, else in the mode of whoever asks;
+  that mode, else in the mode of whoever asks; if it has ``action_repeat`` = k > 1, each of its
+  actions is held for k world steps (the decision interval it was trained with);
 - ``None``: the UAV is parked (inactive): it does not move and no task or cost of it counts.
 """
 
@@ -29,20 +30,36 @@ def check_pilot(pilot: Pilot, role_name: str) -> None:
     raise ValueError(f"pilot for {role_name} must be 'guidance', None or a callable obs -> action, got {pilot!r}")
 
 
-def team_actions(
-    world: World, pilots: Sequence[Pilot], default_mode: ObservationMode, guidance: Guidance, skip: int | None = None
-) -> np.ndarray:
-    """Actions (N, 3, 2) of every flown vehicle; vehicle ``skip`` (the learner) is left at zero."""
-    actions = np.zeros((world.n, len(ROLES), 2))
-    guided = None
-    for j, pilot in enumerate(pilots):
-        if j == skip or pilot is None:
-            continue
-        if pilot == GUIDANCE:
-            if guided is None:
-                guided = guidance.actions(world)
-            actions[:, j] = guided[:, j]
-        elif callable(pilot):
-            mode = getattr(pilot, "observation_mode", default_mode)
-            actions[:, j] = np.asarray(pilot(observe(world, j, mode)), dtype=np.float64)
-    return actions
+class Team:
+    """The pilots of the three vehicles of a World; holds actions of pilots with an action_repeat."""
+
+    def __init__(self, pilots: Sequence[Pilot], default_mode: ObservationMode) -> None:
+        self.pilots = list(pilots)
+        self.default_mode = default_mode
+        self.guidance = Guidance()
+        self._held: np.ndarray | None = None
+
+    def actions(self, world: World, skip: int | None = None) -> np.ndarray:
+        """Actions (N, 3, 2) of every flown vehicle; vehicle ``skip`` (the learner) is left at zero."""
+        if self._held is None or self._held.shape[0] != world.n:
+            self._held = np.zeros((world.n, len(ROLES), 2))
+        actions = np.zeros((world.n, len(ROLES), 2))
+        guided = None
+        for j, pilot in enumerate(self.pilots):
+            if j == skip or pilot is None:
+                continue
+            if pilot == GUIDANCE:
+                if guided is None:
+                    guided = self.guidance.actions(world)
+                actions[:, j] = guided[:, j]
+            elif callable(pilot):
+                mode = getattr(pilot, "observation_mode", self.default_mode)
+                fresh = np.asarray(pilot(observe(world, j, mode)), dtype=np.float64)
+                repeat = int(getattr(pilot, "action_repeat", 1))
+                if repeat > 1:
+                    due = (world.steps % repeat == 0)[:, None]
+                    self._held[:, j] = np.where(due, fresh, self._held[:, j])
+                    actions[:, j] = self._held[:, j]
+                else:
+                    actions[:, j] = fresh
+        return actions

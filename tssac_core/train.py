@@ -73,6 +73,8 @@ class TrainConfig:
     update_after: int = 1000
     """No updates before the buffer holds this many transitions."""
     observation: str = "extended"
+    action_repeat: int = 1
+    """Decision interval: the learner's action is held for this many 0.1 s world steps (1: the paper)."""
     penalty: float = 0.0
     """sac_penalty: reward r + penalty * c."""
     threads: int = 2
@@ -90,7 +92,9 @@ def teammates_for(role: Role, out: Path) -> dict[str, Pilot]:
 
 
 def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
-    fields = {"variant": SAC_FAMILY[cfg.algo], "cost_limit": scenario.cost_limit, "episode_steps": scenario.episode_steps}
+    # The learner's episode is counted in decisions: the Q^c limit converts C over that many.
+    decisions = math.ceil(scenario.episode_steps / cfg.action_repeat)
+    fields = {"variant": SAC_FAMILY[cfg.algo], "cost_limit": scenario.cost_limit, "episode_steps": decisions}
     if cfg.algo == "sac_penalty":
         fields["penalty"] = cfg.penalty
     fields.update(cfg.sac)
@@ -173,8 +177,11 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
                 action = rng.uniform(-1.0, 1.0, (cfg.envs, 2))
             else:
                 action = learner.act(obs, deterministic=False)
-            step = task.step(action)
-            buffer.add_batch(obs, action, step.reward, step.cost, step.final_obs, step.terminated)
+            step = task.step(action, repeat=cfg.action_repeat)
+            # Only a hit ends the learner's future: leaving the area ends the episode too, but the
+            # critics bootstrap through it (like the cap), so that ending an episode early is never
+            # a way out of the step penalty or of the hazard cost (docs/decisions.md).
+            buffer.add_batch(obs, action, step.reward, step.cost, step.final_obs, step.terminated & step.episode_success)
             obs = step.obs
             env_steps += cfg.envs
             ended = step.terminated | step.truncated
@@ -187,8 +194,11 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
             log.env_time += t1 - t0
             if len(buffer) >= cfg.update_after:
                 due = env_steps // cfg.update_every - updates
+                window = sac_cfg.multiplier_window
                 for _ in range(due):
-                    log.stats.append(learner.update(buffer.sample(sac_cfg.batch_size, rng)))
+                    batch = buffer.sample(sac_cfg.batch_size, rng)
+                    recent = buffer.sample_recent(sac_cfg.batch_size, window, rng) if window and learner.uses_multiplier else None
+                    log.stats.append(learner.update(batch, recent))
                 updates += max(due, 0)
                 log.update_time += time.perf_counter() - t1
             bar.update(cfg.envs)
@@ -207,6 +217,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         scenario_digest=scenario.digest(),
         versions=package_versions(),
         metrics={"env_steps": env_steps, "updates": updates},
+        action_repeat=cfg.action_repeat,
     )
     save_role_checkpoint(out / f"{role.value}.pt", info, learner.actor.state_dict(), learner.state_dict())
 
@@ -283,6 +294,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--update-every", type=int, default=1)
     p.add_argument("--start-steps", type=int, default=4000)
     p.add_argument("--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions")
+    p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
     p.add_argument("--threads", type=int, default=2)
@@ -297,8 +309,8 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
             raise UsageError(f"--roles: unknown role {r!r}")
     if list(roles) != [x.value for x in ROLES if x.value in roles]:
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
-    if a.epochs <= 0 or a.steps_per_epoch <= 0 or a.envs <= 0 or a.update_every <= 0:
-        raise UsageError("--epochs, --steps-per-epoch, --envs and --update-every must be positive")
+    if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
+        raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     overrides: dict[str, Any] = {}
     names = {f.name for f in dataclasses.fields(SacConfig)}
     for item in a.set:
@@ -309,8 +321,11 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
             overrides[key] = json.loads(value)
         except json.JSONDecodeError:
             raise UsageError(f"--set {key}: value {value!r} is not a number, list or boolean") from None
-    cfg = TrainConfig(a.algo, str(a.scenario), a.seed, a.epochs, a.steps_per_epoch, roles, a.envs, a.update_every, a.start_steps,
-                      a.update_after, a.observation, a.penalty, a.threads, overrides)
+    cfg = TrainConfig(
+        algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
+        envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
+        observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
+    )
     return cfg, a.out, a.resume, a.no_progress
 
 

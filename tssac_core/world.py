@@ -194,6 +194,21 @@ class World:
         self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c)
         self.in_hazard[idx] = self._inside_radar(idx) & self.active[idx]
 
+    def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
+               radar_on: bool, identified: bool) -> None:
+        """Set one vehicle's state and the mission flags from an outside estimate.
+
+        For a companion computer that keeps a one-world copy of a real (or SITL) vehicle, so that the
+        observation and the guidance controller see what its filter and datalink tell it. Only the
+        estimate is written; nothing is stepped.
+        """
+        self.x_m[index, role_index] = x_m
+        self.y_m[index, role_index] = y_m
+        self.v_m_s[index, role_index] = v_m_s
+        self.phi_rad[index, role_index] = _wrap(phi_rad)
+        self.radar_on[index] = radar_on
+        self.identified[index] = identified
+
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
         c = self.c

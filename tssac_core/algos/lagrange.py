@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
 import torch
@@ -35,7 +36,7 @@ class DampedLagrangeMultiplier:
 
         J(beta) = beta * (C - qc_mean)                 eq. 15, `losses.multiplier_loss`
         beta    <- Adam step on J(beta)                gradient dJ/dbeta = C - qc_mean
-        beta    <- max(0, beta)                        projection
+        beta    <- min(upper, max(0, beta))            projection
 
     so beta rises while qc_mean > C and falls, down to 0, while qc_mean < C: an integral term on the
     constraint error. Adam normalises the step, so beta moves by about `lr` per update.
@@ -43,7 +44,7 @@ class DampedLagrangeMultiplier:
     `effective(qc_mean)` is the multiplier of Q^c in the actor loss (eq. 16):
 
         xi        = k_d * (C - qc_mean)                eq. 17, `losses.damping`
-        effective = max(0, beta - xi)                  if clamp_effective (default)
+        effective = min(upper, max(0, beta - xi))      if clamp_effective (default)
         effective = beta - xi                          otherwise
 
     -xi = k_d (qc_mean - C) is a proportional term on the same error, which damps the oscillation of
@@ -55,6 +56,12 @@ class DampedLagrangeMultiplier:
     seeking hazards. The paper does not say; like the PID Lagrangian, which projects its summed
     multiplier (K_P error + K_I integral + K_D derivative) onto >= 0 (Stooke et al. 2020), we
     clamp it. clamp_effective = False keeps the paper's formula literally.
+
+    Decision, upper (default infinity; the learner passes SacConfig.multiplier_max): OmniSafe's
+    Lagrange class projects onto [0, upper] too. With Q^c in units of discounted hazard steps, a
+    young policy's cost estimate can exceed the limit a hundredfold, and k_d = 10 then asks for a
+    multiplier in the hundreds, which makes the reward irrelevant and saturates the actor; the
+    bound keeps the transient finite while leaving the steady state (multiplier of a few) alone.
     """
 
     def __init__(
@@ -64,6 +71,7 @@ class DampedLagrangeMultiplier:
         beta_init: float = 0.0,
         lr: float = 1e-2,
         clamp_effective: bool = True,
+        upper: float = math.inf,
     ) -> None:
         if beta_init < 0.0:
             raise ValueError(f"beta_init must be >= 0, got {beta_init}")
@@ -74,6 +82,7 @@ class DampedLagrangeMultiplier:
         self.beta_init = beta_init
         self.lr = lr
         self.clamp_effective = clamp_effective
+        self.upper = upper
         self._beta = torch.tensor(float(beta_init), requires_grad=True)
         self._optim = torch.optim.Adam([self._beta], lr=lr)
 
@@ -87,9 +96,9 @@ class DampedLagrangeMultiplier:
         return losses.damping(torch.as_tensor(qc_mean), self.cost_limit, self.k_d)
 
     def effective(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
-        """The multiplier of Q^c in eq. 16: beta - xi, clamped at >= 0 if clamp_effective."""
+        """The multiplier of Q^c in eq. 16: beta - xi, clamped to [0, upper] if clamp_effective."""
         multiplier = self.beta - self.damping(qc_mean)
-        return multiplier.clamp(min=0.0) if self.clamp_effective else multiplier
+        return multiplier.clamp(0.0, self.upper) if self.clamp_effective else multiplier
 
     def update(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
         """One projected Adam step on J(beta) = beta (C - qc_mean), eq. 15; returns J (pre-step)."""
@@ -98,7 +107,7 @@ class DampedLagrangeMultiplier:
         loss.backward()
         self._optim.step()
         with torch.no_grad():
-            self._beta.clamp_(min=0.0)
+            self._beta.clamp_(0.0, self.upper)
         return loss.detach()
 
     def reset(self) -> None:

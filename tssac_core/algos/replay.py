@@ -89,6 +89,14 @@ class ReplayBuffer:
         # Fancy indexing already copies; from_numpy then shares that copy without another one.
         return ReplaySamples(*(torch.from_numpy(self._arrays[name][idx]) for name in _FIELDS))
 
+    def sample_recent(self, batch_size: int, window: int, rng: np.random.Generator) -> ReplaySamples:
+        """batch_size transitions drawn uniformly from the last ``window`` added (the current policy's data)."""
+        if self._size == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        span = min(window, self._size)
+        idx = (self._ptr - 1 - rng.integers(0, span, size=batch_size)) % self.capacity
+        return ReplaySamples(*(torch.from_numpy(self._arrays[name][idx]) for name in _FIELDS))
+
     def state_dict(self) -> dict[str, Any]:
         """The filled rows (tensors, in storage order), the write position and the capacity."""
         state: dict[str, Any] = {

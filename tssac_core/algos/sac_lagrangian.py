@@ -100,6 +100,19 @@ class SacConfig:
     """SAC_PENALTY only: reward r + penalty * c, penalty <= 0 (paper's experiment: 0, -10, -15,
     -50). Must be 0 for the other variants."""
 
+    multiplier_window: int | None = 4000
+    """Q^c of eq. 15 and 17 is measured on transitions drawn from the last this many added to the
+    replay buffer, i.e. on the current policy's state distribution rho_pi, as eq. 15's expectation
+    says (None: on the update's own batch from the whole buffer, as WCSAC does). Deviation from
+    common practice, not from the paper: the whole buffer keeps early exploration's states inside
+    radars, whose cost-to-go no policy can bring under the limit, so beta would rise for ever."""
+
+    multiplier_max: float = 10.0
+    """Upper bound of beta and of the effective multiplier (not in the paper; OmniSafe bounds its
+    Lagrange multiplier the same way). Q^c counts discounted hazard steps, the reward about 0.1 per
+    step, so a multiplier of 10 already makes one hazard step outweigh ten steps of progress; see
+    DampedLagrangeMultiplier."""
+
     clamp_effective: bool = True
     """Clamp the effective multiplier beta - xi of eq. 16 at >= 0 (see DampedLagrangeMultiplier)."""
 
@@ -112,6 +125,7 @@ class SacConfig:
             (self.alpha_init >= 0.0, f"alpha_init must be >= 0, got {self.alpha_init}"),
             (self.beta_init >= 0.0, f"beta_init must be >= 0, got {self.beta_init}"),
             (self.k_d >= 0.0, f"k_d must be >= 0, got {self.k_d}"),
+            (self.multiplier_max > 0.0, f"multiplier_max must be > 0, got {self.multiplier_max}"),
             (self.cost_limit >= 0.0, f"cost_limit must be >= 0, got {self.cost_limit}"),
             (self.episode_steps >= 1, f"episode_steps must be >= 1, got {self.episode_steps}"),
             (self.batch_size >= 1, f"batch_size must be >= 1, got {self.batch_size}"),
@@ -188,6 +202,7 @@ class SacLagrangian:
             beta_init=config.beta_init if self.uses_multiplier else 0.0,
             lr=config.beta_lr,
             clamp_effective=config.clamp_effective,
+            upper=config.multiplier_max,
         )
         self._actor_params = list(self.actor.parameters())
         self._critic_params = [*self.q_r.parameters(), *self.q_c.parameters()]
@@ -222,8 +237,12 @@ class SacLagrangian:
         action, _ = self.actor(obs_t.unsqueeze(0) if obs_t.ndim == 1 else obs_t, deterministic)
         return action.squeeze(0).numpy() if obs_t.ndim == 1 else action.numpy()
 
-    def update(self, batch: ReplaySamples) -> UpdateStats:
-        """One gradient step of every part (Algorithm 1, line 13)."""
+    def update(self, batch: ReplaySamples, recent: ReplaySamples | None = None) -> UpdateStats:
+        """One gradient step of every part (Algorithm 1, line 13).
+
+        ``recent``: transitions of the current policy on which the multiplier's Q^c is measured
+        (see SacConfig.multiplier_window); None measures it on ``batch``.
+        """
         cfg = self.config
         obs, actions, rewards, costs, next_obs, terminated = batch
         if cfg.variant is Variant.SAC_PENALTY:
@@ -252,7 +271,12 @@ class SacLagrangian:
         pi_actions, log_pi = self.actor(obs)
         q_r_pi = self.q_r(obs, pi_actions)
         q_c_pi = self.q_c(obs, pi_actions)[0]
-        qc_mean = q_c_pi.detach().mean()
+        if recent is None:
+            qc_mean = q_c_pi.detach().mean()
+        else:
+            with torch.no_grad():
+                recent_actions, _ = self.actor(recent.observations)
+                qc_mean = self.q_c(recent.observations, recent_actions)[0].mean()
         beta = self.multiplier.beta
         if self.uses_multiplier:
             xi = self.multiplier.damping(qc_mean)
