@@ -255,7 +255,9 @@ class SacLagrangian:
             next_q_r = self.q_r_target(next_obs, next_actions)
             next_v_r = losses.soft_value(next_q_r, next_log_pi, alpha)
             y_r = losses.critic_target(rewards, terminated, next_v_r, cfg.gamma)
-            next_v_c = self.q_c_target(next_obs, next_actions)[0]
+            # A cost-to-go is never negative (eq. 11 costs are 0 or 1): clamp the bootstrap so that the
+            # critic's extrapolation below 0 does not feed on itself.
+            next_v_c = self.q_c_target(next_obs, next_actions)[0].clamp(min=0.0)
             y_c = losses.critic_target(costs, terminated, next_v_c, cfg.gamma)
 
         # Critic losses, eq. 13.
@@ -272,11 +274,11 @@ class SacLagrangian:
         q_r_pi = self.q_r(obs, pi_actions)
         q_c_pi = self.q_c(obs, pi_actions)[0]
         if recent is None:
-            qc_mean = q_c_pi.detach().mean()
+            qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
         else:
             with torch.no_grad():
                 recent_actions, _ = self.actor(recent.observations)
-                qc_mean = self.q_c(recent.observations, recent_actions)[0].mean()
+                qc_mean = self.q_c(recent.observations, recent_actions)[0].clamp(min=0.0).mean()
         beta = self.multiplier.beta
         if self.uses_multiplier:
             xi = self.multiplier.damping(qc_mean)
