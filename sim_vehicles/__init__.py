@@ -1,0 +1,22 @@
+"""SITL vehicles: each UAV of a scenario as a MAVLink 2 autopilot on UDP, physics from tssac_core.world.
+
+``python -m sim_vehicles --scenario FILE`` starts them (see :mod:`sim_vehicles.__main__`); the
+protocol is described in ``docs/mavlink.md``. Modules, one job each:
+
+* :mod:`~sim_vehicles.config` — the run's configuration (frozen dataclass, enums);
+* :mod:`~sim_vehicles.world_runner` — the loop: world steps, real time / speed-up / lockstep, events;
+* :mod:`~sim_vehicles.vehicle` — one vehicle's autopilot behaviour (modes, commands, setpoints, failsafe);
+* :mod:`~sim_vehicles.telemetry` — telemetry messages from a state (frames and units);
+* :mod:`~sim_vehicles.params` — the parameter table;
+* :mod:`~sim_vehicles.mavlink_io` — the UDP endpoint around pymavlink (framing, signing checks, peers);
+* :mod:`~sim_vehicles.signing` — signing keys and replay detection;
+* :mod:`~sim_vehicles.link` — GPS and datalink models;
+* :mod:`~sim_vehicles.events` — mission events and their NAMED_VALUE_INT names;
+* :mod:`~sim_vehicles.truth_log` — the JSON Lines truth log;
+* :mod:`~sim_vehicles.geo` — frames and the flat-earth conversion.
+"""
+
+from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
+from sim_vehicles.world_runner import Endpoint, RunResult, SitlError, WorldRunner
+
+__all__ = ["ClockMode", "Endpoint", "LockstepStart", "RunResult", "SitlConfig", "SitlError", "WorldRunner"]

@@ -1,0 +1,128 @@
+"""Command line: ``python -m sim_vehicles --scenario FILE [options]`` — start the SITL vehicles of a scenario.
+
+Prints one line per vehicle with the connection string a client uses, then a ready line::
+
+    decoy sysid=1 udpout:127.0.0.1:14560
+    detect sysid=2 udpout:127.0.0.1:14570
+    strike sysid=3 udpout:127.0.0.1:14580
+    ready scenario=strike seed=0 clock=realtime speedup=1
+
+and, when the run ends, one ``end ...`` line (reason, success, steps, simulated time, cost per role).
+Exit status: 0 when the mission ended or the run was stopped (SIGINT / SIGTERM); 2 on bad input
+(scenario, key file, port in use, options), with one line on stderr; 1 on an unexpected failure.
+See docs/mavlink.md for the protocol.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import NoReturn
+
+from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
+from sim_vehicles.signing import SigningKeyError, load_key
+from sim_vehicles.world_runner import SitlError, WorldRunner
+from tssac_core.scenario import ScenarioError, load
+
+PROG = "python -m sim_vehicles"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (exit 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{PROG}: error: {message} (see --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Start the SITL vehicles (decoy, detect, strike) of a scenario as MAVLink 2 systems on UDP.")
+    p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random layout, GPS noise and link model (default 0)")
+    p.add_argument("--host", default="127.0.0.1", help="address the vehicles bind (default 127.0.0.1)")
+    p.add_argument(
+        "--base-port",
+        type=int,
+        default=DEFAULT_BASE_PORT,
+        metavar="P",
+        help=f"UDP port of the decoy; detect P+10, strike P+20 (default {DEFAULT_BASE_PORT}); 0 = OS-assigned ports",
+    )
+    clock = p.add_mutually_exclusive_group()
+    clock.add_argument("--speedup", type=float, default=None, metavar="X", help="run X times faster than real time (default 1)")
+    clock.add_argument("--lockstep", action="store_true", help="advance one step per round of setpoints from the armed GUIDED vehicles")
+    p.add_argument(
+        "--lockstep-start",
+        choices=[m.value for m in LockstepStart],
+        default=LockstepStart.ALL.value,
+        help="lockstep: start once all (default) or any vehicle is armed in GUIDED",
+    )
+    p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
+    p.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
+    p.add_argument("--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here")
+    p.add_argument("--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here")
+    p.add_argument("--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)")
+    p.add_argument("--linger-s", type=float, default=1.0, metavar="S", help="simulated seconds to keep serving after the mission ends (default 1.0)")
+    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="warning", help="log level on stderr (default warning)")
+    return p
+
+
+def config_from_args(args: argparse.Namespace) -> SitlConfig:
+    """Build the run's configuration; raises ScenarioError, SigningKeyError or ValueError (one line each)."""
+    scenario = load(args.scenario)
+    key = load_key(args.signing_key) if args.signing_key is not None else None
+    return SitlConfig(
+        scenario=scenario,
+        seed=args.seed,
+        host=args.host,
+        base_port=args.base_port,
+        clock=ClockMode.LOCKSTEP if args.lockstep else ClockMode.REALTIME,
+        speedup=1.0 if args.speedup is None else args.speedup,
+        lockstep_start=LockstepStart(args.lockstep_start),
+        signing_key=key,
+        truth_log=args.truth_log,
+        layout_out=args.layout_out,
+        tlog_dir=args.tlog_dir,
+        setpoint_timeout_s=args.setpoint_timeout_s,
+        linger_s=args.linger_s,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    try:
+        config = config_from_args(args)
+        runner = WorldRunner(config)
+    except (ScenarioError, SigningKeyError, SitlError, ValueError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+
+    def stop(signum: int, _frame: FrameType | None) -> None:
+        logging.getLogger(__name__).info("signal %d: stopping", signum)
+        runner.request_stop()
+
+    # Signal handlers can only be installed from the main thread (main() may be called from elsewhere).
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)} if in_main_thread else {}
+    try:
+        for ep in runner.endpoints:
+            print(f"{ep.role} sysid={ep.sysid} {ep.connection_string}")
+        speed = "lockstep" if config.clock is ClockMode.LOCKSTEP else f"realtime speedup={config.speedup:g}"
+        print(f"ready scenario={config.scenario.name} seed={config.seed} clock={speed}", flush=True)
+        result = runner.run()
+    finally:
+        runner.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    costs = " ".join(f"cost_{role}={c:g}" for role, c in result.cost.items())
+    print(f"end reason={result.end} success={str(result.success).lower()} steps={result.steps} sim_time_s={result.sim_time_s:.1f} {costs}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

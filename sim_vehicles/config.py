@@ -1,0 +1,80 @@
+"""Configuration of a SITL run (what the command line sets), as frozen dataclasses."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from pathlib import Path
+
+from tssac_core.scenario import Scenario
+
+DEFAULT_BASE_PORT = 14560
+"""Vehicle i binds base + PORT_STRIDE * i (decoy 14560, detect 14570, strike 14580)."""
+PORT_STRIDE = 10
+"""Port step between vehicles, as in ArduPilot's multi-instance SITL."""
+
+
+class ClockMode(enum.Enum):
+    """How simulated time advances."""
+
+    REALTIME = "realtime"
+    """One world step every dt / speedup wall seconds."""
+    LOCKSTEP = "lockstep"
+    """One world step per round of setpoints from the vehicles under companion control."""
+
+
+class LockstepStart(enum.Enum):
+    """When a lockstep world takes its first step."""
+
+    ALL = "all"
+    """Once every vehicle is armed in GUIDED (whole-team regression missions: nobody flies alone)."""
+    ANY = "any"
+    """Once any vehicle is armed in GUIDED (single-vehicle experiments)."""
+
+
+@dataclass(frozen=True)
+class SitlConfig:
+    """Everything a :class:`sim_vehicles.world_runner.WorldRunner` needs."""
+
+    scenario: Scenario
+    """The mission; a random scenario gets its layout drawn with ``seed``."""
+    seed: int = 0
+    """Seeds the layout (``sample_layout(scenario, numpy.random.default_rng(seed))``), GPS noise and link model."""
+    host: str = "127.0.0.1"
+    """Address the vehicles bind."""
+    base_port: int = DEFAULT_BASE_PORT
+    """UDP port of vehicle 0; vehicle i binds base + 10 i; 0 = every vehicle gets an OS-assigned port."""
+    clock: ClockMode = ClockMode.REALTIME
+    """Real time (scaled by ``speedup``) or lockstep."""
+    speedup: float = 1.0
+    """Simulated seconds per wall second (REALTIME; also the pace of an unattended lockstep world)."""
+    lockstep_start: LockstepStart = LockstepStart.ALL
+    """LOCKSTEP only: which vehicles must be armed in GUIDED before the first step."""
+    signing_key: bytes | None = None
+    """32-byte MAVLink 2 signing key; None = signing off."""
+    truth_log: Path | None = None
+    """JSON Lines truth log (states, costs, events, summary); None = no log."""
+    layout_out: Path | None = None
+    """Write the layout used as a fixed-layout scenario file here."""
+    tlog_dir: Path | None = None
+    """Write one ``<role>.tlog`` per vehicle (MAVLink in and out, mavlogdump-readable) here."""
+    setpoint_timeout_s: float = 1.0
+    """Failsafe after this long without a setpoint while armed in GUIDED (sim s; wall s at a lockstep barrier)."""
+    linger_s: float = 1.0
+    """After the mission ends, keep serving this many simulated seconds (paced in real time under lockstep)."""
+
+    def __post_init__(self) -> None:
+        if not (self.speedup > 0.0 and self.speedup < float("inf")):
+            raise ValueError(f"speedup must be a positive number, got {self.speedup}")
+        if not (self.setpoint_timeout_s > 0.0 and self.setpoint_timeout_s < float("inf")):
+            raise ValueError(f"setpoint timeout must be a positive number of seconds, got {self.setpoint_timeout_s}")
+        if not (0.0 <= self.linger_s < float("inf")):
+            raise ValueError(f"linger must be >= 0 s, got {self.linger_s}")
+        if self.base_port != 0 and not (1 <= self.base_port <= 65535 - 2 * PORT_STRIDE):
+            raise ValueError(f"base port must be 0 or in 1..{65535 - 2 * PORT_STRIDE}, got {self.base_port}")
+        if self.signing_key is not None and len(self.signing_key) != 32:
+            raise ValueError(f"signing key must be 32 bytes, got {len(self.signing_key)}")
+
+    def port_for(self, index: int) -> int:
+        """The UDP port vehicle ``index`` binds (0 = OS-assigned)."""
+        return 0 if self.base_port == 0 else self.base_port + PORT_STRIDE * index

@@ -1,0 +1,90 @@
+"""The vehicle's parameters (MAVLink parameter protocol).
+
+=================  ======  =========  ==========================================================
+name               type    access     meaning
+=================  ======  =========  ==========================================================
+``SYSID_THISMAV``  INT32   read-only  this vehicle's MAVLink system id (1 decoy, 2 detect, 3 strike)
+``GUID_TIMEOUT``   REAL32  settable   setpoint-timeout failsafe, seconds (0.1 .. 60); ArduCopter's name
+``SIM_DT``         REAL32  read-only  world step, seconds
+``SIM_TURN_MAX``   REAL32  read-only  turn-rate limit (|yaw_rate| is clipped to it), deg/s
+``SIM_ACCEL_MAX``  REAL32  read-only  acceleration limit (|afx| is clipped to it), m/s/s
+``SIM_SPD_MIN``    REAL32  read-only  minimum speed, m/s
+``SIM_SPD_MAX``    REAL32  read-only  maximum speed, m/s
+=================  ======  =========  ==========================================================
+
+The limits are read-only because they are the world's physics (the scenario's ``vehicles:``
+section, which the policies were trained on). Values travel as floats; INT32 values are the
+integer cast to float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST, as ArduPilot does). A PARAM_SET
+that is refused (read-only, out of range, not finite) is answered with a PARAM_VALUE holding the
+unchanged value and a STATUSTEXT saying why; a PARAM_SET or PARAM_REQUEST_READ of an unknown name
+is not answered (clients time out, as with ArduPilot).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+
+@dataclass
+class Param:
+    name: str
+    value: float
+    param_type: int
+    writable: bool = False
+    low: float = -math.inf
+    high: float = math.inf
+
+
+class ParamTable:
+    """An ordered set of parameters (index = position)."""
+
+    def __init__(self, params: list[Param]) -> None:
+        self._params = params
+        self._by_name = {p.name: i for i, p in enumerate(params)}
+
+    def __len__(self) -> int:
+        return len(self._params)
+
+    def __iter__(self) -> Iterator[Param]:
+        return iter(self._params)
+
+    def index(self, name: str) -> int | None:
+        return self._by_name.get(name)
+
+    def at(self, index: int) -> Param | None:
+        return self._params[index] if 0 <= index < len(self._params) else None
+
+    def get(self, name: str) -> Param | None:
+        i = self._by_name.get(name)
+        return None if i is None else self._params[i]
+
+    def set(self, name: str, value: float) -> str | None:
+        """Set a parameter; returns None on success, else why it was refused."""
+        p = self.get(name)
+        if p is None:
+            return f"{name}: unknown parameter"
+        if not p.writable:
+            return f"{name} is read-only"
+        if not math.isfinite(value) or not (p.low <= value <= p.high):
+            return f"{name}: {value:g} not in {p.low:g}..{p.high:g}"
+        p.value = float(round(value)) if p.param_type == mavlink2.MAV_PARAM_TYPE_INT32 else float(value)
+        return None
+
+
+def vehicle_params(sysid: int, setpoint_timeout_s: float, dt_s: float, turn_max_deg_s: float, accel_max_m_s2: float, speed_min_m_s: float, speed_max_m_s: float) -> ParamTable:
+    real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
+    return ParamTable(
+        [
+            Param("SYSID_THISMAV", float(sysid), int32),
+            Param("GUID_TIMEOUT", setpoint_timeout_s, real, writable=True, low=0.1, high=60.0),
+            Param("SIM_DT", dt_s, real),
+            Param("SIM_TURN_MAX", turn_max_deg_s, real),
+            Param("SIM_ACCEL_MAX", accel_max_m_s2, real),
+            Param("SIM_SPD_MIN", speed_min_m_s, real),
+            Param("SIM_SPD_MAX", speed_max_m_s, real),
+        ]
+    )

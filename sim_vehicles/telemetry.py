@@ -1,0 +1,188 @@
+"""Telemetry messages built from a vehicle's state: pure functions, units and frames stated.
+
+Inputs are in the world's frame (x east, y north in metres from the area's south-west corner, heading
+phi CCW from east, turn rate omega CCW-positive); outputs follow the MAVLink message definitions
+(NED, yaw clockwise from north, degE7, mm, cm/s, centidegrees). Altitude is constant: the flight
+altitude ``origin.alt_m`` above mean sea level. Home is the vehicle's start position at sea level,
+so ``relative_alt`` (height above home) equals ``alt`` as well.
+
+The LOCAL_POSITION_NED origin is the scenario's origin (the area's SW corner) at the flight altitude:
+``x = north_m``, ``y = east_m``, ``z = 0`` — the world's coordinates exactly, with the axes swapped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sim_vehicles.geo import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
+from sim_vehicles.link import GpsFix
+from tssac_core.scenario import Origin
+
+GRAVITY_M_S2 = 9.80665
+UINT16_MAX = 65535
+SATELLITES = 12
+"""GPS_RAW_INT.satellites_visible while the receiver has a fix."""
+HDOP_X100 = 100
+"""GPS_RAW_INT.eph: a nominal HDOP of 1.0 (the noise model has no geometry)."""
+
+MAV = mavlink2.MAVLink
+Msg = mavlink2.MAVLink_message
+
+
+@dataclass(frozen=True)
+class VehicleTruth:
+    """A vehicle's true state after a world step."""
+
+    east_m: float
+    north_m: float
+    speed_m_s: float
+    phi_rad: float
+    """Heading, CCW from east (eq. 5)."""
+    turn_rate_rad_s: float
+    """omega flown in the last step, CCW-positive."""
+    accel_m_s2: float
+    """Speed change over the last step / dt (after the speed bounds)."""
+
+    @property
+    def vel_east_m_s(self) -> float:
+        return self.speed_m_s * math.cos(self.phi_rad)
+
+    @property
+    def vel_north_m_s(self) -> float:
+        return self.speed_m_s * math.sin(self.phi_rad)
+
+
+def _i16(x: float) -> int:
+    return max(-32768, min(32767, int(round(x))))
+
+
+def heartbeat(mav: MAV, armed: bool, custom_mode: int, guided: bool, system_status: int) -> Msg:
+    """HEARTBEAT of a fixed-wing vehicle speaking ArduPilot's mode numbers."""
+    base_mode = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if armed:
+        base_mode |= mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
+    if guided:
+        base_mode |= mavlink2.MAV_MODE_FLAG_GUIDED_ENABLED
+    return mav.heartbeat_encode(mavlink2.MAV_TYPE_FIXED_WING, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, custom_mode, system_status, 3)
+
+
+def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -> Msg:
+    """GLOBAL_POSITION_INT of a GPS fix (time_boot_ms = the fix's time); hdg from the true heading."""
+    lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
+    alt_mm = int(round(origin.alt_m * 1000.0))
+    return mav.global_position_int_encode(
+        int(round(fix.time_s * 1000.0)),
+        deg_e7(lat),
+        deg_e7(lon),
+        alt_mm,
+        alt_mm,
+        _i16(fix.vel_north_m_s * 100.0),
+        _i16(fix.vel_east_m_s * 100.0),
+        0,
+        heading_cdeg(phi_rad),
+    )
+
+
+def local_position_ned(mav: MAV, fix: GpsFix) -> Msg:
+    """LOCAL_POSITION_NED of a GPS fix: x north = world y, y east = world x, z 0 (flight altitude)."""
+    return mav.local_position_ned_encode(int(round(fix.time_s * 1000.0)), fix.north_m, fix.east_m, 0.0, fix.vel_north_m_s, fix.vel_east_m_s, 0.0)
+
+
+def gps_raw_int(mav: MAV, origin: Origin, fix: GpsFix | None, has_fix: bool, time_boot_ms: int, position_sigma_m: float, velocity_sigma_m_s: float) -> Msg:
+    """GPS_RAW_INT: the latest fix, fix_type 3D while it is fresh, NO_FIX otherwise (time_usec = time since boot)."""
+    if fix is None:
+        return mav.gps_raw_int_encode(time_boot_ms * 1000, mavlink2.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, UINT16_MAX, UINT16_MAX, UINT16_MAX, UINT16_MAX, 0)
+    lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
+    speed = math.hypot(fix.vel_east_m_s, fix.vel_north_m_s)
+    cog = heading_cdeg(math.atan2(fix.vel_north_m_s, fix.vel_east_m_s))
+    return mav.gps_raw_int_encode(
+        time_boot_ms * 1000,
+        mavlink2.GPS_FIX_TYPE_3D_FIX if has_fix else mavlink2.GPS_FIX_TYPE_NO_FIX,
+        deg_e7(lat),
+        deg_e7(lon),
+        int(round(origin.alt_m * 1000.0)),
+        HDOP_X100,
+        UINT16_MAX,
+        min(UINT16_MAX - 1, int(round(speed * 100.0))),
+        cog,
+        SATELLITES if has_fix else 0,
+        int(round(origin.alt_m * 1000.0)),
+        int(round(position_sigma_m * 1000.0)),
+        0,
+        int(round(velocity_sigma_m_s * 1000.0)),
+        0,
+        0,
+    )
+
+
+def attitude(mav: MAV, truth: VehicleTruth, time_boot_ms: int) -> Msg:
+    """ATTITUDE: yaw = pi/2 - phi (wrapped), yawspeed = -omega; roll is the coordinated-turn bank angle."""
+    yawspeed = -truth.turn_rate_rad_s
+    roll = math.atan(truth.speed_m_s * yawspeed / GRAVITY_M_S2)
+    return mav.attitude_encode(time_boot_ms, roll, 0.0, yaw_ned_from_phi(truth.phi_rad), 0.0, 0.0, yawspeed)
+
+
+def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Msg:
+    """VFR_HUD: air = ground speed (no wind); throttle = 50 + 50 * the acceleration command in [-1, 1]."""
+    heading_deg = heading_cdeg(truth.phi_rad) // 100
+    throttle = int(round(50.0 + 50.0 * max(-1.0, min(1.0, accel_cmd))))
+    return mav.vfr_hud_encode(truth.speed_m_s, truth.speed_m_s, heading_deg, throttle, alt_m, 0.0)
+
+
+SENSORS_PRESENT = mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_AHRS | mavlink2.MAV_SYS_STATUS_GEOFENCE | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
+"""GPS (the noise model), AHRS (true attitude), geofence (the area bounds), pre-arm check (GPS fix)."""
+
+
+def sys_status(mav: MAV, gps_ok: bool, fence_ok: bool, errors_comm: int) -> Msg:
+    """SYS_STATUS with the sensors we simulate; battery unknown (UINT16_MAX / -1)."""
+    health = mavlink2.MAV_SYS_STATUS_AHRS
+    if gps_ok:
+        health |= mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
+    if fence_ok:
+        health |= mavlink2.MAV_SYS_STATUS_GEOFENCE
+    return mav.sys_status_encode(SENSORS_PRESENT, SENSORS_PRESENT, health, 0, UINT16_MAX, -1, -1, 0, min(UINT16_MAX, errors_comm), 0, 0, 0, 0)
+
+
+def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
+    """SYSTEM_TIME: both clocks follow simulated time (unix time = start of the run + simulated time)."""
+    return mav.system_time_encode(int(round((unix_start_s + time_s) * 1e6)), int(round(time_s * 1000.0)))
+
+
+def home_position(mav: MAV, origin: Origin, home_east_m: float, home_north_m: float, time_s: float) -> Msg:
+    """HOME_POSITION: the start position at sea level; local x/y/z in the LOCAL_POSITION_NED frame."""
+    lat, lon = local_to_geodetic(origin, home_east_m, home_north_m)
+    return mav.home_position_encode(deg_e7(lat), deg_e7(lon), 0, home_north_m, home_east_m, origin.alt_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(round(time_s * 1e6)))
+
+
+def gps_global_origin(mav: MAV, origin: Origin, time_s: float) -> Msg:
+    """GPS_GLOBAL_ORIGIN: the LOCAL_POSITION_NED origin (area's SW corner, flight altitude)."""
+    return mav.gps_global_origin_encode(deg_e7(origin.lat_deg), deg_e7(origin.lon_deg), int(round(origin.alt_m * 1000.0)), int(round(time_s * 1e6)))
+
+
+CAPABILITIES = (
+    mavlink2.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mavlink2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+)
+"""AUTOPILOT_VERSION.capabilities (MAVLink has no capability bit for signing)."""
+SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | mavlink2.FIRMWARE_VERSION_TYPE_DEV
+"""0.1.0-dev in ArduPilot's (major, minor, patch, type) byte layout."""
+
+
+def autopilot_version(mav: MAV, sysid: int) -> Msg:
+    custom = list(b"tssacsim")
+    return mav.autopilot_version_encode(CAPABILITIES, SW_VERSION, 0, 0, 0, custom, [0] * 8, [0] * 8, 0, 0, sysid)
+
+
+def statustext(mav: MAV, severity: int, text: str) -> Msg:
+    """STATUSTEXT (text cut to the 50 characters of one chunk)."""
+    return mav.statustext_encode(severity, text[:50].encode("ascii", "replace"))
+
+
+def named_value_int(mav: MAV, time_boot_ms: int, name: str, value: int) -> Msg:
+    return mav.named_value_int_encode(time_boot_ms, name[:10].encode("ascii"), int(value))

@@ -1,0 +1,490 @@
+"""The SITL loop: one world (tssac_core.world.World, n = 1), three vehicles, time, lockstep, events.
+
+Single-threaded: one ``select`` over the three vehicles' sockets, then in each iteration
+
+1. every vehicle drains its socket into its incoming link channel and handles what the channel
+   delivers (commands, setpoints, parameters, ...);
+2. the world advances by as many steps as the clock allows (below); after each step every vehicle
+   gets its true state, takes its GPS fix and sends its due telemetry, and mission events are
+   announced to every vehicle's clients;
+3. every vehicle sends what its outgoing link channel delivers.
+
+Time
+----
+All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step k is at k * dt.
+
+* Real time (default) and ``--speedup X``: step k is due at wall time start + k dt / X. If the
+  machine falls more than 1 s of simulated time behind, the schedule is re-anchored (logged)
+  instead of racing to catch up.
+* ``--lockstep``: the world holds at step 0 until every vehicle (``--lockstep-start all``, default)
+  or any vehicle (``any``) is armed in GUIDED. From then on it takes a step as soon as every vehicle
+  *in the loop* — armed, in GUIDED, not in failsafe — has a setpoint for the current step: one
+  stamped with ``time_boot_ms`` >= the current step's time (echo the newest ``time_boot_ms`` you
+  received), or stamped 0 and received during the current step. Vehicles that are disarmed, in
+  MANUAL or in failsafe never hold the world. A vehicle in the loop that sends nothing for
+  ``GUID_TIMEOUT`` seconds of *wall* time enters its failsafe and stops holding the world (its
+  setpoint timeout is measured on the wall clock there, because simulated time stands still while
+  the world waits for it); its next setpoint brings it back into the loop. While nobody is in the
+  loop (all disarmed, in MANUAL or in failsafe) the world runs at real time (times ``speedup``).
+  After every lockstep step each vehicle sends SYSTEM_TIME (the step "tick"), so a client sees every
+  step even when its other streams are slower than the step rate. While the world holds still,
+  each vehicle sends a snapshot (heartbeat, status, flags, position) once per wall second.
+
+The link models (latency, reordering hold) run on the *link clock*: wall time times ``speedup``
+(simulated seconds while the simulation keeps up) in real-time mode, wall time under lockstep.
+
+Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
+MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
+real time times ``speedup``), then the run ends; :meth:`WorldRunner.run` returns and the truth log
+gets its summary. :meth:`WorldRunner.request_stop` (SIGINT / SIGTERM in the CLI) ends the run early.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import logging
+import select
+import threading
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
+from sim_vehicles.events import EventKind, MissionEnd, MissionFlags, events_from_step
+from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
+from sim_vehicles.telemetry import VehicleTruth
+from sim_vehicles.truth_log import TruthLog, VehicleRow
+from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
+from tssac_core.scenario import ROLES, Layout, dump, sample_layout, to_dict
+from tssac_core.world import World
+
+_log = logging.getLogger(__name__)
+
+MAX_CATCHUP_STEPS = 20
+"""Steps taken per loop iteration at most, so that I/O is never starved."""
+MAX_LAG_S = 1.0
+"""Simulated seconds behind schedule after which real-time pacing is re-anchored."""
+KEEPALIVE_S = 1.0
+"""Wall seconds between snapshots while a lockstep world holds still."""
+MAX_SELECT_S = 0.05
+"""Upper bound of one wait, so a stop request is seen within this time."""
+_EPS = 1e-9
+
+
+class SitlError(Exception):
+    """The SITL cannot start (port in use, unwritable log, ...); ``str()`` is one line."""
+
+
+class _Phase(enum.Enum):
+    HOLD = "hold"
+    RUN = "run"
+    LINGER = "linger"
+    DONE = "done"
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """Where a client finds a vehicle."""
+
+    role: str
+    sysid: int
+    host: str
+    port: int
+
+    @property
+    def connection_string(self) -> str:
+        """pymavlink / MAVProxy connection string of a client (``udpout:HOST:PORT``; a wildcard bind reads as loopback)."""
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"udpout:{host}:{self.port}"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """How a run ended."""
+
+    end: str
+    """"success", "geofence", "episode_cap" or "stopped"."""
+    success: bool
+    steps: int
+    sim_time_s: float
+    cost: dict[str, float]
+    """Total eq. 11 hazard cost per role."""
+
+
+class WorldRunner:
+    """Owns the world, the vehicles and the loop (see the module docstring)."""
+
+    def __init__(self, config: SitlConfig) -> None:
+        self.config = config
+        s = config.scenario
+        self.scenario = s
+        self.dt_s = s.dt_s
+        self.lockstep = config.clock is ClockMode.LOCKSTEP
+        self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
+        self.world = World(s, n=1)
+        self.world.reset([0], [self.layout])
+        self.flags = MissionFlags()
+        self.clock = Clock(unix_start_s=time.time())
+        self._stop = threading.Event()
+        self._phase = _Phase.HOLD if self.lockstep else _Phase.RUN
+        self._end: MissionEnd | None = None
+        self._linger_steps = 0
+        self._truth: TruthLog | None = None
+        self._tlogs: list[BinaryIO] = []
+        self.vehicles: list[Vehicle] = []
+        self.result: RunResult | None = None
+        self._closed = False
+        try:
+            self._open(config)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------------------- set-up
+
+    def _open(self, config: SitlConfig) -> None:
+        s = self.scenario
+        if config.layout_out is not None:
+            try:
+                dump(dataclasses.replace(s, layout=self.layout, random=None), config.layout_out)
+            except OSError as exc:
+                raise SitlError(f"cannot write layout file {config.layout_out}: {exc.strerror or exc}") from None
+        if config.tlog_dir is not None:
+            try:
+                Path(config.tlog_dir).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
+        seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
+        c = self.world.c
+        for i, role in enumerate(ROLES):
+            try:
+                endpoint = MavEndpoint(config.host, config.port_for(i), i + 1, 1, config.signing_key)
+            except EndpointError as exc:
+                raise SitlError(str(exc.strerror)) from None
+            start = self.layout.starts[role.value]
+            setup = VehicleSetup(
+                index=i,
+                role=role.value,
+                sysid=i + 1,
+                turn_rate_max_rad_s=float(c.turn_rate_max_rad_s[i]),
+                accel_max_m_s2=float(c.accel_max_m_s2[i]),
+                speed_min_m_s=float(c.speed_min_m_s[i]),
+                speed_max_m_s=float(c.speed_max_m_s[i]),
+                dt_s=s.dt_s,
+                origin=s.origin,
+                home_east_m=start.position_km[0] * 1000.0,
+                home_north_m=start.position_km[1] * 1000.0,
+                link=s.link,
+                setpoint_timeout_s=config.setpoint_timeout_s,
+            )
+            tx, rx, gps = (np.random.default_rng(q) for q in seeds[i].spawn(3))
+            tlog = None
+            if config.tlog_dir is not None:
+                path = Path(config.tlog_dir) / f"{role.value}.tlog"
+                try:
+                    tlog = open(path, "wb")
+                except OSError as exc:
+                    endpoint.close()
+                    raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
+                self._tlogs.append(tlog)
+            vehicle = Vehicle(setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event)
+            vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
+            self.vehicles.append(vehicle)
+        if config.truth_log is not None:
+            header = {
+                "scenario": s.name,
+                "digest": s.digest(),
+                "seed": config.seed,
+                "dt_s": s.dt_s,
+                "clock": config.clock.value,
+                "speedup": config.speedup,
+                "roles": [r.value for r in ROLES],
+                "sysids": [v.sysid for v in self.vehicles],
+                "ports": [v.endpoint.port for v in self.vehicles],
+                "layout": to_dict(dataclasses.replace(s, layout=self.layout, random=None))["layout"],
+            }
+            try:
+                self._truth = TruthLog(Path(config.truth_log), header)
+            except OSError as exc:
+                raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
+
+    @property
+    def endpoints(self) -> list[Endpoint]:
+        return [Endpoint(v.role, v.sysid, v.endpoint.host, v.endpoint.port) for v in self.vehicles]
+
+    def request_stop(self) -> None:
+        """End the run at the next loop iteration (safe from another thread or a signal handler)."""
+        self._stop.set()
+
+    # ---------------------------------------------------------------------------------- loop
+
+    def run(self) -> RunResult:
+        """Serve until the mission has ended and lingered, or a stop is requested; then close."""
+        try:
+            self._loop()
+        finally:
+            self._finish()
+        assert self.result is not None
+        return self.result
+
+    def _loop(self) -> None:
+        self._wall0 = time.monotonic()
+        self._tick_clock(self._wall0)
+        for v in self.vehicles:
+            v.publish(tick=self.lockstep)  # t = 0: first GPS fix, stream schedules start
+        self._anchor(self._wall0)
+        self._paced = not self.lockstep
+        self._barrier_wall = self._wall0
+        self._last_output_wall = self._wall0
+        sockets = [v.endpoint for v in self.vehicles]
+        while not self._stop.is_set() and self._phase is not _Phase.DONE:
+            now = time.monotonic()
+            self._tick_clock(now)
+            for v in self.vehicles:
+                v.poll_socket()
+            for v in self.vehicles:
+                v.process_incoming()
+            deadline = self._advance(now)
+            for v in self.vehicles:
+                v.flush()
+            if self._phase is _Phase.DONE:
+                break
+            select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))
+
+    def _tick_clock(self, now_wall: float) -> None:
+        self.clock.wall_s = now_wall
+        rate = 1.0 if self.lockstep else self.config.speedup
+        self.clock.link_s = (now_wall - self._wall0) * rate
+
+    def _wait_s(self, now_wall: float, deadline_wall: float | None) -> float:
+        waits = [MAX_SELECT_S]
+        if deadline_wall is not None:
+            waits.append(deadline_wall - now_wall)
+        rate = 1.0 if self.lockstep else self.config.speedup
+        for v in self.vehicles:
+            due = v.next_link_due_s()
+            if due is not None:
+                waits.append((due - self.clock.link_s) / rate)
+        return max(0.0, min(waits))
+
+    # --------------------------------------------------------------------------- advancing
+
+    def _advance(self, now: float) -> float | None:
+        """Take the steps that are due; return the wall time of the next planned action."""
+        if self._phase is _Phase.HOLD:
+            if not self._start_gate_open():
+                return self._keepalive(now)
+            _log.info("lockstep: start gate open, the world starts")
+            self._phase = _Phase.RUN
+            self._barrier_wall = now
+        if self._phase is _Phase.RUN:
+            return self._advance_lockstep(now) if self.lockstep else self._advance_paced(now)
+        if self._phase is _Phase.LINGER:
+            return self._advance_linger(now)
+        return None
+
+    def _start_gate_open(self) -> bool:
+        ready = [v.armed and v.mode is FlightMode.GUIDED for v in self.vehicles]
+        return all(ready) if self.config.lockstep_start is LockstepStart.ALL else any(ready)
+
+    def _anchor(self, now: float) -> None:
+        self._pace_wall0 = now
+        self._pace_sim0 = self.clock.sim_s
+
+    def _step_due(self, now: float) -> bool:
+        target = self._pace_sim0 + (now - self._pace_wall0) * self.config.speedup
+        if target - self.clock.sim_s > MAX_LAG_S + self.dt_s:
+            _log.warning("simulation is %.2f s behind its clock; re-anchoring the schedule", target - self.clock.sim_s)
+            self._anchor(now)
+            return True
+        return self.clock.sim_s + self.dt_s <= target + _EPS
+
+    def _next_step_wall(self) -> float:
+        return self._pace_wall0 + (self.clock.sim_s + self.dt_s - self._pace_sim0) / self.config.speedup
+
+    def _advance_paced(self, now: float) -> float:
+        n = 0
+        while self._phase is _Phase.RUN and n < MAX_CATCHUP_STEPS and self._step_due(now):
+            self._step()
+            n += 1
+        return now if n == MAX_CATCHUP_STEPS else self._next_step_wall()
+
+    def _advance_lockstep(self, now: float) -> float | None:
+        in_loop = [v for v in self.vehicles if v.in_loop]
+        if not in_loop:
+            if not self._paced:
+                _log.info("lockstep: no vehicle in the loop; running at %g x real time", self.config.speedup)
+                self._paced = True
+                self._anchor(now)
+            return self._advance_paced(now)
+        if self._paced:
+            self._paced = False
+            self._barrier_wall = now
+        current_ms = self.clock.time_boot_ms
+        waiting = [v for v in in_loop if not v.ready_for(current_ms)]
+        for v in waiting:
+            since = max(self._barrier_wall, v.loop_since_wall_s)
+            if now - since > v.setpoint_timeout_s:
+                v.enter_failsafe(f"no setpoint for {v.setpoint_timeout_s:g} s wall")
+        waiting = [v for v in waiting if v.in_loop]
+        if waiting:
+            keepalive = self._keepalive(now)
+            return min([keepalive] + [max(self._barrier_wall, v.loop_since_wall_s) + v.setpoint_timeout_s for v in waiting])
+        if not any(v.in_loop for v in self.vehicles):
+            return now  # every waiting vehicle just failed safe: run paced from the next iteration
+        self._step()
+        self._barrier_wall = now
+        return now + min(v.setpoint_timeout_s for v in self.vehicles)
+
+    def _advance_linger(self, now: float) -> float | None:
+        end_s = self._end_sim_s + self.config.linger_s
+        n = 0
+        while self.clock.sim_s + _EPS < end_s and n < MAX_CATCHUP_STEPS and self._step_due(now):
+            self._linger_steps += 1
+            self.clock.sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
+            for v in self.vehicles:
+                v.publish(tick=self.lockstep)
+            n += 1
+        if self.clock.sim_s + _EPS >= end_s:
+            self._phase = _Phase.DONE
+            return None
+        return self._next_step_wall()
+
+    def _keepalive(self, now: float) -> float:
+        if now - self._last_output_wall >= KEEPALIVE_S:
+            self._last_output_wall = now
+            for v in self.vehicles:
+                v.send_snapshot()
+        return self._last_output_wall + KEEPALIVE_S
+
+    # ---------------------------------------------------------------------------------- step
+
+    def _step(self) -> None:
+        w = self.world
+        actions = np.zeros((1, len(ROLES), 2))
+        for v in self.vehicles:
+            actions[0, v.index] = v.action()
+        v_before = w.v_m_s[0].copy()
+        result = w.step(actions)
+        step = int(w.steps[0])
+        self.clock.sim_s = step * self.dt_s
+        self._last_output_wall = self.clock.wall_s
+        for v in self.vehicles:
+            v.observe(self._truth_of(v.index, actions[0, v.index], float(v_before[v.index])))
+        self.flags.radar_on = bool(w.radar_on[0])
+        self.flags.identified = bool(w.identified[0])
+        self.flags.hit = bool(w.hit[0])
+        events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
+        if self._truth is not None:
+            flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
+            self._truth.step(step, self.clock.sim_s, flags, [self._row(v, float(result.cost[0, v.index])) for v in self.vehicles])
+        for v in self.vehicles:
+            v.publish(tick=self.lockstep)
+        for event in events:
+            _log.info("t=%.1f s: %s", event.time_s, event.statustext()[1])
+            if event.kind is EventKind.MISSION_END:
+                self._end = MissionEnd(event.value)
+                self.flags.end = self._end
+            for v in self.vehicles:
+                v.announce(event)
+            if self._truth is not None:
+                self._truth.event(event.as_dict())
+        if result.terminated[0] or result.truncated[0]:
+            self._phase = _Phase.LINGER
+            self._end_sim_s = self.clock.sim_s
+            self._anchor(self.clock.wall_s)
+
+    def _truth_of(self, i: int, action: np.ndarray, v_before: float) -> VehicleTruth:
+        w, c = self.world, self.world.c
+        moving = bool(w.active[0, i])
+        return VehicleTruth(
+            east_m=float(w.x_m[0, i]),
+            north_m=float(w.y_m[0, i]),
+            speed_m_s=float(w.v_m_s[0, i]),
+            phi_rad=float(w.phi_rad[0, i]),
+            turn_rate_rad_s=float(np.clip(action[0], -1.0, 1.0) * c.turn_rate_max_rad_s[i]) if moving else 0.0,
+            accel_m_s2=(float(w.v_m_s[0, i]) - v_before) / self.dt_s,
+        )
+
+    def _row(self, v: Vehicle, cost: float) -> VehicleRow:
+        w, i = self.world, v.index
+        return VehicleRow(
+            role=v.role,
+            x_m=float(w.x_m[0, i]),
+            y_m=float(w.y_m[0, i]),
+            v_m_s=float(w.v_m_s[0, i]),
+            phi_rad=float(w.phi_rad[0, i]),
+            cost=cost,
+            cost_total=float(w.cost_total[0, i]),
+            omega_cmd=v.last_action[0],
+            u_cmd=v.last_action[1],
+            armed=v.armed,
+            mode=v.mode.name,
+            failsafe=v.failsafe,
+        )
+
+    def _vehicle_event(self, role: str, name: str, value: int) -> None:
+        if self._truth is not None:
+            self._truth.event({"type": "event", "step": int(self.world.steps[0]), "t_s": round(self.clock.sim_s, 6), "event": name, "value": value, "vehicle": role})
+
+    # ------------------------------------------------------------------------------- finish
+
+    def _finish(self) -> None:
+        w = self.world
+        end = {MissionEnd.SUCCESS: "success", MissionEnd.GEOFENCE: "geofence", MissionEnd.EPISODE_CAP: "episode_cap", None: "stopped"}[self._end]
+        cost = {v.role: float(w.cost_total[0, v.index]) for v in self.vehicles}
+        steps = int(w.steps[0])
+        self.result = RunResult(end=end, success=bool(w.hit[0]), steps=steps, sim_time_s=round(steps * self.dt_s, 6), cost=cost)
+        _log.info("run ended: %s after %d steps (%.1f s simulated)", end, self.result.steps, self.result.sim_time_s)
+        if self._truth is not None:
+            self._truth.summary(
+                {
+                    "success": self.result.success,
+                    "end": end,
+                    "steps": self.result.steps,
+                    "sim_time_s": round(self.result.sim_time_s, 6),
+                    "cost": cost,
+                    "cost_limit": self.scenario.cost_limit,
+                    "radar_on": bool(w.radar_on[0]),
+                    "identified": bool(w.identified[0]),
+                    "hit": bool(w.hit[0]),
+                    "counters": {v.role: self.counters_of(v) for v in self.vehicles},
+                }
+            )
+        self.close()
+
+    @staticmethod
+    def counters_of(v: Vehicle) -> dict[str, Any]:
+        """Every counter of a vehicle (protocol, framing, signing, link, GPS) as plain data."""
+        return {
+            "protocol": asdict(v.counters),
+            "rx": asdict(v.endpoint.rx),
+            "tx": asdict(v.endpoint.tx),
+            "link_out": asdict(v.tx.counters),
+            "link_in": asdict(v.rx.counters),
+            "gps": {"fixes": v.gps.fixes, "dropouts": v.gps.dropouts},
+            "peers": len(v.endpoint.peers),
+        }
+
+    def close(self) -> None:
+        """Close sockets and logs (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for v in self.vehicles:
+            v.endpoint.close()
+        for f in self._tlogs:
+            try:
+                f.close()
+            except OSError as exc:
+                _log.error("closing a tlog failed: %s", exc)
+        if self._truth is not None:
+            try:
+                self._truth.close()
+            except OSError as exc:
+                _log.error("closing the truth log failed: %s", exc)
+

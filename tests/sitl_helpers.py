@@ -1,0 +1,199 @@
+"""Test helpers for the SITL vehicles: an in-process SITL in a thread, and a pymavlink client.
+
+Everything runs over real UDP sockets on 127.0.0.1 with OS-assigned ports, and every wait is bounded
+on ``time.monotonic()``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+# The client speaks MAVLink 2 (signing needs it); pymavlink picks the wire version from this variable.
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+
+mavutil.set_dialect("ardupilotmega")
+
+from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig  # noqa: E402
+from sim_vehicles.world_runner import RunResult, WorldRunner  # noqa: E402
+from tssac_core.scenario import LinkModel, Scenario, load  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+STRIKE = REPO / "scenarios" / "strike.yaml"
+GUIDED = 15
+MANUAL = 0
+SETPOINT_MASK = 1087
+EXACT_LINK = LinkModel(gps_position_sigma_m=0.0, gps_velocity_sigma_m_s=0.0)
+
+
+def scenario(link: LinkModel = EXACT_LINK, **changes: Any) -> Scenario:
+    """The strike scenario with another link model (default: noise-free GPS, ideal link)."""
+    return dataclasses.replace(load(STRIKE), link=link, **changes)
+
+
+@dataclass
+class RunningSitl:
+    runner: WorldRunner
+    thread: threading.Thread
+    error: list[BaseException]
+
+    @property
+    def ports(self) -> list[int]:
+        return [ep.port for ep in self.runner.endpoints]
+
+    def vehicle(self, index: int) -> Any:
+        return self.runner.vehicles[index]
+
+    def stop(self, timeout_s: float = 5.0) -> RunResult | None:
+        self.runner.request_stop()
+        self.thread.join(timeout_s)
+        assert not self.thread.is_alive(), "SITL thread did not stop"
+        if self.error:
+            raise self.error[0]
+        return self.runner.result
+
+
+@contextmanager
+def sitl(scen: Scenario | None = None, **config: Any) -> Iterator[RunningSitl]:
+    """Run a WorldRunner in a thread on OS-assigned ports; stop and join it on exit."""
+    cfg = SitlConfig(scenario=scen if scen is not None else scenario(), base_port=0, host="127.0.0.1", **config)
+    runner = WorldRunner(cfg)
+    errors: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            runner.run()
+        except BaseException as exc:  # surfaced by RunningSitl.stop
+            errors.append(exc)
+
+    thread = threading.Thread(target=target, name="sitl", daemon=True)
+    thread.start()
+    running = RunningSitl(runner, thread, errors)
+    try:
+        yield running
+    finally:
+        if thread.is_alive() or not errors:
+            running.runner.request_stop()
+            thread.join(5.0)
+
+
+def lockstep(**config: Any) -> dict[str, Any]:
+    return {"clock": ClockMode.LOCKSTEP, "lockstep_start": LockstepStart.ANY, **config}
+
+
+class Client:
+    """A ground-station / companion-style pymavlink client (``udpout:127.0.0.1:PORT``)."""
+
+    def __init__(self, port: int, key: bytes | None = None, source_system: int = 255, source_component: int = 190) -> None:
+        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=source_system, source_component=source_component)
+        # Telemetry at 20x real time is ~1000 datagrams/s: leave room for a test thread that is slow to read.
+        self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        if key is not None:
+            self.conn.setup_signing(key, sign_outgoing=True)
+        self.mav: mavlink2.MAVLink = self.conn.mav
+        self.latest_ms = 0
+        self.log: list[mavlink2.MAVLink_message] = []
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def heartbeat(self) -> None:
+        self.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def poll(self, timeout_s: float) -> mavlink2.MAVLink_message | None:
+        """The next message (waiting up to ``timeout_s``), None if none came."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            msg = self.conn.recv_msg()
+            if msg is not None:
+                if msg.get_type() == "BAD_DATA":
+                    continue
+                ms = getattr(msg, "time_boot_ms", None)
+                if ms is not None and msg.get_type() != "SET_POSITION_TARGET_LOCAL_NED":
+                    self.latest_ms = max(self.latest_ms, ms)
+                self.log.append(msg)
+                return msg
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            select.select([self.conn.fd], [], [], min(remaining, 0.05))
+
+    def wait(self, predicate: Callable[[mavlink2.MAVLink_message], bool], timeout_s: float, heartbeat_every_s: float | None = None) -> mavlink2.MAVLink_message | None:
+        """The first message satisfying ``predicate`` within ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        next_hb = time.monotonic()
+        while (remaining := deadline - time.monotonic()) > 0:
+            if heartbeat_every_s is not None and time.monotonic() >= next_hb:
+                self.heartbeat()
+                next_hb = time.monotonic() + heartbeat_every_s
+            msg = self.poll(min(remaining, 0.05))
+            if msg is not None and predicate(msg):
+                return msg
+        return None
+
+    def wait_type(self, mtype: str, timeout_s: float, **fields: Any) -> mavlink2.MAVLink_message | None:
+        return self.wait(lambda m: m.get_type() == mtype and all(getattr(m, k) == v for k, v in fields.items()), timeout_s)
+
+    def connect(self, timeout_s: float = 5.0) -> mavlink2.MAVLink_message:
+        """Send heartbeats until the vehicle's heartbeat arrives (the vehicle learns us from ours)."""
+        hb = self.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1, timeout_s, heartbeat_every_s=0.2)
+        assert hb is not None, "no heartbeat from the vehicle"
+        return hb
+
+    def command(self, command: int, *params: float, target: int = 0, timeout_s: float = 1.0, retries: int = 3) -> mavlink2.MAVLink_message | None:
+        """COMMAND_LONG, retried until its COMMAND_ACK arrives; the ACK or None."""
+        p = list(params) + [0.0] * (7 - len(params))
+        for attempt in range(retries):
+            self.mav.command_long_send(target, 0, command, attempt, *p)
+            ack = self.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command, timeout_s)
+            if ack is not None:
+                return ack
+        return None
+
+    def arm(self, target: int = 0) -> None:
+        ack = self.command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1, target=target)
+        assert ack is not None and ack.result == mavlink2.MAV_RESULT_ACCEPTED, ack
+
+    def set_mode(self, mode: int, target: int = 0) -> mavlink2.MAVLink_message | None:
+        return self.command(mavlink2.MAV_CMD_DO_SET_MODE, mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, target=target)
+
+    def setpoint(self, yaw_rate_rad_s: float, accel_m_s2: float, stamp_ms: int | None = None, target: int = 0, mask: int = SETPOINT_MASK, frame: int = mavlink2.MAV_FRAME_BODY_FRD) -> None:
+        """Heading-rate (NED, clockwise +) / forward-acceleration setpoint, stamped with the latest vehicle time by default."""
+        stamp = self.latest_ms if stamp_ms is None else stamp_ms
+        self.mav.set_position_target_local_ned_send(stamp, target, 0, frame, mask, 0, 0, 0, 0, 0, 0, accel_m_s2, 0, 0, 0, yaw_rate_rad_s)
+
+    def collect(self, duration_s: float) -> list[mavlink2.MAVLink_message]:
+        """Everything received in the next ``duration_s`` seconds."""
+        out = []
+        deadline = time.monotonic() + duration_s
+        while (remaining := deadline - time.monotonic()) > 0:
+            msg = self.poll(min(remaining, 0.05))
+            if msg is not None:
+                out.append(msg)
+        return out
+
+
+def wait_until(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.01) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(interval_s)
+    return predicate()
