@@ -184,3 +184,41 @@ def test_guidance_team_completes_the_fixed_mission(strike_path):
             break
     assert term and info["hit"] and total_cost == 0.0
     assert steps < 4000
+
+
+def test_pilot_actions_are_held_for_their_repeat(strike_path):
+    """A pilot trained with action_repeat K has its action held for K world steps."""
+    s = load(strike_path)
+
+    class Counting:
+        action_repeat = 3
+
+        def __init__(self):
+            self.k = 0
+
+        def __call__(self, obs):
+            self.k += 1
+            return np.full((obs.shape[0], 2), self.k / 10.0)
+
+    pilot = Counting()
+    task = RoleTask(s, Role.STRIKE, n=1, teammates={"decoy": pilot}, seed=0)
+    task.reset()
+    seen = []
+    for _ in range(7):
+        actions = task.team.actions(task.world, skip=task.j)
+        seen.append(actions[0, 0, 0])
+        task.world.step(actions)
+    assert seen == pytest.approx([0.1, 0.1, 0.1, 0.4, 0.4, 0.4, 0.7])
+
+
+def test_role_task_repeat_sums_reward_and_cost(strike_path):
+    s = load(strike_path)
+    a = RoleTask(s, Role.DECOY, n=1, teammates="none", seed=0)
+    b = RoleTask(s, Role.DECOY, n=1, teammates="none", seed=0)
+    a.reset(), b.reset()
+    act = np.array([[0.2, 0.1]])
+    held = a.step(act, repeat=5)
+    total_r = sum(b.step(act).reward[0] for _ in range(5))
+    assert held.reward[0] == pytest.approx(total_r)
+    assert a.world.steps[0] == 5 and b.world.steps[0] == 5
+    np.testing.assert_array_equal(a.world.x_m, b.world.x_m)
