@@ -47,6 +47,8 @@ from tssac_core.team import Pilot
 logger = logging.getLogger(__name__)
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
 SAC_FAMILY = {v.value: v for v in Variant}
+ON_POLICY = ("ppo", "ppo_lag", "cpo")
+ALGOS = (*SAC_FAMILY, *ON_POLICY)
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,8 @@ class TrainConfig:
     """One training run: an algorithm, a seed, the role curriculum."""
 
     algo: str = "tssac"
-    """tssac, sac_lag, sac or sac_penalty."""
+    """tssac, sac_lag, sac, sac_penalty (off-policy, tssac_core.algos.sac_lagrangian) or ppo, ppo_lag, cpo
+    (on-policy, tssac_core.train_onpolicy)."""
     scenario: str = str(DEFAULT_SCENARIO)
     """Scenario file (random layouts: every episode a new one, section 5.2.3)."""
     seed: int = 0
@@ -284,7 +287,7 @@ def completed_epochs(out: Path, role: str) -> int:
 
 def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=__doc__.split("\n")[0])
-    p.add_argument("--algo", choices=sorted(SAC_FAMILY), default="tssac")
+    p.add_argument("--algo", choices=ALGOS, default="tssac")
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--epochs", type=int, default=50)
@@ -312,11 +315,8 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     overrides: dict[str, Any] = {}
-    names = {f.name for f in dataclasses.fields(SacConfig)}
     for item in a.set:
         key, _, value = item.partition("=")
-        if key not in names or key == "variant":
-            raise UsageError(f"--set: unknown SacConfig field {key!r}")
         try:
             overrides[key] = json.loads(value)
         except json.JSONDecodeError:
@@ -340,10 +340,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif config_path.is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     scenario = load(cfg.scenario)
-    try:
-        sac_config(cfg, scenario)
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"invalid learner settings: {exc}") from None
+    check_learner_settings(cfg, scenario)
     for role_name in cfg.roles:
         role = Role(role_name)
         for earlier in ROLES[: role.index]:
@@ -366,11 +363,32 @@ def main(argv: Sequence[str] | None = None) -> int:
             if (out / f"{role_name}.pt").is_file():
                 logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
                 continue
-            train_role(cfg, scenario, role, out, resume, bar)
+            if cfg.algo in ON_POLICY:
+                from tssac_core.train_onpolicy import train_role_onpolicy
+
+                train_role_onpolicy(cfg, scenario, role, out, resume, bar)
+            else:
+                train_role(cfg, scenario, role, out, resume, bar)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
     print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")
     return 0
+
+
+def check_learner_settings(cfg: TrainConfig, scenario: Scenario) -> None:
+    """Build the algorithm's config once, so that a bad --set fails before any work, in one line."""
+    try:
+        if cfg.algo in ON_POLICY:
+            from tssac_core.train_onpolicy import onpolicy_config
+
+            onpolicy_config(cfg, scenario)
+        else:
+            for key in cfg.sac:
+                if key not in {f.name for f in dataclasses.fields(SacConfig)} or key == "variant":
+                    raise ValueError(f"unknown SacConfig field {key!r}")
+            sac_config(cfg, scenario)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"invalid learner settings (--set): {exc}") from None
 
 
 def write_plots(out: Path, cost_limit: float) -> None:
