@@ -1,0 +1,78 @@
+"""Frames and units between MAVLink telemetry / setpoints and the world of :mod:`tssac_core.world`.
+
+World (eq. 5): x east, y north in metres from the area's south-west corner; heading phi
+counter-clockwise from east; turn rate omega counter-clockwise-positive; action [omega, u] in
+[-1, 1], scaled by the vehicle's limits (``turn_rate_max_deg_s``, ``accel_max_m_s2`` of the scenario).
+
+MAVLink (as the bundled SITL documents it, ``sim_vehicles.telemetry`` / ``sim_vehicles.vehicle``):
+
+* LOCAL_POSITION_NED: origin at the area's SW corner, ``x`` north = world y, ``y`` east = world x,
+  ``vx`` north, ``vy`` east (m, m/s).
+* GLOBAL_POSITION_INT: lat/lon in degE7 from a flat-earth (equirectangular) projection about the
+  scenario's ``origin`` with R = 6 378 100 m (ArduPilot's LOCATION_SCALING_FACTOR); ``vx`` north,
+  ``vy`` east in cm/s.
+* SET_POSITION_TARGET_LOCAL_NED, frame BODY_FRD: ``afx`` forward acceleration (m/s^2) = u;
+  ``yaw_rate`` (rad/s) about the down axis, clockwise-positive, so yaw_rate = -omega.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from tssac_core.scenario import Origin, VehicleSpec
+
+EARTH_RADIUS_M = 6_378_100.0
+"""Sphere radius of the SITL's flat-earth projection."""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One position/velocity fix in the world frame, stamped with the vehicle's clock."""
+
+    t_s: float
+    east_m: float
+    north_m: float
+    vel_east_m_s: float
+    vel_north_m_s: float
+
+
+def from_local_position_ned(time_boot_ms: int, x_m: float, y_m: float, vx_m_s: float, vy_m_s: float) -> Measurement:
+    """LOCAL_POSITION_NED fields -> world measurement (x north -> north, y east -> east)."""
+    return Measurement(time_boot_ms / 1000.0, float(y_m), float(x_m), float(vy_m_s), float(vx_m_s))
+
+
+def geodetic_to_local(origin: Origin, lat_deg: float, lon_deg: float) -> tuple[float, float]:
+    """(east_m, north_m) of a point, inverse of the SITL's flat-earth projection about ``origin``."""
+    d_lon = (lon_deg - origin.lon_deg + 180.0) % 360.0 - 180.0
+    east = math.radians(d_lon) * EARTH_RADIUS_M * math.cos(math.radians(origin.lat_deg))
+    north = math.radians(lat_deg - origin.lat_deg) * EARTH_RADIUS_M
+    return east, north
+
+
+def from_global_position_int(origin: Origin, time_boot_ms: int, lat_e7: int, lon_e7: int, vx_cm_s: int, vy_cm_s: int) -> Measurement:
+    """GLOBAL_POSITION_INT fields -> world measurement."""
+    east, north = geodetic_to_local(origin, lat_e7 * 1e-7, lon_e7 * 1e-7)
+    return Measurement(time_boot_ms / 1000.0, east, north, vy_cm_s / 100.0, vx_cm_s / 100.0)
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """What goes into SET_POSITION_TARGET_LOCAL_NED (BODY_FRD)."""
+
+    yaw_rate_rad_s: float
+    """Clockwise-positive (NED)."""
+    accel_m_s2: float
+    """Forward."""
+
+
+HOLD = Setpoint(0.0, 0.0)
+"""The safe hold: no turn, no acceleration (fly straight at the current speed)."""
+
+
+def action_to_setpoint(action: tuple[float, float], spec: VehicleSpec) -> Setpoint:
+    """[omega, u] in [-1, 1] (clipped) -> heading rate and forward acceleration at the vehicle's limits."""
+    omega_n = min(1.0, max(-1.0, float(action[0])))
+    u_n = min(1.0, max(-1.0, float(action[1])))
+    omega_rad_s = omega_n * math.radians(spec.turn_rate_max_deg_s)
+    return Setpoint(yaw_rate_rad_s=-omega_rad_s, accel_m_s2=u_n * spec.accel_max_m_s2)

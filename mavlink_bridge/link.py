@@ -1,0 +1,513 @@
+"""One MAVLink 2 link to one vehicle over UDP: a typed wrapper around pymavlink's protocol object.
+
+:class:`MavLink` owns a UDP socket and a pymavlink ``MAVLink`` object (dialect ardupilotmega,
+MAVLink 2). It does not use ``mavutil.mavudp`` because that class swallows socket errors in
+``write`` and keeps state in module globals (``mavutil.global_link_id`` for signing): here socket
+errors are counted in :class:`LinkCounters` and logged (rate-limited), and every setting is an
+argument.
+
+Connection strings follow pymavlink / MAVProxy:
+
+* ``udpout:HOST:PORT`` — send to the vehicle at HOST:PORT from an OS-assigned local port (what the
+  bundled SITL prints). The vehicle learns us from our first datagram, so we send HEARTBEATs
+  while waiting for it (:meth:`MavLink.wait_heartbeat`).
+* ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer whoever sent last.
+
+Receiving keeps UDP's datagram boundaries: every datagram is parsed on its own, so a truncated frame
+never swallows the start of the next datagram. Messages that arrive while a command waits for its
+COMMAND_ACK are kept and returned by later :meth:`MavLink.recv` calls, never dropped. Every
+wait is bounded on ``time.monotonic()``; no wait uses the vehicle's clock (a silent vehicle has none).
+
+:attr:`MavLink.last_rx_s` is the time (``time.monotonic()``) at which the datagram of the message
+:meth:`MavLink.recv` returned last was read, for latency measurements.
+
+Optionally every message received and sent is appended to a ``.tlog`` (8-byte big-endian Unix time
+in microseconds, then the raw frame: the format MAVProxy writes and pymavlink's ``mavlogdump.py``
+reads).
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import select
+import socket
+import struct
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO, Callable, Optional
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+__all__ = [
+    "CommandError",
+    "ConnectionSpec",
+    "LinkCounters",
+    "LinkError",
+    "MavLink",
+    "Message",
+    "parse_connection",
+    "SETPOINT_TYPE_MASK",
+]
+
+_log = logging.getLogger(__name__)
+
+Message = mavlink2.MAVLink_message
+M = mavlink2
+
+MAX_DATAGRAM = 65535
+_EPOCH_2015_S = 1420070400
+_TLOG_FLUSH_S = 1.0
+
+SETPOINT_TYPE_MASK = (
+    M.POSITION_TARGET_TYPEMASK_X_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_Y_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_Z_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_VX_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_AY_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    | M.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+)
+"""Use only afx (forward acceleration) and yaw_rate: 1471 (= 1087 + the AY/AZ ignore bits)."""
+SETPOINT_FRAME = M.MAV_FRAME_BODY_FRD
+"""afx along the body's forward axis; yaw_rate about the down axis (clockwise-positive)."""
+
+
+class LinkError(Exception):
+    """A link that cannot be opened or a vehicle that does not answer; ``str()`` is one line."""
+
+
+class CommandError(LinkError):
+    """A COMMAND_LONG that was not acknowledged, or acknowledged with a result other than ACCEPTED."""
+
+    def __init__(self, command: int, result: Optional[int], message: str) -> None:
+        self.command = command
+        self.result = result
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class ConnectionSpec:
+    """A parsed connection string."""
+
+    kind: str
+    """"udpout" (send to host:port) or "udpin" (bind host:port)."""
+    host: str
+    port: int
+
+    def __str__(self) -> str:
+        return f"{self.kind}:{self.host}:{self.port}"
+
+
+def parse_connection(text: str) -> ConnectionSpec:
+    """``udpout:HOST:PORT``, ``udpin:HOST:PORT`` or ``udp:HOST:PORT``; ValueError (one line) otherwise."""
+    parts = text.strip().split(":")
+    if len(parts) != 3 or parts[0] not in ("udpout", "udpin", "udp"):
+        raise ValueError(f"connection {text!r}: expected udpout:HOST:PORT or udpin:HOST:PORT")
+    kind = "udpin" if parts[0] == "udp" else parts[0]
+    host = parts[1]
+    try:
+        port = int(parts[2])
+    except ValueError:
+        raise ValueError(f"connection {text!r}: port {parts[2]!r} is not a number") from None
+    if not host or not 0 <= port <= 65535 or (kind == "udpout" and port == 0):
+        raise ValueError(f"connection {text!r}: bad host or port")
+    return ConnectionSpec(kind, host, port)
+
+
+@dataclass
+class LinkCounters:
+    """What went over the link, by outcome."""
+
+    datagrams_rx: int = 0
+    messages_rx: int = 0
+    bad_data_rx: int = 0
+    """Frames pymavlink could not decode (bad CRC, garbage, unknown id)."""
+    signature_rejected: int = 0
+    """Unsigned, wrongly signed or replayed messages (signing on)."""
+    truncated_rx: int = 0
+    """Datagrams that ended inside a frame."""
+    socket_errors_rx: int = 0
+    messages_tx: int = 0
+    bytes_tx: int = 0
+    socket_errors_tx: int = 0
+    command_retries: int = 0
+
+
+class MavLink:
+    """A MAVLink 2 link to one vehicle over UDP (see the module docstring).
+
+    ``source_system`` / ``source_component`` identify us (default 255 / 191, an onboard computer);
+    ``target_system`` / ``target_component`` are learned from the vehicle's first autopilot heartbeat
+    (or given). ``signing_key`` (32 bytes) turns on MAVLink 2 signing: everything we send is signed,
+    and unsigned, wrongly signed or replayed messages from the vehicle are dropped and counted.
+    """
+
+    def __init__(
+        self,
+        connection: str,
+        *,
+        source_system: int = 255,
+        source_component: int = M.MAV_COMP_ID_ONBOARD_COMPUTER,
+        target_system: int = 0,
+        target_component: int = M.MAV_COMP_ID_AUTOPILOT1,
+        signing_key: Optional[bytes] = None,
+        signing_link_id: int = 1,
+        tlog_path: Optional[Path] = None,
+    ) -> None:
+        try:
+            self.spec = parse_connection(connection)
+        except ValueError as exc:
+            raise LinkError(str(exc)) from None
+        self.counters = LinkCounters()
+        self.target_system = target_system
+        self.target_component = target_component
+        self._backlog: collections.deque[tuple[Message, float]] = collections.deque()
+        self.last_rx_s = 0.0
+        """When the datagram of the message :meth:`recv` returned last was read (time.monotonic())."""
+        self._peer: Optional[tuple[str, int]] = None
+        self._tlog: Optional[BinaryIO] = None
+        self._tlog_flushed = time.monotonic()
+        self._closed = False
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            if self.spec.kind == "udpin":
+                self._sock.bind((self.spec.host, self.spec.port))
+            else:
+                self._peer = (socket.gethostbyname(self.spec.host), self.spec.port)
+                # A loopback vehicle is answered from a loopback address; anything else from any interface.
+                self._sock.bind(("127.0.0.1" if self._peer[0].startswith("127.") else "0.0.0.0", 0))
+        except OSError as exc:
+            self._sock.close()
+            raise LinkError(f"connection {self.spec}: cannot open UDP socket ({exc.strerror or exc})") from None
+        self._sock.setblocking(False)
+        self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
+        self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        self.mav.robust_parsing = True
+        if signing_key is not None:
+            self.setup_signing(signing_key, signing_link_id)
+        if tlog_path is not None:
+            try:
+                Path(tlog_path).parent.mkdir(parents=True, exist_ok=True)
+                self._tlog = open(tlog_path, "wb")
+            except OSError as exc:
+                self._sock.close()
+                raise LinkError(f"cannot write tlog {tlog_path}: {exc.strerror or exc}") from None
+
+    # ----------------------------------------------------------------------------- set-up
+
+    def setup_signing(self, key: bytes, link_id: int = 1) -> None:
+        """Sign what we send with ``key`` and accept only correctly signed, fresh messages.
+
+        The same fields as pymavlink's ``mavfile.setup_signing``, without its global link-id counter.
+        """
+        if len(key) != 32:
+            raise LinkError(f"signing key must be 32 bytes, got {len(key)}")
+        if not 0 <= link_id <= 255:
+            raise LinkError(f"signing link id must be in 0..255, got {link_id}")
+        signing = self.mav.signing
+        signing.secret_key = key
+        signing.sign_outgoing = True
+        signing.allow_unsigned_callback = None
+        signing.link_id = link_id
+        signing.timestamp = int((max(time.time(), _EPOCH_2015_S) - _EPOCH_2015_S) * 100 * 1000)
+
+    @property
+    def signing(self) -> bool:
+        return self.mav.signing.secret_key is not None
+
+    def fileno(self) -> int:
+        return self._sock.fileno()
+
+    # ---------------------------------------------------------------------------- receive
+
+    def recv(self, timeout_s: float = 0.0) -> Optional[Message]:
+        """The next message, waiting up to ``timeout_s`` (wall clock) for one; None if none came."""
+        if self._backlog:
+            return self._pop()
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            self._pump()
+            if self._backlog:
+                return self._pop()
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0 or self._closed:
+                return None
+            try:
+                select.select([self._sock], [], [], remaining)
+            except InterruptedError:  # a signal: let the caller look at its stop flag
+                return None
+
+    def _pop(self) -> Message:
+        msg, self.last_rx_s = self._backlog.popleft()
+        return msg
+
+    def _push_back(self, items: list[tuple[Message, float]]) -> None:
+        """Return messages taken during a wait to the front of the queue, in their order."""
+        self._backlog.extendleft(reversed(items))
+
+    def pending(self) -> bool:
+        """Messages are waiting (already parsed, or datagrams in the socket)."""
+        if self._backlog:
+            return True
+        self._pump()
+        return bool(self._backlog)
+
+    def _pump(self, max_datagrams: int = 256) -> None:
+        """Read and parse every waiting datagram (non-blocking)."""
+        if self._closed:
+            return
+        for _ in range(max_datagrams):
+            try:
+                data, addr = self._sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except ConnectionRefusedError:
+                # ICMP port unreachable for an earlier send: the vehicle is not (yet) there.
+                self.counters.socket_errors_rx += 1
+                continue
+            except OSError as exc:
+                self.counters.socket_errors_rx += 1
+                self._warn_rate_limited("recvfrom", self.counters.socket_errors_rx, exc)
+                return
+            now = time.monotonic()
+            self.counters.datagrams_rx += 1
+            if self.spec.kind == "udpin":
+                self._peer = (str(addr[0]), int(addr[1]))
+            self._parse_datagram(data, now)
+
+    def _parse_datagram(self, data: bytes, rx_s: float) -> None:
+        try:
+            msgs = self.mav.parse_buffer(data) or []
+        except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
+            self.counters.bad_data_rx += 1
+            _log.debug("pymavlink failed on a datagram: %r", exc)
+            msgs = []
+        if self.mav.buf_len() > 0:
+            # The datagram ended inside a frame: drop the partial frame (UDP keeps datagram boundaries).
+            self.counters.truncated_rx += 1
+            self.mav.buf = bytearray()
+            self.mav.buf_index = 0
+            self.mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                if "signature" in str(getattr(msg, "reason", "")).lower():
+                    self.counters.signature_rejected += 1
+                else:
+                    self.counters.bad_data_rx += 1
+                continue
+            self.counters.messages_rx += 1
+            self._log_frame(bytes(msg.get_msgbuf()))
+            self._backlog.append((msg, rx_s))
+
+    # ------------------------------------------------------------------------------- send
+
+    def send(self, msg: Message) -> bool:
+        """Pack (and sign) one message and send it; False if the socket refused it (counted, logged)."""
+        if self._closed:
+            return False
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        self._log_frame(buf)
+        if self._peer is None:  # udpin before anyone has spoken to us
+            return False
+        try:
+            self._sock.sendto(buf, self._peer)
+        except OSError as exc:
+            self.counters.socket_errors_tx += 1
+            self._warn_rate_limited("sendto", self.counters.socket_errors_tx, exc)
+            return False
+        self.counters.messages_tx += 1
+        self.counters.bytes_tx += len(buf)
+        return True
+
+    def send_heartbeat(self) -> bool:
+        """Our HEARTBEAT (an onboard controller, no autopilot)."""
+        return self.send(self.mav.heartbeat_encode(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE))
+
+    def send_statustext(self, severity: int, text: str) -> bool:
+        """STATUSTEXT (cut to one 50-character chunk)."""
+        return self.send(self.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+
+    def send_setpoint(self, time_boot_ms: int, yaw_rate_rad_s: float, accel_m_s2: float) -> bool:
+        """SET_POSITION_TARGET_LOCAL_NED: forward acceleration ``afx`` (m/s^2) and ``yaw_rate`` (rad/s,
+        clockwise-positive, NED), frame BODY_FRD, type mask :data:`SETPOINT_TYPE_MASK`.
+
+        ``time_boot_ms`` echoes the newest vehicle time we acted on (a lockstep vehicle steps once
+        every vehicle in the loop has a setpoint stamped for the current step).
+        """
+        msg = self.mav.set_position_target_local_ned_encode(
+            int(time_boot_ms) & 0xFFFFFFFF,
+            self.target_system,
+            self.target_component,
+            SETPOINT_FRAME,
+            SETPOINT_TYPE_MASK,
+            0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0,
+            float(accel_m_s2), 0.0, 0.0,
+            0.0, float(yaw_rate_rad_s),
+        )  # fmt: skip
+        return self.send(msg)
+
+    # ------------------------------------------------------------------------------ waits
+
+    def wait_heartbeat(self, timeout_s: float, heartbeat_interval_s: float = 1.0,
+                       stop: Optional[Callable[[], bool]] = None) -> Message:
+        """Wait for an autopilot HEARTBEAT (learning the target system), sending ours meanwhile.
+
+        Other messages received meanwhile stay queued for :meth:`recv`. Raises LinkError on timeout.
+        """
+        deadline = time.monotonic() + timeout_s
+        next_hb = time.monotonic()
+        skipped: list[tuple[Message, float]] = []
+        try:
+            while True:
+                now = time.monotonic()
+                if now >= next_hb:
+                    self.send_heartbeat()
+                    next_hb = now + heartbeat_interval_s
+                if stop is not None and stop():
+                    raise LinkError("stopped while waiting for the vehicle's heartbeat")
+                remaining = deadline - now
+                if remaining <= 0.0:
+                    raise LinkError(f"no heartbeat from the vehicle at {self.spec} within {timeout_s:g} s")
+                msg = self.recv(min(remaining, next_hb - now, 0.1))
+                if msg is None:
+                    continue
+                skipped.append((msg, self.last_rx_s))
+                if self.is_vehicle_heartbeat(msg):
+                    self.target_system = msg.get_srcSystem()
+                    self.target_component = msg.get_srcComponent()
+                    return msg
+        finally:
+            self._push_back(skipped)
+
+    def is_vehicle_heartbeat(self, msg: Message) -> bool:
+        """An autopilot's HEARTBEAT (of our target system, once that is known)."""
+        if msg.get_type() != "HEARTBEAT":
+            return False
+        if msg.type in (M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_ADSB):
+            return False
+        if msg.autopilot == M.MAV_AUTOPILOT_INVALID:
+            return False
+        return self.target_system == 0 or msg.get_srcSystem() == self.target_system
+
+    def from_vehicle(self, msg: Message) -> bool:
+        """Sent by our target autopilot (system and component)."""
+        return msg.get_srcSystem() == self.target_system and msg.get_srcComponent() == self.target_component
+
+    def command_long(self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3) -> Message:
+        """Send COMMAND_LONG until its COMMAND_ACK arrives (``retries`` attempts, ``timeout_s`` each).
+
+        Returns the ACK (whatever its result); raises CommandError if none came. Other messages
+        received meanwhile stay queued for :meth:`recv`. ``confirmation`` counts the attempts, as the
+        MAVLink command protocol asks.
+        """
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        if len(p) != 7:
+            raise ValueError(f"COMMAND_LONG takes at most 7 parameters, got {len(params)}")
+        skipped: list[tuple[Message, float]] = []
+        try:
+            for attempt in range(max(1, retries)):
+                if attempt:
+                    self.counters.command_retries += 1
+                    _log.info("command %s: no COMMAND_ACK, retry %d", _command_name(command), attempt)
+                self.send(self.mav.command_long_encode(self.target_system, self.target_component, command, attempt, *p))
+                deadline = time.monotonic() + timeout_s
+                while (remaining := deadline - time.monotonic()) > 0.0:
+                    msg = self.recv(remaining)
+                    if msg is None:
+                        continue
+                    if msg.get_type() == "COMMAND_ACK" and msg.command == command and self._ack_for_us(msg):
+                        if msg.result == M.MAV_RESULT_IN_PROGRESS:
+                            deadline = time.monotonic() + timeout_s
+                            continue
+                        return msg
+                    skipped.append((msg, self.last_rx_s))
+        finally:
+            ack_rx_s = self.last_rx_s
+            self._push_back(skipped)
+            self.last_rx_s = ack_rx_s  # the ACK's (or, on failure, the last message's) receive time
+        raise CommandError(command, None, f"{_command_name(command)}: no COMMAND_ACK from the vehicle after {max(1, retries)} attempts of {timeout_s:g} s")
+
+    def command_checked(self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3) -> Message:
+        """:meth:`command_long`, raising CommandError unless the result is MAV_RESULT_ACCEPTED."""
+        ack = self.command_long(command, params, timeout_s, retries)
+        if ack.result != M.MAV_RESULT_ACCEPTED:
+            raise CommandError(command, ack.result, f"{_command_name(command)} refused by the vehicle: {_result_name(ack.result)}")
+        return ack
+
+    def arm(self, timeout_s: float = 1.0, retries: int = 3) -> Message:
+        """MAV_CMD_COMPONENT_ARM_DISARM(1), checked."""
+        return self.command_checked(M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), timeout_s, retries)
+
+    def set_mode(self, custom_mode: int, timeout_s: float = 1.0, retries: int = 3) -> Message:
+        """MAV_CMD_DO_SET_MODE with CUSTOM_MODE_ENABLED and the autopilot's mode number, checked."""
+        return self.command_checked(M.MAV_CMD_DO_SET_MODE, (float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(custom_mode)), timeout_s, retries)
+
+    def set_message_interval(self, message_id: int, interval_s: float, timeout_s: float = 1.0, retries: int = 3) -> Message:
+        """MAV_CMD_SET_MESSAGE_INTERVAL, checked: ``interval_s`` > 0, or -1 to stop the stream."""
+        interval_us = -1.0 if interval_s < 0 else interval_s * 1e6
+        return self.command_checked(M.MAV_CMD_SET_MESSAGE_INTERVAL, (float(message_id), interval_us), timeout_s, retries)
+
+    def _ack_for_us(self, ack: Message) -> bool:
+        # MAVLink 2 COMMAND_ACK carries target fields; an autopilot that leaves them 0 addresses everyone.
+        ts = getattr(ack, "target_system", 0)
+        tc = getattr(ack, "target_component", 0)
+        return ts in (0, self.mav.srcSystem) and tc in (0, self.mav.srcComponent)
+
+    # ------------------------------------------------------------------------------ misc
+
+    def _log_frame(self, frame: bytes) -> None:
+        if self._tlog is None:
+            return
+        stamp_us = int(time.time() * 1e6) & ~3
+        try:
+            self._tlog.write(struct.pack(">Q", stamp_us) + frame)
+            now = time.monotonic()
+            if now - self._tlog_flushed > _TLOG_FLUSH_S:
+                self._tlog.flush()
+                self._tlog_flushed = now
+        except OSError as exc:
+            _log.error("tlog write failed, tlog closed: %s", exc)
+            self._close_tlog()
+
+    def _close_tlog(self) -> None:
+        if self._tlog is not None:
+            try:
+                self._tlog.close()
+            except OSError as exc:
+                _log.error("closing the tlog failed: %s", exc)
+            self._tlog = None
+
+    @staticmethod
+    def _warn_rate_limited(what: str, count: int, exc: OSError) -> None:
+        if count in (1, 10, 100, 1000) or count % 10000 == 0:
+            _log.warning("%s failed (%d so far): %s", what, count, exc)
+
+    def close(self) -> None:
+        """Close the socket and the tlog (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._sock.close()
+        self._close_tlog()
+
+    def __enter__(self) -> MavLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _command_name(command: int) -> str:
+    entry = M.enums["MAV_CMD"].get(command)
+    return entry.name if entry is not None else f"command {command}"
+
+
+def _result_name(result: int) -> str:
+    entry = M.enums["MAV_RESULT"].get(result)
+    return entry.name if entry is not None else str(result)

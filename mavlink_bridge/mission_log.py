@@ -1,0 +1,138 @@
+"""Reading a SITL world's truth log (JSON Lines) into a mission's outcome, tracks and event markers.
+
+The format is the bundled SITL's (``sim_vehicles.truth_log``; read here without importing it): a
+``header`` line (scenario, seed, the layout flown, ...), one ``step`` line per world step (true
+states per role: ``x_m``, ``y_m``, ``cost``, ``cost_total``, ``failsafe`` ...), ``event`` lines
+(RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END, and the vehicles' ARMED / MODE / FAILSAFE changes)
+and a final ``summary`` line (``success``, ``end``, ``steps``, ``sim_time_s``, ``cost`` per role).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+from tssac_core.scenario import ROLES
+
+TASK_EVENTS = {"decoy": ("RADAR_ON", 1), "detect": ("IDENT", 1), "strike": ("HIT", 1)}
+"""The event that completes each role's task (eq. 9)."""
+EVENT_LABELS = {"RADAR_ON": "radar on", "IDENT": "identified", "HIT": "hit", "HAZARD": "hazard", "FENCE": "left area"}
+_EVENT_VEHICLE = {"RADAR_ON": "decoy", "IDENT": "detect", "HIT": "strike"}
+
+
+class TruthLogError(ValueError):
+    """A truth log that cannot be read; ``str()`` is one line."""
+
+
+@dataclass
+class MissionRecord:
+    """What one truth log says about a mission."""
+
+    header: dict[str, Any]
+    summary: Optional[dict[str, Any]]
+    """None if the world was killed before it could write one."""
+    tracks_m: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    steps: int = 0
+    failsafe_steps: dict[str, int] = field(default_factory=dict)
+    last_flags: dict[str, bool] = field(default_factory=dict)
+    last_cost: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        return self.summary is not None
+
+    @property
+    def success(self) -> bool:
+        return bool(self.summary["success"]) if self.summary is not None else bool(self.last_flags.get("hit", False))
+
+    @property
+    def end(self) -> str:
+        return str(self.summary["end"]) if self.summary is not None else "incomplete"
+
+    @property
+    def sim_time_s(self) -> float:
+        if self.summary is not None:
+            return float(self.summary["sim_time_s"])
+        return self.steps * float(self.header.get("dt_s", 0.1))
+
+    @property
+    def cost(self) -> dict[str, float]:
+        if self.summary is not None:
+            return {k: float(v) for k, v in self.summary["cost"].items()}
+        return dict(self.last_cost)
+
+    def task_done(self) -> dict[str, bool]:
+        seen = {(e.get("event"), e.get("value")) for e in self.events}
+        return {role: ev in seen for role, ev in TASK_EVENTS.items()}
+
+    def event_count(self, name: str) -> dict[str, int]:
+        out = {r.value: 0 for r in ROLES}
+        for e in self.events:
+            if e.get("event") == name and e.get("vehicle") in out and e.get("value") == 1:
+                out[str(e["vehicle"])] += 1
+        return out
+
+    def tracks_km(self) -> dict[str, list[tuple[float, float]]]:
+        return {role: [(x / 1000.0, y / 1000.0) for x, y in pts] for role, pts in self.tracks_m.items()}
+
+    def event_markers_km(self) -> list[tuple[str, float, float]]:
+        """(label, x_km, y_km) of the mission events, at the position of the vehicle concerned."""
+        out = []
+        for e in self.events:
+            name = e.get("event")
+            if name not in EVENT_LABELS or e.get("value") == 0 and name == "RADAR_ON":
+                continue
+            role = e.get("vehicle") or _EVENT_VEHICLE.get(str(name))
+            track = self.tracks_m.get(str(role))
+            if not track:
+                continue
+            k = min(max(int(e.get("step", 0)) - 1, 0), len(track) - 1)
+            x, y = track[k]
+            label = EVENT_LABELS[str(name)] + (f" ({role})" if name in ("HAZARD", "FENCE") else "")
+            out.append((label, x / 1000.0, y / 1000.0))
+        return out
+
+
+def read_mission(path: Path) -> MissionRecord:
+    """Parse a truth log; a missing summary (world killed) is allowed, a missing header is not."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise TruthLogError(f"{path}: cannot read truth log ({exc.strerror or exc})") from None
+    header: Optional[dict[str, Any]] = None
+    record: Optional[MissionRecord] = None
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            if n == len(lines):
+                break  # a line cut off by a killed writer
+            raise TruthLogError(f"{path}:{n}: not JSON") from None
+        kind = row.get("type")
+        if header is None:
+            if kind != "header":
+                raise TruthLogError(f"{path}: first line is not a header")
+            header = row
+            record = MissionRecord(header=row, summary=None, tracks_m={role: [] for role in row.get("roles", [])})
+            continue
+        assert record is not None
+        if kind == "step":
+            record.steps = int(row["step"])
+            record.last_flags = {k: bool(row.get(k, False)) for k in ("radar_on", "identified", "hit")}
+            for role, v in row["vehicles"].items():
+                record.tracks_m.setdefault(role, []).append((float(v["x_m"]), float(v["y_m"])))
+                record.last_cost[role] = float(v["cost_total"])
+                if v.get("failsafe"):
+                    record.failsafe_steps[role] = record.failsafe_steps.get(role, 0) + 1
+        elif kind == "event":
+            record.events.append(row)
+        elif kind == "summary":
+            record.summary = row
+    if record is None:
+        raise TruthLogError(f"{path}: empty truth log")
+    return record

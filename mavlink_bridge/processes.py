@@ -1,0 +1,140 @@
+"""Child processes that must never outlive their parent: own process groups, terminate then kill.
+
+:class:`ChildProcesses` starts each child in its own session (so a Ctrl-C in the terminal reaches
+only the parent, which then stops the children in order), asks Linux to send it SIGTERM if the
+parent dies without cleaning up (``PR_SET_PDEATHSIG``, so even a ``kill -9`` of the parent leaves
+no orphan), and stops children by process group: SIGTERM, a grace period, then SIGKILL, then
+``wait()`` so that no zombie is left either. :meth:`ChildProcesses.stop_all` is idempotent and
+registered with ``atexit``.
+"""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import ctypes.util
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Optional, Sequence
+
+_log = logging.getLogger(__name__)
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """preexec_fn: SIGTERM this child when the parent dies (Linux); a no-op elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except OSError:
+        pass
+
+
+@dataclass
+class Child:
+    """One started child process."""
+
+    name: str
+    process: subprocess.Popen[bytes]
+    log_path: Optional[Path]
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def poll(self) -> Optional[int]:
+        return self.process.poll()
+
+
+class ChildProcesses:
+    """The children one parent started (see the module docstring)."""
+
+    def __init__(self, grace_s: float = 5.0) -> None:
+        self.grace_s = grace_s
+        self.children: list[Child] = []
+        atexit.register(self.stop_all)
+
+    def start(self, name: str, argv: Sequence[str], *, log_path: Optional[Path] = None, stdout_pipe: bool = False,
+              cwd: Optional[Path] = None, env: Optional[dict[str, str]] = None) -> Child:
+        """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``."""
+        log: Optional[IO[bytes]] = None
+        if log_path is not None:
+            log_path.parent.mkdir(parents=True, exist_ok=True)
+            log = open(log_path, "wb")
+        try:
+            proc = subprocess.Popen(
+                list(argv),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE if stdout_pipe else (log if log is not None else subprocess.DEVNULL),
+                stderr=log if log is not None else subprocess.DEVNULL,
+                cwd=cwd,
+                env=env,
+                start_new_session=True,
+                preexec_fn=_die_with_parent,
+            )
+        finally:
+            if log is not None:
+                log.close()  # the child holds its own descriptor
+        child = Child(name, proc, log_path)
+        self.children.append(child)
+        _log.debug("started %s (pid %d): %s", name, proc.pid, " ".join(argv))
+        return child
+
+    def alive(self) -> list[Child]:
+        return [c for c in self.children if c.poll() is None]
+
+    def stop(self, children: Sequence[Child], grace_s: Optional[float] = None) -> None:
+        """SIGTERM each running child's process group, wait up to ``grace_s``, SIGKILL what is left, reap all.
+
+        A child that already exited was reaped by ``poll()``: its group id is not signalled any more,
+        since it may have been reused (our children start no processes of their own).
+        """
+        grace = self.grace_s if grace_s is None else grace_s
+        running = [c for c in children if c.poll() is None]
+        for c in running:
+            _signal_group(c, signal.SIGTERM)
+        deadline = time.monotonic() + grace
+        for c in running:
+            try:
+                c.process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+        for c in running:
+            if c.poll() is None:
+                _log.warning("%s (pid %d) did not stop within %.1f s: killing it", c.name, c.pid, grace)
+                _signal_group(c, signal.SIGKILL)
+        for c in running:
+            try:
+                c.process.wait(grace)
+            except subprocess.TimeoutExpired:
+                _log.error("%s (pid %d) survived SIGKILL", c.name, c.pid)
+        for c in children:
+            if c.process.stdout is not None and not c.process.stdout.closed:
+                c.process.stdout.close()
+
+    def stop_all(self, grace_s: Optional[float] = None) -> None:
+        """Stop every child ever started (idempotent)."""
+        if self.children:
+            self.stop(self.children, grace_s)
+
+    def forget_finished(self) -> None:
+        """Drop reaped children from the list (between missions)."""
+        self.children = [c for c in self.children if c.poll() is None]
+
+
+def _signal_group(child: Child, sig: int) -> None:
+    try:
+        os.killpg(child.pid, sig)  # the child leads its own group (start_new_session)
+    except ProcessLookupError:
+        pass
+    except PermissionError as exc:
+        _log.error("cannot signal %s (pid %d): %s", child.name, child.pid, exc)

@@ -1,0 +1,248 @@
+"""``python -m mavlink_bridge.fly``: whole missions in SITL worlds it starts, and the processes it leaves behind (none).
+
+The mission tests run fly as a subprocess (it starts its own world and companions, each in its own
+process group, on OS-assigned ports on 127.0.0.1) and check afterwards that none of the processes
+it started is still alive: their pids come from fly's JSON and its log lines.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mavlink_bridge import fly
+from tssac_core.scenario import Layout, Radar, Start, dump, load, sample_layout
+
+REPO = Path(__file__).resolve().parents[1]
+STRIKE = REPO / "scenarios" / "strike.yaml"
+RANDOM = REPO / "scenarios" / "random.yaml"
+JSON_KEYS = {"success_rate", "mean_cost", "episodes", "roles", "missions"}
+
+
+def _env() -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(REPO))
+
+
+def _quick_scenario(tmp: Path, strike_km: float = 8.0) -> Path:
+    """The strike scenario with the UAVs starting in their zones (the strike UAV ``strike_km`` east of the SAM)."""
+    base = load(STRIKE)
+    layout = Layout(
+        sam_km=(65.0, 65.0),
+        target_km=(66.0, 64.0),
+        radars=(Radar((20.0, 20.0), 12.0), Radar((15.0, 85.0), 12.0), Radar((88.0, 15.0), 10.0)),
+        starts={"decoy": Start((46.5, 65.0), 90.0), "detect": Start((65.0, 53.5), 0.0), "strike": Start((65.0 + strike_km, 65.0), 180.0)},
+    )
+    path = tmp / f"quick-{strike_km:g}.yaml"
+    dump(dataclasses.replace(base, name="quick", layout=layout), path)
+    return path
+
+
+def _alive(pid: int) -> bool:
+    """A live (not zombie) process with this pid runs our code (a reused pid would not)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+    except OSError:
+        return False
+    state = stat.rsplit(")", 1)[1].split()[0]
+    return state != "Z" and ("sim_vehicles" in cmdline or "mavlink_bridge" in cmdline)
+
+
+def _pids(results: dict[str, Any]) -> list[int]:
+    return [pid for m in results["missions"] for pid in m["pids"].values()]
+
+
+def _start_fly(args: list[str]) -> subprocess.Popen[bytes]:
+    return subprocess.Popen([sys.executable, "-m", "mavlink_bridge.fly", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            cwd=REPO, env=_env())
+
+
+def _read_until(proc: subprocess.Popen[bytes], pattern: str, timeout_s: float) -> tuple[str, re.Match[str]]:
+    """fly's stderr up to the first line matching ``pattern``."""
+    assert proc.stderr is not None
+    buf = ""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        match = re.search(pattern, buf)
+        if match:
+            return buf, match
+        remaining = deadline - time.monotonic()
+        assert remaining > 0 and proc.poll() is None, f"no {pattern!r} in fly's output: {buf}"
+        if select.select([proc.stderr], [], [], min(remaining, 0.2))[0]:
+            buf += os.read(proc.stderr.fileno(), 65536).decode(errors="replace")
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait(10)
+
+
+# ------------------------------------------------------------------------------ missions
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(300)
+def test_fly_guidance_strike_mission_in_lockstep(tmp_path: Path) -> None:
+    out, tlogs, plot = tmp_path / "fly.json", tmp_path / "tlogs", tmp_path / "mission.png"
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(STRIKE), "--pilot", "guidance", "--lockstep",
+         "--json", str(out), "--tlog", str(tlogs), "--plot", str(plot), "--no-progress"],
+        capture_output=True, text=True, cwd=REPO, env=_env(), timeout=280,
+    )
+    wall_s = time.monotonic() - t0
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    assert JSON_KEYS <= set(results) and results["episodes"] == 1 and results["error"] is None
+    assert results["success_rate"] == 1.0
+    mission = results["missions"][0]
+    assert mission["success"] and mission["end"] == "success" and all(mission["task_done"].values())
+    # The same mission in the batched world takes 2,670 steps with no hazard cost.
+    assert mission["steps"] == pytest.approx(2670, abs=30) and mission["sim_time_s"] == pytest.approx(mission["steps"] / 10)
+    assert results["mean_cost"] == pytest.approx(np.mean(list(mission["cost"].values())))
+    assert set(results["roles"]) == {"decoy", "detect", "strike"}
+    for role, comp in mission["companions"].items():
+        assert comp["status"] == "success" and comp["exit_code"] == 0 and comp["holds"] == 0, (role, comp)
+        assert comp["latency_p50_ms"] > 0
+    assert not mission["failsafe_steps"]
+    print(f"strike mission in lockstep: {wall_s:.1f} s wall, {mission['sim_time_s']:.0f} s simulated, {mission.get('speed_x')}x in flight")
+    # One .tlog per vehicle, readable by pymavlink's mavlogdump.py.
+    for role in ("decoy", "detect", "strike"):
+        tlog = tlogs / "mission-000" / f"{role}.tlog"
+        dump_ = subprocess.run([sys.executable, "-m", "pymavlink.tools.mavlogdump", "--types", "HEARTBEAT,COMMAND_ACK,SET_POSITION_TARGET_LOCAL_NED", str(tlog)],
+                               capture_output=True, text=True, timeout=120)
+        assert dump_.returncode == 0, dump_.stderr[-500:]
+        lines = dump_.stdout.splitlines()
+        assert sum("SET_POSITION_TARGET_LOCAL_NED" in ln for ln in lines) >= 2600
+        assert any("HEARTBEAT" in ln for ln in lines) and any("COMMAND_ACK" in ln for ln in lines)
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 20_000
+    assert not [pid for pid in _pids(results) if _alive(pid)]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_fly_speedup_signed_random_layouts(tmp_path: Path) -> None:
+    key = tmp_path / "key.hex"
+    key.write_text(bytes(range(32)).hex() + "\n")
+    scen = load(_quick_scenario(tmp_path))
+    # A "random" scenario whose draws land on the quick layout would need a custom range; instead check
+    # the layout rule directly and fly the quick layout with a real-time world, signing on.
+    rnd = load(RANDOM)
+    assert fly.mission_layout(rnd, 3, 2) == sample_layout(rnd, np.random.default_rng(5))
+    assert fly.mission_layout(scen, 3, 2) == scen.layout
+    out = tmp_path / "fly.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--speedup", "10",
+         "--episodes", "2", "--seed", "4", "--signing-key", str(key), "--json", str(out), "--no-progress"],
+        capture_output=True, text=True, cwd=REPO, env=_env(), timeout=220,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    assert results["episodes"] == 2 and results["success_rate"] == 1.0 and results["signing"] is True
+    assert results["clock"] == "speedup 10" and [m["seed"] for m in results["missions"]] == [4, 5]
+    assert not [pid for pid in _pids(results) if _alive(pid)]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--episodes", "5",
+                       "--json", str(out), "--no-progress"])
+    try:
+        log, _ = _read_until(proc, r"mission 1: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 150)
+        running = [int(p) for m in re.finditer(r"mission \d+: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", log) for p in m.groups()]
+        time.sleep(1.0)  # mission 1 in flight
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    assert proc.returncode == 130, err.decode()[-2000:]
+    results = json.loads(out.read_text())
+    assert results["interrupted"] is True and results["episodes"] >= 1 and results["episodes_requested"] == 5
+    assert all(m["success"] for m in results["missions"])
+    assert len(running) >= 8 and not [pid for pid in running if _alive(pid)]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--episodes", "3",
+                       "--json", str(out), "--no-progress"])
+    try:
+        _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
+        pids = [int(p) for p in match.groups()]
+        time.sleep(2.0)  # in flight
+        os.kill(pids[2], signal.SIGKILL)  # the detect UAV's companion dies
+        _, err_b = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    err = err_b.decode()
+    assert proc.returncode == 1, err[-2000:]
+    errors = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "companion detect" in errors[0] and "-9" in errors[0]
+    results = json.loads(out.read_text())
+    assert results["error"] and "companion detect" in results["error"] and results["episodes"] == 0
+    assert not [pid for pid in pids if _alive(pid)]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(180)
+def test_a_killed_fly_leaves_no_orphans(tmp_path: Path) -> None:
+    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--no-progress"])
+    try:
+        _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
+        pids = [int(p) for p in match.groups()]
+        time.sleep(1.0)
+        proc.kill()  # no clean-up possible: the children learn it from PR_SET_PDEATHSIG
+        proc.wait(10)
+    finally:
+        _stop(proc)
+    deadline = time.monotonic() + 15.0
+    while [pid for pid in pids if _alive(pid)] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [pid for pid in pids if _alive(pid)]
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: strike\nvehicles: {decoy: {speed_min_m_s: fast}}\n")
+    cases = [
+        (["--scenario", str(STRIKE), "--models", str(tmp_path / "nowhere")], "--pilot guidance"),
+        (["--scenario", str(bad), "--pilot", "guidance"], "bad.yaml"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--episodes", "0"], "--episodes"),
+        (["--scenario", str(RANDOM), "--pilot", "guidance", "--connect", "udpout:127.0.0.1:1", "udpout:127.0.0.1:2", "udpout:127.0.0.1:3"], "fixed layout"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--connect", "udpout:127.0.0.1:1", "tcp:x:2", "udpout:127.0.0.1:3"], "udpout:HOST:PORT"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--signing-key", str(bad)], "signing key"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--speedup", "2", "--lockstep"], "not allowed"),
+    ]
+    empty = tmp_path / "models"
+    empty.mkdir()
+    (empty / "decoy.pt").write_bytes(b"not a checkpoint")
+    cases.append((["--scenario", str(STRIKE), "--models", str(empty)], "--pilot guidance"))
+    if not fly.DEFAULT_MODELS.is_dir():
+        cases.append((["--scenario", str(STRIKE)], "models directory not found"))
+    for argv, needle in cases:
+        assert fly.main(argv) == 2, argv
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+        assert len(err) == 1 and needle in err[0], (argv, err)
+    proc = subprocess.run([sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(bad), "--pilot", "guidance"],
+                          capture_output=True, text=True, cwd=REPO, env=_env(), timeout=60)
+    assert proc.returncode == 2 and proc.stdout == "" and len(proc.stderr.strip().splitlines()) == 1
