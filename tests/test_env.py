@@ -208,7 +208,8 @@ def test_pilot_actions_are_held_for_their_repeat(strike_path):
         actions = task.team.actions(task.world, skip=task.j)
         seen.append(actions[0, 0, 0])
         task.world.step(actions)
-    assert seen == pytest.approx([0.1, 0.1, 0.1, 0.4, 0.4, 0.4, 0.7])
+    assert seen == pytest.approx([0.1, 0.1, 0.1, 0.2, 0.2, 0.2, 0.3])
+    assert pilot.k == 3  # asked only at decision steps
 
 
 def test_role_task_repeat_sums_reward_and_cost(strike_path):

@@ -54,12 +54,10 @@ class Team:
                 actions[:, j] = guided[:, j]
             elif callable(pilot):
                 mode = getattr(pilot, "observation_mode", self.default_mode)
-                fresh = np.asarray(pilot(observe(world, j, mode)), dtype=np.float64)
                 repeat = int(getattr(pilot, "action_repeat", 1))
-                if repeat > 1:
-                    due = (world.steps % repeat == 0)[:, None]
-                    self._held[:, j] = np.where(due, fresh, self._held[:, j])
-                    actions[:, j] = self._held[:, j]
-                else:
-                    actions[:, j] = fresh
+                due = world.steps % repeat == 0
+                if due.any():  # between decisions nobody needs the pilot: skip its forward pass
+                    fresh = np.asarray(pilot(observe(world, j, mode)), dtype=np.float64)
+                    self._held[:, j] = np.where(due[:, None], fresh, self._held[:, j])
+                actions[:, j] = self._held[:, j]
         return actions
