@@ -37,6 +37,7 @@ def plot_training(metrics: Path, out: Path, cost_limit: float) -> None:
         x, y = _series(rows, role, "cost")
         axes[1][col].plot(x, y, marker=".", color="tab:red")
         axes[1][col].axhline(cost_limit, color="red", ls="--", label=f"cost threshold C = {cost_limit:g}")
+        axes[1][col].set_yscale("symlog", linthresh=10)  # early epochs cost hundreds, the limit is 3
         axes[1][col].set_title(f"{role}: episode cost")
         axes[1][col].set_xlabel("epoch")
         axes[1][col].legend(loc="upper right")
