@@ -223,3 +223,21 @@ def test_role_task_repeat_sums_reward_and_cost(strike_path):
     assert held.reward[0] == pytest.approx(total_r)
     assert a.world.steps[0] == 5 and b.world.steps[0] == 5
     np.testing.assert_array_equal(a.world.x_m, b.world.x_m)
+
+
+def test_unused_radar_slots_do_not_change_the_observation(strike_path):
+    """A world with spare radar slots observes exactly what a world sized to the layout does."""
+    from tssac_core.observation import observe
+    from tssac_core.world import World
+
+    s = load(strike_path)
+    snug, roomy = World(s, 1), World(s, 1, max_radars=5)
+    for w in (snug, roomy):
+        w.reset([0], [s.layout])
+    for j in range(3):
+        np.testing.assert_array_equal(observe(snug, j, ObservationMode.EXTENDED), observe(roomy, j, ObservationMode.EXTENDED))
+    one = World(s, 1, max_radars=1)
+    lay = s.layout
+    one.reset([0], [type(lay)(lay.sam_km, lay.target_km, lay.radars[:1], lay.starts)])
+    obs = observe(one, 0, ObservationMode.EXTENDED)[0]
+    np.testing.assert_array_equal(obs[14:20], [1.0, 1.0, 0.0, 1.0, 1.0, 0.0])  # missing radars: far, dead ahead

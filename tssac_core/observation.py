@@ -122,47 +122,42 @@ def build_observation(
     out[:, 3] = cos_phi
     out[:, 4] = sin_phi
     out[:, 5] = l_m / area
-    dx, dy = sam_m[:, 0] - x_m, sam_m[:, 1] - y_m
-    d_sam = np.hypot(dx, dy)
-    _relative_bearing(dx, dy, d_sam, cos_phi, sin_phi, out[:, 6:8])
+
+    # The SAM and the radars in one pass: ranges and bearings relative to the heading, (N, 1 + K).
+    points = np.concatenate([sam_m[:, None, :], radar_m], axis=1)
+    dx = points[:, :, 0] - x_m[:, None]
+    dy = points[:, :, 1] - y_m[:, None]
+    d = np.hypot(dx, dy)
+    inv = 1.0 / np.maximum(d, 1e-9)  # on the point itself the bearing is (0, 0)
+    ux, uy = dx * inv, dy * inv
+    c_phi, s_phi = cos_phi[:, None], sin_phi[:, None]
+    rel_cos = ux * c_phi + uy * s_phi  # the unit vector rotated by -phi
+    rel_sin = uy * c_phi - ux * s_phi
+
+    d_sam = d[:, 0]
+    out[:, 6] = rel_cos[:, 0]
+    out[:, 7] = rel_sin[:, 0]
     out[:, 8] = d_sam / area
     out[:, 9] = (d_sam - c.zone_outer_m[j]) / LOCAL_SCALE_M
     out[:, 10] = (d_sam - c.zone_inner_m[j]) / LOCAL_SCALE_M
 
-    rdx = radar_m[:, :, 0] - x_m[:, None]
-    rdy = radar_m[:, :, 1] - y_m[:, None]
-    rd = np.hypot(rdx, rdy)
-    edge = (rd - radar_r_m) / LOCAL_SCALE_M
-    edge = np.where(radar_r_m > 0, edge, np.inf)  # padding slots are far away
-    k = radar_m.shape[1]
-    order = np.argsort(edge, axis=1)[:, :N_RADAR_FEATURES]
-    rows = np.arange(n)[:, None]
-    feats = np.empty((n, N_RADAR_FEATURES, 3))
-    feats[:, :, 0] = 1.0
-    feats[:, :, 1] = 1.0
-    feats[:, :, 2] = 0.0
-    m = min(k, N_RADAR_FEATURES)
-    sel_edge = edge[rows, order[:, :m]]
-    sel_dx, sel_dy, sel_d = rdx[rows, order[:, :m]], rdy[rows, order[:, :m]], rd[rows, order[:, :m]]
-    bearing = np.empty((n, m, 2))
-    _relative_bearing(sel_dx, sel_dy, sel_d, cos_phi[:, None], sin_phi[:, None], bearing)
-    real = np.isfinite(sel_edge)
-    feats[:, :m, 0] = np.where(real, sel_edge, 1.0)
-    feats[:, :m, 1] = np.where(real, bearing[..., 0], 1.0)
-    feats[:, :m, 2] = np.where(real, bearing[..., 1], 0.0)
-    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = feats.reshape(n, -1)
+    # Radars, nearest edge first; padding slots (radius 0) read as far away, dead ahead.
+    feats = np.stack([(d[:, 1:] - radar_r_m) / LOCAL_SCALE_M, rel_cos[:, 1:], rel_sin[:, 1:]], axis=2)  # (N, K, 3)
+    padding = radar_r_m <= 0
+    if padding.any():
+        feats = np.where(padding[:, :, None], _FAR_RADAR, feats)
+    k = feats.shape[1]
+    if k < N_RADAR_FEATURES:
+        feats = np.concatenate([feats, np.broadcast_to(_FAR_RADAR, (n, N_RADAR_FEATURES - k, 3))], axis=1)
+    order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
+    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = np.take_along_axis(feats, order[:, :, None], axis=1).reshape(n, -1)
     out[:, 20] = radar_on
     out[:, 21] = identified
     return np.minimum(np.maximum(out, low), high).astype(np.float32)
 
 
-def _relative_bearing(dx: np.ndarray, dy: np.ndarray, d: np.ndarray, cos_phi: np.ndarray, sin_phi: np.ndarray, out: np.ndarray) -> None:
-    """cos and sin of (bearing of (dx, dy)) - heading, written into out[..., 0:2]."""
-    inv = 1.0 / np.maximum(d, 1e-9)  # at d = 0 (on the point itself) the bearing is (0, 0)
-    ux, uy = dx * inv, dy * inv
-    # Rotate the unit vector by -phi.
-    out[..., 0] = ux * cos_phi + uy * sin_phi
-    out[..., 1] = uy * cos_phi - ux * sin_phi
+_FAR_RADAR = np.array([1e9, 1.0, 0.0])
+"""Features of a radar slot a layout does not use: sorted last, range clipped to 1, bearing dead ahead."""
 
 
 def observe(world: World, role_index: int, mode: ObservationMode) -> np.ndarray:
