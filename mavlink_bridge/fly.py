@@ -177,6 +177,15 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     )
 
 
+def make_signing_key(directory: Path) -> Path:
+    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only."""
+    path = directory / "signing.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(os.urandom(32))
+    return path
+
+
 def check_models(models: Path) -> None:
     """The three role checkpoints load (CheckpointError otherwise), with a hint when they are missing."""
     from tssac_core.policy import CheckpointError, load_team
@@ -517,6 +526,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
             work = Path(tmp.name)
+        if cfg.signing_key_path is None and cfg.scenario.link.signing:
+            cfg = dataclasses.replace(cfg, signing_key_path=make_signing_key(work))
         runner = MissionRunner(cfg, children, work)
         with tqdm(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr) as bar:
             for i in range(cfg.episodes):

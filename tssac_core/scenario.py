@@ -173,6 +173,9 @@ class LinkModel:
     """Probability that a packet is delivered twice."""
     reordering: float = 0.0
     """Probability that a packet is held back behind the next one."""
+    signing: bool = False
+    """Fly with MAVLink 2 message signing (``mavlink_bridge.fly`` makes a fresh key for each run
+    unless ``--signing-key`` gives one)."""
 
 
 @dataclass(frozen=True)
@@ -287,6 +290,10 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ScenarioError(source, where, f"expected an integer, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(source, where, f"expected true or false, got {value!r}")
         return value
     if tp is str:
         if not isinstance(value, str):
