@@ -82,6 +82,8 @@ class TrainConfig:
     """sac_penalty: reward r + penalty * c."""
     threads: int = 2
     """torch threads (this machine has 2 cores)."""
+    init_from: str = ""
+    """A role checkpoint whose networks initialise every trained role (fine-tuning; transfer() resets the rest)."""
     sac: dict[str, Any] = field(default_factory=dict)
     """Overrides of SacConfig fields (Table 3 defaults)."""
 
@@ -163,6 +165,10 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         torch.set_rng_state(saved["torch_rng"])
         start_epoch, env_steps, updates, transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
         logger.info("%s: resuming after epoch %d (%d env steps)", role.value, start_epoch, env_steps)
+    elif cfg.init_from:
+        copied = transfer(learner, read_checkpoint(cfg.init_from)["learner"])
+        transferred = True
+        logger.info("%s: initialised %d tensors from %s", role.value, len(copied), cfg.init_from)
     elif cfg.algo == "tssac" and role.index > 0:
         source = out / f"{ROLES[role.index - 1].value}.pt"
         copied = transfer(learner, read_checkpoint(source)["learner"])
@@ -300,6 +306,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended", help="observation (default extended; paper = eq. 7)")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
+    p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a SacConfig field, e.g. --set lr=3e-4")
     p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
@@ -325,6 +332,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
+        init_from=str(a.init_from) if a.init_from else "",
     )
     return cfg, a.out, a.resume, a.no_progress
 
