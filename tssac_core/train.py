@@ -216,19 +216,26 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
         save_resume_state(state_path, learner, buffer, task, obs, rng, epoch, env_steps, updates, transferred)
 
+    save_trained_role(out, cfg, scenario, role, sac_cfg.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates)
+
+
+def save_trained_role(out: Path, cfg: TrainConfig, scenario: Scenario, role: Role, hidden_sizes: tuple[int, ...],
+                      actor_state: dict[str, torch.Tensor], learner_state: dict[str, Any], env_steps: int, updates: int) -> None:
+    """Write ``<role>.pt``: the deployable actor, what it fits, and the learner's state for transfer."""
+    mode = ObservationMode(cfg.observation)
     info = CheckpointInfo(
         role=role,
         algo=cfg.algo,
         observation_mode=mode,
         obs_dim=mode.size,
         act_dim=2,
-        hidden_sizes=sac_cfg.hidden_sizes,
+        hidden_sizes=hidden_sizes,
         scenario_digest=scenario.digest(),
         versions=package_versions(),
         metrics={"env_steps": env_steps, "updates": updates},
         action_repeat=cfg.action_repeat,
     )
-    save_role_checkpoint(out / f"{role.value}.pt", info, learner.actor.state_dict(), learner.state_dict())
+    save_role_checkpoint(out / f"{role.value}.pt", info, actor_state, learner_state)
 
 
 def role_position(cfg: TrainConfig, role: Role) -> int:

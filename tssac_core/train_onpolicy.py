@@ -55,7 +55,6 @@ from tssac_core.algos.ppo import (
 )
 from tssac_core.env import RoleTask
 from tssac_core.observation import ObservationMode
-from tssac_core.policy import CheckpointInfo, package_versions, save_role_checkpoint
 from tssac_core.scenario import Role, Scenario
 
 if TYPE_CHECKING:
@@ -167,7 +166,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     """Train one role with cfg.algo in {ppo, ppo_lag, cpo} for cfg.epochs epochs, checkpointing every
     epoch; writes ``<role>.pt``."""
     # Imported here, not at the top: train.py dispatches to this module.
-    from tssac_core.train import EpochLog, append_metrics, role_position, teammates_for
+    from tssac_core.train import EpochLog, append_metrics, role_position, save_trained_role, teammates_for
 
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
@@ -243,19 +242,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
         save_onpolicy_resume_state(state_path, learner, task, obs, ep_len, finished, epoch, env_steps, updates)
 
-    info = CheckpointInfo(
-        role=role,
-        algo=cfg.algo,
-        observation_mode=mode,
-        obs_dim=mode.size,
-        act_dim=2,
-        hidden_sizes=config.hidden_sizes,
-        scenario_digest=scenario.digest(),
-        versions=package_versions(),
-        metrics={"env_steps": env_steps, "updates": updates},
-        action_repeat=cfg.action_repeat,
-    )
-    save_role_checkpoint(out / f"{role.value}.pt", info, learner.actor.state_dict(), learner.state_dict())
+    save_trained_role(out, cfg, scenario, role, config.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates)
 
 
 def save_onpolicy_resume_state(path: Path, learner: Learner, task: RoleTask, obs: np.ndarray, ep_len: np.ndarray,
