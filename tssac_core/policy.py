@@ -78,9 +78,14 @@ def save_role_checkpoint(
         "actor": actor_state,
         "learner": learner_state,
     }
+    torch_save_atomic(payload, path)
+
+
+def torch_save_atomic(obj: Any, path: str | Path) -> None:
+    """torch.save to a temporary file, then rename: a crash never leaves a half-written file."""
     target = Path(path)
     tmp = target.with_name(target.name + ".tmp")
-    torch.save(payload, tmp)
+    torch.save(obj, tmp)
     tmp.replace(target)
 
 

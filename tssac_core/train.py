@@ -40,7 +40,7 @@ from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStat
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask
 from tssac_core.observation import ObservationMode
-from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint
+from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint, torch_save_atomic
 from tssac_core.scenario import ROLES, Role, Scenario, load
 from tssac_core.team import Pilot
 
@@ -258,9 +258,7 @@ def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, 
         "updates": updates,
         "transferred": transferred,
     }
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    tmp.replace(path)
+    torch_save_atomic(state, path)
 
 
 METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",

@@ -55,6 +55,7 @@ from tssac_core.algos.ppo import (
 )
 from tssac_core.env import RoleTask
 from tssac_core.observation import ObservationMode
+from tssac_core.policy import torch_save_atomic
 from tssac_core.scenario import Role, Scenario
 
 if TYPE_CHECKING:
@@ -262,6 +263,4 @@ def save_onpolicy_resume_state(path: Path, learner: Learner, task: RoleTask, obs
         "env_steps": env_steps,
         "updates": updates,
     }
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    tmp.replace(path)
+    torch_save_atomic(state, path)

@@ -41,6 +41,8 @@ from tssac_core.algos.ppo import (
     evaluate_values,
     fit_values,
     gaussian_kl,
+    load_networks,
+    networks_state,
     normalised_advantages,
     squashed_gaussian_log_prob,
     value_networks,
@@ -307,19 +309,9 @@ class Cpo:
 
     def state_dict(self) -> dict[str, Any]:
         """Networks and the value optimiser (share storage with the learner, like torch's)."""
-        return {
-            "algo": self.config.algo.value,
-            "actor": self.actor.state_dict(),
-            "v_r": self.v_r.state_dict(),
-            "v_c": self.v_c.state_dict(),
-            "value_optim": self.value_optim.state_dict(),
-        }
+        return {**networks_state(self.config.algo, self.actor, self.v_r, self.v_c), "value_optim": self.value_optim.state_dict()}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what `state_dict` returned."""
-        if state.get("algo") != self.config.algo.value:
-            raise ValueError(f"cannot load a {state.get('algo')} state into a {self.config.algo.value} learner")
-        self.actor.load_state_dict(state["actor"])
-        self.v_r.load_state_dict(state["v_r"])
-        self.v_c.load_state_dict(state["v_c"])
+        load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))

@@ -339,6 +339,20 @@ def evaluate_values(v_r: nn.Module, v_c: nn.Module, obs: torch.Tensor) -> tuple[
     return v_r(obs).squeeze(-1), v_c(obs).squeeze(-1)
 
 
+def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> dict[str, Any]:
+    """The policy and value networks of an on-policy learner, tagged with its algorithm."""
+    return {"algo": algo.value, "actor": actor.state_dict(), "v_r": v_r.state_dict(), "v_c": v_c.state_dict()}
+
+
+def load_networks(state: dict[str, Any], algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> None:
+    """Restore what `networks_state` returned, refusing another algorithm's state."""
+    if state.get("algo") != algo.value:
+        raise ValueError(f"cannot load a {state.get('algo')} state into a {algo.value} learner")
+    actor.load_state_dict(state["actor"])
+    v_r.load_state_dict(state["v_r"])
+    v_c.load_state_dict(state["v_c"])
+
+
 def as_batch_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
     """float32 tensor of an observation batch (n, d) or a single observation (d,) as (1, d)."""
     t = torch.as_tensor(x, dtype=torch.float32)
@@ -441,10 +455,7 @@ class Ppo:
     def state_dict(self) -> dict[str, Any]:
         """Networks, optimisers and the multiplier (share storage with the learner, like torch's)."""
         return {
-            "algo": self.config.algo.value,
-            "actor": self.actor.state_dict(),
-            "v_r": self.v_r.state_dict(),
-            "v_c": self.v_c.state_dict(),
+            **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
             "actor_optim": self.actor_optim.state_dict(),
             "value_optim": self.value_optim.state_dict(),
             "multiplier": self.multiplier.state_dict(),
@@ -452,11 +463,7 @@ class Ppo:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what `state_dict` returned."""
-        if state.get("algo") != self.config.algo.value:
-            raise ValueError(f"cannot load a {state.get('algo')} state into a {self.config.algo.value} learner")
-        self.actor.load_state_dict(state["actor"])
-        self.v_r.load_state_dict(state["v_r"])
-        self.v_c.load_state_dict(state["v_c"])
+        load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         # Copies: never share Adam moments with another learner loaded from the same dict.
         self.actor_optim.load_state_dict(copy.deepcopy(state["actor_optim"]))
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))
