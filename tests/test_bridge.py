@@ -391,7 +391,7 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A decoy checkpoint from ``python -m tssac_core.train`` with tiny settings (untrained, action_repeat 5)."""
     out = tmp_path_factory.mktemp("train") / "run"
     train = subprocess.run(
-        [sys.executable, "-m", "tssac_core.train", "--roles", "decoy", "--epochs", "1", "--steps-per-epoch", "50",
+        [sys.executable, "-m", "tssac_core.train", "--roles", "decoy", "--epochs", "1", "--steps-per-epoch", "50", "--validation-episodes", "0",
          "--update-after", "1000", "--action-repeat", "5", "--set", "hidden_sizes=[16]", "--scenario", str(STRIKE),
          "--out", str(out), "--threads", "1", "--no-progress"],
         capture_output=True, text=True, cwd=REPO, env=_env(), timeout=150,

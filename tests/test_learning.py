@@ -50,7 +50,7 @@ def test_short_training_raises_the_return(tmp_path: Path) -> None:
     scenario = easy_scenario(tmp_path)
     out = tmp_path / "run"
     start = time.monotonic()
-    assert main(["--algo", "sac_lag", "--seed", "1", "--roles", "decoy", "--scenario", str(scenario), "--epochs", "8",
+    assert main(["--algo", "sac_lag", "--seed", "1", "--roles", "decoy", "--scenario", str(scenario), "--epochs", "8", "--validation-episodes", "0",
                  "--steps-per-epoch", "600", "--envs", "2", "--action-repeat", "10", "--update-every", "1", "--start-steps", "0",
                  "--update-after", "200", "--set", "hidden_sizes=[64,64]", "--set", "alpha_init=0.2", "--threads", "1",
                  "--out", str(out), "--no-progress"]) == 0

@@ -333,7 +333,7 @@ def test_cpo_update_keeps_the_trust_region_and_lowers_the_cost_surrogate_when_in
 def tiny_config(algo: str, epochs: int = 2) -> TrainConfig:
     root = Path(__file__).resolve().parent.parent
     return TrainConfig(algo=algo, scenario=str(root / "scenarios" / "strike.yaml"), seed=7, epochs=epochs, steps_per_epoch=200,
-                       roles=("decoy",), envs=2, threads=1, sac={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4})
+                       roles=("decoy",), envs=2, threads=1, validation_episodes=2, sac={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4})
 
 
 def rows(out: Path) -> list[dict[str, str]]:

@@ -17,7 +17,7 @@ import torch
 from tssac_core.policy import CheckpointError, Policy, load_team
 from tssac_core.train import main
 
-TINY = ["--epochs", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
+TINY = ["--epochs", "2", "--validation-episodes", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
         "--set", "hidden_sizes=[32,32]", "--set", "batch_size=32", "--threads", "1", "--no-progress"]
 
 
@@ -53,7 +53,7 @@ def test_same_seed_same_run(trained, tmp_path):
 def test_transfer_initialises_the_next_role(tmp_path):
     """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
     out = tmp_path / "t"
-    args = ["--epochs", "1", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000", "--set", "hidden_sizes=[16]", "--no-progress", "--threads", "1"]
+    args = ["--epochs", "1", "--validation-episodes", "0", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000", "--set", "hidden_sizes=[16]", "--no-progress", "--threads", "1"]
     assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
     a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(out / "detect.pt", weights_only=False)["actor"]
@@ -106,7 +106,7 @@ def test_evaluate_flies_trained_models(trained, tmp_path):
 
 def test_resume_after_kill_continues_identically(tmp_path):
     """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
-    args = ["--algo", "sac_lag", "--seed", "5", "--roles", "decoy", "--epochs", "4", "--steps-per-epoch", "300", "--start-steps", "100",
+    args = ["--algo", "sac_lag", "--seed", "5", "--roles", "decoy", "--epochs", "4", "--validation-episodes", "3", "--steps-per-epoch", "300", "--start-steps", "100",
             "--update-after", "100", "--envs", "2", "--set", "hidden_sizes=[64,64]", "--set", "batch_size=64", "--threads", "1", "--no-progress"]
     whole = tmp_path / "whole"
     assert main([*args, "--out", str(whole)]) == 0

@@ -17,6 +17,7 @@ import numpy as np
 
 from tssac_core.observation import ObservationMode, observation_bounds, observe
 from tssac_core.reward import RewardConfig, reward
+from tssac_core.routes import RouteMap
 from tssac_core.scenario import ROLES, Role, Scenario, load, sample_layout
 from tssac_core.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.world import StepResult, World
@@ -96,6 +97,7 @@ class RoleTask:
         self.pilots = resolve_pilots(role, teammates)
         self.active = tuple(p is not None for p in self.pilots)
         self.reward_config = reward_config
+        self.routes = RouteMap() if reward_config.around_radars else None
         self.world = World(scenario, n)
         self.team = Team(self.pilots, observation)
         self.rng = np.random.default_rng(seed)
@@ -120,8 +122,10 @@ class RoleTask:
         actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
         moving = self.world.active & self.world.running[:, None]
+        detour_prev = self.routes.detour_m(self.world) if self.routes else 0.0
         result = self.world.step(actions)
-        r = reward(result, moving, self.reward_config)[:, self.j]
+        detour = self.routes.detour_m(self.world) if self.routes else 0.0
+        r = reward(result, moving, self.reward_config, detour_prev, detour)[:, self.j]
         cost = result.cost[:, self.j]
         self.ep_return += r
         self.ep_cost += cost

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.routes import FieldCache, cell_centres, radar_depth, sam_disk, wavefront
 from tssac_core.world import World, _wrap
 
 
@@ -67,8 +68,7 @@ class Guidance:
 
     def __init__(self, cfg: GuidanceConfig = GuidanceConfig()) -> None:
         self.cfg = cfg
-        self._fields: np.ndarray | None = None
-        self._layout_ids: np.ndarray | None = None
+        self._plans = FieldCache(lambda world, k: navigation_function(world, k, cfg))
 
     def actions(self, world: World) -> np.ndarray:
         """Actions (N, 3, 2) in [-1, 1] for every vehicle of every world."""
@@ -92,7 +92,7 @@ class Guidance:
 
     def _route_gradient(self, world: World) -> tuple[np.ndarray, np.ndarray]:
         """Gradient of the navigation function at every vehicle, (N, 3) each (central differences)."""
-        fields = self._plans(world)
+        fields = self._plans.fields(world)
         g = self.cfg.grid_m
         size = fields.shape[1]
         fx, fy = world.x_m / g - 0.5, world.y_m / g - 0.5
@@ -105,17 +105,6 @@ class Guidance:
         d1 = fields[w, i + 1, j + 1] - fields[w, i - 1, j - 1]
         d2 = fields[w, i + 1, j - 1] - fields[w, i - 1, j + 1]
         return gx + 0.5 * (d1 + d2), gy + 0.5 * (d1 - d2)
-
-    def _plans(self, world: World) -> np.ndarray:
-        size = int(np.ceil(world.c.area_m / self.cfg.grid_m))
-        if self._fields is None or self._fields.shape[0] != world.n or self._fields.shape[1] != size:
-            self._fields = np.zeros((world.n, size, size), dtype=np.float32)
-            self._layout_ids = np.full(world.n, -2, dtype=np.int64)
-        assert self._layout_ids is not None
-        for k in np.flatnonzero(self._layout_ids != world.layout_id):
-            self._fields[k] = navigation_function(world, int(k), self.cfg, size)
-            self._layout_ids[k] = world.layout_id[k]
-        return self._fields
 
     def _safety(self, world: World, course: np.ndarray) -> np.ndarray:
         cfg = self.cfg
@@ -140,39 +129,19 @@ class Guidance:
         return np.where(any_blocked, b + np.where(o >= 0, 1.0, -1.0) * h, course)
 
 
-def navigation_function(world: World, k: int, cfg: GuidanceConfig, size: int) -> np.ndarray:
+def navigation_function(world: World, k: int, cfg: GuidanceConfig) -> np.ndarray:
     """Geodesic distance (in cells) from every cell to the SAM's detection disk, around inflated radars.
 
-    8-neighbour wavefront (chamfer metric 1 / sqrt 2) iterated to convergence; blocked cells get the
-    largest free value plus their depth into the obstacle, so the gradient also points out of a disk.
+    8-neighbour wavefront (:func:`tssac_core.routes.wavefront`); blocked cells get the largest free
+    value plus their depth into the obstacle, so the gradient also points out of a disk.
     """
-    g = cfg.grid_m
-    centres = (np.arange(size) + 0.5) * g
-    cx, cy = np.meshgrid(centres, centres, indexing="ij")
-    sam = world.sam_m[k]
-    goal = np.hypot(cx - sam[0], cy - sam[1]) <= world.c.r4_m
-    depth = np.zeros((size, size))
-    for pos, r in zip(world.radar_m[k], world.radar_r_m[k]):
-        if r <= 0:
-            continue
-        depth = np.maximum(depth, r + cfg.plan_margin_m - np.hypot(cx - pos[0], cy - pos[1]))
+    cx, cy = cell_centres(world.c.area_m, cfg.grid_m)
+    goal = sam_disk(world, k, cx, cy)
+    depth = np.maximum(radar_depth(world, k, cx, cy, cfg.plan_margin_m), 0.0)
     free = depth <= 0
-    big = 1e9
-    dist = np.where(goal, 0.0, big)
-    steps = [((1, 0), 1.0), ((-1, 0), 1.0), ((0, 1), 1.0), ((0, -1), 1.0)]
-    steps += [((a, b), np.sqrt(2.0)) for a in (1, -1) for b in (1, -1)]
-    while True:
-        new = dist.copy()
-        for (a, b), cost in steps:
-            shifted = np.full_like(dist, big)
-            src = dist[max(a, 0) : size + min(a, 0), max(b, 0) : size + min(b, 0)]
-            shifted[max(-a, 0) : size + min(-a, 0), max(-b, 0) : size + min(-b, 0)] = src + cost
-            np.minimum(new, shifted, out=new)
-        new = np.where(free | goal, new, big)
-        if np.array_equal(new, dist):
-            break
-        dist = new
-    reachable_max = dist[dist < big].max(initial=0.0)
+    dist = wavefront(goal, np.where(free | goal, 1.0, np.inf))
+    reachable = np.isfinite(dist)
+    reachable_max = dist[reachable].max(initial=0.0)
     # Unreachable free cells (boxed in) and obstacle cells: uphill away from the obstacles.
-    fallback = reachable_max + 1.0 + depth / g
-    return np.where(dist < big, dist, fallback).astype(np.float32)
+    fallback = reachable_max + 1.0 + depth / cfg.grid_m
+    return np.where(reachable, dist, fallback).astype(np.float32)

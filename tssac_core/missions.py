@@ -9,6 +9,7 @@ import numpy as np
 
 from tssac_core.observation import ObservationMode
 from tssac_core.reward import RewardConfig, reward
+from tssac_core.routes import RouteMap
 from tssac_core.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.team import Pilot, Team
 from tssac_core.world import World
@@ -74,6 +75,7 @@ def fly_missions(
     out = np.zeros((world.n, len(ROLES)), dtype=bool)
     track: list[np.ndarray] = []
     cfg = RewardConfig()
+    routes = RouteMap()
     team = Team(pilots, mode)
     while world.running.any():
         if record:
@@ -81,8 +83,9 @@ def fly_missions(
             track.append(np.where(world.running[:, None, None], pos, np.nan))
         moving = world.active & world.running[:, None]
         was_running = world.running.copy()
+        detour_prev = routes.detour_m(world)
         result = world.step(team.actions(world))
-        returns += reward(result, moving, cfg)
+        returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area
         if progress is not None:
             finished = int((was_running & ~world.running).sum())

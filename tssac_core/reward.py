@@ -4,10 +4,14 @@
 
     r_done     = +10 on the step the role's task is first completed (eq. 9): decoy first enters its
                  ring, detect identifies the target, strike hits it. Once per episode.
-    r_approach = d_{t-1} - d_t in km, where d is the distance to the role's *zone* around the SAM
-                 (0 inside it). Outside the zone this equals the paper's distance to the SAM minus a
-                 constant, so the term is the paper's; inside it is 0, so nothing pulls the decoy
-                 through its ring towards the SAM (where it would leave its zone).
+    r_approach = d_{t-1} - d_t in km, where d is the length of the way to the role's *zone* around the
+                 SAM (0 inside it): the straight-line distance to the zone plus the detour that radars
+                 in the way force (:class:`tssac_core.routes.RouteMap`; deviation, docs/decisions.md).
+                 With a free line of sight this is the paper's distance to the SAM minus a constant, so
+                 the term is the paper's; inside the zone it is 0, so nothing pulls the decoy through
+                 its ring towards the SAM (where it would leave its zone). The detour removes the trap
+                 of the straight-line term: in front of a wall of radars every way around first
+                 *increases* the straight-line distance, so that term rewards stalling there.
     r_step     = -0.1 per step.
     r_hold     = +0.1 per step while the role holds its zone (deviation, DESIGN.md: a fixed-wing UAV
                  must be taught to loiter in its zone, not only to reach it). It cancels r_step there:
@@ -44,11 +48,25 @@ class RewardConfig:
     k1: float = 1.0
     k2: float = 1.0
     k3: float = 1.0
+    around_radars: bool = True
+    """r_approach measures the way around the radars (True) or the straight line (False, the paper)."""
 
 
-def reward(result: StepResult, moving: np.ndarray, cfg: RewardConfig = RewardConfig()) -> np.ndarray:
-    """Reward of every vehicle for one step, (N, 3); ``moving`` marks vehicles that took the step."""
-    approach_km = (result.zone_dist_prev_m - result.zone_dist_m) / KM
+def reward(
+    result: StepResult,
+    moving: np.ndarray,
+    cfg: RewardConfig = RewardConfig(),
+    detour_prev_m: np.ndarray | float = 0.0,
+    detour_m: np.ndarray | float = 0.0,
+) -> np.ndarray:
+    """Reward of every vehicle for one step, (N, 3); ``moving`` marks vehicles that took the step.
+
+    ``detour_prev_m`` and ``detour_m``: each vehicle's detour before and after the step
+    (:meth:`tssac_core.routes.RouteMap.detour_m`; 0, the default, measures the straight line as the paper).
+    """
+    before = result.zone_dist_prev_m + detour_prev_m
+    after = result.zone_dist_m + detour_m
+    approach_km = (before - after) / KM
     r = (
         cfg.k1 * cfg.success * result.task_completed
         + cfg.k2 * approach_km

@@ -29,7 +29,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -43,6 +43,7 @@ from tssac_core.observation import ObservationMode
 from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint, torch_save_atomic
 from tssac_core.scenario import ROLES, Role, Scenario, load
 from tssac_core.team import Pilot
+from tssac_core.validation import EpochSelector
 
 logger = logging.getLogger(__name__)
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
@@ -82,6 +83,9 @@ class TrainConfig:
     """sac_penalty: reward r + penalty * c."""
     threads: int = 2
     """torch threads (this machine has 2 cores)."""
+    validation_episodes: int = 30
+    """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
+    (tssac_core.validation). 0: ship the last epoch."""
     init_from: str = ""
     """A role checkpoint whose networks initialise every trained role (fine-tuning; transfer() resets the rest)."""
     sac: dict[str, Any] = field(default_factory=dict)
@@ -150,7 +154,9 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
     torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = SacLagrangian(mode.size, 2, sac_cfg)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
-    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates_for(role, out), seed=cfg.seed * 1000 + role.index)
+    teammates = teammates_for(role, out)
+    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index)
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
     transferred = False
     start_epoch, env_steps, updates = 0, 0, 0
@@ -164,6 +170,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         rng.bit_generator.state = saved["rng"]
         torch.set_rng_state(saved["torch_rng"])
         start_epoch, env_steps, updates, transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
+        selector.load_state_dict(saved["selector"])
         logger.info("%s: resuming after epoch %d (%d env steps)", role.value, start_epoch, env_steps)
     elif cfg.init_from:
         copied = transfer(learner, read_checkpoint(cfg.init_from)["learner"])
@@ -176,6 +183,11 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         logger.info("%s: transferred %d tensors from %s", role.value, len(copied), source)
     bar.n = (role_position(cfg, role) * cfg.epochs + start_epoch) * cfg.steps_per_epoch
     bar.refresh()
+
+    epoch = start_epoch
+
+    def write_checkpoint(path: Path) -> None:
+        save_trained_role(path, cfg, scenario, role, sac_cfg.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates, epoch)
 
     iters = max(1, cfg.steps_per_epoch // cfg.envs)
     for epoch in range(start_epoch + 1, cfg.epochs + 1):
@@ -212,16 +224,25 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
                 log.update_time += time.perf_counter() - t1
             bar.update(cfg.envs)
         row = log.row(role, epoch, env_steps, updates, iters * cfg.envs)
+        row.update(selector.after_epoch(epoch, write_checkpoint))
         append_metrics(out / "metrics.csv", row)
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
-        save_resume_state(state_path, learner, buffer, task, obs, rng, epoch, env_steps, updates, transferred)
+        save_resume_state(state_path, learner, buffer, task, obs, rng, epoch, env_steps, updates, transferred, selector)
 
-    save_trained_role(out, cfg, scenario, role, sac_cfg.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates)
+    ship_role(out, role, selector, write_checkpoint)
 
 
-def save_trained_role(out: Path, cfg: TrainConfig, scenario: Scenario, role: Role, hidden_sizes: tuple[int, ...],
-                      actor_state: dict[str, torch.Tensor], learner_state: dict[str, Any], env_steps: int, updates: int) -> None:
-    """Write ``<role>.pt``: the deployable actor, what it fits, and the learner's state for transfer."""
+def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
+    """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's)."""
+    best = selector.finish(out / f"{role.value}.pt", write_checkpoint)
+    if best is not None:
+        logger.info("%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)", role.value, best.epoch,
+                    best.mission_success, best.mean_cost)
+
+
+def save_trained_role(path: Path, cfg: TrainConfig, scenario: Scenario, role: Role, hidden_sizes: tuple[int, ...],
+                      actor_state: dict[str, torch.Tensor], learner_state: dict[str, Any], env_steps: int, updates: int, epoch: int) -> None:
+    """Write a role checkpoint: the deployable actor, what it fits, and the learner's state for transfer."""
     mode = ObservationMode(cfg.observation)
     info = CheckpointInfo(
         role=role,
@@ -232,10 +253,10 @@ def save_trained_role(out: Path, cfg: TrainConfig, scenario: Scenario, role: Rol
         hidden_sizes=hidden_sizes,
         scenario_digest=scenario.digest(),
         versions=package_versions(),
-        metrics={"env_steps": env_steps, "updates": updates},
+        metrics={"epoch": epoch, "env_steps": env_steps, "updates": updates},
         action_repeat=cfg.action_repeat,
     )
-    save_role_checkpoint(out / f"{role.value}.pt", info, actor_state, learner_state)
+    save_role_checkpoint(path, info, actor_state, learner_state)
 
 
 def role_position(cfg: TrainConfig, role: Role) -> int:
@@ -243,7 +264,7 @@ def role_position(cfg: TrainConfig, role: Role) -> int:
 
 
 def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, task: RoleTask, obs: np.ndarray, rng: np.random.Generator,
-                      epoch: int, env_steps: int, updates: int, transferred: bool) -> None:
+                      epoch: int, env_steps: int, updates: int, transferred: bool, selector: EpochSelector) -> None:
     """Everything needed to continue after this epoch, written atomically."""
     path.parent.mkdir(parents=True, exist_ok=True)
     state = {
@@ -257,12 +278,14 @@ def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, 
         "env_steps": env_steps,
         "updates": updates,
         "transferred": transferred,
+        "selector": selector.state_dict(),
     }
     torch_save_atomic(state, path)
 
 
 METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
-                 *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates"]
+                 *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates",
+                 "val_mission_success", "val_task_success", "val_cost", "best_epoch"]
 
 
 def append_metrics(path: Path, row: dict[str, Any]) -> None:
@@ -311,6 +334,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended", help="observation (default extended; paper = eq. 7)")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
+    p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a SacConfig field, e.g. --set lr=3e-4")
@@ -326,6 +350,8 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
+    if a.validation_episodes < 0:
+        raise UsageError("--validation-episodes must be >= 0")
     overrides: dict[str, Any] = {}
     for item in a.set:
         key, _, value = item.partition("=")
@@ -337,6 +363,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
+        validation_episodes=a.validation_episodes,
         init_from=str(a.init_from) if a.init_from else "",
     )
     return cfg, a.out, a.resume, a.no_progress

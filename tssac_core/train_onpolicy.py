@@ -54,6 +54,7 @@ from tssac_core.algos.ppo import (
     sample_actions,
 )
 from tssac_core.env import RoleTask
+from tssac_core.validation import EpochSelector
 from tssac_core.observation import ObservationMode
 from tssac_core.policy import torch_save_atomic
 from tssac_core.scenario import Role, Scenario
@@ -167,14 +168,16 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     """Train one role with cfg.algo in {ppo, ppo_lag, cpo} for cfg.epochs epochs, checkpointing every
     epoch; writes ``<role>.pt``."""
     # Imported here, not at the top: train.py dispatches to this module.
-    from tssac_core.train import EpochLog, append_metrics, role_position, save_trained_role, teammates_for
+    from tssac_core.train import EpochLog, append_metrics, role_position, save_trained_role, ship_role, teammates_for
 
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
     config = onpolicy_config(cfg, scenario)
     torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = make_learner(mode.size, 2, config)
-    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates_for(role, out), seed=cfg.seed * 1000 + role.index)
+    teammates = teammates_for(role, out)
+    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index)
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     finished: deque[tuple[float, int]] = deque(maxlen=config.cost_window)
     ep_len = np.zeros(cfg.envs, dtype=np.int64)
     start_epoch, env_steps, updates = 0, 0, 0
@@ -187,9 +190,15 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
         finished.extend(saved["finished"])
         torch.set_rng_state(saved["torch_rng"])
         start_epoch, env_steps, updates = saved["epoch"], saved["env_steps"], saved["updates"]
+        selector.load_state_dict(saved["selector"])
         logger.info("%s: resuming %s after epoch %d (%d env steps)", role.value, cfg.algo, start_epoch, env_steps)
     bar.n = (role_position(cfg, role) * cfg.epochs + start_epoch) * cfg.steps_per_epoch
     bar.refresh()
+
+    epoch = start_epoch
+
+    def write_checkpoint(path: Path) -> None:
+        save_trained_role(path, cfg, scenario, role, config.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates, epoch)
 
     iters = max(1, cfg.steps_per_epoch // cfg.envs)
     n, obs_dim = cfg.envs, mode.size
@@ -234,6 +243,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
         updates += stats.policy_steps
         row = log.row(role, epoch, env_steps, updates, iters * n)
         row.update(stats_columns(stats, update_time))
+        row.update(selector.after_epoch(epoch, write_checkpoint))
         append_metrics(out / "metrics.csv", row)
         logger.info(
             "%s %s epoch %d: return %.2f, cost %.2f, measured J_C %.2f over L %.0f, kl %.4f%s",
@@ -241,13 +251,14 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
             f", cpo case {stats.cpo_case}, step fraction {stats.step_fraction:.3g}" if isinstance(learner, Cpo) else "",
         )
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
-        save_onpolicy_resume_state(state_path, learner, task, obs, ep_len, finished, epoch, env_steps, updates)
+        save_onpolicy_resume_state(state_path, learner, task, obs, ep_len, finished, epoch, env_steps, updates, selector)
 
-    save_trained_role(out, cfg, scenario, role, config.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates)
+    ship_role(out, role, selector, write_checkpoint)
 
 
 def save_onpolicy_resume_state(path: Path, learner: Learner, task: RoleTask, obs: np.ndarray, ep_len: np.ndarray,
-                               finished: Iterable[tuple[float, int]], epoch: int, env_steps: int, updates: int) -> None:
+                               finished: Iterable[tuple[float, int]], epoch: int, env_steps: int, updates: int,
+                               selector: EpochSelector) -> None:
     """Everything needed to continue after this epoch, written atomically (the key "epoch" is what
     train.completed_epochs reads)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -262,5 +273,6 @@ def save_onpolicy_resume_state(path: Path, learner: Learner, task: RoleTask, obs
         "epoch": epoch,
         "env_steps": env_steps,
         "updates": updates,
+        "selector": selector.state_dict(),
     }
     torch_save_atomic(state, path)

@@ -1,0 +1,147 @@
+"""Route distances around the radars, on a grid: the wavefront planner behind the guidance controller's
+navigation function and behind the reward's approach term.
+
+Both need, per layout, the length of the shortest way from every point of the area to the SAM's
+detection disk (which layouts keep free of radars), going around the radars rather than through them.
+:func:`wavefront` computes it on a square grid: a chamfer distance, relaxed to convergence, with a
+per-cell traversal cost (1 in free air, more or infinite inside a radar). :class:`FieldCache` keeps one
+field per world and recomputes it only when that world gets a new layout. :class:`RouteMap` turns a
+field into the *detour*: how much longer the way to the disk is than the straight line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from tssac_core.world import World
+
+_SQRT2, _SQRT5 = float(np.sqrt(2.0)), float(np.sqrt(5.0))
+KING_MOVES = [((1, 0), 1.0), ((-1, 0), 1.0), ((0, 1), 1.0), ((0, -1), 1.0)] + [
+    ((a, b), _SQRT2) for a in (1, -1) for b in (1, -1)
+]
+"""8 neighbours: distances at most 8% longer than the straight line."""
+KNIGHT_MOVES = KING_MOVES + [((a * p, b * q), _SQRT5) for a in (1, -1) for b in (1, -1) for p, q in ((1, 2), (2, 1))]
+"""16 neighbours: at most 2.7% longer (the reward uses these: its approach term measures progress)."""
+
+
+def wavefront(goal: np.ndarray, step_cost: np.ndarray, moves: list[tuple[tuple[int, int], float]] = KING_MOVES) -> np.ndarray:
+    """Shortest-path length (in cells) from every cell to the nearest ``goal`` cell.
+
+    A move from cell a to cell b of length L costs ``L * (step_cost[a] + step_cost[b]) / 2``; cells of
+    infinite cost are impassable and cells that cannot reach the goal get ``inf``. Iterated to the
+    fixed point (each sweep relaxes every move once), so the result is exact for the move set.
+    """
+    size_i, size_j = goal.shape
+    half = 0.5 * np.asarray(step_cost, dtype=np.float64)
+    dist = np.where(goal, 0.0, np.inf)
+    while True:
+        new = dist.copy()
+        for (a, b), length in moves:
+            src = (dist + length * half)[max(a, 0) : size_i + min(a, 0), max(b, 0) : size_j + min(b, 0)]
+            dst = (slice(max(-a, 0), size_i + min(-a, 0)), slice(max(-b, 0), size_j + min(-b, 0)))
+            np.minimum(new[dst], src + length * half[dst], out=new[dst])
+        new[goal] = 0.0
+        if np.array_equal(new, dist):
+            return dist
+        dist = new
+
+
+def cell_centres(area_m: float, grid_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """x and y of every cell centre, (size, size) each, indexed [i (x), j (y)]."""
+    size = int(np.ceil(area_m / grid_m))
+    centres = (np.arange(size) + 0.5) * grid_m
+    return np.meshgrid(centres, centres, indexing="ij")
+
+
+def radar_depth(world: World, k: int, cx: np.ndarray, cy: np.ndarray, margin_m: float) -> np.ndarray:
+    """How deep every cell lies inside world k's radars inflated by ``margin_m`` (<= 0: outside all), metres."""
+    depth = np.full(cx.shape, -np.inf)
+    for pos, r in zip(world.radar_m[k], world.radar_r_m[k]):
+        if r > 0:
+            depth = np.maximum(depth, r + margin_m - np.hypot(cx - pos[0], cy - pos[1]))
+    return depth
+
+
+def sam_disk(world: World, k: int, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """Cells whose centre lies in world k's SAM detection disk (D <= R4)."""
+    sam = world.sam_m[k]
+    return np.hypot(cx - sam[0], cy - sam[1]) <= world.c.r4_m
+
+
+class FieldCache:
+    """One grid field per world of a World, rebuilt only for worlds whose layout changed."""
+
+    def __init__(self, build: Callable[[World, int], np.ndarray]) -> None:
+        self.build = build
+        self._fields: np.ndarray | None = None
+        self._layout_ids: np.ndarray | None = None
+
+    def fields(self, world: World) -> np.ndarray:
+        """(N, size, size) fields, current for every world's layout."""
+        if self._fields is None or self._fields.shape[0] != world.n:
+            first = self.build(world, 0)
+            self._fields = np.zeros((world.n, *first.shape), dtype=np.float32)
+            self._layout_ids = np.full(world.n, -2, dtype=np.int64)
+        assert self._layout_ids is not None
+        for k in np.flatnonzero(self._layout_ids != world.layout_id):
+            self._fields[k] = self.build(world, int(k))
+            self._layout_ids[k] = world.layout_id[k]
+        return self._fields
+
+
+def sample_bilinear(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of each world's field (N, size, size) at positions (N, K) in metres."""
+    size = fields.shape[1]
+    fx = np.clip(x_m / grid_m - 0.5, 0.0, size - 1.0)
+    fy = np.clip(y_m / grid_m - 0.5, 0.0, size - 1.0)
+    i = np.minimum(fx.astype(np.int64), size - 2)
+    j = np.minimum(fy.astype(np.int64), size - 2)
+    tx, ty = fx - i, fy - j
+    w = np.arange(fields.shape[0])[:, None]
+    f00, f10 = fields[w, i, j], fields[w, i + 1, j]
+    f01, f11 = fields[w, i, j + 1], fields[w, i + 1, j + 1]
+    return (1 - tx) * ((1 - ty) * f00 + ty * f01) + tx * ((1 - ty) * f10 + ty * f11)
+
+
+@dataclass(frozen=True)
+class RouteConfig:
+    """The route field of the reward's approach term."""
+
+    grid_m: float = 1000.0
+    margin_m: float = 1000.0
+    """Radars count as hazards out to radius + this margin."""
+    hazard_weight: float = 5.0
+    """Flying a metre inside a radar counts as this many metres of route, so a way around the radars is
+    shorter unless it is more than this many times as long (finite, so the field has no jumps and a UAV
+    inside a radar still has a way out)."""
+
+
+class RouteMap:
+    """The detour of every vehicle: route length to the SAM's detection disk minus the straight-line length.
+
+    Zero inside the disk and on a straight, free line to it; grows in front of radars that block the
+    straight line. ``zone distance + detour`` is the length of the way to a role's zone around the
+    radars, which the reward's approach term measures (:mod:`tssac_core.reward`).
+    """
+
+    def __init__(self, cfg: RouteConfig = RouteConfig()) -> None:
+        self.cfg = cfg
+        self.cache = FieldCache(self._build)
+
+    def _build(self, world: World, k: int) -> np.ndarray:
+        cfg = self.cfg
+        cx, cy = cell_centres(world.c.area_m, cfg.grid_m)
+        inside = radar_depth(world, k, cx, cy, cfg.margin_m) > 0
+        return wavefront(sam_disk(world, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
+
+    def detour_m(self, world: World, vehicle: int | None = None) -> np.ndarray:
+        """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""
+        cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
+        x, y = world.x_m[:, cols], world.y_m[:, cols]
+        route = sample_bilinear(self.cache.fields(world), self.cfg.grid_m, x, y)
+        straight = np.hypot(x - world.sam_m[:, 0:1], y - world.sam_m[:, 1:2]) - world.c.r4_m
+        detour = np.where(straight > 0.0, np.maximum(route - straight, 0.0), 0.0)
+        return detour if vehicle is None else detour[:, 0]
