@@ -133,14 +133,27 @@ def test_reward_terms():
 
 
 def test_approach_reward_matches_distance_to_sam_outside_the_zone(strike_path):
-    """Outside its zone the approach term equals the paper's d_{t-1} - d_t to the SAM, in km."""
-    task = RoleTask(load(strike_path), Role.DECOY, n=1, teammates="none", seed=0)
+    """Straight-line mode: outside its zone the approach term is the paper's d_{t-1} - d_t to the SAM, in km."""
+    task = RoleTask(load(strike_path), Role.DECOY, n=1, teammates="none", seed=0, reward_config=RewardConfig(around_radars=False))
     task.reset()
     w = task.world
     d0 = w.sam_dist_m[0, 0]
     _, r, _ = task.advance(np.array([[0.0, 0.0]]))
     d1 = w.sam_dist_m[0, 0]
     assert r[0] == pytest.approx((d0 - d1) / KM - 0.1, abs=1e-9)
+
+
+def test_approach_reward_measures_the_way_around_the_radars(strike_path):
+    """Default mode: the approach term is the decrease of zone distance + detour (tssac_core.routes)."""
+    task = RoleTask(load(strike_path), Role.STRIKE, n=1, teammates="none", seed=0)
+    task.reset()
+    w = task.world
+    before = w.zone_dist_m[0, 2] + task.detour_m[0, 2]
+    _, r, _ = task.advance(np.array([[0.0, 0.0]]))
+    after = w.zone_dist_m[0, 2] + task.detour_m[0, 2]
+    assert r[0] == pytest.approx((before - after) / KM - 0.1, abs=1e-9)
+    # The paper's mission has radars between the start and the SAM: the way around is longer.
+    assert task.detour_m[0, 2] > 1000.0
 
 
 def test_teammates_alone_and_callable(strike_path):

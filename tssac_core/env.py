@@ -8,6 +8,7 @@ as ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0``.
 
 from __future__ import annotations
 
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -103,6 +104,8 @@ class RoleTask:
         self.rng = np.random.default_rng(seed)
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
+        self.detour_m = np.zeros((n, len(ROLES)))
+        """Every vehicle's detour now (reward term r_approach), kept current by reset and advance."""
 
     @property
     def n(self) -> int:
@@ -115,17 +118,31 @@ class RoleTask:
         self.world.reset(idx, [sample_layout(self.scenario, gen) for _ in idx], self.active)
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
+        self._measure_detours()
         return observe(self.world, self.j, self.mode)
+
+    def snapshot(self) -> bytes:
+        """The task's state (worlds, layout generator, running episode sums) for a resume file."""
+        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost))
+
+    def restore(self, snapshot: bytes) -> None:
+        """Continue from a :meth:`snapshot` (the pilots stay those this task was built with)."""
+        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(snapshot)
+        self._measure_detours()
+
+    def _measure_detours(self) -> None:
+        if self.routes is not None:
+            self.detour_m = self.routes.detour_m(self.world)
 
     def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
         actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
         moving = self.world.active & self.world.running[:, None]
-        detour_prev = self.routes.detour_m(self.world) if self.routes else 0.0
+        detour_prev = self.detour_m
         result = self.world.step(actions)
-        detour = self.routes.detour_m(self.world) if self.routes else 0.0
-        r = reward(result, moving, self.reward_config, detour_prev, detour)[:, self.j]
+        self._measure_detours()
+        r = reward(result, moving, self.reward_config, detour_prev, self.detour_m)[:, self.j]
         cost = result.cost[:, self.j]
         self.ep_return += r
         self.ep_cost += cost

@@ -68,7 +68,10 @@ class Guidance:
 
     def __init__(self, cfg: GuidanceConfig = GuidanceConfig()) -> None:
         self.cfg = cfg
-        self._plans = FieldCache(lambda world, k: navigation_function(world, k, cfg))
+        self._plans = FieldCache(self._plan)
+
+    def _plan(self, world: World, k: int) -> np.ndarray:
+        return navigation_function(world, k, self.cfg)
 
     def actions(self, world: World) -> np.ndarray:
         """Actions (N, 3, 2) in [-1, 1] for every vehicle of every world."""

@@ -72,23 +72,27 @@ def sam_disk(world: World, k: int, cx: np.ndarray, cy: np.ndarray) -> np.ndarray
 
 
 class FieldCache:
-    """One grid field per world of a World, rebuilt only for worlds whose layout changed."""
+    """One grid field per world of a World, rebuilt only for worlds whose SAM or radars changed.
+
+    Keyed by the layout's content, not by an id, so a cache stays right when the World it serves is
+    replaced (a resumed training run unpickles its worlds into a task that was built afresh).
+    """
 
     def __init__(self, build: Callable[[World, int], np.ndarray]) -> None:
         self.build = build
         self._fields: np.ndarray | None = None
-        self._layout_ids: np.ndarray | None = None
+        self._keys: np.ndarray | None = None
 
     def fields(self, world: World) -> np.ndarray:
         """(N, size, size) fields, current for every world's layout."""
-        if self._fields is None or self._fields.shape[0] != world.n:
+        keys = np.concatenate([world.sam_m, world.radar_m.reshape(world.n, -1), world.radar_r_m], axis=1)
+        if self._fields is None or self._keys is None or self._keys.shape != keys.shape:
             first = self.build(world, 0)
             self._fields = np.zeros((world.n, *first.shape), dtype=np.float32)
-            self._layout_ids = np.full(world.n, -2, dtype=np.int64)
-        assert self._layout_ids is not None
-        for k in np.flatnonzero(self._layout_ids != world.layout_id):
+            self._keys = np.full(keys.shape, np.nan)
+        for k in np.flatnonzero(np.any(self._keys != keys, axis=1)):
             self._fields[k] = self.build(world, int(k))
-            self._layout_ids[k] = world.layout_id[k]
+            self._keys[k] = keys[k]
         return self._fields
 
 

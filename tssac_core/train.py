@@ -24,7 +24,6 @@ import io
 import json
 import logging
 import math
-import pickle
 import sys
 import time
 from dataclasses import dataclass, field
@@ -165,7 +164,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         saved = torch.load(io.BytesIO(state_path.read_bytes()), map_location="cpu", weights_only=False)
         learner.load_state_dict(saved["learner"])
         buffer.load_state_dict(saved["buffer"])
-        task.world, task.rng, task.ep_return, task.ep_cost = pickle.loads(saved["task"])
+        task.restore(saved["task"])
         obs = saved["obs"]
         rng.bit_generator.state = saved["rng"]
         torch.set_rng_state(saved["torch_rng"])
@@ -270,7 +269,7 @@ def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, 
     state = {
         "learner": learner.state_dict(),
         "buffer": buffer.state_dict(),
-        "task": pickle.dumps((task.world, task.rng, task.ep_return, task.ep_cost)),
+        "task": task.snapshot(),
         "obs": obs,
         "rng": rng.bit_generator.state,
         "torch_rng": torch.get_rng_state(),

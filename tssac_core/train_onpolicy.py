@@ -31,7 +31,6 @@ import dataclasses
 import io
 import logging
 import math
-import pickle
 import time
 from collections import deque
 from collections.abc import Iterable
@@ -185,7 +184,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     if resume and state_path.is_file():
         saved = torch.load(io.BytesIO(state_path.read_bytes()), map_location="cpu", weights_only=False)
         learner.load_state_dict(saved["learner"])
-        task.world, task.rng, task.ep_return, task.ep_cost = pickle.loads(saved["task"])
+        task.restore(saved["task"])
         obs, ep_len = saved["obs"], saved["ep_len"]
         finished.extend(saved["finished"])
         torch.set_rng_state(saved["torch_rng"])
@@ -265,7 +264,7 @@ def save_onpolicy_resume_state(path: Path, learner: Learner, task: RoleTask, obs
     state = {
         "algo": learner.config.algo.value,
         "learner": learner.state_dict(),
-        "task": pickle.dumps((task.world, task.rng, task.ep_return, task.ep_cost)),
+        "task": task.snapshot(),
         "obs": obs,
         "ep_len": ep_len.copy(),
         "finished": list(finished),
