@@ -74,17 +74,22 @@ def sam_disk(world: World, k: int, cx: np.ndarray, cy: np.ndarray) -> np.ndarray
 class FieldCache:
     """One grid field per world of a World, rebuilt only for worlds whose SAM or radars changed.
 
-    Keyed by the layout's content, not by an id, so a cache stays right when the World it serves is
-    replaced (a resumed training run unpickles its worlds into a task that was built afresh).
+    Keyed by the layout's content, not only by the world's layout ids, so that a cache stays right when
+    the World it serves is replaced (a resumed training run unpickles its worlds into a task that was
+    built afresh); the ids are the fast path while the World stays the same object.
     """
 
     def __init__(self, build: Callable[[World, int], np.ndarray]) -> None:
         self.build = build
         self._fields: np.ndarray | None = None
         self._keys: np.ndarray | None = None
+        self._world: World | None = None
+        self._layout_ids: np.ndarray | None = None
 
     def fields(self, world: World) -> np.ndarray:
         """(N, size, size) fields, current for every world's layout."""
+        if self._fields is not None and world is self._world and np.array_equal(world.layout_id, self._layout_ids):
+            return self._fields
         keys = np.concatenate([world.sam_m, world.radar_m.reshape(world.n, -1), world.radar_r_m], axis=1)
         if self._fields is None or self._keys is None or self._keys.shape != keys.shape:
             first = self.build(world, 0)
@@ -93,21 +98,24 @@ class FieldCache:
         for k in np.flatnonzero(np.any(self._keys != keys, axis=1)):
             self._fields[k] = self.build(world, int(k))
             self._keys[k] = keys[k]
+        self._world, self._layout_ids = world, world.layout_id.copy()
         return self._fields
 
 
 def sample_bilinear(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
     """Bilinear interpolation of each world's field (N, size, size) at positions (N, K) in metres."""
-    size = fields.shape[1]
-    fx = np.clip(x_m / grid_m - 0.5, 0.0, size - 1.0)
-    fy = np.clip(y_m / grid_m - 0.5, 0.0, size - 1.0)
-    i = np.minimum(fx.astype(np.int64), size - 2)
-    j = np.minimum(fy.astype(np.int64), size - 2)
+    n, size = fields.shape[0], fields.shape[1]
+    top = size - 1.000001  # so that the lower corner index is at most size - 2
+    fx = np.minimum(np.maximum(x_m * (1.0 / grid_m) - 0.5, 0.0), top)
+    fy = np.minimum(np.maximum(y_m * (1.0 / grid_m) - 0.5, 0.0), top)
+    i, j = fx.astype(np.intp), fy.astype(np.intp)
     tx, ty = fx - i, fy - j
-    w = np.arange(fields.shape[0])[:, None]
-    f00, f10 = fields[w, i, j], fields[w, i + 1, j]
-    f01, f11 = fields[w, i, j + 1], fields[w, i + 1, j + 1]
-    return (1 - tx) * ((1 - ty) * f00 + ty * f01) + tx * ((1 - ty) * f10 + ty * f11)
+    flat = fields.reshape(-1)
+    k = (np.arange(n)[:, None] * size + i) * size + j
+    f00, f01, f10, f11 = flat[k], flat[k + 1], flat[k + size], flat[k + size + 1]
+    low = f00 + ty * (f01 - f00)
+    high = f10 + ty * (f11 - f10)
+    return low + tx * (high - low)
 
 
 @dataclass(frozen=True)
