@@ -23,6 +23,16 @@ def test_shipped_scenarios_round_trip(name, tmp_path):
     assert load(tmp_path / "copy.yaml").digest() == s.digest()
 
 
+def test_digest_follows_the_task_not_the_expectations(random_path):
+    import dataclasses
+
+    from tssac_core.scenario import Expect
+
+    s = load(random_path)
+    assert dataclasses.replace(s, expect=Expect(episodes=3, min_success_rate=0.5, max_mean_cost=9.0)).digest() == s.digest()
+    assert dataclasses.replace(s, cost_limit=4.0).digest() != s.digest()
+
+
 def test_random_layouts_are_feasible_and_seeded(random_path):
     s = load(random_path)
     a = [sample_layout(s, np.random.default_rng(3)) for _ in range(2)]
