@@ -1,0 +1,226 @@
+"""The experiment runner: grid files, resumable jobs in their own process groups, Table 4 and the figures."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tssac_core.cli import run
+from tssac_core.experiment_grid import load_grid
+from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
+from tssac_core.experiment_report import steps_to_threshold, transfer_speedup
+from tssac_core.experiments import main, train
+from tssac_core.train import METRIC_FIELDS
+
+ROOT = Path(__file__).resolve().parent.parent
+SMOKE = ROOT / "experiments" / "smoke.yaml"
+
+
+@pytest.fixture(autouse=True)
+def at_root(monkeypatch):
+    """Grid files name scenarios relative to the directory the command runs in: the repository root."""
+    monkeypatch.chdir(ROOT)
+
+
+def write_grid(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def smoke_text(*changes: tuple[str, str]) -> str:
+    """experiments/smoke.yaml with the first occurrence of each ``old`` text replaced by ``new``."""
+    text = SMOKE.read_text()
+    for old, new in changes:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    return text
+
+
+# ------------------------------------------------------------------------------------- grid files
+
+
+def test_paper_grid():
+    grid = load_grid("experiments/paper.yaml")
+    names = [e.name for e in grid.algos]
+    assert names == ["tssac", "sac_lag", "sac", "ppo", "cpo", "ppo_lag", "sac_pen0", "sac_pen10", "sac_pen15", "sac_pen50"]
+    assert [e.penalty for e in grid.algos if e.algo == "sac_penalty"] == [0.0, -10.0, -15.0, -50.0]
+    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 30 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
+    jobs = grid.jobs(Path("results"))
+    assert len(jobs) == 30 and jobs[0].out == Path("results/runs/tssac-seed0")
+    by_name = {j.name: j for j in jobs}
+    tssac, ppo, pen = by_name["tssac-seed1"].config(), by_name["ppo-seed1"].config(), by_name["sac_pen50-seed2"].config()
+    assert tssac.sac == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001}
+    assert ppo.sac == {"hidden_sizes": [128, 128]}  # on-policy learners get no SacConfig fields
+    assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
+    for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
+        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (30, 4000, 1, 10, 2, 0, 1)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (("seeds: [0]", "seeds: [0, 0]"), "seeds: a seed is listed twice"),
+        (("  epochs: 1\n", "  epochs: many\n"), "train.epochs: expected an integer, got 'many'"),
+        (("  epochs: 1\n", "  epochs: 0\n"), "train.epochs: must be >= 1"),
+        (("  envs: 1\n", "  envs: 1\n  speed: 3\n"), "train.speed: unknown key"),
+        (("  scenario: scenarios/strike.yaml", "  scenario: scenarios/nowhere.yaml"), "train.scenario: file not found"),
+        (("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"), "algos[1].penalty: only sac_penalty takes a penalty"),
+        (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: unknown algorithm 'sarsa'"),
+        (("  - sac_lag\n", "  - {algo: sac_lag, name: tssac}\n"), "algos[1].name: 'tssac' is used twice"),
+        (("  - sac_lag\n", "  - {algo: ppo, set: {alpha_init: 0.2}}\n"), "algos[1] (ppo): invalid learner settings (--set): unknown OnPolicyConfig field 'alpha_init'"),
+        (("batch_size: 8", "batch_sise: 8"), "algos[0] (tssac): invalid learner settings (--set): unknown SacConfig field 'batch_sise'"),
+        (("  episodes: 2", "  episodes: [2]"), "evaluation.episodes: expected an integer"),
+        (("seeds: [0]", "seeds: [0"), "not valid YAML"),
+    ],
+)
+def test_malformed_grid_is_one_line(tmp_path, capsys, change, message):
+    grid = write_grid(tmp_path / "bad.yaml", smoke_text(change))
+    assert run(main, ["--grid", str(grid), "--results", str(tmp_path / "r"), "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith(f"error: {grid}: ") and message in err, err
+    assert not (tmp_path / "r").exists()
+
+
+def test_missing_grid_file(tmp_path, capsys):
+    assert run(main, ["--grid", str(tmp_path / "none.yaml"), "--dry-run"]) == 2
+    assert "cannot read file" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------- the smoke grid
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory) -> Path:
+    """The smoke grid run once through the command (two jobs at once), from the repository root."""
+    results = tmp_path_factory.mktemp("experiments") / "results"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(ROOT)
+        assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--jobs", "2"]) == 0
+    return results
+
+
+def test_smoke_grid_trains_every_job(smoke):
+    for name in ("tssac-seed0", "sac_lag-seed0"):
+        run_dir = smoke / "runs" / name
+        assert all((run_dir / f"{role}.pt").is_file() for role in ("decoy", "detect", "strike")), name
+        log = (run_dir / LOG_NAME).read_text()
+        assert log.count("runner: ") == 1 and "--no-progress" in log and f"--out {run_dir}" in log
+        config = json.loads((run_dir / "config.json").read_text())
+        assert config["epochs"] == 1 and config["sac"] == {"hidden_sizes": [16, 16], "batch_size": 8}
+
+
+def test_second_invocation_starts_nothing(smoke, capsys):
+    logs = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/" + LOG_NAME)}
+    caches = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/eval_*.json")}
+    assert len(logs) == 2 and len(caches) == 4
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(smoke)]) == 0
+    out = capsys.readouterr().out
+    assert "2 jobs: 2 finished, 0 to run" in out and "started" not in out
+    assert {p: p.stat().st_mtime_ns for p in logs} == logs  # no job was started
+    assert {p: p.stat().st_mtime_ns for p in caches} == caches  # the evaluations came from their caches
+    assert train(load_grid("experiments/smoke.yaml"), smoke, 2, report=lambda line: None) == []
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(smoke), "--dry-run"]) == 0
+    assert [line.split()[0] for line in capsys.readouterr().out.splitlines()] == ["finished", "finished"]
+
+
+def test_report_writes_table4_json_and_figures(smoke):
+    table = (smoke / "table4.md").read_text()
+    rows = [line for line in table.splitlines() if line.startswith("| ")]
+    assert rows[2].startswith("| tssac | 1 | ") and rows[2].endswith("| 96% | 3.0 |")  # the paper's Table 4 beside ours
+    assert rows[3].startswith("| sac_lag | 1 | ") and rows[3].endswith("| 96% | 3.0 |")
+    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | — | — |"  # it solves the fixed mission safely
+    assert "## Transfer speed-up" in table and "| detect |" in table and "| strike |" in table
+    data = json.loads((smoke / "experiments.json").read_text())
+    assert [a["name"] for a in data["algorithms"]] == ["tssac", "sac_lag"]
+    tssac = data["algorithms"][0]
+    assert tssac["seeds"] == [0] and tssac["paper"] == {"success_rate": 0.96, "mean_cost": 3.0}
+    cached = json.loads((smoke / "runs" / "tssac-seed0" / "eval_random.json").read_text())
+    assert tssac["random"]["mean_cost"]["per_seed"] == {"0": cached["mean_cost"]}
+    assert len(cached["per_episode"]["cost"]) == 2 and len(cached["per_episode"]["return"][0]) == 3
+    assert data["guidance"]["random"]["success_rate"] == 1.0 and data["guidance"]["generalization"]["episodes"] == 2
+    assert set(data["transfer_speedup"]) == {"threshold", "detect", "strike"} and data["left_out"] == []
+    for fig in ("fig7_training", "fig8_multiplier", "fig9_mission", "fig10_test_boxplots", "fig11_generalization"):
+        assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
+
+
+def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
+    results = tmp_path / "r"
+    run_dir = results / "runs" / "tssac-seed0"
+    run_dir.mkdir(parents=True)
+    config = json.loads((smoke / "runs" / "tssac-seed0" / "config.json").read_text())
+    (run_dir / "config.json").write_text(json.dumps({**config, "epochs": 40}))
+    assert run(main, ["--grid", "experiments/smoke.yaml", "--results", str(results)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "holds a run with other settings" in err and "epochs: 40" in err
+    assert not (run_dir / LOG_NAME).exists()
+
+
+# ------------------------------------------------------------------------- interruption and resume
+
+
+def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
+    """SIGTERM to the runner mid-job: the job's process is gone with it; the next run continues it with --resume."""
+    # Two epochs per role: after the decoy's first one is saved, there is well over a second left to stop it.
+    grid_path = write_grid(tmp_path / "one.yaml", smoke_text(("  - sac_lag\n", ""), ("  epochs: 1\n", "  epochs: 2\n")))
+    results = tmp_path / "results"
+    run_dir = results / "runs" / "tssac-seed0"
+    runner = subprocess.Popen([sys.executable, "-m", "tssac_core.experiments", "--grid", str(grid_path), "--results", str(results)],
+                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (run_dir / "resume" / "decoy.pt").is_file() and runner.poll() is None:
+        time.sleep(0.02)
+    runner.send_signal(signal.SIGTERM)
+    out, err = runner.communicate(timeout=60)
+    assert runner.returncode == 130, err
+    pid = int(re.search(r"started tssac-seed0: pid (\d+)", out).group(1))
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)  # stopped and reaped, not orphaned
+    assert "stopping tssac-seed0" in out
+    grid = load_grid(grid_path)
+    assert job_state(grid.jobs(results)[0]).status is Status.PARTIAL, "the job finished before it could be stopped"
+
+    launches = train(grid, results, 1, report=lambda line: None)
+    assert len(launches) == 1 and launches[0].resumed and "--resume" in launches[0].command
+    assert launches[0].returncode == 0 and job_state(grid.jobs(results)[0]).status is Status.FINISHED
+    with (run_dir / "metrics.csv").open() as fh:
+        epochs = [(r["role"], r["epoch"]) for r in csv.DictReader(fh)]
+    assert epochs == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]  # nothing run twice
+    assert (run_dir / LOG_NAME).read_text().count("runner: ") == 2
+
+
+# ---------------------------------------------------------------------------------- transfer speed-up
+
+
+def write_metrics(path: Path, rows: list[tuple[str, int, int, float]]) -> None:
+    path.mkdir(parents=True, exist_ok=True)
+    with (path / "metrics.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=METRIC_FIELDS, restval="")
+        writer.writeheader()
+        for role, epoch, steps, task in rows:
+            writer.writerow({"role": role, "epoch": epoch, "env_steps": steps, "task_success": task})
+
+
+def test_transfer_speedup(tmp_path):
+    grid = load_grid(write_grid(tmp_path / "g.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1]"))))
+    jobs = {j.name: j for j in grid.jobs(tmp_path)}
+    detect = lambda tasks: [("detect", e + 1, 100 * (e + 1), t) for e, t in enumerate(tasks)]  # noqa: E731
+    write_metrics(jobs["tssac-seed0"].out, detect([0.5, 0.95, 0.2]))  # reached at 200 (later dips do not count)
+    write_metrics(jobs["tssac-seed1"].out, detect([0.9, 1.0, 1.0]))  # at 100
+    write_metrics(jobs["sac_lag-seed0"].out, detect([0.1, 0.3, 0.92]))  # at 300
+    write_metrics(jobs["sac_lag-seed1"].out, detect([0.1, 0.3, 0.5]))  # never: counts 300, a lower bound
+    assert steps_to_threshold([], "detect") == (None, 0)
+    result = transfer_speedup(grid, list(jobs.values()))["detect"]
+    assert result["tssac"]["per_seed"] == {"0": 200, "1": 100} and result["tssac"]["mean_steps"] == 150
+    assert result["sac_lag"]["per_seed"] == {"0": 300, "1": None} and result["sac_lag"]["reached"] == 1
+    assert result["sac_lag"]["mean_steps"] == 300 and result["sac_lag"]["mean_is_lower_bound"]
+    assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]

@@ -1,0 +1,325 @@
+"""Evaluate a grid's finished teams on the same layouts and write Table 4 (``table4.md``) and ``experiments.json``.
+
+Every finished team, and the guidance controller as a reference row, flies the evaluation scenario's
+layouts drawn from the grid's evaluation seed (the same layouts for every team), and the generalisation
+scenario's if the grid names one. Each evaluation is cached as JSON next to the team
+(``<run>/eval_random.json``, ``<run>/eval_generalization.json``; the guidance controller's under
+``<results>/guidance/``) with the per-episode figures the box plots need; a cache is reused only if it was
+made from the same checkpoints, scenario, seed and number of episodes.
+
+Figures per algorithm are mean ± sample standard deviation over its finished seeds. The transfer speed-up
+compares, for the detect and strike roles, the learner decisions (``env_steps`` in metrics.csv) until the
+first epoch whose task success reaches 90%, TSSAC against SAC-Lagrangian.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tssac_core.cli import write_json
+from tssac_core.experiment_grid import Grid, Job
+from tssac_core.missions import MissionResults, fly_missions
+from tssac_core.policy import load_team
+from tssac_core.scenario import ROLES, load
+from tssac_core.team import GUIDANCE, Pilot
+
+PAPER_TABLE4: dict[str, tuple[float, float]] = {
+    # Yue et al., Table 4 (section 5.2.2): success rate over 50 random layouts and average cost.
+    "ppo": (0.92, 3.8),
+    "sac": (0.98, 5.0),
+    "cpo": (0.76, 3.0),
+    "sac_lag": (0.96, 3.0),
+    "tssac": (0.96, 3.0),
+}
+"""algorithm -> (success rate, average cost) as printed in the paper."""
+
+TRANSFER_THRESHOLD = 0.9
+TRANSFER_ROLES = ("detect", "strike")
+GUIDANCE_NAME = "guidance controller"
+
+
+@dataclass(frozen=True)
+class EvalSpec:
+    """One evaluation every team flies."""
+
+    label: str
+    """``random`` (Table 4, figure 10) or ``generalization`` (figure 11); names the cache file."""
+    scenario: Path
+    episodes: int
+    seed: int
+
+    def cache_name(self) -> str:
+        return f"eval_{self.label}.json"
+
+
+def eval_specs(grid: Grid) -> list[EvalSpec]:
+    ev = grid.evaluation
+    specs = [EvalSpec("random", ev.scenario, ev.episodes, ev.seed)]
+    if ev.generalization_scenario is not None:
+        specs.append(EvalSpec("generalization", ev.generalization_scenario, ev.episodes, ev.seed))
+    return specs
+
+
+def team_digest(team: Path) -> str:
+    """A hash of the three role checkpoints: a cached evaluation belongs to exactly these weights."""
+    h = hashlib.sha256()
+    for role in ROLES:
+        h.update((team / f"{role.value}.pt").read_bytes())
+    return h.hexdigest()[:16]
+
+
+def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
+    """The summary of ``team`` (None: the guidance controller) flying ``spec``, from ``cache`` if it still fits.
+
+    The summary has the keys of ``tssac_core.evaluate --json`` plus ``per_episode``: ``success`` (M,),
+    ``return`` and ``cost`` (M, 3) per role.
+    """
+    scenario = load(spec.scenario)
+    key = {"team": team_digest(team) if team is not None else GUIDANCE, "scenario_digest": scenario.digest(),
+           "seed": spec.seed, "episodes": spec.episodes}
+    if cache.is_file():
+        try:
+            cached = json.loads(cache.read_text())
+        except ValueError:
+            cached = {}
+        if cached.get("cache_key") == key and "per_episode" in cached:
+            return dict(cached)
+    pilots: list[Pilot] = list(load_team(team)) if team is not None else [GUIDANCE] * len(ROLES)
+    results = fly_missions(scenario, pilots, spec.episodes, spec.seed)
+    summary = results.summary(scenario.cost_limit)
+    summary.update({
+        "controller": str(team) if team is not None else GUIDANCE,
+        "scenario": str(spec.scenario),
+        "seed": spec.seed,
+        "cost_limit": scenario.cost_limit,
+        "cache_key": key,
+        "per_episode": {"success": results.success.tolist(), "return": results.returns.tolist(), "cost": results.cost.tolist()},
+    })
+    write_json(cache, summary)
+    return summary
+
+
+def fly_one(team: Path, spec: EvalSpec) -> MissionResults:
+    """The first evaluation layout, flown by ``team`` with its trajectories recorded (figure 9)."""
+    scenario = load(spec.scenario)
+    return fly_missions(scenario, list(load_team(team)), 1, spec.seed, record=True)
+
+
+Evaluations = dict[tuple[str, str], dict[str, Any]]
+"""(job name or GUIDANCE, eval label) -> evaluation summary."""
+
+
+def evaluate_all(grid: Grid, finished: list[Job], results: Path, report: Callable[[str], None]) -> Evaluations:
+    """Every finished team and the guidance controller on every EvalSpec (cached)."""
+    out: Evaluations = {}
+    for spec in eval_specs(grid):
+        report(f"evaluating on {spec.scenario.name}: {spec.episodes} layouts, seed {spec.seed}")
+        out[(GUIDANCE, spec.label)] = evaluate(None, spec, results / "guidance" / spec.cache_name())
+        for job in finished:
+            out[(job.name, spec.label)] = evaluate(job.out, spec, job.out / spec.cache_name())
+    return out
+
+
+# ------------------------------------------------------------------------------------ figures
+
+
+def over_seeds(per_seed: dict[int, float]) -> dict[str, Any]:
+    """Mean and sample standard deviation over seeds (std None with fewer than two)."""
+    values = list(per_seed.values())
+    return {
+        "mean": float(np.mean(values)) if values else None,
+        "std": float(np.std(values, ddof=1)) if len(values) > 1 else None,
+        "per_seed": {str(s): v for s, v in per_seed.items()},
+    }
+
+
+def read_metrics(run: Path) -> list[dict[str, str]]:
+    path = run / "metrics.csv"
+    if not path.is_file():
+        return []
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
+def steps_to_threshold(rows: list[dict[str, str]], role: str, threshold: float = TRANSFER_THRESHOLD) -> tuple[int | None, int]:
+    """(env_steps at the end of the first epoch with task_success >= threshold, or None; the role's total env_steps)."""
+    sel = sorted((r for r in rows if r["role"] == role), key=lambda r: int(r["epoch"]))
+    total = int(_number(sel[-1]["env_steps"])) if sel else 0
+    for r in sel:
+        if _number(r["task_success"]) >= threshold:
+            return int(_number(r["env_steps"])), total
+    return None, total
+
+
+def transfer_speedup(grid: Grid, finished: list[Job]) -> dict[str, Any]:
+    """Decisions until >= 90% task success, TSSAC vs SAC-Lagrangian, per role (mean over finished seeds).
+
+    A seed that never reached the threshold counts with its role's total decisions, a lower bound of what
+    it would have needed: the mean is then marked as a lower bound, and so is the speed-up when only
+    SAC-Lagrangian's mean is one (if TSSAC's is one, the ratio bounds nothing and is left out).
+    """
+    out: dict[str, Any] = {"threshold": TRANSFER_THRESHOLD}
+    for role in TRANSFER_ROLES:
+        per_algo: dict[str, Any] = {}
+        for algo in ("tssac", "sac_lag"):
+            entry = next((e for e in grid.algos if e.algo == algo), None)
+            jobs = [j for j in finished if entry is not None and j.entry == entry]
+            per_seed: dict[str, int | None] = {}
+            counted: list[int] = []
+            for job in jobs:
+                reached, total = steps_to_threshold(read_metrics(job.out), role)
+                per_seed[str(job.seed)] = reached
+                counted.append(reached if reached is not None else total)
+            per_algo[algo] = {
+                "entry": entry.name if entry is not None else None,
+                "per_seed": per_seed,
+                "seeds": len(jobs),
+                "reached": sum(v is not None for v in per_seed.values()),
+                "mean_steps": float(np.mean(counted)) if counted else None,
+                "mean_is_lower_bound": any(v is None for v in per_seed.values()),
+            }
+        t, s = per_algo["tssac"], per_algo["sac_lag"]
+        ratio = None
+        if t["mean_steps"] and s["mean_steps"] is not None and not t["mean_is_lower_bound"]:
+            ratio = s["mean_steps"] / t["mean_steps"]
+        out[role] = {**per_algo, "speedup": ratio, "speedup_is_lower_bound": ratio is not None and s["mean_is_lower_bound"]}
+    return out
+
+
+def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Evaluations, results: Path) -> dict[str, Any]:
+    """Everything ``experiments.json`` holds."""
+    labels = [spec.label for spec in eval_specs(grid)]
+    algorithms = []
+    for entry in grid.algos:
+        mine = [j for j in finished if j.entry == entry]
+        row: dict[str, Any] = {"name": entry.name, "algo": entry.algo, "penalty": entry.penalty, "seeds": [j.seed for j in mine]}
+        for label in labels:
+            row[label] = {key: over_seeds({j.seed: evaluations[(j.name, label)][key] for j in mine}) for key in ("success_rate", "mean_cost")}
+        paper = PAPER_TABLE4.get(entry.algo) if entry.algo != "sac_penalty" else None
+        row["paper"] = {"success_rate": paper[0], "mean_cost": paper[1]} if paper else None
+        algorithms.append(row)
+    guidance = {label: {key: evaluations[(GUIDANCE, label)][key] for key in ("success_rate", "mean_cost", "episodes")} for label in labels}
+    ev = grid.evaluation
+    return {
+        "grid": shown(grid.source),
+        "results": shown(results),
+        "evaluation": {"scenario": shown(ev.scenario), "episodes": ev.episodes, "seed": ev.seed,
+                       "generalization_scenario": shown(ev.generalization_scenario) if ev.generalization_scenario else None},
+        "cost_limit": load(ev.scenario).cost_limit,
+        "algorithms": algorithms,
+        "guidance": guidance,
+        "transfer_speedup": transfer_speedup(grid, finished),
+        "left_out": [j.name for j in jobs if j not in finished],
+    }
+
+
+def shown(path: Path) -> str:
+    """A path as a user of this directory would write it: relative to the working directory if inside it."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+# -------------------------------------------------------------------------------------- table
+
+
+def _rate(stats: dict[str, Any]) -> str:
+    if stats["mean"] is None:
+        return "—"
+    return f"{100 * stats['mean']:.1f}%" + (f" ± {100 * stats['std']:.1f}" if stats["std"] is not None else "")
+
+
+def _cost(stats: dict[str, Any]) -> str:
+    if stats["mean"] is None:
+        return "—"
+    return f"{stats['mean']:.2f}" + (f" ± {stats['std']:.2f}" if stats["std"] is not None else "")
+
+
+def _steps(figures: dict[str, Any]) -> str:
+    if figures["mean_steps"] is None:
+        return "—"
+    bound = ">= " if figures["mean_is_lower_bound"] else ""
+    return f"{bound}{figures['mean_steps']:,.0f} (reached in {figures['reached']} of {figures['seeds']} seeds)"
+
+
+def table_markdown(summary: dict[str, Any]) -> str:
+    """table4.md: Table 4 beside the paper's, the generalisation figures and the transfer speed-up."""
+    ev = summary["evaluation"]
+    lines = [
+        "# Table 4: success rate and average cost",
+        "",
+        f"Grid `{summary['grid']}`. Every team flies the same {ev['episodes']} layouts of `{ev['scenario']}` "
+        f"(layout seed {ev['seed']}, never used in training). Ours: mean ± sample standard deviation over the "
+        "finished seeds. Success = the target was hit (all three tasks). Average cost = hazard cost per UAV "
+        f"per mission (limit C = {summary['cost_limit']:g} per UAV). The paper's figures are its Table 4.",
+        "",
+        "| algorithm | seeds | success rate | average cost | paper: success rate | paper: average cost |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for a in summary["algorithms"]:
+        paper = a["paper"]
+        p_rate, p_cost = (f"{100 * paper['success_rate']:.0f}%", f"{paper['mean_cost']:.1f}") if paper else ("—", "—")
+        lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(a['random']['success_rate'])} | {_cost(a['random']['mean_cost'])} | {p_rate} | {p_cost} |")
+    g = summary["guidance"]["random"]
+    lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | — | — |")
+    if summary["left_out"]:
+        lines += ["", f"Left out (not finished, or a run with other settings than the grid: see --dry-run): {', '.join(summary['left_out'])}."]
+    if "generalization" in summary["guidance"]:
+        lines += [
+            "",
+            "## Generalisation (figure 11)",
+            "",
+            f"The same teams on `{ev['generalization_scenario']}` ({ev['episodes']} layouts, seed {ev['seed']}).",
+            "",
+            "| algorithm | seeds | success rate | average cost |",
+            "| --- | --- | --- | --- |",
+        ]
+        for a in summary["algorithms"]:
+            lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(a['generalization']['success_rate'])} | {_cost(a['generalization']['mean_cost'])} |")
+        g = summary["guidance"]["generalization"]
+        lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} |")
+    t = summary["transfer_speedup"]
+    lines += [
+        "",
+        "## Transfer speed-up",
+        "",
+        f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= {100 * t['threshold']:.0f}%, "
+        "mean over the finished seeds. A seed that never got there counts with its role's total decisions, "
+        "so such a mean is a lower bound (>=).",
+        "",
+        "| role | tssac | sac_lag | speed-up (sac_lag / tssac) |",
+        "| --- | --- | --- | --- |",
+    ]
+    for role in TRANSFER_ROLES:
+        r = t[role]
+        speedup = "—" if r["speedup"] is None else f"{'>= ' if r['speedup_is_lower_bound'] else ''}{r['speedup']:.2f}x"
+        lines.append(f"| {role} | {_steps(r['tssac'])} | {_steps(r['sac_lag'])} | {speedup} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(summary: dict[str, Any], results: Path) -> tuple[Path, Path]:
+    """Write ``table4.md`` and ``experiments.json`` under ``results``."""
+    results.mkdir(parents=True, exist_ok=True)
+    table = results / "table4.md"
+    tmp = table.with_name(table.name + ".tmp")
+    tmp.write_text(table_markdown(summary))
+    tmp.replace(table)
+    data = results / "experiments.json"
+    write_json(data, summary)
+    return table, data

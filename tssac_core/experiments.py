@@ -1,0 +1,126 @@
+"""``python -m tssac_core.experiments``: train a grid of (algorithm x seed) runs, evaluate them, write Table 4 and figures 7-12.
+
+Examples::
+
+    python -m tssac_core.experiments --grid experiments/paper.yaml --dry-run      # the jobs and their status
+    python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2       # train what is missing, then report
+    python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
+
+The grid file's format is in :mod:`tssac_core.experiment_grid`. Each job is a ``python -m tssac_core.train``
+process writing ``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is
+not run again and an interrupted one is continued with ``--resume``, so running the command again after a
+crash, Ctrl-C or reboot picks up where it stopped (:mod:`tssac_core.experiment_jobs`). Then every finished
+team is evaluated (:mod:`tssac_core.experiment_report`) and ``<results>/table4.md``,
+``<results>/experiments.json`` and the figures (:mod:`tssac_core.experiment_figures`) are written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+from tssac_core.cli import UsageError, run
+from tssac_core.experiment_figures import plot_figures
+from tssac_core.experiment_grid import Grid, Job, load_grid
+from tssac_core.experiment_jobs import Launch, Status, command, is_finished, job_state, run_jobs
+from tssac_core.experiment_report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
+from tssac_core.missions import MissionResults
+from tssac_core.scenario import Scenario, load
+
+Say = Callable[[str], None]
+
+
+def say(line: str) -> None:
+    print(line, flush=True)
+
+
+def train(grid: Grid, results: Path, parallel: int, report: Say = say) -> list[Launch]:
+    """Run every job that is not finished; refuses (UsageError) if a run directory holds other settings."""
+    states = [job_state(job) for job in grid.jobs(results)]
+    conflicts = [s for s in states if s.status is Status.CONFLICT]
+    if conflicts:
+        more = f" (and {len(conflicts) - 1} more: see --dry-run)" if len(conflicts) > 1 else ""
+        raise UsageError(f"{conflicts[0].job.out} holds a run with other settings than {grid.source} ({conflicts[0].detail}); "
+                         f"move it away or choose another --results{more}")
+    todo = sum(s.status is not Status.FINISHED for s in states)
+    report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {parallel} at a time")
+    return run_jobs(states, parallel, report)
+
+
+def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
+    """Evaluate the finished teams (cached), write table4.md, experiments.json and the figures; returns the files."""
+    jobs = grid.jobs(results)
+    states = [job_state(job) for job in jobs]
+    for s in states:
+        if s.status is Status.CONFLICT:
+            report(f"warning: leaving out {s.job.out}: other settings than the grid ({s.detail})")
+    finished = [s.job for s in states if s.status is Status.FINISHED]
+    report(f"report on {len(finished)} of {len(jobs)} runs")
+    evaluations = evaluate_all(grid, finished, results, report)
+    summary = summarise(grid, jobs, finished, evaluations, results)
+    table, data = write_report(summary, results)
+    curves = {e.name: [read_metrics(j.out) for j in finished if j.entry == e] for e in grid.algos}
+    curves = {name: runs for name, runs in curves.items() if runs}
+    per_episode = {e.name: [evaluations[(j.name, "random")]["per_episode"] for j in finished if j.entry == e] for e in grid.algos}
+    per_episode = {name: runs for name, runs in per_episode.items() if runs}
+    figures = plot_figures(results, summary, curves, per_episode, mission_for_fig9(grid, finished))
+    for path in (table, data, *figures):
+        report(f"wrote {path}")
+    return [table, data, *figures]
+
+
+def mission_for_fig9(grid: Grid, finished: list[Job]) -> tuple[MissionResults, Scenario, str] | None:
+    """The first evaluation layout flown by the first finished TSSAC team (else the first finished team)."""
+    if not finished:
+        return None
+    job = next((j for j in finished if j.entry.algo == "tssac"), finished[0])
+    spec = eval_specs(grid)[0]
+    return fly_one(job.out, spec), load(spec.scenario), f"{job.name}: {spec.scenario.name}, layout 1 of seed {spec.seed}"
+
+
+def dry_run(grid: Grid, results: Path, report: Say = say) -> None:
+    """Print every job with its status and what running the grid would do with it."""
+    for job in grid.jobs(results):
+        state = job_state(job)
+        what = {
+            Status.FINISHED: "",
+            Status.PARTIAL: " ".join(command(job, resume=True)),
+            Status.NEW: " ".join(command(job, resume=False)),
+            Status.CONFLICT: state.detail,
+        }[state.status]
+        report(f"{state.status.value:9s} {job.name:22s} {job.out}  {what}".rstrip())
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=__doc__.split("\n")[0])
+    p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
+    p.add_argument("--results", type=Path, default=Path("results"), help="output directory (default results/): runs/, table4.md, experiments.json, figures")
+    p.add_argument("--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished")
+    mode.add_argument("--dry-run", action="store_true", help="print the jobs and their status (finished, partial, new, conflict) and exit")
+    args = p.parse_args(argv)
+    if args.jobs < 1:
+        raise UsageError("--jobs must be at least 1")
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    grid = load_grid(args.grid)
+    if args.dry_run:
+        dry_run(grid, args.results)
+        return 0
+    launches = [] if args.report_only else train(grid, args.results, args.jobs)
+    make_report(grid, args.results)
+    failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job.out)]
+    if failed:
+        print(f"error: {len(failed)} job(s) failed: {', '.join(f.job.name for f in failed)} (see train.log in their run directories)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))
