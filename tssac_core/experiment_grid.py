@@ -39,13 +39,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Collection
 
-import yaml
-
 from tssac_core.cli import UsageError
 from tssac_core.observation import ObservationMode
 from tssac_core.scenario import load as load_scenario
 from tssac_core.train import ALGOS, ON_POLICY, TrainConfig, check_learner_settings
 from tssac_core.train import parse_args as parse_train_args
+from tssac_core.yaml_file import read_yaml
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -158,16 +157,7 @@ def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
 def load_grid(path: str | Path) -> Grid:
     """Read and check a grid file; every job's training arguments are checked as the command would."""
     source = str(path)
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise GridError(source, "", f"cannot read file ({exc.strerror or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark is not None else ""
-        raise GridError(source, "", f"not valid YAML{at}: {getattr(exc, 'problem', exc)}") from None
+    data = read_yaml(path, GridError)
     r = _Reader(source)
     top = r.mapping(data, "", allowed={"seeds", "algos", "train", "evaluation"}, required={"seeds", "algos", "train", "evaluation"})
     seeds = r.seeds(top["seeds"], "seeds")

@@ -29,6 +29,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from tssac_core.yaml_file import read_yaml
+
 
 class Role(enum.Enum):
     """The three UAVs, in the order the world stores them (index = position in that order)."""
@@ -333,18 +335,7 @@ def from_dict(data: Any, source: str = "<scenario>") -> Scenario:
 
 def load(path: str | Path) -> Scenario:
     """Load and validate a scenario file; raises ScenarioError (one line) on any problem."""
-    source = str(path)
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise ScenarioError(source, "", f"cannot read file ({exc.strerror or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ScenarioError(source, "", f"not valid YAML{at}: {getattr(exc, 'problem', exc)}") from None
-    return from_dict(data, source)
+    return from_dict(read_yaml(path, ScenarioError), str(path))
 
 
 def dump(scenario: Scenario, path: str | Path) -> None:
