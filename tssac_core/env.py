@@ -98,7 +98,7 @@ class RoleTask:
         self.pilots = resolve_pilots(role, teammates)
         self.active = tuple(p is not None for p in self.pilots)
         self.reward_config = reward_config
-        self.routes = RouteMap() if reward_config.around_radars else None
+        self.routes = RouteMap(reward_config.route) if reward_config.around_radars else None
         self.world = World(scenario, n)
         self.team = Team(self.pilots, observation)
         self.rng = np.random.default_rng(seed)

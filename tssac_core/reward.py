@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.routes import RouteConfig
 from tssac_core.world import KM, StepResult
 
 
@@ -50,6 +51,8 @@ class RewardConfig:
     k3: float = 1.0
     around_radars: bool = True
     """r_approach measures the way around the radars (True) or the straight line (False, the paper)."""
+    route: RouteConfig = RouteConfig()
+    """How the way around the radars is measured (the margin kept from them, the cost of crossing one)."""
 
 
 def reward(

@@ -40,6 +40,8 @@ from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask
 from tssac_core.observation import ObservationMode
 from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint, torch_save_atomic
+from tssac_core.reward import RewardConfig
+from tssac_core.routes import RouteConfig
 from tssac_core.scenario import ROLES, Role, Scenario, load
 from tssac_core.team import Pilot
 from tssac_core.validation import EpochSelector
@@ -82,6 +84,8 @@ class TrainConfig:
     """sac_penalty: reward r + penalty * c."""
     threads: int = 2
     """torch threads (this machine has 2 cores)."""
+    route_margin_km: float = 1.0
+    """Reward: the way around the radars keeps this far from them (tssac_core.routes.RouteConfig)."""
     validation_episodes: int = 30
     """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
     (tssac_core.validation). 0: ship the last epoch."""
@@ -97,6 +101,10 @@ def teammates_for(role: Role, out: Path) -> dict[str, Pilot]:
     for earlier in ROLES[: role.index]:
         pilots[earlier.value] = Policy.load(out / f"{earlier.value}.pt", earlier)
     return pilots
+
+
+def reward_config(cfg: TrainConfig) -> RewardConfig:
+    return RewardConfig(route=RouteConfig(margin_m=cfg.route_margin_km * 1000.0))
 
 
 def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
@@ -154,7 +162,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
     learner = SacLagrangian(mode.size, 2, sac_cfg)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, out)
-    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index)
+    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index, reward_config=reward_config(cfg))
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
     transferred = False
@@ -333,6 +341,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended", help="observation (default extended; paper = eq. 7)")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
+    p.add_argument("--route-margin-km", type=float, default=1.0, help="reward: the way to the zone keeps this far from the radars (default 1)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
@@ -349,8 +358,8 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
-    if a.validation_episodes < 0:
-        raise UsageError("--validation-episodes must be >= 0")
+    if a.validation_episodes < 0 or a.route_margin_km < 0:
+        raise UsageError("--validation-episodes and --route-margin-km must be >= 0")
     overrides: dict[str, Any] = {}
     for item in a.set:
         key, _, value = item.partition("=")
@@ -362,7 +371,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
-        validation_episodes=a.validation_episodes,
+        validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km,
         init_from=str(a.init_from) if a.init_from else "",
     )
     return cfg, a.out, a.resume, a.no_progress
