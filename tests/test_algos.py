@@ -413,6 +413,35 @@ def test_state_dict_round_trip_gives_same_actions_and_same_next_update() -> None
     assert_same_tensors(all_tensors(restored), all_tensors(agent))
 
 
+def test_checkpoint_of_unfused_optimisers_loads_and_keeps_the_fast_step() -> None:
+    """States saved before the learner used fused Adam (param groups with fused=None) still load,
+    continue the same training, and do not switch the loading learner back to the slow step."""
+    torch.manual_seed(0)
+    old = SacLagrangian(OBS_DIM, ACT_DIM, small_config(alpha_init=0.1))
+    old.actor_optim = torch.optim.Adam(old._actor_params, lr=old.config.lr)
+    old.critic_optim = torch.optim.Adam(old._critic_params, lr=old.config.lr)
+    old.alpha_optim = torch.optim.Adam([old.alpha], lr=old.config.lr)
+    for i in range(2):
+        old.update(random_batch(i))
+    state = copy.deepcopy(old.state_dict())
+    assert state["critic_optim"]["param_groups"][0]["fused"] is None
+
+    new = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    flags = new.critic_optim.param_groups[0]["fused"], new.critic_optim.param_groups[0]["foreach"]
+    new.load_state_dict(state)
+    for optim in (new.actor_optim, new.critic_optim, new.alpha_optim):
+        assert (optim.param_groups[0]["fused"], optim.param_groups[0]["foreach"]) == flags
+    torch.manual_seed(5)
+    s_old = old.update(random_batch(2))
+    torch.manual_seed(5)
+    s_new = new.update(random_batch(2))
+    # the same Adam rule; a fused kernel may round the last bit differently
+    assert s_new.q_r_loss == pytest.approx(s_old.q_r_loss, rel=1e-5)
+    assert s_new.actor_loss == pytest.approx(s_old.actor_loss, rel=1e-5, abs=1e-7)
+    for key, value in all_tensors(old).items():
+        torch.testing.assert_close(all_tensors(new)[key], value, rtol=1e-5, atol=1e-6)
+
+
 def test_in_memory_load_does_not_share_optimiser_moments() -> None:
     torch.manual_seed(0)
     a = SacLagrangian(OBS_DIM, ACT_DIM, small_config())

@@ -20,11 +20,15 @@ _LOG_2 = math.log(2.0)
 
 
 def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int) -> nn.Sequential:
-    """MLP in_dim -> hidden_sizes... -> out_dim, ReLU after every layer but the last."""
+    """MLP in_dim -> hidden_sizes... -> out_dim, ReLU after every layer but the last.
+
+    The ReLUs work in place: a Linear's backward does not need its output, so overwriting it saves
+    one activation-sized allocation and memory pass per layer (no parameters, same state_dict).
+    """
     layers: list[nn.Module] = []
     sizes = [in_dim, *hidden_sizes]
     for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
-        layers += [nn.Linear(fan_in, fan_out), nn.ReLU()]
+        layers += [nn.Linear(fan_in, fan_out), nn.ReLU(inplace=True)]
     layers.append(nn.Linear(sizes[-1], out_dim))
     return nn.Sequential(*layers)
 
@@ -110,8 +114,11 @@ class Critic(nn.Module):
         x = torch.cat([obs, action], dim=-1)
         h = x.expand(self.n_members, *x.shape)
         last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+        # The lists' own parameter dicts, in order: iterating a ParameterList indexes it item by
+        # item through string keys, ~20 us per forward pass here.
+        layers = zip(self.weights._parameters.values(), self.biases._parameters.values())
+        for i, (w, b) in enumerate(layers):
             h = torch.baddbmm(b, h, w)
             if i < last:
-                h = torch.relu(h)
+                h = h.relu_()  # in place: baddbmm's backward does not need its output
         return h.squeeze(-1)

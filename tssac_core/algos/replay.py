@@ -20,6 +20,7 @@ class ReplaySamples(NamedTuple):
 
 
 _FIELDS = ReplaySamples._fields
+_VECTORS = ("observations", "actions", "next_observations")
 
 
 class ReplayBuffer:
@@ -27,6 +28,10 @@ class ReplayBuffer:
 
     Once full, the oldest transitions are overwritten. `add_batch` takes the transitions of a
     batched environment (one row per sub-environment) in one call.
+
+    Storage is one (capacity, width) array, a transition per row, and each field a column slice
+    of it: a minibatch is one gather of whole rows (a few cache lines each) instead of one per
+    field.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, capacity: int) -> None:
@@ -35,13 +40,16 @@ class ReplayBuffer:
         self.obs_dim = obs_dim
         self.act_dim = act_dim
         self.capacity = capacity
+        widths = dict(zip(_FIELDS, (obs_dim, act_dim, 1, 1, obs_dim, 1)))
+        self._rows = np.zeros((capacity, sum(widths.values())), dtype=np.float32)
+        self._columns: dict[str, slice | int] = {}
+        start = 0
+        for name, width in widths.items():
+            # The per-transition scalars (rewards, costs, terminated) are single columns.
+            self._columns[name] = slice(start, start + width) if name in _VECTORS else start
+            start += width
         self._arrays: dict[str, np.ndarray] = {
-            "observations": np.zeros((capacity, obs_dim), dtype=np.float32),
-            "actions": np.zeros((capacity, act_dim), dtype=np.float32),
-            "rewards": np.zeros(capacity, dtype=np.float32),
-            "costs": np.zeros(capacity, dtype=np.float32),
-            "next_observations": np.zeros((capacity, obs_dim), dtype=np.float32),
-            "terminated": np.zeros(capacity, dtype=np.float32),
+            name: self._rows[:, column] for name, column in self._columns.items()
         }
         self._ptr = 0  # next row to write
         self._size = 0
@@ -85,9 +93,7 @@ class ReplayBuffer:
         """batch_size transitions drawn uniformly with replacement."""
         if self._size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
-        idx = rng.integers(0, self._size, size=batch_size)
-        # Fancy indexing already copies; from_numpy then shares that copy without another one.
-        return ReplaySamples(*(torch.from_numpy(self._arrays[name][idx]) for name in _FIELDS))
+        return self._gather(rng.integers(0, self._size, size=batch_size))
 
     def sample_recent(self, batch_size: int, window: int, rng: np.random.Generator) -> ReplaySamples:
         """batch_size transitions drawn uniformly from the last ``window`` added (the current policy's data)."""
@@ -95,7 +101,12 @@ class ReplayBuffer:
             raise ValueError("cannot sample from an empty replay buffer")
         span = min(window, self._size)
         idx = (self._ptr - 1 - rng.integers(0, span, size=batch_size)) % self.capacity
-        return ReplaySamples(*(torch.from_numpy(self._arrays[name][idx]) for name in _FIELDS))
+        return self._gather(idx)
+
+    def _gather(self, idx: np.ndarray) -> ReplaySamples:
+        # One fancy-indexing copy of the rows; the fields are views of it (from_numpy shares it).
+        rows = torch.from_numpy(self._rows[idx])
+        return ReplaySamples(*(rows[:, self._columns[name]] for name in _FIELDS))
 
     def state_dict(self) -> dict[str, Any]:
         """The filled rows (tensors, in storage order), the write position and the capacity."""
