@@ -64,6 +64,7 @@ from mavlink_bridge.state_filter import FilterModel, FilterNoise, VehicleStateFi
 from tssac_core.cli import UsageError, write_json
 from tssac_core.guidance import Guidance
 from tssac_core.observation import ObservationMode, observe
+from tssac_core.routes import RouteMap
 from tssac_core.scenario import Role, Scenario, ScenarioError, load
 from tssac_core.world import World
 
@@ -186,6 +187,7 @@ class PolicyPilot:
         self.name = str(path)
         self.repeat = max(1, int(self.policy.action_repeat))
         self.mode: ObservationMode = self.policy.observation_mode
+        self.routes = RouteMap()
         self._held: Optional[np.ndarray] = None
         self._next_decision = 0
 
@@ -197,7 +199,7 @@ class PolicyPilot:
         # Decisions at ticks 0, k, 2k, ... of the vehicle's clock (Team holds actions the same way);
         # a tick skipped by a slow companion moves the decision to the next tick seen.
         if self._held is None or step >= self._next_decision:
-            obs = observe(world, role_index, self.mode)[0]
+            obs = observe(world, role_index, self.mode, self.routes)[0]
             self._held = np.asarray(self.policy.act(obs), dtype=np.float64).reshape(2)
             self._next_decision = (step // self.repeat + 1) * self.repeat
         return self._held

@@ -356,7 +356,7 @@ def test_tiny_run_writes_metrics_and_a_deployable_checkpoint(algo, tmp_path):
         assert (x["beta"] != "nan") == (algo == "ppo_lag")
     policy = Policy.load(tmp_path / "decoy.pt", "decoy")
     assert policy.info.algo == algo and policy.info.hidden_sizes == (16, 16) and policy.info.action_repeat == 1
-    obs = np.random.default_rng(0).uniform(0, 1, (3, 22)).astype(np.float32)
+    obs = np.random.default_rng(0).uniform(0, 1, (3, policy.info.obs_dim)).astype(np.float32)
     assert policy.act(obs).shape == (3, 2) and np.abs(policy.act(obs)).max() <= 1.0
     assert read_checkpoint(tmp_path / "decoy.pt")["learner"]["algo"] == algo
     assert (tmp_path / "resume" / "decoy.pt").is_file()

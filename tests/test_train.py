@@ -67,7 +67,7 @@ def test_transfer_initialises_the_next_role(tmp_path):
 
 def test_checkpoint_round_trip_and_team(trained):
     team = load_team(trained)
-    obs = np.random.default_rng(0).uniform(0, 1, (5, 22)).astype(np.float32)
+    obs = np.random.default_rng(0).uniform(0, 1, (5, team[0].info.obs_dim)).astype(np.float32)
     again = load_team(trained)
     for p, q in zip(team, again):
         np.testing.assert_array_equal(p.act(obs), q.act(obs))

@@ -18,7 +18,7 @@ import numpy as np
 
 from tssac_core.observation import ObservationMode, observation_bounds, observe
 from tssac_core.reward import RewardConfig, reward
-from tssac_core.routes import RouteMap
+from tssac_core.routes import RouteConfig, RouteMap
 from tssac_core.scenario import ROLES, Role, Scenario, load, sample_layout
 from tssac_core.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.world import StepResult, World
@@ -98,7 +98,9 @@ class RoleTask:
         self.pilots = resolve_pilots(role, teammates)
         self.active = tuple(p is not None for p in self.pilots)
         self.reward_config = reward_config
-        self.routes = RouteMap(reward_config.route) if reward_config.around_radars else None
+        self.routes = RouteMap(reward_config.route)
+        """Route fields of the reward's approach term (the observation's own, in route mode, have the default margins)."""
+        self.obs_routes = self.routes if reward_config.route == RouteConfig() else RouteMap()
         self.world = World(scenario, n)
         self.team = Team(self.pilots, observation)
         self.rng = np.random.default_rng(seed)
@@ -119,7 +121,7 @@ class RoleTask:
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
         self._measure_detours()
-        return observe(self.world, self.j, self.mode)
+        return observe(self.world, self.j, self.mode, self.obs_routes)
 
     def snapshot(self) -> bytes:
         """The task's state (worlds, layout generator, running episode sums) for a resume file."""
@@ -131,7 +133,7 @@ class RoleTask:
         self._measure_detours()
 
     def _measure_detours(self) -> None:
-        if self.routes is not None:
+        if self.reward_config.around_radars:
             self.detour_m = self.routes.detour_m(self.world)
 
     def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
@@ -160,7 +162,7 @@ class RoleTask:
             r, cost = r + r_k, cost + cost_k
             terminated |= result.terminated
             truncated |= result.truncated
-        final_obs = observe(self.world, self.j, self.mode)
+        final_obs = observe(self.world, self.j, self.mode, self.obs_routes)
         ended = terminated | truncated
         ep_return = np.where(ended, self.ep_return, 0.0)
         ep_cost = np.where(ended, self.ep_cost, 0.0)
@@ -178,7 +180,8 @@ class UavRoleEnv(gym.Env):
     **Action** (eq. 8), ``Box(-1, 1, (2,))``: [omega, u], scaled to the vehicle's turn-rate and
     acceleration limits (scenario file), e.g. +-5 deg/s and +-10 m/s^2.
 
-    **Observation**: ``observation="extended"`` (default, 22 values) or ``"paper"`` (eq. 7, 5 values);
+    **Observation**: ``observation="extended"`` (default, 22 values), ``"route"`` (24: extended plus the
+    direction of the way around the radars; what training uses by default) or ``"paper"`` (eq. 7, 5 values);
     the table is in :mod:`tssac_core.observation`.
 
     **Reward** (eq. 10, Table 2, plus a zone-holding term and a leaving penalty): see
@@ -231,7 +234,7 @@ class UavRoleEnv(gym.Env):
         self._needs_reset = terminated or truncated
         info = self._info()
         info["cost"] = float(cost[0])
-        return observe(self.task.world, self.task.j, self.mode)[0], float(r[0]), terminated, truncated, info
+        return observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[0], float(r[0]), terminated, truncated, info
 
     def _info(self) -> dict[str, Any]:
         w = self.task.world

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.routes import FieldCache, cell_centres, radar_depth, sam_disk, wavefront
+from tssac_core.routes import FieldCache, cell_centres, field_gradient, radar_depth, sam_disk, wavefront
 from tssac_core.world import World, _wrap
 
 
@@ -94,20 +94,8 @@ class Guidance:
         return np.clip(np.stack([omega_cmd, accel_cmd], axis=-1), -1.0, 1.0)
 
     def _route_gradient(self, world: World) -> tuple[np.ndarray, np.ndarray]:
-        """Gradient of the navigation function at every vehicle, (N, 3) each (central differences)."""
-        fields = self._plans.fields(world)
-        g = self.cfg.grid_m
-        size = fields.shape[1]
-        fx, fy = world.x_m / g - 0.5, world.y_m / g - 0.5
-        i = np.clip(np.round(fx).astype(np.int64), 1, size - 2)
-        j = np.clip(np.round(fy).astype(np.int64), 1, size - 2)
-        w = np.arange(world.n)[:, None]
-        gx = fields[w, i + 1, j] - fields[w, i - 1, j]
-        gy = fields[w, i, j + 1] - fields[w, i, j - 1]
-        # Diagonal differences smooth the 8-neighbour metric's preferred directions.
-        d1 = fields[w, i + 1, j + 1] - fields[w, i - 1, j - 1]
-        d2 = fields[w, i + 1, j - 1] - fields[w, i - 1, j + 1]
-        return gx + 0.5 * (d1 + d2), gy + 0.5 * (d1 - d2)
+        """Gradient of the navigation function at every vehicle, (N, 3) each."""
+        return field_gradient(self._plans.fields(world), self.cfg.grid_m, world.x_m, world.y_m)
 
     def _safety(self, world: World, course: np.ndarray) -> np.ndarray:
         cfg = self.cfg

@@ -37,6 +37,17 @@ transfer between them; only the zone edges differ (each role's own zone).
     ======  ======================  =============================================================  =======
 
 A layout with fewer radars pads with "far away" (range 1, bearing dead ahead).
+
+``route`` (the training default), 24 values: ``extended`` plus where the way to the SAM's detection
+disk around the radars starts, relative to the heading — the descent direction of the route field
+that the reward's approach term measures (:class:`tssac_core.routes.RouteMap`; straight at the SAM
+inside the disk). It is a function of the layout the other entries already describe, precomputed
+the way a mission planner would: which way round a cluster of radars is shorter is a global
+question that three nearest-radar entries only answer after much learning.
+
+    ======  ======================  =============================================================  =======
+    22-23   route cos, sin          direction of the way around the radars relative to the heading  [-1, 1]
+    ======  ======================  =============================================================  =======
 """
 
 from __future__ import annotations
@@ -45,22 +56,25 @@ import enum
 
 import numpy as np
 
+from tssac_core.routes import RouteMap
 from tssac_core.world import World, WorldConstants
 
 LOCAL_SCALE_M = 20_000.0
 """Scale of the local (zone and hazard) ranges: the SAM's detection range R4."""
 N_RADAR_FEATURES = 3
 EXTENDED_SIZE = 11 + 3 * N_RADAR_FEATURES + 2
+ROUTE_SIZE = EXTENDED_SIZE + 2
 PAPER_SIZE = 5
 
 
 class ObservationMode(enum.Enum):
     PAPER = "paper"
     EXTENDED = "extended"
+    ROUTE = "route"
 
     @property
     def size(self) -> int:
-        return PAPER_SIZE if self is ObservationMode.PAPER else EXTENDED_SIZE
+        return {ObservationMode.PAPER: PAPER_SIZE, ObservationMode.EXTENDED: EXTENDED_SIZE, ObservationMode.ROUTE: ROUTE_SIZE}[self]
 
 
 def observation_bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
@@ -74,8 +88,8 @@ def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
         low = np.array([0, 0, 0, -1, 0], dtype=np.float32)
         high = np.array([1, 1, 1, 1, 1.5], dtype=np.float32)
         return low, high
-    low = np.full(EXTENDED_SIZE, -1.0, dtype=np.float32)
-    high = np.ones(EXTENDED_SIZE, dtype=np.float32)
+    low = np.full(mode.size, -1.0, dtype=np.float32)
+    high = np.ones(mode.size, dtype=np.float32)
     low[[0, 1, 2, 5, 8, 20, 21]] = 0.0
     high[[5, 8]] = 1.5
     return low, high
@@ -98,11 +112,13 @@ def build_observation(
     radar_r_m: np.ndarray,
     radar_on: np.ndarray,
     identified: np.ndarray,
+    route_dir: np.ndarray | None = None,
 ) -> np.ndarray:
     """Observations of one role in N worlds, (N, mode.size) float32.
 
     Vehicle arrays are (N,) for the observing UAV; ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
-    ``radar_r_m`` (N, K); flags (N,). This is the only place observations are made.
+    ``radar_r_m`` (N, K); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode
+    only). This is the only place observations are made.
     """
     j = role_index
     area = c.area_m
@@ -114,7 +130,7 @@ def build_observation(
         return np.minimum(np.maximum(obs, low), high).astype(np.float32)
 
     n = x_m.shape[0]
-    out = np.empty((n, EXTENDED_SIZE))
+    out = np.empty((n, mode.size))
     cos_phi, sin_phi = np.cos(phi_rad), np.sin(phi_rad)
     out[:, 0] = x_m / area
     out[:, 1] = y_m / area
@@ -153,6 +169,11 @@ def build_observation(
     out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = np.take_along_axis(feats, order[:, :, None], axis=1).reshape(n, -1)
     out[:, 20] = radar_on
     out[:, 21] = identified
+    if mode is ObservationMode.ROUTE:
+        if route_dir is None:
+            raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
+        out[:, 22] = route_dir[:, 0] * cos_phi + route_dir[:, 1] * sin_phi
+        out[:, 23] = route_dir[:, 1] * cos_phi - route_dir[:, 0] * sin_phi
     return np.minimum(np.maximum(out, low), high).astype(np.float32)
 
 
@@ -160,8 +181,12 @@ _FAR_RADAR = np.array([1e9, 1.0, 0.0])
 """Features of a radar slot a layout does not use: sorted last, range clipped to 1, bearing dead ahead."""
 
 
-def observe(world: World, role_index: int, mode: ObservationMode) -> np.ndarray:
-    """Observations of one role in every world of ``world``, (N, mode.size) float32."""
+def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteMap | None = None) -> np.ndarray:
+    """Observations of one role in every world of ``world``, (N, mode.size) float32.
+
+    ``routes``: the route fields of the route mode (one RouteMap per World you observe: it caches a
+    field per layout); ignored by the other modes.
+    """
     j = role_index
     return build_observation(
         j,
@@ -177,4 +202,5 @@ def observe(world: World, role_index: int, mode: ObservationMode) -> np.ndarray:
         world.radar_r_m,
         world.radar_on,
         world.identified,
+        routes.direction(world, j) if mode is ObservationMode.ROUTE and routes is not None else None,
     )

@@ -118,13 +118,27 @@ def sample_bilinear(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.
     return low + tx * (high - low)
 
 
+def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradient (per cell) of each world's field at positions (N, K): central differences at the nearest
+    cell, with the diagonal differences added to smooth the grid metric's preferred directions."""
+    size = fields.shape[1]
+    i = np.clip(np.round(x_m / grid_m - 0.5).astype(np.int64), 1, size - 2)
+    j = np.clip(np.round(y_m / grid_m - 0.5).astype(np.int64), 1, size - 2)
+    w = np.arange(fields.shape[0])[:, None]
+    gx = fields[w, i + 1, j] - fields[w, i - 1, j]
+    gy = fields[w, i, j + 1] - fields[w, i, j - 1]
+    d1 = fields[w, i + 1, j + 1] - fields[w, i - 1, j - 1]
+    d2 = fields[w, i + 1, j - 1] - fields[w, i - 1, j + 1]
+    return gx + 0.5 * (d1 + d2), gy + 0.5 * (d1 - d2)
+
+
 @dataclass(frozen=True)
 class RouteConfig:
     """The route field of the reward's approach term."""
 
     grid_m: float = 1000.0
-    margin_m: float = 1000.0
-    """Radars count as hazards out to radius + this margin."""
+    margin_m: float = 3000.0
+    """Radars count as hazards out to radius + this margin (the guidance controller plans with 3 km too)."""
     hazard_weight: float = 5.0
     """Flying a metre inside a radar counts as this many metres of route, so a way around the radars is
     shorter unless it is more than this many times as long (finite, so the field has no jumps and a UAV
@@ -157,3 +171,15 @@ class RouteMap:
         straight = np.hypot(x - world.sam_m[:, 0:1], y - world.sam_m[:, 1:2]) - world.c.r4_m
         detour = np.where(straight > 0.0, np.maximum(route - straight, 0.0), 0.0)
         return detour if vehicle is None else detour[:, 0]
+
+    def direction(self, world: World, vehicle: int) -> np.ndarray:
+        """Unit vector (N, 2), world frame, along which one vehicle's way to the SAM's detection disk
+        starts (down the route field); straight at the SAM where the field is flat (inside the disk)."""
+        x, y = world.x_m[:, vehicle : vehicle + 1], world.y_m[:, vehicle : vehicle + 1]
+        gx, gy = field_gradient(self.cache.fields(world), self.cfg.grid_m, x, y)
+        down = -np.concatenate([gx, gy], axis=1).astype(np.float64)
+        to_sam = world.sam_m - np.concatenate([x, y], axis=1)
+        norm = np.hypot(down[:, 0], down[:, 1])[:, None]
+        flat = norm < 1e-3 * self.cfg.grid_m
+        v = np.where(flat, to_sam, down)
+        return v / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)[:, None]

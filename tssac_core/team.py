@@ -17,6 +17,7 @@ import numpy as np
 
 from tssac_core.guidance import Guidance
 from tssac_core.observation import ObservationMode, observe
+from tssac_core.routes import RouteMap
 from tssac_core.scenario import ROLES
 from tssac_core.world import World
 
@@ -37,6 +38,8 @@ class Team:
         self.pilots = list(pilots)
         self.default_mode = default_mode
         self.guidance = Guidance()
+        self.routes = RouteMap()
+        """Route fields for pilots that observe in route mode."""
         self._held: np.ndarray | None = None
 
     def actions(self, world: World, skip: int | None = None) -> np.ndarray:
@@ -57,7 +60,7 @@ class Team:
                 repeat = int(getattr(pilot, "action_repeat", 1))
                 due = world.steps % repeat == 0
                 if due.any():  # between decisions nobody needs the pilot: skip its forward pass
-                    fresh = np.asarray(pilot(observe(world, j, mode)), dtype=np.float64)
+                    fresh = np.asarray(pilot(observe(world, j, mode, self.routes)), dtype=np.float64)
                     self._held[:, j] = np.where(due[:, None], fresh, self._held[:, j])
                 actions[:, j] = self._held[:, j]
         return actions

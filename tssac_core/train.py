@@ -77,14 +77,15 @@ class TrainConfig:
     """From-scratch roles act uniformly at random for this many steps first (not after transfer)."""
     update_after: int = 1000
     """No updates before the buffer holds this many transitions."""
-    observation: str = "extended"
+    observation: str = "route"
+    """paper (eq. 7), extended, or route (extended + the way around the radars; tssac_core.observation)."""
     action_repeat: int = 1
     """Decision interval: the learner's action is held for this many 0.1 s world steps (1: the paper)."""
     penalty: float = 0.0
     """sac_penalty: reward r + penalty * c."""
     threads: int = 2
     """torch threads (this machine has 2 cores)."""
-    route_margin_km: float = 1.0
+    route_margin_km: float = 3.0
     """Reward: the way around the radars keeps this far from them (tssac_core.routes.RouteConfig)."""
     validation_episodes: int = 30
     """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
@@ -339,9 +340,9 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--start-steps", type=int, default=4000, help="uniform random actions for this many decisions first (from-scratch roles)")
     p.add_argument("--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions")
     p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
-    p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="extended", help="observation (default extended; paper = eq. 7)")
+    p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="route", help="observation (default route = extended + the way around the radars; paper = eq. 7)")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
-    p.add_argument("--route-margin-km", type=float, default=1.0, help="reward: the way to the zone keeps this far from the radars (default 1)")
+    p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
