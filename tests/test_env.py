@@ -12,18 +12,18 @@ from gymnasium.utils.env_checker import check_env
 
 import tssac_core  # noqa: F401  (registers the environments)
 from tssac_core.env import RoleTask
-from tssac_core.observation import EXTENDED_SIZE, ObservationMode, observation_bounds
+from tssac_core.observation import EXTENDED_SIZE, ObservationMode, observation_bounds, observe
 from tssac_core.reward import RewardConfig, reward
 from tssac_core.scenario import Role, load
 from tssac_core.world import KM, StepResult
 
 
 @pytest.mark.parametrize("role", ["Decoy", "Detect", "Strike"])
-@pytest.mark.parametrize("observation", ["paper", "extended"])
+@pytest.mark.parametrize("observation", ["paper", "extended", "route"])
 def test_check_env(role, observation):
     env = gym.make(f"tssac/{role}-v0", observation=observation)
     check_env(env.unwrapped)
-    assert env.observation_space.shape == ((5,) if observation == "paper" else (EXTENDED_SIZE,))
+    assert env.observation_space.shape == ({"paper": 5, "extended": EXTENDED_SIZE, "route": EXTENDED_SIZE + 2}[observation],)
 
 
 def rollout(env, seed, steps=300):
@@ -96,6 +96,28 @@ def test_extended_observation_geometry(strike_path):
     assert obs[14] >= obs[11] and obs[17] >= obs[14]
     assert obs[20] == 0.0 and obs[21] == 0.0
     assert w.radar_on[0] == 0
+
+
+def test_route_observation_points_the_way_around_the_radars(strike_path):
+    """Route mode = extended + the route direction relative to the heading; a unit vector that bends
+    away from the SAM's bearing when radars block the line, and is the SAM's bearing inside its disk."""
+    s = load(strike_path)
+    task = RoleTask(s, Role.STRIKE, n=1, observation=ObservationMode.ROUTE, seed=0)
+    obs = task.reset()[0]
+    extended = RoleTask(s, Role.STRIKE, n=1, observation=ObservationMode.EXTENDED, seed=0).reset()[0]
+    np.testing.assert_array_equal(obs[:EXTENDED_SIZE], extended)
+    assert obs[22] ** 2 + obs[23] ** 2 == pytest.approx(1.0, abs=1e-5)
+    # The paper's mission: radars at (38, 44), (30, 21), (62, 26) lie across the line from (12, 12) to
+    # (65, 65) (SAM dead ahead); the way round them leaves the line by a clear angle.
+    route_angle = math.degrees(math.atan2(obs[23], obs[22]))
+    assert abs(route_angle) > 10.0
+    # Inside the SAM's detection disk the route is the SAM's bearing.
+    w = task.world
+    w.x_m[0, 2], w.y_m[0, 2], w.phi_rad[0, 2] = 60_000.0, 60_000.0, 0.3
+    inside = observe(w, 2, ObservationMode.ROUTE, task.obs_routes)[0]
+    assert inside[22] == pytest.approx(inside[6], abs=1e-5) and inside[23] == pytest.approx(inside[7], abs=1e-5)
+    with pytest.raises(ValueError, match="route direction"):
+        observe(w, 2, ObservationMode.ROUTE)
 
 
 def result(**kw) -> StepResult:
