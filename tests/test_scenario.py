@@ -90,6 +90,18 @@ def test_wrong_type(strike_path, tmp_path):
     assert "layout.sam_km: expected a list of 2 numbers" in error_of(data, tmp_path)
 
 
+def test_expectations(strike_path, tmp_path):
+    data = base(strike_path)
+    data["expect"] = {"episodes": 2, "min_success_rate": 0.9, "max_mean_cost": 3.0, "speedup": 10.0}
+    path = tmp_path / "ok.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert load(path).expect.speedup == 10.0
+    data["expect"]["speedup"] = 0.0
+    assert "expect.speedup: must be positive" in error_of(data, tmp_path)
+    data["expect"] = {"episodes": 0}
+    assert "expect.episodes: must be positive" in error_of(data, tmp_path)
+
+
 def test_radius_out_of_range(strike_path, tmp_path):
     data = base(strike_path)
     data["layout"]["radars"][1]["radius_km"] = -4.0

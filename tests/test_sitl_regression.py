@@ -1,8 +1,9 @@
 """SITL regression tests: the shipped models fly every scenario that has an ``expect:`` block.
 
-Each scenario's missions are flown end to end by ``python -m mavlink_bridge.fly`` in lockstep: the
-bundled SITL world, one companion process per UAV (Kalman filter, observation, policy, setpoints over
-MAVLink), scored from the world's truth log. The layouts come from seeds training never drew from
+Each scenario's missions are flown end to end by ``python -m mavlink_bridge.fly`` in lockstep (or at
+the ``expect.speedup`` the scenario names, for links with latency or loss): the bundled SITL world,
+one companion process per UAV (Kalman filter, observation, policy, setpoints over MAVLink), scored
+from the world's truth log. The layouts come from seeds training never drew from
 (training seeds its layout generators with 0-2; these start at 7001). A failure prints the
 per-mission table.
 
@@ -45,9 +46,10 @@ def test_shipped_models_meet_the_scenario_expectations(scenario: Path, tmp_path:
     expect = load(scenario).expect
     assert expect is not None
     out = tmp_path / "fly.json"
+    clock = ["--lockstep"] if expect.speedup is None else ["--speedup", str(expect.speedup)]
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(scenario), "--models", str(MODELS),
-         "--episodes", str(expect.episodes), "--seed", str(EVAL_SEED), "--lockstep", "--json", str(out), "--no-progress"],
+         "--episodes", str(expect.episodes), "--seed", str(EVAL_SEED), *clock, "--json", str(out), "--no-progress"],
         capture_output=True, text=True, timeout=880, env=dict(os.environ, PYTHONPATH=str(REPO)),
     )
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -200,6 +200,10 @@ class Expect:
     """Minimum fraction of missions with the target hit."""
     max_mean_cost: float = 3.0
     """Maximum mean hazard cost per UAV per episode."""
+    speedup: float | None = None
+    """Fly at real time x this instead of lockstep. For links with latency or loss: under lockstep the
+    SITL runs link delays on the wall clock and a lost setpoint holds the world until the vehicle's
+    wall-clock timeout, so a 200 ms link would stretch every 0.1 s step to over 0.4 s of wall time."""
 
 
 @dataclass(frozen=True)
@@ -399,6 +403,7 @@ def validate(s: Scenario, source: str) -> None:
         check(s.expect.episodes > 0, "expect.episodes", "must be positive")
         check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
         check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
+        check(s.expect.speedup is None or s.expect.speedup > 0, "expect.speedup", "must be positive")
 
 
 def _max_radius_km(s: Scenario) -> float:
