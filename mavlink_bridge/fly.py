@@ -287,8 +287,8 @@ class MissionRunner:
                 "--truth-log", str(truth), "--linger-s", "0.2"]
         if cfg.lockstep:
             argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
-        else:
-            argv += ["--speedup", repr(cfg.speedup)]
+        else:  # the world waits for all three companions, as in lockstep, then runs at real time x speedup
+            argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
         if cfg.signing_key_path is not None:
             argv += ["--signing-key", str(cfg.signing_key_path)]
         log = mdir / "sitl.log"

@@ -59,8 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--lockstep-start",
         choices=[m.value for m in LockstepStart],
         default=LockstepStart.ALL.value,
-        help="lockstep: start once all (default) or any vehicle is armed in GUIDED",
+        help="lockstep (or --hold-start): start once all (default) or any vehicle is armed in GUIDED",
     )
+    p.add_argument("--hold-start", action="store_true", help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED")
     p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
     p.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
     p.add_argument("--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here")
@@ -83,6 +84,7 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         clock=ClockMode.LOCKSTEP if args.lockstep else ClockMode.REALTIME,
         speedup=1.0 if args.speedup is None else args.speedup,
         lockstep_start=LockstepStart(args.lockstep_start),
+        hold_start=args.hold_start,
         signing_key=key,
         truth_log=args.truth_log,
         layout_out=args.layout_out,

@@ -49,7 +49,11 @@ class SitlConfig:
     speedup: float = 1.0
     """Simulated seconds per wall second (REALTIME; also the pace of an unattended lockstep world)."""
     lockstep_start: LockstepStart = LockstepStart.ALL
-    """LOCKSTEP only: which vehicles must be armed in GUIDED before the first step."""
+    """Which vehicles must be armed in GUIDED before the first step (LOCKSTEP, or REALTIME with ``hold_start``)."""
+    hold_start: bool = False
+    """REALTIME: hold the world at t = 0, like lockstep, until the ``lockstep_start`` vehicles are armed in
+    GUIDED, then run at real time x speedup. Without it the vehicles fly from the ready line, and at
+    10x the few wall seconds that companions take to start are a minute of uncontrolled flight."""
     signing_key: bytes | None = None
     """32-byte MAVLink 2 signing key; None = signing off."""
     truth_log: Path | None = None

@@ -26,6 +26,7 @@ All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step 
   setpoint timeout is measured on the wall clock there, because simulated time stands still while
   the world waits for it); its next setpoint brings it back into the loop. While nobody is in the
   loop (all disarmed, in MANUAL or in failsafe) the world runs at real time (times ``speedup``).
+* ``--hold-start`` (real time): the same start gate as lockstep, then real time x ``speedup``.
   After every lockstep step each vehicle sends SYSTEM_TIME (the step "tick"), so a client sees every
   step even when its other streams are slower than the step rate. While the world holds still,
   each vehicle sends a snapshot (heartbeat, status, flags, position) once per wall second.
@@ -130,7 +131,7 @@ class WorldRunner:
         self.flags = MissionFlags()
         self.clock = Clock(unix_start_s=time.time())
         self._stop = threading.Event()
-        self._phase = _Phase.HOLD if self.lockstep else _Phase.RUN
+        self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
         self._end: MissionEnd | None = None
         self._linger_steps = 0
         self._truth: TruthLog | None = None
@@ -278,9 +279,10 @@ class WorldRunner:
         if self._phase is _Phase.HOLD:
             if not self._start_gate_open():
                 return self._keepalive(now)
-            _log.info("lockstep: start gate open, the world starts")
+            _log.info("start gate open, the world starts")
             self._phase = _Phase.RUN
             self._barrier_wall = now
+            self._anchor(now)  # real time: the schedule starts now, not when the world was created
         if self._phase is _Phase.RUN:
             return self._advance_lockstep(now) if self.lockstep else self._advance_paced(now)
         if self._phase is _Phase.LINGER:

@@ -424,12 +424,13 @@ def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path
     # (noise-free fixes: the filter starts exactly there), so the bridge's observation is training's.
     from tssac_core.observation import observe
     from tssac_core.policy import Policy
+    from tssac_core.routes import RouteMap
 
     policy = Policy.load(model, Role.DECOY)
     scen = load(scen_file)
     world = World(scen, 1)
     world.reset([0], [scen.layout])
-    first = action_to_setpoint(tuple(policy.act(observe(world, 0, policy.observation_mode)[0])), spec)
+    first = action_to_setpoint(tuple(policy.act(observe(world, 0, policy.observation_mode, RouteMap())[0])), spec)
     assert setpoints[0] == pytest.approx((first.yaw_rate_rad_s, first.accel_m_s2), abs=1e-4)
 
 

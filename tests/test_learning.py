@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tssac_core.env import RoleTask
+from tssac_core.observation import ObservationMode
 from tssac_core.policy import Policy
 from tssac_core.scenario import Layout, Radar, Role, Start, dump, load
 from tssac_core.train import main
@@ -32,7 +33,8 @@ def easy_scenario(tmp: Path) -> Path:
 
 
 def greedy_return(policy: Policy | None, scenario: Path) -> float:
-    task = RoleTask(load(scenario), Role.DECOY, n=1, teammates="none", seed=0)
+    mode = policy.observation_mode if policy is not None else ObservationMode.EXTENDED
+    task = RoleTask(load(scenario), Role.DECOY, n=1, observation=mode, teammates="none", seed=0)
     obs = task.reset()
     total = 0.0
     for _ in range(120):

@@ -428,6 +428,32 @@ def test_setpoint_timeout_failsafe_and_recovery(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(40)
+def test_real_time_with_hold_start_waits_for_the_team_then_runs() -> None:
+    """--hold-start: a real-time world stands at t = 0 until every vehicle is armed in GUIDED."""
+    with sitl(speedup=10.0, hold_start=True) as s:
+        clients = [Client(p) for p in s.ports]
+        try:
+            for c in clients:
+                c.connect()
+            for c in clients[:2]:
+                c.arm()
+                c.set_mode(GUIDED)
+            time.sleep(0.5)  # 5 simulated seconds at 10x, had the world been running
+            assert int(s.runner.world.steps[0]) == 0
+            clients[2].arm()
+            clients[2].set_mode(GUIDED)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and int(s.runner.world.steps[0]) < 20:
+                for c in clients:
+                    c.setpoint(0.0, 0.0)
+                time.sleep(0.05)
+            assert int(s.runner.world.steps[0]) >= 20  # 2 simulated seconds: the clock runs
+        finally:
+            for c in clients:
+                c.close()
+
+
+@pytest.mark.timeout(40)
 def test_lockstep_advances_exactly_one_step_per_setpoint_round() -> None:
     from sim_vehicles.config import ClockMode
 
