@@ -116,7 +116,9 @@ class CompanionConfig:
     """Wall seconds to wait for the first heartbeat."""
     command_timeout_s: float = 1.0
     """Wall seconds to wait for each COMMAND_ACK."""
-    command_retries: int = 3
+    command_retries: int = 10
+    """Attempts per command. A 10% lossy link (degraded.yaml, each way) loses 19% of command round
+    trips: 3 attempts failed 0.7% of commands, about one three-UAV mission in 25; 10 fail 1e-7."""
     hold_after_s: float = 0.5
     """Vehicle seconds without a position fix after which the hold setpoint is flown."""
     silence_hold_s: float = 2.0
@@ -709,7 +711,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lockstep", action="store_true", help="the vehicle runs in lockstep: never extrapolate its clock")
     p.add_argument("--timeout-s", type=float, default=30.0, metavar="S", help="wall seconds to wait for the first heartbeat (default 30)")
     p.add_argument("--command-timeout-s", type=float, default=1.0, metavar="S", help="wall seconds per COMMAND_ACK wait (default 1)")
-    p.add_argument("--command-retries", type=int, default=3, metavar="N", help="attempts per command (default 3)")
+    p.add_argument("--command-retries", type=int, default=10, metavar="N", help="attempts per command (default 10)")
     p.add_argument("--hold-after-s", type=float, default=0.5, metavar="S", help="vehicle seconds without a fix before the hold setpoint (default 0.5)")
     p.add_argument("--silence-hold-s", type=float, default=2.0, metavar="S", help="wall seconds of silence before the hold when the clock cannot be extrapolated (default 2)")
     p.add_argument("--lost-after-s", type=float, default=10.0, metavar="S", help="wall seconds of silence before the vehicle is given up (default 10)")
