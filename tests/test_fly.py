@@ -65,8 +65,11 @@ def _pids(results: dict[str, Any]) -> list[int]:
 
 
 def _start_fly(args: list[str]) -> subprocess.Popen[bytes]:
+    # SIGINT back to its default in the child: a test run started in the background (`cmd &` in a
+    # script) inherits SIGINT ignored, and Python then installs no KeyboardInterrupt handler, so fly
+    # would not see the Ctrl-C these tests send it.
     return subprocess.Popen([sys.executable, "-m", "mavlink_bridge.fly", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            cwd=REPO, env=_env())
+                            cwd=REPO, env=_env(), preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _read_until(proc: subprocess.Popen[bytes], pattern: str, timeout_s: float) -> tuple[str, re.Match[str]]:
