@@ -72,6 +72,9 @@ class TaskStep:
     episode_return: np.ndarray
     """For worlds that ended this step: the episode's return (else 0)."""
     episode_cost: np.ndarray
+    """For worlds that ended: the episode's sum of the learner's cost (with the task's cost margin)."""
+    episode_hazard_cost: np.ndarray
+    """For worlds that ended: the learner's eq. 11 hazard cost (steps inside a radar), margin or not."""
     episode_success: np.ndarray
     """For worlds that ended: the mission succeeded (target hit)."""
     episode_task: np.ndarray
@@ -90,6 +93,7 @@ class RoleTask:
         teammates: Teammates = GUIDANCE,
         seed: int | None = None,
         reward_config: RewardConfig = RewardConfig(),
+        cost_margin_m: float = 0.0,
     ) -> None:
         self.scenario = scenario
         self.role = role
@@ -98,6 +102,9 @@ class RoleTask:
         self.pilots = resolve_pilots(role, teammates)
         self.active = tuple(p is not None for p in self.pilots)
         self.reward_config = reward_config
+        self.cost_margin_m = cost_margin_m
+        """The learner's cost counts steps within this distance of a radar's disk (0: eq. 11 exactly); the
+        mission's own figures (``world.cost_total``, ``episode_hazard_cost``) stay eq. 11."""
         self.routes = RouteMap(reward_config.route)
         """Route fields of the reward's approach term (the observation's own, in route mode, have the default margins)."""
         self.obs_routes = self.routes if reward_config.route == RouteConfig() else RouteMap()
@@ -146,6 +153,8 @@ class RoleTask:
         self._measure_detours()
         r = reward(result, moving, self.reward_config, detour_prev, self.detour_m)[:, self.j]
         cost = result.cost[:, self.j]
+        if self.cost_margin_m > 0:
+            cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
         self.ep_return += r
         self.ep_cost += cost
         return result, r, cost
@@ -166,12 +175,13 @@ class RoleTask:
         ended = terminated | truncated
         ep_return = np.where(ended, self.ep_return, 0.0)
         ep_cost = np.where(ended, self.ep_cost, 0.0)
+        ep_hazard = np.where(ended, self.world.cost_total[:, self.j], 0.0)
         success = ended & self.world.hit
         task = ended & self.world.task_done[:, self.j]
         obs = final_obs
         if ended.any():
             obs = self.reset(np.flatnonzero(ended), rng)
-        return TaskStep(obs, final_obs, r, cost, terminated, truncated, ep_return, ep_cost, success, task)
+        return TaskStep(obs, final_obs, r, cost, terminated, truncated, ep_return, ep_cost, ep_hazard, success, task)
 
 
 class UavRoleEnv(gym.Env):

@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 import tssac_core
 from tssac_core.experiment_grid import Job
 from tssac_core.scenario import ROLES
-from tssac_core.train import TrainConfig
+from tssac_core.train import TrainConfig, config_from_saved
 
 logger = logging.getLogger(__name__)
 
@@ -98,10 +98,10 @@ def job_state(job: Job) -> JobState:
 def config_difference(saved: dict[str, Any], wanted: TrainConfig) -> str:
     """'' if a run's config.json is the run the grid asks for, else the first differing setting.
 
-    A key missing from an older config.json takes TrainConfig's default, as ``train --resume`` does.
+    A key missing from an older config.json takes what ``train --resume`` gives it.
     """
     expected = json.loads(json.dumps(asdict(wanted)))  # tuples -> lists, as in config.json
-    have = {**json.loads(json.dumps(asdict(TrainConfig()))), **saved}
+    have = json.loads(json.dumps(asdict(config_from_saved(saved))))
     for key, value in expected.items():
         if key in IGNORED_SETTINGS:
             continue

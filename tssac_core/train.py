@@ -87,6 +87,10 @@ class TrainConfig:
     """torch threads (this machine has 2 cores)."""
     route_margin_km: float = 3.0
     """Reward: the way around the radars keeps this far from them (tssac_core.routes.RouteConfig)."""
+    cost_margin_km: float = 1.0
+    """The learner's cost counts steps within this distance of a radar, not only inside it: a tightened
+    constraint, so that the policy keeps clear of the radars' edges (docs/decisions.md). Evaluation,
+    validation and the hazard_cost column count eq. 11 exactly."""
     validation_episodes: int = 30
     """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
     (tssac_core.validation). 0: ship the last epoch."""
@@ -104,8 +108,24 @@ def teammates_for(role: Role, out: Path) -> dict[str, Pilot]:
     return pilots
 
 
+OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}
+"""Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly)."""
+
+
+def config_from_saved(saved: dict[str, Any]) -> TrainConfig:
+    """The TrainConfig of a run's config.json; keys it lacks take their value from before they existed."""
+    full = {**OLDER_RUN_SETTINGS, **saved}
+    return TrainConfig(**{**full, "roles": tuple(full["roles"])})
+
+
 def reward_config(cfg: TrainConfig) -> RewardConfig:
     return RewardConfig(route=RouteConfig(margin_m=cfg.route_margin_km * 1000.0))
+
+
+def make_task(cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, Pilot]) -> RoleTask:
+    """The training worlds of one role: its reward, its (tightened) cost, its teammates, its seed."""
+    return RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index,
+                    reward_config=reward_config(cfg), cost_margin_m=cfg.cost_margin_km * 1000.0)
 
 
 def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
@@ -126,6 +146,7 @@ class EpochLog:
 
     returns: list[float] = field(default_factory=list)
     costs: list[float] = field(default_factory=list)
+    hazard_costs: list[float] = field(default_factory=list)
     tasks: list[float] = field(default_factory=list)
     successes: list[float] = field(default_factory=list)
     stats: list[UpdateStats] = field(default_factory=list)
@@ -143,6 +164,7 @@ class EpochLog:
             "episodes": len(self.returns),
             "return": mean(self.returns),
             "cost": mean(self.costs),
+            "hazard_cost": mean(self.hazard_costs),
             "task_success": mean(self.tasks),
             "mission_success": mean(self.successes),
         }
@@ -163,7 +185,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
     learner = SacLagrangian(mode.size, 2, sac_cfg)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, out)
-    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index, reward_config=reward_config(cfg))
+    task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
     transferred = False
@@ -217,6 +239,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
             if ended.any():
                 log.returns += step.episode_return[ended].tolist()
                 log.costs += step.episode_cost[ended].tolist()
+                log.hazard_costs += step.episode_hazard_cost[ended].tolist()
                 log.tasks += step.episode_task[ended].astype(float).tolist()
                 log.successes += step.episode_success[ended].astype(float).tolist()
             t1 = time.perf_counter()
@@ -293,13 +316,18 @@ def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, 
 
 METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
                  *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates",
-                 "val_mission_success", "val_task_success", "val_cost", "best_epoch"]
+                 "val_mission_success", "val_task_success", "val_cost", "best_epoch", "hazard_cost"]
 
 
 def append_metrics(path: Path, row: dict[str, Any]) -> None:
+    """Append one epoch's row; a resumed run keeps the columns its file was started with."""
     new = not path.is_file()
+    fields = METRIC_FIELDS
+    if not new:
+        with path.open(newline="") as fh:
+            fields = next(csv.reader(fh), METRIC_FIELDS)
     with path.open("a", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=METRIC_FIELDS)
+        writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         if new:
             writer.writeheader()
         writer.writerow(row)
@@ -343,6 +371,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
     p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="route", help="observation (default route = extended + the way around the radars; paper = eq. 7)")
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
     p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
+    p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
@@ -359,8 +388,8 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
-    if a.validation_episodes < 0 or a.route_margin_km < 0:
-        raise UsageError("--validation-episodes and --route-margin-km must be >= 0")
+    if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:
+        raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
     overrides: dict[str, Any] = {}
     for item in a.set:
         key, _, value = item.partition("=")
@@ -372,7 +401,7 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
-        validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km,
+        validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
         init_from=str(a.init_from) if a.init_from else "",
     )
     return cfg, a.out, a.resume, a.no_progress
@@ -385,7 +414,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not config_path.is_file():
             raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
         saved = json.loads(config_path.read_text())
-        cfg = TrainConfig(**{**saved, "roles": tuple(saved["roles"])})
+        cfg = config_from_saved(saved)
     elif config_path.is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     scenario = load(cfg.scenario)

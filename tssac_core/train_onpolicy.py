@@ -167,7 +167,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     """Train one role with cfg.algo in {ppo, ppo_lag, cpo} for cfg.epochs epochs, checkpointing every
     epoch; writes ``<role>.pt``."""
     # Imported here, not at the top: train.py dispatches to this module.
-    from tssac_core.train import EpochLog, append_metrics, reward_config, role_position, save_trained_role, ship_role, teammates_for
+    from tssac_core.train import EpochLog, append_metrics, make_task, role_position, save_trained_role, ship_role, teammates_for
 
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
@@ -175,7 +175,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = make_learner(mode.size, 2, config)
     teammates = teammates_for(role, out)
-    task = RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index, reward_config=reward_config(cfg))
+    task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     finished: deque[tuple[float, int]] = deque(maxlen=config.cost_window)
     ep_len = np.zeros(cfg.envs, dtype=np.int64)
@@ -226,6 +226,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
             if ended.any():
                 log.returns += step.episode_return[ended].tolist()
                 log.costs += step.episode_cost[ended].tolist()
+                log.hazard_costs += step.episode_hazard_cost[ended].tolist()
                 log.tasks += step.episode_task[ended].astype(float).tolist()
                 log.successes += step.episode_success[ended].astype(float).tolist()
                 finished.extend(zip(step.episode_cost[ended].tolist(), ep_len[ended].tolist()))

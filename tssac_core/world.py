@@ -277,10 +277,20 @@ class World:
             truncated=truncated,
         )
 
-    def _inside_radar(self, idx: np.ndarray | slice) -> np.ndarray:
+    def near_radar(self, margin_m: float) -> np.ndarray:
+        """(N, 3): each vehicle lies within ``margin_m`` of a radar's disk (inside radius + margin).
+
+        With margin 0 this is the eq. 11 hazard; training may use a margin as a tightened constraint
+        (:class:`tssac_core.env.RoleTask`).
+        """
+        return self._inside_radar(slice(None), margin_m)
+
+    def _inside_radar(self, idx: np.ndarray | slice, margin_m: float = 0.0) -> np.ndarray:
         x, y = self.x_m[idx], self.y_m[idx]
         radar, r = self.radar_m[idx], self.radar_r_m[idx]
         inside = np.zeros(x.shape, dtype=bool)
+        if margin_m:  # unused slots have radius 0: they stay empty whatever the margin
+            r = np.where(r > 0, r + margin_m, 0.0)
         for k in range(r.shape[1]):  # a few radars: a loop of (N, 3) operations beats (N, 3, K) temporaries
             dx = x - radar[:, k, 0:1]
             dy = y - radar[:, k, 1:2]
