@@ -197,6 +197,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     base = FilterNoise.from_sensor(POS_SIGMA_M, VEL_SIGMA_M_S, MAX_ACCEL_M_S2, MAX_TURN_RATE_RAD_S)
     cases: list[tuple[str, FilterModel, FilterNoise]] = [
         ("constant_turn", FilterModel.CONSTANT_TURN, base),
+        ("constant_turn_ekf", FilterModel.CONSTANT_TURN_EKF, base),
         ("constant_velocity", FilterModel.CONSTANT_VELOCITY, base),
     ]
     # Give the constant-velocity model its best shot: its acceleration noise must cover turns.

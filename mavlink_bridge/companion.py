@@ -132,7 +132,7 @@ class CompanionConfig:
     """Wall seconds to wait for the tick's position fix once the tick is known (it usually comes in the same burst)."""
     duration_s: Optional[float] = None
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
-    filter_model: FilterModel = FilterModel.CONSTANT_TURN
+    filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
     source_system: int = 255
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
@@ -717,7 +717,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lost-after-s", type=float, default=10.0, metavar="S", help="wall seconds of silence before the vehicle is given up (default 10)")
     p.add_argument("--duration-s", type=float, metavar="S", help="stop after this many vehicle seconds of flight")
     p.add_argument("--lean-telemetry", action="store_true", help="stop the vehicle's streams the companion does not use (no ground station sharing it)")
-    p.add_argument("--filter", choices=[m.value for m in FilterModel], default=FilterModel.CONSTANT_TURN.value, help="Kalman filter model (default constant_turn)")
+    p.add_argument("--filter", choices=[m.value for m in FilterModel], default=FilterModel.CONSTANT_TURN_EKF.value, help="Kalman filter model (default constant_turn_ekf)")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info", help="log level on stderr (default info)")
     return p
 

@@ -70,7 +70,7 @@ from dataclasses import dataclass
 from typing import Optional, Protocol
 
 import numpy as np
-from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import NDArray
 
 __all__ = ["FilterModel", "FilterNoise", "VehicleStateFilter"]
@@ -108,6 +108,8 @@ class FilterModel(enum.Enum):
 
     CONSTANT_TURN = "constant_turn"
     """Eq. 5 with constant speed and turn rate, unscented filter; estimates the turn rate."""
+    CONSTANT_TURN_EKF = "constant_turn_ekf"
+    """The same model, extended filter (analytic Jacobians): the same figures at a fraction of the cost."""
     CONSTANT_VELOCITY = "constant_velocity"
     """Straight-line motion, linear filter; cheaper, no turn rate, lags in turns."""
 
@@ -294,85 +296,144 @@ def _ct_mean_x(sigmas: FloatArray, wm: FloatArray) -> FloatArray:
     return mean
 
 
-class _ConstantTurn:
-    """State [x, y, v, phi, omega]; unscented KF."""
+def _ct_q(noise: FilterNoise, state: FloatArray, dt_s: float) -> FloatArray:
+    """Process noise of the constant-turn models over dt_s, linearised at the state's speed and heading."""
+    v, phi = float(state[_V]), float(state[_PHI])
+    along = np.array([math.cos(phi), math.sin(phi)])
+    across = np.array([-math.sin(phi), math.cos(phi)])
+    q = np.zeros((5, 5))
+    # Along track: white acceleration drives [s_along, v].
+    qa = _integrator_q(noise.accel_sigma_m_s2**2, dt_s, 2)
+    q[:2, :2] += qa[0, 0] * np.outer(along, along)
+    q[:2, _V] += qa[0, 1] * along
+    q[_V, :2] += qa[0, 1] * along
+    q[_V, _V] += qa[1, 1]
+    # Across track: white omega' drives [s_across / v, phi, omega] (linearised at speed v).
+    qw = _integrator_q(noise.turn_accel_sigma_rad_s2**2, dt_s, 3)
+    q[:2, :2] += v * v * qw[0, 0] * np.outer(across, across)
+    for col, k in ((_PHI, 1), (_OMEGA, 2)):
+        q[:2, col] += v * qw[0, k] * across
+        q[col, :2] += v * qw[0, k] * across
+    q[_PHI:, _PHI:] += qw[1:, 1:]
+    return q
 
-    def __init__(self, noise: FilterNoise) -> None:
+
+def _ct_jacobian(state: FloatArray, dt: float) -> FloatArray:
+    """d _ct_fx / d state: the extended filter's transition matrix (eq. 5 at constant v and omega)."""
+    _, _, v, phi, omega = state
+    f = np.eye(5)
+    phi_end = phi + omega * dt
+    if abs(omega) > _SMALL_TURN_RAD_S:
+        ds, dc = math.sin(phi_end) - math.sin(phi), math.cos(phi) - math.cos(phi_end)
+        f[_X, _V], f[_Y, _V] = ds / omega, dc / omega
+        f[_X, _PHI], f[_Y, _PHI] = -v / omega * dc, v / omega * ds
+        f[_X, _OMEGA] = -v / omega**2 * ds + v / omega * math.cos(phi_end) * dt
+        f[_Y, _OMEGA] = -v / omega**2 * dc + v / omega * math.sin(phi_end) * dt
+    else:
+        mid = phi + 0.5 * omega * dt
+        c, s = math.cos(mid), math.sin(mid)
+        f[_X, _V], f[_Y, _V] = dt * c, dt * s
+        f[_X, _PHI], f[_Y, _PHI] = -v * dt * s, v * dt * c
+        f[_X, _OMEGA], f[_Y, _OMEGA] = -0.5 * v * dt * dt * s, 0.5 * v * dt * dt * c
+    f[_PHI, _OMEGA] = dt
+    return f
+
+
+def _ct_h_jacobian(state: FloatArray) -> FloatArray:
+    """d _ct_hx / d state."""
+    v, phi = state[_V], state[_PHI]
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array(
+        [
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, c, -v * s, 0.0],
+            [0.0, 0.0, s, v * c, 0.0],
+        ]
+    )
+
+
+class _TurnEkf(ExtendedKalmanFilter):
+    """filterpy's extended filter, with eq. 5 as its (non-linear) state transition."""
+
+    dt_s = 0.1
+
+    def predict_x(self, u: object = 0) -> None:
+        self.x = _ct_fx(self.x, self.dt_s)
+
+
+class _ConstantTurn:
+    """State [x, y, v, phi, omega]; unscented (default) or extended KF."""
+
+    def __init__(self, noise: FilterNoise, unscented: bool = True) -> None:
         self._noise = noise
-        points = MerweScaledSigmaPoints(5, alpha=0.3, beta=2.0, kappa=0.0, subtract=_ct_residual_x)
-        self._ukf = UnscentedKalmanFilter(
-            dim_x=5,
-            dim_z=4,
-            dt=0.1,
-            hx=_ct_hx,
-            fx=_ct_fx,
-            points=points,
-            x_mean_fn=_ct_mean_x,
-            residual_x=_ct_residual_x,
-        )
-        self._ukf.R = np.diag([noise.pos_sigma_m**2] * 2 + [noise.vel_sigma_m_s**2] * 2)
+        self._unscented = unscented
+        if unscented:
+            points = MerweScaledSigmaPoints(5, alpha=0.3, beta=2.0, kappa=0.0, subtract=_ct_residual_x)
+            self._kf: UnscentedKalmanFilter | _TurnEkf = UnscentedKalmanFilter(
+                dim_x=5,
+                dim_z=4,
+                dt=0.1,
+                hx=_ct_hx,
+                fx=_ct_fx,
+                points=points,
+                x_mean_fn=_ct_mean_x,
+                residual_x=_ct_residual_x,
+            )
+        else:
+            self._kf = _TurnEkf(dim_x=5, dim_z=4)
+        self._kf.R = np.diag([noise.pos_sigma_m**2] * 2 + [noise.vel_sigma_m_s**2] * 2)
 
     def initialise(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
         speed = math.hypot(*vel_m_s)
         n = self._noise
-        self._ukf.x = np.array([pos_m[0], pos_m[1], speed, math.atan2(vel_m_s[1], vel_m_s[0]), 0.0])
+        self._kf.x = np.array([pos_m[0], pos_m[1], speed, math.atan2(vel_m_s[1], vel_m_s[0]), 0.0])
         # Heading from a velocity of speed s with noise sigma per axis: sigma_phi ~ sigma / s,
         # meaningless (use pi) when the vehicle is barely moving.
         phi_sigma = min(math.pi, n.vel_sigma_m_s / max(speed, 1e-9))
-        self._ukf.P = np.diag(
+        self._kf.P = np.diag(
             [n.pos_sigma_m**2, n.pos_sigma_m**2, n.vel_sigma_m_s**2, phi_sigma**2, n.initial_turn_rate_sigma_rad_s**2]
         )
 
-    def _q(self, dt_s: float) -> FloatArray:
-        v, phi = float(self._ukf.x[_V]), float(self._ukf.x[_PHI])
-        along = np.array([math.cos(phi), math.sin(phi)])
-        across = np.array([-math.sin(phi), math.cos(phi)])
-        q = np.zeros((5, 5))
-        # Along track: white acceleration drives [s_along, v].
-        qa = _integrator_q(self._noise.accel_sigma_m_s2**2, dt_s, 2)
-        q[:2, :2] += qa[0, 0] * np.outer(along, along)
-        q[:2, _V] += qa[0, 1] * along
-        q[_V, :2] += qa[0, 1] * along
-        q[_V, _V] += qa[1, 1]
-        # Across track: white omega' drives [s_across / v, phi, omega] (linearised at speed v).
-        qw = _integrator_q(self._noise.turn_accel_sigma_rad_s2**2, dt_s, 3)
-        q[:2, :2] += v * v * qw[0, 0] * np.outer(across, across)
-        for col, k in ((_PHI, 1), (_OMEGA, 2)):
-            q[:2, col] += v * qw[0, k] * across
-            q[col, :2] += v * qw[0, k] * across
-        q[_PHI:, _PHI:] += qw[1:, 1:]
-        return q
-
     def _tidy(self) -> None:
-        self._ukf.x[_PHI] = _wrap_angle_rad(float(self._ukf.x[_PHI]))
-        self._ukf.P = 0.5 * (self._ukf.P + self._ukf.P.T)
+        self._kf.x[_PHI] = _wrap_angle_rad(float(self._kf.x[_PHI]))
+        self._kf.P = 0.5 * (self._kf.P + self._kf.P.T)
 
     def predict(self, dt_s: float) -> None:
-        self._ukf.Q = self._q(dt_s)
-        self._ukf.predict(dt=dt_s)
+        self._kf.Q = _ct_q(self._noise, self._kf.x, dt_s)
+        if isinstance(self._kf, UnscentedKalmanFilter):
+            self._kf.predict(dt=dt_s)
+        else:
+            self._kf.F = _ct_jacobian(self._kf.x, dt_s)  # at the prior mean, before predict_x moves it
+            self._kf.dt_s = dt_s
+            self._kf.predict()
         self._tidy()
 
     def update(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
-        self._ukf.update(np.array([pos_m[0], pos_m[1], vel_m_s[0], vel_m_s[1]]))
+        z = np.array([pos_m[0], pos_m[1], vel_m_s[0], vel_m_s[1]])
+        if isinstance(self._kf, UnscentedKalmanFilter):
+            self._kf.update(z)
+        else:
+            self._kf.update(z, _ct_h_jacobian, _ct_hx)
         self._tidy()
 
     def get(self) -> tuple[FloatArray, FloatArray]:
-        return self._ukf.x.copy(), self._ukf.P.copy()
+        return self._kf.x.copy(), self._kf.P.copy()
 
     def set(self, x: FloatArray, p: FloatArray) -> None:
-        self._ukf.x = x.copy()
-        self._ukf.P = p.copy()
+        self._kf.x = x.copy()
+        self._kf.P = p.copy()
 
     def pos_vel(self) -> tuple[float, float, float, float]:
-        x = self._ukf.x
+        x = self._kf.x
         v, phi = float(x[_V]), float(x[_PHI])
         return float(x[_X]), float(x[_Y]), v * math.cos(phi), v * math.sin(phi)
 
     def turn_rate_rad_s(self) -> Optional[float]:
-        return float(self._ukf.x[_OMEGA])
+        return float(self._kf.x[_OMEGA])
 
     def pos_cov(self) -> FloatArray:
-        return np.asarray(self._ukf.P[:2, :2], dtype=np.float64)
+        return np.asarray(self._kf.P[:2, :2], dtype=np.float64)
 
 
 class VehicleStateFilter:
@@ -386,11 +447,13 @@ class VehicleStateFilter:
     time — valid because nothing but prediction happened in between.
     """
 
-    def __init__(self, noise: FilterNoise | None = None, model: FilterModel = FilterModel.CONSTANT_TURN) -> None:
+    def __init__(self, noise: FilterNoise | None = None, model: FilterModel = FilterModel.CONSTANT_TURN_EKF) -> None:
         self._noise = noise if noise is not None else FilterNoise()
         self._model = model
         self._backend: _Backend = (
-            _ConstantTurn(self._noise) if model is FilterModel.CONSTANT_TURN else _ConstantVelocity(self._noise)
+            _ConstantVelocity(self._noise)
+            if model is FilterModel.CONSTANT_VELOCITY
+            else _ConstantTurn(self._noise, unscented=model is FilterModel.CONSTANT_TURN)
         )
         self._t_s: Optional[float] = None
         # Posterior after the last applied measurement (or reset): time, mean, covariance.
