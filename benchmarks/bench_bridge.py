@@ -79,6 +79,7 @@ def summarise(name: str, run: dict[str, Any]) -> dict[str, Any]:
     wall = np.array([m["wall_time_s"] for m in missions])
     flight = np.array([m.get("flight_wall_s") or np.nan for m in missions])
     cpu = np.array([m["cpu_s"] for m in missions])
+    flight_cpu = np.array([m.get("flight_cpu_s") or np.nan for m in missions])
     ours = float(cpu.sum())
     other = max(0.0, run["machine_busy_s"] - ours)
     return {
@@ -103,6 +104,9 @@ def summarise(name: str, run: dict[str, Any]) -> dict[str, Any]:
         "mission_cpu_s": float(cpu.mean()),
         "cpu_s_per_sim_s": float((cpu / sim).mean()),
         "idle_machine_speed_x_bound": float((sim / (cpu / run["cpus"])).mean()),
+        "flight_cpu_s": float(np.nanmean(flight_cpu)),
+        "flight_cpu_ms_per_step": float(np.nanmean(flight_cpu / sim)) * 100.0,
+        "idle_machine_flight_speed_x_bound": float(np.nanmean(sim / (flight_cpu / run["cpus"]))),
         "other_load_cpus": other / run["wall_s"],
         "run_wall_s": run["wall_s"],
     }
@@ -136,6 +140,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"({fig['mission_speed_x']:.1f}x real time), flight {fig['flight_wall_s']:.1f} s ({fig['flight_speed_x']:.1f}x; target {TARGET_SPEED_X:g}x)")
         print(f"  CPU {fig['mission_cpu_s']:.1f} s per mission ({fig['cpu_s_per_sim_s'] * 1000:.0f} ms per simulated s); "
               f"other load on the machine {fig['other_load_cpus']:.2f} CPUs; bound on an idle machine {fig['idle_machine_speed_x_bound']:.0f}x")
+        print(f"  flight alone: {fig['flight_cpu_s']:.1f} CPU s ({fig['flight_cpu_ms_per_step']:.2f} ms per 0.1 s step, world and companions); "
+              f"bound on an idle machine {fig['idle_machine_flight_speed_x_bound']:.0f}x")
     out = {
         "scenario": str(args.scenario.relative_to(REPO) if args.scenario.is_relative_to(REPO) else args.scenario),
         "clock": "lockstep",

@@ -258,6 +258,8 @@ class CompanionResult:
     vehicle_time_s: Optional[float]
     flight_wall_s: Optional[float]
     """Wall seconds between the first and the last control step."""
+    flight_cpu_s: Optional[float]
+    """This process's CPU seconds between the first and the last control step."""
     counters: CompanionCounters
     link: dict[str, int]
     latency_ms: dict[str, float]
@@ -310,6 +312,8 @@ class Companion:
         self.latencies_s: list[float] = []
         self._first_control_wall_s: Optional[float] = None
         self._last_control_wall_s: Optional[float] = None
+        self._first_control_cpu_s = 0.0
+        self._last_control_cpu_s = 0.0
         self.phase = Phase.CONNECT
         self._stop_requested = False
         self._link: Optional[MavLink] = None
@@ -596,7 +600,9 @@ class Companion:
         now = time.monotonic()
         if self._first_control_wall_s is None:
             self._first_control_wall_s = now
+            self._first_control_cpu_s = time.process_time()
         self._last_control_wall_s = now
+        self._last_control_cpu_s = time.process_time()
         setpoint, why = self._decide(t_ms)
         if why is None:
             if self._holding is not None:
@@ -679,6 +685,7 @@ class Companion:
             vehicle_time_s=None if self.vt_ms is None else self.vt_ms / 1000.0,
             flight_wall_s=None if self._first_control_wall_s is None or self._last_control_wall_s is None
             else self._last_control_wall_s - self._first_control_wall_s,
+            flight_cpu_s=None if self._first_control_wall_s is None else self._last_control_cpu_s - self._first_control_cpu_s,
             counters=self.counters,
             link=asdict(link.counters) if link is not None else {},
             latency_ms=latency,

@@ -276,6 +276,10 @@ class MissionRunner:
         if flight and row.get("sim_time_s"):
             row["flight_wall_s"] = round(max(flight), 3)
             row["speed_x"] = round(row["sim_time_s"] / max(flight), 1)
+        # The CPU the flight took, world and companions, start-up excluded (what bench_bridge reports).
+        cpus = [s.get("flight_cpu_s") for s in statuses.values()] + ([row.get("world_flight_cpu_s")] if sitl is not None else [])
+        if cpus and all(c is not None for c in cpus):
+            row["flight_cpu_s"] = round(sum(cpus), 3)
         if timed_out:
             row["end"] = "timeout"
             row["success"] = False
@@ -393,6 +397,7 @@ class MissionRunner:
                 "status": data.get("status"),
                 "vehicle_time_s": data.get("vehicle_time_s"),
                 "flight_wall_s": data.get("flight_wall_s"),
+                "flight_cpu_s": data.get("flight_cpu_s"),
                 "control_steps": counters.get("control_steps"),
                 "holds": counters.get("holds"),
                 "restarts": counters.get("restarts"),
@@ -430,6 +435,7 @@ def _outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
         "within_cost_limit": {k: v <= cost_limit for k, v in record.cost.items()},
         "task_done": tasks,
         "failsafe_steps": record.failsafe_steps,
+        "world_flight_cpu_s": record.summary.get("flight_cpu_s") if record.summary is not None else None,
     }
 
 

@@ -77,6 +77,8 @@ _MASK_OPTIONAL = _TM.POSITION_TARGET_TYPEMASK_AY_IGNORE | _TM.POSITION_TARGET_TY
 SETPOINT_FRAMES = frozenset({_TM.MAV_FRAME_BODY_FRD, _TM.MAV_FRAME_BODY_NED})
 
 _EPS_S = 1e-6
+COALESCE_BYTES = 1200
+"""Largest datagram :meth:`Vehicle.flush` builds from several frames (below any path MTU on a LAN)."""
 M = mavlink2  # message ids and enums
 
 DEFAULT_INTERVALS_S: dict[int, float | None] = {
@@ -317,9 +319,22 @@ class Vehicle:
                 self._handle(msg, addr)
 
     def flush(self) -> None:
-        """Send the datagrams the outgoing channel delivers now."""
+        """Send the frames the outgoing channel delivers now, packed into datagrams per destination.
+
+        Frames released together for the same destination share one datagram (in order, up to
+        COALESCE_BYTES), as a flight controller's UDP output does: one system call per destination and
+        step instead of one per message. Loss, duplication and latency still act on every frame.
+        """
+        batches: dict[Address | None, list[bytes]] = {}
         for data, dest in self.tx.pop_due(self.clock.link_s):
-            self.endpoint.sendto(data, dest)
+            frames = batches.setdefault(dest, [])
+            if frames and len(frames[-1]) + len(data) <= COALESCE_BYTES:
+                frames[-1] += data
+            else:
+                frames.append(bytes(data))
+        for dest, frames in batches.items():
+            for datagram in frames:
+                self.endpoint.sendto(datagram, dest)
 
     def next_link_due_s(self) -> float | None:
         """Link time at which a channel next has something to deliver."""

@@ -133,6 +133,8 @@ class WorldRunner:
         self._stop = threading.Event()
         self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
         self._end: MissionEnd | None = None
+        self._first_step_cpu_s: float | None = None
+        """This process's CPU clock at the first world step (the summary reports the flight's CPU)."""
         self._linger_steps = 0
         self._truth: TruthLog | None = None
         self._tlogs: list[BinaryIO] = []
@@ -367,6 +369,8 @@ class WorldRunner:
 
     def _step(self) -> None:
         w = self.world
+        if self._first_step_cpu_s is None:
+            self._first_step_cpu_s = time.process_time()
         actions = np.zeros((1, len(ROLES), 2))
         for v in self.vehicles:
             actions[0, v.index] = v.action()
@@ -455,6 +459,7 @@ class WorldRunner:
                     "identified": bool(w.identified[0]),
                     "hit": bool(w.hit[0]),
                     "counters": {v.role: self.counters_of(v) for v in self.vehicles},
+                    "flight_cpu_s": None if self._first_step_cpu_s is None else round(time.process_time() - self._first_step_cpu_s, 4),
                 }
             )
         self.close()

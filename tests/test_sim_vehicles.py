@@ -176,6 +176,33 @@ def test_heartbeat_and_telemetry_at_their_rates_in_sim_time() -> None:
 
 
 @pytest.mark.timeout(30)
+def test_frames_of_one_step_share_a_datagram() -> None:
+    # A step's telemetry (ATTITUDE, the two position messages, VFR_HUD...) leaves in one datagram per
+    # client, every frame whole and valid, no datagram larger than COALESCE_BYTES unless it is one frame.
+    from sim_vehicles.vehicle import COALESCE_BYTES
+
+    with sitl(scenario(), speedup=20.0) as s, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        sender = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+        sock.sendto(sender.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(sender), ("127.0.0.1", s.ports[0]))
+        frames_per_datagram: list[int] = []
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline and len(frames_per_datagram) < 40:
+            if not select.select([sock], [], [], 0.1)[0]:
+                continue
+            data = sock.recv(65535)
+            parser = mavlink2.MAVLink(None)
+            msgs = parser.parse_buffer(data) or []
+            assert parser.buf_len() == 0, "a frame was cut"
+            assert all(m.get_type() != "BAD_DATA" for m in msgs)
+            assert len(msgs) == 1 or len(data) <= COALESCE_BYTES
+            frames_per_datagram.append(len(msgs))
+        s.stop()
+    assert len(frames_per_datagram) >= 10
+    assert np.median(frames_per_datagram) >= 4, frames_per_datagram
+
+
+@pytest.mark.timeout(30)
 def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
     with sitl(speedup=10.0) as s, Client(s.ports[0]) as gcs, Client(s.ports[0], source_system=1, source_component=191) as companion:
         gcs.connect()
