@@ -8,11 +8,13 @@ GLOBAL_POSITION_INT (after projecting to the local frame), stamped with the vehi
 
 Models (:class:`FilterModel`)
 -----------------------------
-* ``CONSTANT_TURN`` (default): state [x, y, v, phi, omega]; eq. 5 with u and omega' as white noise,
-  integrated exactly over each step (constant speed and turn rate); filterpy's
-  ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints`` (alpha 0.3, beta 2, kappa 0). phi is
-  wrapped to [-pi, pi) in the state residual, in the circular weighted mean of the sigma points and
-  after every step. Measurement h(x) = [x, y, v cos phi, v sin phi].
+* ``CONSTANT_TURN_EKF`` (default): state [x, y, v, phi, omega]; eq. 5 with u and omega' as white
+  noise, integrated exactly over each step (constant speed and turn rate); filterpy's
+  ``ExtendedKalmanFilter`` with the analytic Jacobians of that transition and of the measurement
+  h(x) = [x, y, v cos phi, v sin phi]. phi is wrapped to [-pi, pi) after every step.
+* ``CONSTANT_TURN``: the same model with filterpy's ``UnscentedKalmanFilter`` and
+  ``MerweScaledSigmaPoints`` (alpha 0.3, beta 2, kappa 0); phi is wrapped in the state residual and
+  in the circular weighted mean of the sigma points.
 * ``CONSTANT_VELOCITY``: state [x, y, v_east, v_north]; filterpy's linear ``KalmanFilter``;
   acceleration is white noise on each axis. It has no turn rate, so a turn is unmodelled
   acceleration (v * omega = 13 m/s^2 at 250 m/s and 3 deg/s): its process noise has to cover that,
@@ -33,32 +35,35 @@ its best position error on the manoeuvring track in a sweep 2.5-40 (the JSON has
 
 Constant turn, 250 m/s, 3 deg/s (raw measurement position RMS 14.1 m):
 
-================================  =============  ===================
-figure                            constant turn  constant velocity
-================================  =============  ===================
-RMS position error (m)            1.51           1.52  [1.53]
-RMS heading error (deg)           0.14           0.30  [0.21]
-RMS speed error (m/s)             0.61           0.61  [0.79]
-RMS turn-rate error (deg/s)       0.37           --
-position error after 2 s gap (m)  4.6 / 11.1     28.3 / 31.5  [26.8 / 30.6]
-position_sigma_m after the gap    10.8           6.3  [11.9]
-update + predict_to, per call     287 + 181 us   64 + 25 us
-================================  =============  ===================
+==================================  ==============  =============  ==================
+figure                              constant turn   constant turn  constant velocity
+                                    (EKF, default)  (UKF)
+==================================  ==============  =============  ==================
+RMS position error (m)              1.51            1.51           1.52  [1.53]
+RMS heading error (deg)             0.14            0.14           0.30  [0.21]
+RMS speed error (m/s)               0.61            0.61           0.61  [0.79]
+RMS turn-rate error (deg/s)         0.37            0.37           --
+position error after 2 s gap (m)    4.6 / 11.1      4.6 / 11.1     28.3 / 31.5  [26.8 / 30.6]
+position_sigma_m after the gap      10.8            10.8           6.3  [11.9]
+update + predict_to, per call (us)  212 + 104       684 + 427      159 + 60
+==================================  ==============  =============  ==================
 
-Manoeuvring (200 m/s; turns +5, -4, +2 deg/s; +/-10 m/s^2 for 5 s; the gap spans a turn
-reversal): constant turn 1.57 m, 0.18 deg, gap 10.4 / 20.0 m (sigma 9.3 m); constant velocity
-1.67 m, 0.37 deg, gap 19.8 / 22.9 m (sigma 6.3 m) [1.55 m, 0.24 deg, 18.2 / 22.0 m].
+(Times from one run on a loaded machine; their ratios are what counts.) Manoeuvring (200 m/s;
+turns +5, -4, +2 deg/s; +/-10 m/s^2 for 5 s; the gap spans a turn reversal): both constant-turn
+filters 1.57 m, 0.18 deg, gap 10.4 / 20.0 m (sigma 9.3 m); constant velocity 1.67 m, 0.37 deg,
+gap 19.8 / 22.9 m (sigma 6.3 m) [1.55 m, 0.24 deg, 18.2 / 22.0 m].
 
-Choice. With 10 Hz velocity measurements both models estimate position equally well (about 1.5 m
+Choice. With 10 Hz velocity measurements every model estimates position equally well (about 1.5 m
 DRMS, ten times better than the raw fixes, and ``position_sigma_m`` agrees with it). The
-constant-turn model is the default because it is as good or better at everything else: heading error 0.14
-deg against 0.21-0.30, a turn-rate estimate, and a 2 s dropout in a steady turn costs 4.6 m
-against 26-28 m. No retuning of the constant-velocity model fixes the last one (its error is the
-unmodelled v * omega * t^2 / 2 = 26 m; more acceleration noise only widens its sigma), and at the
-noise that suits its position estimate its sigma (6 m) understates that error. The constant-turn
-model costs about 0.5 ms per 10 Hz cycle, negligible on a companion computer. The
-constant-velocity model stays selectable as the cheap baseline that the benchmark and the tests
-compare against.
+constant-turn model is the default because it is as good or better at everything else: heading
+error 0.14 deg against 0.21-0.30, a turn-rate estimate, and a 2 s dropout in a steady turn costs
+4.6 m against 26-28 m. No retuning of the constant-velocity model fixes the last one (its error is
+the unmodelled v * omega * t^2 / 2 = 26 m; more acceleration noise only widens its sigma), and at
+the noise that suits its position estimate its sigma (6 m) understates that error. At 10 Hz the
+model is nearly linear over a step, so the extended and the unscented filter agree to millimetres
+(pinned by a test); the extended one costs a third as much, which counts in a control loop that the
+SITL runs 50 times faster than real time. The unscented and the constant-velocity filters stay
+selectable.
 """
 
 from __future__ import annotations
