@@ -379,17 +379,19 @@ class WorldRunner:
         step = int(w.steps[0])
         self.clock.sim_s = step * self.dt_s
         self._last_output_wall = self.clock.wall_s
-        for v in self.vehicles:
-            v.observe(self._truth_of(v.index, actions[0, v.index], float(v_before[v.index])))
         self.flags.radar_on = bool(w.radar_on[0])
         self.flags.identified = bool(w.identified[0])
         self.flags.hit = bool(w.hit[0])
+        for v in self.vehicles:
+            v.observe(self._truth_of(v.index, actions[0, v.index], float(v_before[v.index])))
+            # Each vehicle's telemetry leaves before the next vehicle's is built and before the
+            # bookkeeping below: its client starts on the step while the world finishes it.
+            v.publish(tick=self.lockstep)
+            v.flush()
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
         if self._truth is not None:
             flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
             self._truth.step(step, self.clock.sim_s, flags, [self._row(v, float(result.cost[0, v.index])) for v in self.vehicles])
-        for v in self.vehicles:
-            v.publish(tick=self.lockstep)
         for event in events:
             _log.info("t=%.1f s: %s", event.time_s, event.statustext()[1])
             if event.kind is EventKind.MISSION_END:
