@@ -187,6 +187,11 @@ class World:
     def max_radars(self) -> int:
         return self.radar_r_m.shape[1]
 
+    @property
+    def layout_version(self) -> int:
+        """Grows whenever any world gets a new layout (reset): one number to compare instead of ``layout_id``."""
+        return self._resets
+
     def _build_constants(self) -> None:
         """Per-role constants broadcast to (N, 3) and the per-layout arrays of every world."""
         c, shape = self.c, (self.n, N_ROLES)
