@@ -346,8 +346,9 @@ class World:
         self.v_m_s = v_new
         # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices (eq. 6 heading bounds).
         phi = self.phi_rad + theta
-        phi = np.where(phi >= math.pi, phi - 2 * math.pi, phi)
-        self.phi_rad = np.where(phi < -math.pi, phi + 2 * math.pi, phi)
+        np.subtract(phi, 2 * math.pi, out=phi, where=phi >= math.pi)
+        np.add(phi, 2 * math.pi, out=phi, where=phi < -math.pi)
+        self.phi_rad = phi
 
     def _measure_zones(self, moving: np.ndarray) -> np.ndarray:
         """Distances to the SAM and to each role's zone after the move; returns in_zone (N, 3)."""
@@ -402,7 +403,7 @@ class World:
     def _end_worlds(self, hit_now: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Count the step; a hit or a vehicle leaving ends a world, the episode cap truncates it."""
         self.steps += self.running
-        terminated = hit_now | np.logical_or.reduce(out, axis=1)
+        terminated = hit_now | _any_vehicle(out)
         terminated &= self.running
         self.running &= ~terminated
         truncated = self.steps >= self.c.episode_steps
@@ -426,15 +427,13 @@ class World:
         """(N, 3): inside any radar's disk of squared radius ``r2`` (K, N, 3): dx^2 + dy^2 < r^2."""
         d = self._xy[:, None] - self._radar_xy  # (2, K, N, 3)
         d *= d
-        inside = np.add(d[0], d[1]) < r2
-        return np.logical_or.reduce(inside, axis=0)
+        return _any_radar(np.add(d[0], d[1]) < r2)
 
     def _inside_radar(self, idx: np.ndarray) -> np.ndarray:
         """(n, 3) for worlds ``idx`` (reset): inside any radar's disk."""
         d = self._xy[:, idx][:, None] - self._radar_xy[:, :, idx]
         d *= d
-        inside = np.add(d[0], d[1]) < self._radar_r2[0.0][:, idx]
-        return np.logical_or.reduce(inside, axis=0)
+        return _any_radar(np.add(d[0], d[1]) < self._radar_r2[0.0][:, idx])
 
     def _sinc(self, half: np.ndarray) -> np.ndarray:
         """sin(h) / h; a Taylor series when every |h| is small (error < h^6 / 5040, under 1e-12)."""
@@ -454,6 +453,20 @@ def _zone_distance(sam_dist_m: np.ndarray, inner_m: np.ndarray, outer_m: np.ndar
     np.maximum(dist, inner_m - sam_dist_m, out=dist)
     np.maximum(dist, 0.0, out=dist)
     return dist
+
+
+def _any_vehicle(flags: np.ndarray) -> np.ndarray:
+    """(N,) any of the three columns of (N, 3) flags; two element-wise ORs (a reduction along an axis of
+    length 3 runs N tiny inner loops, several times slower at large N)."""
+    return flags[:, 0] | flags[:, 1] | flags[:, 2]
+
+
+def _any_radar(inside: np.ndarray) -> np.ndarray:
+    """(N, 3) any over the leading radar axis of (K, N, 3) flags."""
+    hit = inside[0].copy()
+    for k in range(1, inside.shape[0]):
+        hit |= inside[k]
+    return hit
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
