@@ -53,6 +53,7 @@ question that three nearest-radar entries only answer after much learning.
 from __future__ import annotations
 
 import enum
+import functools
 
 import numpy as np
 
@@ -103,8 +104,7 @@ def build_observation(
     role_index: int,
     mode: ObservationMode,
     c: WorldConstants,
-    x_m: np.ndarray,
-    y_m: np.ndarray,
+    xy_m: np.ndarray,
     v_m_s: np.ndarray,
     phi_rad: np.ndarray,
     sam_m: np.ndarray,
@@ -117,18 +117,17 @@ def build_observation(
 ) -> np.ndarray:
     """Observations of one role in N worlds, (N, mode.size) float32.
 
-    Vehicle arrays are (N,) for the observing UAV; ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
+    Vehicle arrays are the observing UAV's: position ``xy_m`` (N, 2), the others (N,); ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
     ``radar_r_m`` (N, K); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode
     only). This is the only place observations are made.
     """
     if mode is ObservationMode.PAPER:
-        return _paper_observation(role_index, c, x_m, y_m, v_m_s, phi_rad, target_m)
+        return _paper_observation(role_index, c, xy_m[:, 0], xy_m[:, 1], v_m_s, phi_rad, target_m)
     j = role_index
     area = c.area_m
-    n = x_m.shape[0]
+    n = xy_m.shape[0]
     out = np.empty((n, _SIZES[mode]))
-    np.divide(x_m, area, out=out[:, 0])
-    np.divide(y_m, area, out=out[:, 1])
+    np.divide(xy_m, area, out=out[:, 0:2])
     _speed(v_m_s, c, j, out=out[:, 2])
     heading = out[:, 3:5]  # cos phi, sin phi
     np.cos(phi_rad, out=out[:, 3])
@@ -136,9 +135,7 @@ def build_observation(
 
     # The target, the SAM and the radars in one pass: ranges and bearings relative to the heading, (N, 2 + K).
     points = np.concatenate([target_m[:, None, :], sam_m[:, None, :], radar_m], axis=1)
-    delta = np.empty(points.shape)
-    np.subtract(points[:, :, 0], x_m[:, None], out=delta[:, :, 0])
-    np.subtract(points[:, :, 1], y_m[:, None], out=delta[:, :, 1])
+    delta = points - xy_m[:, None, :]
     d = np.hypot(delta[:, :, 0], delta[:, :, 1])
     inv = np.maximum(d, 1e-9)
     np.divide(1.0, inv, out=inv)  # on the point itself the bearing is (0, 0)
@@ -205,12 +202,20 @@ def _nearest_radars(d: np.ndarray, bearing: np.ndarray, radius_m: np.ndarray) ->
     np.subtract(d, radius_m, out=feats[:, :k, 0])
     feats[:, :k, 0] /= LOCAL_SCALE_M
     feats[:, :k, 1:] = bearing
-    feats[:, k:] = _FAR_RADAR
+    if k < N_RADAR_FEATURES:
+        feats[:, k:] = _FAR_RADAR
     padding = radius_m <= 0
     if padding.any():
         feats[:, :k] = np.where(padding[:, :, None], _FAR_RADAR, feats[:, :k])
     order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
-    return feats[np.arange(n)[:, None], order].reshape(n, -1)
+    return feats[_rows(n), order].reshape(n, -1)
+
+
+@functools.lru_cache(maxsize=16)
+def _rows(n: int) -> np.ndarray:
+    """Row indices (N, 1) for picking per-row columns by fancy indexing."""
+    return np.arange(n)[:, None]
+
 
 
 def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
@@ -235,8 +240,7 @@ def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteM
         j,
         mode,
         world.c,
-        world.x_m[:, j],
-        world.y_m[:, j],
+        world.xy_m[:, :, j].T,
         world.v_m_s[:, j],
         world.phi_rad[:, j],
         world.sam_m,

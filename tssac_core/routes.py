@@ -11,6 +11,7 @@ field into the *detour*: how much longer the way to the disk is than the straigh
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -116,25 +117,35 @@ class FieldCache:
 
 def sample_bilinear(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
     """Bilinear interpolation of each world's field (N, size, size) at positions (N, K) in metres."""
+    return _sample_stacked(fields, grid_m, np.stack([x_m, y_m]))
+
+
+def _sample_stacked(fields: np.ndarray, grid_m: float, xy_m: np.ndarray) -> np.ndarray:
+    """:func:`sample_bilinear` at positions stacked x over y, (2, N, K)."""
     n, size = fields.shape[0], fields.shape[1]
     top = size - 1.000001  # so that the lower corner index is at most size - 2
-    f = np.empty((2, *x_m.shape))  # fractional cell coordinates, x and y stacked: one call per operation
-    np.multiply(x_m, 1.0 / grid_m, out=f[0])
-    np.multiply(y_m, 1.0 / grid_m, out=f[1])
+    f = xy_m * (1.0 / grid_m)  # fractional cell coordinates, x and y in one call per operation
     f -= 0.5
     np.maximum(f, 0.0, out=f)
     np.minimum(f, top, out=f)
     ij = f.astype(np.intp)
     t = f - ij  # (tx, ty)
-    k = np.arange(n).reshape((n,) + (1,) * (x_m.ndim - 1)) * size + ij[0]
-    k *= size
+    k = ij[0] * size
     k += ij[1]
+    row_start, corner_offsets = _flat_offsets(n, size)
+    k += row_start  # the flat index of cell (i, j) of world w: (w size + i) size + j
     # The four corners (i, j), (i, j + 1), (i + 1, j), (i + 1, j + 1) in one gather, (N, K, 4).
-    corners = fields.reshape(-1)[k[..., None] + np.array([0, 1, size, size + 1])]
+    corners = fields.reshape(-1)[k[..., None] + corner_offsets]
     ty = t[1][..., None]
     low_high = corners[..., 0::2] + ty * (corners[..., 1::2] - corners[..., 0::2])  # along y at i and at i + 1
     low, high = low_high[..., 0], low_high[..., 1]
     return low + t[0] * (high - low)
+
+
+@functools.lru_cache(maxsize=16)
+def _flat_offsets(n: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Start of each world's field in the flattened (N, size, size) fields, (N, 1); the four corners' offsets."""
+    return np.arange(n)[:, None] * (size * size), np.array([0, 1, size, size + 1])
 
 
 def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,9 +196,11 @@ class RouteMap:
     def detour_m(self, world: World, vehicle: int | None = None) -> np.ndarray:
         """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""
         cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
-        x, y = world.x_m[:, cols], world.y_m[:, cols]
-        route = sample_bilinear(self.cache.fields(world), self.cfg.grid_m, x, y)
-        straight = np.hypot(x - world.sam_m[:, 0:1], y - world.sam_m[:, 1:2]) - world.c.r4_m
+        xy = world.xy_m[:, :, cols]  # (2, N, 3 or 1)
+        route = _sample_stacked(self.cache.fields(world), self.cfg.grid_m, xy)
+        to_sam = xy - world.sam_m.T[:, :, None]
+        straight = np.hypot(to_sam[0], to_sam[1])
+        straight -= world.c.r4_m
         np.subtract(route, straight, out=route)
         np.maximum(route, 0.0, out=route)
         detour = np.where(straight > 0.0, route, 0.0)

@@ -168,6 +168,11 @@ class World:
 
     # Positions are views of one (2, N, 3) array; assigning to x_m / y_m writes into it.
     @property
+    def xy_m(self) -> np.ndarray:
+        """Positions stacked, (2, N, 3): ``xy_m[0]`` is x_m, ``xy_m[1]`` is y_m (read only, as they are)."""
+        return self._xy
+
+    @property
     def x_m(self) -> np.ndarray:
         return self._xy[0]
 
