@@ -140,16 +140,21 @@ def build_observation(
     inv = np.maximum(d, 1e-9)
     np.divide(1.0, inv, out=inv)  # on the point itself the bearing is (0, 0)
     delta *= inv[:, :, None]  # unit vectors to the points
-    bearing = _relative(delta, heading)
+    # Per point: (range to the edge, bearing cos, bearing sin); the radars' rows are their features.
+    points_feats = np.empty((n, points.shape[1], 3))
+    _relative(delta, heading, out=points_feats[:, :, 1:])
 
     np.divide(d[:, 0], area, out=out[:, 5])  # l: distance to the target
     d_sam = d[:, 1]
-    out[:, 6:8] = bearing[:, 1]
+    out[:, 6:8] = points_feats[:, 1, 1:]
     np.divide(d_sam, area, out=out[:, 8])
     np.subtract(d_sam, c.zone_outer_m[j], out=out[:, 9])
     np.subtract(d_sam, c.zone_inner_m[j], out=out[:, 10])
     out[:, 9:11] /= LOCAL_SCALE_M
-    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = _nearest_radars(d[:, 2:], bearing[:, 2:], radar_r_m)
+    radar_feats = points_feats[:, 2:]
+    np.subtract(d[:, 2:], radar_r_m, out=radar_feats[:, :, 0])
+    radar_feats[:, :, 0] /= LOCAL_SCALE_M
+    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = _nearest_radars(radar_feats, radar_r_m)
     out[:, 20] = radar_on
     out[:, 21] = identified
     if mode is ObservationMode.ROUTE:
@@ -176,7 +181,7 @@ def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None 
     return speed
 
 
-def _relative(u: np.ndarray, heading: np.ndarray) -> np.ndarray:
+def _relative(u: np.ndarray, heading: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Unit vectors ``u`` (N, ..., 2) rotated by -phi: (cos, sin) of their bearing relative to the heading.
 
     ``heading`` (N, 2) is (cos phi, sin phi). rel_cos = ux cos + uy sin, rel_sin = uy cos - ux sin, as two
@@ -185,27 +190,24 @@ def _relative(u: np.ndarray, heading: np.ndarray) -> np.ndarray:
     shape = (heading.shape[0],) + (1,) * (u.ndim - 2) + (2,)
     straight = u * heading.reshape(shape)  # (ux cos, uy sin)
     swapped = u * heading[:, ::-1].reshape(shape)  # (ux sin, uy cos)
-    rel = np.empty(u.shape)
+    rel = np.empty(u.shape) if out is None else out
     np.add(straight[..., 0], straight[..., 1], out=rel[..., 0])
     np.subtract(swapped[..., 1], swapped[..., 0], out=rel[..., 1])
     return rel
 
 
-def _nearest_radars(d: np.ndarray, bearing: np.ndarray, radius_m: np.ndarray) -> np.ndarray:
-    """The N_RADAR_FEATURES nearest radar edges, (N, 3 * N_RADAR_FEATURES): (range - radius) / LOCAL_SCALE, cos, sin.
+def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray) -> np.ndarray:
+    """The N_RADAR_FEATURES nearest radar edges, (N, 3 * N_RADAR_FEATURES), from every radar slot's
+    features (N, K, 3): (range - radius) / LOCAL_SCALE, cos and sin of the bearing.
 
-    ``d`` (N, K) ranges to the radar centres, ``bearing`` (N, K, 2) relative cos and sin, ``radius_m`` (N, K).
     Padding slots (radius 0) and missing ones read as far away, dead ahead.
     """
-    n, k = d.shape
-    feats = np.empty((n, max(k, N_RADAR_FEATURES), 3))
-    np.subtract(d, radius_m, out=feats[:, :k, 0])
-    feats[:, :k, 0] /= LOCAL_SCALE_M
-    feats[:, :k, 1:] = bearing
+    n, k = radius_m.shape
     if k < N_RADAR_FEATURES:
-        feats[:, k:] = _FAR_RADAR
+        feats = np.concatenate([feats, np.broadcast_to(_FAR_RADAR, (n, N_RADAR_FEATURES - k, 3))], axis=1)
     padding = radius_m <= 0
     if padding.any():
+        feats = feats.copy()
         feats[:, :k] = np.where(padding[:, :, None], _FAR_RADAR, feats[:, :k])
     order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
     return feats[_rows(n), order].reshape(n, -1)

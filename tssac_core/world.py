@@ -207,6 +207,8 @@ class World:
         self._zone_inner = np.broadcast_to(c.zone_inner_m, shape).copy()
         self._zone_outer = np.broadcast_to(c.zone_outer_m, shape).copy()
         k = self.max_radars
+        self._trig = np.zeros((2, *shape))
+        """Scratch for the chord's (cos, sin) in a step, (2, N, 3)."""
         self._sam_xy = np.zeros((2, *shape))
         """SAM position per vehicle, (2, N, 3)."""
         self._radar_xy = np.zeros((2, k, *shape))
@@ -238,7 +240,7 @@ class World:
     def __getstate__(self) -> dict:
         # The broadcast arrays are derived; a pickle holds the state only (and stays small).
         state = self.__dict__.copy()
-        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_sam_xy", "_radar_xy", "_radar_r2"):
+        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
             state.pop(key, None)
         return state
 
@@ -342,7 +344,7 @@ class World:
         chord *= 0.5
         chord *= dt
         chord *= self._sinc(half)
-        trig = np.empty_like(self._xy)
+        trig = self._trig
         np.add(self.phi_rad, half, out=half)  # the chord's direction (half is not needed any more)
         np.cos(half, out=trig[0])
         np.sin(half, out=trig[1])
@@ -467,11 +469,9 @@ def _any_vehicle(flags: np.ndarray) -> np.ndarray:
 
 
 def _any_radar(inside: np.ndarray) -> np.ndarray:
-    """(N, 3) any over the leading radar axis of (K, N, 3) flags."""
-    hit = inside[0].copy()
-    for k in range(1, inside.shape[0]):
-        hit |= inside[k]
-    return hit
+    """(N, 3) any over the leading radar axis of (K, N, 3) flags (a reduction along the leading axis runs
+    one inner loop over all N * 3 flags per radar, which is fast at any N)."""
+    return np.logical_or.reduce(inside, axis=0)
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
