@@ -170,12 +170,12 @@ def test_approach_reward_measures_the_way_around_the_radars(strike_path):
     task = RoleTask(load(strike_path), Role.STRIKE, n=1, teammates="none", seed=0)
     task.reset()
     w = task.world
-    before = w.zone_dist_m[0, 2] + task.detour_m[0, 2]
+    before = w.zone_dist_m[0, 2] + task.detour_m[0]
     _, r, _ = task.advance(np.array([[0.0, 0.0]]))
-    after = w.zone_dist_m[0, 2] + task.detour_m[0, 2]
+    after = w.zone_dist_m[0, 2] + task.detour_m[0]
     assert r[0] == pytest.approx((before - after) / KM - 0.1, abs=1e-9)
     # The paper's mission has radars between the start and the SAM: the way around is longer.
-    assert task.detour_m[0, 2] > 1000.0
+    assert task.detour_m[0] > 1000.0
 
 
 def test_teammates_alone_and_callable(strike_path):

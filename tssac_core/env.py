@@ -113,8 +113,9 @@ class RoleTask:
         self.rng = np.random.default_rng(seed)
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
-        self.detour_m = np.zeros((n, len(ROLES)))
-        """Every vehicle's detour now (reward term r_approach), kept current by reset and advance."""
+        self.detour_m = np.zeros(n)
+        """The learner's detour now, (N,) (reward term r_approach), kept current by reset and advance; the
+        teammates' detours are not measured (their rewards are nobody's concern here)."""
 
     @property
     def n(self) -> int:
@@ -141,7 +142,7 @@ class RoleTask:
 
     def _measure_detours(self) -> None:
         if self.reward_config.around_radars:
-            self.detour_m = self.routes.detour_m(self.world)
+            self.detour_m = self.routes.detour_m(self.world, self.j)
 
     def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
@@ -151,7 +152,7 @@ class RoleTask:
         detour_prev = self.detour_m
         result = self.world.step(actions)
         self._measure_detours()
-        r = reward(result, moving, self.reward_config, detour_prev, self.detour_m)[:, self.j]
+        r = reward(result, moving, self.reward_config, detour_prev, self.detour_m, vehicle=self.j)
         cost = result.cost[:, self.j]
         if self.cost_margin_m > 0:
             cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)

@@ -53,6 +53,7 @@ question that three nearest-radar entries only answer after much learning.
 from __future__ import annotations
 
 import enum
+import functools
 
 import numpy as np
 
@@ -96,14 +97,14 @@ def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
 
 
 _BOUNDS = {mode: _bounds(mode) for mode in ObservationMode}
+_SIZES = {mode: mode.size for mode in ObservationMode}
 
 
 def build_observation(
     role_index: int,
     mode: ObservationMode,
     c: WorldConstants,
-    x_m: np.ndarray,
-    y_m: np.ndarray,
+    xy_m: np.ndarray,
     v_m_s: np.ndarray,
     phi_rad: np.ndarray,
     sam_m: np.ndarray,
@@ -116,65 +117,114 @@ def build_observation(
 ) -> np.ndarray:
     """Observations of one role in N worlds, (N, mode.size) float32.
 
-    Vehicle arrays are (N,) for the observing UAV; ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
+    Vehicle arrays are the observing UAV's: position ``xy_m`` (N, 2), the others (N,); ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
     ``radar_r_m`` (N, K); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode
     only). This is the only place observations are made.
     """
+    if mode is ObservationMode.PAPER:
+        return _paper_observation(role_index, c, xy_m[:, 0], xy_m[:, 1], v_m_s, phi_rad, target_m)
     j = role_index
     area = c.area_m
-    low, high = _BOUNDS[mode]
-    speed = (v_m_s - c.speed_min_m_s[j]) / (c.speed_max_m_s[j] - c.speed_min_m_s[j])
-    l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
-    if mode is ObservationMode.PAPER:
-        obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area], axis=1)
-        return np.minimum(np.maximum(obs, low), high).astype(np.float32)
+    n = xy_m.shape[0]
+    out = np.empty((n, _SIZES[mode]))
+    np.divide(xy_m, area, out=out[:, 0:2])
+    _speed(v_m_s, c, j, out=out[:, 2])
+    heading = out[:, 3:5]  # cos phi, sin phi
+    np.cos(phi_rad, out=out[:, 3])
+    np.sin(phi_rad, out=out[:, 4])
 
-    n = x_m.shape[0]
-    out = np.empty((n, mode.size))
-    cos_phi, sin_phi = np.cos(phi_rad), np.sin(phi_rad)
-    out[:, 0] = x_m / area
-    out[:, 1] = y_m / area
-    out[:, 2] = speed
-    out[:, 3] = cos_phi
-    out[:, 4] = sin_phi
-    out[:, 5] = l_m / area
+    # The target, the SAM and the radars in one pass: ranges and bearings relative to the heading, (N, 2 + K).
+    points = np.concatenate([target_m[:, None, :], sam_m[:, None, :], radar_m], axis=1)
+    delta = points - xy_m[:, None, :]
+    d = np.hypot(delta[:, :, 0], delta[:, :, 1])
+    inv = np.maximum(d, 1e-9)
+    np.divide(1.0, inv, out=inv)  # on the point itself the bearing is (0, 0)
+    delta *= inv[:, :, None]  # unit vectors to the points
+    # Per point: (range to the edge, bearing cos, bearing sin); the radars' rows are their features.
+    points_feats = np.empty((n, points.shape[1], 3))
+    _relative(delta, heading, out=points_feats[:, :, 1:])
 
-    # The SAM and the radars in one pass: ranges and bearings relative to the heading, (N, 1 + K).
-    points = np.concatenate([sam_m[:, None, :], radar_m], axis=1)
-    dx = points[:, :, 0] - x_m[:, None]
-    dy = points[:, :, 1] - y_m[:, None]
-    d = np.hypot(dx, dy)
-    inv = 1.0 / np.maximum(d, 1e-9)  # on the point itself the bearing is (0, 0)
-    ux, uy = dx * inv, dy * inv
-    c_phi, s_phi = cos_phi[:, None], sin_phi[:, None]
-    rel_cos = ux * c_phi + uy * s_phi  # the unit vector rotated by -phi
-    rel_sin = uy * c_phi - ux * s_phi
-
-    d_sam = d[:, 0]
-    out[:, 6] = rel_cos[:, 0]
-    out[:, 7] = rel_sin[:, 0]
-    out[:, 8] = d_sam / area
-    out[:, 9] = (d_sam - c.zone_outer_m[j]) / LOCAL_SCALE_M
-    out[:, 10] = (d_sam - c.zone_inner_m[j]) / LOCAL_SCALE_M
-
-    # Radars, nearest edge first; padding slots (radius 0) read as far away, dead ahead.
-    feats = np.stack([(d[:, 1:] - radar_r_m) / LOCAL_SCALE_M, rel_cos[:, 1:], rel_sin[:, 1:]], axis=2)  # (N, K, 3)
-    padding = radar_r_m <= 0
-    if padding.any():
-        feats = np.where(padding[:, :, None], _FAR_RADAR, feats)
-    k = feats.shape[1]
-    if k < N_RADAR_FEATURES:
-        feats = np.concatenate([feats, np.broadcast_to(_FAR_RADAR, (n, N_RADAR_FEATURES - k, 3))], axis=1)
-    order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
-    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = np.take_along_axis(feats, order[:, :, None], axis=1).reshape(n, -1)
+    np.divide(d[:, 0], area, out=out[:, 5])  # l: distance to the target
+    d_sam = d[:, 1]
+    out[:, 6:8] = points_feats[:, 1, 1:]
+    np.divide(d_sam, area, out=out[:, 8])
+    np.subtract(d_sam, c.zone_outer_m[j], out=out[:, 9])
+    np.subtract(d_sam, c.zone_inner_m[j], out=out[:, 10])
+    out[:, 9:11] /= LOCAL_SCALE_M
+    radar_feats = points_feats[:, 2:]
+    np.subtract(d[:, 2:], radar_r_m, out=radar_feats[:, :, 0])
+    radar_feats[:, :, 0] /= LOCAL_SCALE_M
+    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = _nearest_radars(radar_feats, radar_r_m)
     out[:, 20] = radar_on
     out[:, 21] = identified
     if mode is ObservationMode.ROUTE:
         if route_dir is None:
             raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
-        out[:, 22] = route_dir[:, 0] * cos_phi + route_dir[:, 1] * sin_phi
-        out[:, 23] = route_dir[:, 1] * cos_phi - route_dir[:, 0] * sin_phi
-    return np.minimum(np.maximum(out, low), high).astype(np.float32)
+        out[:, 22:24] = _relative(route_dir, heading)
+    return _clip_to_bounds(out, mode)
+
+
+def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray,
+                       phi_rad: np.ndarray, target_m: np.ndarray) -> np.ndarray:
+    """Eq. 7: [x, y, v, phi, l] scaled to about [0, 1]."""
+    area = c.area_m
+    speed = _speed(v_m_s, c, j)
+    l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
+    obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area], axis=1)
+    return _clip_to_bounds(obs, ObservationMode.PAPER)
+
+
+def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None = None) -> np.ndarray:
+    """(v - v_min) / (v_max - v_min) of role j."""
+    speed = np.subtract(v_m_s, c.speed_min_m_s[j], out=out)
+    speed /= c.speed_max_m_s[j] - c.speed_min_m_s[j]
+    return speed
+
+
+def _relative(u: np.ndarray, heading: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Unit vectors ``u`` (N, ..., 2) rotated by -phi: (cos, sin) of their bearing relative to the heading.
+
+    ``heading`` (N, 2) is (cos phi, sin phi). rel_cos = ux cos + uy sin, rel_sin = uy cos - ux sin, as two
+    products with the heading (straight and swapped) and one sum and one difference.
+    """
+    shape = (heading.shape[0],) + (1,) * (u.ndim - 2) + (2,)
+    straight = u * heading.reshape(shape)  # (ux cos, uy sin)
+    swapped = u * heading[:, ::-1].reshape(shape)  # (ux sin, uy cos)
+    rel = np.empty(u.shape) if out is None else out
+    np.add(straight[..., 0], straight[..., 1], out=rel[..., 0])
+    np.subtract(swapped[..., 1], swapped[..., 0], out=rel[..., 1])
+    return rel
+
+
+def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray) -> np.ndarray:
+    """The N_RADAR_FEATURES nearest radar edges, (N, 3 * N_RADAR_FEATURES), from every radar slot's
+    features (N, K, 3): (range - radius) / LOCAL_SCALE, cos and sin of the bearing.
+
+    Padding slots (radius 0) and missing ones read as far away, dead ahead.
+    """
+    n, k = radius_m.shape
+    if k < N_RADAR_FEATURES:
+        feats = np.concatenate([feats, np.broadcast_to(_FAR_RADAR, (n, N_RADAR_FEATURES - k, 3))], axis=1)
+    padding = radius_m <= 0
+    if padding.any():
+        feats = feats.copy()
+        feats[:, :k] = np.where(padding[:, :, None], _FAR_RADAR, feats[:, :k])
+    order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
+    return feats[_rows(n), order].reshape(n, -1)
+
+
+@functools.lru_cache(maxsize=16)
+def _rows(n: int) -> np.ndarray:
+    """Row indices (N, 1) for picking per-row columns by fancy indexing."""
+    return np.arange(n)[:, None]
+
+
+
+def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
+    low, high = _BOUNDS[mode]
+    np.maximum(obs, low, out=obs)
+    np.minimum(obs, high, out=obs)
+    return obs.astype(np.float32)
 
 
 _FAR_RADAR = np.array([1e9, 1.0, 0.0])
@@ -192,8 +242,7 @@ def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteM
         j,
         mode,
         world.c,
-        world.x_m[:, j],
-        world.y_m[:, j],
+        world.xy_m[:, :, j].T,
         world.v_m_s[:, j],
         world.phi_rad[:, j],
         world.sam_m,

@@ -61,20 +61,23 @@ def reward(
     cfg: RewardConfig = RewardConfig(),
     detour_prev_m: np.ndarray | float = 0.0,
     detour_m: np.ndarray | float = 0.0,
+    vehicle: int | None = None,
 ) -> np.ndarray:
-    """Reward of every vehicle for one step, (N, 3); ``moving`` marks vehicles that took the step.
+    """Reward of every vehicle for one step, (N, 3), or of vehicle index ``vehicle`` only, (N,).
 
-    ``detour_prev_m`` and ``detour_m``: each vehicle's detour before and after the step
-    (:meth:`tssac_core.routes.RouteMap.detour_m`; 0, the default, measures the straight line as the paper).
+    ``moving`` (N, 3) marks vehicles that took the step. ``detour_prev_m`` and ``detour_m``: the detour
+    before and after the step (:meth:`tssac_core.routes.RouteMap.detour_m`; 0, the default, measures the
+    straight line as the paper), of every vehicle (N, 3) or, with ``vehicle``, of that one (N,).
     """
-    before = result.zone_dist_prev_m + detour_prev_m
-    after = result.zone_dist_m + detour_m
+    cols = slice(None) if vehicle is None else vehicle  # a learner's reward needs its own column only
+    before = result.zone_dist_prev_m[:, cols] + detour_prev_m
+    after = result.zone_dist_m[:, cols] + detour_m
     approach_km = (before - after) / KM
     r = (
-        cfg.k1 * cfg.success * result.task_completed
+        cfg.k1 * cfg.success * result.task_completed[:, cols]
         + cfg.k2 * approach_km
         + cfg.k3 * cfg.step
-        + cfg.hold * result.in_zone
-        + cfg.out_of_area * result.out_of_area
+        + cfg.hold * result.in_zone[:, cols]
+        + cfg.out_of_area * result.out_of_area[:, cols]
     )
-    return np.where(moving, r, 0.0)
+    return np.where(moving[:, cols], r, 0.0)

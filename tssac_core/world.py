@@ -117,12 +117,23 @@ class StepResult:
 class World:
     """N worlds of three UAVs, stepped together.
 
-    State arrays (public, read them freely; write only through reset/step): ``x_m, y_m, v_m_s,
+    State arrays (public, read them freely; write only through reset/step/mirror): ``x_m, y_m, v_m_s,
     phi_rad`` (N, 3); layout ``sam_m`` (N, 2), ``target_m`` (N, 2), ``radar_m`` (N, K, 2),
     ``radar_r_m`` (N, K); flags ``active`` (N, 3) (inactive vehicles are parked: they neither move
     nor count), ``running`` (N,) (a finished world is frozen until reset), ``radar_on``,
     ``identified``, ``hit`` (N,), ``task_done`` (N, 3), ``in_hazard`` (N, 3), ``steps`` (N,),
     ``cost_total`` (N, 3).
+
+    Speed (benchmarks/bench_env.py): a step is a fixed sequence of whole-array operations, so its cost
+    is the number of numpy calls at small N and the number of passes over memory at large N. Two
+    choices keep both low without changing a single bit of the arithmetic:
+
+    - positions live in one (2, N, 3) array (``x_m``, ``y_m`` are views of it), so the chord update,
+      the SAM distance, the radar test and the area bounds treat x and y in one call each;
+    - every per-role constant and every per-layout position (SAM, radars, radar radii squared) is kept
+      broadcast to the full (N, 3) vehicle shape (rebuilt by :meth:`reset`). An (N, 3) operand against
+      an (N, 1) or (3,) one makes numpy run N inner loops of 3 elements, several times slower than one
+      loop over 3N; same-shape operands avoid that.
     """
 
     def __init__(self, scenario: Scenario, n: int, max_radars: int | None = None) -> None:
@@ -130,8 +141,7 @@ class World:
         self.c = WorldConstants.from_scenario(scenario)
         self.n = n
         k = max_radars if max_radars is not None else _max_radar_count(scenario)
-        self.x_m = np.zeros((n, N_ROLES))
-        self.y_m = np.zeros((n, N_ROLES))
+        self._xy = np.zeros((2, n, N_ROLES))
         self.v_m_s = np.zeros((n, N_ROLES))
         self.phi_rad = np.zeros((n, N_ROLES))
         self.sam_m = np.zeros((n, 2))
@@ -154,10 +164,91 @@ class World:
         self.layout_id = np.full(n, -1, dtype=np.int64)
         """Changes whenever a world gets a new layout (lets controllers cache per-layout work)."""
         self._resets = 0
+        self._build_constants()
+
+    # Positions are views of one (2, N, 3) array; assigning to x_m / y_m writes into it.
+    @property
+    def xy_m(self) -> np.ndarray:
+        """Positions stacked, (2, N, 3): ``xy_m[0]`` is x_m, ``xy_m[1]`` is y_m (read only, as they are)."""
+        return self._xy
+
+    @property
+    def x_m(self) -> np.ndarray:
+        return self._xy[0]
+
+    @x_m.setter
+    def x_m(self, value: np.ndarray) -> None:
+        self._xy[0] = value
+
+    @property
+    def y_m(self) -> np.ndarray:
+        return self._xy[1]
+
+    @y_m.setter
+    def y_m(self, value: np.ndarray) -> None:
+        self._xy[1] = value
 
     @property
     def max_radars(self) -> int:
         return self.radar_r_m.shape[1]
+
+    @property
+    def layout_version(self) -> int:
+        """Grows whenever any world gets a new layout (reset): one number to compare instead of ``layout_id``."""
+        return self._resets
+
+    def _build_constants(self) -> None:
+        """Per-role constants broadcast to (N, 3) and the per-layout arrays of every world."""
+        c, shape = self.c, (self.n, N_ROLES)
+        self._turn_rate = np.broadcast_to(c.turn_rate_max_rad_s, shape).copy()
+        self._accel = np.broadcast_to(c.accel_max_m_s2, shape).copy()
+        self._speed_min = np.broadcast_to(c.speed_min_m_s, shape).copy()
+        self._speed_max = np.broadcast_to(c.speed_max_m_s, shape).copy()
+        self._zone_inner = np.broadcast_to(c.zone_inner_m, shape).copy()
+        self._zone_outer = np.broadcast_to(c.zone_outer_m, shape).copy()
+        k = self.max_radars
+        self._trig = np.zeros((2, *shape))
+        """Scratch for the chord's (cos, sin) in a step, (2, N, 3)."""
+        self._sam_xy = np.zeros((2, *shape))
+        """SAM position per vehicle, (2, N, 3)."""
+        self._radar_xy = np.zeros((2, k, *shape))
+        """Radar positions per vehicle, (2, K, N, 3)."""
+        self._radar_r2: dict[float, np.ndarray] = {}
+        """Squared radar radius (plus a margin, the key) per vehicle, (K, N, 3)."""
+        self._cache_layouts(np.arange(self.n))
+
+    def _cache_layouts(self, idx: np.ndarray) -> None:
+        """Refresh the broadcast layout arrays of worlds ``idx`` from sam_m, radar_m and radar_r_m."""
+        self._sam_xy[:, idx] = self.sam_m[idx].T[:, :, None]
+        self._radar_xy[:, :, idx] = self.radar_m[idx].transpose(2, 1, 0)[..., None]
+        for margin, r2 in self._radar_r2.items():
+            r2[:, idx] = self._squared_radius(idx, margin).T[..., None]
+        if 0.0 not in self._radar_r2:
+            self._radar_r2[0.0] = self._squared_radius_full(0.0)
+
+    def _squared_radius(self, idx: np.ndarray | slice, margin_m: float) -> np.ndarray:
+        """(n, K) squared radius of each radar's disk inflated by ``margin_m`` (unused slots: 0)."""
+        r = self.radar_r_m[idx]
+        if margin_m:  # unused slots have radius 0: they stay empty whatever the margin
+            r = np.where(r > 0, r + margin_m, 0.0)
+        return r**2
+
+    def _squared_radius_full(self, margin_m: float) -> np.ndarray:
+        r2 = self._squared_radius(slice(None), margin_m)  # (N, K)
+        return np.ascontiguousarray(np.broadcast_to(r2.T[..., None], (self.max_radars, self.n, N_ROLES)))
+
+    def __getstate__(self) -> dict:
+        # The broadcast arrays are derived; a pickle holds the state only (and stays small).
+        state = self.__dict__.copy()
+        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
+            state.pop(key, None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        if "_xy" not in state:  # pickled before positions were stacked: separate x_m and y_m arrays
+            state["_xy"] = np.stack([state.pop("x_m"), state.pop("y_m")])
+        self.__dict__.update(state)
+        self._build_constants()
 
     def reset(self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, bool, bool] = (True, True, True)) -> None:
         """Start worlds ``index`` afresh with the given layouts (one per index)."""
@@ -179,6 +270,7 @@ class World:
                 self.x_m[i, j] = start.position_km[0] * KM
                 self.y_m[i, j] = start.position_km[1] * KM
                 self.phi_rad[i, j] = _wrap(math.radians(start.heading_deg))
+        self._cache_layouts(idx)
         self.layout_id[idx] = self._resets + np.arange(len(idx))
         self._resets += len(idx)
         self.v_m_s[idx] = self.c.speed_init_m_s
@@ -191,7 +283,7 @@ class World:
         self.steps[idx] = 0
         self.cost_total[idx] = 0.0
         self.sam_dist_m[idx] = np.hypot(self.x_m[idx] - self.sam_m[idx, 0:1], self.y_m[idx] - self.sam_m[idx, 1:2])
-        self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c)
+        self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c.zone_inner_m, self.c.zone_outer_m)
         self.in_hazard[idx] = self._inside_radar(idx) & self.active[idx]
 
     def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
@@ -211,71 +303,120 @@ class World:
 
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
-        c = self.c
-        a = np.minimum(np.maximum(action, -1.0), 1.0)
         moving = self.active & self.running[:, None]
-        dt = c.dt_s * moving  # parked vehicles and finished worlds do not move
-        theta = a[..., 0] * c.turn_rate_max_rad_s * dt
-        # eq. 5-6: speed first (clipped to its bounds), then the exact arc at the step's mean speed:
-        # the chord of an arc of angle theta has length v dt sinc(theta / 2) along phi + theta / 2.
-        v_new = np.minimum(np.maximum(self.v_m_s + a[..., 1] * c.accel_max_m_s2 * dt, c.speed_min_m_s), c.speed_max_m_s)
-        half = 0.5 * theta
-        chord = 0.5 * (self.v_m_s + v_new) * dt * self._sinc(half)
-        mid = self.phi_rad + half
-        self.x_m += chord * np.cos(mid)
-        self.y_m += chord * np.sin(mid)
-        self.v_m_s = v_new
-        # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices.
-        phi = self.phi_rad + theta
-        phi = np.where(phi >= math.pi, phi - 2 * math.pi, phi)
-        self.phi_rad = np.where(phi < -math.pi, phi + 2 * math.pi, phi)
-
-        # Mission logic (eq. 9, Table 1), all conditions at once.
-        sx, sy = self.x_m - self.sam_m[:, 0:1], self.y_m - self.sam_m[:, 1:2]
-        self.sam_dist_m = np.sqrt(sx * sx + sy * sy)
+        self._move(action, moving)
         zone_dist_prev = self.zone_dist_m
-        self.zone_dist_m = _zone_distance(self.sam_dist_m, c)
-        in_zone = (self.sam_dist_m > c.zone_inner_m) & (self.sam_dist_m <= c.zone_outer_m) & moving
-        radar_on = in_zone[:, 0]
-        radar_on_changed = radar_on != self.radar_on
-        self.radar_on = radar_on
-        identified_now = radar_on & in_zone[:, 1] & ~self.identified
-        self.identified |= identified_now
-        hit_now = self.identified & radar_on & in_zone[:, 1] & in_zone[:, 2] & ~self.hit
-        self.hit |= hit_now
-        task_completed = np.empty_like(in_zone)
-        task_completed[:, 0] = in_zone[:, 0] & ~self.task_done[:, 0]
-        task_completed[:, 1] = identified_now
-        task_completed[:, 2] = hit_now
-        self.task_done |= task_completed
-
-        # eq. 11 cost and eq. 6 position bounds.
-        inside = self._inside_radar(slice(None)) & moving
-        hazard_entered = inside & ~self.in_hazard
-        self.in_hazard = inside
-        cost = inside.astype(np.float64)
-        self.cost_total += cost
-        h = 0.5 * c.area_m
-        out = moving & (np.maximum(np.abs(self.x_m - h), np.abs(self.y_m - h)) > h)
-
-        self.steps += self.running
-        terminated = self.running & (hit_now | out.any(axis=1))
-        truncated = self.running & ~terminated & (self.steps >= c.episode_steps)
-        self.running &= ~(terminated | truncated)
+        in_zone = self._measure_zones(moving)
+        flags = self._mission_logic(in_zone)
+        cost, hazard_entered = self._hazard_cost(moving)
+        out = self._out_of_area(moving)
+        terminated, truncated = self._end_worlds(flags[3], out)
         return StepResult(
             cost=cost,
             zone_dist_prev_m=zone_dist_prev,
             zone_dist_m=self.zone_dist_m,
             in_zone=in_zone,
-            task_completed=task_completed,
+            task_completed=flags[0],
             out_of_area=out,
             hazard_entered=hazard_entered,
-            radar_on_changed=radar_on_changed,
-            identified_now=identified_now,
-            hit_now=hit_now,
+            radar_on_changed=flags[1],
+            identified_now=flags[2],
+            hit_now=flags[3],
             terminated=terminated,
             truncated=truncated,
         )
+
+    def _move(self, action: np.ndarray, moving: np.ndarray) -> None:
+        """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean speed."""
+        a = np.maximum(action, -1.0)
+        np.minimum(a, 1.0, out=a)
+        dt = moving * self.c.dt_s  # parked vehicles and finished worlds do not move
+        theta = a[..., 0] * self._turn_rate
+        theta *= dt
+        v_new = a[..., 1] * self._accel
+        v_new *= dt
+        np.add(self.v_m_s, v_new, out=v_new)
+        np.maximum(v_new, self._speed_min, out=v_new)  # eq. 6 speed bounds
+        np.minimum(v_new, self._speed_max, out=v_new)
+        # The chord of an arc of angle theta has length v dt sinc(theta / 2) along phi + theta / 2.
+        half = theta * 0.5
+        chord = self.v_m_s + v_new
+        chord *= 0.5
+        chord *= dt
+        chord *= self._sinc(half)
+        trig = self._trig
+        np.add(self.phi_rad, half, out=half)  # the chord's direction (half is not needed any more)
+        np.cos(half, out=trig[0])
+        np.sin(half, out=trig[1])
+        trig *= chord
+        self._xy += trig  # x' = x + chord cos(mid), y' = y + chord sin(mid)
+        self.v_m_s = v_new
+        # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices (eq. 6 heading bounds).
+        phi = self.phi_rad + theta
+        np.subtract(phi, 2 * math.pi, out=phi, where=phi >= math.pi)
+        np.add(phi, 2 * math.pi, out=phi, where=phi < -math.pi)
+        self.phi_rad = phi
+
+    def _measure_zones(self, moving: np.ndarray) -> np.ndarray:
+        """Distances to the SAM and to each role's zone after the move; returns in_zone (N, 3)."""
+        d = self._xy - self._sam_xy
+        d *= d
+        sam_dist = np.add(d[0], d[1])
+        np.sqrt(sam_dist, out=sam_dist)
+        self.sam_dist_m = sam_dist
+        self.zone_dist_m = _zone_distance(sam_dist, self._zone_inner, self._zone_outer)
+        in_zone = sam_dist > self._zone_inner
+        in_zone &= sam_dist <= self._zone_outer
+        in_zone &= moving
+        return in_zone
+
+    def _mission_logic(self, in_zone: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Eq. 9 (Table 1), all conditions at once. Returns (task_completed, radar_on_changed, identified_now, hit_now)."""
+        radar_on = in_zone[:, 0]
+        radar_on_changed = radar_on != self.radar_on
+        self.radar_on = radar_on
+        seen = radar_on & in_zone[:, 1]  # the detect UAV holds its ring while the radar is on
+        identified_now = seen & ~self.identified
+        self.identified |= identified_now
+        hit_now = seen & in_zone[:, 2]
+        hit_now &= self.identified
+        hit_now &= ~self.hit
+        self.hit |= hit_now
+        task_completed = in_zone & ~self.task_done  # the decoy's task: first time in its ring
+        task_completed[:, 1] = identified_now
+        task_completed[:, 2] = hit_now
+        self.task_done |= task_completed
+        return task_completed, radar_on_changed, identified_now, hit_now
+
+    def _hazard_cost(self, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 11 cost of the step and which vehicles entered a radar's disk."""
+        inside = self._inside_all(self._radar_r2[0.0])
+        inside &= moving
+        hazard_entered = inside & ~self.in_hazard
+        self.in_hazard = inside
+        cost = inside.astype(np.float64)
+        self.cost_total += cost
+        return cost, hazard_entered
+
+    def _out_of_area(self, moving: np.ndarray) -> np.ndarray:
+        """Eq. 6 position bounds: max(|x - A/2|, |y - A/2|) > A/2 for a moving vehicle."""
+        h = 0.5 * self.c.area_m
+        off = self._xy - h
+        np.abs(off, out=off)
+        out = np.maximum(off[0], off[1]) > h
+        out &= moving
+        return out
+
+    def _end_worlds(self, hit_now: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Count the step; a hit or a vehicle leaving ends a world, the episode cap truncates it."""
+        self.steps += self.running
+        terminated = hit_now | _any_vehicle(out)
+        terminated &= self.running
+        self.running &= ~terminated
+        truncated = self.steps >= self.c.episode_steps
+        truncated &= self.running
+        self.running &= ~truncated
+        return terminated, truncated
 
     def near_radar(self, margin_m: float) -> np.ndarray:
         """(N, 3): each vehicle lies within ``margin_m`` of a radar's disk (inside radius + margin).
@@ -283,33 +424,54 @@ class World:
         With margin 0 this is the eq. 11 hazard; training may use a margin as a tightened constraint
         (:class:`tssac_core.env.RoleTask`).
         """
-        return self._inside_radar(slice(None), margin_m)
+        margin_m = float(margin_m)
+        r2 = self._radar_r2.get(margin_m)
+        if r2 is None:  # the first call with this margin: keep its radii for the next steps
+            r2 = self._radar_r2[margin_m] = self._squared_radius_full(margin_m)
+        return self._inside_all(r2)
 
-    def _inside_radar(self, idx: np.ndarray | slice, margin_m: float = 0.0) -> np.ndarray:
-        x, y = self.x_m[idx], self.y_m[idx]
-        radar, r = self.radar_m[idx], self.radar_r_m[idx]
-        inside = np.zeros(x.shape, dtype=bool)
-        if margin_m:  # unused slots have radius 0: they stay empty whatever the margin
-            r = np.where(r > 0, r + margin_m, 0.0)
-        for k in range(r.shape[1]):  # a few radars: a loop of (N, 3) operations beats (N, 3, K) temporaries
-            dx = x - radar[:, k, 0:1]
-            dy = y - radar[:, k, 1:2]
-            inside |= dx * dx + dy * dy < r[:, k : k + 1] ** 2
-        return inside
+    def _inside_all(self, r2: np.ndarray) -> np.ndarray:
+        """(N, 3): inside any radar's disk of squared radius ``r2`` (K, N, 3): dx^2 + dy^2 < r^2."""
+        d = self._xy[:, None] - self._radar_xy  # (2, K, N, 3)
+        d *= d
+        return _any_radar(np.add(d[0], d[1]) < r2)
+
+    def _inside_radar(self, idx: np.ndarray) -> np.ndarray:
+        """(n, 3) for worlds ``idx`` (reset): inside any radar's disk."""
+        d = self._xy[:, idx][:, None] - self._radar_xy[:, :, idx]
+        d *= d
+        return _any_radar(np.add(d[0], d[1]) < self._radar_r2[0.0][:, idx])
 
     def _sinc(self, half: np.ndarray) -> np.ndarray:
         """sin(h) / h; a Taylor series when every |h| is small (error < h^6 / 5040, under 1e-12)."""
         if self._small_turns:
             h2 = half * half
-            return 1.0 - h2 * (1.0 / 6.0 - h2 * (1.0 / 120.0))
+            s = h2 * (1.0 / 120.0)
+            np.subtract(1.0 / 6.0, s, out=s)
+            s *= h2
+            np.subtract(1.0, s, out=s)  # 1 - h2 (1/6 - h2 / 120)
+            return s
         return np.sinc(half / np.pi)
 
 
-def _zone_distance(sam_dist_m: np.ndarray, c: WorldConstants) -> np.ndarray:
-    """Distance from each UAV to its role's zone around the SAM (0 inside it)."""
-    outside = sam_dist_m - c.zone_outer_m
-    inside = c.zone_inner_m - sam_dist_m
-    return np.maximum(np.maximum(outside, inside), 0.0)
+def _zone_distance(sam_dist_m: np.ndarray, inner_m: np.ndarray, outer_m: np.ndarray) -> np.ndarray:
+    """Distance from each UAV to its role's zone inner < D <= outer around the SAM (0 inside it)."""
+    dist = sam_dist_m - outer_m
+    np.maximum(dist, inner_m - sam_dist_m, out=dist)
+    np.maximum(dist, 0.0, out=dist)
+    return dist
+
+
+def _any_vehicle(flags: np.ndarray) -> np.ndarray:
+    """(N,) any of the three columns of (N, 3) flags; two element-wise ORs (a reduction along an axis of
+    length 3 runs N tiny inner loops, several times slower at large N)."""
+    return flags[:, 0] | flags[:, 1] | flags[:, 2]
+
+
+def _any_radar(inside: np.ndarray) -> np.ndarray:
+    """(N, 3) any over the leading radar axis of (K, N, 3) flags (a reduction along the leading axis runs
+    one inner loop over all N * 3 flags per radar, which is fast at any N)."""
+    return np.logical_or.reduce(inside, axis=0)
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
