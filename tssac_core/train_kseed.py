@@ -36,7 +36,6 @@ from tssac_core.scenario import Role, Scenario
 from tssac_core.train import (
     SAC_FAMILY,
     EpochLog,
-    SeedRole,
     TrainConfig,
     log_transfer,
     open_seed_role,
