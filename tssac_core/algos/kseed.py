@@ -212,7 +212,7 @@ class KSeedSacLagrangian:
             return self.q_r.member_tensors(k, ts[:n]) + self.q_c.member_tensors(k, ts[n:])
 
         def critics_load(k: int, ts: Sequence[torch.Tensor], member: Sequence[torch.Tensor]) -> None:
-            n, n_member = self._n_q_r, len(list(self.q_r.parameters()))
+            n, n_member = self._n_q_r, 2 * self.q_r.n_layers  # stacked q_r tensors; a single Critic's
             self.q_r.load_member(k, ts[:n], member[:n_member])
             self.q_c.load_member(k, ts[n:], member[n_member:])
 

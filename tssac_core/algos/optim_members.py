@@ -24,7 +24,11 @@ def member_state(
     optim: torch.optim.Optimizer, params: Sequence[torch.Tensor], k: int, to_member: ToMember
 ) -> dict[str, Any]:
     """Member k's `state_dict` of an optimiser with one param group over the single parameters."""
-    groups = copy.deepcopy(optim.state_dict()["param_groups"])
+    (group,) = copy.deepcopy(optim.state_dict()["param_groups"])
+    # The single learner's parameters are numbered 0, 1, ... in its order (the stack may hold them
+    # in more or fewer tensors).
+    group["params"] = list(range(len(to_member(k, params))))
+    groups = [group]
     states = [optim.state.get(p, {}) for p in params]
     if not states[0]:
         return {"state": {}, "param_groups": groups}
@@ -57,7 +61,7 @@ def load_member_state(
         if current[0]:
             raise ValueError(f"member {k}: a fresh optimiser state cannot join a stack at a later step")
         return
-    saved = [entries[i] for i in range(len(params))]
+    saved = [entries[i] for i in sorted(entries)]
     step = saved[0]["step"]
     if not current[0]:
         for p in params:
