@@ -95,7 +95,7 @@ def measure(variant: Variant, k: int, seconds: float, rounds: int, hidden: tuple
     floor: dict[str, float] = {}
     if hidden == HIDDEN:  # bench_train's matmul list is for Table 3's sizes
         matmuls = our_matmuls(recent=variant in (Variant.SAC_LAG, Variant.TSSAC), cost_in_actor=variant in (Variant.SAC_LAG, Variant.TSSAC))
-        seconds_per_update = matmul_seconds(matmuls, threads=1)
+        seconds_per_update = matmul_seconds(matmuls, threads=1, repeats=15)  # best of 15: the load varies
         floor = {
             "matmul_ms_per_seed_update": 1e3 * seconds_per_update,
             # K seeds' matmuls alone, at torch.mm's hot-cache speed, over one whole single-seed update (CPU time).
