@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from tssac_core.algos.replay import ReplayBuffer
+from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStats, Variant, transfer
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask
@@ -176,91 +176,180 @@ class EpochLog:
         return row
 
 
-def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resume: bool, bar: tqdm) -> None:
-    """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``."""
+@dataclass
+class SeedRole:
+    """One seed's side of training one role: its worlds, replay buffer, validation, random state and
+    counters. The learner is the caller's (one `SacLagrangian`, or one seed of a K-seed learner)."""
+
+    cfg: TrainConfig
+    role: Role
+    out: Path
+    task: RoleTask
+    buffer: ReplayBuffer
+    selector: EpochSelector
+    rng: np.random.Generator
+    obs: np.ndarray
+    epoch: int = 0
+    """The epoch running, or the last one completed between epochs."""
+    env_steps: int = 0
+    updates: int = 0
+    transferred: bool = False
+
+    @property
+    def state_path(self) -> Path:
+        return self.out / "resume" / f"{self.role.value}.pt"
+
+    def exploring(self) -> bool:
+        """From-scratch roles act uniformly at random for cfg.start_steps decisions first."""
+        return self.env_steps < self.cfg.start_steps and not self.transferred
+
+    def random_action(self) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, (self.cfg.envs, 2))
+
+    def collect(self, action: np.ndarray, log: EpochLog) -> None:
+        """One step of the worlds with ``action``: into the replay buffer, finished episodes into ``log``."""
+        cfg = self.cfg
+        step = self.task.step(action, repeat=cfg.action_repeat)
+        # Only a hit ends the learner's future: leaving the area ends the episode too, but the
+        # critics bootstrap through it (like the cap), so that ending an episode early is never
+        # a way out of the step penalty or of the hazard cost (docs/decisions.md).
+        self.buffer.add_batch(self.obs, action, step.reward, step.cost, step.final_obs, step.terminated & step.episode_success)
+        self.obs = step.obs
+        self.env_steps += cfg.envs
+        ended = step.terminated | step.truncated
+        if ended.any():
+            log.returns += step.episode_return[ended].tolist()
+            log.costs += step.episode_cost[ended].tolist()
+            log.hazard_costs += step.episode_hazard_cost[ended].tolist()
+            log.tasks += step.episode_task[ended].astype(float).tolist()
+            log.successes += step.episode_success[ended].astype(float).tolist()
+
+    def updates_due(self) -> int | None:
+        """Gradient updates owed after the last step (Algorithm 1: one per update_every decisions);
+        None while the buffer holds fewer than update_after transitions."""
+        if len(self.buffer) < self.cfg.update_after:
+            return None
+        return self.env_steps // self.cfg.update_every - self.updates
+
+    def sample(self, sac_cfg: SacConfig, uses_multiplier: bool) -> tuple[ReplaySamples, ReplaySamples | None]:
+        """One update's minibatch, and the recent batch on which the multiplier measures Q^c."""
+        batch = self.buffer.sample(sac_cfg.batch_size, self.rng)
+        window = sac_cfg.multiplier_window
+        recent = self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng) if window and uses_multiplier else None
+        return batch, recent
+
+    def end_epoch(self, log: EpochLog, iters: int, write_checkpoint: Callable[[Path], None]) -> dict[str, Any]:
+        """Validate the epoch's checkpoint and append its metrics row; returns the row."""
+        row = log.row(self.role, self.epoch, self.env_steps, self.updates, iters * self.cfg.envs)
+        row.update(self.selector.after_epoch(self.epoch, write_checkpoint))
+        append_metrics(self.out / "metrics.csv", row)
+        return row
+
+    def restore(self, saved: dict[str, Any]) -> None:
+        """Continue from a resume state (`resume_state`); the learner's part is the caller's."""
+        self.buffer.load_state_dict(saved["buffer"])
+        self.task.restore(saved["task"])
+        self.obs = saved["obs"]
+        self.rng.bit_generator.state = saved["rng"]
+        self.epoch, self.env_steps, self.updates, self.transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
+        self.selector.load_state_dict(saved["selector"])
+        logger.info("%s: resuming after epoch %d (%d env steps)", self.role.value, self.epoch, self.env_steps)
+
+    def resume_state(self, learner_state: dict[str, Any], torch_rng: torch.Tensor) -> dict[str, Any]:
+        """Everything needed to continue after this epoch."""
+        return {
+            "learner": learner_state,
+            "buffer": self.buffer.state_dict(),
+            "task": self.task.snapshot(),
+            "obs": self.obs,
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch_rng,
+            "epoch": self.epoch,
+            "env_steps": self.env_steps,
+            "updates": self.updates,
+            "transferred": self.transferred,
+            "selector": self.selector.state_dict(),
+        }
+
+    def write_checkpoint(self, path: Path, scenario: Scenario, hidden_sizes: tuple[int, ...], learner_state: dict[str, Any]) -> None:
+        save_trained_role(path, self.cfg, scenario, self.role, hidden_sizes, learner_state["actor"], learner_state,
+                          self.env_steps, self.updates, self.epoch)
+
+
+def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, sac_cfg: SacConfig) -> SeedRole:
+    """A seed's worlds (reset), replay buffer, validation selector and exploration generator for ``role``."""
     mode = ObservationMode(cfg.observation)
-    state_path = out / "resume" / f"{role.value}.pt"
-    sac_cfg = sac_config(cfg, scenario)
-    torch.manual_seed(cfg.seed * 1000 + role.index)
-    learner = SacLagrangian(mode.size, 2, sac_cfg)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, out)
     task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
-    transferred = False
-    start_epoch, env_steps, updates = 0, 0, 0
-    obs = task.reset()
-    if resume and state_path.is_file():
-        saved = torch.load(io.BytesIO(state_path.read_bytes()), map_location="cpu", weights_only=False)
+    return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset())
+
+
+def read_resume_state(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    return torch.load(io.BytesIO(path.read_bytes()), map_location="cpu", weights_only=False)
+
+
+def transfer_source(cfg: TrainConfig, role: Role, out: Path) -> Path | None:
+    """The checkpoint a fresh role starts from: --init-from, TSSAC's previous role (N_k -> N_k+1), or none."""
+    if cfg.init_from:
+        return Path(cfg.init_from)
+    if cfg.algo == "tssac" and role.index > 0:
+        return out / f"{ROLES[role.index - 1].value}.pt"
+    return None
+
+
+def log_transfer(role: Role, cfg: TrainConfig, copied: list[str], source: Path) -> None:
+    verb = "initialised" if cfg.init_from else "transferred"
+    logger.info("%s: %s %d tensors from %s", role.value, verb, len(copied), source)
+
+
+def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resume: bool, bar: tqdm) -> None:
+    """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``."""
+    mode = ObservationMode(cfg.observation)
+    sac_cfg = sac_config(cfg, scenario)
+    torch.manual_seed(cfg.seed * 1000 + role.index)
+    learner = SacLagrangian(mode.size, 2, sac_cfg)
+    run = open_seed_role(cfg, scenario, role, out, sac_cfg)
+    saved = read_resume_state(run.state_path) if resume else None
+    source = transfer_source(cfg, role, out)
+    if saved is not None:
         learner.load_state_dict(saved["learner"])
-        buffer.load_state_dict(saved["buffer"])
-        task.restore(saved["task"])
-        obs = saved["obs"]
-        rng.bit_generator.state = saved["rng"]
+        run.restore(saved)
         torch.set_rng_state(saved["torch_rng"])
-        start_epoch, env_steps, updates, transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
-        selector.load_state_dict(saved["selector"])
-        logger.info("%s: resuming after epoch %d (%d env steps)", role.value, start_epoch, env_steps)
-    elif cfg.init_from:
-        copied = transfer(learner, read_checkpoint(cfg.init_from)["learner"])
-        transferred = True
-        logger.info("%s: initialised %d tensors from %s", role.value, len(copied), cfg.init_from)
-    elif cfg.algo == "tssac" and role.index > 0:
-        source = out / f"{ROLES[role.index - 1].value}.pt"
-        copied = transfer(learner, read_checkpoint(source)["learner"])
-        transferred = True
-        logger.info("%s: transferred %d tensors from %s", role.value, len(copied), source)
-    bar.n = (role_position(cfg, role) * cfg.epochs + start_epoch) * cfg.steps_per_epoch
+    elif source is not None:
+        log_transfer(role, cfg, transfer(learner, read_checkpoint(source)["learner"]), source)
+        run.transferred = True
+    bar.n = (role_position(cfg, role) * cfg.epochs + run.epoch) * cfg.steps_per_epoch
     bar.refresh()
 
-    epoch = start_epoch
-
     def write_checkpoint(path: Path) -> None:
-        save_trained_role(path, cfg, scenario, role, sac_cfg.hidden_sizes, learner.actor.state_dict(), learner.state_dict(), env_steps, updates, epoch)
+        run.write_checkpoint(path, scenario, sac_cfg.hidden_sizes, learner.state_dict())
 
     iters = max(1, cfg.steps_per_epoch // cfg.envs)
-    for epoch in range(start_epoch + 1, cfg.epochs + 1):
+    for epoch in range(run.epoch + 1, cfg.epochs + 1):
+        run.epoch = epoch
         log = EpochLog()
         for _ in range(iters):
             t0 = time.perf_counter()
-            if env_steps < cfg.start_steps and not transferred:
-                action = rng.uniform(-1.0, 1.0, (cfg.envs, 2))
-            else:
-                action = learner.act(obs, deterministic=False)
-            step = task.step(action, repeat=cfg.action_repeat)
-            # Only a hit ends the learner's future: leaving the area ends the episode too, but the
-            # critics bootstrap through it (like the cap), so that ending an episode early is never
-            # a way out of the step penalty or of the hazard cost (docs/decisions.md).
-            buffer.add_batch(obs, action, step.reward, step.cost, step.final_obs, step.terminated & step.episode_success)
-            obs = step.obs
-            env_steps += cfg.envs
-            ended = step.terminated | step.truncated
-            if ended.any():
-                log.returns += step.episode_return[ended].tolist()
-                log.costs += step.episode_cost[ended].tolist()
-                log.hazard_costs += step.episode_hazard_cost[ended].tolist()
-                log.tasks += step.episode_task[ended].astype(float).tolist()
-                log.successes += step.episode_success[ended].astype(float).tolist()
+            run.collect(run.random_action() if run.exploring() else learner.act(run.obs, deterministic=False), log)
             t1 = time.perf_counter()
             log.env_time += t1 - t0
-            if len(buffer) >= cfg.update_after:
-                due = env_steps // cfg.update_every - updates
-                window = sac_cfg.multiplier_window
+            due = run.updates_due()
+            if due is not None:
                 for _ in range(due):
-                    batch = buffer.sample(sac_cfg.batch_size, rng)
-                    recent = buffer.sample_recent(sac_cfg.batch_size, window, rng) if window and learner.uses_multiplier else None
-                    log.stats.append(learner.update(batch, recent))
-                updates += max(due, 0)
+                    log.stats.append(learner.update(*run.sample(sac_cfg, learner.uses_multiplier)))
+                run.updates += max(due, 0)
                 log.update_time += time.perf_counter() - t1
             bar.update(cfg.envs)
-        row = log.row(role, epoch, env_steps, updates, iters * cfg.envs)
-        row.update(selector.after_epoch(epoch, write_checkpoint))
-        append_metrics(out / "metrics.csv", row)
+        row = run.end_epoch(log, iters, write_checkpoint)
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
-        save_resume_state(state_path, learner, buffer, task, obs, rng, epoch, env_steps, updates, transferred, selector)
+        save_resume_state(run.state_path, run.resume_state(learner.state_dict(), torch.get_rng_state()))
 
-    ship_role(out, role, selector, write_checkpoint)
+    ship_role(out, role, run.selector, write_checkpoint)
 
 
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
@@ -294,23 +383,9 @@ def role_position(cfg: TrainConfig, role: Role) -> int:
     return list(cfg.roles).index(role.value)
 
 
-def save_resume_state(path: Path, learner: SacLagrangian, buffer: ReplayBuffer, task: RoleTask, obs: np.ndarray, rng: np.random.Generator,
-                      epoch: int, env_steps: int, updates: int, transferred: bool, selector: EpochSelector) -> None:
-    """Everything needed to continue after this epoch, written atomically."""
+def save_resume_state(path: Path, state: dict[str, Any]) -> None:
+    """Write a resume state (`SeedRole.resume_state`) atomically."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    state = {
-        "learner": learner.state_dict(),
-        "buffer": buffer.state_dict(),
-        "task": task.snapshot(),
-        "obs": obs,
-        "rng": rng.bit_generator.state,
-        "torch_rng": torch.get_rng_state(),
-        "epoch": epoch,
-        "env_steps": env_steps,
-        "updates": updates,
-        "transferred": transferred,
-        "selector": selector.state_dict(),
-    }
     torch_save_atomic(state, path)
 
 
@@ -356,10 +431,28 @@ def completed_epochs(out: Path, role: str) -> int:
 
 
 def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
+    """The run's TrainConfig, --out, --resume and --no-progress (see `parse_cli` for --seeds)."""
+    cfg, out, resume, quiet, _ = parse_cli(argv)
+    return cfg, out, resume, quiet
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise UsageError(f"--seeds: {text!r} is not a comma-separated list of integers") from None
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise UsageError(f"--seeds: give one or more distinct seeds, got {text!r}")
+    return seeds
+
+
+def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, tuple[int, ...] | None]:
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=__doc__.split("\n")[0])
     p.add_argument("--algo", choices=ALGOS, default="tssac", help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
+    p.add_argument("--seeds", help="train these seeds (e.g. 0,1,2) in one process with one batched learner, into --out/seed<N>/ "
+                   "(SAC family only; replaces --seed)")
     p.add_argument("--epochs", type=int, default=50, help="epochs per role (Table 3: 50)")
     p.add_argument("--steps-per-epoch", type=int, default=4000, help="learner decisions per epoch (Table 3: 4000)")
     p.add_argument("--roles", default="decoy,detect,strike", help="comma-separated, in curriculum order")
@@ -404,35 +497,17 @@ def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, boo
         validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
         init_from=str(a.init_from) if a.init_from else "",
     )
-    return cfg, a.out, a.resume, a.no_progress
+    return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    cfg, out, resume, quiet = parse_args(argv)
-    config_path = out / "config.json"
-    if resume:
-        if not config_path.is_file():
-            raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
-        saved = json.loads(config_path.read_text())
-        cfg = config_from_saved(saved)
-    elif config_path.is_file():
-        raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
-    scenario = load(cfg.scenario)
-    check_learner_settings(cfg, scenario)
-    for role_name in cfg.roles:
-        role = Role(role_name)
-        for earlier in ROLES[: role.index]:
-            if earlier.value not in cfg.roles and not (out / f"{earlier.value}.pt").is_file():
-                raise UsageError(f"training {role.value} needs {out / (earlier.value + '.pt')} (train {earlier.value} first)")
-    out.mkdir(parents=True, exist_ok=True)
-    if not resume:
-        write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+    cfg, out, resume, quiet, seeds = parse_cli(argv)
+    from tssac_core.train_kseed import is_kseed_run, train_seeds
+
+    if seeds is not None or (resume and is_kseed_run(out)):
+        return train_seeds(cfg, seeds, out, resume, quiet)
+    cfg, scenario = prepare_run(cfg, out, resume)
     torch.set_num_threads(cfg.threads)
-    keep = set()
-    for role_name in cfg.roles:
-        done = completed_epochs(out, role_name)
-        keep |= {(role_name, e) for e in range(1, (cfg.epochs if done < 0 else done) + 1)}
-    truncate_metrics(out / "metrics.csv", keep)
     total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
     start = time.perf_counter()
     with tqdm(total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05) as bar:
@@ -451,6 +526,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     write_plots(out, scenario.cost_limit)
     print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")
     return 0
+
+
+def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig, Scenario]:
+    """Check the run and set up ``out``: config.json written (or, on --resume, read: it wins), earlier roles
+    present, metrics of epochs that were not checkpointed dropped. Returns the run's config and scenario."""
+    config_path = out / "config.json"
+    if resume:
+        if not config_path.is_file():
+            raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
+        saved = json.loads(config_path.read_text())
+        cfg = config_from_saved(saved)
+    elif config_path.is_file():
+        raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
+    scenario = load(cfg.scenario)
+    check_learner_settings(cfg, scenario)
+    for role_name in cfg.roles:
+        role = Role(role_name)
+        for earlier in ROLES[: role.index]:
+            if earlier.value not in cfg.roles and not (out / f"{earlier.value}.pt").is_file():
+                raise UsageError(f"training {role.value} needs {out / (earlier.value + '.pt')} (train {earlier.value} first)")
+    out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+    keep = set()
+    for role_name in cfg.roles:
+        done = completed_epochs(out, role_name)
+        keep |= {(role_name, e) for e in range(1, (cfg.epochs if done < 0 else done) + 1)}
+    truncate_metrics(out / "metrics.csv", keep)
+    return cfg, scenario
 
 
 def check_learner_settings(cfg: TrainConfig, scenario: Scenario) -> None:

@@ -1,6 +1,9 @@
 """The losses of SAC-Lagrangian and TSSAC (paper eq. 12-17) as small pure functions.
 
 Shapes: per-sample tensors are (batch,); critic outputs of an ensemble are (n_members, batch).
+Every function also takes a leading seed axis (K learners at once, `tssac_core.algos.kseed`):
+per-sample tensors (K, batch), critic outputs (K, n_members, batch), alpha and the multiplier (K, 1)
+in eq. 12-13 and (K,) in eq. 14-17; a loss is then (K,), one per seed.
 Symbols follow the paper: log_pi, q_r (reward critic), q_c (cost critic), alpha, beta, xi,
 cost_limit (C, already converted to the scale of q_c, see `lagrange.qc_limit`).
 """
@@ -14,7 +17,7 @@ def soft_value(
     next_q_r: torch.Tensor, next_log_pi: torch.Tensor, alpha: torch.Tensor
 ) -> torch.Tensor:
     """Eq. 13's V(s') = min_i Q^r_i(s', a') - alpha log pi(a'|s'), a' ~ pi(s'); twin critics."""
-    return next_q_r.min(dim=0).values - alpha * next_log_pi
+    return next_q_r.min(dim=-2).values - alpha * next_log_pi
 
 
 def critic_target(
@@ -29,8 +32,8 @@ def critic_target(
 
 
 def critic_loss(q: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Eq. 13: J_Q = E[1/2 (Q(s, a) - target)^2], summed over the ensemble (leading axis)."""
-    return 0.5 * (q - target).square().mean(dim=-1).sum()
+    """Eq. 13: J_Q = E[1/2 (Q(s, a) - target)^2], summed over the ensemble (members axis)."""
+    return 0.5 * (q - target).square().mean(dim=-1).sum(dim=-1)
 
 
 def actor_loss(
@@ -41,12 +44,12 @@ def actor_loss(
     multiplier: torch.Tensor,
 ) -> torch.Tensor:
     """Eq. 12 / 16: J_pi = E[alpha log pi - min_i Q^r_i + m Q^c], m = beta or beta - xi."""
-    return (alpha * log_pi - q_r.min(dim=0).values + multiplier * q_c).mean()
+    return (alpha * log_pi - q_r.min(dim=-2).values + multiplier * q_c).mean(dim=-1)
 
 
 def alpha_loss(alpha: torch.Tensor, log_pi: torch.Tensor, target_entropy: float) -> torch.Tensor:
     """Eq. 14: J(alpha) = E[-alpha log pi - alpha H0]; log_pi is treated as a constant."""
-    return alpha * (-log_pi.detach() - target_entropy).mean()
+    return alpha * (-log_pi.detach() - target_entropy).mean(dim=-1)
 
 
 def multiplier_loss(beta: torch.Tensor, qc_mean: torch.Tensor, cost_limit: float) -> torch.Tensor:

@@ -71,16 +71,26 @@ class SquashedGaussianActor(nn.Module):
         u = mean.
         """
         mean, log_std = self.mean_log_std(obs)
-        if deterministic:
-            u = mean
-            noise_sq = torch.zeros_like(mean)
-        else:
-            eps = torch.randn_like(mean)
-            u = mean + log_std.exp() * eps
-            noise_sq = eps.square()  # ((u - mean) / std)^2, without the division
-        gaussian_log_prob = -0.5 * noise_sq - log_std - _HALF_LOG_2PI
-        log_pi = (gaussian_log_prob - tanh_log_abs_det_jacobian(u)).sum(dim=-1)
-        return torch.tanh(u), log_pi
+        return squashed_gaussian(mean, log_std, None if deterministic else torch.randn_like(mean))
+
+
+def squashed_gaussian(
+    mean: torch.Tensor, log_std: torch.Tensor, eps: torch.Tensor | None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(a = tanh(u), log pi(a|s)) for u = mean + exp(log_std) * eps, or u = mean if eps is None.
+
+    Shapes (..., act_dim) -> (..., act_dim), (...); the change of variables of
+    `SquashedGaussianActor`, shared with the K-seed actor (tssac_core.algos.stacked).
+    """
+    if eps is None:
+        u = mean
+        noise_sq = torch.zeros_like(mean)
+    else:
+        u = mean + log_std.exp() * eps
+        noise_sq = eps.square()  # ((u - mean) / std)^2, without the division
+    gaussian_log_prob = -0.5 * noise_sq - log_std - _HALF_LOG_2PI
+    log_pi = (gaussian_log_prob - tanh_log_abs_det_jacobian(u)).sum(dim=-1)
+    return torch.tanh(u), log_pi
 
 
 class Critic(nn.Module):
