@@ -45,10 +45,10 @@ RMS speed error (m/s)               0.61            0.61           0.61  [0.79]
 RMS turn-rate error (deg/s)         0.37            0.37           --
 position error after 2 s gap (m)    4.6 / 11.1      4.6 / 11.1     28.3 / 31.5  [26.8 / 30.6]
 position_sigma_m after the gap      10.8            10.8           6.3  [11.9]
-update + predict_to, per call (us)  212 + 104       684 + 427      159 + 60
+update + predict_to, per call (us)  91 + 47         492 + 304      65 + 25
 ==================================  ==============  =============  ==================
 
-(Times from one run on a loaded machine; their ratios are what counts.) Manoeuvring (200 m/s;
+(Times from one run on an otherwise idle machine.) Manoeuvring (200 m/s;
 turns +5, -4, +2 deg/s; +/-10 m/s^2 for 5 s; the gap spans a turn reversal): both constant-turn
 filters 1.57 m, 0.18 deg, gap 10.4 / 20.0 m (sigma 9.3 m); constant velocity 1.67 m, 0.37 deg,
 gap 19.8 / 22.9 m (sigma 6.3 m) [1.55 m, 0.24 deg, 18.2 / 22.0 m].
@@ -61,7 +61,7 @@ error 0.14 deg against 0.21-0.30, a turn-rate estimate, and a 2 s dropout in a s
 the unmodelled v * omega * t^2 / 2 = 26 m; more acceleration noise only widens its sigma), and at
 the noise that suits its position estimate its sigma (6 m) understates that error. At 10 Hz the
 model is nearly linear over a step, so the extended and the unscented filter agree to millimetres
-(pinned by a test); the extended one costs a third as much, which counts in a control loop that the
+(pinned by a test); the extended one costs a sixth as much, which counts in a control loop that the
 SITL runs 50 times faster than real time. The unscented and the constant-velocity filters stay
 selectable.
 """
