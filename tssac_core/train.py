@@ -37,7 +37,7 @@ from tqdm import tqdm
 from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStats, Variant, transfer
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.env import RoleTask
+from tssac_core.env import RoleTask, TaskStep
 from tssac_core.observation import ObservationMode
 from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint, torch_save_atomic
 from tssac_core.reward import RewardConfig
@@ -153,6 +153,14 @@ class EpochLog:
     env_time: float = 0.0
     update_time: float = 0.0
 
+    def record_episodes(self, step: TaskStep, ended: np.ndarray) -> None:
+        """Add the figures of the episodes that ended at this step (``ended``, (N,) bool)."""
+        self.returns += step.episode_return[ended].tolist()
+        self.costs += step.episode_cost[ended].tolist()
+        self.hazard_costs += step.episode_hazard_cost[ended].tolist()
+        self.tasks += step.episode_task[ended].astype(float).tolist()
+        self.successes += step.episode_success[ended].astype(float).tolist()
+
     def row(self, role: Role, epoch: int, env_steps: int, updates: int, steps: int) -> dict[str, Any]:
         def mean(xs: list[float]) -> float:
             return float(np.mean(xs)) if xs else math.nan
@@ -218,11 +226,7 @@ class SeedRole:
         self.env_steps += cfg.envs
         ended = step.terminated | step.truncated
         if ended.any():
-            log.returns += step.episode_return[ended].tolist()
-            log.costs += step.episode_cost[ended].tolist()
-            log.hazard_costs += step.episode_hazard_cost[ended].tolist()
-            log.tasks += step.episode_task[ended].astype(float).tolist()
-            log.successes += step.episode_success[ended].astype(float).tolist()
+            log.record_episodes(step, ended)
 
     def updates_due(self) -> int | None:
         """Gradient updates owed after the last step (Algorithm 1: one per update_every decisions);

@@ -224,11 +224,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
             rollout.terminal[t], rollout.ended[t] = step.terminated & step.episode_success, ended
             ep_len += 1
             if ended.any():
-                log.returns += step.episode_return[ended].tolist()
-                log.costs += step.episode_cost[ended].tolist()
-                log.hazard_costs += step.episode_hazard_cost[ended].tolist()
-                log.tasks += step.episode_task[ended].astype(float).tolist()
-                log.successes += step.episode_success[ended].astype(float).tolist()
+                log.record_episodes(step, ended)
                 finished.extend(zip(step.episode_cost[ended].tolist(), ep_len[ended].tolist()))
                 ep_len[ended] = 0
             obs = step.obs
