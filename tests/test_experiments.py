@@ -53,7 +53,7 @@ def test_paper_grid():
     names = [e.name for e in grid.algos]
     assert names == ["tssac", "sac_lag", "sac", "ppo", "cpo", "ppo_lag", "sac_pen0", "sac_pen10", "sac_pen15", "sac_pen50"]
     assert [e.penalty for e in grid.algos if e.algo == "sac_penalty"] == [0.0, -10.0, -15.0, -50.0]
-    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 25 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
+    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 10 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
     jobs = grid.jobs(Path("results"))
     assert len(jobs) == 30 and jobs[0].out == Path("results/runs/tssac-seed0")
     by_name = {j.name: j for j in jobs}
@@ -62,7 +62,7 @@ def test_paper_grid():
     assert ppo.sac == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
-        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (25, 4000, 1, 10, 2, 0, 1)
+        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (10, 4000, 1, 10, 2, 0, 1)
 
 
 @pytest.mark.parametrize(
