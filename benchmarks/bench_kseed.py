@@ -1,9 +1,10 @@
 """K seeds in one batched learner against one seed, and against K single learners run in turn.
 
-    python benchmarks/bench_kseed.py [--k 3] [--seconds 60] [--rounds 10] [--hidden 256,256] [--json benchmarks/results/kseed.json]
+    python benchmarks/bench_kseed.py [--k 3] [--seconds 60] [--rounds 10] [--hidden 256,256] [--threads 1] \
+        [--json benchmarks/results/kseed.json]
 
-Table 3's sizes (batch 256, 256x256 ReLU networks, twin reward critics + cost critic + actor), one
-torch thread, replay sampling included as the training loop does it (one buffer per seed, TSSAC's
+Table 3's sizes (batch 256, 256x256 ReLU networks, twin reward critics + cost critic + actor),
+``--threads`` torch threads (default one), replay sampling included as the training loop does it (one buffer per seed, TSSAC's
 recent batch for the multiplier). Three blocks alternate within every round, so that a change in the
 machine's load hits all three; each figure is the median over the rounds:
 
@@ -82,7 +83,7 @@ def batched_block(config: SacConfig, buffers: Sequence[ReplayBuffer]) -> Callabl
     return block
 
 
-def measure(variant: Variant, k: int, seconds: float, rounds: int, hidden: tuple[int, ...] = HIDDEN) -> dict[str, float]:
+def measure(variant: Variant, k: int, seconds: float, rounds: int, hidden: tuple[int, ...] = HIDDEN, threads: int = 1) -> dict[str, float]:
     config = table3_config(variant, hidden)
     buffers = [synthetic_buffer(FILL, seed) for seed in range(k)]
     blocks = {
@@ -90,12 +91,12 @@ def measure(variant: Variant, k: int, seconds: float, rounds: int, hidden: tuple
         "batched": batched_block(config, buffers),
         "sequential": single_block(config, buffers),
     }
-    rates = timed_rounds(blocks, threads=1, seconds=seconds, rounds=rounds)
+    rates = timed_rounds(blocks, threads=threads, seconds=seconds, rounds=rounds)
     one, batched, sequential = (rates[name] for name in ("one", "batched", "sequential"))
     floor: dict[str, float] = {}
     if hidden == HIDDEN:  # bench_train's matmul list is for Table 3's sizes
         matmuls = our_matmuls(recent=variant in (Variant.SAC_LAG, Variant.TSSAC), cost_in_actor=variant in (Variant.SAC_LAG, Variant.TSSAC))
-        seconds_per_update = matmul_seconds(matmuls, threads=1, repeats=15)  # best of 15: the load varies
+        seconds_per_update = matmul_seconds(matmuls, threads=threads, repeats=15)  # best of 15: the load varies
         floor = {
             "matmul_ms_per_seed_update": 1e3 * seconds_per_update,
             # K seeds' matmuls alone, at torch.mm's hot-cache speed, over one whole single-seed update (CPU time).
@@ -121,13 +122,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=60.0, help="measured seconds per block and variant")
     p.add_argument("--rounds", type=int, default=10, help="alternating rounds (medians over them)")
     p.add_argument("--hidden", default="256,256", help="hidden layer sizes (default Table 3's 256,256)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads for every block (default 1; this machine has 2 cores)")
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "kseed.json")
     a = p.parse_args(argv)
     hidden = tuple(int(x) for x in a.hidden.split(","))
-    torch.set_num_threads(1)
+    torch.set_num_threads(a.threads)
     results: dict[str, object] = {
         "k": a.k,
-        "threads": 1,
+        "threads": a.threads,
         "batch": BATCH,
         "hidden": list(hidden),
         "torch": torch.__version__,
@@ -135,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "load_average_before": list(os.getloadavg()),
     }
     for name in a.variants.split(","):
-        figures = measure(Variant(name), a.k, a.seconds, a.rounds, hidden)
+        figures = measure(Variant(name), a.k, a.seconds, a.rounds, hidden, a.threads)
         results[name] = figures
         print(
             f"{name}: 1 seed {figures['updates_per_s_1_seed']:.1f} updates/s; "

@@ -165,6 +165,24 @@ def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
     assert not (run_dir / LOG_NAME).exists()
 
 
+@pytest.mark.parametrize("content, message", [
+    ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
+    ('[1, 2]', "not a training configuration"),
+    ('{"algo": "tssac", "roles": "decoy"}', "roles: expected a list"),
+])
+def test_a_config_json_this_version_cannot_read_is_a_conflict_not_a_crash(tmp_path, capsys, content, message):
+    results = tmp_path / "r"
+    run_dir = results / "runs" / "tssac-seed0"
+    run_dir.mkdir(parents=True)
+    (run_dir / "config.json").write_text(content)
+    assert run(main, ["--grid", "experiments/smoke.yaml", "--results", str(results), "--dry-run"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "tssac-seed0" in x)
+    assert line.startswith("conflict") and message in line
+    assert run(main, ["--grid", "experiments/smoke.yaml", "--results", str(results)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err
+
+
 # ------------------------------------------------------------------------- interruption and resume
 
 

@@ -136,3 +136,16 @@ def test_bad_arguments(tmp_path, capsys):
     assert run(main, ["--out", str(tmp_path / "y"), "--resume"]) == 2
     assert run(main, ["--out", str(tmp_path / "z"), "--roles", "detect"]) == 2
     assert "train decoy first" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content, message", [
+    ("{not json", "is not readable"),
+    ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
+])
+def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content, message):
+    from tssac_core.cli import run
+
+    (tmp_path / "config.json").write_text(content)
+    assert run(main, ["--out", str(tmp_path), "--resume"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err and "config.json" in err

@@ -33,6 +33,7 @@ from types import FrameType
 from typing import Any, Callable, Iterator
 
 import tssac_core
+from tssac_core.cli import UsageError
 from tssac_core.experiment_grid import Job
 from tssac_core.scenario import ROLES
 from tssac_core.train import TrainConfig, config_from_saved
@@ -87,9 +88,10 @@ def job_state(job: Job) -> JobState:
         saved = json.loads(config_path.read_text())
     except (OSError, ValueError) as exc:
         return JobState(job, Status.CONFLICT, f"its config.json is not readable ({exc})")
-    if not isinstance(saved, dict):
-        return JobState(job, Status.CONFLICT, "its config.json is not a training configuration")
-    difference = config_difference(saved, job.config())
+    try:
+        difference = config_difference(saved, job.config())
+    except UsageError as exc:
+        return JobState(job, Status.CONFLICT, str(exc))
     if difference:
         return JobState(job, Status.CONFLICT, difference)
     return JobState(job, Status.FINISHED if is_finished(job.out) else Status.PARTIAL)

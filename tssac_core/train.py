@@ -112,9 +112,20 @@ OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}
 """Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly)."""
 
 
-def config_from_saved(saved: dict[str, Any]) -> TrainConfig:
-    """The TrainConfig of a run's config.json; keys it lacks take their value from before they existed."""
+def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainConfig:
+    """The TrainConfig of a run's config.json; keys it lacks take their value from before they existed.
+
+    A file that is not a training configuration of this TSSAC (not a mapping, settings it does not know,
+    no roles) raises UsageError naming ``source``.
+    """
+    if not isinstance(saved, dict):
+        raise UsageError(f"{source}: not a training configuration")
+    unknown = sorted(set(saved) - {f.name for f in dataclasses.fields(TrainConfig)})
+    if unknown:
+        raise UsageError(f"{source}: settings this TSSAC does not know: {', '.join(unknown)}")
     full = {**OLDER_RUN_SETTINGS, **saved}
+    if not isinstance(full.get("roles"), list):
+        raise UsageError(f"{source}: roles: expected a list of role names")
     return TrainConfig(**{**full, "roles": tuple(full["roles"])})
 
 
@@ -539,8 +550,11 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
     if resume:
         if not config_path.is_file():
             raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
-        saved = json.loads(config_path.read_text())
-        cfg = config_from_saved(saved)
+        try:
+            saved = json.loads(config_path.read_text())
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--resume: {config_path} is not readable ({exc})") from None
+        cfg = config_from_saved(saved, config_path)
     elif config_path.is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     scenario = load(cfg.scenario)

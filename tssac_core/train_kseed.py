@@ -98,7 +98,10 @@ def check_seeds(cfg: TrainConfig, seeds: tuple[int, ...] | None, out: Path, resu
     if resume:
         if not is_kseed_run(out):
             raise UsageError(f"--resume: {out / SEEDS_FILE} not found (not a --seeds run)")
-        saved = tuple(json.loads((out / SEEDS_FILE).read_text())["seeds"])
+        try:
+            saved = tuple(int(s) for s in json.loads((out / SEEDS_FILE).read_text())["seeds"])
+        except (OSError, ValueError, TypeError, KeyError) as exc:
+            raise UsageError(f"--resume: {out / SEEDS_FILE} is not readable ({type(exc).__name__}: {exc})") from None
         if seeds is not None and seeds != saved:
             raise UsageError(f"--seeds {','.join(map(str, seeds))} does not match the run in {out} (seeds {','.join(map(str, saved))})")
         return saved
