@@ -136,9 +136,11 @@ def test_second_invocation_starts_nothing(smoke, capsys):
 def test_report_writes_table4_json_and_figures(smoke):
     table = (smoke / "table4.md").read_text()
     rows = [line for line in table.splitlines() if line.startswith("| ")]
-    assert rows[2].startswith("| tssac | 1 | ") and rows[2].endswith("| 96% | 3.0 |")  # the paper's Table 4 beside ours
-    assert rows[3].startswith("| sac_lag | 1 | ") and rows[3].endswith("| 96% | 3.0 |")
-    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | — | — |"  # it solves the fixed mission safely
+    assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
+    assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
+    assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
+    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | — | — | — |"  # it solves the fixed mission safely
+    assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer speed-up" in table and "| detect |" in table and "| strike |" in table
     data = json.loads((smoke / "experiments.json").read_text())
     assert [a["name"] for a in data["algorithms"]] == ["tssac", "sac_lag"]
@@ -149,6 +151,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert len(cached["per_episode"]["cost"]) == 2 and len(cached["per_episode"]["return"][0]) == 3
     assert data["guidance"]["random"]["success_rate"] == 1.0 and data["guidance"]["generalization"]["episodes"] == 2
     assert set(data["transfer_speedup"]) == {"threshold", "detect", "strike"} and data["left_out"] == []
+    assert data["training"]["epochs_per_role"] == 1 and tssac["training_wall_s"]["mean"] >= 0
     for fig in ("fig7_training", "fig8_multiplier", "fig9_mission", "fig10_test_boxplots", "fig11_generalization"):
         assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
 
@@ -242,3 +245,17 @@ def test_transfer_speedup(tmp_path):
     assert result["sac_lag"]["per_seed"] == {"0": 300, "1": None} and result["sac_lag"]["reached"] == 1
     assert result["sac_lag"]["mean_steps"] == 300 and result["sac_lag"]["mean_is_lower_bound"]
     assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
+
+
+def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):
+    from tssac_core.experiment_report import training_wall_s
+
+    assert training_wall_s(tmp_path) is None  # no train.log
+    (tmp_path / "train.log").write_text(
+        "=== 2026-11-22 15:41:04 runner: python -m tssac_core.train ...\n"
+        "trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r/runs/tssac-seed0\n"
+        "=== 2026-11-22 16:00:00 runner: python -m tssac_core.train --resume ...\n"  # killed: no line
+        "=== 2026-11-22 16:10:00 runner: python -m tssac_core.train --resume ...\n"
+        "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n")
+    assert training_wall_s(tmp_path) == 500.0
+

@@ -18,6 +18,7 @@ import csv
 import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -141,6 +142,21 @@ def over_seeds(per_seed: dict[int, float]) -> dict[str, Any]:
     }
 
 
+TRAINED_LINE = re.compile(r"^trained .* in (\d+) s; results in ", re.MULTILINE)
+PAPER_EPOCHS = 50
+"""Table 3: epochs per role."""
+
+
+def training_wall_s(run: Path) -> float | None:
+    """Wall seconds of a run as ``tssac_core.train`` reports them in its train.log (one "trained ... in N s"
+    line per invocation that finished, summed over resumes; time lost to a kill is not counted)."""
+    log = run / "train.log"
+    if not log.is_file():
+        return None
+    seconds = [int(m) for m in TRAINED_LINE.findall(log.read_text(errors="replace"))]
+    return float(sum(seconds)) if seconds else None
+
+
 def read_metrics(run: Path) -> list[dict[str, str]]:
     path = run / "metrics.csv"
     if not path.is_file():
@@ -210,6 +226,8 @@ def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Eva
         row: dict[str, Any] = {"name": entry.name, "algo": entry.algo, "penalty": entry.penalty, "seeds": [j.seed for j in mine]}
         for label in labels:
             row[label] = {key: over_seeds({j.seed: evaluations[(j.name, label)][key] for j in mine}) for key in ("success_rate", "mean_cost")}
+        walls = {j.seed: w for j in mine if (w := training_wall_s(j.out)) is not None}
+        row["training_wall_s"] = over_seeds(walls)
         paper = PAPER_TABLE4.get(entry.algo) if entry.algo != "sac_penalty" else None
         row["paper"] = {"success_rate": paper[0], "mean_cost": paper[1]} if paper else None
         algorithms.append(row)
@@ -220,6 +238,8 @@ def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Eva
         "results": shown(results),
         "evaluation": {"scenario": shown(ev.scenario), "episodes": ev.episodes, "seed": ev.seed,
                        "generalization_scenario": shown(ev.generalization_scenario) if ev.generalization_scenario else None},
+        "training": {"epochs_per_role": grid.train.epochs, "steps_per_epoch": grid.train.steps_per_epoch,
+                     "action_repeat": grid.train.action_repeat, "paper_epochs_per_role": PAPER_EPOCHS},
         "cost_limit": load(ev.scenario).cost_limit,
         "algorithms": algorithms,
         "guidance": guidance,
@@ -258,6 +278,22 @@ def _steps(figures: dict[str, Any]) -> str:
     return f"{bound}{figures['mean_steps']:,.0f} (reached in {figures['reached']} of {figures['seeds']} seeds)"
 
 
+def _minutes(stats: dict[str, Any]) -> str:
+    if stats["mean"] is None:
+        return "—"
+    return f"{stats['mean'] / 60:.0f} min" + (f" ± {stats['std'] / 60:.0f}" if stats["std"] is not None else "")
+
+
+def _budget(training: dict[str, Any]) -> str:
+    """The training budget beside the table: every algorithm alike, and how it compares with the paper's."""
+    epochs, paper = training["epochs_per_role"], training["paper_epochs_per_role"]
+    text = (f"Training budget, the same for every algorithm: {epochs} epochs x {training['steps_per_epoch']:,} learner decisions "
+            f"per role (one decision per {training['action_repeat']} world steps of 0.1 s).")
+    if epochs < paper:
+        text += f" **Shrunk from the paper's {paper} epochs** to fit the grid on this machine: {epochs / paper:.0%} of its training."
+    return text
+
+
 def table_markdown(summary: dict[str, Any]) -> str:
     """table4.md: Table 4 beside the paper's, the generalisation figures and the transfer speed-up."""
     ev = summary["evaluation"]
@@ -269,15 +305,18 @@ def table_markdown(summary: dict[str, Any]) -> str:
         "finished seeds. Success = the target was hit (all three tasks). Average cost = hazard cost per UAV "
         f"per mission (limit C = {summary['cost_limit']:g} per UAV). The paper's figures are its Table 4.",
         "",
-        "| algorithm | seeds | success rate | average cost | paper: success rate | paper: average cost |",
-        "| --- | --- | --- | --- | --- | --- |",
+        _budget(summary["training"]),
+        "",
+        "| algorithm | seeds | success rate | average cost | paper: success rate | paper: average cost | training wall time per seed |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for a in summary["algorithms"]:
         paper = a["paper"]
         p_rate, p_cost = (f"{100 * paper['success_rate']:.0f}%", f"{paper['mean_cost']:.1f}") if paper else ("—", "—")
-        lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(a['random']['success_rate'])} | {_cost(a['random']['mean_cost'])} | {p_rate} | {p_cost} |")
+        lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(a['random']['success_rate'])} | {_cost(a['random']['mean_cost'])} "
+                     f"| {p_rate} | {p_cost} | {_minutes(a['training_wall_s'])} |")
     g = summary["guidance"]["random"]
-    lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | — | — |")
+    lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | — | — | — |")
     if summary["left_out"]:
         lines += ["", f"Left out (not finished, or a run with other settings than the grid: see --dry-run): {', '.join(summary['left_out'])}."]
     if "generalization" in summary["guidance"]:
