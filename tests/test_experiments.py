@@ -6,12 +6,14 @@ import csv
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tssac_core.cli import run
@@ -154,6 +156,32 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert data["training"]["epochs_per_role"] == 1 and tssac["training_wall_s"]["mean"] >= 0
     for fig in ("fig7_training", "fig8_multiplier", "fig9_mission", "fig10_test_boxplots", "fig11_generalization"):
         assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
+
+
+def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys):
+    from tssac_core.policy import CheckpointError, learner_state, load_team
+
+    results = tmp_path / "results"
+    shutil.copytree(smoke, results)
+    run_dir = results / "runs" / "tssac-seed0"
+    obs = np.random.default_rng(0).uniform(-1, 1, (5, 24)).astype(np.float32)
+    before = [p.act(obs) for p in load_team(run_dir)]
+    sizes = {p: p.stat().st_size for p in run_dir.glob("*.pt")}
+    caches = {p: p.read_text() for p in results.glob("runs/*/eval_*.json")}
+    assert (run_dir / "resume").is_dir() and len(caches) == 4
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0
+    assert "compacted 2 finished runs" in capsys.readouterr().out
+    assert not (run_dir / "resume").exists()
+    assert all(p.stat().st_size < sizes[p] for p in sizes)
+    assert all(np.array_equal(a, b) for a, b in zip(before, [p.act(obs) for p in load_team(run_dir)]))
+    with pytest.raises(CheckpointError, match="actor only"):
+        learner_state(run_dir / "decoy.pt")  # nothing to transfer from any more, said in one line
+    # Still finished, and the cached evaluations still belong to these pilots: nothing is trained or flown again.
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results)]) == 0
+    assert "2 jobs: 2 finished, 0 to run" in capsys.readouterr().out
+    assert {p: p.read_text() for p in caches} == caches
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0  # again: nothing changes
+    assert all(np.array_equal(a, b) for a, b in zip(before, [p.act(obs) for p in load_team(run_dir)]))
 
 
 def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):

@@ -28,7 +28,7 @@ import numpy as np
 from tssac_core.cli import write_json
 from tssac_core.experiment_grid import Grid, Job
 from tssac_core.missions import MissionResults, fly_missions
-from tssac_core.policy import load_team
+from tssac_core.policy import checkpoint_info, load_team, read_checkpoint
 from tssac_core.scenario import ROLES, load
 from tssac_core.team import GUIDANCE, Pilot
 
@@ -70,10 +70,17 @@ def eval_specs(grid: Grid) -> list[EvalSpec]:
 
 
 def team_digest(team: Path) -> str:
-    """A hash of the three role checkpoints: a cached evaluation belongs to exactly these weights."""
+    """A hash of what the three role checkpoints fly with (actor weights, observation mode, decision
+    interval): a cached evaluation belongs to exactly these pilots, also after ``--compact``."""
     h = hashlib.sha256()
     for role in ROLES:
-        h.update((team / f"{role.value}.pt").read_bytes())
+        path = team / f"{role.value}.pt"
+        data = read_checkpoint(path)
+        info = checkpoint_info(data, path)
+        h.update(f"{info.role.value} {info.observation_mode.value} {info.action_repeat} {info.hidden_sizes}".encode())
+        for name, tensor in sorted(data["actor"].items()):
+            h.update(name.encode())
+            h.update(tensor.detach().cpu().numpy().tobytes())
     return h.hexdigest()[:16]
 
 

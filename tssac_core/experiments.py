@@ -5,6 +5,7 @@ Examples::
     python -m tssac_core.experiments --grid experiments/paper.yaml --dry-run      # the jobs and their status
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2       # train what is missing, then report
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
+    python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
 The grid file's format is in :mod:`tssac_core.experiment_grid`. Each job is a ``python -m tssac_core.train``
 process writing ``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is
@@ -17,6 +18,7 @@ team is evaluated (:mod:`tssac_core.experiment_report`) and ``<results>/table4.m
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
@@ -27,7 +29,8 @@ from tssac_core.experiment_grid import Grid, Job, load_grid
 from tssac_core.experiment_jobs import Launch, Status, command, is_finished, job_state, run_jobs
 from tssac_core.experiment_report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
 from tssac_core.missions import MissionResults
-from tssac_core.scenario import Scenario, load
+from tssac_core.policy import compact_checkpoint
+from tssac_core.scenario import ROLES, Scenario, load
 
 Say = Callable[[str], None]
 
@@ -93,6 +96,20 @@ def dry_run(grid: Grid, results: Path, report: Say = say) -> None:
         report(f"{state.status.value:9s} {job.name:22s} {job.out}  {what}".rstrip())
 
 
+def compact(grid: Grid, results: Path, report: Say = say) -> None:
+    """Finished runs keep what evaluation and the figures need (actors, metrics, logs, plots): each role
+    checkpoint loses its learner state (critics, targets, optimiser moments) and the run its resume/
+    directory. Partial and conflicting runs are left alone."""
+    before = after = 0
+    finished = [s.job for s in map(job_state, grid.jobs(results)) if s.status is Status.FINISHED]
+    for job in finished:
+        for role in ROLES:
+            b, a = compact_checkpoint(job.out / f"{role.value}.pt")
+            before, after = before + b, after + a
+        shutil.rmtree(job.out / "resume", ignore_errors=True)
+    report(f"compacted {len(finished)} finished runs: role checkpoints {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB, resume/ states deleted")
+
+
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=__doc__.split("\n")[0])
     p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
@@ -101,6 +118,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished")
     mode.add_argument("--dry-run", action="store_true", help="print the jobs and their status (finished, partial, new, conflict) and exit")
+    mode.add_argument("--compact", action="store_true", help="train nothing: keep only the deployable actor in finished runs' checkpoints "
+                      "and delete their resume/ states (to commit results; their evaluations stay valid)")
     args = p.parse_args(argv)
     if args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
@@ -112,6 +131,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     grid = load_grid(args.grid)
     if args.dry_run:
         dry_run(grid, args.results)
+        return 0
+    if args.compact:
+        compact(grid, args.results)
         return 0
     launches = [] if args.report_only else train(grid, args.results, args.jobs)
     make_report(grid, args.results)

@@ -105,6 +105,27 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     return data
 
 
+def learner_state(path: str | Path) -> dict[str, Any]:
+    """The full learner state a role checkpoint carries for transfer and fine-tuning; CheckpointError if the
+    file has none (a compacted checkpoint holds the actor only)."""
+    state = read_checkpoint(path).get("learner")
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{path}: holds the actor only (compacted), not the learner state that transfer and --init-from need")
+    return state
+
+
+def compact_checkpoint(path: str | Path) -> tuple[int, int]:
+    """Drop the learner state (critics, targets, optimiser moments) from a role checkpoint, keeping the
+    deployable actor and its metadata; rewritten atomically. Returns the file's size before and after."""
+    p = Path(path)
+    before = p.stat().st_size if p.is_file() else 0
+    data = read_checkpoint(p)
+    checkpoint_info(data, p)  # refuse to rewrite a checkpoint whose metadata is damaged
+    if data.get("learner") is not None:
+        torch_save_atomic({**data, "learner": None}, p)
+    return before, p.stat().st_size
+
+
 def checkpoint_info(data: dict[str, Any], path: str | Path) -> CheckpointInfo:
     try:
         return CheckpointInfo(

@@ -39,7 +39,7 @@ from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStat
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask, TaskStep
 from tssac_core.observation import ObservationMode
-from tssac_core.policy import CheckpointInfo, Policy, package_versions, read_checkpoint, save_role_checkpoint, torch_save_atomic
+from tssac_core.policy import CheckpointInfo, Policy, learner_state, package_versions, save_role_checkpoint, torch_save_atomic
 from tssac_core.reward import RewardConfig
 from tssac_core.routes import RouteConfig
 from tssac_core.scenario import ROLES, Role, Scenario, load
@@ -336,7 +336,7 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         run.restore(saved)
         torch.set_rng_state(saved["torch_rng"])
     elif source is not None:
-        log_transfer(role, cfg, transfer(learner, read_checkpoint(source)["learner"]), source)
+        log_transfer(role, cfg, transfer(learner, learner_state(source)), source)
         run.transferred = True
     bar.n = (role_position(cfg, role) * cfg.epochs + run.epoch) * cfg.steps_per_epoch
     bar.refresh()

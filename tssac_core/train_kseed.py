@@ -31,7 +31,7 @@ from tqdm import tqdm
 from tssac_core.algos.kseed import KSeedSacLagrangian
 from tssac_core.cli import UsageError, write_json
 from tssac_core.observation import ObservationMode
-from tssac_core.policy import read_checkpoint
+from tssac_core.policy import learner_state
 from tssac_core.scenario import Role, Scenario
 from tssac_core.train import (
     SAC_FAMILY,
@@ -137,7 +137,7 @@ def train_role_kseed(cfgs: list[TrainConfig], scenario: Scenario, role: Role, ou
     else:
         sources = [transfer_source(c, role, o) for c, o in zip(cfgs, outs)]
         if sources[0] is not None:
-            copied = learner.transfer([read_checkpoint(s)["learner"] for s in sources if s is not None])
+            copied = learner.transfer([learner_state(s) for s in sources if s is not None])
             for run, source in zip(runs, sources):
                 assert source is not None
                 log_transfer(role, run.cfg, copied, source)
