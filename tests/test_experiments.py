@@ -184,6 +184,31 @@ def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys)
     assert all(np.array_equal(a, b) for a, b in zip(before, [p.act(obs) for p in load_team(run_dir)]))
 
 
+def test_a_run_copied_from_another_clone_is_recognised_by_its_task(smoke, tmp_path, capsys):
+    """config.json names the scenario file of the clone the run was made in; the grid compares tasks, not paths."""
+    results = tmp_path / "results"
+    shutil.copytree(smoke, results)
+    config_path = results / "runs" / "tssac-seed0" / "config.json"
+    config = json.loads(config_path.read_text())
+    assert config["scenario"] == "scenarios/strike.yaml"  # as the grid file writes it: portable
+    copy = tmp_path / "other-clone" / "scenarios" / "strike.yaml"
+    copy.parent.mkdir(parents=True)
+    shutil.copy(ROOT / "scenarios" / "strike.yaml", copy)
+
+    def status(scenario: str) -> str:
+        config_path.write_text(json.dumps({**config, "scenario": scenario}))
+        with pytest.MonkeyPatch.context() as mp:
+            mp.chdir(ROOT)
+            assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--dry-run"]) == 0
+        return next(x for x in capsys.readouterr().out.splitlines() if "tssac-seed0" in x)
+
+    assert status(str(copy)).startswith("finished")  # the same task in another file
+    copy.unlink()
+    assert status(str(copy)).startswith("finished")  # that file is gone: the checkpoints' scenario digest says
+    line = status(str(ROOT / "scenarios" / "random.yaml"))  # another task
+    assert line.startswith("conflict") and "scenario:" in line
+
+
 def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
     results = tmp_path / "r"
     run_dir = results / "runs" / "tssac-seed0"

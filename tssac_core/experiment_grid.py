@@ -239,11 +239,12 @@ class _Reader:
         return value
 
     def scenario(self, value: Any, where: str) -> Path:
-        """A scenario file, resolved against the working directory; it must exist."""
+        """A scenario file as written, relative to the working directory (so that the runs' config.json
+        files hold portable paths); it must exist."""
         path = Path(self.string(value, where))
         if not path.is_file():
             raise self.fail(where, f"file not found: {path} (paths are relative to the directory the command runs in)")
-        return path.resolve()
+        return path
 
     def seeds(self, value: Any, where: str) -> tuple[int, ...]:
         if not isinstance(value, list) or not value:

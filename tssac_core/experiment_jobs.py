@@ -35,7 +35,9 @@ from typing import Any, Callable, Iterator
 import tssac_core
 from tssac_core.cli import UsageError
 from tssac_core.experiment_grid import Job
-from tssac_core.scenario import ROLES
+from tssac_core.policy import CheckpointError, read_checkpoint
+from tssac_core.scenario import ROLES, ScenarioError
+from tssac_core.scenario import load as load_scenario
 from tssac_core.train import TrainConfig, config_from_saved
 
 logger = logging.getLogger(__name__)
@@ -89,7 +91,7 @@ def job_state(job: Job) -> JobState:
     except (OSError, ValueError) as exc:
         return JobState(job, Status.CONFLICT, f"its config.json is not readable ({exc})")
     try:
-        difference = config_difference(saved, job.config())
+        difference = config_difference(saved, job.config(), job.out)
     except UsageError as exc:
         return JobState(job, Status.CONFLICT, str(exc))
     if difference:
@@ -97,10 +99,11 @@ def job_state(job: Job) -> JobState:
     return JobState(job, Status.FINISHED if is_finished(job.out) else Status.PARTIAL)
 
 
-def config_difference(saved: dict[str, Any], wanted: TrainConfig) -> str:
+def config_difference(saved: dict[str, Any], wanted: TrainConfig, run: Path | None = None) -> str:
     """'' if a run's config.json is the run the grid asks for, else the first differing setting.
 
-    A key missing from an older config.json takes what ``train --resume`` gives it.
+    A key missing from an older config.json takes what ``train --resume`` gives it. The scenario is the
+    same if it is the same file or a file with the same task (:func:`same_scenario`).
     """
     expected = json.loads(json.dumps(asdict(wanted)))  # tuples -> lists, as in config.json
     have = json.loads(json.dumps(asdict(config_from_saved(saved))))
@@ -108,12 +111,34 @@ def config_difference(saved: dict[str, Any], wanted: TrainConfig) -> str:
         if key in IGNORED_SETTINGS:
             continue
         if key == "scenario":
-            same = Path(have[key]).resolve() == Path(value).resolve()
+            same = same_scenario(Path(have[key]), Path(value), run)
         else:
             same = have.get(key) == value
         if not same:
             return f"{key}: {have.get(key)!r} in its config.json, {value!r} in the grid"
     return ""
+
+
+def same_scenario(saved: Path, wanted: Path, run: Path | None) -> bool:
+    """Whether a run trained on the task of the scenario file ``wanted``: the same path, or the same task
+    (scenario digest) in the file it names, or, if that file is gone (a run directory copied from another
+    clone), in its role checkpoints, which record the digest of the task they were trained on."""
+    if saved.resolve() == wanted.resolve():
+        return True
+    try:
+        digest = load_scenario(wanted).digest()
+        if saved.is_file():
+            return load_scenario(saved).digest() == digest
+    except ScenarioError:
+        return False
+    for role in ROLES if run is not None else ():
+        checkpoint = run / f"{role.value}.pt"
+        if checkpoint.is_file():
+            try:
+                return read_checkpoint(checkpoint).get("scenario_digest") == digest
+            except CheckpointError:
+                return False
+    return False
 
 
 def command(job: Job, resume: bool) -> tuple[str, ...]:
