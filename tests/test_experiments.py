@@ -298,6 +298,8 @@ def test_transfer_speedup(tmp_path):
     assert result["sac_lag"]["per_seed"] == {"0": 300, "1": None} and result["sac_lag"]["reached"] == 1
     assert result["sac_lag"]["mean_steps"] == 300 and result["sac_lag"]["mean_is_lower_bound"]
     assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
+    assert result["tssac"]["mean_task_success"]["per_seed"] == {"0": pytest.approx(0.55), "1": pytest.approx(29 / 30)}
+    assert result["sac_lag"]["mean_task_success"]["mean"] == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
 
 
 def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):
