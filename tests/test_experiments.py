@@ -58,6 +58,7 @@ def test_paper_grid():
     assert grid.seeds == (0, 1, 2) and grid.train.epochs == 10 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
     jobs = grid.jobs(Path("results"))
     assert len(jobs) == 30 and jobs[0].out == Path("results/runs/tssac-seed0")
+    assert [j.name for j in jobs[:11]] == [f"{n}-seed0" for n in names] + ["tssac-seed1"]  # seed-major: a cut-short grid fills every row
     by_name = {j.name: j for j in jobs}
     tssac, ppo, pen = by_name["tssac-seed1"].config(), by_name["ppo-seed1"].config(), by_name["sac_pen50-seed2"].config()
     assert tssac.sac == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}

@@ -130,8 +130,9 @@ class Grid:
     evaluation: Evaluation
 
     def jobs(self, results: Path) -> list[Job]:
-        """Every (entry, seed) run, in file order (entries first, then seeds); directories under ``results/runs``."""
-        return [Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s)) for e in self.algos for s in self.seeds]
+        """Every (entry, seed) run, seed-major: each entry's first seed before any entry's second, so a grid
+        stopped part-way (it runs across sessions) has every row of Table 4; directories under ``results/runs``."""
+        return [Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s)) for s in self.seeds for e in self.algos]
 
     def entry(self, name: str) -> AlgoEntry:
         return next(e for e in self.algos if e.name == name)
