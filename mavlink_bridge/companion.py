@@ -62,7 +62,9 @@ from mavlink_bridge.frames import HOLD, Measurement, Setpoint, action_to_setpoin
 from mavlink_bridge.link import CommandError, LinkError, MavLink, Message, M
 from mavlink_bridge.state_filter import FilterModel, FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
+from tssac_core.errors import CheckpointError
 from tssac_core.guidance import Guidance
+from tssac_core.numpy_actor import load_actor
 from tssac_core.observation import ObservationMode, observe
 from tssac_core.routes import RouteMap
 from tssac_core.scenario import Role, Scenario, ScenarioError, load
@@ -183,9 +185,7 @@ class PolicyPilot:
     """A trained role policy; each action is held for ``action_repeat`` ticks, as in training."""
 
     def __init__(self, path: Path, role: Role) -> None:
-        from tssac_core.policy import Policy  # torch: only when a policy flies
-
-        self.policy = Policy.load(path, role)
+        self.policy = load_actor(path, role)  # <role>.npz: numpy only; <role>.pt: imports torch
         self.name = str(path)
         self.repeat = max(1, int(self.policy.action_repeat))
         self.mode: ObservationMode = self.policy.observation_mode
@@ -301,6 +301,7 @@ class Companion:
         self.world.reset([0], [s.layout])
         self.pilot.action(self.world, self.role_index, 0)  # warm up: the guidance plans its route once per layout
         self.pilot.reset()
+        _log.info("%s: pilot %s", config.role.value, self.pilot.name)
         link_model = s.link
         self.noise = FilterNoise.from_sensor(
             max(link_model.gps_position_sigma_m, MIN_POS_SIGMA_M),
@@ -709,7 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--connect", required=True, metavar="CONN", help="the vehicle's connection string, e.g. udpout:127.0.0.1:14560")
     p.add_argument("--role", required=True, choices=[r.value for r in Role], help="which UAV this is")
     who = p.add_mutually_exclusive_group(required=True)
-    who.add_argument("--model", type=Path, metavar="FILE", help="role checkpoint (models/tssac/<role>.pt)")
+    who.add_argument("--model", type=Path, metavar="FILE", help="the role's trained actor: models/tssac/<role>.npz (numpy only) or <role>.pt (needs torch)")
     who.add_argument("--pilot", choices=[GUIDANCE], help="fly the rule-based guidance controller")
     p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies")
     p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
@@ -774,11 +775,8 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     )
 
 
-def _bad_input_errors() -> tuple[type[Exception], ...]:
-    """Exceptions that mean bad input; CheckpointError only if a policy was loaded (torch is slow to import)."""
-    errors: tuple[type[Exception], ...] = (UsageError, ScenarioError, LinkError)
-    policy = sys.modules.get("tssac_core.policy")
-    return errors + ((policy.CheckpointError,) if policy is not None else ())
+BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)
+"""Exceptions that mean bad input: one line and exit code 2."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -786,7 +784,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
         companion = Companion(config_from_args(args))
-    except _bad_input_errors() as exc:
+    except BAD_INPUT_ERRORS as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

@@ -51,6 +51,8 @@ from mavlink_bridge.link import parse_connection
 from mavlink_bridge.mission_log import MissionRecord, TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
 from tssac_core.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
+from tssac_core.errors import CheckpointError
+from tssac_core.numpy_actor import load_actor, pilot_file
 from tssac_core.scenario import ROLES, Layout, Scenario, ScenarioError, dump, load, sample_layout
 
 _log = logging.getLogger("mavlink_bridge.fly")
@@ -187,14 +189,13 @@ def make_signing_key(directory: Path) -> Path:
 
 
 def check_models(models: Path) -> None:
-    """The three role checkpoints load (CheckpointError otherwise), with a hint when they are missing."""
-    from tssac_core.policy import CheckpointError, load_team
-
+    """The three roles' actors load (CheckpointError otherwise), with a hint when they are missing."""
     hint = "fly with --pilot guidance, or train with python -m tssac_core.train --out DIR and pass --models DIR"
     if not models.is_dir():
         raise UsageError(f"{models}: models directory not found ({hint})")
     try:
-        load_team(models)
+        for role in ROLES:
+            load_actor(pilot_file(models, role), role)
     except CheckpointError as exc:
         raise UsageError(f"{exc} ({hint})") from None
 
@@ -334,7 +335,7 @@ class MissionRunner:
             name = role.value
             argv = [sys.executable, "-m", "mavlink_bridge.companion", "--connect", endpoints[name], "--role", name,
                     "--scenario", str(scenario_file), "--status-json", str(mdir / f"{name}.status.json")]
-            argv += ["--model", str(cfg.models / f"{name}.pt")] if cfg.models is not None else ["--pilot", GUIDANCE]
+            argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", GUIDANCE]
             if cfg.lockstep:
                 argv += ["--lockstep"]
             if cfg.lean_telemetry:

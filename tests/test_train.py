@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 import torch
 
+from tssac_core.numpy_actor import pilot_file
 from tssac_core.policy import CheckpointError, Policy, load_team
+from tssac_core.scenario import Role
 from tssac_core.train import main
 
 TINY = ["--epochs", "2", "--validation-episodes", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
@@ -40,6 +42,8 @@ def test_outputs(trained):
     assert [(x["role"], int(x["epoch"])) for x in r] == [(role, e) for role in ("decoy", "detect", "strike") for e in (1, 2)]
     assert float(r[-1]["updates"]) > 0 and float(r[-1]["updates_per_s"]) > 0
     assert all(x["beta_minus_xi"] not in ("", "nan") for x in r[1:])
+    for role in ("decoy", "detect", "strike"):  # each shipped role's actor, exported for the companion
+        assert pilot_file(trained, Role(role)) == trained / f"{role}.npz"
 
 
 def test_same_seed_same_run(trained, tmp_path):

@@ -19,15 +19,12 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
+from tssac_core.errors import CheckpointError
 from tssac_core.observation import ObservationMode
 from tssac_core.scenario import ROLES, Role
 
 FORMAT = "tssac-role-checkpoint"
 FORMAT_VERSION = 1
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that is missing, corrupt or does not fit; ``str()`` is one line."""
 
 
 @dataclass(frozen=True)
@@ -123,6 +120,10 @@ def compact_checkpoint(path: str | Path) -> tuple[int, int]:
     checkpoint_info(data, p)  # refuse to rewrite a checkpoint whose metadata is damaged
     if data.get("learner") is not None:
         torch_save_atomic({**data, "learner": None}, p)
+        if p.with_suffix(".npz").is_file():  # same actor, new file: the export records the file's digest
+            from tssac_core.numpy_actor import export_actor
+
+            export_actor(p)
     return before, p.stat().st_size
 
 

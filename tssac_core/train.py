@@ -38,6 +38,7 @@ from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStats, Variant, transfer
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask, TaskStep
+from tssac_core.numpy_actor import export_actor
 from tssac_core.observation import ObservationMode
 from tssac_core.policy import CheckpointInfo, Policy, learner_state, package_versions, save_role_checkpoint, torch_save_atomic
 from tssac_core.reward import RewardConfig
@@ -368,8 +369,11 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
 
 
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
-    """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's)."""
+    """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's),
+    and its actor as ``<role>.npz`` (tssac_core.numpy_actor)."""
     best = selector.finish(out / f"{role.value}.pt", write_checkpoint)
+    if (out / f"{role.value}.pt").is_file():
+        export_actor(out / f"{role.value}.pt")  # <role>.npz: what the companion flies, without torch
     if best is not None:
         logger.info("%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)", role.value, best.epoch,
                     best.mission_success, best.mean_cost)

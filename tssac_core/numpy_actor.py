@@ -1,0 +1,231 @@
+"""A trained role's actor as a numpy file (``<role>.npz``), flown without torch.
+
+The companion computer runs one small MLP per control decision. Importing torch to do that costs about
+2 s of CPU per process start and a few hundred MB of memory, on hardware where both are scarce, and
+``fly`` starts three companions per mission. So training writes, beside every shipped ``<role>.pt``,
+the deterministic actor as plain arrays:
+
+    <role>.npz:  meta  JSON: format, role, algo, observation mode and size, action size, hidden sizes,
+                       action_repeat, scenario digest, and the SHA-256 of the .pt it came from
+                 w0, b0, w1, b1, ...  the Linear layers, float32, weights (out, in) as in torch
+
+and :class:`NumpyPolicy` computes what ``Policy(deterministic=True)`` does: the MLP with ReLU after every
+layer but the last, then a = tanh(mean) (the first ``act_dim`` outputs; the log-std half is unused).
+
+For a models directory made by an older version (or trained elsewhere), export by hand:
+
+    python -m tssac_core.numpy_actor models/tssac [more dirs or .pt files]
+
+:func:`pilot_file` picks what a role flies from a models directory: the .npz when it was exported from
+the .pt beside it (or stands alone), else the .pt, so a retrained .pt is never shadowed by a stale export.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import logging
+import zipfile
+from pathlib import Path
+from typing import Any, Protocol, Sequence
+
+import numpy as np
+
+from tssac_core.errors import CheckpointError
+from tssac_core.observation import ObservationMode
+from tssac_core.scenario import ROLES, Role
+
+FORMAT = "tssac-actor-npz"
+FORMAT_VERSION = 1
+
+logger = logging.getLogger(__name__)
+
+
+class Actor(Protocol):
+    """What a pilot needs of a trained policy (``Policy`` and ``NumpyPolicy`` both are one)."""
+
+    observation_mode: ObservationMode
+    action_repeat: int
+
+    def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+def sha256_file(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+class NumpyPolicy:
+    """The deterministic actor of an exported ``<role>.npz``: ``act(obs) -> action`` in [-1, 1], float64."""
+
+    def __init__(self, meta: dict[str, Any], layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        self.meta = meta
+        self.role = Role(meta["role"])
+        self.observation_mode = ObservationMode(meta["observation_mode"])
+        self.obs_dim = int(meta["obs_dim"])
+        self.act_dim = int(meta["act_dim"])
+        self.action_repeat = int(meta["action_repeat"])
+        # Stored as torch keeps them, (out, in); transposed once here so that act() is x @ w + b.
+        self._layers = [(np.ascontiguousarray(w.T), b) for w, b in layers]
+
+    @staticmethod
+    def load(path: str | Path, role: Role | str | None = None) -> NumpyPolicy:
+        p = Path(path)
+        meta, layers = _read(p)
+        if role is not None and Role(role) is not Role(meta["role"]):
+            raise CheckpointError(f"{p}: exported actor is for the {meta['role']} UAV, not the {Role(role).value}")
+        return NumpyPolicy(meta, layers)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        x = np.asarray(obs, dtype=np.float32)
+        single = x.ndim == 1
+        if x.shape[-1] != self.obs_dim:
+            raise ValueError(f"observation has {x.shape[-1]} values, the {self.role.value} policy takes {self.obs_dim}")
+        h = x[None] if single else x
+        for w, b in self._layers[:-1]:
+            h = h @ w
+            h += b
+            np.maximum(h, 0.0, out=h)  # ReLU
+        w, b = self._layers[-1]
+        mean = (h @ w + b)[:, : self.act_dim]
+        out = np.tanh(mean).astype(np.float64)  # deterministic squashed Gaussian: a = tanh(mean)
+        return out[0] if single else out
+
+    __call__ = act
+
+
+def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
+    """(meta, layers) of an exported actor; CheckpointError (one line) for anything wrong with the file."""
+    if not p.is_file():
+        raise CheckpointError(f"{p}: exported actor not found")
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise CheckpointError(f"{p}: not a readable .npz file ({type(exc).__name__})") from None
+    try:
+        meta = json.loads(str(arrays.pop("meta")))
+    except (KeyError, ValueError):
+        raise CheckpointError(f"{p}: not an exported TSSAC actor (no readable meta)") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise CheckpointError(f"{p}: not an exported TSSAC actor")
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(f"{p}: exported actor format version {meta.get('format_version')}, this TSSAC reads {FORMAT_VERSION}")
+    try:
+        mode = ObservationMode(meta["observation_mode"])
+        Role(meta["role"])
+        sizes = [int(meta["obs_dim"]), *(int(h) for h in meta["hidden_sizes"]), 2 * int(meta["act_dim"])]
+        int(meta["action_repeat"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise CheckpointError(f"{p}: exported actor metadata is damaged ({exc})") from None
+    if sizes[0] != mode.size:
+        raise CheckpointError(f"{p}: observation size {sizes[0]} does not fit the '{mode.value}' observation ({mode.size})")
+    layers = []
+    for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        w, b = arrays.get(f"w{i}"), arrays.get(f"b{i}")
+        if w is None or b is None or w.shape != (fan_out, fan_in) or b.shape != (fan_out,):
+            raise CheckpointError(f"{p}: layer {i} is missing or not {fan_out}x{fan_in}")
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+            raise CheckpointError(f"{p}: layer {i} holds non-finite weights")
+        layers.append((w.astype(np.float32), b.astype(np.float32)))
+    return meta, layers
+
+
+def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
+    """Write the deterministic actor of a role checkpoint as ``<role>.npz`` beside it (or to ``out``), atomically."""
+    from torch import nn  # the export needs torch; flying the export does not
+
+    from tssac_core.policy import Policy
+
+    src = Path(checkpoint)
+    policy = Policy.load(src)
+    info = policy.info
+    linears = [m for m in policy.actor.net if isinstance(m, nn.Linear)]
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "role": info.role.value,
+        "algo": info.algo,
+        "observation_mode": info.observation_mode.value,
+        "obs_dim": info.obs_dim,
+        "act_dim": info.act_dim,
+        "hidden_sizes": list(info.hidden_sizes),
+        "action_repeat": info.action_repeat,
+        "scenario_digest": info.scenario_digest,
+        "source": src.name,
+        "source_sha256": sha256_file(src),
+    }
+    arrays: dict[str, np.ndarray] = {"meta": np.array(json.dumps(meta))}
+    for i, layer in enumerate(linears):
+        arrays[f"w{i}"] = layer.weight.detach().numpy().astype(np.float32)
+        arrays[f"b{i}"] = layer.bias.detach().numpy().astype(np.float32)
+    target = Path(out) if out is not None else src.with_suffix(".npz")
+    tmp = target.with_name(target.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(target)
+    return target
+
+
+def pilot_file(models: str | Path, role: Role) -> Path:
+    """The file ``role`` flies from a models directory: ``<role>.npz`` if it was exported from the
+    ``<role>.pt`` beside it (or there is no .pt), otherwise ``<role>.pt`` (with a warning if a stale
+    export is being passed over)."""
+    d = Path(models)
+    pt, npz = d / f"{role.value}.pt", d / f"{role.value}.npz"
+    if not npz.is_file():
+        return pt
+    if not pt.is_file():
+        return npz
+    try:
+        source = _read(npz)[0].get("source_sha256")
+    except CheckpointError as exc:
+        logger.warning("%s; flying %s instead", exc, pt)
+        return pt
+    if source == sha256_file(pt):
+        return npz
+    logger.warning("%s was exported from another %s: flying the .pt (refresh with python -m tssac_core.numpy_actor %s)", npz, pt.name, d)
+    return pt
+
+
+def load_actor(path: str | Path, role: Role | str | None = None) -> Actor:
+    """A deterministic role policy from ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch)."""
+    if Path(path).suffix == ".npz":
+        return NumpyPolicy.load(path, role)
+    from tssac_core.policy import Policy
+
+    return Policy.load(path, role)
+
+
+def export_paths(targets: Sequence[str]) -> list[Path]:
+    """Role checkpoints named by the command line: .pt files, and every <role>.pt in a directory."""
+    found: list[Path] = []
+    for t in map(Path, targets):
+        if t.is_dir():
+            pts = [t / f"{r.value}.pt" for r in ROLES if (t / f"{r.value}.pt").is_file()]
+            if not pts:
+                raise CheckpointError(f"{t}: no decoy.pt, detect.pt or strike.pt here")
+            found += pts
+        elif t.suffix == ".pt" and t.is_file():
+            found.append(t)
+        else:
+            raise CheckpointError(f"{t}: not a role checkpoint (.pt) or a models directory")
+    return found
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tssac_core.numpy_actor",
+                                description="Export trained role checkpoints' actors as <role>.npz, which the companion flies without torch.")
+    p.add_argument("targets", nargs="+", metavar="DIR_OR_PT", help="a models directory (every <role>.pt in it) or .pt files")
+    args = p.parse_args(argv)
+    for pt in export_paths(args.targets):
+        out = export_actor(pt)
+        policy = NumpyPolicy.load(out)
+        shape = "->".join(str(n) for n in [policy.obs_dim, *policy.meta["hidden_sizes"], 2 * policy.act_dim])
+        print(f"wrote {out} ({policy.role.value}, actor {shape}, {out.stat().st_size / 1024:.0f} KB)")
+    return 0
+
+
+if __name__ == "__main__":
+    from tssac_core.cli import run
+
+    raise SystemExit(run(main))
