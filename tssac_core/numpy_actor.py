@@ -5,8 +5,9 @@ The companion computer runs one small MLP per control decision. Importing torch 
 ``fly`` starts three companions per mission. So training writes, beside every shipped ``<role>.pt``,
 the deterministic actor as plain arrays:
 
-    <role>.npz:  meta  JSON: format, role, algo, observation mode and size, action size, hidden sizes,
-                       action_repeat, scenario digest, and the SHA-256 of the .pt it came from
+    <role>.npz:  meta  JSON: format, the checkpoint's metadata (role, algo, observation mode and size,
+                       action size, hidden sizes, action_repeat, scenario digest, versions, metrics)
+                       and the SHA-256 of the .pt it came from
                  w0, b0, w1, b1, ...  the Linear layers, float32, weights (out, in) as in torch
 
 and :class:`NumpyPolicy` computes what ``Policy(deterministic=True)`` does: the MLP with ReLU after every
@@ -139,22 +140,8 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
 
     src = Path(checkpoint)
     policy = Policy.load(src)
-    info = policy.info
     linears = [m for m in policy.actor.net if isinstance(m, nn.Linear)]
-    meta = {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "role": info.role.value,
-        "algo": info.algo,
-        "observation_mode": info.observation_mode.value,
-        "obs_dim": info.obs_dim,
-        "act_dim": info.act_dim,
-        "hidden_sizes": list(info.hidden_sizes),
-        "action_repeat": info.action_repeat,
-        "scenario_digest": info.scenario_digest,
-        "source": src.name,
-        "source_sha256": sha256_file(src),
-    }
+    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, **policy.info.fields(), "source": src.name, "source_sha256": sha256_file(src)}
     arrays: dict[str, np.ndarray] = {"meta": np.array(json.dumps(meta))}
     for i, layer in enumerate(linears):
         arrays[f"w{i}"] = layer.weight.detach().numpy().astype(np.float32)

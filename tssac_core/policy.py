@@ -43,6 +43,21 @@ class CheckpointInfo:
     action_repeat: int = 1
     """The decision interval it was trained with: hold each action for this many 0.1 s steps."""
 
+    def fields(self) -> dict[str, Any]:
+        """As plain JSON values: what a checkpoint (and an exported actor) stores beside the weights."""
+        return {
+            "role": self.role.value,
+            "algo": self.algo,
+            "observation_mode": self.observation_mode.value,
+            "obs_dim": self.obs_dim,
+            "act_dim": self.act_dim,
+            "hidden_sizes": list(self.hidden_sizes),
+            "scenario_digest": self.scenario_digest,
+            "versions": self.versions,
+            "metrics": self.metrics,
+            "action_repeat": self.action_repeat,
+        }
+
 
 def package_versions() -> dict[str, str]:
     import gymnasium
@@ -62,16 +77,7 @@ def save_role_checkpoint(
     payload = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "role": info.role.value,
-        "algo": info.algo,
-        "observation_mode": info.observation_mode.value,
-        "obs_dim": info.obs_dim,
-        "act_dim": info.act_dim,
-        "hidden_sizes": list(info.hidden_sizes),
-        "scenario_digest": info.scenario_digest,
-        "versions": info.versions,
-        "metrics": info.metrics,
-        "action_repeat": info.action_repeat,
+        **info.fields(),
         "actor": actor_state,
         "learner": learner_state,
     }
