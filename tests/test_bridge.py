@@ -320,9 +320,10 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
     scen_file = _scenario_file(tmp_path, LinkModel(gps_position_sigma_m=5.0, gps_velocity_sigma_m_s=0.5))
     truth = tmp_path / "truth.jsonl"
     speedup, gap_s = 5.0, 2.0
-    # Setpoint timeout 2 s of vehicle time (0.4 s of wall): the companion must keep the vehicle out of its
-    # failsafe through the gap, with some slack for a loaded machine.
-    with sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=2.0) as s, UdpRelay(s.ports[0]) as relay:
+    # Setpoint timeout 4 s of vehicle time (0.8 s of wall), well inside the gap's 10 s of vehicle time: only
+    # the companion's hold setpoints can keep the vehicle out of its failsafe through the gap. (At 2 s, a
+    # companion descheduled for 0.4 s on a loaded machine tripped it.)
+    with sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=4.0) as s, UdpRelay(s.ports[0]) as relay:
         with CompanionProcess(tmp_path, relay.port, scen_file, "--hold-after-s", "0.5") as comp:
             # Long enough for the companion to have measured the vehicle's clock rate (0.5 s windows).
             _until(lambda: len(relay.sent("SET_POSITION_TARGET_LOCAL_NED")) >= 60, 30.0, "the companion to fly")
