@@ -320,10 +320,9 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
     scen_file = _scenario_file(tmp_path, LinkModel(gps_position_sigma_m=5.0, gps_velocity_sigma_m_s=0.5))
     truth = tmp_path / "truth.jsonl"
     speedup, gap_s = 5.0, 2.0
-    # Setpoint timeout 4 s of vehicle time (0.8 s of wall), well inside the gap's 10 s of vehicle time: only
-    # the companion's hold setpoints can keep the vehicle out of its failsafe through the gap. (At 2 s, a
-    # companion descheduled for 0.4 s on a loaded machine tripped it.)
-    with sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=4.0) as s, UdpRelay(s.ports[0]) as relay:
+    # Setpoint timeout 2 s of vehicle time (0.4 s of wall), well inside the gap's 10 s of vehicle time: only
+    # the companion's hold setpoints can keep the vehicle out of its failsafe through the gap.
+    with sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=2.0) as s, UdpRelay(s.ports[0]) as relay:
         with CompanionProcess(tmp_path, relay.port, scen_file, "--hold-after-s", "0.5") as comp:
             # Long enough for the companion to have measured the vehicle's clock rate (0.5 s windows).
             _until(lambda: len(relay.sent("SET_POSITION_TARGET_LOCAL_NED")) >= 60, 30.0, "the companion to fly")
@@ -334,6 +333,7 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
             gap_end = time.monotonic()
             _until(lambda: any(t > gap_end for t, m in relay.sent("STATUSTEXT") if "resuming" in m.text), 10.0, "the companion to resume")
             time.sleep(0.5)
+            stopped_ms = s.vehicle(0).clock.time_boot_ms  # after this the vehicle is on its own: its failsafe may fire
             comp.proc.send_signal(signal.SIGTERM)
             code, out = comp.wait(15)
             assert code == 0 and "status=stopped" in out, comp.log()
@@ -353,9 +353,10 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
     assert any(gap_start < t < gap_end and "telemetry gap" in text and "holding" in text for t, text in texts), texts
     assert "sending the hold setpoint" in log
     assert status["counters"]["hold_episodes"] >= 1 and status["counters"]["extrapolated_steps"] > 5
-    # The companion kept the vehicle under control: its own setpoint failsafe never fired.
-    rows = [r for r in read_truth_log(truth) if r["type"] == "step"]
-    assert not any(r["vehicles"]["decoy"]["failsafe"] for r in rows)
+    # The companion kept the vehicle under control: its own setpoint failsafe never fired while the companion
+    # ran. (After SIGTERM it may: the world flies on at 5x until s.stop(), seconds later on a loaded machine.)
+    rows = [r for r in read_truth_log(truth) if r["type"] == "step" and r["step"] * 100 < stopped_ms]
+    assert len(rows) > 100 and not any(r["vehicles"]["decoy"]["failsafe"] for r in rows)
     # The tlog is readable (what mavlogdump.py uses) and has both directions.
     tlog = mavutil.mavlink_connection(str(tmp_path / "decoy.tlog"))
     types = set()
