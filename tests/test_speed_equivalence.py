@@ -248,7 +248,10 @@ def test_role_task_rollout_matches_the_recording(random_path):
     assert ends == rec["episodes_ended"]
     np.testing.assert_array_equal(costs, rec["cost_sum"])
     np.testing.assert_array_equal(w.cost_total, rec["cost_total"])
-    np.testing.assert_allclose(rewards, rec["reward_sum"], rtol=1e-9)
+    # The guidance teammates close the loop on their own positions, so another CPU's sin/cos rounding
+    # (numpy's SIMD paths differ between machines) grows over the 4,200 steps: CI's machine ended 0.7 mm
+    # from this one. A millimetre-scale drift is rounding; a change to the physics moves these by metres.
+    np.testing.assert_allclose(rewards, rec["reward_sum"], rtol=1e-7)
     np.testing.assert_allclose(st.obs[0], rec["last_obs"], atol=1e-6)
-    np.testing.assert_allclose(w.x_m, rec["x_m"], rtol=0, atol=1e-4)
+    np.testing.assert_allclose(w.x_m, rec["x_m"], rtol=0, atol=1e-2)
     np.testing.assert_allclose(w.phi_rad, rec["phi_rad"], rtol=0, atol=1e-9)
