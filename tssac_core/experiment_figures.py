@@ -55,7 +55,7 @@ def fig7_training(path: Path, curves: Curves, cost_limit: float) -> None:
         for name, runs in curves.items():
             for row, key in enumerate(("return", "cost")):
                 x, y = mean_curve(runs, role, key)
-                axes[row][col].plot(x, y, marker=".", label=f"{name} ({len(runs)} seeds)")
+                axes[row][col].plot(x, y, marker=".", label=f"{name} ({len(runs)} seed{'' if len(runs) == 1 else 's'})")
         axes[0][col].set_title(f"{role} UAV: average epoch return")
         axes[1][col].set_title(f"{role} UAV: average epoch cost")
         axes[1][col].axhline(cost_limit, color="red", ls="--", label=f"cost threshold C = {cost_limit:g}")
