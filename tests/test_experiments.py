@@ -66,6 +66,15 @@ def test_paper_grid():
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
         assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (10, 4000, 1, 10, 2, 0, 1)
+    transfer = grid.transfer_jobs(Path("results"))  # the transfer experiment: each role alone, both sides, every seed
+    assert [j.name for j in transfer[:4]] == ["transfer-detect-tssac-seed0", "transfer-detect-sac_lag-seed0",
+                                              "transfer-strike-tssac-seed0", "transfer-strike-sac_lag-seed0"] and len(transfer) == 12
+    strike = transfer[3]
+    cfg = strike.config()
+    assert strike.out == Path("results/runs/transfer-strike-sac_lag-seed0") and strike.roles == ("strike",)
+    assert (cfg.algo, cfg.roles, cfg.teammates, cfg.stop_at_task_success, cfg.epochs, cfg.validation_episodes) == (
+        "sac_lag", ("strike",), "models/tssac", 0.9, 25, 0)
+    assert cfg.sac == tssac.sac and (cfg.steps_per_epoch, cfg.action_repeat, cfg.start_steps) == (4000, 10, 0)  # the grid's settings
 
 
 @pytest.mark.parametrize(
@@ -83,6 +92,14 @@ def test_paper_grid():
         (("batch_size: 8", "batch_sise: 8"), "algos[0] (tssac): invalid learner settings (--set): unknown SacConfig field 'batch_sise'"),
         (("  episodes: 2", "  episodes: [2]"), "evaluation.episodes: expected an integer"),
         (("seeds: [0]", "seeds: [0"), "not valid YAML"),
+        *[(("evaluation:", f"transfer: {{{t}}}\nevaluation:"), message) for t, message in (
+            ("teammates: models/tssac, with: sac_lag, without: tssac", "transfer.with: 'sac_lag' is sac_lag: 'with' needs tssac"),
+            ("teammates: models/tssac, with: tssac, without: ppo", "transfer.without: 'ppo' is not an entry of algos (tssac, sac_lag)"),
+            ("teammates: models/tssac, with: tssac, without: sac_lag, roles: [decoy]", "transfer.roles: expected a list of detect and/or strike"),
+            ("teammates: nowhere, with: tssac, without: sac_lag", "transfer.teammates: nowhere/decoy.pt not found"),
+            ("teammates: models/tssac, with: tssac, without: sac_lag, task_success: 1.5", "transfer.task_success: expected a fraction"),
+            ("teammates: models/tssac, with: tssac", "transfer.without: missing required field"),
+        )],
     ],
 )
 def test_malformed_grid_is_one_line(tmp_path, capsys, change, message):
@@ -210,6 +227,28 @@ def test_a_run_copied_from_another_clone_is_recognised_by_its_task(smoke, tmp_pa
     assert line.startswith("conflict") and "scenario:" in line
 
 
+def test_transfer_runs_train_their_role_beside_the_teammates_and_are_reported(smoke, tmp_path, capsys):
+    results = tmp_path / "results"
+    shutil.copytree(smoke, results)
+    teammates = results / "runs" / "tssac-seed0"
+    text = smoke_text(("evaluation:", f"transfer: {{teammates: {teammates}, with: tssac, without: sac_lag, roles: [detect], epochs: 1}}\nevaluation:"))
+    grid = write_grid(tmp_path / "g.yaml", text)
+    assert main(["--grid", str(grid), "--results", str(results), "--jobs", "2"]) == 0
+    assert "4 jobs: 2 finished, 2 to run" in capsys.readouterr().out
+    for side in ("tssac", "sac_lag"):
+        run_dir = results / "runs" / f"transfer-detect-{side}-seed0"
+        assert sorted(p.name for p in run_dir.glob("*.pt")) == ["detect.pt"]  # one role; the teammates stay where they are
+    log = (results / "runs" / "transfer-detect-tssac-seed0" / LOG_NAME).read_text()
+    assert f"transferred 30 tensors from {teammates / 'decoy.pt'}" in log
+    assert "## Transfer experiment" in (results / "table4.md").read_text()
+    data = json.loads((results / "experiments.json").read_text())["transfer_experiment"]
+    assert data["detect"]["with"]["seeds"] == 1 and data["detect"]["without"]["seeds"] == 1 and data["roles"] == ["detect"]
+    assert main(["--grid", str(grid), "--results", str(results), "--dry-run"]) == 0
+    assert [line.split()[0] for line in capsys.readouterr().out.splitlines()] == ["finished"] * 4
+    assert main(["--grid", str(grid), "--results", str(results), "--compact"]) == 0
+    assert "compacted 4 finished runs" in capsys.readouterr().out
+
+
 def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
     results = tmp_path / "r"
     run_dir = results / "runs" / "tssac-seed0"
@@ -301,6 +340,30 @@ def test_transfer_speedup(tmp_path):
     assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
     assert result["tssac"]["mean_task_success"]["per_seed"] == {"0": pytest.approx(0.55), "1": pytest.approx(29 / 30)}
     assert result["sac_lag"]["mean_task_success"]["mean"] == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
+
+
+def test_transfer_experiment_figures_and_table(tmp_path):
+    from tssac_core.experiment_report import table_markdown, transfer_experiment, transfer_experiment_markdown
+
+    text = smoke_text(("seeds: [0]", "seeds: [0, 1]"), ("evaluation:", "transfer: {teammates: models/tssac, with: tssac, without: sac_lag, epochs: 3}\nevaluation:"))
+    grid = load_grid(write_grid(tmp_path / "g.yaml", text))
+    jobs = {j.name: j for j in grid.transfer_jobs(tmp_path)}
+    assert len(jobs) == 8 and jobs["transfer-detect-tssac-seed1"].config().epochs == 3
+    write_metrics(jobs["transfer-detect-tssac-seed0"].out, [("detect", 1, 20, 0.95)])  # stopped at its first epoch
+    write_metrics(jobs["transfer-detect-tssac-seed1"].out, [("detect", 1, 20, 0.5), ("detect", 2, 40, 1.0)])
+    write_metrics(jobs["transfer-detect-sac_lag-seed0"].out, [("detect", e, 20 * e, 0.1 * e) for e in (1, 2, 3)])  # never: 60, a bound
+    write_metrics(jobs["transfer-detect-sac_lag-seed1"].out, [("detect", 1, 20, 0.0), ("detect", 2, 40, 0.9)])
+    runs = [jobs[n] for n in jobs if "detect" in n]
+    x = transfer_experiment(grid, runs)
+    detect = x["detect"]
+    assert detect["with"]["per_seed"] == {"0": 20, "1": 40} and detect["with"]["mean_steps"] == 30 and not detect["with"]["mean_is_lower_bound"]
+    assert detect["without"]["per_seed"] == {"0": None, "1": 40} and detect["without"]["mean_steps"] == 50
+    assert detect["speedup"] == pytest.approx(50 / 30) and detect["speedup_is_lower_bound"]
+    assert x["strike"]["with"]["seeds"] == 0 and x["strike"]["speedup"] is None  # nothing finished yet: no figure
+    lines = transfer_experiment_markdown(x)
+    assert "| detect | 20, 40 | 30 | not in 60, 40 | >= 50 | >= 1.7x |" in lines
+    assert "| strike | — | — | — | — | — |" in lines
+    assert transfer_experiment(load_grid(SMOKE), []) is None
 
 
 def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):

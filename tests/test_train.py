@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -67,6 +69,47 @@ def test_transfer_initialises_the_next_role(tmp_path):
     c = torch.load(out2 / "decoy.pt", weights_only=False)["actor"]
     d = torch.load(out2 / "detect.pt", weights_only=False)["actor"]
     assert not all(torch.equal(c[k], d[k]) for k in c)  # sac_lag starts every role from scratch
+
+
+def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_path, capsys):
+    """--teammates DIR: the earlier roles come from DIR (not --out); TSSAC's strike starts as DIR's detect."""
+    from tssac_core.cli import run
+
+    out = tmp_path / "strike-only"
+    args = ["--epochs", "1", "--validation-episodes", "0", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000",
+            "--set", "hidden_sizes=[32,32]", "--no-progress", "--threads", "1", "--roles", "strike"]
+    assert main(["--algo", "tssac", "--out", str(out), "--teammates", str(trained), *args]) == 0
+    assert sorted(p.name for p in out.glob("*.pt")) == ["strike.pt"]  # nothing of the teammates copied in
+    a = torch.load(trained / "detect.pt", weights_only=False)["actor"]
+    b = torch.load(out / "strike.pt", weights_only=False)["actor"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert json.loads((out / "config.json").read_text())["teammates"] == str(trained)
+    lonely = tmp_path / "lonely"  # a directory without the detect UAV: one line naming the missing file
+    lonely.mkdir()
+    shutil.copy(trained / "decoy.pt", lonely / "decoy.pt")
+    assert run(main, ["--out", str(tmp_path / "x"), "--teammates", str(lonely), *args]) == 2
+    assert f"needs {lonely / 'detect.pt'}" in capsys.readouterr().err
+
+
+def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(tmp_path, capsys, caplog):
+    """The shipped strike UAV, flown (no update) beside the shipped team, completes its task at once: with
+    --stop-at-task-success the role ends after epoch 1 of 3 and ships; the K-seed learner refuses the option."""
+    from tssac_core.cli import run
+
+    caplog.set_level("INFO")
+    models = Path(__file__).resolve().parent.parent / "models" / "tssac"
+    args = ["--roles", "strike", "--teammates", str(models), "--init-from", str(models / "strike.pt"), "--epochs", "3",
+            "--steps-per-epoch", "700", "--envs", "1", "--action-repeat", "10", "--update-after", "100000", "--start-steps", "0",
+            "--validation-episodes", "0", "--set", "hidden_sizes=[128,128]", "--threads", "1", "--no-progress"]
+    out = tmp_path / "stopped"
+    assert main(["--algo", "sac_lag", "--out", str(out), "--stop-at-task-success", "0.5", *args]) == 0
+    r = rows(out)
+    assert [int(x["epoch"]) for x in r] == [1] and float(r[0]["task_success"]) >= 0.5 and int(r[0]["episodes"]) >= 1
+    assert (out / "strike.pt").is_file() and "reaches --stop-at-task-success" in caplog.text
+    assert run(main, ["--algo", "sac_lag", "--out", str(tmp_path / "k"), "--seeds", "0,1", "--stop-at-task-success", "0.5", *args]) == 2
+    assert "train the seeds one by one" in capsys.readouterr().err
+    assert run(main, ["--out", str(tmp_path / "b"), "--stop-at-task-success", "1.5"]) == 2
+    assert "--stop-at-task-success must be a fraction" in capsys.readouterr().err
 
 
 def test_checkpoint_round_trip_and_team(trained):

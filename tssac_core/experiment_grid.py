@@ -20,6 +20,13 @@ Example (``experiments/paper.yaml`` is the full one)::
       episodes: 50
       seed: 12345
       generalization_scenario: scenarios/generalization.yaml
+    transfer:                      # optional: the transfer experiment (TransferExperiment)
+      teammates: models/tssac
+      with: tssac
+      without: sac_lag
+      roles: [detect, strike]
+      epochs: 25
+      task_success: 0.9
 
 Every key of ``train`` is an argument of ``python -m tssac_core.train`` (``steps_per_epoch`` is
 ``--steps-per-epoch``) and is passed to every job alike; a key left out is the command's default.
@@ -41,6 +48,7 @@ from typing import Any, Collection
 
 from tssac_core.cli import UsageError
 from tssac_core.observation import ObservationMode
+from tssac_core.scenario import ROLES, Role
 from tssac_core.scenario import load as load_scenario
 from tssac_core.train import ALGOS, ON_POLICY, TrainConfig, check_learner_settings
 from tssac_core.train import parse_args as parse_train_args
@@ -102,18 +110,46 @@ class Evaluation:
 
 
 @dataclass(frozen=True)
+class TransferExperiment:
+    """The transfer speed-up: learner decisions until a role first reaches ``task_success`` in training, started
+    from the previous role's networks (``with_transfer``: TSSAC) or from scratch (``without_transfer``).
+
+    Both sides train the role alone, with the same trained earlier roles flying (``teammates``), for every seed
+    of the grid, and stop at the first epoch that reaches the level; so the role's own start is all that
+    differs, and neither side's figure depends on how well its own earlier roles happened to learn. The
+    grid's training arguments apply, except ``epochs`` (the cap: a role that never gets there counts with all
+    its decisions, a lower bound) and ``validation_episodes`` (the figure is read from training).
+    """
+
+    teammates: Path
+    with_transfer: AlgoEntry
+    without_transfer: AlgoEntry
+    roles: tuple[str, ...] = ("detect", "strike")
+    epochs: int = 25
+    task_success: float = 0.9
+    validation_episodes: int = 0
+
+
+@dataclass(frozen=True)
 class Job:
-    """One training run of the grid."""
+    """One training run of the grid: a whole team, or one role of the transfer experiment."""
 
     entry: AlgoEntry
     seed: int
     out: Path
     train_args: tuple[str, ...]
     """Arguments of ``python -m tssac_core.train`` for a new run (without --out)."""
+    role: str | None = None
+    """The transfer experiment's role (the run trains that role only); None: the whole curriculum."""
 
     @property
     def name(self) -> str:
-        return f"{self.entry.name}-seed{self.seed}"
+        return f"{self.entry.name}-seed{self.seed}" if self.role is None else f"transfer-{self.role}-{self.entry.name}-seed{self.seed}"
+
+    @property
+    def roles(self) -> tuple[str, ...]:
+        """The roles this run trains (and whose checkpoints mark it finished)."""
+        return tuple(r.value for r in ROLES) if self.role is None else (self.role,)
 
     def config(self) -> TrainConfig:
         """The TrainConfig this job's run writes to its config.json."""
@@ -128,11 +164,27 @@ class Grid:
     seeds: tuple[int, ...]
     train: TrainArgs
     evaluation: Evaluation
+    transfer: TransferExperiment | None = None
 
     def jobs(self, results: Path) -> list[Job]:
         """Every (entry, seed) run, seed-major: each entry's first seed before any entry's second, so a grid
         stopped part-way (it runs across sessions) has every row of Table 4; directories under ``results/runs``."""
         return [Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s)) for s in self.seeds for e in self.algos]
+
+    def transfer_jobs(self, results: Path) -> list[Job]:
+        """The transfer experiment's runs (none without a ``transfer:`` section), seed-major, under ``results/runs``."""
+        t = self.transfer
+        if t is None:
+            return []
+        args = dataclasses.replace(self.train, epochs=t.epochs, validation_episodes=t.validation_episodes)
+        jobs = []
+        for s in self.seeds:
+            for role in t.roles:
+                for e in (t.with_transfer, t.without_transfer):
+                    argv = (*train_argv(args, e, s), "--roles", role, "--teammates", str(t.teammates),
+                            "--stop-at-task-success", repr(t.task_success))
+                    jobs.append(Job(e, s, Path("unused"), argv, role))
+        return [dataclasses.replace(j, out=results / "runs" / j.name) for j in jobs]
 
     def entry(self, name: str) -> AlgoEntry:
         return next(e for e in self.algos if e.name == name)
@@ -160,7 +212,7 @@ def load_grid(path: str | Path) -> Grid:
     source = str(path)
     data = read_yaml(path, GridError)
     r = _Reader(source)
-    top = r.mapping(data, "", allowed={"seeds", "algos", "train", "evaluation"}, required={"seeds", "algos", "train", "evaluation"})
+    top = r.mapping(data, "", allowed={"seeds", "algos", "train", "evaluation", "transfer"}, required={"seeds", "algos", "train", "evaluation"})
     seeds = r.seeds(top["seeds"], "seeds")
     train_data = r.mapping(top["train"], "train", allowed={f.name for f in dataclasses.fields(TrainArgs)} | {"sac_set", "onpolicy_set"},
                            required={"scenario"})
@@ -182,7 +234,8 @@ def load_grid(path: str | Path) -> Grid:
         generalization_scenario=(r.scenario(ev["generalization_scenario"], "evaluation.generalization_scenario")
                                  if ev.get("generalization_scenario") is not None else None),
     )
-    grid = Grid(Path(path), algos, seeds, train, evaluation)
+    transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
+    grid = Grid(Path(path), algos, seeds, train, evaluation, transfer)
     check_jobs(grid)
     return grid
 
@@ -278,6 +331,39 @@ class _Reader:
                 raise self.fail("train.observation", f"expected one of {', '.join(modes)}, got {data['observation']!r}")
             values["observation"] = data["observation"]
         return TrainArgs(**values)
+
+    def transfer(self, value: Any, entries: dict[str, AlgoEntry]) -> TransferExperiment:
+        """``transfer:``: the transfer experiment; its sides name entries of ``algos`` (their settings apply)."""
+        where = "transfer"
+        data = self.mapping(value, where, allowed={"teammates", "with", "without", "roles", "epochs", "task_success", "validation_episodes"},
+                            required={"teammates", "with", "without"})
+        sides = {}
+        for key, algo_wanted in (("with", "tssac"), ("without", None)):
+            name = self.string(data[key], f"{where}.{key}")
+            if name not in entries:
+                raise self.fail(f"{where}.{key}", f"{name!r} is not an entry of algos ({', '.join(entries)})")
+            transfers = entries[name].algo == "tssac"
+            if transfers != (algo_wanted is not None):
+                raise self.fail(f"{where}.{key}", f"{name!r} is {entries[name].algo}: 'with' needs tssac (it transfers), 'without' another algorithm")
+            sides[key] = entries[name]
+        roles = data.get("roles", list(TransferExperiment.roles))
+        if not isinstance(roles, list) or not roles or any(r not in ("detect", "strike") for r in roles) or len(set(roles)) != len(roles):
+            raise self.fail(f"{where}.roles", f"expected a list of detect and/or strike (the roles that have a previous role), got {roles!r}")
+        teammates = Path(self.string(data["teammates"], f"{where}.teammates"))
+        for role in roles:
+            for earlier in ROLES[: Role(role).index]:
+                if not (teammates / f"{earlier.value}.pt").is_file():
+                    raise self.fail(f"{where}.teammates", f"{teammates / (earlier.value + '.pt')} not found (training {role} needs the trained {earlier.value})")
+        task_success = self.number(data.get("task_success", TransferExperiment.task_success), f"{where}.task_success")
+        if not 0.0 < task_success <= 1.0:
+            raise self.fail(f"{where}.task_success", f"expected a fraction in (0, 1], got {task_success:g}")
+        return TransferExperiment(
+            teammates=teammates, with_transfer=sides["with"], without_transfer=sides["without"], roles=tuple(roles),
+            epochs=self.integer(data.get("epochs", TransferExperiment.epochs), f"{where}.epochs", minimum=1),
+            task_success=task_success,
+            validation_episodes=self.integer(data.get("validation_episodes", TransferExperiment.validation_episodes),
+                                             f"{where}.validation_episodes", minimum=0),
+        )
 
     def algo_entry(self, item: Any, where: str, family_sets: dict[str, dict[str, Any]]) -> AlgoEntry:
         """``tssac`` or ``{algo: sac_penalty, penalty: -10, name: sac_pen10, set: {...}}``."""

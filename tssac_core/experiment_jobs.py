@@ -2,7 +2,8 @@
 
 A job's state is read from its run directory alone:
 
-- *finished*: the three role checkpoints (decoy.pt, detect.pt, strike.pt) are there; it is not run again;
+- *finished*: the checkpoints of the roles it trains (decoy.pt, detect.pt, strike.pt; a transfer run's one role)
+  are there; it is not run again;
 - *partial*: config.json is there but not every checkpoint (the job was killed, or failed); it is continued
   with ``--out DIR --resume``, which loses at most the epoch that was running;
 - *new*: no config.json (nor checkpoints); it is started from the beginning;
@@ -75,8 +76,9 @@ class Launch:
     returncode: int | None = None
 
 
-def is_finished(out: Path) -> bool:
-    return all((out / f"{role.value}.pt").is_file() for role in ROLES)
+def is_finished(job: Job) -> bool:
+    """Every role the job trains has its checkpoint."""
+    return all((job.out / f"{role}.pt").is_file() for role in job.roles)
 
 
 def job_state(job: Job) -> JobState:
@@ -96,7 +98,7 @@ def job_state(job: Job) -> JobState:
         return JobState(job, Status.CONFLICT, str(exc))
     if difference:
         return JobState(job, Status.CONFLICT, difference)
-    return JobState(job, Status.FINISHED if is_finished(job.out) else Status.PARTIAL)
+    return JobState(job, Status.FINISHED if is_finished(job) else Status.PARTIAL)
 
 
 def config_difference(saved: dict[str, Any], wanted: TrainConfig, run: Path | None = None) -> str:
@@ -230,7 +232,7 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
                     del running[pid]
                     launch = launches[index]
                     launches[index] = Launch(launch.job, launch.command, launch.resumed, code)
-                    ok = code == 0 and is_finished(launch.job.out)
+                    ok = code == 0 and is_finished(launch.job)
                     report(f"{'finished' if ok else f'FAILED (exit code {code})'} {launch.job.name}"
                            + ("" if ok else f": see {launch.job.out / LOG_NAME}"))
                 time.sleep(POLL_S)

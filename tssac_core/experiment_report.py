@@ -197,46 +197,73 @@ def mean_task_success(rows: list[dict[str, str]], role: str) -> float:
     return float(np.mean(values)) if values else math.nan
 
 
-def transfer_speedup(grid: Grid, finished: list[Job]) -> dict[str, Any]:
-    """Decisions until >= 90% task success, TSSAC vs SAC-Lagrangian, per role (mean over finished seeds).
+def steps_figures(jobs: list[Job], role: str, threshold: float) -> dict[str, Any]:
+    """Decisions until ``role`` first reached ``threshold`` task success in each run, and their mean over seeds.
 
-    A seed that never reached the threshold counts with its role's total decisions, a lower bound of what
-    it would have needed: the mean is then marked as a lower bound, and so is the speed-up when only
-    SAC-Lagrangian's mean is one (if TSSAC's is one, the ratio bounds nothing and is left out).
+    A seed that never reached it counts with its role's total decisions, a lower bound of what it would have
+    needed; the mean is then marked as a lower bound.
     """
+    per_seed: dict[str, int | None] = {}
+    counted: list[int] = []
+    mean_task: dict[int, float] = {}
+    for job in jobs:
+        rows = read_metrics(job.out)
+        reached, total = steps_to_threshold(rows, role, threshold)
+        per_seed[str(job.seed)] = reached
+        counted.append(reached if reached is not None else total)
+        mean_task[job.seed] = mean_task_success(rows, role)
+    return {
+        "entry": jobs[0].entry.name if jobs else None,
+        "per_seed": per_seed,
+        "counted": {str(job.seed): c for job, c in zip(jobs, counted)},
+        "seeds": len(jobs),
+        "reached": sum(v is not None for v in per_seed.values()),
+        "mean_steps": float(np.mean(counted)) if counted else None,
+        "mean_is_lower_bound": any(v is None for v in per_seed.values()),
+        "mean_task_success": over_seeds(mean_task),
+    }
+
+
+def speedup(slow: dict[str, Any], fast: dict[str, Any]) -> dict[str, Any]:
+    """Mean decisions without transfer over those with it; a lower bound when only the slow side's mean is one
+    (if the fast side's mean is a lower bound, the ratio bounds nothing and is left out)."""
+    ratio = None
+    if fast["mean_steps"] and slow["mean_steps"] is not None and not fast["mean_is_lower_bound"]:
+        ratio = slow["mean_steps"] / fast["mean_steps"]
+    return {"speedup": ratio, "speedup_is_lower_bound": ratio is not None and slow["mean_is_lower_bound"]}
+
+
+def transfer_speedup(grid: Grid, finished: list[Job]) -> dict[str, Any]:
+    """Decisions until >= 90% task success in the grid's own curricula, TSSAC vs SAC-Lagrangian, per role
+    (mean over finished seeds; :func:`steps_figures`, :func:`speedup`)."""
     out: dict[str, Any] = {"threshold": TRANSFER_THRESHOLD}
     for role in TRANSFER_ROLES:
         per_algo: dict[str, Any] = {}
         for algo in ("tssac", "sac_lag"):
             entry = next((e for e in grid.algos if e.algo == algo), None)
-            jobs = [j for j in finished if entry is not None and j.entry == entry]
-            per_seed: dict[str, int | None] = {}
-            counted: list[int] = []
-            mean_task: list[float] = []
-            for job in jobs:
-                rows = read_metrics(job.out)
-                reached, total = steps_to_threshold(rows, role)
-                per_seed[str(job.seed)] = reached
-                counted.append(reached if reached is not None else total)
-                mean_task.append(mean_task_success(rows, role))
-            per_algo[algo] = {
-                "entry": entry.name if entry is not None else None,
-                "per_seed": per_seed,
-                "seeds": len(jobs),
-                "reached": sum(v is not None for v in per_seed.values()),
-                "mean_steps": float(np.mean(counted)) if counted else None,
-                "mean_is_lower_bound": any(v is None for v in per_seed.values()),
-                "mean_task_success": over_seeds({job.seed: v for job, v in zip(jobs, mean_task)}),
-            }
-        t, s = per_algo["tssac"], per_algo["sac_lag"]
-        ratio = None
-        if t["mean_steps"] and s["mean_steps"] is not None and not t["mean_is_lower_bound"]:
-            ratio = s["mean_steps"] / t["mean_steps"]
-        out[role] = {**per_algo, "speedup": ratio, "speedup_is_lower_bound": ratio is not None and s["mean_is_lower_bound"]}
+            per_algo[algo] = steps_figures([j for j in finished if entry is not None and j.entry == entry], role, TRANSFER_THRESHOLD)
+            per_algo[algo]["entry"] = entry.name if entry is not None else None
+        out[role] = {**per_algo, **speedup(per_algo["sac_lag"], per_algo["tssac"])}
     return out
 
 
-def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Evaluations, results: Path) -> dict[str, Any]:
+def transfer_experiment(grid: Grid, runs: list[Job]) -> dict[str, Any] | None:
+    """The transfer experiment's figures (``grid.transfer``) from its finished runs: per role, the decisions
+    to the level with transfer and without, and the speed-up. None if the grid has no such experiment."""
+    t = grid.transfer
+    if t is None:
+        return None
+    out: dict[str, Any] = {"threshold": t.task_success, "teammates": shown(t.teammates), "epochs": t.epochs,
+                           "steps_per_epoch": grid.train.steps_per_epoch, "roles": list(t.roles)}
+    for role in t.roles:
+        sides = {side: steps_figures([j for j in runs if j.role == role and j.entry == entry], role, t.task_success)
+                 for side, entry in (("with", t.with_transfer), ("without", t.without_transfer))}
+        out[role] = {**sides, **speedup(sides["without"], sides["with"])}
+    return out
+
+
+def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Evaluations, results: Path,
+              transfer_runs: list[Job] = ()) -> dict[str, Any]:
     """Everything ``experiments.json`` holds."""
     labels = [spec.label for spec in eval_specs(grid)]
     algorithms = []
@@ -263,6 +290,7 @@ def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Eva
         "algorithms": algorithms,
         "guidance": guidance,
         "transfer_speedup": transfer_speedup(grid, finished),
+        "transfer_experiment": transfer_experiment(grid, list(transfer_runs)),
         "left_out": [j.name for j in jobs if j not in finished],
     }
 
@@ -379,7 +407,47 @@ def table_markdown(summary: dict[str, Any]) -> str:
     for role in TRANSFER_ROLES:
         r = t[role]
         lines.append(f"| {role} | {_rate(r['tssac']['mean_task_success'])} | {_rate(r['sac_lag']['mean_task_success'])} |")
+    if summary.get("transfer_experiment"):
+        lines += transfer_experiment_markdown(summary["transfer_experiment"])
     return "\n".join(lines) + "\n"
+
+
+def transfer_experiment_markdown(x: dict[str, Any]) -> list[str]:
+    """The transfer experiment's table: decisions to the level per seed and their mean, each side, each role."""
+    first = x[x["roles"][0]]
+    with_name, without_name = first["with"]["entry"] or "with", first["without"]["entry"] or "without"
+    cap = x["epochs"] * x["steps_per_epoch"]
+    lines = [
+        "",
+        "## Transfer experiment: decisions to the level, with and without transfer",
+        "",
+        f"Each role trained alone with the same trained earlier roles flying (`{x['teammates']}`), stopped at the first "
+        f"epoch whose task success in training reached {100 * x['threshold']:.0f}%, at most {x['epochs']} epochs "
+        f"({cap:,} decisions). `{with_name}` starts from the previous role's networks in `{x['teammates']}` (TSSAC's transfer); "
+        f"`{without_name}` starts from scratch. Per seed, then the mean; a seed that never got there counts with its "
+        f"{cap:,} decisions, so such a mean is a lower bound (>=).",
+        "",
+        f"| role | {with_name} (transfer): per seed | mean | {without_name} (from scratch): per seed | mean | speed-up |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for role in x["roles"]:
+        r = x[role]
+        speed = "—" if r["speedup"] is None else f"{'>= ' if r['speedup_is_lower_bound'] else ''}{r['speedup']:.1f}x"
+        lines.append(f"| {role} | {_per_seed(r['with'])} | {_mean_steps(r['with'])} | {_per_seed(r['without'])} | "
+                     f"{_mean_steps(r['without'])} | {speed} |")
+    return lines
+
+
+def _per_seed(figures: dict[str, Any]) -> str:
+    if not figures["seeds"]:
+        return "—"
+    return ", ".join(f"{v:,}" if v is not None else f"not in {figures['counted'][seed]:,}" for seed, v in figures["per_seed"].items())
+
+
+def _mean_steps(figures: dict[str, Any]) -> str:
+    if figures["mean_steps"] is None:
+        return "—"
+    return f"{'>= ' if figures['mean_is_lower_bound'] else ''}{figures['mean_steps']:,.0f}"
 
 
 def write_report(summary: dict[str, Any], results: Path) -> tuple[Path, Path]:

@@ -30,7 +30,7 @@ from tssac_core.experiment_jobs import Launch, Status, command, is_finished, job
 from tssac_core.experiment_report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
 from tssac_core.missions import MissionResults
 from tssac_core.policy import compact_checkpoint
-from tssac_core.scenario import ROLES, Scenario, load
+from tssac_core.scenario import Scenario, load
 
 Say = Callable[[str], None]
 
@@ -41,7 +41,7 @@ def say(line: str) -> None:
 
 def train(grid: Grid, results: Path, parallel: int, report: Say = say) -> list[Launch]:
     """Run every job that is not finished; refuses (UsageError) if a run directory holds other settings."""
-    states = [job_state(job) for job in grid.jobs(results)]
+    states = [job_state(job) for job in all_jobs(grid, results)]
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
         more = f" (and {len(conflicts) - 1} more: see --dry-run)" if len(conflicts) > 1 else ""
@@ -50,6 +50,11 @@ def train(grid: Grid, results: Path, parallel: int, report: Say = say) -> list[L
     todo = sum(s.status is not Status.FINISHED for s in states)
     report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {parallel} at a time")
     return run_jobs(states, parallel, report)
+
+
+def all_jobs(grid: Grid, results: Path) -> list[Job]:
+    """The teams of Table 4, then the transfer experiment's runs."""
+    return [*grid.jobs(results), *grid.transfer_jobs(results)]
 
 
 def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
@@ -62,7 +67,8 @@ def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
     finished = [s.job for s in states if s.status is Status.FINISHED]
     report(f"report on {len(finished)} of {len(jobs)} runs")
     evaluations = evaluate_all(grid, finished, results, report)
-    summary = summarise(grid, jobs, finished, evaluations, results)
+    transfer_runs = [job for job in grid.transfer_jobs(results) if job_state(job).status is Status.FINISHED]
+    summary = summarise(grid, jobs, finished, evaluations, results, transfer_runs)
     table, data = write_report(summary, results)
     curves = {e.name: [read_metrics(j.out) for j in finished if j.entry == e] for e in grid.algos}
     curves = {name: runs for name, runs in curves.items() if runs}
@@ -85,7 +91,7 @@ def mission_for_fig9(grid: Grid, finished: list[Job]) -> tuple[MissionResults, S
 
 def dry_run(grid: Grid, results: Path, report: Say = say) -> None:
     """Print every job with its status and what running the grid would do with it."""
-    for job in grid.jobs(results):
+    for job in all_jobs(grid, results):
         state = job_state(job)
         what = {
             Status.FINISHED: "",
@@ -93,7 +99,7 @@ def dry_run(grid: Grid, results: Path, report: Say = say) -> None:
             Status.NEW: " ".join(command(job, resume=False)),
             Status.CONFLICT: state.detail,
         }[state.status]
-        report(f"{state.status.value:9s} {job.name:22s} {job.out}  {what}".rstrip())
+        report(f"{state.status.value:9s} {job.name:32s} {job.out}  {what}".rstrip())
 
 
 def compact(grid: Grid, results: Path, report: Say = say) -> None:
@@ -101,10 +107,10 @@ def compact(grid: Grid, results: Path, report: Say = say) -> None:
     checkpoint loses its learner state (critics, targets, optimiser moments) and the run its resume/
     directory. Partial and conflicting runs are left alone."""
     before = after = 0
-    finished = [s.job for s in map(job_state, grid.jobs(results)) if s.status is Status.FINISHED]
+    finished = [s.job for s in map(job_state, all_jobs(grid, results)) if s.status is Status.FINISHED]
     for job in finished:
-        for role in ROLES:
-            b, a = compact_checkpoint(job.out / f"{role.value}.pt")
+        for role in job.roles:
+            b, a = compact_checkpoint(job.out / f"{role}.pt")
             before, after = before + b, after + a
         shutil.rmtree(job.out / "resume", ignore_errors=True)
     report(f"compacted {len(finished)} finished runs: role checkpoints {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB, resume/ states deleted")
@@ -137,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     launches = [] if args.report_only else train(grid, args.results, args.jobs)
     make_report(grid, args.results)
-    failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job.out)]
+    failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]
     if failed:
         print(f"error: {len(failed)} job(s) failed: {', '.join(f.job.name for f in failed)} (see train.log in their run directories)", file=sys.stderr)
         return 1

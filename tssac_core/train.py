@@ -69,7 +69,7 @@ class TrainConfig:
     steps_per_epoch: int = 4000
     """Environment steps per epoch, summed over the parallel worlds (Table 3: 4,000)."""
     roles: tuple[str, ...] = ("decoy", "detect", "strike")
-    """Roles to train, in curriculum order; earlier roles must already be in --out."""
+    """Roles to train, in curriculum order; earlier roles must already be in --out (or in ``teammates``)."""
     envs: int = 4
     """Parallel worlds collecting experience (one batched world)."""
     update_every: int = 1
@@ -97,16 +97,35 @@ class TrainConfig:
     (tssac_core.validation). 0: ship the last epoch."""
     init_from: str = ""
     """A role checkpoint whose networks initialise every trained role (fine-tuning; transfer() resets the rest)."""
+    teammates: str = ""
+    """A directory of trained role checkpoints (a run, or ``models/tssac``) for the earlier roles this run does
+    not train: they fly beside the trained roles and, for TSSAC, are transferred from. "" (default): this
+    run's own --out (the curriculum)."""
+    stop_at_task_success: float = 0.0
+    """End a role after the first epoch whose task success in training reaches this fraction (0: train every
+    epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
     sac: dict[str, Any] = field(default_factory=dict)
     """Overrides of SacConfig fields (Table 3 defaults)."""
 
 
-def teammates_for(role: Role, out: Path) -> dict[str, Pilot]:
+def role_checkpoint(cfg: TrainConfig, out: Path, role: Role) -> Path:
+    """Where a trained earlier role is: in this run if it trains that role (or has no ``teammates``), else in ``teammates``."""
+    if cfg.teammates and role.value not in cfg.roles:
+        return Path(cfg.teammates) / f"{role.value}.pt"
+    return out / f"{role.value}.pt"
+
+
+def teammates_for(role: Role, cfg: TrainConfig, out: Path) -> dict[str, Pilot]:
     """Earlier roles fly their trained policies (the judgement condition); later ones are parked."""
     pilots: dict[str, Pilot] = {}
     for earlier in ROLES[: role.index]:
-        pilots[earlier.value] = Policy.load(out / f"{earlier.value}.pt", earlier)
+        pilots[earlier.value] = Policy.load(role_checkpoint(cfg, out, earlier), earlier)
     return pilots
+
+
+def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
+    """The epoch's training task success reached ``cfg.stop_at_task_success`` (never when that is 0)."""
+    return cfg.stop_at_task_success > 0 and row["task_success"] >= cfg.stop_at_task_success
 
 
 OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}
@@ -296,7 +315,7 @@ def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, 
     """A seed's worlds (reset), replay buffer, validation selector and exploration generator for ``role``."""
     mode = ObservationMode(cfg.observation)
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
-    teammates = teammates_for(role, out)
+    teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
@@ -314,7 +333,7 @@ def transfer_source(cfg: TrainConfig, role: Role, out: Path) -> Path | None:
     if cfg.init_from:
         return Path(cfg.init_from)
     if cfg.algo == "tssac" and role.index > 0:
-        return out / f"{ROLES[role.index - 1].value}.pt"
+        return role_checkpoint(cfg, out, ROLES[role.index - 1])
     return None
 
 
@@ -363,9 +382,18 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
             bar.update(cfg.envs)
         row = run.end_epoch(log, iters, write_checkpoint)
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
+        if reached_stop(cfg, row):
+            # No resume state for this epoch: a kill before the role ships repeats it (from the same state).
+            log_stop(role, epoch, row)
+            break
         save_resume_state(run.state_path, run.resume_state(learner.state_dict(), torch.get_rng_state()))
 
     ship_role(out, role, run.selector, write_checkpoint)
+
+
+def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
+    logger.info("%s: task success %.2f in epoch %d (%d decisions) reaches --stop-at-task-success: role done", role.value,
+                row["task_success"], epoch, row["env_steps"])
 
 
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
@@ -486,6 +514,10 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
+    p.add_argument("--teammates", type=Path, help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
+                   "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")
+    p.add_argument("--stop-at-task-success", type=float, default=0.0, metavar="FRACTION",
+                   help="end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a SacConfig field, e.g. --set lr=3e-4")
     p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
@@ -502,6 +534,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:
         raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
+    if not 0.0 <= a.stop_at_task_success <= 1.0:
+        raise UsageError(f"--stop-at-task-success must be a fraction in [0, 1], got {a.stop_at_task_success:g}")
     overrides: dict[str, Any] = {}
     for item in a.set:
         key, _, value = item.partition("=")
@@ -514,7 +548,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
         validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
-        init_from=str(a.init_from) if a.init_from else "",
+        init_from=str(a.init_from) if a.init_from else "", teammates=str(a.teammates) if a.teammates else "",
+        stop_at_task_success=a.stop_at_task_success,
     )
     return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
 
@@ -566,8 +601,9 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
     for role_name in cfg.roles:
         role = Role(role_name)
         for earlier in ROLES[: role.index]:
-            if earlier.value not in cfg.roles and not (out / f"{earlier.value}.pt").is_file():
-                raise UsageError(f"training {role.value} needs {out / (earlier.value + '.pt')} (train {earlier.value} first)")
+            path = role_checkpoint(cfg, out, earlier)
+            if earlier.value not in cfg.roles and not path.is_file():
+                raise UsageError(f"training {role.value} needs {path} (train {earlier.value} first)")
     out.mkdir(parents=True, exist_ok=True)
     if not resume:
         write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})

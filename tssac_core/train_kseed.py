@@ -107,6 +107,8 @@ def check_seeds(cfg: TrainConfig, seeds: tuple[int, ...] | None, out: Path, resu
         return saved
     if cfg.algo not in SAC_FAMILY:
         raise UsageError(f"--seeds trains the SAC family only ({', '.join(SAC_FAMILY)}), not {cfg.algo}")
+    if cfg.stop_at_task_success > 0:
+        raise UsageError("--stop-at-task-success ends each seed at its own epoch, and --seeds trains them in lockstep: train the seeds one by one")
     if is_kseed_run(out) or (out / "config.json").is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     assert seeds is not None

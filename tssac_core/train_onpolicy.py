@@ -167,14 +167,15 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     """Train one role with cfg.algo in {ppo, ppo_lag, cpo} for cfg.epochs epochs, checkpointing every
     epoch; writes ``<role>.pt``."""
     # Imported here, not at the top: train.py dispatches to this module.
-    from tssac_core.train import EpochLog, append_metrics, make_task, role_position, save_trained_role, ship_role, teammates_for
+    from tssac_core.train import (EpochLog, append_metrics, log_stop, make_task, reached_stop, role_position, save_trained_role, ship_role,
+                                  teammates_for)
 
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
     config = onpolicy_config(cfg, scenario)
     torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = make_learner(mode.size, 2, config)
-    teammates = teammates_for(role, out)
+    teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     finished: deque[tuple[float, int]] = deque(maxlen=config.cost_window)
@@ -247,6 +248,9 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
             f", cpo case {stats.cpo_case}, step fraction {stats.step_fraction:.3g}" if isinstance(learner, Cpo) else "",
         )
         bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
+        if reached_stop(cfg, row):
+            log_stop(role, epoch, row)  # no resume state: a kill before the role ships repeats this epoch
+            break
         save_onpolicy_resume_state(state_path, learner, task, obs, ep_len, finished, epoch, env_steps, updates, selector)
 
     ship_role(out, role, selector, write_checkpoint)
