@@ -95,6 +95,10 @@ def _wrap_angle_rad(angle_rad: float) -> float:
 
 
 def _finite_pair(name: str, value: tuple[float, float] | FloatArray) -> tuple[float, float]:
+    if type(value) is tuple and len(value) == 2 and type(value[0]) is float and type(value[1]) is float:
+        # The companion's case (two floats), without the round trip through a numpy array.
+        if math.isfinite(value[0]) and math.isfinite(value[1]):
+            return value
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
     if arr.shape != (2,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be two finite numbers (east, north), got {value!r}")
@@ -302,46 +306,59 @@ def _ct_mean_x(sigmas: FloatArray, wm: FloatArray) -> FloatArray:
 
 
 def _ct_q(noise: FilterNoise, state: FloatArray, dt_s: float) -> FloatArray:
-    """Process noise of the constant-turn models over dt_s, linearised at the state's speed and heading."""
+    """Process noise of the constant-turn models over dt_s, linearised at the state's speed and heading.
+
+    Along track, white acceleration drives [s_along, v]; across track, white omega' drives
+    [s_across / v, phi, omega] (linearised at speed v). Built from scalars in one array: a dozen
+    small numpy operations on a 5 x 5 matrix cost more than the arithmetic.
+    """
     v, phi = float(state[_V]), float(state[_PHI])
-    along = np.array([math.cos(phi), math.sin(phi)])
-    across = np.array([-math.sin(phi), math.cos(phi)])
-    q = np.zeros((5, 5))
-    # Along track: white acceleration drives [s_along, v].
+    ax, ay = math.cos(phi), math.sin(phi)  # along track
+    cx, cy = -math.sin(phi), math.cos(phi)  # across track
     qa = _integrator_q(noise.accel_sigma_m_s2**2, dt_s, 2)
-    q[:2, :2] += qa[0, 0] * np.outer(along, along)
-    q[:2, _V] += qa[0, 1] * along
-    q[_V, :2] += qa[0, 1] * along
-    q[_V, _V] += qa[1, 1]
-    # Across track: white omega' drives [s_across / v, phi, omega] (linearised at speed v).
     qw = _integrator_q(noise.turn_accel_sigma_rad_s2**2, dt_s, 3)
-    q[:2, :2] += v * v * qw[0, 0] * np.outer(across, across)
-    for col, k in ((_PHI, 1), (_OMEGA, 2)):
-        q[:2, col] += v * qw[0, k] * across
-        q[col, :2] += v * qw[0, k] * across
-    q[_PHI:, _PHI:] += qw[1:, 1:]
-    return q
+    a00, a01, a11 = float(qa[0, 0]), float(qa[0, 1]), float(qa[1, 1])
+    w_pos = v * v * float(qw[0, 0])
+    w_phi, w_omega = v * float(qw[0, 1]), v * float(qw[0, 2])
+    xx = a00 * (ax * ax) + w_pos * (cx * cx)
+    xy = a00 * (ax * ay) + w_pos * (cx * cy)
+    yy = a00 * (ay * ay) + w_pos * (cy * cy)
+    return np.array(
+        [
+            [xx, xy, a01 * ax, w_phi * cx, w_omega * cx],
+            [xy, yy, a01 * ay, w_phi * cy, w_omega * cy],
+            [a01 * ax, a01 * ay, a11, 0.0, 0.0],
+            [w_phi * cx, w_phi * cy, 0.0, float(qw[1, 1]), float(qw[1, 2])],
+            [w_omega * cx, w_omega * cy, 0.0, float(qw[2, 1]), float(qw[2, 2])],
+        ]
+    )
 
 
 def _ct_jacobian(state: FloatArray, dt: float) -> FloatArray:
     """d _ct_fx / d state: the extended filter's transition matrix (eq. 5 at constant v and omega)."""
-    _, _, v, phi, omega = state
-    f = np.eye(5)
+    v, phi, omega = float(state[_V]), float(state[_PHI]), float(state[_OMEGA])
     phi_end = phi + omega * dt
     if abs(omega) > _SMALL_TURN_RAD_S:
         ds, dc = math.sin(phi_end) - math.sin(phi), math.cos(phi) - math.cos(phi_end)
-        f[_X, _V], f[_Y, _V] = ds / omega, dc / omega
-        f[_X, _PHI], f[_Y, _PHI] = -v / omega * dc, v / omega * ds
-        f[_X, _OMEGA] = -v / omega**2 * ds + v / omega * math.cos(phi_end) * dt
-        f[_Y, _OMEGA] = -v / omega**2 * dc + v / omega * math.sin(phi_end) * dt
+        xv, yv = ds / omega, dc / omega
+        xphi, yphi = -v / omega * dc, v / omega * ds
+        xomega = -v / omega**2 * ds + v / omega * math.cos(phi_end) * dt
+        yomega = -v / omega**2 * dc + v / omega * math.sin(phi_end) * dt
     else:
         mid = phi + 0.5 * omega * dt
         c, s = math.cos(mid), math.sin(mid)
-        f[_X, _V], f[_Y, _V] = dt * c, dt * s
-        f[_X, _PHI], f[_Y, _PHI] = -v * dt * s, v * dt * c
-        f[_X, _OMEGA], f[_Y, _OMEGA] = -0.5 * v * dt * dt * s, 0.5 * v * dt * dt * c
-    f[_PHI, _OMEGA] = dt
-    return f
+        xv, yv = dt * c, dt * s
+        xphi, yphi = -v * dt * s, v * dt * c
+        xomega, yomega = -0.5 * v * dt * dt * s, 0.5 * v * dt * dt * c
+    return np.array(
+        [
+            [1.0, 0.0, xv, xphi, xomega],
+            [0.0, 1.0, yv, yphi, yomega],
+            [0.0, 0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0, dt],
+            [0.0, 0.0, 0.0, 0.0, 1.0],
+        ]
+    )
 
 
 def _ct_h_jacobian(state: FloatArray) -> FloatArray:
@@ -405,8 +422,12 @@ class _ConstantTurn:
         self._kf.P = 0.5 * (self._kf.P + self._kf.P.T)
 
     def predict(self, dt_s: float) -> None:
+        if dt_s == 0.0 and not self._unscented:
+            # The extended filter's zero step is the identity (F = I, Q = 0): nothing to compute. (The
+            # unscented one draws its sigma points in predict, so it always runs.)
+            return
         self._kf.Q = _ct_q(self._noise, self._kf.x, dt_s)
-        if isinstance(self._kf, UnscentedKalmanFilter):
+        if self._unscented:
             self._kf.predict(dt=dt_s)
         else:
             self._kf.F = _ct_jacobian(self._kf.x, dt_s)  # at the prior mean, before predict_x moves it
@@ -416,7 +437,7 @@ class _ConstantTurn:
 
     def update(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
         z = np.array([pos_m[0], pos_m[1], vel_m_s[0], vel_m_s[1]])
-        if isinstance(self._kf, UnscentedKalmanFilter):
+        if self._unscented:
             self._kf.update(z)
         else:
             self._kf.update(z, _ct_h_jacobian, _ct_hx)
