@@ -130,10 +130,10 @@ def _sample_stacked(fields: np.ndarray, grid_m: float, xy_m: np.ndarray) -> np.n
     np.minimum(f, top, out=f)
     ij = f.astype(np.intp)
     t = f - ij  # (tx, ty)
-    k = ij[0] * size
-    k += ij[1]
     row_start, corner_offsets = _flat_offsets(n, size)
-    k += row_start  # the flat index of cell (i, j) of world w: (w size + i) size + j
+    # The flat index of cell (i, j) of world w: (w size + i) size + j. Afresh, not in place: with one
+    # vehicle in one world k has a single element, and an in-place update of that takes numpy's slow path.
+    k = ij[0] * size + ij[1] + row_start
     # The four corners (i, j), (i, j + 1), (i + 1, j), (i + 1, j + 1) in one gather, (N, K, 4).
     corners = fields.reshape(-1)[k[..., None] + corner_offsets]
     ty = t[1][..., None]
@@ -198,11 +198,11 @@ class RouteMap:
         cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
         xy = world.xy_m[:, :, cols]  # (2, N, 3 or 1)
         route = _sample_stacked(self.cache.fields(world), self.cfg.grid_m, xy)
-        to_sam = xy - world.sam_m.T[:, :, None]
-        straight = np.hypot(to_sam[0], to_sam[1])
-        straight -= world.c.r4_m
-        np.subtract(route, straight, out=route)
-        np.maximum(route, 0.0, out=route)
+        to_sam = xy - world.sam_xy_m[:, :, cols]
+        # Afresh, not in place: one vehicle's (N, 1) arrays have a single element at N = 1, and an in-place
+        # update of that takes numpy's slow path.
+        straight = np.hypot(to_sam[0], to_sam[1]) - world.c.r4_m
+        route = np.maximum(route - straight, 0.0)
         detour = np.where(straight > 0.0, route, 0.0)
         return detour if vehicle is None else detour[:, 0]
 
