@@ -148,16 +148,17 @@ class RoleTask:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
         actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
-        moving = self.world.active & self.world.running[:, None]
         detour_prev = self.detour_m
         result = self.world.step(actions)
+        moving = result.moving
         self._measure_detours()
         r = reward(result, moving, self.reward_config, detour_prev, self.detour_m, vehicle=self.j)
         cost = result.cost[:, self.j]
         if self.cost_margin_m > 0:
             cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
-        self.ep_return += r
-        self.ep_cost += cost
+        # Afresh, not in place: an in-place update of a one-element array (N = 1) takes numpy's slow path.
+        self.ep_return = self.ep_return + r
+        self.ep_cost = self.ep_cost + cost
         return result, r, cost
 
     def step(self, action: np.ndarray, rng: np.random.Generator | None = None, repeat: int = 1) -> TaskStep:

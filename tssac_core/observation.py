@@ -58,7 +58,7 @@ import functools
 import numpy as np
 
 from tssac_core.routes import RouteMap
-from tssac_core.world import World, WorldConstants
+from tssac_core.world import World, WorldConstants, constant_operand
 
 LOCAL_SCALE_M = 20_000.0
 """Scale of the local (zone and hazard) ranges: the SAM's detection range R4."""
@@ -117,50 +117,57 @@ def build_observation(
 ) -> np.ndarray:
     """Observations of one role in N worlds, (N, mode.size) float32.
 
-    Vehicle arrays are the observing UAV's: position ``xy_m`` (N, 2), the others (N,); ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2);
-    ``radar_r_m`` (N, K); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode
-    only). This is the only place observations are made.
+    Vehicle arrays are the observing UAV's: position ``xy_m`` (2, N), x over y (as ``World.xy_m``), the
+    others (N,); ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2); ``radar_r_m`` (N, K); flags (N,);
+    ``route_dir`` (N, 2) unit vectors in the world frame (route mode only). This is the only place
+    observations are made.
+
+    Speed: the entries are computed feature-major, one contiguous (N,) row per entry, and transposed once
+    at the end: at N = 1 numpy's fast path wants same-shape contiguous operands (see :class:`World`), which
+    rows are and columns of an (N, size) array are not.
     """
     if mode is ObservationMode.PAPER:
-        return _paper_observation(role_index, c, xy_m[:, 0], xy_m[:, 1], v_m_s, phi_rad, target_m)
+        return _paper_observation(role_index, c, xy_m[0], xy_m[1], v_m_s, phi_rad, target_m)
     j = role_index
-    area = c.area_m
-    n = xy_m.shape[0]
-    out = np.empty((n, _SIZES[mode]))
-    np.divide(xy_m, area, out=out[:, 0:2])
-    _speed(v_m_s, c, j, out=out[:, 2])
-    heading = out[:, 3:5]  # cos phi, sin phi
-    np.cos(phi_rad, out=out[:, 3])
-    np.sin(phi_rad, out=out[:, 4])
+    area = constant_operand(c.area_m)
+    n = xy_m.shape[1]
+    out = np.empty((_SIZES[mode], n))
+    np.divide(xy_m, area, out=out[0:2])
+    _speed(v_m_s, c, j, out=out[2])
+    np.cos(phi_rad, out=out[3])
+    np.sin(phi_rad, out=out[4])
 
-    # The target, the SAM and the radars in one pass: ranges and bearings relative to the heading, (N, 2 + K).
-    points = np.concatenate([target_m[:, None, :], sam_m[:, None, :], radar_m], axis=1)
-    delta = points - xy_m[:, None, :]
-    d = np.hypot(delta[:, :, 0], delta[:, :, 1])
-    inv = np.maximum(d, 1e-9)
-    np.divide(1.0, inv, out=inv)  # on the point itself the bearing is (0, 0)
-    delta *= inv[:, :, None]  # unit vectors to the points
-    # Per point: (range to the edge, bearing cos, bearing sin); the radars' rows are their features.
-    points_feats = np.empty((n, points.shape[1], 3))
-    _relative(delta, heading, out=points_feats[:, :, 1:])
+    # The target, the SAM and the radars in one pass: ranges and bearings relative to the heading, (N, P = 2 + K).
+    points = np.concatenate([target_m[:, None, :], sam_m[:, None, :], radar_m], axis=1)  # (N, P, 2)
+    delta = np.empty((2, n, points.shape[1]))  # C-ordered x over y, so that delta[0] and delta[1] are contiguous
+    np.subtract(points.transpose(2, 0, 1), xy_m[:, :, None], out=delta)
+    d = np.hypot(delta[0], delta[1])
+    inv = np.maximum(d, _TINY)
+    np.divide(_ONE, inv, out=inv)  # on the point itself the bearing is (0, 0)
+    for component in delta:  # unit vectors to the points
+        component *= inv
+    # Per point, (range to the edge, bearing cos, bearing sin), (3, N, P); the radars' columns are their features.
+    feats = np.empty((3, *d.shape))
+    _relative(delta, _heading(out[3], out[4], d.shape), out=feats[1:])
 
-    np.divide(d[:, 0], area, out=out[:, 5])  # l: distance to the target
+    np.divide(d[:, 0], area, out=out[5])  # l: distance to the target
     d_sam = d[:, 1]
-    out[:, 6:8] = points_feats[:, 1, 1:]
-    np.divide(d_sam, area, out=out[:, 8])
-    np.subtract(d_sam, c.zone_outer_m[j], out=out[:, 9])
-    np.subtract(d_sam, c.zone_inner_m[j], out=out[:, 10])
-    out[:, 9:11] /= LOCAL_SCALE_M
-    radar_feats = points_feats[:, 2:]
-    np.subtract(d[:, 2:], radar_r_m, out=radar_feats[:, :, 0])
-    radar_feats[:, :, 0] /= LOCAL_SCALE_M
-    out[:, 11 : 11 + 3 * N_RADAR_FEATURES] = _nearest_radars(radar_feats, radar_r_m)
-    out[:, 20] = radar_on
-    out[:, 21] = identified
+    out[6:8] = feats[1:, :, 1]
+    np.divide(d_sam, area, out=out[8])
+    np.subtract(d_sam, c.zone_outer_m[j], out=out[9])
+    np.subtract(d_sam, c.zone_inner_m[j], out=out[10])
+    out[9:11] /= _LOCAL_SCALE
+    radar_feats = feats[:, :, 2:]
+    edge = np.subtract(d[:, 2:], radar_r_m)
+    edge /= _LOCAL_SCALE
+    radar_feats[0] = edge
+    _nearest_radars(radar_feats, radar_r_m, out=out[11 : 11 + 3 * N_RADAR_FEATURES])
+    out[20] = radar_on
+    out[21] = identified
     if mode is ObservationMode.ROUTE:
         if route_dir is None:
             raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
-        out[:, 22:24] = _relative(route_dir, heading)
+        _relative(route_dir.T, _heading(out[3], out[4], (n,)), out=out[22:24])
     return _clip_to_bounds(out, mode)
 
 
@@ -170,63 +177,84 @@ def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarr
     area = c.area_m
     speed = _speed(v_m_s, c, j)
     l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
-    obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area], axis=1)
+    obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area])
     return _clip_to_bounds(obs, ObservationMode.PAPER)
 
 
 def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None = None) -> np.ndarray:
     """(v - v_min) / (v_max - v_min) of role j."""
-    speed = np.subtract(v_m_s, c.speed_min_m_s[j], out=out)
-    speed /= c.speed_max_m_s[j] - c.speed_min_m_s[j]
-    return speed
+    # Not in place: an in-place update of a one-element row (N = 1) takes numpy's slow path.
+    return np.divide(v_m_s - c.speed_min_m_s[j], c.speed_max_m_s[j] - c.speed_min_m_s[j], out=out)
 
 
-def _relative(u: np.ndarray, heading: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Unit vectors ``u`` (N, ..., 2) rotated by -phi: (cos, sin) of their bearing relative to the heading.
+def _heading(cos_phi: np.ndarray, sin_phi: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """(sin, cos, sin) of the heading, each broadcast from (N,) to ``shape`` (N, ...), stacked (3, N, ...).
 
-    ``heading`` (N, 2) is (cos phi, sin phi). rel_cos = ux cos + uy sin, rel_sin = uy cos - ux sin, as two
-    products with the heading (straight and swapped) and one sum and one difference.
+    Stacked so that [1:] is (cos, sin) and [:2] is (sin, cos): both are contiguous views for :func:`_relative`.
     """
-    shape = (heading.shape[0],) + (1,) * (u.ndim - 2) + (2,)
-    straight = u * heading.reshape(shape)  # (ux cos, uy sin)
-    swapped = u * heading[:, ::-1].reshape(shape)  # (ux sin, uy cos)
-    rel = np.empty(u.shape) if out is None else out
-    np.add(straight[..., 0], straight[..., 1], out=rel[..., 0])
-    np.subtract(swapped[..., 1], swapped[..., 0], out=rel[..., 1])
-    return rel
+    heading = np.empty((3, *shape))
+    expand = (slice(None),) + (None,) * (len(shape) - 1)
+    heading[0] = sin_phi[expand]
+    heading[1] = cos_phi[expand]
+    heading[2] = heading[0]
+    return heading
 
 
-def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray) -> np.ndarray:
-    """The N_RADAR_FEATURES nearest radar edges, (N, 3 * N_RADAR_FEATURES), from every radar slot's
-    features (N, K, 3): (range - radius) / LOCAL_SCALE, cos and sin of the bearing.
+def _relative(u: np.ndarray, heading: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Unit vectors ``u`` (2, N, ...), x over y, rotated by -phi into ``out`` (2, N, ...): (cos, sin) of their
+    bearing relative to the heading; ``heading`` is :func:`_heading`'s (sin, cos, sin) of the same shape.
+
+    rel_cos = ux cos + uy sin, rel_sin = uy cos - ux sin, as two products with the heading (straight and
+    swapped) and one sum and one difference, every operand of one shape.
+    """
+    straight = u * heading[1:]  # (ux cos, uy sin)
+    swapped = u * heading[:2]  # (ux sin, uy cos)
+    np.add(straight[0], straight[1], out=out[0])
+    np.subtract(swapped[1], swapped[0], out=out[1])
+    return out
+
+
+def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray, out: np.ndarray) -> None:
+    """The N_RADAR_FEATURES nearest radar edges into ``out`` (3 * N_RADAR_FEATURES, N), radar by radar, from
+    every radar slot's features (3, N, K): (range - radius) / LOCAL_SCALE, cos and sin of the bearing.
 
     Padding slots (radius 0) and missing ones read as far away, dead ahead.
     """
     n, k = radius_m.shape
     if k < N_RADAR_FEATURES:
-        feats = np.concatenate([feats, np.broadcast_to(_FAR_RADAR, (n, N_RADAR_FEATURES - k, 3))], axis=1)
+        far = np.broadcast_to(_FAR_RADAR[:, None, None], (3, n, N_RADAR_FEATURES - k))
+        feats = np.concatenate([feats, far], axis=2)
     padding = radius_m <= 0
-    if padding.any():
+    if np.count_nonzero(padding):  # (count_nonzero is a plain C call; padding.any() goes through Python)
         feats = feats.copy()
-        feats[:, :k] = np.where(padding[:, :, None], _FAR_RADAR, feats[:, :k])
-    order = np.argsort(feats[:, :, 0], axis=1)[:, :N_RADAR_FEATURES]
-    return feats[_rows(n), order].reshape(n, -1)
+        feats[:, :, :k] = np.where(padding, _FAR_RADAR[:, None, None], feats[:, :, :k])
+    order = feats[0].argsort(axis=1)[:, :N_RADAR_FEATURES]
+    order += _row_starts(n, feats.shape[2])  # flat indices into each feature's (N * K) values
+    nearest = feats.reshape(3, -1).take(order, axis=1)  # (3, N, N_RADAR_FEATURES)
+    out.reshape(N_RADAR_FEATURES, 3, n)[...] = nearest.transpose(2, 0, 1)
 
 
 @functools.lru_cache(maxsize=16)
-def _rows(n: int) -> np.ndarray:
-    """Row indices (N, 1) for picking per-row columns by fancy indexing."""
-    return np.arange(n)[:, None]
+def _row_starts(n: int, k: int) -> np.ndarray:
+    """Where each row starts in an (N, K) array flattened, (N, N_RADAR_FEATURES), for picking per-row columns."""
+    return np.ascontiguousarray(np.broadcast_to(np.arange(n)[:, None] * k, (n, N_RADAR_FEATURES)))
 
+
+@functools.lru_cache(maxsize=16)
+def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds as (size, N) arrays: same-shape operands for the clip."""
+    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
 
 
 def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
-    low, high = _BOUNDS[mode]
+    """Clip feature-major (size, N) entries to the bounds; the observations (N, size) float32."""
+    low, high = _bounds_of(mode, obs.shape[1])
     np.maximum(obs, low, out=obs)
     np.minimum(obs, high, out=obs)
-    return obs.astype(np.float32)
+    return obs.T.astype(np.float32, order="C")
 
 
+_ONE, _TINY, _LOCAL_SCALE = constant_operand(1.0), constant_operand(1e-9), constant_operand(LOCAL_SCALE_M)
 _FAR_RADAR = np.array([1e9, 1.0, 0.0])
 """Features of a radar slot a layout does not use: sorted last, range clipped to 1, bearing dead ahead."""
 
@@ -242,7 +270,7 @@ def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteM
         j,
         mode,
         world.c,
-        world.xy_m[:, :, j].T,
+        world.xy_m[:, :, j],
         world.v_m_s[:, j],
         world.phi_rad[:, j],
         world.sam_m,

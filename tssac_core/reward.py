@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.routes import RouteConfig
-from tssac_core.world import KM, StepResult
+from tssac_core.world import KM, StepResult, constant_operand
 
 
 @dataclass(frozen=True)
@@ -72,12 +72,23 @@ def reward(
     cols = slice(None) if vehicle is None else vehicle  # a learner's reward needs its own column only
     before = result.zone_dist_prev_m[:, cols] + detour_prev_m
     after = result.zone_dist_m[:, cols] + detour_m
-    approach_km = (before - after) / KM
+    approach_km = (before - after) / _KM
+    # Every term is built afresh: an in-place update of a one-element array (a learner's column at N = 1)
+    # takes numpy's slow path (see :class:`tssac_core.world.World`).
     r = (
-        cfg.k1 * cfg.success * result.task_completed[:, cols]
+        _weighted(result.task_completed[:, cols], cfg.k1 * cfg.success)
         + cfg.k2 * approach_km
         + cfg.k3 * cfg.step
-        + cfg.hold * result.in_zone[:, cols]
-        + cfg.out_of_area * result.out_of_area[:, cols]
+        + _weighted(result.in_zone[:, cols], cfg.hold)
+        + _weighted(result.out_of_area[:, cols], cfg.out_of_area)
     )
     return np.where(moving[:, cols], r, 0.0)
+
+
+def _weighted(flags: np.ndarray, weight: float) -> np.ndarray:
+    """``weight * flags`` as floats. The flags are made floats first, as numpy would inside the product,
+    but in a call of their own: a bool operand in float arithmetic takes numpy's slow casting path."""
+    return np.multiply(flags.astype(np.float64), weight)
+
+
+_KM = constant_operand(KM)

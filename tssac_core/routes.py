@@ -128,24 +128,27 @@ def _sample_stacked(fields: np.ndarray, grid_m: float, xy_m: np.ndarray) -> np.n
     f -= 0.5
     np.maximum(f, 0.0, out=f)
     np.minimum(f, top, out=f)
-    ij = f.astype(np.intp)
-    t = f - ij  # (tx, ty)
-    k = ij[0] * size
-    k += ij[1]
+    cell = np.trunc(f)  # the lower corner (i, j); f >= 0, so truncation is the floor
+    t = f - cell  # (tx, ty): the same numbers as f minus the integer corner, without a mixed-type call
+    ij = cell.astype(np.intp)
     row_start, corner_offsets = _flat_offsets(n, size)
-    k += row_start  # the flat index of cell (i, j) of world w: (w size + i) size + j
-    # The four corners (i, j), (i, j + 1), (i + 1, j), (i + 1, j + 1) in one gather, (N, K, 4).
-    corners = fields.reshape(-1)[k[..., None] + corner_offsets]
-    ty = t[1][..., None]
-    low_high = corners[..., 0::2] + ty * (corners[..., 1::2] - corners[..., 0::2])  # along y at i and at i + 1
-    low, high = low_high[..., 0], low_high[..., 1]
+    # The flat index of cell (i, j) of world w: (w size + i) size + j. Afresh, not in place: with one
+    # vehicle in one world k has a single element, and an in-place update of that takes numpy's slow path.
+    k = ij[0] * size + ij[1] + row_start
+    # The four corners in one gather, corner-major (4, N, K): (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1),
+    # so that the corners at j and those at j + 1 are contiguous (2, N, K) halves.
+    corners = fields.reshape(-1).take(k + corner_offsets)
+    rise = (corners[2:] - corners[:2]).astype(np.float64)  # along y at i and at i + 1, in float32 as the fields
+    np.multiply(rise, t[1], out=rise)
+    low, high = corners[:2].astype(np.float64) + rise  # the float32 corners promoted in a call of their own
     return low + t[0] * (high - low)
 
 
 @functools.lru_cache(maxsize=16)
 def _flat_offsets(n: int, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Start of each world's field in the flattened (N, size, size) fields, (N, 1); the four corners' offsets."""
-    return np.arange(n)[:, None] * (size * size), np.array([0, 1, size, size + 1])
+    """Start of each world's field in the flattened (N, size, size) fields, (N, 1); the four corners'
+    offsets, (4, 1, 1): (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
+    return np.arange(n)[:, None] * (size * size), np.array([0, size, 1, size + 1]).reshape(4, 1, 1)
 
 
 def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,11 +201,11 @@ class RouteMap:
         cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
         xy = world.xy_m[:, :, cols]  # (2, N, 3 or 1)
         route = _sample_stacked(self.cache.fields(world), self.cfg.grid_m, xy)
-        to_sam = xy - world.sam_m.T[:, :, None]
-        straight = np.hypot(to_sam[0], to_sam[1])
-        straight -= world.c.r4_m
-        np.subtract(route, straight, out=route)
-        np.maximum(route, 0.0, out=route)
+        to_sam = xy - world.sam_xy_m[:, :, cols]
+        # Afresh, not in place: one vehicle's (N, 1) arrays have a single element at N = 1, and an in-place
+        # update of that takes numpy's slow path.
+        straight = np.hypot(to_sam[0], to_sam[1]) - world.c.r4_m
+        route = np.maximum(route - straight, 0.0)
         detour = np.where(straight > 0.0, route, 0.0)
         return detour if vehicle is None else detour[:, 0]
 

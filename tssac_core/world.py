@@ -40,6 +40,20 @@ KM = 1000.0
 N_ROLES = len(ROLES)
 
 
+def constant_operand(value: float) -> np.ndarray:
+    """A constant operand as a 0-d array. numpy converts a Python float into an array on every call (about
+    0.5 us, most of a small-N operation); a 0-d array it takes as is, on its fast path."""
+    return np.array(value)
+
+
+_ZERO, _HALF, _ONE, _MINUS_ONE = constant_operand(0.0), constant_operand(0.5), constant_operand(1.0), constant_operand(-1.0)
+_SINC_C3, _SINC_C5 = constant_operand(1.0 / 6.0), constant_operand(1.0 / 120.0)
+_WRAP_EDGES = np.array([-math.pi, math.pi])
+"""Heading bins: below -pi, [-pi, pi), at or above pi (``searchsorted(side="right")`` gives 0, 1, 2)."""
+_WRAP_SHIFT = np.array([2 * math.pi, -0.0, -2 * math.pi])
+"""What each heading bin adds: x + (-0.0) is x to the bit (even for -0.0), x + (-2 pi) is x - 2 pi."""
+
+
 @dataclass(frozen=True)
 class WorldConstants:
     """Per-scenario constants in SI units, per role where they differ (arrays of shape (3,))."""
@@ -112,6 +126,8 @@ class StepResult:
     """The world ended this step by a hit or a vehicle leaving the area, (N,) bool."""
     truncated: np.ndarray
     """The world reached the episode cap this step without terminating, (N,) bool."""
+    moving: np.ndarray | None = None
+    """Vehicles that took the step (active, in a running world), (N, 3) bool."""
 
 
 class World:
@@ -134,6 +150,14 @@ class World:
       broadcast to the full (N, 3) vehicle shape (rebuilt by :meth:`reset`). An (N, 3) operand against
       an (N, 1) or (3,) one makes numpy run N inner loops of 3 elements, several times slower than one
       loop over 3N; same-shape operands avoid that.
+
+    At N = 1 the same choice pays for another reason: numpy runs an operation whose operands are all
+    contiguous arrays of one shape and one dtype (or 0-d arrays) on a fast path (about 0.7 us); a
+    broadcast, a strided view, a bool operand in float arithmetic (a cast) or a ``where=`` takes its
+    general iterator (2.5-3.5 us). So constants are 0-d arrays (:func:`constant_operand`), masks are turned into
+    floats once, and a broadcast is split into same-shape calls where that takes fewer microseconds. And an
+    operation that writes into one of its inputs takes the slow path when the array has a single element,
+    as every per-world (N,) array has at N = 1: those are built afresh (``a = a | b``, not ``a |= b``).
     """
 
     def __init__(self, scenario: Scenario, n: int, max_radars: int | None = None) -> None:
@@ -189,6 +213,11 @@ class World:
         self._xy[1] = value
 
     @property
+    def sam_xy_m(self) -> np.ndarray:
+        """The SAM's position per vehicle, (2, N, 3), x over y (read only): same-shape operand for ``xy_m``."""
+        return self._sam_xy
+
+    @property
     def max_radars(self) -> int:
         return self.radar_r_m.shape[1]
 
@@ -206,6 +235,11 @@ class World:
         self._speed_max = np.broadcast_to(c.speed_max_m_s, shape).copy()
         self._zone_inner = np.broadcast_to(c.zone_inner_m, shape).copy()
         self._zone_outer = np.broadcast_to(c.zone_outer_m, shape).copy()
+        self._rate = np.stack([self._turn_rate, self._accel])
+        """Turn-rate over acceleration limit, (2, N, 3), to scale the (omega, u) actions in one call."""
+        self._dt = constant_operand(c.dt_s)
+        self._half_area = constant_operand(0.5 * c.area_m)
+        self._episode_steps = constant_operand(c.episode_steps)
         k = self.max_radars
         self._trig = np.zeros((2, *shape))
         """Scratch for the chord's (cos, sin) in a step, (2, N, 3)."""
@@ -240,7 +274,8 @@ class World:
     def __getstate__(self) -> dict:
         # The broadcast arrays are derived; a pickle holds the state only (and stays small).
         state = self.__dict__.copy()
-        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
+        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
+                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
             state.pop(key, None)
         return state
 
@@ -312,6 +347,7 @@ class World:
         out = self._out_of_area(moving)
         terminated, truncated = self._end_worlds(flags[3], out)
         return StepResult(
+            moving=moving,
             cost=cost,
             zone_dist_prev_m=zone_dist_prev,
             zone_dist_m=self.zone_dist_m,
@@ -328,33 +364,38 @@ class World:
 
     def _move(self, action: np.ndarray, moving: np.ndarray) -> None:
         """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean speed."""
-        a = np.maximum(action, -1.0)
-        np.minimum(a, 1.0, out=a)
-        dt = moving * self.c.dt_s  # parked vehicles and finished worlds do not move
-        theta = a[..., 0] * self._turn_rate
+        # (omega, u) clipped and scaled as (2, N, 3): one strided read of the (N, 3, 2) actions, then
+        # same-shape operands (out= keeps the result C-ordered; numpy would copy the input's strides).
+        a = np.empty(self._rate.shape)
+        np.maximum(action.transpose(2, 0, 1), _MINUS_ONE, out=a)
+        np.minimum(a, _ONE, out=a)
+        a *= self._rate
+        dt = moving.astype(np.float64)  # the bool mask as floats once: a bool operand is cast on every call
+        dt *= self._dt  # parked vehicles and finished worlds do not move
+        theta, dv = a[0], a[1]
         theta *= dt
-        v_new = a[..., 1] * self._accel
-        v_new *= dt
-        np.add(self.v_m_s, v_new, out=v_new)
+        dv *= dt
+        v_new = np.add(self.v_m_s, dv)
         np.maximum(v_new, self._speed_min, out=v_new)  # eq. 6 speed bounds
         np.minimum(v_new, self._speed_max, out=v_new)
         # The chord of an arc of angle theta has length v dt sinc(theta / 2) along phi + theta / 2.
-        half = theta * 0.5
+        half = theta * _HALF
         chord = self.v_m_s + v_new
-        chord *= 0.5
+        chord *= _HALF
         chord *= dt
         chord *= self._sinc(half)
         trig = self._trig
         np.add(self.phi_rad, half, out=half)  # the chord's direction (half is not needed any more)
         np.cos(half, out=trig[0])
         np.sin(half, out=trig[1])
-        trig *= chord
+        for component in trig:  # x and y in two same-shape calls (one broadcast call costs more at small N)
+            component *= chord
         self._xy += trig  # x' = x + chord cos(mid), y' = y + chord sin(mid)
         self.v_m_s = v_new
-        # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices (eq. 6 heading bounds).
+        # |theta| <= 90 deg/s * 1 s < pi (scenario limits), so one wrap either way suffices (eq. 6 heading
+        # bounds): -2 pi at or above pi, +2 pi below -pi, as two masked subtractions would, in one lookup.
         phi = self.phi_rad + theta
-        np.subtract(phi, 2 * math.pi, out=phi, where=phi >= math.pi)
-        np.add(phi, 2 * math.pi, out=phi, where=phi < -math.pi)
+        phi += _WRAP_SHIFT.take(_WRAP_EDGES.searchsorted(phi, side="right"))
         self.phi_rad = phi
 
     def _measure_zones(self, moving: np.ndarray) -> np.ndarray:
@@ -376,13 +417,14 @@ class World:
         radar_on_changed = radar_on != self.radar_on
         self.radar_on = radar_on
         seen = radar_on & in_zone[:, 1]  # the detect UAV holds its ring while the radar is on
-        identified_now = seen & ~self.identified
-        self.identified |= identified_now
+        # Per-world (N,) flags are built afresh, not in place (see the class docstring).
+        identified_now = _and_not(seen, self.identified)
+        self.identified = self.identified | identified_now
         hit_now = seen & in_zone[:, 2]
-        hit_now &= self.identified
-        hit_now &= ~self.hit
-        self.hit |= hit_now
-        task_completed = in_zone & ~self.task_done  # the decoy's task: first time in its ring
+        hit_now = hit_now & self.identified
+        hit_now = _and_not(hit_now, self.hit)
+        self.hit = self.hit | hit_now
+        task_completed = _and_not(in_zone, self.task_done)  # the decoy's task: first time in its ring
         task_completed[:, 1] = identified_now
         task_completed[:, 2] = hit_now
         self.task_done |= task_completed
@@ -392,7 +434,7 @@ class World:
         """Eq. 11 cost of the step and which vehicles entered a radar's disk."""
         inside = self._inside_all(self._radar_r2[0.0])
         inside &= moving
-        hazard_entered = inside & ~self.in_hazard
+        hazard_entered = _and_not(inside, self.in_hazard)
         self.in_hazard = inside
         cost = inside.astype(np.float64)
         self.cost_total += cost
@@ -400,7 +442,7 @@ class World:
 
     def _out_of_area(self, moving: np.ndarray) -> np.ndarray:
         """Eq. 6 position bounds: max(|x - A/2|, |y - A/2|) > A/2 for a moving vehicle."""
-        h = 0.5 * self.c.area_m
+        h = self._half_area
         off = self._xy - h
         np.abs(off, out=off)
         out = np.maximum(off[0], off[1]) > h
@@ -409,13 +451,14 @@ class World:
 
     def _end_worlds(self, hit_now: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Count the step; a hit or a vehicle leaving ends a world, the episode cap truncates it."""
-        self.steps += self.running
+        # Per-world (N,) arrays are built afresh, not in place (see the class docstring).
+        self.steps = self.steps + self.running.astype(np.int64)  # (the bool cast in a call of its own is faster)
         terminated = hit_now | _any_vehicle(out)
-        terminated &= self.running
-        self.running &= ~terminated
-        truncated = self.steps >= self.c.episode_steps
-        truncated &= self.running
-        self.running &= ~truncated
+        terminated = terminated & self.running
+        self.running = _and_not(self.running, terminated)
+        truncated = self.steps >= self._episode_steps
+        truncated = truncated & self.running
+        self.running = _and_not(self.running, truncated)
         return terminated, truncated
 
     def near_radar(self, margin_m: float) -> np.ndarray:
@@ -446,10 +489,10 @@ class World:
         """sin(h) / h; a Taylor series when every |h| is small (error < h^6 / 5040, under 1e-12)."""
         if self._small_turns:
             h2 = half * half
-            s = h2 * (1.0 / 120.0)
-            np.subtract(1.0 / 6.0, s, out=s)
+            s = h2 * _SINC_C5
+            np.subtract(_SINC_C3, s, out=s)
             s *= h2
-            np.subtract(1.0, s, out=s)  # 1 - h2 (1/6 - h2 / 120)
+            np.subtract(_ONE, s, out=s)  # 1 - h2 (1/6 - h2 / 120)
             return s
         return np.sinc(half / np.pi)
 
@@ -458,7 +501,7 @@ def _zone_distance(sam_dist_m: np.ndarray, inner_m: np.ndarray, outer_m: np.ndar
     """Distance from each UAV to its role's zone inner < D <= outer around the SAM (0 inside it)."""
     dist = sam_dist_m - outer_m
     np.maximum(dist, inner_m - sam_dist_m, out=dist)
-    np.maximum(dist, 0.0, out=dist)
+    np.maximum(dist, _ZERO, out=dist)
     return dist
 
 
@@ -469,9 +512,17 @@ def _any_vehicle(flags: np.ndarray) -> np.ndarray:
 
 
 def _any_radar(inside: np.ndarray) -> np.ndarray:
-    """(N, 3) any over the leading radar axis of (K, N, 3) flags (a reduction along the leading axis runs
-    one inner loop over all N * 3 flags per radar, which is fast at any N)."""
-    return np.logical_or.reduce(inside, axis=0)
+    """(N, 3) any over the leading radar axis of (K, N, 3) flags: K - 1 element-wise ORs of whole (N, 3)
+    slices, fast at any N (a reduction along the axis does the same but costs three ORs' time at N = 1)."""
+    found = inside[0]
+    for radar in inside[1:]:
+        found = found | radar
+    return found
+
+
+def _and_not(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a & ~b`` for bool arrays in one call: True > False is the only pair that compares greater."""
+    return np.greater(a, b)
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
