@@ -161,7 +161,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
     assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | — | — | — |"  # it solves the fixed mission safely
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
-    assert "## Transfer speed-up" in table and "| detect |" in table and "| strike |" in table
+    assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
     data = json.loads((smoke / "experiments.json").read_text())
     assert [a["name"] for a in data["algorithms"]] == ["tssac", "sac_lag"]
     tssac = data["algorithms"][0]

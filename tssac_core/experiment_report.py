@@ -383,11 +383,12 @@ def table_markdown(summary: dict[str, Any]) -> str:
     t = summary["transfer_speedup"]
     lines += [
         "",
-        "## Transfer speed-up",
+        "## Transfer inside the grid's curricula",
         "",
         f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= {100 * t['threshold']:.0f}%, "
-        "mean over the finished seeds. A seed that never got there counts with its role's total decisions, "
-        "so such a mean is a lower bound (>=).",
+        "mean over the finished seeds, in the grid's own runs (each role beside that run's earlier roles). A seed that never "
+        "got there counts with its role's total decisions, so such a mean is a lower bound (>=)."
+        + (" The transfer experiment (last section) measures it beside the same trained earlier roles." if summary.get("transfer_experiment") else ""),
         "",
         "| role | tssac | sac_lag | speed-up (sac_lag / tssac) |",
         "| --- | --- | --- | --- |",
