@@ -125,7 +125,7 @@ def result(**kw) -> StepResult:
     zb = np.zeros((1, 3), dtype=bool)
     base = dict(cost=z, zone_dist_prev_m=z, zone_dist_m=z, in_zone=zb, task_completed=zb, out_of_area=zb, hazard_entered=zb,
                 radar_on_changed=np.zeros(1, bool), identified_now=np.zeros(1, bool), hit_now=np.zeros(1, bool),
-                terminated=np.zeros(1, bool), truncated=np.zeros(1, bool))
+                terminated=np.zeros(1, bool), truncated=np.zeros(1, bool), moving=np.ones((1, 3), bool))
     base.update(kw)
     return StepResult(**base)
 

@@ -338,12 +338,11 @@ class _Reader:
         data = self.mapping(value, where, allowed={"teammates", "with", "without", "roles", "epochs", "task_success", "validation_episodes"},
                             required={"teammates", "with", "without"})
         sides = {}
-        for key, algo_wanted in (("with", "tssac"), ("without", None)):
+        for key, must_transfer in (("with", True), ("without", False)):
             name = self.string(data[key], f"{where}.{key}")
             if name not in entries:
                 raise self.fail(f"{where}.{key}", f"{name!r} is not an entry of algos ({', '.join(entries)})")
-            transfers = entries[name].algo == "tssac"
-            if transfers != (algo_wanted is not None):
+            if (entries[name].algo == "tssac") != must_transfer:  # only TSSAC transfers
                 raise self.fail(f"{where}.{key}", f"{name!r} is {entries[name].algo}: 'with' needs tssac (it transfers), 'without' another algorithm")
             sides[key] = entries[name]
         roles = data.get("roles", list(TransferExperiment.roles))

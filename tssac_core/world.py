@@ -126,7 +126,7 @@ class StepResult:
     """The world ended this step by a hit or a vehicle leaving the area, (N,) bool."""
     truncated: np.ndarray
     """The world reached the episode cap this step without terminating, (N,) bool."""
-    moving: np.ndarray | None = None
+    moving: np.ndarray
     """Vehicles that took the step (active, in a running world), (N, 3) bool."""
 
 
