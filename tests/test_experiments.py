@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
+from tssac_core.experiment_figures import penalty_entries
 from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
 from tssac_core.experiment_report import steps_to_threshold, transfer_speedup
@@ -340,6 +341,15 @@ def test_transfer_speedup(tmp_path):
     assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
     assert result["tssac"]["mean_task_success"]["per_seed"] == {"0": pytest.approx(0.55), "1": pytest.approx(29 / 30)}
     assert result["sac_lag"]["mean_task_success"]["mean"] == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
+
+
+def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
+    entry = lambda name, algo, penalty=0.0: {"name": name, "algo": algo, "penalty": penalty}  # noqa: E731
+    done = [entry("tssac", "tssac"), entry("sac", "sac"), entry("ppo", "ppo"), entry("p50", "sac_penalty", -50.0), entry("p10", "sac_penalty", -10.0)]
+    bars = penalty_entries(done)
+    assert [(a["name"], a["penalty"]) for a in bars] == [("sac", 0.0), ("p10", -10.0), ("p50", -50.0), ("tssac", 0.0)]
+    bars = penalty_entries([*done, entry("p0", "sac_penalty", 0.0)])
+    assert [a["name"] for a in bars] == ["p0", "p10", "p50", "tssac"]
 
 
 def test_transfer_experiment_figures_and_table(tmp_path):

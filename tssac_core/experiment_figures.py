@@ -182,10 +182,19 @@ def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_epi
         bar_panel(written[-1], f"Generalisation: {Path(summary['evaluation']['generalization_scenario']).name}",
                   [a["name"] for a in done], [a["generalization"]["success_rate"] for a in done],
                   [a["generalization"]["mean_cost"] for a in done], cost_limit, ("guidance", g["success_rate"], g["mean_cost"]))
-    penalty = sorted((a for a in done if a["algo"] == "sac_penalty"), key=lambda a: -a["penalty"]) + [a for a in done if a["algo"] == "tssac"]
+    penalty = penalty_entries(done)
     if any(a["algo"] == "sac_penalty" for a in penalty):
         written.append(results / "fig12_penalty.png")
         bar_panel(written[-1], "SAC with a hazard penalty vs TSSAC",
-                  [f"{a['name']} (penalty {a['penalty']:g})" if a["algo"] == "sac_penalty" else a["name"] for a in penalty],
+                  [a["name"] if a["algo"] == "tssac" else f"{a['name']} (penalty {a['penalty']:g})" for a in penalty],
                   [a["random"]["success_rate"] for a in penalty], [a["random"]["mean_cost"] for a in penalty], cost_limit)
     return written
+
+
+def penalty_entries(done: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Figure 12's bars: SAC with penalties 0, -10, -15, -50 ... then TSSAC. Penalty 0 is plain SAC (the same
+    learner, the same run), so the ``sac`` entry stands for it unless the grid trains a penalty-0 entry too."""
+    sac = [a for a in done if a["algo"] == "sac_penalty"]
+    if not any(a["penalty"] == 0 for a in sac):
+        sac += [dict(a, penalty=0.0) for a in done if a["algo"] == "sac"]
+    return sorted(sac, key=lambda a: -a["penalty"]) + [a for a in done if a["algo"] == "tssac"]
