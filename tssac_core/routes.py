@@ -33,23 +33,34 @@ def wavefront(goal: np.ndarray, step_cost: np.ndarray, moves: list[tuple[tuple[i
 
     A move from cell a to cell b of length L costs ``L * (step_cost[a] + step_cost[b]) / 2``; cells of
     infinite cost are impassable and cells that cannot reach the goal get ``inf``. Iterated to the
-    fixed point (each sweep relaxes every move once), so the result is exact for the move set.
+    fixed point, so the result is exact for the move set.
 
-    The sweeps relax in place (a move sees what the moves before it in the same sweep found), which
-    needs fewer sweeps than relaxing every move from the previous sweep's distances, and ends on the
-    same floating-point numbers: both start from +inf, each relaxation min(d, d_neighbour + cost) is
-    monotone in d, and an in-place sweep lies between the fixed point and the previous-sweep one; so
-    both stop at the largest fixed point, to the bit.
+    Every relaxation is ``d_b = min(d_b, (d_a + L c_a / 2) + L c_b / 2)``, in this order of operations.
+    The order in which relaxations are applied does not change the result, to the bit: starting from
+    +inf, each relaxation is monotone in d and never goes below any fixed point, so the distances only
+    fall and stay at or above the largest fixed point; iterating until a sweep of every relaxation
+    changes nothing ends on a fixed point, hence on the largest one, whatever came before. So the schedule
+    is chosen for speed: first :data:`LINE_SWEEP_ROUNDS` rounds of line sweeps (:func:`_line_sweeps`),
+    which carry a distance across the whole grid in one pass, then whole-grid sweeps, each relaxing every
+    move once (in place: a move sees what the moves before it in the same sweep found), until one changes
+    nothing (after the line sweeps, one to five).
     """
     size_i, size_j = goal.shape
-    half = 0.5 * np.asarray(step_cost, dtype=np.float64)
-    weighted = {length: length * half for _, length in moves}
+    pad = max(max(abs(a), abs(b)) for (a, b), _ in moves)  # the longest move's reach
+    half = np.full((size_i + 2 * pad, size_j + 2 * pad), np.inf)
+    inner = (slice(pad, pad + size_i), slice(pad, pad + size_j))
+    half[inner] = 0.5 * np.asarray(step_cost, dtype=np.float64)
+    weighted = {length: length * half for _, length in moves}  # L c / 2, padded (the padding impassable)
+    padded = np.full(half.shape, np.inf)
+    dist = padded[inner]
+    dist[goal] = 0.0
+    _line_sweeps(padded, pad, weighted, tuple(moves))
     relaxations = []  # per move: where from, where to, and the two halves of its cost there
     for (a, b), length in moves:
         src = (slice(max(a, 0), size_i + min(a, 0)), slice(max(b, 0), size_j + min(b, 0)))
         dst = (slice(max(-a, 0), size_i + min(-a, 0)), slice(max(-b, 0), size_j + min(-b, 0)))
-        relaxations.append((src, dst, weighted[length][src], weighted[length][dst]))
-    dist = np.where(goal, 0.0, np.inf)
+        cost = weighted[length][inner]
+        relaxations.append((src, dst, cost[src], cost[dst]))
     while True:
         before = dist.copy()
         for src, dst, cost_src, cost_dst in relaxations:
@@ -58,7 +69,62 @@ def wavefront(goal: np.ndarray, step_cost: np.ndarray, moves: list[tuple[tuple[i
             np.minimum(dist[dst], via, out=dist[dst])
         dist[goal] = 0.0
         if np.array_equal(before, dist):
-            return dist
+            return dist.copy()
+
+
+LINE_SWEEP_ROUNDS = 2
+"""Rounds of line sweeps before the whole-grid sweeps. On the 100 x 100 route fields two leave the
+whole-grid sweeps 1-5 passes, and the field takes 2.4x less time than with whole-grid sweeps alone (one
+round: 1.4x, it leaves 10-50 passes; three: 1.8x, a round costs more than the passes it saves)."""
+
+
+def _line_sweeps(padded: np.ndarray, pad: int, weighted: dict[float, np.ndarray], moves: tuple[tuple[tuple[int, int], float], ...]) -> None:
+    """Relax ``padded`` distances in line sweeps: the grid with ``pad`` cells (the longest move's reach) of
+    impassable padding round it, at +inf; ``weighted`` holds each move length's L c / 2, padded likewise.
+
+    A whole-grid sweep applies each move to all cells at once, so a distance travels one move per sweep,
+    and the fields take 40-80 sweeps. A line sweep goes through the rows (or columns) in order and
+    relaxes each line from the lines already done, with every move that comes from that side: a path
+    that runs one way along the axis is found in one pass, however long. Four directions (rows up and
+    down, columns up and down) make a round. Relaxations from the padding give +inf: no-ops.
+    """
+    flat = padded.reshape(-1)
+    costs = np.stack([weighted[length].reshape(-1) for _, length in moves]).reshape(-1)  # (moves x cells)
+    inner = padded[pad:-pad, pad:-pad]
+    for _ in range(LINE_SWEEP_ROUNDS):
+        for axis, lines, src, src_cost, dst_cost in _line_plan(padded.shape, pad, moves):
+            cost_src, cost_dst = costs.take(src_cost), costs.take(dst_cost)  # (lines, moves, cells)
+            view = inner if axis == 0 else inner.T
+            for n, line in enumerate(lines):
+                via = flat.take(src[n])
+                via += cost_src[n]
+                via += cost_dst[n]  # (d_a + L c_a / 2) + L c_b / 2, as in the whole-grid sweeps
+                np.minimum(view[line], np.minimum.reduce(via, axis=0), out=view[line])
+
+
+@functools.lru_cache(maxsize=8)
+def _line_plan(padded_shape: tuple[int, int], pad: int, moves: tuple[tuple[tuple[int, int], float], ...]) -> list[tuple]:
+    """Per direction of a line sweep: (axis, line order, source cells (lines, moves, cells) as flat indices
+    into the padded grid, and the source's and destination's entries in the stacked per-move costs)."""
+    rows, cols = padded_shape
+    size = rows * cols
+    plan = []
+    for axis in (0, 1):
+        for step in (1, -1):
+            # A move (a, b) relaxes cell p from p + (a, b): in a sweep along ``axis`` in direction ``step``
+            # the moves whose source lies in a line already swept.
+            chosen = [m for m, ((a, b), _) in enumerate(moves) if (a, b)[axis] * step < 0]
+            if not chosen:
+                continue
+            n_lines, n_cells = (rows, cols)[axis] - 2 * pad, (rows, cols)[1 - axis] - 2 * pad
+            line, cell = np.meshgrid(np.arange(n_lines), np.arange(n_cells), indexing="ij")
+            i, j = (line, cell) if axis == 0 else (cell, line)
+            dst = (i + pad) * cols + (j + pad)  # (lines, cells)
+            src = np.stack([dst + moves[m][0][0] * cols + moves[m][0][1] for m in chosen], axis=1)
+            offset = (np.array(chosen) * size)[None, :, None]  # where each move's costs start in the stack
+            order = range(n_lines) if step > 0 else range(n_lines - 1, -1, -1)
+            plan.append((axis, list(order), src[list(order)], (src + offset)[list(order)], (dst[:, None, :] + offset)[list(order)]))
+    return plan
 
 
 def cell_centres(area_m: float, grid_m: float) -> tuple[np.ndarray, np.ndarray]:
