@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from tssac_core.world import World
+from tssac_core.world import World, cached_constant, constant_operand
 
 _SQRT2, _SQRT5 = float(np.sqrt(2.0)), float(np.sqrt(5.0))
 KING_MOVES = [((1, 0), 1.0), ((-1, 0), 1.0), ((0, 1), 1.0), ((0, -1), 1.0)] + [
@@ -189,21 +189,19 @@ def sample_bilinear(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.
 def _sample_stacked(fields: np.ndarray, grid_m: float, xy_m: np.ndarray) -> np.ndarray:
     """:func:`sample_bilinear` at positions stacked x over y, (2, N, K)."""
     n, size = fields.shape[0], fields.shape[1]
-    top = size - 1.000001  # so that the lower corner index is at most size - 2
-    f = xy_m * (1.0 / grid_m)  # fractional cell coordinates, x and y in one call per operation
-    f -= 0.5
-    np.maximum(f, 0.0, out=f)
-    np.minimum(f, top, out=f)
+    f = xy_m * cached_constant(1.0 / grid_m)  # fractional cell coordinates, x and y in one call per operation
+    f -= _HALF
+    np.maximum(f, _ZERO, out=f)
+    np.minimum(f, cached_constant(size - 1.000001), out=f)  # so that the lower corner index is at most size - 2
     cell = np.trunc(f)  # the lower corner (i, j); f >= 0, so truncation is the floor
     t = f - cell  # (tx, ty): the same numbers as f minus the integer corner, without a mixed-type call
     ij = cell.astype(np.intp)
-    row_start, corner_offsets = _flat_offsets(n, size)
     # The flat index of cell (i, j) of world w: (w size + i) size + j. Afresh, not in place: with one
     # vehicle in one world k has a single element, and an in-place update of that takes numpy's slow path.
-    k = ij[0] * size + ij[1] + row_start
+    k = ij[0] * size + ij[1]
     # The four corners in one gather, corner-major (4, N, K): (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1),
     # so that the corners at j and those at j + 1 are contiguous (2, N, K) halves.
-    corners = fields.reshape(-1).take(k + corner_offsets)
+    corners = fields.reshape(-1).take(k + _corner_offsets(n, size))
     rise = (corners[2:] - corners[:2]).astype(np.float64)  # along y at i and at i + 1, in float32 as the fields
     np.multiply(rise, t[1], out=rise)
     low, high = corners[:2].astype(np.float64) + rise  # the float32 corners promoted in a call of their own
@@ -211,10 +209,10 @@ def _sample_stacked(fields: np.ndarray, grid_m: float, xy_m: np.ndarray) -> np.n
 
 
 @functools.lru_cache(maxsize=16)
-def _flat_offsets(n: int, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Start of each world's field in the flattened (N, size, size) fields, (N, 1); the four corners'
-    offsets, (4, 1, 1): (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
-    return np.arange(n)[:, None] * (size * size), np.array([0, size, 1, size + 1]).reshape(4, 1, 1)
+def _corner_offsets(n: int, size: int) -> np.ndarray:
+    """Where the four corners of cell (0, 0) of each world lie in the flattened (N, size, size) fields,
+    (4, N, 1): the world's start plus (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
+    return np.arange(n)[None, :, None] * (size * size) + np.array([0, size, 1, size + 1]).reshape(4, 1, 1)
 
 
 def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -229,6 +227,9 @@ def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.n
     d1 = fields[w, i + 1, j + 1] - fields[w, i - 1, j - 1]
     d2 = fields[w, i + 1, j - 1] - fields[w, i - 1, j + 1]
     return gx + 0.5 * (d1 + d2), gy + 0.5 * (d1 - d2)
+
+
+_ZERO, _HALF = constant_operand(0.0), constant_operand(0.5)
 
 
 @dataclass(frozen=True)
@@ -270,9 +271,9 @@ class RouteMap:
         to_sam = xy - world.sam_xy_m[:, :, cols]
         # Afresh, not in place: one vehicle's (N, 1) arrays have a single element at N = 1, and an in-place
         # update of that takes numpy's slow path.
-        straight = np.hypot(to_sam[0], to_sam[1]) - world.c.r4_m
-        route = np.maximum(route - straight, 0.0)
-        detour = np.where(straight > 0.0, route, 0.0)
+        straight = np.hypot(to_sam[0], to_sam[1]) - cached_constant(world.c.r4_m)
+        route = np.maximum(route - straight, _ZERO)
+        detour = np.where(straight > _ZERO, route, _ZERO)
         return detour if vehicle is None else detour[:, 0]
 
     def direction(self, world: World, vehicle: int) -> np.ndarray:

@@ -29,6 +29,7 @@ truncates it. Cost (eq. 11): 1 per step for a UAV inside any radar's radius, els
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -44,6 +45,13 @@ def constant_operand(value: float) -> np.ndarray:
     """A constant operand as a 0-d array. numpy converts a Python float into an array on every call (about
     0.5 us, most of a small-N operation); a 0-d array it takes as is, on its fast path."""
     return np.array(value)
+
+
+@functools.lru_cache(maxsize=64, typed=True)
+def cached_constant(value: float) -> np.ndarray:
+    """:func:`constant_operand` made once per value, for scenario constants (the lookup costs less than a
+    fresh 0-d array). Shared: read it, never write into it."""
+    return constant_operand(value)
 
 
 _ZERO, _HALF, _ONE, _MINUS_ONE = constant_operand(0.0), constant_operand(0.5), constant_operand(1.0), constant_operand(-1.0)
@@ -218,6 +226,17 @@ class World:
         return self._sam_xy
 
     @property
+    def points_xy_m(self) -> np.ndarray:
+        """The layout's points per world, (2, N, 2 + K), x over y: the target, the SAM, then the radar slots
+        (read only; what the observation measures ranges and bearings to, rebuilt at reset)."""
+        return self._points_xy
+
+    @property
+    def has_unused_radar_slots(self) -> bool:
+        """Some world's layout has fewer radars than the world holds (their slots have radius 0)."""
+        return self._unused_slots
+
+    @property
     def max_radars(self) -> int:
         return self.radar_r_m.shape[1]
 
@@ -249,12 +268,19 @@ class World:
         """Radar positions per vehicle, (2, K, N, 3)."""
         self._radar_r2: dict[float, np.ndarray] = {}
         """Squared radar radius (plus a margin, the key) per vehicle, (K, N, 3)."""
+        self._points_xy = np.zeros((2, self.n, 2 + k))
+        """Target, SAM and radar positions, (2, N, 2 + K)."""
+        self._unused_slots = False
         self._cache_layouts(np.arange(self.n))
 
     def _cache_layouts(self, idx: np.ndarray) -> None:
         """Refresh the broadcast layout arrays of worlds ``idx`` from sam_m, radar_m and radar_r_m."""
         self._sam_xy[:, idx] = self.sam_m[idx].T[:, :, None]
         self._radar_xy[:, :, idx] = self.radar_m[idx].transpose(2, 1, 0)[..., None]
+        self._points_xy[:, idx, 0] = self.target_m[idx].T
+        self._points_xy[:, idx, 1] = self.sam_m[idx].T
+        self._points_xy[:, idx, 2:] = self.radar_m[idx].transpose(2, 0, 1)
+        self._unused_slots = bool(np.any(self.radar_r_m <= 0))
         for margin, r2 in self._radar_r2.items():
             r2[:, idx] = self._squared_radius(idx, margin).T[..., None]
         if 0.0 not in self._radar_r2:
@@ -275,7 +301,8 @@ class World:
         # The broadcast arrays are derived; a pickle holds the state only (and stays small).
         state = self.__dict__.copy()
         for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
-                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
+                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2",
+                    "_points_xy", "_unused_slots"):
             state.pop(key, None)
         return state
 
