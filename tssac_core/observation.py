@@ -97,7 +97,8 @@ def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
 
 
 _BOUNDS = {mode: _bounds(mode) for mode in ObservationMode}
-_SIZES = {mode: mode.size for mode in ObservationMode}
+_BOUNDS_BY_SIZE = {mode.size: bounds for mode, bounds in _BOUNDS.items()}
+"""The bounds by observation size (each mode has its own; an int is a cheaper key than an enum member)."""
 
 
 def build_observation(
@@ -131,7 +132,8 @@ def build_observation(
     j = role_index
     area = cached_constant(c.area_m)
     n = xy_m.shape[1]
-    out = np.empty((_SIZES[mode], n))
+    out = np.empty((ROUTE_SIZE if mode is ObservationMode.ROUTE else EXTENDED_SIZE, n))
+    xy_m = np.ascontiguousarray(xy_m)  # (a vehicle's x over y is a strided view: a copy is cheaper than its slow path)
     np.divide(xy_m, area, out=out[0:2])
     _speed(v_m_s, c, j, out=out[2])
     np.cos(phi_rad, out=out[3])
@@ -152,8 +154,8 @@ def build_observation(
     d_sam = d[:, 1]
     out[6:8] = feats[1:, :, 1]
     np.divide(d_sam, area, out=out[8])
-    np.subtract(d_sam, c.zone_outer_m[j], out=out[9])
-    np.subtract(d_sam, c.zone_inner_m[j], out=out[10])
+    np.subtract(d_sam, cached_constant(float(c.zone_outer_m[j])), out=out[9])
+    np.subtract(d_sam, cached_constant(float(c.zone_inner_m[j])), out=out[10])
     out[9:11] /= _LOCAL_SCALE
     radar_feats = feats[:, :, 2:]
     edge = np.subtract(d[:, 2:], radar_r_m)
@@ -166,7 +168,7 @@ def build_observation(
         if route_dir is None:
             raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
         _relative(route_dir.T, _heading(out[3], out[4], (n,)), out=out[22:24])
-    return _clip_to_bounds(out, mode)
+    return _clip_to_bounds(out)
 
 
 def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray,
@@ -176,13 +178,15 @@ def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarr
     speed = _speed(v_m_s, c, j)
     l_m = np.hypot(target_xy_m[0] - x_m, target_xy_m[1] - y_m)
     obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area])
-    return _clip_to_bounds(obs, ObservationMode.PAPER)
+    return _clip_to_bounds(obs)
 
 
 def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None = None) -> np.ndarray:
     """(v - v_min) / (v_max - v_min) of role j."""
-    # Not in place: an in-place update of a one-element row (N = 1) takes numpy's slow path.
-    return np.divide(v_m_s - c.speed_min_m_s[j], c.speed_max_m_s[j] - c.speed_min_m_s[j], out=out)
+    # Not in place: an in-place update of a one-element row (N = 1) takes numpy's slow path. The limits as
+    # cached 0-d arrays: the same floats, without a conversion per call.
+    v_min, v_max = float(c.speed_min_m_s[j]), float(c.speed_max_m_s[j])
+    return np.divide(v_m_s - cached_constant(v_min), cached_constant(v_max - v_min), out=out)
 
 
 def _heading(cos_phi: np.ndarray, sin_phi: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -239,14 +243,14 @@ def _row_starts(n: int, k: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The bounds as (size, N) arrays: same-shape operands for the clip."""
-    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
+def _bounds_of(size: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of the mode of ``size`` entries as (size, N) arrays: same-shape operands for the clip."""
+    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS_BY_SIZE[size])
 
 
-def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
-    """Clip feature-major (size, N) entries to the bounds; the observations (N, size) float32."""
-    low, high = _bounds_of(mode, obs.shape[1])
+def _clip_to_bounds(obs: np.ndarray) -> np.ndarray:
+    """Clip feature-major (size, N) entries to the bounds of their mode (known by the size); the observations (N, size) float32."""
+    low, high = _bounds_of(*obs.shape)
     np.maximum(obs, low, out=obs)
     np.minimum(obs, high, out=obs)
     return obs.T.astype(np.float32, order="C")

@@ -266,9 +266,11 @@ class RouteMap:
     def detour_m(self, world: World, vehicle: int | None = None) -> np.ndarray:
         """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""
         cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
-        xy = world.xy_m[:, :, cols]  # (2, N, 3 or 1)
+        # (2, N, 3 or 1), copied: one vehicle's column is a strided view, and a copy costs less than the
+        # slower path numpy takes for strided operands in the next calls.
+        xy = world.xy_m[:, :, cols].copy()
         route = _sample_stacked(self.cache.fields(world), self.cfg.grid_m, xy)
-        to_sam = xy - world.sam_xy_m[:, :, cols]
+        to_sam = xy - world.sam_xy_m[:, :, cols].copy()
         # Afresh, not in place: one vehicle's (N, 1) arrays have a single element at N = 1, and an in-place
         # update of that takes numpy's slow path.
         straight = np.hypot(to_sam[0], to_sam[1]) - cached_constant(world.c.r4_m)

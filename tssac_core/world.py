@@ -272,6 +272,7 @@ class World:
         """Target, SAM and radar positions, (2, N, 2 + K)."""
         self._unused_slots = False
         self._cache_layouts(np.arange(self.n))
+        self._update_moving()
 
     def _cache_layouts(self, idx: np.ndarray) -> None:
         """Refresh the broadcast layout arrays of worlds ``idx`` from sam_m, radar_m and radar_r_m."""
@@ -302,7 +303,7 @@ class World:
         state = self.__dict__.copy()
         for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
                     "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2",
-                    "_points_xy", "_unused_slots"):
+                    "_points_xy", "_unused_slots", "_moving", "_dt_moving", "_running_count"):
             state.pop(key, None)
         return state
 
@@ -347,6 +348,18 @@ class World:
         self.sam_dist_m[idx] = np.hypot(self.x_m[idx] - self.sam_m[idx, 0:1], self.y_m[idx] - self.sam_m[idx, 1:2])
         self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c.zone_inner_m, self.c.zone_outer_m)
         self.in_hazard[idx] = self._inside_radar(idx) & self.active[idx]
+        self._update_moving()
+
+    def _update_moving(self) -> None:
+        """Which vehicles the next step moves (active, in a running world), as a mask and as each one's time
+        step (dt, or 0: parked vehicles and finished worlds do not move; the mask as floats once, since a bool
+        operand is cast on every call). Kept between steps: they change only when a world starts or ends,
+        which a count of the running worlds tells (``running`` only loses worlds in a step)."""
+        self._moving = self.active & self.running[:, None]
+        dt = self._moving.astype(np.float64)
+        dt *= self._dt
+        self._dt_moving = dt
+        self._running_count = np.count_nonzero(self.running)
 
     def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
                radar_on: bool, identified: bool) -> None:
@@ -365,8 +378,8 @@ class World:
 
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
-        moving = self.active & self.running[:, None]
-        self._move(action, moving)
+        moving = self._moving
+        self._move(action, self._dt_moving)
         zone_dist_prev = self.zone_dist_m
         in_zone = self._measure_zones(moving)
         flags = self._mission_logic(in_zone)
@@ -389,16 +402,15 @@ class World:
             truncated=truncated,
         )
 
-    def _move(self, action: np.ndarray, moving: np.ndarray) -> None:
-        """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean speed."""
-        # (omega, u) clipped and scaled as (2, N, 3): one strided read of the (N, 3, 2) actions, then
-        # same-shape operands (out= keeps the result C-ordered; numpy would copy the input's strides).
-        a = np.empty(self._rate.shape)
-        np.maximum(action.transpose(2, 0, 1), _MINUS_ONE, out=a)
+    def _move(self, action: np.ndarray, dt: np.ndarray) -> None:
+        """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean
+        speed; ``dt`` (N, 3) is each vehicle's time step (0 for those that do not move)."""
+        # (omega, u) clipped and scaled as (2, N, 3): one C-ordered copy of the (N, 3, 2) actions transposed,
+        # then same-shape contiguous operands (an operation reading the strided view is slower than the copy).
+        a = action.transpose(2, 0, 1).copy()
+        np.maximum(a, _MINUS_ONE, out=a)
         np.minimum(a, _ONE, out=a)
         a *= self._rate
-        dt = moving.astype(np.float64)  # the bool mask as floats once: a bool operand is cast on every call
-        dt *= self._dt  # parked vehicles and finished worlds do not move
         theta, dv = a[0], a[1]
         theta *= dt
         dv *= dt
@@ -486,6 +498,8 @@ class World:
         truncated = self.steps >= self._episode_steps
         truncated = truncated & self.running
         self.running = _and_not(self.running, truncated)
+        if np.count_nonzero(self.running) != self._running_count:
+            self._update_moving()
         return terminated, truncated
 
     def near_radar(self, margin_m: float) -> np.ndarray:
