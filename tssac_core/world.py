@@ -303,7 +303,8 @@ class World:
         state = self.__dict__.copy()
         for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
                     "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2",
-                    "_points_xy", "_unused_slots", "_moving", "_dt_moving", "_running_count"):
+                    "_points_xy", "_unused_slots", "_moving", "_dt_moving", "_running_steps",
+                    "_running_count"):
             state.pop(key, None)
         return state
 
@@ -359,6 +360,7 @@ class World:
         dt = self._moving.astype(np.float64)
         dt *= self._dt
         self._dt_moving = dt
+        self._running_steps = self.running.astype(np.int64)  # what a step adds to ``steps``
         self._running_count = np.count_nonzero(self.running)
 
     def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
@@ -491,7 +493,7 @@ class World:
     def _end_worlds(self, hit_now: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Count the step; a hit or a vehicle leaving ends a world, the episode cap truncates it."""
         # Per-world (N,) arrays are built afresh, not in place (see the class docstring).
-        self.steps = self.steps + self.running.astype(np.int64)  # (the bool cast in a call of its own is faster)
+        self.steps = self.steps + self._running_steps  # the worlds that took this step count it
         terminated = hit_now | _any_vehicle(out)
         terminated = terminated & self.running
         self.running = _and_not(self.running, terminated)
