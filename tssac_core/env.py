@@ -241,7 +241,8 @@ class UavRoleEnv(gym.Env):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._needs_reset:
             raise RuntimeError("call reset() before step() (the episode has ended)")
-        result, r, cost = self.task.advance(np.asarray(action, dtype=np.float64).reshape(1, 2))
+        # Not cast here: the assignment into the world's float64 actions makes the same floats in fewer calls.
+        result, r, cost = self.task.advance(np.asarray(action).reshape(1, 2))
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         self._needs_reset = terminated or truncated
         info = self._info()

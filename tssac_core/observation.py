@@ -58,7 +58,7 @@ import functools
 import numpy as np
 
 from tssac_core.routes import RouteMap
-from tssac_core.world import World, WorldConstants, constant_operand
+from tssac_core.world import World, WorldConstants, cached_constant, constant_operand
 
 LOCAL_SCALE_M = 20_000.0
 """Scale of the local (zone and hazard) ranges: the SAM's detection range R4."""
@@ -97,7 +97,8 @@ def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
 
 
 _BOUNDS = {mode: _bounds(mode) for mode in ObservationMode}
-_SIZES = {mode: mode.size for mode in ObservationMode}
+_BOUNDS_BY_SIZE = {mode.size: bounds for mode, bounds in _BOUNDS.items()}
+"""The bounds by observation size (each mode has its own; an int is a cheaper key than an enum member)."""
 
 
 def build_observation(
@@ -107,10 +108,9 @@ def build_observation(
     xy_m: np.ndarray,
     v_m_s: np.ndarray,
     phi_rad: np.ndarray,
-    sam_m: np.ndarray,
-    target_m: np.ndarray,
-    radar_m: np.ndarray,
+    points_xy_m: np.ndarray,
     radar_r_m: np.ndarray,
+    unused_radar_slots: bool,
     radar_on: np.ndarray,
     identified: np.ndarray,
     route_dir: np.ndarray | None = None,
@@ -118,29 +118,29 @@ def build_observation(
     """Observations of one role in N worlds, (N, mode.size) float32.
 
     Vehicle arrays are the observing UAV's: position ``xy_m`` (2, N), x over y (as ``World.xy_m``), the
-    others (N,); ``sam_m``/``target_m`` (N, 2); ``radar_m`` (N, K, 2); ``radar_r_m`` (N, K); flags (N,);
-    ``route_dir`` (N, 2) unit vectors in the world frame (route mode only). This is the only place
-    observations are made.
+    others (N,); ``points_xy_m`` (2, N, 2 + K), x over y: the target, the SAM and the radar slots (as
+    ``World.points_xy_m``); ``radar_r_m`` (N, K); ``unused_radar_slots``: some radius is 0 (a slot no
+    radar fills); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode only).
+    This is the only place observations are made.
 
     Speed: the entries are computed feature-major, one contiguous (N,) row per entry, and transposed once
     at the end: at N = 1 numpy's fast path wants same-shape contiguous operands (see :class:`World`), which
     rows are and columns of an (N, size) array are not.
     """
     if mode is ObservationMode.PAPER:
-        return _paper_observation(role_index, c, xy_m[0], xy_m[1], v_m_s, phi_rad, target_m)
+        return _paper_observation(role_index, c, xy_m[0], xy_m[1], v_m_s, phi_rad, points_xy_m[:, :, 0])
     j = role_index
-    area = constant_operand(c.area_m)
+    area = cached_constant(c.area_m)
     n = xy_m.shape[1]
-    out = np.empty((_SIZES[mode], n))
+    out = np.empty((ROUTE_SIZE if mode is ObservationMode.ROUTE else EXTENDED_SIZE, n))
+    xy_m = np.ascontiguousarray(xy_m)  # (a vehicle's x over y is a strided view: a copy is cheaper than its slow path)
     np.divide(xy_m, area, out=out[0:2])
     _speed(v_m_s, c, j, out=out[2])
     np.cos(phi_rad, out=out[3])
     np.sin(phi_rad, out=out[4])
 
     # The target, the SAM and the radars in one pass: ranges and bearings relative to the heading, (N, P = 2 + K).
-    points = np.concatenate([target_m[:, None, :], sam_m[:, None, :], radar_m], axis=1)  # (N, P, 2)
-    delta = np.empty((2, n, points.shape[1]))  # C-ordered x over y, so that delta[0] and delta[1] are contiguous
-    np.subtract(points.transpose(2, 0, 1), xy_m[:, :, None], out=delta)
+    delta = points_xy_m - xy_m[:, :, None]  # (2, N, P), C-ordered as the points: delta[0], delta[1] contiguous
     d = np.hypot(delta[0], delta[1])
     inv = np.maximum(d, _TINY)
     np.divide(_ONE, inv, out=inv)  # on the point itself the bearing is (0, 0)
@@ -154,37 +154,39 @@ def build_observation(
     d_sam = d[:, 1]
     out[6:8] = feats[1:, :, 1]
     np.divide(d_sam, area, out=out[8])
-    np.subtract(d_sam, c.zone_outer_m[j], out=out[9])
-    np.subtract(d_sam, c.zone_inner_m[j], out=out[10])
+    np.subtract(d_sam, cached_constant(float(c.zone_outer_m[j])), out=out[9])
+    np.subtract(d_sam, cached_constant(float(c.zone_inner_m[j])), out=out[10])
     out[9:11] /= _LOCAL_SCALE
     radar_feats = feats[:, :, 2:]
     edge = np.subtract(d[:, 2:], radar_r_m)
     edge /= _LOCAL_SCALE
     radar_feats[0] = edge
-    _nearest_radars(radar_feats, radar_r_m, out=out[11 : 11 + 3 * N_RADAR_FEATURES])
+    _nearest_radars(radar_feats, radar_r_m, unused_radar_slots, out=out[11 : 11 + 3 * N_RADAR_FEATURES])
     out[20] = radar_on
     out[21] = identified
     if mode is ObservationMode.ROUTE:
         if route_dir is None:
             raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
         _relative(route_dir.T, _heading(out[3], out[4], (n,)), out=out[22:24])
-    return _clip_to_bounds(out, mode)
+    return _clip_to_bounds(out)
 
 
 def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray,
-                       phi_rad: np.ndarray, target_m: np.ndarray) -> np.ndarray:
-    """Eq. 7: [x, y, v, phi, l] scaled to about [0, 1]."""
+                       phi_rad: np.ndarray, target_xy_m: np.ndarray) -> np.ndarray:
+    """Eq. 7: [x, y, v, phi, l] scaled to about [0, 1]; ``target_xy_m`` (2, N)."""
     area = c.area_m
     speed = _speed(v_m_s, c, j)
-    l_m = np.hypot(target_m[:, 0] - x_m, target_m[:, 1] - y_m)
+    l_m = np.hypot(target_xy_m[0] - x_m, target_xy_m[1] - y_m)
     obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area])
-    return _clip_to_bounds(obs, ObservationMode.PAPER)
+    return _clip_to_bounds(obs)
 
 
 def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None = None) -> np.ndarray:
     """(v - v_min) / (v_max - v_min) of role j."""
-    # Not in place: an in-place update of a one-element row (N = 1) takes numpy's slow path.
-    return np.divide(v_m_s - c.speed_min_m_s[j], c.speed_max_m_s[j] - c.speed_min_m_s[j], out=out)
+    # Not in place: an in-place update of a one-element row (N = 1) takes numpy's slow path. The limits as
+    # cached 0-d arrays: the same floats, without a conversion per call.
+    v_min, v_max = float(c.speed_min_m_s[j]), float(c.speed_max_m_s[j])
+    return np.divide(v_m_s - cached_constant(v_min), cached_constant(v_max - v_min), out=out)
 
 
 def _heading(cos_phi: np.ndarray, sin_phi: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -214,7 +216,7 @@ def _relative(u: np.ndarray, heading: np.ndarray, out: np.ndarray) -> np.ndarray
     return out
 
 
-def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray, out: np.ndarray) -> None:
+def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray, unused_slots: bool, out: np.ndarray) -> None:
     """The N_RADAR_FEATURES nearest radar edges into ``out`` (3 * N_RADAR_FEATURES, N), radar by radar, from
     every radar slot's features (3, N, K): (range - radius) / LOCAL_SCALE, cos and sin of the bearing.
 
@@ -224,8 +226,8 @@ def _nearest_radars(feats: np.ndarray, radius_m: np.ndarray, out: np.ndarray) ->
     if k < N_RADAR_FEATURES:
         far = np.broadcast_to(_FAR_RADAR[:, None, None], (3, n, N_RADAR_FEATURES - k))
         feats = np.concatenate([feats, far], axis=2)
-    padding = radius_m <= 0
-    if np.count_nonzero(padding):  # (count_nonzero is a plain C call; padding.any() goes through Python)
+    if unused_slots:
+        padding = radius_m <= 0
         feats = feats.copy()
         feats[:, :, :k] = np.where(padding, _FAR_RADAR[:, None, None], feats[:, :, :k])
     order = feats[0].argsort(axis=1)[:, :N_RADAR_FEATURES]
@@ -241,20 +243,21 @@ def _row_starts(n: int, k: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The bounds as (size, N) arrays: same-shape operands for the clip."""
-    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
+def _bounds_of(size: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of the mode of ``size`` entries as (size, N) arrays: same-shape operands for the clip."""
+    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS_BY_SIZE[size])
 
 
-def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
-    """Clip feature-major (size, N) entries to the bounds; the observations (N, size) float32."""
-    low, high = _bounds_of(mode, obs.shape[1])
+def _clip_to_bounds(obs: np.ndarray) -> np.ndarray:
+    """Clip feature-major (size, N) entries to the bounds of their mode (known by the size); the observations (N, size) float32."""
+    low, high = _bounds_of(*obs.shape)
     np.maximum(obs, low, out=obs)
     np.minimum(obs, high, out=obs)
     return obs.T.astype(np.float32, order="C")
 
 
 _ONE, _TINY, _LOCAL_SCALE = constant_operand(1.0), constant_operand(1e-9), constant_operand(LOCAL_SCALE_M)
+
 _FAR_RADAR = np.array([1e9, 1.0, 0.0])
 """Features of a radar slot a layout does not use: sorted last, range clipped to 1, bearing dead ahead."""
 
@@ -273,10 +276,9 @@ def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteM
         world.xy_m[:, :, j],
         world.v_m_s[:, j],
         world.phi_rad[:, j],
-        world.sam_m,
-        world.target_m,
-        world.radar_m,
+        world.points_xy_m,
         world.radar_r_m,
+        world.has_unused_radar_slots,
         world.radar_on,
         world.identified,
         routes.direction(world, j) if mode is ObservationMode.ROUTE and routes is not None else None,

@@ -70,25 +70,55 @@ def reward(
     straight line as the paper), of every vehicle (N, 3) or, with ``vehicle``, of that one (N,).
     """
     cols = slice(None) if vehicle is None else vehicle  # a learner's reward needs its own column only
+    w = _weights(cfg)
     before = result.zone_dist_prev_m[:, cols] + detour_prev_m
     after = result.zone_dist_m[:, cols] + detour_m
     approach_km = (before - after) / _KM
     # Every term is built afresh: an in-place update of a one-element array (a learner's column at N = 1)
     # takes numpy's slow path (see :class:`tssac_core.world.World`).
     r = (
-        _weighted(result.task_completed[:, cols], cfg.k1 * cfg.success)
-        + cfg.k2 * approach_km
-        + cfg.k3 * cfg.step
-        + _weighted(result.in_zone[:, cols], cfg.hold)
-        + _weighted(result.out_of_area[:, cols], cfg.out_of_area)
+        w.done.take(result.task_completed[:, cols].astype(np.intp))
+        + w.k2 * approach_km
+        + w.step
+        + w.hold.take(result.in_zone[:, cols].astype(np.intp))
+        + w.out_of_area.take(result.out_of_area[:, cols].astype(np.intp))
     )
-    return np.where(moving[:, cols], r, 0.0)
+    return np.where(moving[:, cols], r, _ZERO)
 
 
-def _weighted(flags: np.ndarray, weight: float) -> np.ndarray:
-    """``weight * flags`` as floats. The flags are made floats first, as numpy would inside the product,
-    but in a call of their own: a bool operand in float arithmetic takes numpy's slow casting path."""
-    return np.multiply(flags.astype(np.float64), weight)
+@dataclass(frozen=True)
+class _Weights:
+    """A config's weights as numpy operands: each flag's term as a table (flag 0 or 1 -> its value) and the
+    constants as 0-d arrays. The tables hold ``weight * 0.0`` and ``weight * 1.0``, the very floats that
+    multiplying the flags (as 0.0 and 1.0) by the weight gives (-0.0 for a negative weight's 0), looked up
+    in one call instead of a cast and a product; the sums are those of eq. 10, in its order."""
+
+    done: np.ndarray
+    k2: np.ndarray
+    step: np.ndarray
+    hold: np.ndarray
+    out_of_area: np.ndarray
+
+    @staticmethod
+    def of(cfg: RewardConfig) -> _Weights:
+        def table(weight: float) -> np.ndarray:
+            return np.multiply(np.array([0.0, 1.0]), weight)
+
+        return _Weights(table(cfg.k1 * cfg.success), constant_operand(cfg.k2), constant_operand(cfg.k3 * cfg.step),
+                        table(cfg.hold), table(cfg.out_of_area))
 
 
-_KM = constant_operand(KM)
+_WEIGHTS: dict[int, tuple[RewardConfig, _Weights]] = {}
+"""Weights per config, by identity (hashing a config every step costs more than the whole lookup)."""
+
+
+def _weights(cfg: RewardConfig) -> _Weights:
+    entry = _WEIGHTS.get(id(cfg))
+    if entry is None or entry[0] is not cfg:  # (the entry holds its config, so its id is not reused meanwhile)
+        if len(_WEIGHTS) >= 64:
+            _WEIGHTS.clear()
+        entry = _WEIGHTS[id(cfg)] = (cfg, _Weights.of(cfg))
+    return entry[1]
+
+
+_KM, _ZERO = constant_operand(KM), constant_operand(0.0)

@@ -504,18 +504,36 @@ def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, s
 
 
 def _flood(seed: np.ndarray, passable: np.ndarray) -> np.ndarray:
-    """4-connected flood fill of ``passable`` cells from ``seed`` (iterated dilation)."""
+    """4-connected flood fill of ``passable`` cells from ``seed``: every cell of the components it touches.
+
+    Whole runs at a time (a run: a maximal stretch of passable cells along a row, or along a column):
+    a run that holds a reached cell is reached entirely. Rows and columns alternate until nothing grows,
+    which ends on the same cells as growing by one neighbour per pass, in a few passes instead of one per
+    cell of the longest path (the reachability check of every sampled layout runs it).
+    """
+    along_rows = _run_ids(passable)
+    along_cols = _run_ids(passable.T).T
     reach = seed & passable
     while True:
-        grown = reach.copy()
-        grown[1:, :] |= reach[:-1, :]
-        grown[:-1, :] |= reach[1:, :]
-        grown[:, 1:] |= reach[:, :-1]
-        grown[:, :-1] |= reach[:, 1:]
-        grown &= passable
+        grown = _fill_runs(_fill_runs(reach, along_rows, passable), along_cols, passable)
         if np.array_equal(grown, reach):
             return reach
         reach = grown
+
+
+def _run_ids(passable: np.ndarray) -> np.ndarray:
+    """An id per cell of the run of passable cells along its row that it belongs to (blocked cells get the
+    id of the run before them: callers mask them out)."""
+    start = passable.copy()
+    start[:, 1:] &= ~passable[:, :-1]  # a run starts at a passable cell after a blocked one or the edge
+    return np.cumsum(start, axis=None).reshape(passable.shape)
+
+
+def _fill_runs(reach: np.ndarray, run_ids: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """``reach`` grown to the whole of every run it touches."""
+    touched = np.zeros(int(run_ids.max()) + 1, dtype=bool)
+    touched[run_ids[reach]] = True
+    return touched[run_ids] & passable
 
 
 def sample_layout(s: Scenario, rng: np.random.Generator, max_tries: int = 1000) -> Layout:

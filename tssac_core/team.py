@@ -36,6 +36,8 @@ class Team:
 
     def __init__(self, pilots: Sequence[Pilot], default_mode: ObservationMode) -> None:
         self.pilots = list(pilots)
+        self._flown = [(j, pilot) for j, pilot in enumerate(self.pilots) if pilot is not None]
+        """The vehicles someone flies (a parked one's action stays zero)."""
         self.default_mode = default_mode
         self.guidance = Guidance()
         self.routes = RouteMap()
@@ -48,8 +50,8 @@ class Team:
             self._held = np.zeros((world.n, len(ROLES), 2))
         actions = np.zeros((world.n, len(ROLES), 2))
         guided = None
-        for j, pilot in enumerate(self.pilots):
-            if j == skip or pilot is None:
+        for j, pilot in self._flown:
+            if j == skip:
                 continue
             if pilot == GUIDANCE:
                 if guided is None:

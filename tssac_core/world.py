@@ -29,6 +29,7 @@ truncates it. Cost (eq. 11): 1 per step for a UAV inside any radar's radius, els
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -44,6 +45,13 @@ def constant_operand(value: float) -> np.ndarray:
     """A constant operand as a 0-d array. numpy converts a Python float into an array on every call (about
     0.5 us, most of a small-N operation); a 0-d array it takes as is, on its fast path."""
     return np.array(value)
+
+
+@functools.lru_cache(maxsize=64, typed=True)
+def cached_constant(value: float) -> np.ndarray:
+    """:func:`constant_operand` made once per value, for scenario constants (the lookup costs less than a
+    fresh 0-d array). Shared: read it, never write into it."""
+    return constant_operand(value)
 
 
 _ZERO, _HALF, _ONE, _MINUS_ONE = constant_operand(0.0), constant_operand(0.5), constant_operand(1.0), constant_operand(-1.0)
@@ -218,6 +226,17 @@ class World:
         return self._sam_xy
 
     @property
+    def points_xy_m(self) -> np.ndarray:
+        """The layout's points per world, (2, N, 2 + K), x over y: the target, the SAM, then the radar slots
+        (read only; what the observation measures ranges and bearings to, rebuilt at reset)."""
+        return self._points_xy
+
+    @property
+    def has_unused_radar_slots(self) -> bool:
+        """Some world's layout has fewer radars than the world holds (their slots have radius 0)."""
+        return self._unused_slots
+
+    @property
     def max_radars(self) -> int:
         return self.radar_r_m.shape[1]
 
@@ -249,12 +268,20 @@ class World:
         """Radar positions per vehicle, (2, K, N, 3)."""
         self._radar_r2: dict[float, np.ndarray] = {}
         """Squared radar radius (plus a margin, the key) per vehicle, (K, N, 3)."""
+        self._points_xy = np.zeros((2, self.n, 2 + k))
+        """Target, SAM and radar positions, (2, N, 2 + K)."""
+        self._unused_slots = False
         self._cache_layouts(np.arange(self.n))
+        self._update_moving()
 
     def _cache_layouts(self, idx: np.ndarray) -> None:
         """Refresh the broadcast layout arrays of worlds ``idx`` from sam_m, radar_m and radar_r_m."""
         self._sam_xy[:, idx] = self.sam_m[idx].T[:, :, None]
         self._radar_xy[:, :, idx] = self.radar_m[idx].transpose(2, 1, 0)[..., None]
+        self._points_xy[:, idx, 0] = self.target_m[idx].T
+        self._points_xy[:, idx, 1] = self.sam_m[idx].T
+        self._points_xy[:, idx, 2:] = self.radar_m[idx].transpose(2, 0, 1)
+        self._unused_slots = bool(np.any(self.radar_r_m <= 0))
         for margin, r2 in self._radar_r2.items():
             r2[:, idx] = self._squared_radius(idx, margin).T[..., None]
         if 0.0 not in self._radar_r2:
@@ -275,7 +302,9 @@ class World:
         # The broadcast arrays are derived; a pickle holds the state only (and stays small).
         state = self.__dict__.copy()
         for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
-                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2"):
+                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2",
+                    "_points_xy", "_unused_slots", "_moving", "_dt_moving", "_running_steps",
+                    "_running_count"):
             state.pop(key, None)
         return state
 
@@ -320,6 +349,19 @@ class World:
         self.sam_dist_m[idx] = np.hypot(self.x_m[idx] - self.sam_m[idx, 0:1], self.y_m[idx] - self.sam_m[idx, 1:2])
         self.zone_dist_m[idx] = _zone_distance(self.sam_dist_m[idx], self.c.zone_inner_m, self.c.zone_outer_m)
         self.in_hazard[idx] = self._inside_radar(idx) & self.active[idx]
+        self._update_moving()
+
+    def _update_moving(self) -> None:
+        """Which vehicles the next step moves (active, in a running world), as a mask and as each one's time
+        step (dt, or 0: parked vehicles and finished worlds do not move; the mask as floats once, since a bool
+        operand is cast on every call). Kept between steps: they change only when a world starts or ends,
+        which a count of the running worlds tells (``running`` only loses worlds in a step)."""
+        self._moving = self.active & self.running[:, None]
+        dt = self._moving.astype(np.float64)
+        dt *= self._dt
+        self._dt_moving = dt
+        self._running_steps = self.running.astype(np.int64)  # what a step adds to ``steps``
+        self._running_count = np.count_nonzero(self.running)
 
     def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
                radar_on: bool, identified: bool) -> None:
@@ -338,8 +380,8 @@ class World:
 
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
-        moving = self.active & self.running[:, None]
-        self._move(action, moving)
+        moving = self._moving
+        self._move(action, self._dt_moving)
         zone_dist_prev = self.zone_dist_m
         in_zone = self._measure_zones(moving)
         flags = self._mission_logic(in_zone)
@@ -362,16 +404,15 @@ class World:
             truncated=truncated,
         )
 
-    def _move(self, action: np.ndarray, moving: np.ndarray) -> None:
-        """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean speed."""
-        # (omega, u) clipped and scaled as (2, N, 3): one strided read of the (N, 3, 2) actions, then
-        # same-shape operands (out= keeps the result C-ordered; numpy would copy the input's strides).
-        a = np.empty(self._rate.shape)
-        np.maximum(action.transpose(2, 0, 1), _MINUS_ONE, out=a)
+    def _move(self, action: np.ndarray, dt: np.ndarray) -> None:
+        """Eq. 5-6 for every vehicle: speed first (clipped to its bounds), then the exact arc at the step's mean
+        speed; ``dt`` (N, 3) is each vehicle's time step (0 for those that do not move)."""
+        # (omega, u) clipped and scaled as (2, N, 3): one C-ordered copy of the (N, 3, 2) actions transposed,
+        # then same-shape contiguous operands (an operation reading the strided view is slower than the copy).
+        a = action.transpose(2, 0, 1).copy()
+        np.maximum(a, _MINUS_ONE, out=a)
         np.minimum(a, _ONE, out=a)
         a *= self._rate
-        dt = moving.astype(np.float64)  # the bool mask as floats once: a bool operand is cast on every call
-        dt *= self._dt  # parked vehicles and finished worlds do not move
         theta, dv = a[0], a[1]
         theta *= dt
         dv *= dt
@@ -452,13 +493,15 @@ class World:
     def _end_worlds(self, hit_now: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Count the step; a hit or a vehicle leaving ends a world, the episode cap truncates it."""
         # Per-world (N,) arrays are built afresh, not in place (see the class docstring).
-        self.steps = self.steps + self.running.astype(np.int64)  # (the bool cast in a call of its own is faster)
+        self.steps = self.steps + self._running_steps  # the worlds that took this step count it
         terminated = hit_now | _any_vehicle(out)
         terminated = terminated & self.running
         self.running = _and_not(self.running, terminated)
         truncated = self.steps >= self._episode_steps
         truncated = truncated & self.running
         self.running = _and_not(self.running, truncated)
+        if np.count_nonzero(self.running) != self._running_count:
+            self._update_moving()
         return terminated, truncated
 
     def near_radar(self, margin_m: float) -> np.ndarray:
