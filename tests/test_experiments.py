@@ -20,7 +20,7 @@ from tssac_core.cli import run
 from tssac_core.experiment_figures import penalty_entries
 from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
-from tssac_core.experiment_report import steps_to_threshold, transfer_speedup
+from tssac_core.experiment_report import steps_to_threshold, transfer_speedup, within_limit
 from tssac_core.experiments import main, train
 from tssac_core.train import METRIC_FIELDS
 
@@ -160,7 +160,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
     assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
     assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
-    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | — | — | — |"  # it solves the fixed mission safely
+    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | 100.0% | — | — | — |"  # it solves the fixed mission safely
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
     data = json.loads((smoke / "experiments.json").read_text())
@@ -169,6 +169,8 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert tssac["seeds"] == [0] and tssac["paper"] == {"success_rate": 0.96, "mean_cost": 3.0}
     cached = json.loads((smoke / "runs" / "tssac-seed0" / "eval_random.json").read_text())
     assert tssac["random"]["mean_cost"]["per_seed"] == {"0": cached["mean_cost"]}
+    within = np.mean(np.asarray(cached["per_episode"]["cost"]) <= cached["cost_limit"])
+    assert tssac["random"]["within_cost_limit"]["per_seed"] == {"0": within}
     assert len(cached["per_episode"]["cost"]) == 2 and len(cached["per_episode"]["return"][0]) == 3
     assert data["guidance"]["random"]["success_rate"] == 1.0 and data["guidance"]["generalization"]["episodes"] == 2
     assert set(data["transfer_speedup"]) == {"threshold", "detect", "strike"} and data["left_out"] == []
@@ -374,6 +376,12 @@ def test_transfer_experiment_figures_and_table(tmp_path):
     assert "| detect | 20, 40 | 30 | not in 60, 40 | >= 50 | >= 1.7x |" in lines
     assert "| strike | — | — | — | — | — |" in lines
     assert transfer_experiment(load_grid(SMOKE), []) is None
+
+
+def test_within_limit_counts_uav_missions_at_or_under_the_limit():
+    # 2 missions x 3 UAVs: one long stay inside a radar (812 steps) and one cost exactly at the limit
+    evaluation = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 3.0, 812.0], [0.0, 0.0, 4.0]]}}
+    assert within_limit(evaluation) == 4 / 6
 
 
 def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):
