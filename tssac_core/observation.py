@@ -97,8 +97,6 @@ def _bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
 
 
 _BOUNDS = {mode: _bounds(mode) for mode in ObservationMode}
-_BOUNDS_BY_SIZE = {mode.size: bounds for mode, bounds in _BOUNDS.items()}
-"""The bounds by observation size (each mode has its own; an int is a cheaper key than an enum member)."""
 
 
 def build_observation(
@@ -168,7 +166,7 @@ def build_observation(
         if route_dir is None:
             raise ValueError("the route observation needs the route direction (observe(..., routes=RouteMap()))")
         _relative(route_dir.T, _heading(out[3], out[4], (n,)), out=out[22:24])
-    return _clip_to_bounds(out)
+    return _clip_to_bounds(out, mode)
 
 
 def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray,
@@ -178,7 +176,7 @@ def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarr
     speed = _speed(v_m_s, c, j)
     l_m = np.hypot(target_xy_m[0] - x_m, target_xy_m[1] - y_m)
     obs = np.stack([x_m / area, y_m / area, speed, phi_rad / np.pi, l_m / area])
-    return _clip_to_bounds(obs)
+    return _clip_to_bounds(obs, ObservationMode.PAPER)
 
 
 def _speed(v_m_s: np.ndarray, c: WorldConstants, j: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -243,14 +241,14 @@ def _row_starts(n: int, k: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _bounds_of(size: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The bounds of the mode of ``size`` entries as (size, N) arrays: same-shape operands for the clip."""
-    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS_BY_SIZE[size])
+def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of ``mode`` as (size, N) arrays: same-shape operands for the clip."""
+    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
 
 
-def _clip_to_bounds(obs: np.ndarray) -> np.ndarray:
-    """Clip feature-major (size, N) entries to the bounds of their mode (known by the size); the observations (N, size) float32."""
-    low, high = _bounds_of(*obs.shape)
+def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:
+    """Clip feature-major (size, N) entries of ``mode`` to its bounds; the observations (N, size) float32."""
+    low, high = _bounds_of(mode, obs.shape[1])
     np.maximum(obs, low, out=obs)
     np.minimum(obs, high, out=obs)
     return obs.T.astype(np.float32, order="C")

@@ -27,63 +27,12 @@ See docs/decisions.md for the reasoning.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from tssac_core.routes import RouteConfig
 from tssac_core.world import KM, StepResult, constant_operand
-
-
-@dataclass(frozen=True)
-class RewardConfig:
-    """Table 2 values and weights (Table 3: k = (1, 1, 1)), plus our two added terms."""
-
-    success: float = 10.0
-    """r_done."""
-    step: float = -0.1
-    """r_step."""
-    hold: float = 0.1
-    """r_hold per step in the zone (not in the paper)."""
-    out_of_area: float = -20.0
-    """r_out, once on leaving the area (not in the paper)."""
-    k1: float = 1.0
-    k2: float = 1.0
-    k3: float = 1.0
-    around_radars: bool = True
-    """r_approach measures the way around the radars (True) or the straight line (False, the paper)."""
-    route: RouteConfig = RouteConfig()
-    """How the way around the radars is measured (the margin kept from them, the cost of crossing one)."""
-
-
-def reward(
-    result: StepResult,
-    moving: np.ndarray,
-    cfg: RewardConfig = RewardConfig(),
-    detour_prev_m: np.ndarray | float = 0.0,
-    detour_m: np.ndarray | float = 0.0,
-    vehicle: int | None = None,
-) -> np.ndarray:
-    """Reward of every vehicle for one step, (N, 3), or of vehicle index ``vehicle`` only, (N,).
-
-    ``moving`` (N, 3) marks vehicles that took the step. ``detour_prev_m`` and ``detour_m``: the detour
-    before and after the step (:meth:`tssac_core.routes.RouteMap.detour_m`; 0, the default, measures the
-    straight line as the paper), of every vehicle (N, 3) or, with ``vehicle``, of that one (N,).
-    """
-    cols = slice(None) if vehicle is None else vehicle  # a learner's reward needs its own column only
-    w = _weights(cfg)
-    before = result.zone_dist_prev_m[:, cols] + detour_prev_m
-    after = result.zone_dist_m[:, cols] + detour_m
-    approach_km = (before - after) / _KM
-    # Every term is built afresh: an in-place update of a one-element array (a learner's column at N = 1)
-    # takes numpy's slow path (see :class:`tssac_core.world.World`).
-    r = (
-        w.done.take(result.task_completed[:, cols].astype(np.intp))
-        + w.k2 * approach_km
-        + w.step
-        + w.hold.take(result.in_zone[:, cols].astype(np.intp))
-        + w.out_of_area.take(result.out_of_area[:, cols].astype(np.intp))
-    )
-    return np.where(moving[:, cols], r, _ZERO)
 
 
 @dataclass(frozen=True)
@@ -108,17 +57,62 @@ class _Weights:
                         table(cfg.hold), table(cfg.out_of_area))
 
 
-_WEIGHTS: dict[int, tuple[RewardConfig, _Weights]] = {}
-"""Weights per config, by identity (hashing a config every step costs more than the whole lookup)."""
+@dataclass(frozen=True)
+class RewardConfig:
+    """Table 2 values and weights (Table 3: k = (1, 1, 1)), plus our two added terms."""
+
+    success: float = 10.0
+    """r_done."""
+    step: float = -0.1
+    """r_step."""
+    hold: float = 0.1
+    """r_hold per step in the zone (not in the paper)."""
+    out_of_area: float = -20.0
+    """r_out, once on leaving the area (not in the paper)."""
+    k1: float = 1.0
+    k2: float = 1.0
+    k3: float = 1.0
+    around_radars: bool = True
+    """r_approach measures the way around the radars (True) or the straight line (False, the paper)."""
+    route: RouteConfig = RouteConfig()
+    """How the way around the radars is measured (the margin kept from them, the cost of crossing one)."""
+
+    @cached_property
+    def operands(self) -> _Weights:
+        """The weights as :func:`reward` uses them, made on first use and kept in the instance (not a field:
+        equality, hashing and ``asdict`` ignore it)."""
+        return _Weights.of(self)
 
 
-def _weights(cfg: RewardConfig) -> _Weights:
-    entry = _WEIGHTS.get(id(cfg))
-    if entry is None or entry[0] is not cfg:  # (the entry holds its config, so its id is not reused meanwhile)
-        if len(_WEIGHTS) >= 64:
-            _WEIGHTS.clear()
-        entry = _WEIGHTS[id(cfg)] = (cfg, _Weights.of(cfg))
-    return entry[1]
+def reward(
+    result: StepResult,
+    moving: np.ndarray,
+    cfg: RewardConfig = RewardConfig(),
+    detour_prev_m: np.ndarray | float = 0.0,
+    detour_m: np.ndarray | float = 0.0,
+    vehicle: int | None = None,
+) -> np.ndarray:
+    """Reward of every vehicle for one step, (N, 3), or of vehicle index ``vehicle`` only, (N,).
+
+    ``moving`` (N, 3) marks vehicles that took the step. ``detour_prev_m`` and ``detour_m``: the detour
+    before and after the step (:meth:`tssac_core.routes.RouteMap.detour_m`; 0, the default, measures the
+    straight line as the paper), of every vehicle (N, 3) or, with ``vehicle``, of that one (N,).
+    """
+    cols = slice(None) if vehicle is None else vehicle  # a learner's reward needs its own column only
+    w = cfg.operands
+    before = result.zone_dist_prev_m[:, cols] + detour_prev_m
+    after = result.zone_dist_m[:, cols] + detour_m
+    approach_km = (before - after) / _KM
+    # Every term is built afresh: an in-place update of a one-element array (a learner's column at N = 1)
+    # takes numpy's slow path (see :class:`tssac_core.world.World`).
+    r = (
+        w.done.take(result.task_completed[:, cols].astype(np.intp))
+        + w.k2 * approach_km
+        + w.step
+        + w.hold.take(result.in_zone[:, cols].astype(np.intp))
+        + w.out_of_area.take(result.out_of_area[:, cols].astype(np.intp))
+    )
+    return np.where(moving[:, cols], r, _ZERO)
 
 
 _KM, _ZERO = constant_operand(KM), constant_operand(0.0)
