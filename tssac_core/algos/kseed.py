@@ -33,6 +33,9 @@ from tssac_core.algos.sac_lagrangian import (
     Variant,
     TRANSFERRED_NETWORKS,
     fast_adam,
+    multiplier_terms,
+    step_actor_and_alpha,
+    step_multiplier_and_targets,
 )
 from tssac_core.algos.stacked import StackedActor, StackedCritic
 
@@ -156,32 +159,13 @@ class KSeedSacLagrangian:
                 recent_obs = torch.stack([r.observations for r in recents])
                 recent_actions, _ = self.actor(recent_obs, gens)
                 qc_mean = self.q_c(recent_obs, recent_actions)[:, 0].clamp(min=0.0).mean(dim=-1)
-        beta = self.multiplier.beta
-        if self.uses_multiplier:
-            xi = self.multiplier.damping(qc_mean)
-            multiplier = self.multiplier.effective(qc_mean)
-        else:
-            xi = multiplier = torch.zeros(self.n_seeds)
+        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, qc_mean)  # (K,) each
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha_col, multiplier.unsqueeze(1))
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
-        self.actor_optim.zero_grad()
-        self.alpha_optim.zero_grad()
-        torch.autograd.backward(
-            [actor_loss.sum(), alpha_loss.sum()], inputs=[*self._actor_params, self.alpha]
+        step_actor_and_alpha(self.actor_optim, self.alpha_optim, self._actor_params, self.alpha, actor_loss, alpha_loss)
+        beta_loss = step_multiplier_and_targets(  # one beta per seed, projected onto [0, upper] inside
+            self.multiplier, self.uses_multiplier, qc_mean, self._targets, self._onlines, cfg.polyak
         )
-        self.actor_optim.step()
-        self.alpha_optim.step()
-        with torch.no_grad():
-            self.alpha.clamp_(min=0.0)
-
-        # Multiplier, eq. 15 (projected onto [0, upper] inside), one beta per seed.
-        beta_loss = (
-            self.multiplier.update(qc_mean) if self.uses_multiplier else torch.zeros(self.n_seeds)
-        )
-
-        # Soft target update: target <- polyak * target + (1 - polyak) * online.
-        with torch.no_grad():
-            torch._foreach_lerp_(self._targets, self._onlines, 1.0 - cfg.polyak)
 
         columns = torch.stack(
             [

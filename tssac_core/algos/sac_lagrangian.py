@@ -167,6 +167,57 @@ def load_optimiser(optim: torch.optim.Optimizer, state: dict[str, Any]) -> None:
         group.update(flags)
 
 
+# --- the steps after the critics', shared with the K-seed learner (scalars here, (K,) there) ----
+
+
+def multiplier_terms(
+    multiplier: DampedLagrangeMultiplier, active: bool, qc_mean: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(beta, xi, beta - xi) at the policy's cost ``qc_mean``: eq. 16's damping and the effective
+    multiplier; xi and the multiplier are 0 without one (SAC, SAC_PENALTY)."""
+    if not active:
+        zero = torch.zeros_like(qc_mean)
+        return multiplier.beta, zero, zero
+    return multiplier.beta, multiplier.damping(qc_mean), multiplier.effective(qc_mean)
+
+
+def step_actor_and_alpha(
+    actor_optim: torch.optim.Optimizer,
+    alpha_optim: torch.optim.Optimizer,
+    actor_params: list[torch.Tensor],
+    alpha: torch.Tensor,
+    actor_loss: torch.Tensor,
+    alpha_loss: torch.Tensor,
+) -> None:
+    """One Adam step of the actor (eq. 12/16) and of alpha (eq. 14), alpha projected onto >= 0 (see
+    SacConfig.alpha_init). One backward pass for both losses: they share no parameter (the actor loss
+    uses a detached alpha, eq. 14 a detached log_pi). inputs=: no gradients for the critics' weights,
+    which the actor loss must not train. K seeds' losses are summed: each seed gets its own gradient."""
+    actor_optim.zero_grad()
+    alpha_optim.zero_grad()
+    torch.autograd.backward([actor_loss.sum(), alpha_loss.sum()], inputs=[*actor_params, alpha])
+    actor_optim.step()
+    alpha_optim.step()
+    with torch.no_grad():
+        alpha.clamp_(min=0.0)
+
+
+def step_multiplier_and_targets(
+    multiplier: DampedLagrangeMultiplier,
+    active: bool,
+    qc_mean: torch.Tensor,
+    targets: list[torch.Tensor],
+    onlines: list[torch.Tensor],
+    polyak: float,
+) -> torch.Tensor:
+    """The multiplier's step, eq. 15 (projected inside; returns its loss, 0 without a multiplier), then
+    the soft target update target <- polyak * target + (1 - polyak) * online."""
+    beta_loss = multiplier.update(qc_mean) if active else torch.zeros_like(qc_mean)
+    with torch.no_grad():
+        torch._foreach_lerp_(targets, onlines, 1.0 - polyak)
+    return beta_loss
+
+
 @dataclass(frozen=True)
 class UpdateStats:
     """Scalars of one `update`. alpha, beta, xi and beta_minus_xi are the values *used* in this
@@ -298,33 +349,13 @@ class SacLagrangian:
             with torch.no_grad():
                 recent_actions, _ = self.actor(recent.observations)
                 qc_mean = self.q_c(recent.observations, recent_actions)[0].clamp(min=0.0).mean()
-        beta = self.multiplier.beta
-        if self.uses_multiplier:
-            xi = self.multiplier.damping(qc_mean)
-            multiplier = self.multiplier.effective(qc_mean)
-        else:
-            xi = multiplier = torch.zeros(())
+        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, qc_mean)
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
-        # Temperature, eq. 14 (log_pi a constant); alpha projected onto >= 0 (see
-        # SacConfig.alpha_init).
-        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
-        self.actor_optim.zero_grad()
-        self.alpha_optim.zero_grad()
-        # One backward pass for both losses: they share no parameter (the actor loss uses a
-        # detached alpha, eq. 14 a detached log_pi). inputs=: no gradients for the critics'
-        # weights, which the actor loss must not train.
-        torch.autograd.backward([actor_loss, alpha_loss], inputs=[*self._actor_params, self.alpha])
-        self.actor_optim.step()
-        self.alpha_optim.step()
-        with torch.no_grad():
-            self.alpha.clamp_(min=0.0)
-
-        # Multiplier, eq. 15 (projected onto >= 0 inside).
-        beta_loss = self.multiplier.update(qc_mean) if self.uses_multiplier else torch.zeros(())
-
-        # Soft target update: target <- polyak * target + (1 - polyak) * online.
-        with torch.no_grad():
-            torch._foreach_lerp_(self._targets, self._onlines, 1.0 - cfg.polyak)
+        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)  # eq. 14, log_pi a constant
+        step_actor_and_alpha(self.actor_optim, self.alpha_optim, self._actor_params, self.alpha, actor_loss, alpha_loss)
+        beta_loss = step_multiplier_and_targets(
+            self.multiplier, self.uses_multiplier, qc_mean, self._targets, self._onlines, cfg.polyak
+        )
 
         scalars = torch.stack(
             [
