@@ -20,7 +20,7 @@ from tssac_core.cli import run
 from tssac_core.experiment_figures import penalty_entries
 from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
-from tssac_core.experiment_report import steps_to_threshold, transfer_speedup, within_limit
+from tssac_core.experiment_report import pooled_cost, steps_to_threshold, transfer_speedup, within_limit
 from tssac_core.experiments import main, train
 from tssac_core.train import METRIC_FIELDS
 
@@ -160,6 +160,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
     assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
     assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
+    assert "## The mean cost against the limit" in table and re.search(r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M)
     assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | 100.0% | — | — | — |"  # it solves the fixed mission safely
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
@@ -382,6 +383,18 @@ def test_within_limit_counts_uav_missions_at_or_under_the_limit():
     # 2 missions x 3 UAVs: one long stay inside a radar (812 steps) and one cost exactly at the limit
     evaluation = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 3.0, 812.0], [0.0, 0.0, 4.0]]}}
     assert within_limit(evaluation) == 4 / 6
+
+
+def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_limit():
+    # two seeds of 50 missions: all at 0 but one UAV 812 steps inside a radar, and one at exactly the limit
+    quiet = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 0.0, 0.0]] * 50}}
+    tail = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 0.0, 812.0], [0.0, 3.0, 0.0]] + [[0.0, 0.0, 0.0]] * 48}}
+    c = pooled_cost([quiet, tail])
+    assert c["uav_missions"] == 300 and c["mean"] == pytest.approx(815 / 300)
+    assert c["over_limit"] == 1 and c["largest"] == [812.0, 3.0, 0.0]
+    low, high = c["ci95"]
+    assert low == 0.0 < 3.0 < c["mean"] * 2 < high  # one mission in a hundred: the interval reaches 0 and spans C
+    assert pooled_cost([quiet])["ci95"] == [0.0, 0.0] and pooled_cost([])["mean"] is None
 
 
 def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):
