@@ -54,19 +54,20 @@ def smoke_text(*changes: tuple[str, str]) -> str:
 def test_paper_grid():
     grid = load_grid("experiments/paper.yaml")
     names = [e.name for e in grid.algos]
-    assert names == ["tssac", "sac_lag", "sac", "ppo", "cpo", "ppo_lag", "sac_pen0", "sac_pen10", "sac_pen15", "sac_pen50"]
-    assert [e.penalty for e in grid.algos if e.algo == "sac_penalty"] == [0.0, -10.0, -15.0, -50.0]
-    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 10 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
+    assert names == ["tssac", "sac_lag", "sac", "ppo", "cpo", "ppo_lag", "sac_pen10", "sac_pen15", "sac_pen50"]
+    assert [e.penalty for e in grid.algos if e.algo == "sac_penalty"] == [-10.0, -15.0, -50.0]  # penalty 0 is sac
+    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 25 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
+    assert grid.train.validation_episodes == 50
     jobs = grid.jobs(Path("results"))
-    assert len(jobs) == 30 and jobs[0].out == Path("results/runs/tssac-seed0")
-    assert [j.name for j in jobs[:11]] == [f"{n}-seed0" for n in names] + ["tssac-seed1"]  # seed-major: a cut-short grid fills every row
+    assert len(jobs) == 27 and jobs[0].out == Path("results/runs/tssac-seed0")
+    assert [j.name for j in jobs[:10]] == [f"{n}-seed0" for n in names] + ["tssac-seed1"]  # seed-major: a cut-short grid fills every row
     by_name = {j.name: j for j in jobs}
     tssac, ppo, pen = by_name["tssac-seed1"].config(), by_name["ppo-seed1"].config(), by_name["sac_pen50-seed2"].config()
     assert tssac.sac == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
     assert ppo.sac == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
-        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (10, 4000, 1, 10, 2, 0, 1)
+        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (25, 4000, 1, 10, 2, 0, 1)
     transfer = grid.transfer_jobs(Path("results"))  # the transfer experiment: each role alone, both sides, every seed
     assert [j.name for j in transfer[:4]] == ["transfer-detect-tssac-seed0", "transfer-detect-sac_lag-seed0",
                                               "transfer-strike-tssac-seed0", "transfer-strike-sac_lag-seed0"] and len(transfer) == 12
