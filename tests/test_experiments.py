@@ -317,6 +317,54 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     assert (run_dir / LOG_NAME).read_text().count("runner: ") == 2
 
 
+# ------------------------------------------------------------------------------------ --finish-by
+
+
+def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
+    from datetime import datetime
+
+    from tssac_core.cli import UsageError
+    from tssac_core.experiment_deadline import parse_finish_by
+
+    now = datetime(2026, 11, 25, 9, 30)
+    assert parse_finish_by("11:45", now) == datetime(2026, 11, 25, 11, 45).timestamp()
+    assert parse_finish_by("2026-11-26 08:00", now) == datetime(2026, 11, 26, 8, 0).timestamp()
+    for text, message in (("09:00", "has passed"), ("7pm", "expected HH:MM"), ("25:00", "expected HH:MM")):
+        with pytest.raises(UsageError, match=message):
+            parse_finish_by(text, now)
+
+
+def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_time(smoke, tmp_path):
+    """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag has no finished run."""
+    from tssac_core.experiment_deadline import deadline_filter
+
+    grid = load_grid(write_grid(tmp_path / "three.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"))))
+    results = tmp_path / "results"
+    shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
+    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text("trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n")
+    partial = results / "runs" / "tssac-seed2"
+    write_metrics(partial, [("decoy", 1, 20, 0.0)])  # the decoy's epoch, one of the three roles' one each
+    (partial / "config.json").write_text((results / "runs" / "tssac-seed0" / "config.json").read_text().replace('"seed": 0', '"seed": 2'))
+    jobs = {j.name: j for j in grid.jobs(results)}
+    assert job_state(jobs["tssac-seed0"]).status is Status.FINISHED and job_state(jobs["tssac-seed2"]).status is Status.PARTIAL
+    clock = lambda: 1000.0  # noqa: E731
+    tight, loose = deadline_filter(list(jobs.values()), 1500.0, clock), deadline_filter(list(jobs.values()), 1700.0, clock)
+    assert not tight(jobs["tssac-seed1"]) and loose(jobs["tssac-seed1"])  # 600 s from 1000 ends at 1600
+    assert tight(jobs["tssac-seed2"]) and not deadline_filter(list(jobs.values()), 1350.0, clock)(jobs["tssac-seed2"])  # 400 s left
+    assert tight(jobs["sac_lag-seed1"])  # nothing to go by: started
+
+
+def test_a_job_the_deadline_refuses_is_reported_and_not_started(tmp_path):
+    from tssac_core.experiment_jobs import run_jobs
+
+    grid = load_grid(write_grid(tmp_path / "one.yaml", smoke_text(("  - sac_lag\n", ""))))
+    states = [job_state(job) for job in grid.jobs(tmp_path / "results")]
+    lines: list[str] = []
+    assert run_jobs(states, 2, lines.append, may_start=lambda job: False) == []
+    assert lines == ["not started tssac-seed0: it would not finish in the time given"]
+    assert not (tmp_path / "results" / "runs" / "tssac-seed0").exists()
+
+
 # ---------------------------------------------------------------------------------- transfer speed-up
 
 

@@ -204,11 +204,14 @@ def interrupt_on_sigterm() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None] = logger.info) -> list[Launch]:
+def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None] = logger.info,
+             may_start: Callable[[Job], bool] = lambda job: True) -> list[Launch]:
     """Run every new or partial job, at most ``parallel`` at once; returns the launches, in start order.
 
-    Finished jobs are skipped; conflicts must have been refused by the caller. On KeyboardInterrupt
-    (SIGINT, or SIGTERM via :func:`interrupt_on_sigterm`) every running job is stopped, then it re-raises.
+    Finished jobs are skipped; conflicts must have been refused by the caller. A free slot goes to the
+    first pending job that ``may_start`` allows (``--finish-by``: :mod:`tssac_core.experiment_deadline`);
+    one it refuses is dropped, and reported, since time only runs on. On KeyboardInterrupt (SIGINT, or
+    SIGTERM via :func:`interrupt_on_sigterm`) every running job is stopped, then it re-raises.
     """
     pending = [s for s in states if s.status in (Status.NEW, Status.PARTIAL)]
     if any(s.status is Status.CONFLICT for s in states):
@@ -220,6 +223,9 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
             while pending or running:
                 while pending and len(running) < parallel:
                     state = pending.pop(0)
+                    if not may_start(state.job):
+                        report(f"not started {state.job.name}: it would not finish in the time given")
+                        continue
                     resume = state.status is Status.PARTIAL
                     proc, cmd = start(state.job, resume)
                     running[proc.pid] = (proc, len(launches))

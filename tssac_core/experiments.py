@@ -4,6 +4,7 @@ Examples::
 
     python -m tssac_core.experiments --grid experiments/paper.yaml --dry-run      # the jobs and their status
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2       # train what is missing, then report
+    python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --finish-by 17:30  # only what ends by 17:30
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
     python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
@@ -20,10 +21,12 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 
 from tssac_core.cli import UsageError, run
+from tssac_core.experiment_deadline import deadline_filter, parse_finish_by
 from tssac_core.experiment_figures import plot_figures
 from tssac_core.experiment_grid import Grid, Job, load_grid
 from tssac_core.experiment_jobs import Launch, Status, command, is_finished, job_state, run_jobs
@@ -39,8 +42,9 @@ def say(line: str) -> None:
     print(line, flush=True)
 
 
-def train(grid: Grid, results: Path, parallel: int, report: Say = say) -> list[Launch]:
-    """Run every job that is not finished; refuses (UsageError) if a run directory holds other settings."""
+def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by: float | None = None) -> list[Launch]:
+    """Run every job that is not finished (with ``finish_by``, a POSIX time: those expected to finish by
+    then); refuses (UsageError) if a run directory holds other settings."""
     states = [job_state(job) for job in all_jobs(grid, results)]
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
@@ -49,7 +53,10 @@ def train(grid: Grid, results: Path, parallel: int, report: Say = say) -> list[L
                          f"move it away or choose another --results{more}")
     todo = sum(s.status is not Status.FINISHED for s in states)
     report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {parallel} at a time")
-    return run_jobs(states, parallel, report)
+    if finish_by is None:
+        return run_jobs(states, parallel, report)
+    report(f"starting only jobs expected to finish by {time.strftime('%Y-%m-%d %H:%M', time.localtime(finish_by))}")
+    return run_jobs(states, parallel, report, deadline_filter([s.job for s in states], finish_by))
 
 
 def all_jobs(grid: Grid, results: Path) -> list[Job]:
@@ -121,6 +128,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
     p.add_argument("--results", type=Path, default=Path("results"), help="output directory (default results/): runs/, table4.md, experiments.json, figures")
     p.add_argument("--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)")
+    p.add_argument("--finish-by", metavar="HH:MM", help="start only jobs expected to finish by then (today, local time; or "
+                   "'YYYY-MM-DD HH:MM'), by what the grid's finished runs of the same entry took; the rest wait for the next run")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished")
     mode.add_argument("--dry-run", action="store_true", help="print the jobs and their status (finished, partial, new, conflict) and exit")
@@ -129,6 +138,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
+    args.finish_by = parse_finish_by(args.finish_by) if args.finish_by is not None else None
     return args
 
 
@@ -141,7 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.compact:
         compact(grid, args.results)
         return 0
-    launches = [] if args.report_only else train(grid, args.results, args.jobs)
+    launches = [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by)
     make_report(grid, args.results)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]
     if failed:
