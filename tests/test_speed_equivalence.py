@@ -251,7 +251,10 @@ def test_role_task_rollout_matches_the_recording(random_path):
     # The guidance teammates close the loop on their own positions, so another CPU's sin/cos rounding
     # (numpy's SIMD paths differ between machines) grows over the 4,200 steps: CI's machine ended 0.7 mm
     # from this one. A millimetre-scale drift is rounding; a change to the physics moves these by metres.
+    # The headings drift the same way: the teammates steer down a float32 route field, and the machine of
+    # 2026-11-25 ended two of them one float32 step (6e-8 rad) from the recording; a change to the
+    # kinematics or the guidance turns them by milliradians or more.
     np.testing.assert_allclose(rewards, rec["reward_sum"], rtol=1e-7)
     np.testing.assert_allclose(st.obs[0], rec["last_obs"], atol=1e-6)
     np.testing.assert_allclose(w.x_m, rec["x_m"], rtol=0, atol=1e-2)
-    np.testing.assert_allclose(w.phi_rad, rec["phi_rad"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(w.phi_rad, rec["phi_rad"], rtol=0, atol=1e-6)
