@@ -335,10 +335,11 @@ def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
 
 
 def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_time(smoke, tmp_path):
-    """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag has no finished run."""
+    """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag, with no
+    finished run of its own, goes by its family's (tssac's); a PPO run, with none in its family, is started."""
     from tssac_core.experiment_deadline import deadline_filter
 
-    grid = load_grid(write_grid(tmp_path / "three.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"))))
+    grid = load_grid(write_grid(tmp_path / "three.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"), ("  - sac_lag\n", "  - sac_lag\n  - ppo\n"))))
     results = tmp_path / "results"
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
     (results / "runs" / "tssac-seed0" / LOG_NAME).write_text("trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n")
@@ -351,7 +352,8 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     tight, loose = deadline_filter(list(jobs.values()), 1500.0, clock), deadline_filter(list(jobs.values()), 1700.0, clock)
     assert not tight(jobs["tssac-seed1"]) and loose(jobs["tssac-seed1"])  # 600 s from 1000 ends at 1600
     assert tight(jobs["tssac-seed2"]) and not deadline_filter(list(jobs.values()), 1350.0, clock)(jobs["tssac-seed2"])  # 400 s left
-    assert tight(jobs["sac_lag-seed1"])  # nothing to go by: started
+    assert not tight(jobs["sac_lag-seed1"]) and loose(jobs["sac_lag-seed1"])  # as tssac's 600 s
+    assert tight(jobs["ppo-seed1"])  # nothing to go by: started
 
 
 def test_a_job_the_deadline_refuses_is_reported_and_not_started(tmp_path):

@@ -4,9 +4,11 @@ A grid takes longer than the machine is there for (a shared machine's slot, a se
 still training when the machine goes is lost unless its directory outlives it, so starting a 65-minute
 run 20 minutes before the end only wastes the 20 minutes that a shorter job could have used. The
 runner asks :func:`deadline_filter` before each start; a job is expected to take what the finished runs
-of the same grid entry (and the same transfer role) took on average, by their train.log, times the share
-of its epochs still to train (a partial run resumes at its last finished epoch). A job with no finished
-run to go by is started: nothing says it would not fit.
+of the same grid entry (and the same transfer role) took on average, by their train.log, or if there are
+none, those of the same learner family (the SAC family's variants cost about the same per update, as do
+PPO, PPO-Lagrangian and CPO per epoch), times the share of its epochs still to train (a partial run
+resumes at its last finished epoch). A job with no finished run to go by is started: nothing says it
+would not fit.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from tssac_core.cli import UsageError
 from tssac_core.experiment_grid import Job
 from tssac_core.experiment_jobs import Status, job_state
 from tssac_core.experiment_report import read_metrics, training_wall_s
+from tssac_core.train import ON_POLICY
 
 
 def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:
@@ -37,12 +40,17 @@ def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:
     return when.timestamp()
 
 
+def family(job: Job) -> str:
+    return "on-policy" if job.entry.algo in ON_POLICY else "sac"
+
+
 def expected_run_s(jobs: list[Job]) -> dict[tuple[str, str | None], float]:
-    """Mean wall seconds of the finished runs, per (entry name, transfer role)."""
+    """Mean wall seconds of the finished runs, per (entry name, transfer role) and per (family, transfer role)."""
     walls: dict[tuple[str, str | None], list[float]] = {}
     for job in jobs:
         if job_state(job).status is Status.FINISHED and (wall := training_wall_s(job.out)) is not None:
             walls.setdefault((job.entry.name, job.role), []).append(wall)
+            walls.setdefault((family(job), job.role), []).append(wall)
     return {key: sum(w) / len(w) for key, w in walls.items()}
 
 
@@ -58,7 +66,7 @@ def deadline_filter(jobs: list[Job], finish_by: float, clock: Callable[[], float
     expected = expected_run_s(jobs)
 
     def may_start(job: Job) -> bool:
-        whole = expected.get((job.entry.name, job.role))
+        whole = expected.get((job.entry.name, job.role), expected.get((family(job), job.role)))
         return whole is None or clock() + whole * share_left(job) <= finish_by
 
     return may_start
