@@ -346,12 +346,13 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     partial = results / "runs" / "tssac-seed2"
     write_metrics(partial, [("decoy", 1, 20, 0.0)])  # the decoy's epoch, one of the three roles' one each
     (partial / "config.json").write_text((results / "runs" / "tssac-seed0" / "config.json").read_text().replace('"seed": 0', '"seed": 2'))
-    jobs = {j.name: j for j in grid.jobs(results)}
+    states = [job_state(j) for j in grid.jobs(results)]
+    jobs = {s.job.name: s.job for s in states}
     assert job_state(jobs["tssac-seed0"]).status is Status.FINISHED and job_state(jobs["tssac-seed2"]).status is Status.PARTIAL
     clock = lambda: 1000.0  # noqa: E731
-    tight, loose = deadline_filter(list(jobs.values()), 1500.0, clock), deadline_filter(list(jobs.values()), 1700.0, clock)
+    tight, loose = deadline_filter(states, 1500.0, clock), deadline_filter(states, 1700.0, clock)
     assert not tight(jobs["tssac-seed1"]) and loose(jobs["tssac-seed1"])  # 600 s from 1000 ends at 1600
-    assert tight(jobs["tssac-seed2"]) and not deadline_filter(list(jobs.values()), 1350.0, clock)(jobs["tssac-seed2"])  # 400 s left
+    assert tight(jobs["tssac-seed2"]) and not deadline_filter(states, 1350.0, clock)(jobs["tssac-seed2"])  # 400 s left
     assert not tight(jobs["sac_lag-seed1"]) and loose(jobs["sac_lag-seed1"])  # as tssac's 600 s
     assert tight(jobs["ppo-seed1"])  # nothing to go by: started
 

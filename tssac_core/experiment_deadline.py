@@ -18,10 +18,9 @@ import time
 from typing import Callable
 
 from tssac_core.cli import UsageError
-from tssac_core.experiment_grid import Job
-from tssac_core.experiment_jobs import Status, job_state
+from tssac_core.experiment_grid import Job, learner_family
+from tssac_core.experiment_jobs import JobState, Status
 from tssac_core.experiment_report import read_metrics, training_wall_s
-from tssac_core.train import ON_POLICY
 
 
 def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:
@@ -40,17 +39,13 @@ def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:
     return when.timestamp()
 
 
-def family(job: Job) -> str:
-    return "on-policy" if job.entry.algo in ON_POLICY else "sac"
-
-
-def expected_run_s(jobs: list[Job]) -> dict[tuple[str, str | None], float]:
-    """Mean wall seconds of the finished runs, per (entry name, transfer role) and per (family, transfer role)."""
+def expected_run_s(states: list[JobState]) -> dict[tuple[str, str | None], float]:
+    """Mean wall seconds of the finished runs, per (entry name, transfer role) and per (learner family, transfer role)."""
     walls: dict[tuple[str, str | None], list[float]] = {}
-    for job in jobs:
-        if job_state(job).status is Status.FINISHED and (wall := training_wall_s(job.out)) is not None:
-            walls.setdefault((job.entry.name, job.role), []).append(wall)
-            walls.setdefault((family(job), job.role), []).append(wall)
+    for s in states:
+        if s.status is Status.FINISHED and (wall := training_wall_s(s.job.out)) is not None:
+            walls.setdefault((s.job.entry.name, s.job.role), []).append(wall)
+            walls.setdefault((learner_family(s.job.entry.algo), s.job.role), []).append(wall)
     return {key: sum(w) / len(w) for key, w in walls.items()}
 
 
@@ -61,12 +56,13 @@ def share_left(job: Job) -> float:
     return max(0.0, 1.0 - done / total)
 
 
-def deadline_filter(jobs: list[Job], finish_by: float, clock: Callable[[], float] = time.time) -> Callable[[Job], bool]:
-    """Whether a job, started now, is expected to finish by ``finish_by`` (module docstring)."""
-    expected = expected_run_s(jobs)
+def deadline_filter(states: list[JobState], finish_by: float, clock: Callable[[], float] = time.time) -> Callable[[Job], bool]:
+    """Whether a job, started now, is expected to finish by ``finish_by`` (module docstring); ``states``: the
+    grid's jobs as the runner found them."""
+    expected = expected_run_s(states)
 
     def may_start(job: Job) -> bool:
-        whole = expected.get((job.entry.name, job.role), expected.get((family(job), job.role)))
+        whole = expected.get((job.entry.name, job.role), expected.get((learner_family(job.entry.algo), job.role)))
         return whole is None or clock() + whole * share_left(job) <= finish_by
 
     return may_start

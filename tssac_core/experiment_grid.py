@@ -190,6 +190,11 @@ class Grid:
         return next(e for e in self.algos if e.name == name)
 
 
+def learner_family(algo: str) -> str:
+    """``sac`` or ``onpolicy``: the learner an algorithm trains with (its ``--set`` family, ``sac_set`` or ``onpolicy_set``)."""
+    return "onpolicy" if algo in ON_POLICY else "sac"
+
+
 def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
     """The ``tssac_core.train`` arguments of one run."""
     argv = ["--algo", entry.algo, "--seed", str(seed), "--scenario", str(args.scenario),
@@ -376,6 +381,6 @@ class _Reader:
         penalty = self.number(data.get("penalty", 0.0), f"{where}.penalty")
         if penalty != 0.0 and algo != "sac_penalty":
             raise self.fail(f"{where}.penalty", f"only sac_penalty takes a penalty, not {algo}")
-        family = family_sets["onpolicy" if algo in ON_POLICY else "sac"]
+        family = family_sets[learner_family(algo)]
         overrides = {**family, **self.overrides(data.get("set", {}), f"{where}.set")}
         return AlgoEntry(name=name, algo=algo, penalty=penalty, overrides=overrides)

@@ -56,7 +56,7 @@ def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by
     if finish_by is None:
         return run_jobs(states, parallel, report)
     report(f"starting only jobs expected to finish by {time.strftime('%Y-%m-%d %H:%M', time.localtime(finish_by))}")
-    return run_jobs(states, parallel, report, deadline_filter([s.job for s in states], finish_by))
+    return run_jobs(states, parallel, report, deadline_filter(states, finish_by))
 
 
 def all_jobs(grid: Grid, results: Path) -> list[Job]:
