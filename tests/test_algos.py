@@ -299,6 +299,11 @@ def test_config_validation() -> None:
     assert cfg.alpha_init == 0.0 and cfg.beta_init == 0.0 and cfg.k_d == 10.0
     assert cfg.beta_lr > cfg.lr
     assert cfg.qc_limit == pytest.approx(qc_limit(3.0, 0.99, 4000))
+    assert cfg.multiplier_signal == "episode_cost"
+    with pytest.raises(ValueError, match="multiplier_signal"):
+        SacConfig(multiplier_signal="q")
+    with pytest.raises(ValueError, match="cost_window"):
+        SacConfig(cost_window=0)
 
 
 def test_act_shapes_and_bounds() -> None:
@@ -328,6 +333,7 @@ def test_variants_multiplier_terms() -> None:
     assert lag.beta == pytest.approx(0.5) and lag.xi == 0.0
     assert lag.beta_minus_xi == pytest.approx(0.5)
     ts = stats[Variant.TSSAC]
+    assert ts.cost_signal == ts.qc_mean  # no episode cost, no recent batch: Q^c on the batch
     assert ts.xi == pytest.approx(10.0 * (c - ts.qc_mean), rel=1e-5)
     assert ts.beta_minus_xi == pytest.approx(max(0.0, 0.5 - ts.xi), rel=1e-5, abs=1e-7)
 
@@ -619,13 +625,35 @@ def test_multiplier_measured_on_recent_batch() -> None:
     learner = SacLagrangian(2, 1, cfg)
     obs = torch.zeros(4, 2)
     batch = ReplaySamples(obs, torch.zeros(4, 1), torch.zeros(4), torch.zeros(4), obs, torch.zeros(4))
+    q_c_everywhere(learner, 100.0)  # Q^c = 100 everywhere: far above the limit
+    stats = learner.update(batch, recent=batch)
+    assert stats.cost_signal == pytest.approx(100.0, rel=1e-3)
+    assert learner.multiplier.beta.item() > 0.0
+
+
+def q_c_everywhere(learner: SacLagrangian, value: float) -> None:
     with torch.no_grad():
         for p in learner.q_c.parameters():
             p.zero_()
-        learner.q_c.biases[-1].fill_(100.0)  # Q^c = 100 everywhere: far above the limit
-    stats = learner.update(batch, recent=batch)
-    assert stats.qc_mean == pytest.approx(100.0, rel=1e-3)
-    assert learner.multiplier.beta.item() > 0.0
+        learner.q_c.biases[-1].fill_(value)
+
+
+def test_episode_cost_drives_the_multiplier_whatever_q_c_says() -> None:
+    """Given a measured episode cost, eq. 15 and 17 compare it (on Q^c's scale) with C; Q^c is ignored."""
+    cfg = SacConfig(variant=Variant.TSSAC, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100, gamma=0.99, beta_init=1.0)
+    per_cost = qc_limit(1.0, 0.99, 100)
+    assert float(cfg.cost_on_qc_scale(3.0)) == pytest.approx(cfg.qc_limit)  # C maps onto the Q^c limit
+    obs = torch.zeros(4, 2)
+    batch = ReplaySamples(obs, torch.zeros(4, 1), torch.zeros(4), torch.zeros(4), obs, torch.zeros(4))
+    for q_c, measured, rises in ((100.0, 0.0, False), (0.0, 12.0, True)):
+        torch.manual_seed(0)
+        learner = SacLagrangian(2, 1, cfg)
+        q_c_everywhere(learner, q_c)
+        stats = learner.update(batch, recent=batch, episode_cost=measured)
+        assert stats.cost_signal == pytest.approx(measured * per_cost, rel=1e-6)
+        assert stats.qc_mean == pytest.approx(q_c, rel=1e-3)  # still reported
+        assert stats.xi == pytest.approx(10.0 * (cfg.qc_limit - measured * per_cost), rel=1e-5)  # eq. 17
+        assert (learner.multiplier.beta.item() > 1.0) is rises  # eq. 15: up above C, down below
 
 
 def test_multiplier_upper_bound() -> None:

@@ -138,7 +138,8 @@ def test_smoke_grid_trains_every_job(smoke):
         log = (run_dir / LOG_NAME).read_text()
         assert log.count("runner: ") == 1 and "--no-progress" in log and f"--out {run_dir}" in log
         config = json.loads((run_dir / "config.json").read_text())
-        assert config["epochs"] == 1 and config["sac"] == {"hidden_sizes": [16, 16], "batch_size": 8}
+        assert config["epochs"] == 1
+        assert config["sac"] == {"hidden_sizes": [16, 16], "batch_size": 8, "multiplier_signal": "episode_cost"}
 
 
 def test_second_invocation_starts_nothing(smoke, capsys):
@@ -264,6 +265,19 @@ def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "holds a run with other settings" in err and "epochs: 40" in err
     assert not (run_dir / LOG_NAME).exists()
+
+
+def test_a_run_from_before_multiplier_signal_is_a_conflict(smoke, tmp_path, capsys):
+    """Its multiplier measured Q^c; the grid's default is now the episode cost."""
+    results = tmp_path / "r"
+    run_dir = results / "runs" / "tssac-seed0"
+    run_dir.mkdir(parents=True)
+    config = json.loads((smoke / "runs" / "tssac-seed0" / "config.json").read_text())
+    assert config["sac"].pop("multiplier_signal") == "episode_cost"
+    (run_dir / "config.json").write_text(json.dumps(config))
+    assert run(main, ["--grid", "experiments/smoke.yaml", "--results", str(results), "--dry-run"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "tssac-seed0" in x)
+    assert line.startswith("conflict") and "'multiplier_signal': 'q_c'" in line
 
 
 @pytest.mark.parametrize("content, message", [

@@ -53,24 +53,30 @@ def batches(k: int, i: int) -> tuple[ReplaySamples, ReplaySamples]:
     return random_batch(1000 * k + 2 * i), random_batch(1000 * k + 2 * i + 1)
 
 
-def run_single(cfg: SacConfig, seed: int, k: int, n_updates: int) -> tuple[SacLagrangian, list[UpdateStats], list[np.ndarray]]:
+def episode_cost(k: int, i: int) -> float:
+    """Seed k's measured cost per episode at update i: above C = 3 for some updates, below for others."""
+    return float((3 * k + i) % 5) * 2.0
+
+
+def run_single(cfg: SacConfig, seed: int, k: int, n_updates: int, costs: bool = False) -> tuple[SacLagrangian, list[UpdateStats], list[np.ndarray]]:
     torch.manual_seed(seed)
     learner = SacLagrangian(OBS_DIM, ACT_DIM, cfg)
     stats, actions = [], []
     for i in range(n_updates):
         actions.append(learner.act(random_batch(5000 + i).observations.numpy(), deterministic=False))
-        stats.append(learner.update(*batches(k, i)))
+        stats.append(learner.update(*batches(k, i), episode_cost(k, i) if costs else None))
     return learner, stats, actions
 
 
-def run_batched(cfg: SacConfig, n_updates: int) -> tuple[KSeedSacLagrangian, list[list[UpdateStats]], list[np.ndarray]]:
+def run_batched(cfg: SacConfig, n_updates: int, costs: bool = False) -> tuple[KSeedSacLagrangian, list[list[UpdateStats]], list[np.ndarray]]:
     learner = KSeedSacLagrangian.from_seeds(OBS_DIM, ACT_DIM, cfg, SEEDS)
     stats, actions = [], []
     obs = np.stack([random_batch(5000 + i).observations.numpy() for i in range(n_updates)])
     for i in range(n_updates):
         actions.append(learner.act(np.stack([obs[i]] * len(SEEDS)), deterministic=False))
         pairs = [batches(k, i) for k in range(len(SEEDS))]
-        stats.append(learner.update([p[0] for p in pairs], [p[1] for p in pairs]))
+        measured = [episode_cost(k, i) for k in range(len(SEEDS))] if costs else None
+        stats.append(learner.update([p[0] for p in pairs], [p[1] for p in pairs], measured))
     return learner, stats, actions
 
 
@@ -92,13 +98,15 @@ def assert_states_close(a: Any, b: Any, path: str = "") -> None:
         assert a == b, path
 
 
+@pytest.mark.parametrize("costs", [False, True], ids=["q_c", "episode_cost"])
 @pytest.mark.parametrize("name", list(CONFIGS))
-def test_each_seed_updates_like_a_separate_learner(name: str) -> None:
+def test_each_seed_updates_like_a_separate_learner(name: str, costs: bool) -> None:
+    """Also with the multiplier driven by each seed's own measured episode cost."""
     cfg = CONFIGS[name]
     n_updates = 6
-    batched, batched_stats, batched_actions = run_batched(cfg, n_updates)
+    batched, batched_stats, batched_actions = run_batched(cfg, n_updates, costs)
     for k, seed in enumerate(SEEDS):
-        single, stats, actions = run_single(cfg, seed, k, n_updates)
+        single, stats, actions = run_single(cfg, seed, k, n_updates, costs)
         for i in range(n_updates):
             np.testing.assert_allclose(batched_actions[i][k], actions[i], **TOL)
             np.testing.assert_allclose(

@@ -46,6 +46,21 @@ def test_outputs(trained):
     assert all(x["beta_minus_xi"] not in ("", "nan") for x in r[1:])
     for role in ("decoy", "detect", "strike"):  # each shipped role's actor, exported for the companion
         assert pilot_file(trained, Role(role)) == trained / f"{role}.npz"
+    # The multiplier's measurement, left to its default on the command line, is recorded.
+    assert json.loads((trained / "config.json").read_text())["sac"]["multiplier_signal"] == "episode_cost"
+
+
+def test_runs_from_before_a_setting_resume_with_what_they_used():
+    """A config.json without cost_margin_km trained on eq. 11 exactly; one of TSSAC or SAC-Lagrangian
+    without multiplier_signal measured Q^c. The other algorithms have no multiplier to record."""
+    from tssac_core.train import config_from_saved
+
+    old = {"algo": "tssac", "roles": ["decoy"], "sac": {"gamma": 0.995}}
+    cfg = config_from_saved(old)
+    assert cfg.cost_margin_km == 0.0 and cfg.sac == {"gamma": 0.995, "multiplier_signal": "q_c"}
+    assert config_from_saved({**old, "algo": "sac"}).sac == {"gamma": 0.995}
+    new = {**old, "cost_margin_km": 1.0, "sac": {"multiplier_signal": "episode_cost"}}
+    assert config_from_saved(new).sac == {"multiplier_signal": "episode_cost"}
 
 
 def test_same_seed_same_run(trained, tmp_path):
@@ -196,3 +211,31 @@ def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content
     assert run(main, ["--out", str(tmp_path), "--resume"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err and "config.json" in err
+
+
+def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(tmp_path):
+    """SeedRole.episode_cost: the mean learner cost of the last cost_window episodes; a resume state
+    carries them, so a resumed run's multiplier sees what the uninterrupted one saw."""
+    from tssac_core.algos.sac_lagrangian import SacConfig
+    from tssac_core.scenario import load
+    from tssac_core.train import EpochLog, TrainConfig, open_seed_role
+
+    cfg = TrainConfig(algo="sac_lag", seed=4, roles=("decoy",), envs=2, action_repeat=10, validation_episodes=0)
+    scenario = load(cfg.scenario)
+    sac_cfg = SacConfig(cost_window=3)
+    run = open_seed_role(cfg, scenario, Role.DECOY, tmp_path, sac_cfg)
+    assert run.episode_cost(sac_cfg, uses_multiplier=True) == 0.0  # no episode has ended yet
+    log = EpochLog()
+    rng = np.random.default_rng(0)
+    for _ in range(2000):  # random flight: episodes end by the 400-decision cap at the latest
+        run.collect(rng.uniform(-1.0, 1.0, (2, 2)), log)
+        if len(log.costs) >= 5:
+            break
+    assert len(log.costs) >= 5 and len(set(log.costs)) > 1, log.costs  # the window's choice matters
+    assert run.episode_cost(sac_cfg, uses_multiplier=True) == pytest.approx(np.mean(log.costs[-3:]))
+    assert run.episode_cost(sac_cfg, uses_multiplier=False) is None
+    assert run.episode_cost(SacConfig(multiplier_signal="q_c"), uses_multiplier=True) is None
+    state = run.resume_state({}, torch.get_rng_state())
+    resumed = open_seed_role(cfg, scenario, Role.DECOY, tmp_path, sac_cfg)
+    resumed.restore(state)
+    assert list(resumed.recent_costs) == log.costs[-3:] and resumed.recent_costs.maxlen == 3

@@ -314,13 +314,13 @@ class _Reader:
         return seeds
 
     def overrides(self, value: Any, where: str) -> dict[str, Any]:
-        """Learner settings: names to numbers, booleans or lists of numbers (what ``--set`` takes)."""
+        """Learner settings: names to numbers, booleans, words or lists of numbers (what ``--set`` takes)."""
         if not isinstance(value, dict):
             raise self.fail(where, f"expected a mapping of learner settings, got {type(value).__name__}")
         for key, v in value.items():
-            ok = isinstance(v, (int, float, bool)) or v is None or (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
+            ok = isinstance(v, (int, float, bool, str)) or v is None or (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
             if not isinstance(key, str) or not ok:
-                raise self.fail(f"{where}.{key}", f"expected a number, boolean, null or list of numbers, got {v!r}")
+                raise self.fail(f"{where}.{key}", f"expected a number, boolean, word, null or list of numbers, got {v!r}")
         return dict(value)
 
     def train_args(self, data: dict[str, Any]) -> TrainArgs:

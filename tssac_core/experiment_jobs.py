@@ -39,7 +39,7 @@ from tssac_core.experiment_grid import Job
 from tssac_core.policy import CheckpointError, read_checkpoint
 from tssac_core.scenario import ROLES, ScenarioError
 from tssac_core.scenario import load as load_scenario
-from tssac_core.train import TrainConfig, config_from_saved
+from tssac_core.train import TrainConfig, config_from_saved, with_recorded_defaults
 
 logger = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def config_difference(saved: dict[str, Any], wanted: TrainConfig, run: Path | No
     A key missing from an older config.json takes what ``train --resume`` gives it. The scenario is the
     same if it is the same file or a file with the same task (:func:`same_scenario`).
     """
-    expected = json.loads(json.dumps(asdict(wanted)))  # tuples -> lists, as in config.json
+    expected = json.loads(json.dumps(asdict(with_recorded_defaults(wanted))))  # tuples -> lists, as in config.json
     have = json.loads(json.dumps(asdict(config_from_saved(saved))))
     for key, value in expected.items():
         if key in IGNORED_SETTINGS:

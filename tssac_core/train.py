@@ -18,6 +18,7 @@ random states), from which ``--resume`` continues, losing at most the epoch that
 from __future__ import annotations
 
 import argparse
+import collections
 import csv
 import dataclasses
 import io
@@ -128,6 +129,9 @@ def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
     return cfg.stop_at_task_success > 0 and row["task_success"] >= cfg.stop_at_task_success
 
 
+SAC_MULTIPLIER_ALGOS = ("tssac", "sac_lag")
+"""The SAC family's algorithms with a learned multiplier (SacConfig.multiplier_signal matters)."""
+
 OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}
 """Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly)."""
 
@@ -146,7 +150,18 @@ def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainCo
     full = {**OLDER_RUN_SETTINGS, **saved}
     if not isinstance(full.get("roles"), list):
         raise UsageError(f"{source}: roles: expected a list of role names")
+    if full.get("algo") in SAC_MULTIPLIER_ALGOS and isinstance(full.get("sac"), dict) and "multiplier_signal" not in full["sac"]:
+        full["sac"] = {**full["sac"], "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
     return TrainConfig(**{**full, "roles": tuple(full["roles"])})
+
+
+def with_recorded_defaults(cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with TSSAC's and SAC-Lagrangian's multiplier_signal written out in ``sac`` when the command
+    line left it to the default: its default changed ("q_c" before), so a run's config.json records which
+    it used."""
+    if cfg.algo not in SAC_MULTIPLIER_ALGOS or "multiplier_signal" in cfg.sac:
+        return cfg
+    return dataclasses.replace(cfg, sac={**cfg.sac, "multiplier_signal": SacConfig.multiplier_signal})
 
 
 def reward_config(cfg: TrainConfig) -> RewardConfig:
@@ -233,6 +248,9 @@ class SeedRole:
     env_steps: int = 0
     updates: int = 0
     transferred: bool = False
+    recent_costs: collections.deque[float] = field(default_factory=collections.deque)
+    """The learner's costs of the last finished episodes, SacConfig.cost_window of them (maxlen; the
+    multiplier's measurement with multiplier_signal "episode_cost")."""
 
     @property
     def state_path(self) -> Path:
@@ -258,6 +276,7 @@ class SeedRole:
         ended = step.terminated | step.truncated
         if ended.any():
             log.record_episodes(step, ended)
+            self.recent_costs.extend(step.episode_cost[ended].tolist())
 
     def updates_due(self) -> int | None:
         """Gradient updates owed after the last step (Algorithm 1: one per update_every decisions);
@@ -267,11 +286,19 @@ class SeedRole:
         return self.env_steps // self.cfg.update_every - self.updates
 
     def sample(self, sac_cfg: SacConfig, uses_multiplier: bool) -> tuple[ReplaySamples, ReplaySamples | None]:
-        """One update's minibatch, and the recent batch on which the multiplier measures Q^c."""
+        """One update's minibatch, and (multiplier_signal "q_c") the recent batch on which the
+        multiplier measures Q^c."""
         batch = self.buffer.sample(sac_cfg.batch_size, self.rng)
-        window = sac_cfg.multiplier_window
+        window = sac_cfg.multiplier_window if sac_cfg.multiplier_signal == "q_c" else None
         recent = self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng) if window and uses_multiplier else None
         return batch, recent
+
+    def episode_cost(self, sac_cfg: SacConfig, uses_multiplier: bool) -> float | None:
+        """Multiplier_signal "episode_cost": the mean learner cost of the recent finished episodes (0
+        before the first ends); None otherwise (the learner measures Q^c)."""
+        if not uses_multiplier or sac_cfg.multiplier_signal != "episode_cost":
+            return None
+        return float(np.mean(self.recent_costs)) if self.recent_costs else 0.0
 
     def end_epoch(self, log: EpochLog, iters: int, write_checkpoint: Callable[[Path], None]) -> dict[str, Any]:
         """Validate the epoch's checkpoint and append its metrics row; returns the row."""
@@ -287,6 +314,8 @@ class SeedRole:
         self.obs = saved["obs"]
         self.rng.bit_generator.state = saved["rng"]
         self.epoch, self.env_steps, self.updates, self.transferred = saved["epoch"], saved["env_steps"], saved["updates"], saved["transferred"]
+        # Absent from resume states older than SacConfig.multiplier_signal.
+        self.recent_costs = collections.deque(saved.get("recent_costs", []), maxlen=self.recent_costs.maxlen)
         self.selector.load_state_dict(saved["selector"])
         logger.info("%s: resuming after epoch %d (%d env steps)", self.role.value, self.epoch, self.env_steps)
 
@@ -303,6 +332,7 @@ class SeedRole:
             "env_steps": self.env_steps,
             "updates": self.updates,
             "transferred": self.transferred,
+            "recent_costs": list(self.recent_costs),
             "selector": self.selector.state_dict(),
         }
 
@@ -319,7 +349,8 @@ def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, 
     task = make_task(cfg, scenario, role, mode, teammates)
     selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
     rng = np.random.default_rng([cfg.seed, role.index])
-    return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset())
+    return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset(),
+                    recent_costs=collections.deque(maxlen=sac_cfg.cost_window))
 
 
 def read_resume_state(path: Path) -> dict[str, Any] | None:
@@ -376,7 +407,8 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
             due = run.updates_due()
             if due is not None:
                 for _ in range(due):
-                    log.stats.append(learner.update(*run.sample(sac_cfg, learner.uses_multiplier)))
+                    batch, recent = run.sample(sac_cfg, learner.uses_multiplier)
+                    log.stats.append(learner.update(batch, recent, run.episode_cost(sac_cfg, learner.uses_multiplier)))
                 run.updates += max(due, 0)
                 log.update_time += time.perf_counter() - t1
             bar.update(cfg.envs)
@@ -542,7 +574,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         try:
             overrides[key] = json.loads(value)
         except json.JSONDecodeError:
-            raise UsageError(f"--set {key}: value {value!r} is not a number, list or boolean") from None
+            overrides[key] = value  # a word, e.g. multiplier_signal=q_c; SacConfig checks it
     cfg = TrainConfig(
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
@@ -596,6 +628,8 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
         cfg = config_from_saved(saved, config_path)
     elif config_path.is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
+    else:
+        cfg = with_recorded_defaults(cfg)
     scenario = load(cfg.scenario)
     check_learner_settings(cfg, scenario)
     for role_name in cfg.roles:

@@ -174,7 +174,9 @@ def train_role_kseed(cfgs: list[TrainConfig], scenario: Scenario, role: Role, ou
                 for _ in range(due):
                     samples = [run.sample(sac_cfg, learner.uses_multiplier) for run in runs]
                     recents = [recent for _, recent in samples if recent is not None]
-                    stats = learner.update([batch for batch, _ in samples], recents or None)
+                    costs = [run.episode_cost(sac_cfg, learner.uses_multiplier) for run in runs]
+                    episode_costs = None if None in costs else costs
+                    stats = learner.update([batch for batch, _ in samples], recents or None, episode_costs)
                     for log, s in zip(logs, stats):
                         log.stats.append(s)
                 for run in runs:

@@ -120,10 +120,13 @@ class KSeedSacLagrangian:
         return action.numpy()
 
     def update(
-        self, batches: Sequence[ReplaySamples], recents: Sequence[ReplaySamples] | None = None
+        self,
+        batches: Sequence[ReplaySamples],
+        recents: Sequence[ReplaySamples] | None = None,
+        episode_costs: Sequence[float] | None = None,
     ) -> list[UpdateStats]:
         """One gradient step of every seed: seed k's is `SacLagrangian.update(batches[k],
-        recents[k])` (the same equations, in the same order; eq. numbers as there)."""
+        recents[k], episode_costs[k])` (the same equations, in the same order; eq. numbers as there)."""
         cfg = self.config
         gens = self.generators
         obs, actions, rewards, costs, next_obs, terminated = stack_samples(batches)
@@ -152,19 +155,22 @@ class KSeedSacLagrangian:
         q_r_pi = self.q_r(obs, pi_actions)
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[:, 0]
-        if recents is None:
-            qc_mean = q_c_pi.detach().clamp(min=0.0).mean(dim=-1)
-        else:
+        qc_mean = q_c_pi.detach().clamp(min=0.0).mean(dim=-1)
+        if episode_costs is not None:
+            measured = cfg.cost_on_qc_scale(list(episode_costs))
+        elif recents is not None:
             with torch.no_grad():
                 recent_obs = torch.stack([r.observations for r in recents])
                 recent_actions, _ = self.actor(recent_obs, gens)
-                qc_mean = self.q_c(recent_obs, recent_actions)[:, 0].clamp(min=0.0).mean(dim=-1)
-        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, qc_mean)  # (K,) each
+                measured = self.q_c(recent_obs, recent_actions)[:, 0].clamp(min=0.0).mean(dim=-1)
+        else:
+            measured = qc_mean
+        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, measured)  # (K,) each
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha_col, multiplier.unsqueeze(1))
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
         step_actor_and_alpha(self.actor_optim, self.alpha_optim, self._actor_params, self.alpha, actor_loss, alpha_loss)
         beta_loss = step_multiplier_and_targets(  # one beta per seed, projected onto [0, upper] inside
-            self.multiplier, self.uses_multiplier, qc_mean, self._targets, self._onlines, cfg.polyak
+            self.multiplier, self.uses_multiplier, measured, self._targets, self._onlines, cfg.polyak
         )
 
         columns = torch.stack(
@@ -180,10 +186,11 @@ class KSeedSacLagrangian:
                 multiplier,
                 q_r_pi.detach().min(dim=1).values.mean(dim=-1),
                 qc_mean,
+                measured,
                 -log_pi.detach().mean(dim=-1),
             ],
             dim=1,
-        ).tolist()  # (K, 12): one synchronisation for all statistics
+        ).tolist()  # (K, 13): one synchronisation for all statistics
         return [UpdateStats(*row) for row in columns]
 
     # --- seed k in SacLagrangian's format ---------------------------------------------------

@@ -44,6 +44,10 @@ class Variant(enum.Enum):
     TSSAC = "tssac"
 
 
+MULTIPLIER_SIGNALS = ("episode_cost", "q_c")
+"""SacConfig.multiplier_signal's values."""
+
+
 @dataclass(frozen=True)
 class SacConfig:
     """Hyperparameters; defaults are the paper's Table 3 unless a field says otherwise."""
@@ -100,9 +104,24 @@ class SacConfig:
     """SAC_PENALTY only: reward r + penalty * c, penalty <= 0 (paper's experiment: 0, -10, -15,
     -50). Must be 0 for the other variants."""
 
+    multiplier_signal: str = "episode_cost"
+    """What eq. 15 and 17 compare with C; read by the training loop, which passes the measurement to
+    `update`. "episode_cost": the mean measured cost of the last `cost_window` training episodes,
+    converted to Q^c's scale (`cost_on_qc_scale`), as PID-Lagrangian (Stooke et al. 2020) and
+    OmniSafe's SAC-Lag measure the constraint, and as our PPO-Lag and CPO do. "q_c": the mean Q^c of
+    the current policy on recent transitions (`multiplier_window`), eq. 15's E[Q^c] literally.
+    Deviation from the paper, measured (results/README.md): a mean cost critic barely registers the
+    rare long stays inside a radar that make up the tail of the episode cost (its mean over an epoch
+    stayed under the limit in epochs whose training episodes averaged 5-10 x C), so with "q_c" beta
+    sat near 0 while the role's cost was above C."""
+
+    cost_window: int = 10
+    """"episode_cost": the number of most recent finished training episodes averaged (about one
+    4,000-decision epoch of 400-decision missions); before the first one ends, the measured cost is 0."""
+
     multiplier_window: int | None = 4000
-    """Q^c of eq. 15 and 17 is measured on transitions drawn from the last this many added to the
-    replay buffer, i.e. on the current policy's state distribution rho_pi, as eq. 15's expectation
+    """"q_c": Q^c of eq. 15 and 17 is measured on transitions drawn from the last this many added to
+    the replay buffer, i.e. on the current policy's state distribution rho_pi, as eq. 15's expectation
     says (None: on the update's own batch from the whole buffer, as WCSAC does). Deviation from
     common practice, not from the paper: the whole buffer keeps early exploration's states inside
     radars, whose cost-to-go no policy can bring under the limit, so beta would rise for ever."""
@@ -128,6 +147,11 @@ class SacConfig:
             (self.multiplier_max > 0.0, f"multiplier_max must be > 0, got {self.multiplier_max}"),
             (self.cost_limit >= 0.0, f"cost_limit must be >= 0, got {self.cost_limit}"),
             (self.episode_steps >= 1, f"episode_steps must be >= 1, got {self.episode_steps}"),
+            (
+                self.multiplier_signal in MULTIPLIER_SIGNALS,
+                f"multiplier_signal must be one of {', '.join(MULTIPLIER_SIGNALS)}, got {self.multiplier_signal!r}",
+            ),
+            (self.cost_window >= 1, f"cost_window must be >= 1, got {self.cost_window}"),
             (self.batch_size >= 1, f"batch_size must be >= 1, got {self.batch_size}"),
             (self.replay_size >= 1, f"replay_size must be >= 1, got {self.replay_size}"),
             (len(self.hidden_sizes) >= 1, "hidden_sizes must not be empty"),
@@ -146,6 +170,11 @@ class SacConfig:
     def qc_limit(self) -> float:
         """The cost limit C on the scale of Q^c (see `lagrange.qc_limit`)."""
         return qc_limit(self.cost_limit, self.gamma, self.episode_steps)
+
+    def cost_on_qc_scale(self, episode_cost: torch.Tensor | float) -> torch.Tensor:
+        """A measured cost per episode on Q^c's scale, by the conversion that gives `qc_limit` from C
+        (linear: comparing the result with qc_limit is comparing episode_cost with C)."""
+        return torch.as_tensor(episode_cost, dtype=torch.float32) * qc_limit(1.0, self.gamma, self.episode_steps)
 
 
 def fast_adam(params: list[torch.Tensor], lr: float) -> torch.optim.Adam:
@@ -244,7 +273,10 @@ class UpdateStats:
     q_r_mean: float
     """Batch mean of min_i Q^r_i(s, a~pi)."""
     qc_mean: float
-    """Batch mean of Q^c(s, a~pi): the measured cost fed to eq. 15 and 17."""
+    """Batch mean of Q^c(s, a~pi), clamped at >= 0."""
+    cost_signal: float
+    """The measured cost fed to eq. 15 and 17, on Q^c's scale (SacConfig.multiplier_signal): the
+    recent episodes' mean cost converted, or a mean Q^c."""
     entropy: float
     """Batch mean of -log pi(a|s), a ~ pi."""
 
@@ -305,11 +337,14 @@ class SacLagrangian:
         action, _ = self.actor(obs_t.unsqueeze(0) if obs_t.ndim == 1 else obs_t, deterministic)
         return action.squeeze(0).numpy() if obs_t.ndim == 1 else action.numpy()
 
-    def update(self, batch: ReplaySamples, recent: ReplaySamples | None = None) -> UpdateStats:
+    def update(
+        self, batch: ReplaySamples, recent: ReplaySamples | None = None, episode_cost: float | None = None
+    ) -> UpdateStats:
         """One gradient step of every part (Algorithm 1, line 13).
 
-        ``recent``: transitions of the current policy on which the multiplier's Q^c is measured
-        (see SacConfig.multiplier_window); None measures it on ``batch``.
+        What the multiplier (eq. 15, 17) compares with C (see SacConfig.multiplier_signal):
+        ``episode_cost``, the mean measured cost per recent episode, if given; else the mean Q^c of
+        the current policy on ``recent`` (SacConfig.multiplier_window), or on ``batch`` without it.
         """
         cfg = self.config
         obs, actions, rewards, costs, next_obs, terminated = batch
@@ -343,18 +378,21 @@ class SacLagrangian:
         # Without a multiplier (SAC, SAC_PENALTY) Q^c is only measured: no graph, no backward pass.
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[0]
-        if recent is None:
-            qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
-        else:
+        qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
+        if episode_cost is not None:
+            measured = cfg.cost_on_qc_scale(episode_cost)
+        elif recent is not None:
             with torch.no_grad():
                 recent_actions, _ = self.actor(recent.observations)
-                qc_mean = self.q_c(recent.observations, recent_actions)[0].clamp(min=0.0).mean()
-        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, qc_mean)
+                measured = self.q_c(recent.observations, recent_actions)[0].clamp(min=0.0).mean()
+        else:
+            measured = qc_mean
+        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, measured)
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)  # eq. 14, log_pi a constant
         step_actor_and_alpha(self.actor_optim, self.alpha_optim, self._actor_params, self.alpha, actor_loss, alpha_loss)
         beta_loss = step_multiplier_and_targets(
-            self.multiplier, self.uses_multiplier, qc_mean, self._targets, self._onlines, cfg.polyak
+            self.multiplier, self.uses_multiplier, measured, self._targets, self._onlines, cfg.polyak
         )
 
         scalars = torch.stack(
@@ -370,6 +408,7 @@ class SacLagrangian:
                 multiplier,
                 q_r_pi.detach().min(dim=0).values.mean(),
                 qc_mean,
+                measured,
                 -log_pi.detach().mean(),
             ]
         ).tolist()  # one synchronisation for all statistics
