@@ -110,10 +110,10 @@ class SacConfig:
     converted to Q^c's scale (`cost_on_qc_scale`), as PID-Lagrangian (Stooke et al. 2020) and
     OmniSafe's SAC-Lag measure the constraint, and as our PPO-Lag and CPO do. "q_c": the mean Q^c of
     the current policy on recent transitions (`multiplier_window`), eq. 15's E[Q^c] literally.
-    Deviation from the paper, measured (results/README.md): a mean cost critic barely registers the
-    rare long stays inside a radar that make up the tail of the episode cost (its mean over an epoch
-    stayed under the limit in epochs whose training episodes averaged 5-10 x C), so with "q_c" beta
-    sat near 0 while the role's cost was above C."""
+    Deviation from the paper (docs/decisions.md; the side-by-side run: results/multiplier-signal/): a
+    mean cost critic barely registers the rare long stays inside a radar that make up the tail of the
+    episode cost (its mean over an epoch stayed under the limit in epochs whose training episodes
+    averaged 5-10 x C), so with "q_c" beta sat near 0 while the role's cost was above C."""
 
     cost_window: int = 10
     """"episode_cost": the number of most recent finished training episodes averaged (about one
