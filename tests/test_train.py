@@ -200,6 +200,21 @@ def test_bad_arguments(tmp_path, capsys):
     assert "train decoy first" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("algo, setting, message", [
+    ("tssac", "hidden_sizes=128x", "hidden_sizes: expected a number, list or boolean, got '128x'"),
+    ("tssac", "multiplier_signal=qc", "multiplier_signal must be one of episode_cost, q_c, got 'qc'"),
+    ("tssac", "multiplier_signal=3", "multiplier_signal: expected a word, got 3"),
+    ("ppo", "gamma=high", "gamma: expected a number, list or boolean, got 'high'"),
+])
+def test_a_bad_learner_setting_is_one_line_before_any_work(tmp_path, capsys, algo, setting, message):
+    from tssac_core.cli import run
+
+    assert run(main, ["--algo", algo, "--set", setting, "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("content, message", [
     ("{not json", "is not readable"),
     ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),

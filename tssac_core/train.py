@@ -551,7 +551,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--stop-at-task-success", type=float, default=0.0, metavar="FRACTION",
                    help="end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
-    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a SacConfig field, e.g. --set lr=3e-4")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a learner setting (SacConfig or OnPolicyConfig field), e.g. --set lr=3e-4 or --set multiplier_signal=q_c")
     p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -653,16 +653,28 @@ def check_learner_settings(cfg: TrainConfig, scenario: Scenario) -> None:
     """Build the algorithm's config once, so that a bad --set fails before any work, in one line."""
     try:
         if cfg.algo in ON_POLICY:
-            from tssac_core.train_onpolicy import onpolicy_config
+            from tssac_core.train_onpolicy import OnPolicyConfig, onpolicy_config
 
+            check_override_kinds(cfg.sac, OnPolicyConfig)
             onpolicy_config(cfg, scenario)
         else:
+            check_override_kinds(cfg.sac, SacConfig)
             for key in cfg.sac:
                 if key not in {f.name for f in dataclasses.fields(SacConfig)} or key == "variant":
                     raise ValueError(f"unknown SacConfig field {key!r}")
             sac_config(cfg, scenario)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"invalid learner settings (--set): {exc}") from None
+
+
+def check_override_kinds(overrides: dict[str, Any], config: type) -> None:
+    """A word (``--set key=word``) only for a setting that is a word, such as multiplier_signal, and a
+    number, list or boolean for every other: ValueError naming the key."""
+    words = {f.name for f in dataclasses.fields(config) if isinstance(f.default, str)}
+    for key, value in overrides.items():
+        if isinstance(value, str) != (key in words):
+            expected = "a word" if key in words else "a number, list or boolean"
+            raise ValueError(f"{key}: expected {expected}, got {value!r}")
 
 
 def write_plots(out: Path, cost_limit: float) -> None:
