@@ -371,6 +371,22 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     assert tight(jobs["ppo-seed1"])  # nothing to go by: started
 
 
+def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke, tmp_path):
+    """Nothing had finished when the runner started, so a SAC-family job could start; once tssac-seed0
+    finishes (600 s), sac_lag-seed0 goes by it."""
+    from tssac_core.experiment_deadline import deadline_filter
+
+    grid = load_grid(write_grid(tmp_path / "two.yaml", smoke_text()))
+    results = tmp_path / "results"
+    states = [job_state(j) for j in grid.jobs(results)]
+    jobs = {s.job.name: s.job for s in states}
+    may_start = deadline_filter(states, 1500.0, lambda: 1000.0)
+    assert may_start(jobs["sac_lag-seed0"])  # nothing to go by yet
+    shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
+    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text("trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n")
+    assert not may_start(jobs["sac_lag-seed0"])  # 600 s from 1000 ends after 1500
+
+
 def test_a_job_the_deadline_refuses_is_reported_and_not_started(tmp_path):
     from tssac_core.experiment_jobs import run_jobs
 

@@ -19,7 +19,7 @@ from typing import Callable
 
 from tssac_core.cli import UsageError
 from tssac_core.experiment_grid import Job, learner_family
-from tssac_core.experiment_jobs import JobState, Status
+from tssac_core.experiment_jobs import JobState, Status, job_state
 from tssac_core.experiment_report import read_metrics, training_wall_s
 
 
@@ -58,10 +58,14 @@ def share_left(job: Job) -> float:
 
 def deadline_filter(states: list[JobState], finish_by: float, clock: Callable[[], float] = time.time) -> Callable[[Job], bool]:
     """Whether a job, started now, is expected to finish by ``finish_by`` (module docstring); ``states``: the
-    grid's jobs as the runner found them."""
-    expected = expected_run_s(states)
+    grid's jobs as the runner found them. Each decision reads again the jobs that were not finished then, so
+    that a run finishing during this invocation informs the next start (the first SAC-family run of a grid
+    gives the estimate for the rest of its family)."""
+    current = list(states)
 
     def may_start(job: Job) -> bool:
+        current[:] = [s if s.status is Status.FINISHED else job_state(s.job) for s in current]
+        expected = expected_run_s(current)
         whole = expected.get((job.entry.name, job.role), expected.get((learner_family(job.entry.algo), job.role)))
         return whole is None or clock() + whole * share_left(job) <= finish_by
 
