@@ -36,7 +36,7 @@ import torch
 from tqdm import tqdm
 
 from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
-from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, UpdateStats, Variant, transfer
+from tssac_core.algos.sac_lagrangian import MULTIPLIER_VARIANTS, SacConfig, SacLagrangian, UpdateStats, Variant, transfer
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.env import RoleTask, TaskStep
 from tssac_core.numpy_actor import export_actor
@@ -129,7 +129,7 @@ def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
     return cfg.stop_at_task_success > 0 and row["task_success"] >= cfg.stop_at_task_success
 
 
-SAC_MULTIPLIER_ALGOS = ("tssac", "sac_lag")
+SAC_MULTIPLIER_ALGOS = tuple(algo for algo, variant in SAC_FAMILY.items() if variant in MULTIPLIER_VARIANTS)
 """The SAC family's algorithms with a learned multiplier (SacConfig.multiplier_signal matters)."""
 
 OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}

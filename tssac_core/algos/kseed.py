@@ -27,12 +27,14 @@ from tssac_core.algos.optim_members import LoadMember, ToMember
 from tssac_core.algos.lagrange import DampedLagrangeMultiplier
 from tssac_core.algos.replay import ReplaySamples
 from tssac_core.algos.sac_lagrangian import (
+    MULTIPLIER_VARIANTS,
     SacConfig,
     SacLagrangian,
     UpdateStats,
     Variant,
     TRANSFERRED_NETWORKS,
     fast_adam,
+    measured_cost,
     multiplier_terms,
     step_actor_and_alpha,
     step_multiplier_and_targets,
@@ -62,7 +64,7 @@ class KSeedSacLagrangian:
         self.q_r_target = copy.deepcopy(self.q_r).requires_grad_(False)
         self.q_c_target = copy.deepcopy(self.q_c).requires_grad_(False)
         self.alpha = torch.full((n_seeds,), config.alpha_init, requires_grad=True)
-        self.uses_multiplier = config.variant in (Variant.SAC_LAG, Variant.TSSAC)
+        self.uses_multiplier = config.variant in MULTIPLIER_VARIANTS
         self.multiplier = DampedLagrangeMultiplier(
             cost_limit=config.qc_limit,
             k_d=config.k_d if config.variant is Variant.TSSAC else 0.0,
@@ -156,15 +158,13 @@ class KSeedSacLagrangian:
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[:, 0]
         qc_mean = q_c_pi.detach().clamp(min=0.0).mean(dim=-1)
-        if episode_costs is not None:
-            measured = cfg.cost_on_qc_scale(list(episode_costs))
-        elif recents is not None:
-            with torch.no_grad():
-                recent_obs = torch.stack([r.observations for r in recents])
-                recent_actions, _ = self.actor(recent_obs, gens)
-                measured = self.q_c(recent_obs, recent_actions)[:, 0].clamp(min=0.0).mean(dim=-1)
-        else:
-            measured = qc_mean
+
+        def recent_qc_mean() -> torch.Tensor:
+            assert recents is not None
+            recent_obs = torch.stack([r.observations for r in recents])
+            return self.q_c(recent_obs, self.actor(recent_obs, gens)[0])[:, 0].clamp(min=0.0).mean(dim=-1)
+
+        measured = measured_cost(cfg, qc_mean, episode_costs, recent_qc_mean if recents is not None else None)
         beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, measured)  # (K,) each
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha_col, multiplier.unsqueeze(1))
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import enum
 import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,9 @@ class Variant(enum.Enum):
     SAC_LAG = "sac_lag"
     TSSAC = "tssac"
 
+
+MULTIPLIER_VARIANTS = (Variant.SAC_LAG, Variant.TSSAC)
+"""The variants that learn the cost multiplier beta (eq. 15)."""
 
 MULTIPLIER_SIGNALS = ("episode_cost", "q_c")
 """SacConfig.multiplier_signal's values."""
@@ -171,7 +175,7 @@ class SacConfig:
         """The cost limit C on the scale of Q^c (see `lagrange.qc_limit`)."""
         return qc_limit(self.cost_limit, self.gamma, self.episode_steps)
 
-    def cost_on_qc_scale(self, episode_cost: torch.Tensor | float) -> torch.Tensor:
+    def cost_on_qc_scale(self, episode_cost: torch.Tensor | float | Sequence[float]) -> torch.Tensor:
         """A measured cost per episode on Q^c's scale, by the conversion that gives `qc_limit` from C
         (linear: comparing the result with qc_limit is comparing episode_cost with C)."""
         return torch.as_tensor(episode_cost, dtype=torch.float32) * qc_limit(1.0, self.gamma, self.episode_steps)
@@ -208,6 +212,23 @@ def multiplier_terms(
         zero = torch.zeros_like(qc_mean)
         return multiplier.beta, zero, zero
     return multiplier.beta, multiplier.damping(qc_mean), multiplier.effective(qc_mean)
+
+
+def measured_cost(
+    cfg: SacConfig,
+    qc_mean: torch.Tensor,
+    episode_cost: float | Sequence[float] | None,
+    recent_qc_mean: Callable[[], torch.Tensor] | None,
+) -> torch.Tensor:
+    """What eq. 15 and 17 compare with C, on Q^c's scale (SacConfig.multiplier_signal): the recent
+    episodes' measured cost if given, else the mean Q^c on the recent batch (``recent_qc_mean``, computed
+    only then), else the update batch's ``qc_mean``."""
+    if episode_cost is not None:
+        return cfg.cost_on_qc_scale(episode_cost)
+    if recent_qc_mean is not None:
+        with torch.no_grad():
+            return recent_qc_mean()
+    return qc_mean
 
 
 def step_actor_and_alpha(
@@ -297,7 +318,7 @@ class SacLagrangian:
         self.q_r_target = copy.deepcopy(self.q_r).requires_grad_(False)
         self.q_c_target = copy.deepcopy(self.q_c).requires_grad_(False)
         self.alpha = torch.tensor(config.alpha_init, requires_grad=True)
-        self.uses_multiplier = config.variant in (Variant.SAC_LAG, Variant.TSSAC)
+        self.uses_multiplier = config.variant in MULTIPLIER_VARIANTS
         self.multiplier = DampedLagrangeMultiplier(
             cost_limit=config.qc_limit,
             k_d=config.k_d if config.variant is Variant.TSSAC else 0.0,
@@ -379,14 +400,12 @@ class SacLagrangian:
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[0]
         qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
-        if episode_cost is not None:
-            measured = cfg.cost_on_qc_scale(episode_cost)
-        elif recent is not None:
-            with torch.no_grad():
-                recent_actions, _ = self.actor(recent.observations)
-                measured = self.q_c(recent.observations, recent_actions)[0].clamp(min=0.0).mean()
-        else:
-            measured = qc_mean
+
+        def recent_qc_mean() -> torch.Tensor:
+            assert recent is not None
+            return self.q_c(recent.observations, self.actor(recent.observations)[0])[0].clamp(min=0.0).mean()
+
+        measured = measured_cost(cfg, qc_mean, episode_cost, recent_qc_mean if recent is not None else None)
         beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, measured)
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)  # eq. 14, log_pi a constant
