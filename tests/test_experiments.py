@@ -255,6 +255,22 @@ def test_transfer_runs_train_their_role_beside_the_teammates_and_are_reported(sm
     assert "compacted 4 finished runs" in capsys.readouterr().out
 
 
+def test_only_trains_the_jobs_its_patterns_name(smoke, tmp_path, capsys):
+    """With tssac-seed0 finished and sac_lag-seed0 new, --only 'tssac-*' starts nothing; a pattern naming no job is one line."""
+    results = tmp_path / "results"
+    shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
+    grid = ["--grid", "experiments/smoke.yaml", "--results", str(results)]
+    assert main([*grid, "--dry-run", "--only", "sac_lag-*"]) == 0
+    assert [line.split()[:2] for line in capsys.readouterr().out.splitlines()] == [["new", "sac_lag-seed0"]]
+    assert main([*grid, "--only", "tssac-*"]) == 0
+    assert "1 jobs: 1 finished, 0 to run" in capsys.readouterr().out
+    assert not (results / "runs" / "sac_lag-seed0").exists()
+    assert run(main, [*grid, "--only", "tssac-*", "--only", "sac-seed*"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: --only 'sac-seed*' matches none of the jobs of experiments/smoke.yaml (see --dry-run for their names)", err
+    assert not (results / "runs" / "sac_lag-seed0").exists()
+
+
 def test_a_run_with_other_settings_is_refused(smoke, tmp_path, capsys):
     results = tmp_path / "r"
     run_dir = results / "runs" / "tssac-seed0"

@@ -5,6 +5,7 @@ Examples::
     python -m tssac_core.experiments --grid experiments/paper.yaml --dry-run      # the jobs and their status
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2       # train what is missing, then report
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --finish-by 17:30  # only what ends by 17:30
+    python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --only 'tssac-*' --only 'sac_lag-*'  # these first
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
     python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
@@ -19,6 +20,7 @@ team is evaluated (:mod:`tssac_core.experiment_report`) and ``<results>/table4.m
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import shutil
 import sys
 import time
@@ -42,10 +44,11 @@ def say(line: str) -> None:
     print(line, flush=True)
 
 
-def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by: float | None = None) -> list[Launch]:
-    """Run every job that is not finished (with ``finish_by``, a POSIX time: those expected to finish by
-    then); refuses (UsageError) if a run directory holds other settings."""
-    states = [job_state(job) for job in all_jobs(grid, results)]
+def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by: float | None = None,
+          only: Sequence[str] = ()) -> list[Launch]:
+    """Run every job that is not finished (with ``only``, of the jobs those patterns name; with ``finish_by``,
+    a POSIX time: those expected to finish by then); refuses (UsageError) if a run directory holds other settings."""
+    states = [job_state(job) for job in selected_jobs(grid, results, only)]
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
         more = f" (and {len(conflicts) - 1} more: see --dry-run)" if len(conflicts) > 1 else ""
@@ -62,6 +65,16 @@ def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by
 def all_jobs(grid: Grid, results: Path) -> list[Job]:
     """The teams of Table 4, then the transfer experiment's runs."""
     return [*grid.jobs(results), *grid.transfer_jobs(results)]
+
+
+def selected_jobs(grid: Grid, results: Path, only: Sequence[str] = ()) -> list[Job]:
+    """The grid's jobs (in the grid's order) whose names match one of the shell patterns ``only`` (all of
+    them without patterns); refuses (UsageError) a pattern that matches none."""
+    jobs = all_jobs(grid, results)
+    for pattern in only:
+        if not any(fnmatch.fnmatchcase(job.name, pattern) for job in jobs):
+            raise UsageError(f"--only {pattern!r} matches none of the jobs of {grid.source} (see --dry-run for their names)")
+    return [job for job in jobs if not only or any(fnmatch.fnmatchcase(job.name, pattern) for pattern in only)]
 
 
 def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
@@ -96,9 +109,9 @@ def mission_for_fig9(grid: Grid, finished: list[Job]) -> tuple[MissionResults, S
     return fly_one(job.out, spec), load(spec.scenario), f"{job.name}: {spec.scenario.name}, layout 1 of seed {spec.seed}"
 
 
-def dry_run(grid: Grid, results: Path, report: Say = say) -> None:
-    """Print every job with its status and what running the grid would do with it."""
-    for job in all_jobs(grid, results):
+def dry_run(grid: Grid, results: Path, report: Say = say, only: Sequence[str] = ()) -> None:
+    """Print every job (with ``only``, those the patterns name) with its status and what running the grid would do with it."""
+    for job in selected_jobs(grid, results, only):
         state = job_state(job)
         what = {
             Status.FINISHED: "",
@@ -130,6 +143,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)")
     p.add_argument("--finish-by", metavar="HH:MM", help="start only jobs expected to finish by then (today, local time; or "
                    "'YYYY-MM-DD HH:MM'), by what the grid's finished runs of the same entry took; the rest wait for the next run")
+    p.add_argument("--only", metavar="PATTERN", action="append", default=[], help="train only the jobs whose names (as --dry-run "
+                   "prints them, e.g. tssac-seed1) match this shell pattern, e.g. 'sac_lag-*'; may be given more than once")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished")
     mode.add_argument("--dry-run", action="store_true", help="print the jobs and their status (finished, partial, new, conflict) and exit")
@@ -146,12 +161,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     grid = load_grid(args.grid)
     if args.dry_run:
-        dry_run(grid, args.results)
+        dry_run(grid, args.results, only=args.only)
         return 0
     if args.compact:
         compact(grid, args.results)
         return 0
-    launches = [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by)
+    launches = [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by, only=args.only)
     make_report(grid, args.results)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]
     if failed:
