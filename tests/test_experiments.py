@@ -113,6 +113,17 @@ def test_malformed_grid_is_one_line(tmp_path, capsys, change, message):
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize("mode", ["--report-only", "--compact"])
+@pytest.mark.parametrize("chooser", [["--only", "tssac-*"], ["--finish-by", "2099-01-01 00:00"]])
+def test_choosing_jobs_for_a_mode_that_trains_none_is_refused(tmp_path, capsys, mode, chooser):
+    """--only and --finish-by pick what to train; beside --report-only or --compact they would be ignored in silence."""
+    results = tmp_path / "r"
+    assert run(main, ["--grid", str(ROOT / "experiments" / "smoke.yaml"), "--results", str(results), mode, *chooser]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {chooser[0]} chooses jobs to train, and {mode} trains nothing (it works on every finished run)", err
+    assert not results.exists()
+
+
 def test_missing_grid_file(tmp_path, capsys):
     assert run(main, ["--grid", str(tmp_path / "none.yaml"), "--dry-run"]) == 2
     assert "cannot read file" in capsys.readouterr().err

@@ -153,6 +153,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
+    trains_nothing = "--report-only" if args.report_only else "--compact" if args.compact else None
+    if trains_nothing and (args.only or args.finish_by is not None):
+        chooser = "--only" if args.only else "--finish-by"
+        raise UsageError(f"{chooser} chooses jobs to train, and {trains_nothing} trains nothing (it works on every finished run)")
     args.finish_by = parse_finish_by(args.finish_by) if args.finish_by is not None else None
     return args
 
