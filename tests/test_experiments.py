@@ -20,7 +20,7 @@ from tssac_core.cli import run
 from tssac_core.experiment_figures import penalty_entries
 from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
-from tssac_core.experiment_report import pooled_cost, steps_to_threshold, transfer_speedup, within_limit
+from tssac_core.experiment_report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
 from tssac_core.experiments import main, train
 from tssac_core.train import METRIC_FIELDS
 
@@ -355,7 +355,9 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     with (run_dir / "metrics.csv").open() as fh:
         epochs = [(r["role"], r["epoch"]) for r in csv.DictReader(fh)]
     assert epochs == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]  # nothing run twice
-    assert (run_dir / LOG_NAME).read_text().count("runner: ") == 2
+    log = (run_dir / LOG_NAME).read_text()
+    assert log.count("runner: ") == 3 and len(re.findall(r"runner: stopped after \d+ s", log)) == 1, log
+    assert training_wall_s(run_dir) > int(re.search(r"trained .* in (\d+) s", log).group(1))  # the stopped invocation counts
 
 
 # ------------------------------------------------------------------------------------ --finish-by
@@ -506,15 +508,16 @@ def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_li
     assert pooled_cost([quiet])["ci95"] == [0.0, 0.0] and pooled_cost([])["mean"] is None
 
 
-def test_training_wall_time_sums_the_invocations_that_finished(tmp_path):
-    from tssac_core.experiment_report import training_wall_s
-
+def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_stopped(tmp_path):
     assert training_wall_s(tmp_path) is None  # no train.log
     (tmp_path / "train.log").write_text(
         "=== 2026-11-22 15:41:04 runner: python -m tssac_core.train ...\n"
         "trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r/runs/tssac-seed0\n"
-        "=== 2026-11-22 16:00:00 runner: python -m tssac_core.train --resume ...\n"  # killed: no line
+        "=== 2026-11-22 16:00:00 runner: python -m tssac_core.train --resume ...\n"  # killed otherwise: no line
+        "=== 2026-11-22 16:05:00 runner: python -m tssac_core.train --resume ...\n"
+        "INFO tssac_core.train: decoy epoch 3: ... stopped after 9 s\n"  # not the runner's line
+        "=== 2026-11-22 16:06:40 runner: stopped after 100 s; the next run resumes it\n"
         "=== 2026-11-22 16:10:00 runner: python -m tssac_core.train --resume ...\n"
         "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n")
-    assert training_wall_s(tmp_path) == 500.0
+    assert training_wall_s(tmp_path) == 600.0
 

@@ -13,7 +13,9 @@ A job's state is read from its run directory alone:
 
 Each job runs in its own process group (its own session), with stdout and stderr appended to
 ``train.log`` in its run directory. On SIGINT or SIGTERM the runner stops every job it started (SIGTERM
-to the group, SIGKILL after a grace period) before it exits, so no training process outlives it.
+to the group, SIGKILL after a grace period) before it exits, so no training process outlives it, and
+writes in each stopped job's train.log how long that invocation ran (its time counts in the run's wall
+time: :func:`tssac_core.experiment_report.training_wall_s`).
 """
 
 from __future__ import annotations
@@ -171,6 +173,12 @@ def start(job: Job, resume: bool) -> tuple[subprocess.Popen[bytes], tuple[str, .
     return proc, cmd
 
 
+def log_stopped(job: Job, seconds: float) -> None:
+    """Record in the job's train.log that the runner stopped it after ``seconds`` of training."""
+    with (job.out / LOG_NAME).open("a") as log:
+        log.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: stopped after {seconds:.0f} s; the next run resumes it\n")
+
+
 def stop(proc: subprocess.Popen[bytes], grace_s: float = GRACE_S) -> None:
     """Stop a job's whole process group: SIGTERM, then SIGKILL if it has not exited after ``grace_s``."""
     if proc.poll() is not None:
@@ -217,7 +225,7 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
     if any(s.status is Status.CONFLICT for s in states):
         raise ValueError("run_jobs was given a conflicting job")
     launches: list[Launch] = []
-    running: dict[int, tuple[subprocess.Popen[bytes], int]] = {}
+    running: dict[int, tuple[subprocess.Popen[bytes], int, float]] = {}  # pid -> process, launch index, start time
     with interrupt_on_sigterm():
         try:
             while pending or running:
@@ -228,10 +236,10 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
                         continue
                     resume = state.status is Status.PARTIAL
                     proc, cmd = start(state.job, resume)
-                    running[proc.pid] = (proc, len(launches))
+                    running[proc.pid] = (proc, len(launches), time.monotonic())
                     launches.append(Launch(state.job, cmd, resume))
                     report(f"started {state.job.name}{' (resume)' if resume else ''}: pid {proc.pid}, log {state.job.out / LOG_NAME}")
-                for pid, (proc, index) in list(running.items()):
+                for pid, (proc, index, _) in list(running.items()):
                     code = proc.poll()
                     if code is None:
                         continue
@@ -243,7 +251,8 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
                            + ("" if ok else f": see {launch.job.out / LOG_NAME}"))
                 time.sleep(POLL_S)
         finally:
-            for proc, index in running.values():
+            for proc, index, started in running.values():
                 report(f"stopping {launches[index].job.name} (pid {proc.pid}); it resumes on the next run")
                 stop(proc)
+                log_stopped(launches[index].job, time.monotonic() - started)
     return launches

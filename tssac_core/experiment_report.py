@@ -178,18 +178,21 @@ def over_seeds(per_seed: dict[int, float]) -> dict[str, Any]:
     }
 
 
-TRAINED_LINE = re.compile(r"^trained .* in (\d+) s; results in ", re.MULTILINE)
+TRAINED_LINE = re.compile(r"^trained .* in (\d+) s; results in |^=== .* runner: stopped after (\d+) s", re.MULTILINE)
+"""The line ``tssac_core.train`` prints when it finishes, and the one the grid runner writes when it stops a job."""
 PAPER_EPOCHS = 50
 """Table 3: epochs per role."""
 
 
 def training_wall_s(run: Path) -> float | None:
-    """Wall seconds of a run as ``tssac_core.train`` reports them in its train.log (one "trained ... in N s"
-    line per invocation that finished, summed over resumes; time lost to a kill is not counted)."""
+    """Wall seconds of a run by its train.log: summed over its invocations, those that finished (the "trained
+    ... in N s" line of ``tssac_core.train``) and those the grid runner stopped ("stopped after N s", the
+    epoch they were in included: it was spent, though it is trained again). An invocation killed some other
+    way leaves no line, and its time is not counted."""
     log = run / "train.log"
     if not log.is_file():
         return None
-    seconds = [int(m) for m in TRAINED_LINE.findall(log.read_text(errors="replace"))]
+    seconds = [int(done or stopped) for done, stopped in TRAINED_LINE.findall(log.read_text(errors="replace"))]
     return float(sum(seconds)) if seconds else None
 
 
