@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
-from tssac_core.experiment_figures import penalty_entries
+from tssac_core.experiment_figures import clipped_error, penalty_entries
 from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
 from tssac_core.experiment_report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
@@ -455,6 +455,12 @@ def test_transfer_speedup(tmp_path):
     assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
     assert result["tssac"]["mean_task_success"]["per_seed"] == {"0": pytest.approx(0.55), "1": pytest.approx(29 / 30)}
     assert result["sac_lag"]["mean_task_success"]["mean"] == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
+
+
+def test_error_bars_stop_where_the_quantity_does():
+    """mean ± std of a cost (0.5 ± 1.8) must not reach below 0, nor a rate (94 ± 9) above 100%."""
+    np.testing.assert_allclose(clipped_error([0.5, 4.0], [1.8, 1.0], 0.0), [[0.5, 1.0], [1.8, 1.0]])
+    np.testing.assert_allclose(clipped_error([94.0, 6.0, np.nan], [9.0, 0.0, 0.0], 0.0, 100.0), [[9.0, 0.0, np.nan], [6.0, 0.0, np.nan]])
 
 
 def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():

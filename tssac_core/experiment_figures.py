@@ -122,6 +122,13 @@ def fig10_boxplots(path: Path, per_episode: dict[str, list[dict[str, Any]]], cos
     plt.close(fig)
 
 
+def clipped_error(mean: Sequence[float], std: Sequence[float], low: float, high: float = math.inf) -> np.ndarray:
+    """Error bars of ± std, cut where the quantity cannot go (a rate under 0 or over 100%, a cost under 0):
+    shape (2, N), the lengths below and above each mean, as matplotlib's ``yerr`` takes them."""
+    m, d = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
+    return np.stack([np.minimum(d, np.maximum(m - low, 0.0)), np.minimum(d, np.maximum(high - m, 0.0))])
+
+
 def bar_panel(path: Path, title: str, names: Sequence[str], rates: Sequence[dict[str, Any]], costs: Sequence[dict[str, Any]],
               cost_limit: float, reference: tuple[str, float, float] | None = None) -> None:
     """Success rate and cost bars (mean ± std over seeds) per entry; ``reference`` = (label, success, cost)."""
@@ -140,10 +147,10 @@ def bar_panel(path: Path, title: str, names: Sequence[str], rates: Sequence[dict
     rate_colours = ["tab:blue"] * len(names) + ["tab:gray"] * (reference is not None)
     cost_colours = ["tab:red"] * len(names) + ["tab:gray"] * (reference is not None)
     fig, axes = plt.subplots(1, 2, figsize=(max(8.0, 1.1 * len(labels) * 2), 3.8))
-    axes[0].bar(x, rate_mean, yerr=rate_std, capsize=3, color=rate_colours)
+    axes[0].bar(x, rate_mean, yerr=clipped_error(rate_mean, rate_std, 0.0, 100.0), capsize=3, color=rate_colours)
     axes[0].set_ylabel("success rate (%)")
     axes[0].set_ylim(0, 105)
-    axes[1].bar(x, cost_mean, yerr=cost_std, capsize=3, color=cost_colours)
+    axes[1].bar(x, cost_mean, yerr=clipped_error(cost_mean, cost_std, 0.0), capsize=3, color=cost_colours)
     axes[1].axhline(cost_limit, color="red", ls="--", label=f"C = {cost_limit:g}")
     axes[1].set_ylabel("hazard cost per UAV per mission")
     axes[1].legend(fontsize=7)
