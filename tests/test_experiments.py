@@ -22,7 +22,7 @@ from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
 from tssac_core.experiment_report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
 from tssac_core.experiments import main, train
-from tssac_core.train import METRIC_FIELDS
+from tssac_core.train import METRIC_FIELDS, within_limit
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -66,6 +66,9 @@ def test_paper_grid():
     assert tssac.sac == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
     assert ppo.sac == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
+    # each ships its epoch by its own rule: within C where the learner is given C (docs/decisions.md)
+    assert [within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [True, True, False, False, True, True, False, False, False]
+    assert load_grid("results/earlier/grid-10-epochs/paper.yaml").train.selection == "within_limit"  # pinned: its runs were
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
         assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (25, 4000, 1, 10, 2, 0, 1)
     transfer = grid.transfer_jobs(Path("results"))  # the transfer experiment: each role alone, both sides, every seed
@@ -86,6 +89,7 @@ def test_paper_grid():
         (("  epochs: 1\n", "  epochs: many\n"), "train.epochs: expected an integer, got 'many'"),
         (("  epochs: 1\n", "  epochs: 0\n"), "train.epochs: must be >= 1"),
         (("  envs: 1\n", "  envs: 1\n  speed: 3\n"), "train.speed: unknown key"),
+        (("  envs: 1\n", "  envs: 1\n  selection: best\n"), "train.selection: expected one of within_limit, success, got 'best'"),
         (("  scenario: scenarios/strike.yaml", "  scenario: scenarios/nowhere.yaml"), "train.scenario: file not found"),
         (("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"), "algos[1].penalty: only sac_penalty takes a penalty"),
         (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: unknown algorithm 'sarsa'"),

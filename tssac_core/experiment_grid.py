@@ -50,7 +50,7 @@ from tssac_core.cli import UsageError
 from tssac_core.observation import ObservationMode
 from tssac_core.scenario import ROLES, Role
 from tssac_core.scenario import load as load_scenario
-from tssac_core.train import ALGOS, ON_POLICY, TrainConfig, check_learner_settings
+from tssac_core.train import ALGOS, ON_POLICY, SELECTIONS, TrainConfig, check_learner_settings
 from tssac_core.train import parse_args as parse_train_args
 from tssac_core.yaml_file import read_yaml
 
@@ -94,6 +94,8 @@ class TrainArgs:
     """torch threads of each job (``--jobs`` jobs run at once)."""
     validation_episodes: int = TrainConfig.validation_episodes
     observation: str = TrainConfig.observation
+    selection: str = TrainConfig.selection
+    """"" (default): each algorithm's own epoch selection; a word pins one for every job (TrainConfig.selection)."""
 
 
 @dataclass(frozen=True)
@@ -202,6 +204,8 @@ def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
             "--action-repeat", str(args.action_repeat), "--update-every", str(args.update_every),
             "--start-steps", str(args.start_steps), "--update-after", str(args.update_after), "--threads", str(args.threads),
             "--validation-episodes", str(args.validation_episodes), "--observation", args.observation]
+    if args.selection:
+        argv += ["--selection", args.selection]
     if entry.algo == "sac_penalty":
         argv += ["--penalty", repr(entry.penalty)]
     for key, value in entry.overrides.items():
@@ -335,6 +339,10 @@ class _Reader:
             if data["observation"] not in modes:
                 raise self.fail("train.observation", f"expected one of {', '.join(modes)}, got {data['observation']!r}")
             values["observation"] = data["observation"]
+        if "selection" in data:
+            if data["selection"] not in SELECTIONS:
+                raise self.fail("train.selection", f"expected one of {', '.join(SELECTIONS)}, got {data['selection']!r}")
+            values["selection"] = data["selection"]
         return TrainArgs(**values)
 
     def transfer(self, value: Any, entries: dict[str, AlgoEntry]) -> TransferExperiment:

@@ -105,6 +105,11 @@ class TrainConfig:
     stop_at_task_success: float = 0.0
     """End a role after the first epoch whose task success in training reaches this fraction (0: train every
     epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
+    selection: str = ""
+    """Which validated epoch a role ships (tssac_core.validation): "within_limit", the best mission success
+    among the epochs within the cost limit; "success", the best mission success whatever the cost. "" (the
+    default): the algorithm's own, "within_limit" for the learners that are given the limit
+    (CONSTRAINED_ALGOS), "success" for those that are not (sac, sac_penalty, ppo)."""
     sac: dict[str, Any] = field(default_factory=dict)
     """Overrides of SacConfig fields (Table 3 defaults)."""
 
@@ -132,8 +137,23 @@ def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
 SAC_MULTIPLIER_ALGOS = tuple(algo for algo, variant in SAC_FAMILY.items() if variant in MULTIPLIER_VARIANTS)
 """The SAC family's algorithms with a learned multiplier (SacConfig.multiplier_signal matters)."""
 
-OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0}
-"""Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly)."""
+CONSTRAINED_ALGOS = (*SAC_MULTIPLIER_ALGOS, "ppo_lag", "cpo")
+"""The learners that are given the cost limit C: they ship the best epoch within it (TrainConfig.selection)."""
+SELECTIONS = ("within_limit", "success")
+
+OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0, "selection": "within_limit"}
+"""Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly, and
+every algorithm shipped the best epoch within the cost limit)."""
+
+
+def within_limit(cfg: TrainConfig) -> bool:
+    """Whether the run ships the best epoch within the cost limit (TrainConfig.selection, resolved)."""
+    return (cfg.selection or default_selection(cfg.algo)) == "within_limit"
+
+
+def default_selection(algo: str) -> str:
+    """TrainConfig.selection's default: a learner that is not given the cost limit is not judged by it either."""
+    return "within_limit" if algo in CONSTRAINED_ALGOS else "success"
 
 
 def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainConfig:
@@ -152,16 +172,20 @@ def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainCo
         raise UsageError(f"{source}: roles: expected a list of role names")
     if full.get("algo") in SAC_MULTIPLIER_ALGOS and isinstance(full.get("sac"), dict) and "multiplier_signal" not in full["sac"]:
         full["sac"] = {**full["sac"], "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
+    if full["selection"] not in SELECTIONS:
+        raise UsageError(f"{source}: selection: expected one of {', '.join(SELECTIONS)}, got {full['selection']!r}")
     return TrainConfig(**{**full, "roles": tuple(full["roles"])})
 
 
 def with_recorded_defaults(cfg: TrainConfig) -> TrainConfig:
-    """``cfg`` with TSSAC's and SAC-Lagrangian's multiplier_signal written out in ``sac`` when the command
-    line left it to the default: its default changed ("q_c" before), so a run's config.json records which
-    it used."""
-    if cfg.algo not in SAC_MULTIPLIER_ALGOS or "multiplier_signal" in cfg.sac:
-        return cfg
-    return dataclasses.replace(cfg, sac={**cfg.sac, "multiplier_signal": SacConfig.multiplier_signal})
+    """``cfg`` with the settings whose default changed written out, so that a run's config.json records
+    which it used: TSSAC's and SAC-Lagrangian's multiplier_signal in ``sac`` ("q_c" before), and the
+    epoch selection (every algorithm's was "within_limit" before)."""
+    if cfg.algo in SAC_MULTIPLIER_ALGOS and "multiplier_signal" not in cfg.sac:
+        cfg = dataclasses.replace(cfg, sac={**cfg.sac, "multiplier_signal": SacConfig.multiplier_signal})
+    if not cfg.selection:
+        cfg = dataclasses.replace(cfg, selection=default_selection(cfg.algo))
+    return cfg
 
 
 def reward_config(cfg: TrainConfig) -> RewardConfig:
@@ -347,7 +371,7 @@ def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, 
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode)
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, within_limit(cfg))
     rng = np.random.default_rng([cfg.seed, role.index])
     return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset(),
                     recent_costs=collections.deque(maxlen=sac_cfg.cost_window))
@@ -545,6 +569,9 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
     p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
+    p.add_argument("--selection", choices=SELECTIONS, help="which validated epoch a role ships: the best mission success among the "
+                   "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
+                   "(success: default of sac, sac_penalty, ppo)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--teammates", type=Path, help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
                    "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")
@@ -581,7 +608,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
         validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
         init_from=str(a.init_from) if a.init_from else "", teammates=str(a.teammates) if a.teammates else "",
-        stop_at_task_success=a.stop_at_task_success,
+        stop_at_task_success=a.stop_at_task_success, selection=a.selection or "",
     )
     return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
 

@@ -1,0 +1,67 @@
+"""Which epoch a role ships (tssac_core.validation): the constrained learners within the cost limit, the others by success."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+
+from tssac_core.cli import UsageError
+from tssac_core.experiment_jobs import config_difference
+from tssac_core.train import ALGOS, TrainConfig, config_from_saved, default_selection, parse_cli, with_recorded_defaults, within_limit
+from tssac_core.validation import Score
+
+
+def score(epoch: int, success: float, cost: float) -> Score:
+    return Score(epoch, success, success, cost, cost_limit=3.0)
+
+
+# Plain SAC's decoy, seed 0 of the grid: only its first epoch was within C.
+EPOCHS = [score(1, 0.44, 0.0), score(5, 0.92, 7.0), score(12, 0.96, 98.0), score(13, 0.96, 174.0), score(20, 0.90, 2.0)]
+
+
+def best(scores: list[Score], limit_first: bool) -> Score:
+    return max(scores, key=lambda s: s.key(limit_first))
+
+
+def test_within_the_limit_the_best_success_among_epochs_at_or_under_c_ships():
+    assert best(EPOCHS, True).epoch == 20  # 0.90 at cost 2 beats 0.96 at cost 98
+    assert best(EPOCHS[:4], True).epoch == 1  # the one epoch within C, however poor
+    assert best([score(3, 0.9, 40.0), score(4, 1.0, 9.0)], True).epoch == 4  # none within: the lowest cost
+    assert best([score(7, 0.9, 3.0), score(8, 0.9, 3.0)], True).epoch == 7  # at C is within; a tie: the earlier
+
+
+def test_by_success_the_cost_only_breaks_ties():
+    assert best(EPOCHS, False).epoch == 12  # 0.96 twice: the lower cost
+    assert best([score(7, 0.9, 0.0), score(8, 0.9, 0.0)], False).epoch == 7
+
+
+def test_only_the_learners_given_the_limit_are_selected_within_it():
+    assert {a: default_selection(a) for a in ALGOS} == {
+        "tssac": "within_limit", "sac_lag": "within_limit", "ppo_lag": "within_limit", "cpo": "within_limit",
+        "sac": "success", "sac_penalty": "success", "ppo": "success"}
+    cfg, *_ = parse_cli(["--algo", "sac", "--out", "r"])
+    assert cfg.selection == "" and not within_limit(cfg)
+    assert with_recorded_defaults(cfg).selection == "success"  # what config.json records
+    cfg, *_ = parse_cli(["--algo", "sac", "--selection", "within_limit", "--out", "r"])
+    assert within_limit(cfg) and with_recorded_defaults(cfg).selection == "within_limit"
+
+
+def saved(cfg: TrainConfig, **changes) -> dict:
+    return json.loads(json.dumps({**dataclasses.asdict(with_recorded_defaults(cfg)), **changes}))
+
+
+def test_a_run_from_before_the_setting_shipped_within_the_limit():
+    """Every algorithm's epochs were selected within C before: an old SAC run is not the grid's SAC run now, a TSSAC one is."""
+    for algo, same in (("sac", False), ("ppo", False), ("tssac", True), ("cpo", True)):
+        cfg, *_ = parse_cli(["--algo", algo, "--out", "r"])
+        old = saved(cfg)
+        del old["selection"]
+        assert config_from_saved(old).selection == "within_limit"
+        difference = config_difference(old, cfg)
+        assert (difference == "") is same, difference
+        if not same:
+            assert "selection: 'within_limit' in its config.json, 'success' in the grid" in difference
+    with pytest.raises(UsageError, match="selection: expected one of within_limit, success, got 'best'"):
+        config_from_saved(saved(cfg, selection="best"))
