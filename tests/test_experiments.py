@@ -197,6 +197,15 @@ def test_report_writes_table4_json_and_figures(smoke):
         assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
 
 
+def test_a_figure_the_runs_no_longer_allow_is_deleted(smoke, tmp_path, capsys):
+    """The smoke grid trains no SAC with a penalty: a figure 12 left from runs since moved away must not stay."""
+    results = tmp_path / "results"
+    shutil.copytree(smoke, results)
+    (results / "fig12_penalty.png").write_bytes(b"a figure of runs that are gone")
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only"]) == 0
+    assert not (results / "fig12_penalty.png").exists() and (results / "fig7_training.png").is_file()
+
+
 def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys):
     from tssac_core.policy import CheckpointError, learner_state, load_team
 

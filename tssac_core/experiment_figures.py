@@ -162,9 +162,14 @@ def bar_panel(path: Path, title: str, names: Sequence[str], rates: Sequence[dict
     plt.close(fig)
 
 
+FIGURES = ("fig7_training.png", "fig8_multiplier.png", "fig9_mission.png", "fig10_test_boxplots.png",
+           "fig11_generalization.png", "fig12_penalty.png")
+
+
 def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_episode: dict[str, list[dict[str, Any]]],
                  mission: tuple[MissionResults, Scenario, str] | None) -> list[Path]:
-    """Write every figure the data allows under ``results``; returns the paths written."""
+    """Write every figure the data allows under ``results`` and delete those it no longer allows (a figure
+    of runs that have since been moved away); returns the paths written."""
     written: list[Path] = []
     cost_limit = float(summary["cost_limit"])
     done = [a for a in summary["algorithms"] if a["seeds"]]
@@ -195,6 +200,9 @@ def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_epi
         bar_panel(written[-1], "SAC with a hazard penalty vs TSSAC",
                   [a["name"] if a["algo"] == "tssac" else f"{a['name']} (penalty {a['penalty']:g})" for a in penalty],
                   [a["random"]["success_rate"] for a in penalty], [a["random"]["mean_cost"] for a in penalty], cost_limit)
+    for name in FIGURES:
+        if results / name not in written:
+            (results / name).unlink(missing_ok=True)
     return written
 
 
