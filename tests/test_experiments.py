@@ -22,7 +22,7 @@ from tssac_core.experiment_grid import load_grid
 from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
 from tssac_core.experiment_report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
 from tssac_core.experiments import main, train
-from tssac_core.train import METRIC_FIELDS, within_limit
+from tssac_core.train import METRIC_FIELDS, selects_within_limit
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -67,7 +67,7 @@ def test_paper_grid():
     assert ppo.sac == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     # each ships its epoch by its own rule: within C where the learner is given C (docs/decisions.md)
-    assert [within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [True, True, False, False, True, True, False, False, False]
+    assert [selects_within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [True, True, False, False, True, True, False, False, False]
     assert load_grid("results/earlier/grid-10-epochs/paper.yaml").train.selection == "within_limit"  # pinned: its runs were
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
         assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (25, 4000, 1, 10, 2, 0, 1)

@@ -9,7 +9,7 @@ import pytest
 
 from tssac_core.cli import UsageError
 from tssac_core.experiment_jobs import config_difference
-from tssac_core.train import ALGOS, TrainConfig, config_from_saved, default_selection, parse_cli, with_recorded_defaults, within_limit
+from tssac_core.train import ALGOS, TrainConfig, config_from_saved, default_selection, parse_cli, selects_within_limit, with_recorded_defaults
 from tssac_core.validation import Score
 
 
@@ -42,10 +42,10 @@ def test_only_the_learners_given_the_limit_are_selected_within_it():
         "tssac": "within_limit", "sac_lag": "within_limit", "ppo_lag": "within_limit", "cpo": "within_limit",
         "sac": "success", "sac_penalty": "success", "ppo": "success"}
     cfg, *_ = parse_cli(["--algo", "sac", "--out", "r"])
-    assert cfg.selection == "" and not within_limit(cfg)
+    assert cfg.selection == "" and not selects_within_limit(cfg)
     assert with_recorded_defaults(cfg).selection == "success"  # what config.json records
     cfg, *_ = parse_cli(["--algo", "sac", "--selection", "within_limit", "--out", "r"])
-    assert within_limit(cfg) and with_recorded_defaults(cfg).selection == "within_limit"
+    assert selects_within_limit(cfg) and with_recorded_defaults(cfg).selection == "within_limit"
 
 
 def saved(cfg: TrainConfig, **changes) -> dict:

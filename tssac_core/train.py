@@ -146,7 +146,7 @@ OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0, "selection": "within_limit"}
 every algorithm shipped the best epoch within the cost limit)."""
 
 
-def within_limit(cfg: TrainConfig) -> bool:
+def selects_within_limit(cfg: TrainConfig) -> bool:
     """Whether the run ships the best epoch within the cost limit (TrainConfig.selection, resolved)."""
     return (cfg.selection or default_selection(cfg.algo)) == "within_limit"
 
@@ -371,7 +371,7 @@ def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, 
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, within_limit(cfg))
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg))
     rng = np.random.default_rng([cfg.seed, role.index])
     return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset(),
                     recent_costs=collections.deque(maxlen=sac_cfg.cost_window))

@@ -167,8 +167,8 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     """Train one role with cfg.algo in {ppo, ppo_lag, cpo} for cfg.epochs epochs, checkpointing every
     epoch; writes ``<role>.pt``."""
     # Imported here, not at the top: train.py dispatches to this module.
-    from tssac_core.train import (EpochLog, append_metrics, log_stop, make_task, reached_stop, role_position, save_trained_role, ship_role,
-                                  teammates_for, within_limit)
+    from tssac_core.train import (EpochLog, append_metrics, log_stop, make_task, reached_stop, role_position, save_trained_role,
+                                  selects_within_limit, ship_role, teammates_for)
 
     mode = ObservationMode(cfg.observation)
     state_path = out / "resume" / f"{role.value}.pt"
@@ -177,7 +177,7 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     learner = make_learner(mode.size, 2, config)
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, within_limit(cfg))
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg))
     finished: deque[tuple[float, int]] = deque(maxlen=config.cost_window)
     ep_len = np.zeros(cfg.envs, dtype=np.int64)
     start_epoch, env_steps, updates = 0, 0, 0
