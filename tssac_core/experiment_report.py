@@ -178,7 +178,7 @@ def over_seeds(per_seed: dict[int, float]) -> dict[str, Any]:
     }
 
 
-TRAINED_LINE = re.compile(r"^trained .* in (\d+) s; results in |^=== .* runner: stopped after (\d+) s", re.MULTILINE)
+INVOCATION_LINE = re.compile(r"^trained .* in (\d+) s; results in |^=== .* runner: stopped after (\d+) s", re.MULTILINE)
 """The line ``tssac_core.train`` prints when it finishes, and the one the grid runner writes when it stops a job."""
 PAPER_EPOCHS = 50
 """Table 3: epochs per role."""
@@ -192,7 +192,7 @@ def training_wall_s(run: Path) -> float | None:
     log = run / "train.log"
     if not log.is_file():
         return None
-    seconds = [int(done or stopped) for done, stopped in TRAINED_LINE.findall(log.read_text(errors="replace"))]
+    seconds = [int(done or stopped) for done, stopped in INVOCATION_LINE.findall(log.read_text(errors="replace"))]
     return float(sum(seconds)) if seconds else None
 
 
