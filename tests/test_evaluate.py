@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from tssac_core.evaluate import main
 from tssac_core.missions import fly_missions
 from tssac_core.scenario import load
@@ -17,6 +19,7 @@ def test_guidance_solves_random_layouts(random_path):
     assert summary["success_rate"] >= 0.9
     assert summary["mean_cost"] <= 0.5
     assert summary["episodes"] == 30
+    assert all(role["left_area_rate"] == 0.0 for role in summary["roles"].values())
 
 
 def test_evaluate_writes_json(tmp_path, strike_path, capsys):
@@ -35,3 +38,27 @@ def test_parked_team_never_succeeds(strike_path):
     assert not results.success.any()  # nobody identifies the target
     assert results.task_done[0].tolist() == [True, False, False]
     assert results.time_s[0] == s.episode_steps * s.dt_s
+
+
+class TurnAwayThenStraight:
+    """A pilot that turns at full rate for its first ``turn_steps`` calls, then flies straight on."""
+
+    def __init__(self, turn_steps: int) -> None:
+        self.turn_steps = turn_steps
+        self.calls = 0
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        action = np.zeros((len(obs), 2))
+        action[:, 0] = 1.0 if self.calls <= self.turn_steps else 0.0
+        return action
+
+
+def test_a_uav_that_flies_out_ends_the_mission_and_is_counted(strike_path):
+    s = load(strike_path)
+    results = fly_missions(s, [GUIDANCE, GUIDANCE, TurnAwayThenStraight(150)], episodes=1, seed=0)
+    assert results.out_of_area[0].tolist() == [False, False, True]
+    assert not results.success[0]
+    assert results.time_s[0] < s.episode_steps * s.dt_s  # ended by leaving, not by the episode cap
+    roles = results.summary(s.cost_limit)["roles"]
+    assert (roles["decoy"]["left_area_rate"], roles["strike"]["left_area_rate"]) == (0.0, 1.0)

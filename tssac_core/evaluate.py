@@ -68,7 +68,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     print(f"success rate {summary['success_rate']:.1%} over {summary['episodes']} missions, mean hazard cost per UAV {summary['mean_cost']:.2f} (limit {scenario.cost_limit:g})")
     for role, fig in summary["roles"].items():
-        print(f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} max {fig['max_cost']:.0f}  return {fig['mean_return']:.1f}")
+        print(f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} max {fig['max_cost']:.0f}  "
+              f"left the area {fig['left_area_rate']:.1%}  return {fig['mean_return']:.1f}")
     if args.json:
         write_json(args.json, summary)
         print(f"wrote {args.json}")

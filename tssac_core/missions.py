@@ -26,6 +26,7 @@ class MissionResults:
     time_s: np.ndarray
     """Mission time (simulated seconds)."""
     out_of_area: np.ndarray
+    """The UAV flew out of the area, which ended its mission, (M, 3) bool."""
     layouts: list[Layout] = field(default_factory=list)
     trajectories: np.ndarray | None = None
     """(M, T, 3, 2) positions in metres if recorded (NaN after a mission ended)."""
@@ -39,6 +40,7 @@ class MissionResults:
                 "max_cost": float(self.cost[:, j].max()),
                 "within_cost_limit": float((self.cost[:, j] <= cost_limit).mean()),
                 "task_success_rate": float(self.task_done[:, j].mean()),
+                "left_area_rate": float(self.out_of_area[:, j].mean()),
                 "mean_return": float(self.returns[:, j].mean()),
             }
         return {
