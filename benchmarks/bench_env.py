@@ -18,9 +18,9 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-import tssac_core  # noqa: F401
-from tssac_core.scenario import load, sample_layout
-from tssac_core.world import World
+import tssac_core.sim.env  # noqa: F401  (registers the environments)
+from tssac_core.sim.scenario import load, sample_layout
+from tssac_core.sim.world import World
 
 ROOT = Path(__file__).resolve().parent.parent
 

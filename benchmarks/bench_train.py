@@ -50,13 +50,13 @@ import torch
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tssac_core  # noqa: E402,F401  (registers tssac/Decoy-v0)
+import tssac_core.sim.env  # noqa: E402,F401  (registers tssac/Decoy-v0)
 from tssac_core.algos.replay import ReplayBuffer  # noqa: E402
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, Variant  # noqa: E402
-from tssac_core.env import RoleTask  # noqa: E402
-from tssac_core.observation import ObservationMode  # noqa: E402
-from tssac_core.scenario import Role, load  # noqa: E402
-from tssac_core.train import DEFAULT_SCENARIO, TrainConfig  # noqa: E402
+from tssac_core.sim.env import RoleTask  # noqa: E402
+from tssac_core.sim.observation import ObservationMode  # noqa: E402
+from tssac_core.sim.scenario import Role, load  # noqa: E402
+from tssac_core.train.config import DEFAULT_SCENARIO, TrainConfig  # noqa: E402
 
 OBS_DIM = ObservationMode.EXTENDED.size
 ACT_DIM = 2

@@ -1,4 +1,4 @@
-"""Frames and units between MAVLink telemetry / setpoints and the world of :mod:`tssac_core.world`.
+"""Frames and units between MAVLink telemetry / setpoints and the world of :mod:`tssac_core.sim.world`.
 
 World (eq. 5): x east, y north in metres from the area's south-west corner; heading phi
 counter-clockwise from east; turn rate omega counter-clockwise-positive; action [omega, u] in
@@ -20,11 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from tssac_core.scenario import Origin, VehicleSpec
-
-EARTH_RADIUS_M = 6_378_100.0
-"""Sphere radius of the SITL's flat-earth projection."""
-
+from tssac_core.deploy.geodetic import geodetic_to_local
+from tssac_core.sim.scenario import Origin, VehicleSpec
 
 @dataclass(frozen=True)
 class Measurement:
@@ -40,14 +37,6 @@ class Measurement:
 def from_local_position_ned(time_boot_ms: int, x_m: float, y_m: float, vx_m_s: float, vy_m_s: float) -> Measurement:
     """LOCAL_POSITION_NED fields -> world measurement (x north -> north, y east -> east)."""
     return Measurement(time_boot_ms / 1000.0, float(y_m), float(x_m), float(vy_m_s), float(vx_m_s))
-
-
-def geodetic_to_local(origin: Origin, lat_deg: float, lon_deg: float) -> tuple[float, float]:
-    """(east_m, north_m) of a point, inverse of the SITL's flat-earth projection about ``origin``."""
-    d_lon = (lon_deg - origin.lon_deg + 180.0) % 360.0 - 180.0
-    east = math.radians(d_lon) * EARTH_RADIUS_M * math.cos(math.radians(origin.lat_deg))
-    north = math.radians(lat_deg - origin.lat_deg) * EARTH_RADIUS_M
-    return east, north
 
 
 def from_global_position_int(origin: Origin, time_boot_ms: int, lat_e7: int, lon_e7: int, vx_cm_s: int, vy_cm_s: int) -> Measurement:

@@ -1,6 +1,7 @@
 """Reading a SITL world's truth log (JSON Lines) into a mission's outcome, tracks and event markers.
 
-The format is the bundled SITL's (``sim_vehicles.truth_log``; read here without importing it): a
+The format is :mod:`tssac_core.deploy.truth_log_schema` (the bundled SITL writes it; it is read here
+without importing the SITL): a
 ``header`` line (scenario, seed, the layout flown, ...), one ``step`` line per world step (true
 states per role: ``x_m``, ``y_m``, ``cost``, ``cost_total``, ``failsafe`` ...), ``event`` lines
 (RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END, and the vehicles' ARMED / MODE / FAILSAFE changes)
@@ -14,7 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-from tssac_core.scenario import ROLES
+from tssac_core.deploy.truth_log_schema import EVENT, FLAGS, HEADER, ROLES_KEY, STEP, SUMMARY, VEHICLES_KEY
+from tssac_core.sim.scenario import ROLES
 
 TASK_EVENTS = {"decoy": ("RADAR_ON", 1), "detect": ("IDENT", 1), "strike": ("HIT", 1)}
 """The event that completes each role's task (eq. 9)."""
@@ -115,23 +117,23 @@ def read_mission(path: Path) -> MissionRecord:
             raise TruthLogError(f"{path}:{n}: not JSON") from None
         kind = row.get("type")
         if header is None:
-            if kind != "header":
+            if kind != HEADER:
                 raise TruthLogError(f"{path}: first line is not a header")
             header = row
-            record = MissionRecord(header=row, summary=None, tracks_m={role: [] for role in row.get("roles", [])})
+            record = MissionRecord(header=row, summary=None, tracks_m={role: [] for role in row.get(ROLES_KEY, [])})
             continue
         assert record is not None
-        if kind == "step":
+        if kind == STEP:
             record.steps = int(row["step"])
-            record.last_flags = {k: bool(row.get(k, False)) for k in ("radar_on", "identified", "hit")}
-            for role, v in row["vehicles"].items():
+            record.last_flags = {k: bool(row.get(k, False)) for k in FLAGS}
+            for role, v in row[VEHICLES_KEY].items():
                 record.tracks_m.setdefault(role, []).append((float(v["x_m"]), float(v["y_m"])))
                 record.last_cost[role] = float(v["cost_total"])
                 if v.get("failsafe"):
                     record.failsafe_steps[role] = record.failsafe_steps.get(role, 0) + 1
-        elif kind == "event":
+        elif kind == EVENT:
             record.events.append(row)
-        elif kind == "summary":
+        elif kind == SUMMARY:
             record.summary = row
     if record is None:
         raise TruthLogError(f"{path}: empty truth log")

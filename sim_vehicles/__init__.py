@@ -1,4 +1,4 @@
-"""SITL vehicles: each UAV of a scenario as a MAVLink 2 autopilot on UDP, physics from tssac_core.world.
+"""SITL vehicles: each UAV of a scenario as a MAVLink 2 autopilot on UDP, physics from tssac_core.sim.world.
 
 ``python -m sim_vehicles --scenario FILE`` starts them (see :mod:`sim_vehicles.__main__`); the
 protocol is described in ``docs/mavlink.md``. Modules, one job each:
@@ -13,7 +13,7 @@ protocol is described in ``docs/mavlink.md``. Modules, one job each:
 * :mod:`~sim_vehicles.link` — GPS and datalink models;
 * :mod:`~sim_vehicles.events` — mission events and their NAMED_VALUE_INT names;
 * :mod:`~sim_vehicles.truth_log` — the JSON Lines truth log;
-* :mod:`~sim_vehicles.geo` — frames and the flat-earth conversion.
+* :mod:`~tssac_core.deploy.geodetic` — frames and the flat-earth conversion.
 """
 
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig

@@ -28,7 +28,7 @@ from typing import NoReturn
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import SitlError, WorldRunner
-from tssac_core.scenario import ScenarioError, load
+from tssac_core.sim.scenario import ScenarioError, load
 
 PROG = "python -m sim_vehicles"
 

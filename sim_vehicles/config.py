@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass
 from pathlib import Path
 
-from tssac_core.scenario import Scenario
+from tssac_core.sim.scenario import Scenario
 
 DEFAULT_BASE_PORT = 14560
 """Vehicle i binds base + PORT_STRIDE * i (decoy 14560, detect 14570, strike 14580)."""

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
-from tssac_core.scenario import ROLES
-from tssac_core.world import StepResult
+from tssac_core.sim.scenario import ROLES
+from tssac_core.sim.world import StepResult
 
 
 class EventKind(enum.Enum):
@@ -106,7 +106,7 @@ class MissionFlags:
 
 
 def events_from_step(result: StepResult, radar_on: bool, step: int, time_s: float) -> list[MissionEvent]:
-    """The events of world 0 of one :meth:`tssac_core.world.World.step` (``radar_on`` = the world's new flag)."""
+    """The events of world 0 of one :meth:`tssac_core.sim.world.World.step` (``radar_on`` = the world's new flag)."""
     out: list[MissionEvent] = []
 
     def add(kind: EventKind, value: int) -> None:

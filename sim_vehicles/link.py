@@ -29,7 +29,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from tssac_core.scenario import LinkModel
+from tssac_core.sim.scenario import LinkModel
 
 REORDER_HOLD_MAX_S = 0.2
 """A held-back datagram is released at the latest this long after it was due, next datagram or not."""

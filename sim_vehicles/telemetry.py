@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles.geo import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
+from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from sim_vehicles.link import GpsFix
-from tssac_core.scenario import Origin
+from tssac_core.sim.scenario import Origin
 
 GRAVITY_M_S2 = 9.80665
 UINT16_MAX = 65535

@@ -53,7 +53,7 @@ from sim_vehicles.link import GpsFix, GpsReceiver, LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint
 from sim_vehicles.params import ParamTable, vehicle_params
 from sim_vehicles.telemetry import VehicleTruth
-from tssac_core.scenario import LinkModel, Origin
+from tssac_core.sim.scenario import LinkModel, Origin
 
 _log = logging.getLogger(__name__)
 

@@ -1,4 +1,4 @@
-"""The SITL loop: one world (tssac_core.world.World, n = 1), three vehicles, time, lockstep, events.
+"""The SITL loop: one world (tssac_core.sim.world.World, n = 1), three vehicles, time, lockstep, events.
 
 Single-threaded: one ``select`` over the three vehicles' sockets, then in each iteration
 
@@ -58,10 +58,11 @@ from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.events import EventKind, MissionEnd, MissionFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.telemetry import VehicleTruth
-from sim_vehicles.truth_log import TruthLog, VehicleRow
+from sim_vehicles.truth_log import TruthLog
+from tssac_core.deploy.truth_log_schema import VehicleRow
 from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
-from tssac_core.scenario import ROLES, Layout, dump, sample_layout, to_dict
-from tssac_core.world import World
+from tssac_core.sim.scenario import ROLES, Layout, dump, sample_layout, to_dict
+from tssac_core.sim.world import World
 
 _log = logging.getLogger(__name__)
 

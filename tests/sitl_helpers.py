@@ -27,7 +27,7 @@ mavutil.set_dialect("ardupilotmega")
 
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig  # noqa: E402
 from sim_vehicles.world_runner import RunResult, WorldRunner  # noqa: E402
-from tssac_core.scenario import LinkModel, Scenario, load  # noqa: E402
+from tssac_core.sim.scenario import LinkModel, Scenario, load  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 STRIKE = REPO / "scenarios" / "strike.yaml"

@@ -26,13 +26,13 @@ import numpy as np
 import pytest
 
 from sitl_helpers import EXACT_LINK, REPO, STRIKE, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
-from mavlink_bridge import companion as companion_cli
+from mavlink_bridge.companion import cli as companion_cli
 from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
-from sim_vehicles.geo import deg_e7, local_to_geodetic
-from sim_vehicles.truth_log import read_truth_log
-from tssac_core.scenario import LinkModel, Role, dump, load
-from tssac_core.world import World
+from tssac_core.deploy.geodetic import deg_e7, local_to_geodetic
+from tssac_core.deploy.truth_log_schema import read_truth_log
+from tssac_core.sim.scenario import LinkModel, Role, dump, load
+from tssac_core.sim.world import World
 
 M = mavlink2
 GUIDED = 15
@@ -424,9 +424,9 @@ def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path
     assert len(decisions) > 1
     # The first decision is the policy's action on the observation training builds for the start state
     # (noise-free fixes: the filter starts exactly there), so the bridge's observation is training's.
-    from tssac_core.observation import observe
-    from tssac_core.policy import Policy
-    from tssac_core.routes import RouteMap
+    from tssac_core.sim.observation import observe
+    from tssac_core.deploy.policy import Policy
+    from tssac_core.sim.routes import RouteMap
 
     policy = Policy.load(model, Role.DECOY)
     scen = load(scen_file)

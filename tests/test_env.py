@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import tssac_core  # noqa: F401  (registers the environments)
-from tssac_core.env import RoleTask
-from tssac_core.observation import EXTENDED_SIZE, ObservationMode, observation_bounds, observe
-from tssac_core.reward import RewardConfig, reward
-from tssac_core.scenario import Role, load
-from tssac_core.world import KM, StepResult
+import tssac_core.sim.env  # noqa: F401  (registers the environments)
+from tssac_core.sim.env import RoleTask
+from tssac_core.sim.observation import EXTENDED_SIZE, ObservationMode, observation_bounds, observe
+from tssac_core.sim.reward import RewardConfig, reward
+from tssac_core.sim.scenario import Role, load
+from tssac_core.sim.world import KM, StepResult
 
 
 @pytest.mark.parametrize("role", ["Decoy", "Detect", "Strike"])
@@ -166,7 +166,7 @@ def test_approach_reward_matches_distance_to_sam_outside_the_zone(strike_path):
 
 
 def test_approach_reward_measures_the_way_around_the_radars(strike_path):
-    """Default mode: the approach term is the decrease of zone distance + detour (tssac_core.routes)."""
+    """Default mode: the approach term is the decrease of zone distance + detour (tssac_core.sim.routes)."""
     task = RoleTask(load(strike_path), Role.STRIKE, n=1, teammates="none", seed=0)
     task.reset()
     w = task.world
@@ -207,7 +207,7 @@ def test_guidance_team_completes_the_fixed_mission(strike_path):
     obs, _ = env.reset(seed=0)
     # The strike UAV flown by hand: straight at the SAM, then circle inside R1.
     total_cost, steps = 0.0, 0
-    from tssac_core.guidance import Guidance
+    from tssac_core.sim.guidance import Guidance
 
     g = Guidance()
     while True:
@@ -262,8 +262,8 @@ def test_role_task_repeat_sums_reward_and_cost(strike_path):
 
 def test_unused_radar_slots_do_not_change_the_observation(strike_path):
     """A world with spare radar slots observes exactly what a world sized to the layout does."""
-    from tssac_core.observation import observe
-    from tssac_core.world import World
+    from tssac_core.sim.observation import observe
+    from tssac_core.sim.world import World
 
     s = load(strike_path)
     snug, roomy = World(s, 1), World(s, 1, max_radars=5)

@@ -7,9 +7,9 @@ import json
 import numpy as np
 
 from tssac_core.evaluate import main
-from tssac_core.missions import fly_missions
-from tssac_core.scenario import load
-from tssac_core.team import GUIDANCE
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.scenario import load
+from tssac_core.sim.team import GUIDANCE
 
 
 def test_guidance_solves_random_layouts(random_path):

@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
-from tssac_core.experiment_figures import clipped_error, penalty_entries
-from tssac_core.experiment_grid import load_grid
-from tssac_core.experiment_jobs import LOG_NAME, Status, job_state
-from tssac_core.experiment_report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
-from tssac_core.experiments import main, train
-from tssac_core.train import METRIC_FIELDS, selects_within_limit
+from tssac_core.experiments.figures import clipped_error, penalty_entries
+from tssac_core.experiments.grid import load_grid
+from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
+from tssac_core.experiments.report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
+from tssac_core.experiments.cli import main, train
+from tssac_core.train.config import selects_within_limit
+from tssac_core.train.rundir import METRIC_FIELDS
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -207,7 +208,7 @@ def test_a_figure_the_runs_no_longer_allow_is_deleted(smoke, tmp_path, capsys):
 
 
 def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys):
-    from tssac_core.policy import CheckpointError, learner_state, load_team
+    from tssac_core.deploy.policy import CheckpointError, learner_state, load_team
 
     results = tmp_path / "results"
     shutil.copytree(smoke, results)
@@ -380,7 +381,7 @@ def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
     from datetime import datetime
 
     from tssac_core.cli import UsageError
-    from tssac_core.experiment_deadline import parse_finish_by
+    from tssac_core.experiments.deadline import parse_finish_by
 
     now = datetime(2026, 11, 25, 9, 30)
     assert parse_finish_by("11:45", now) == datetime(2026, 11, 25, 11, 45).timestamp()
@@ -393,7 +394,7 @@ def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
 def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_time(smoke, tmp_path):
     """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag, with no
     finished run of its own, goes by its family's (tssac's); a PPO run, with none in its family, is started."""
-    from tssac_core.experiment_deadline import deadline_filter
+    from tssac_core.experiments.deadline import deadline_filter
 
     grid = load_grid(write_grid(tmp_path / "three.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"), ("  - sac_lag\n", "  - sac_lag\n  - ppo\n"))))
     results = tmp_path / "results"
@@ -416,7 +417,7 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
 def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke, tmp_path):
     """Nothing had finished when the runner started, so a SAC-family job could start; once tssac-seed0
     finishes (600 s), sac_lag-seed0 goes by it."""
-    from tssac_core.experiment_deadline import deadline_filter
+    from tssac_core.experiments.deadline import deadline_filter
 
     grid = load_grid(write_grid(tmp_path / "two.yaml", smoke_text()))
     results = tmp_path / "results"
@@ -430,7 +431,7 @@ def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke,
 
 
 def test_a_job_the_deadline_refuses_is_reported_and_not_started(tmp_path):
-    from tssac_core.experiment_jobs import run_jobs
+    from tssac_core.experiments.jobs import run_jobs
 
     grid = load_grid(write_grid(tmp_path / "one.yaml", smoke_text(("  - sac_lag\n", ""))))
     states = [job_state(job) for job in grid.jobs(tmp_path / "results")]
@@ -486,7 +487,7 @@ def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
 
 
 def test_transfer_experiment_figures_and_table(tmp_path):
-    from tssac_core.experiment_report import table_markdown, transfer_experiment, transfer_experiment_markdown
+    from tssac_core.experiments.report import table_markdown, transfer_experiment, transfer_experiment_markdown
 
     text = smoke_text(("seeds: [0]", "seeds: [0, 1]"), ("evaluation:", "transfer: {teammates: models/tssac, with: tssac, without: sac_lag, epochs: 3}\nevaluation:"))
     grid = load_grid(write_grid(tmp_path / "g.yaml", text))

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tssac_core.env import RoleTask
-from tssac_core.observation import ObservationMode
-from tssac_core.policy import Policy
-from tssac_core.scenario import Layout, Radar, Role, Start, dump, load
-from tssac_core.train import main
+from tssac_core.sim.env import RoleTask
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.deploy.policy import Policy
+from tssac_core.sim.scenario import Layout, Radar, Role, Start, dump, load
+from tssac_core.train.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 

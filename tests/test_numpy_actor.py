@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from tssac_core.errors import CheckpointError
-from tssac_core.numpy_actor import NumpyPolicy, export_actor, load_actor, pilot_file
-from tssac_core.policy import Policy, compact_checkpoint
-from tssac_core.scenario import ROLES, Role
+from tssac_core.deploy.export import compact_checkpoint, export_actor
+from tssac_core.deploy.numpy_actor import NumpyPolicy, load_actor, pilot_file
+from tssac_core.deploy.policy import Policy
+from tssac_core.sim.scenario import ROLES, Role
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "models" / "tssac"
@@ -51,8 +52,8 @@ def test_exported_actor_acts_like_the_torch_policy(models: Path, role: Role):
 def test_the_companion_flies_an_export_without_importing_torch(models: Path):
     code = (
         "import sys\n"
-        "import mavlink_bridge.companion as c\n"
-        "from tssac_core.scenario import Role\n"
+        "import mavlink_bridge.companion.pilots as c\n"
+        "from tssac_core.sim.scenario import Role\n"
         f"pilot = c.PolicyPilot(__import__('pathlib').Path({str(models / 'strike.npz')!r}), Role.STRIKE)\n"
         "print(type(pilot.policy).__name__, 'torch' in sys.modules)\n"
     )
@@ -130,9 +131,9 @@ def test_an_export_for_another_role_is_refused(models: Path):
 def test_export_command(models: Path, tmp_path: Path):
     for npz in models.glob("*.npz"):
         npz.unlink()
-    out = subprocess.run([sys.executable, "-m", "tssac_core.numpy_actor", str(models)], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    out = subprocess.run([sys.executable, "-m", "tssac_core.deploy.export", str(models)], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.count("wrote ") == 3 and "actor 24->128->128->4" in out.stdout
     assert all(pilot_file(models, r).suffix == ".npz" for r in ROLES)
-    bad = subprocess.run([sys.executable, "-m", "tssac_core.numpy_actor", str(tmp_path / "nothing")], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    bad = subprocess.run([sys.executable, "-m", "tssac_core.deploy.export", str(tmp_path / "nothing")], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "not a role checkpoint" in bad.stderr

@@ -14,7 +14,7 @@ import pytest
 import torch
 from tqdm import tqdm
 
-from tssac_core.algos.cpo import (
+from tssac_core.algos.onpolicy.cpo import (
     FEASIBLE_ACTIVE,
     FEASIBLE_INTERIOR,
     INFEASIBLE,
@@ -26,9 +26,9 @@ from tssac_core.algos.cpo import (
     fisher_vector_product,
     line_search_accepts,
 )
-from tssac_core.algos.gae import gae
+from tssac_core.algos.onpolicy.gae import gae
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.algos.ppo import (
+from tssac_core.algos.onpolicy.ppo import (
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
@@ -40,10 +40,11 @@ from tssac_core.algos.ppo import (
     sample_actions,
     squashed_gaussian_log_prob,
 )
-from tssac_core.policy import Policy, read_checkpoint
-from tssac_core.scenario import Radar, Role, load
-from tssac_core.train import METRIC_FIELDS, TrainConfig
-from tssac_core.train_onpolicy import measured_episode_cost, onpolicy_config, train_role_onpolicy
+from tssac_core.deploy.policy import Policy, read_checkpoint
+from tssac_core.sim.scenario import Radar, Role, load
+from tssac_core.train.config import TrainConfig, onpolicy_config
+from tssac_core.train.rundir import METRIC_FIELDS
+from tssac_core.train.onpolicy_loop import measured_episode_cost, train_role_onpolicy
 
 torch.set_num_threads(1)
 

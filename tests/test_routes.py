@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from tssac_core.routes import KING_MOVES, KNIGHT_MOVES, RouteConfig, RouteMap, sample_bilinear, wavefront
-from tssac_core.scenario import Layout, Radar, Role, Start, load
-from tssac_core.world import World
+from tssac_core.sim.routes import KING_MOVES, KNIGHT_MOVES, RouteConfig, RouteMap, sample_bilinear, wavefront
+from tssac_core.sim.scenario import Layout, Radar, Role, Start, load
+from tssac_core.sim.world import World
 
 
 def corner_goal(size: int = 21) -> np.ndarray:

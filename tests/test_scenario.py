@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tssac_core.scenario import Layout, Radar, ScenarioError, dump, from_dict, infeasibility, load, sample_layout, to_dict
+from tssac_core.sim.scenario import Layout, Radar, ScenarioError, dump, from_dict, infeasibility, load, sample_layout, to_dict
 
 
 @pytest.mark.parametrize("name", ["strike.yaml", "random.yaml"])
@@ -26,7 +26,7 @@ def test_shipped_scenarios_round_trip(name, tmp_path):
 def test_digest_follows_the_task_not_the_expectations(random_path):
     import dataclasses
 
-    from tssac_core.scenario import Expect
+    from tssac_core.sim.scenario import Expect
 
     s = load(random_path)
     assert dataclasses.replace(s, expect=Expect(episodes=3, min_success_rate=0.5, max_mean_cost=9.0)).digest() == s.digest()

@@ -24,13 +24,13 @@ import pytest
 from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
 from sim_vehicles.__main__ import main
 from sim_vehicles.config import SitlConfig
-from sim_vehicles.geo import geodetic_to_local, heading_cdeg, local_to_geodetic, phi_from_yaw_ned, yaw_ned_from_phi
+from tssac_core.deploy.geodetic import geodetic_to_local, heading_cdeg, local_to_geodetic, phi_from_yaw_ned, yaw_ned_from_phi
 from sim_vehicles.link import GpsReceiver, LinkChannel
 from sim_vehicles.signing import SigningKeyError, load_key
-from sim_vehicles.truth_log import read_truth_log
+from tssac_core.deploy.truth_log_schema import read_truth_log
 from sim_vehicles.world_runner import WorldRunner
-from tssac_core.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
-from tssac_core.world import World
+from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
+from tssac_core.sim.world import World
 
 M = mavlink2
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from tssac_core.scenario import load
+from tssac_core.sim.scenario import load
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = REPO / "models" / "tssac"

@@ -16,13 +16,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import tssac_core  # noqa: F401  (registers the environments)
-from tssac_core.env import RoleTask
-from tssac_core.observation import LOCAL_SCALE_M, ObservationMode, observe
-from tssac_core.reward import RewardConfig, reward
-from tssac_core.routes import RouteMap
-from tssac_core.scenario import Role, load, sample_layout
-from tssac_core.world import KM, World
+import tssac_core.sim.env  # noqa: F401  (registers the environments)
+from tssac_core.sim.env import RoleTask
+from tssac_core.sim.observation import LOCAL_SCALE_M, ObservationMode, observe
+from tssac_core.sim.reward import RewardConfig, reward
+from tssac_core.sim.routes import RouteMap
+from tssac_core.sim.scenario import Role, load, sample_layout
+from tssac_core.sim.world import KM, World
 
 
 def reference_step(w: World, action: np.ndarray) -> dict[str, np.ndarray]:
@@ -128,7 +128,7 @@ def test_world_step_matches_the_equations(random_path):
 
 
 def test_extended_observation_matches_its_table(random_path):
-    """Every entry of the extended observation by its definition (tssac_core.observation's table)."""
+    """Every entry of the extended observation by its definition (tssac_core.sim.observation's table)."""
     s = load(random_path)
     rng = np.random.default_rng(8)
     w = World(s, 4)

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 import torch
 
-from tssac_core.numpy_actor import pilot_file
-from tssac_core.policy import CheckpointError, Policy, load_team
-from tssac_core.scenario import Role
-from tssac_core.train import main
+from tssac_core.deploy.numpy_actor import pilot_file
+from tssac_core.deploy.policy import CheckpointError, Policy, load_team
+from tssac_core.sim.scenario import Role
+from tssac_core.train.cli import main
 
 TINY = ["--epochs", "2", "--validation-episodes", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
         "--set", "hidden_sizes=[32,32]", "--set", "batch_size=32", "--threads", "1", "--no-progress"]
@@ -53,7 +53,7 @@ def test_outputs(trained):
 def test_runs_from_before_a_setting_resume_with_what_they_used():
     """A config.json without cost_margin_km trained on eq. 11 exactly; one of TSSAC or SAC-Lagrangian
     without multiplier_signal measured Q^c. The other algorithms have no multiplier to record."""
-    from tssac_core.train import config_from_saved
+    from tssac_core.train.legacy import config_from_saved
 
     old = {"algo": "tssac", "roles": ["decoy"], "sac": {"gamma": 0.995}}
     cfg = config_from_saved(old)
@@ -232,8 +232,10 @@ def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(t
     """SeedRole.episode_cost: the mean learner cost of the last cost_window episodes; a resume state
     carries them, so a resumed run's multiplier sees what the uninterrupted one saw."""
     from tssac_core.algos.sac_lagrangian import SacConfig
-    from tssac_core.scenario import load
-    from tssac_core.train import EpochLog, TrainConfig, open_seed_role
+    from tssac_core.sim.scenario import load
+    from tssac_core.train.config import TrainConfig
+    from tssac_core.train.epoch import EpochLog
+    from tssac_core.train.loop import open_seed_role
 
     cfg = TrainConfig(algo="sac_lag", seed=4, roles=("decoy",), envs=2, action_repeat=10, validation_episodes=0)
     scenario = load(cfg.scenario)

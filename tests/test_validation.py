@@ -1,4 +1,4 @@
-"""Which epoch a role ships (tssac_core.validation): the constrained learners within the cost limit, the others by success."""
+"""Which epoch a role ships (tssac_core.train.validation): the constrained learners within the cost limit, the others by success."""
 
 from __future__ import annotations
 
@@ -8,9 +8,11 @@ import json
 import pytest
 
 from tssac_core.cli import UsageError
-from tssac_core.experiment_jobs import config_difference
-from tssac_core.train import ALGOS, TrainConfig, config_from_saved, default_selection, parse_cli, selects_within_limit, with_recorded_defaults
-from tssac_core.validation import Score
+from tssac_core.experiments.jobs import config_difference
+from tssac_core.train.arguments import parse_cli
+from tssac_core.train.config import ALGOS, TrainConfig, default_selection, selects_within_limit, with_recorded_defaults
+from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.validation import Score
 
 
 def score(epoch: int, success: float, cost: float) -> Score:

@@ -1,4 +1,4 @@
-"""Kinematics (eq. 5-6), cost (eq. 11) and mission logic (eq. 9) of tssac_core.world."""
+"""Kinematics (eq. 5-6), cost (eq. 11) and mission logic (eq. 9) of tssac_core.sim.world."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tssac_core.scenario import Layout, Radar, Start, load
-from tssac_core.world import KM, World
+from tssac_core.sim.scenario import Layout, Radar, Start, load
+from tssac_core.sim.world import KM, World
 
 
 def layout(sam=(65.0, 65.0), radars=(), starts=None) -> Layout:
@@ -55,7 +55,7 @@ def test_constant_rate_circle_closes(scenario):
 
 
 def scenario_role(name):
-    from tssac_core.scenario import Role
+    from tssac_core.sim.scenario import Role
 
     return Role(name)
 

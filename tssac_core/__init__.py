@@ -1,14 +1,11 @@
 """TSSAC: transfer-safe soft actor-critic for a team of cooperating UAVs.
 
-Importing the package registers the gymnasium environments ``tssac/Decoy-v0``, ``tssac/Detect-v0``
-and ``tssac/Strike-v0`` (keyword arguments: ``scenario=``, ``observation=``, ``teammates=``).
+Subpackages: ``sim`` (the paper's world, observation, reward, the batched task and the gymnasium env),
+``algos`` (the learners), ``train`` (``python -m tssac_core.train``), ``deploy`` (what flies a trained
+policy, and the frames and logs that the SITL and the bridge share), ``experiments`` (the paper's grid).
+Importing the package imports none of them (nor gymnasium or torch); the gymnasium environments
+``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0`` are registered by importing
+:mod:`tssac_core.sim.env`.
 """
 
-from gymnasium.envs.registration import register, registry
-
 __version__ = "0.1.0"
-
-for _role in ("decoy", "detect", "strike"):
-    _id = f"tssac/{_role.capitalize()}-v0"
-    if _id not in registry:
-        register(id=_id, entry_point="tssac_core.env:UavRoleEnv", kwargs={"role": _role})

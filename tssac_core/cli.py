@@ -19,7 +19,7 @@ class UsageError(Exception):
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
     """Run a command's ``main``: known errors become one line on stderr and exit code 2."""
     from tssac_core.errors import CheckpointError
-    from tssac_core.scenario import ScenarioError
+    from tssac_core.sim.scenario import ScenarioError
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -20,9 +20,9 @@ from typing import Sequence
 from tqdm import tqdm
 
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.missions import fly_missions
-from tssac_core.scenario import ROLES, load
-from tssac_core.team import GUIDANCE, Pilot
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.scenario import ROLES, load
+from tssac_core.sim.team import GUIDANCE, Pilot
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
 
@@ -46,7 +46,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 def load_pilots(models: Path | None) -> list[Pilot]:
     if models is None:
         return [GUIDANCE] * len(ROLES)
-    from tssac_core.policy import load_team
+    from tssac_core.deploy.policy import load_team
 
     return list(load_team(models))
 

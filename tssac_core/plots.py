@@ -66,10 +66,10 @@ def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[f
                  events: "list[tuple[str, float, float]]" = (), title: str = "", area_km: float = 100.0) -> None:
     """Figure 9: one mission's trajectories over the radars, the SAM's rings and the zones, with events.
 
-    ``layout_`` is a :class:`tssac_core.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;
+    ``layout_`` is a :class:`tssac_core.sim.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;
     ``events`` are (label, x_km, y_km) markers (e.g. "radar on", "identified", "hit").
     """
-    from tssac_core.scenario import Layout
+    from tssac_core.sim.scenario import Layout
 
     assert isinstance(layout_, Layout)
     lay = layout_

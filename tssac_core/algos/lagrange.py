@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import torch
 
-from tssac_core.algos import losses, optim_members
+from tssac_core.algos import losses
 
 
 def qc_limit(cost_per_episode: float, gamma: float, episode_steps: int) -> float:
@@ -73,7 +72,6 @@ class DampedLagrangeMultiplier:
         lr: float = 1e-2,
         clamp_effective: bool = True,
         upper: float = math.inf,
-        n_seeds: int | None = None,
     ) -> None:
         if beta_init < 0.0:
             raise ValueError(f"beta_init must be >= 0, got {beta_init}")
@@ -85,15 +83,12 @@ class DampedLagrangeMultiplier:
         self.lr = lr
         self.clamp_effective = clamp_effective
         self.upper = upper
-        # n_seeds: one beta per seed of a K-seed learner (tssac_core.algos.kseed), shape (K,); every
-        # operation is elementwise, so each seed's beta follows exactly the rule above.
-        shape: tuple[int, ...] = () if n_seeds is None else (n_seeds,)
-        self._beta = torch.full(shape, float(beta_init), requires_grad=True)
+        self._beta = torch.tensor(float(beta_init), requires_grad=True)
         self._optim = torch.optim.Adam([self._beta], lr=lr)
 
     @property
     def beta(self) -> torch.Tensor:
-        """The current beta, a 0-d tensor, (K,) with n_seeds (a copy: later updates do not change it)."""
+        """The current beta, a 0-d tensor (a copy: later updates do not change it)."""
         return self._beta.detach().clone()
 
     def damping(self, qc_mean: torch.Tensor | float) -> torch.Tensor:
@@ -109,7 +104,7 @@ class DampedLagrangeMultiplier:
         """One projected Adam step on J(beta) = beta (C - qc_mean), eq. 15; returns J (pre-step)."""
         loss = losses.multiplier_loss(self._beta, torch.as_tensor(qc_mean), self.cost_limit)
         self._optim.zero_grad()
-        loss.sum().backward()  # K seeds: the sum's gradient for each beta is its own loss's
+        loss.backward()
         self._optim.step()
         with torch.no_grad():
             self._beta.clamp_(0.0, self.upper)
@@ -130,25 +125,3 @@ class DampedLagrangeMultiplier:
         with torch.no_grad():
             self._beta.copy_(state["beta"])
         self._optim.load_state_dict(copy.deepcopy(state["optim"]))  # never share Adam moments
-
-    def seed_state_dict(self, k: int) -> dict[str, Any]:
-        """With n_seeds: seed k's `state_dict`, in the format of a single multiplier's."""
-        return {
-            "beta": self._beta.detach()[k].clone(),
-            "optim": optim_members.member_state(self._optim, [self._beta], k, _beta_of_seed),
-        }
-
-    def load_seed_state_dict(self, k: int, state: dict[str, Any]) -> None:
-        """With n_seeds: restore seed k from a single multiplier's `state_dict`."""
-        with torch.no_grad():
-            self._beta[k] = state["beta"]
-        optim_members.load_member_state(self._optim, [self._beta], k, state["optim"], _load_beta_of_seed)
-
-
-def _beta_of_seed(k: int, stacked: Sequence[torch.Tensor]) -> list[torch.Tensor]:
-    return [stacked[0].detach()[k].clone()]
-
-
-def _load_beta_of_seed(k: int, stacked: Sequence[torch.Tensor], member: Sequence[torch.Tensor]) -> None:
-    with torch.no_grad():
-        stacked[0][k] = member[0]

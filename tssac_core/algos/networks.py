@@ -80,7 +80,7 @@ def squashed_gaussian(
     """(a = tanh(u), log pi(a|s)) for u = mean + exp(log_std) * eps, or u = mean if eps is None.
 
     Shapes (..., act_dim) -> (..., act_dim), (...); the change of variables of
-    `SquashedGaussianActor`, shared with the K-seed actor (tssac_core.algos.stacked).
+    `SquashedGaussianActor`.
     """
     if eps is None:
         u = mean

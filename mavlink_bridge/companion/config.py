@@ -1,0 +1,83 @@
+"""The companion's settings (`CompanionConfig`) and the constants every part of it uses."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+from mavlink_bridge.state_filter import FilterModel
+from tssac_core.cli import UsageError
+from tssac_core.sim.scenario import Role, Scenario
+
+GUIDED_MODE = 15
+"""ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
+GUIDANCE = "guidance"
+MIN_POS_SIGMA_M = 0.1
+MIN_VEL_SIGMA_M_S = 0.01
+"""Floors for the filter's measurement noise: a noise-free SITL still quantises (cm, cm/s)."""
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_VEHICLE = 3
+
+
+@dataclass(frozen=True)
+class CompanionConfig:
+    """Everything a :class:`Companion` needs (what the command line sets)."""
+
+    connection: str
+    """pymavlink connection string of the vehicle (``udpout:HOST:PORT``)."""
+    role: Role
+    scenario: Scenario
+    """A scenario with a fixed layout (the one the vehicle flies)."""
+    model: Optional[Path] = None
+    """A role checkpoint (``decoy.pt`` ...); None = the guidance controller."""
+    signing_key: Optional[bytes] = None
+    tlog: Optional[Path] = None
+    """Write every message received and sent here (.tlog)."""
+    status_json: Optional[Path] = None
+    """Write the final status (counters, latencies) here."""
+    lockstep: bool = False
+    """The vehicle runs in lockstep: never extrapolate its clock."""
+    connect_timeout_s: float = 30.0
+    """Wall seconds to wait for the first heartbeat."""
+    command_timeout_s: float = 1.0
+    """Wall seconds to wait for each COMMAND_ACK."""
+    command_retries: int = 10
+    """Attempts per command. A 10% lossy link (degraded.yaml, each way) loses 19% of command round
+    trips: 3 attempts failed 0.7% of commands, about one three-UAV mission in 25; 10 fail 1e-7."""
+    hold_after_s: float = 0.5
+    """Vehicle seconds without a position fix after which the hold setpoint is flown."""
+    silence_hold_s: float = 2.0
+    """Wall seconds without any message after which the hold is sent when the vehicle's clock cannot be extrapolated
+    (lockstep, or its rate not yet known). More than the 1 s a waiting lockstep vehicle is quiet for."""
+    lost_after_s: float = 10.0
+    """Wall seconds without any message after which the vehicle is given up."""
+    restart_jump_s: float = 1.0
+    """A vehicle clock that goes back by more than this is a restart (reordering is far smaller)."""
+    settle_s: float = 0.005
+    """Wall seconds to wait for the tick's position fix once the tick is known (it usually comes in the same burst)."""
+    duration_s: Optional[float] = None
+    """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
+    filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
+    source_system: int = 255
+    lean_telemetry: bool = False
+    """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
+    VFR_HUD): less work on both sides when no ground station shares the vehicle (fly's own worlds)."""
+
+    def __post_init__(self) -> None:
+        if self.scenario.layout is None:
+            raise UsageError(f"scenario '{self.scenario.name}' has a random layout: the companion needs the layout the vehicle flies "
+                             "(the SITL writes it with --layout-out FILE)")
+        for name in ("connect_timeout_s", "command_timeout_s", "hold_after_s", "silence_hold_s", "lost_after_s", "restart_jump_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise UsageError(f"--{name.replace('_', '-')} must be a positive number of seconds, got {value}")
+        if self.lost_after_s <= self.silence_hold_s:
+            raise UsageError("--lost-after-s must be longer than --silence-hold-s")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
+        if self.command_retries < 1:
+            raise UsageError("--command-retries must be at least 1")

@@ -1,0 +1,452 @@
+"""The companion's state machine: connect, engage, fly each tick of the vehicle's clock, end.
+
+States (:class:`Phase`) and failsafes: :mod:`mavlink_bridge.companion`.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import time
+from dataclasses import asdict
+from typing import Optional
+
+import numpy as np
+
+from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, CompanionConfig
+from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot
+from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
+from mavlink_bridge.frames import HOLD, Measurement, Setpoint, action_to_setpoint, from_global_position_int, from_local_position_ned
+from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
+from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
+from tssac_core.cli import UsageError, write_json
+from tssac_core.sim.world import World
+
+_log = logging.getLogger("mavlink_bridge.companion")
+
+TIMED_TYPES = frozenset({"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYSTEM_TIME", "NAMED_VALUE_INT"})
+"""Messages whose ``time_boot_ms`` is the vehicle's clock."""
+_LOCAL_FRESH_S = 2.0
+"""GLOBAL_POSITION_INT is used only when no LOCAL_POSITION_NED came for this long (vehicle time)."""
+
+
+class Phase(enum.Enum):
+    CONNECT = "connect"
+    ENGAGE = "engage"
+    FLY = "fly"
+    PAUSED = "paused"
+    END = "end"
+
+
+class _Stop(Exception):
+    """Internal: leave the loop."""
+
+
+class Companion:
+    """One UAV's companion process (see the module docstring)."""
+
+    def __init__(self, config: CompanionConfig) -> None:
+        self.cfg = config
+        s = config.scenario
+        assert s.layout is not None
+        self.role_index = config.role.index
+        self.spec = s.vehicle(config.role)
+        self.dt_ms = int(round(s.dt_s * 1000.0))
+        self.pilot: Pilot = PolicyPilot(config.model, config.role) if config.model is not None else GuidancePilot()
+        self.world = World(s, 1)
+        self.world.reset([0], [s.layout])
+        self.pilot.action(self.world, self.role_index, 0)  # warm up: the guidance plans its route once per layout
+        self.pilot.reset()
+        _log.info("%s: pilot %s", config.role.value, self.pilot.name)
+        link_model = s.link
+        self.noise = FilterNoise.from_sensor(
+            max(link_model.gps_position_sigma_m, MIN_POS_SIGMA_M),
+            max(link_model.gps_velocity_sigma_m_s, MIN_VEL_SIGMA_M_S),
+            max_accel_m_s2=self.spec.accel_max_m_s2,
+            max_turn_rate_rad_s=math.radians(self.spec.turn_rate_max_deg_s),
+        )
+        self.counters = CompanionCounters()
+        self.latencies_s: list[float] = []
+        self._first_control_wall_s: Optional[float] = None
+        self._last_control_wall_s: Optional[float] = None
+        self._first_control_cpu_s = 0.0
+        self._last_control_cpu_s = 0.0
+        self.phase = Phase.CONNECT
+        self._stop_requested = False
+        self._link: Optional[MavLink] = None
+        self._reset_vehicle_state()
+        self._status: Optional[tuple[str, str]] = None
+
+    # --------------------------------------------------------------------------- control
+
+    def request_stop(self) -> None:
+        """End the run at the next loop iteration (safe from a signal handler)."""
+        self._stop_requested = True
+
+    def _reset_vehicle_state(self) -> None:
+        """Forget everything about the vehicle's flight (at start and after a restart)."""
+        self.filter = VehicleStateFilter(self.noise, self.cfg.filter_model)
+        self.flags = MissionFlags()
+        self.vt_ms: Optional[int] = None  # newest vehicle time seen
+        self.vt_rx_s = 0.0  # wall time it was first seen
+        self.fix_ms: Optional[int] = None  # time of the newest position fix
+        self.fix_rx_s = 0.0
+        self.local_ms: Optional[int] = None  # newest LOCAL_POSITION_NED
+        self.last_control_ms: Optional[int] = None
+        self.fly_start_ms: Optional[int] = None
+        self.armed = False
+        self.mode: Optional[int] = None
+        self._state_valid_after_s = 0.0  # heartbeats read before this wall time predate our last commands
+        self._rate_ref: Optional[tuple[float, int]] = None  # (wall, vehicle ms) for the clock-rate estimate
+        self.rate: Optional[float] = None  # vehicle seconds per wall second
+        self._holding: Optional[str] = None  # why we hold, while we do
+        self._gap_seen = False  # a gap happened since the last fix: re-engage a disarmed vehicle
+        self.pilot.reset()
+
+    def run(self) -> CompanionResult:
+        """Connect, engage, fly until the mission ends, the vehicle is lost or a stop is requested."""
+        cfg = self.cfg
+        try:
+            self._link = MavLink(cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system)
+        except LinkError as exc:
+            raise UsageError(str(exc)) from None
+        link = self._link
+        self.last_rx_s = time.monotonic()
+        self._next_heartbeat_s = 0.0
+        self._last_silence_hold_s = -math.inf
+        try:
+            try:
+                hb = link.wait_heartbeat(cfg.connect_timeout_s, stop=lambda: self._stop_requested)
+            except LinkError as exc:
+                if self._stop_requested:
+                    raise _Stop("stopped", "stopped before the vehicle answered") from None
+                raise _Stop("no_vehicle", str(exc)) from None
+            _log.info("%s: vehicle sysid %d at %s (type %d, autopilot %d)", cfg.role.value, hb.get_srcSystem(), link.spec, hb.type, hb.autopilot)
+            self.last_rx_s = time.monotonic()
+            self.phase = Phase.ENGAGE
+            self._loop()
+        except _Stop as stop:
+            self._status = (stop.args[0], stop.args[1])
+        finally:
+            result = self._result()
+            link.close()
+            if cfg.status_json is not None:
+                write_json(cfg.status_json, result.as_dict())
+        return result
+
+    # ------------------------------------------------------------------------------ loop
+
+    def _loop(self) -> None:
+        link = self._link
+        assert link is not None
+        while True:
+            if self._stop_requested:
+                raise _Stop("stopped", "stopped by a signal")
+            if self.phase is Phase.ENGAGE:
+                self._engage()
+            msg = link.recv(self._wait_s())
+            while msg is not None:
+                self._handle(msg)
+                msg = link.recv(0.0)
+            now = time.monotonic()
+            self._maybe_control(now)
+            self._check_silence(now)
+            if now >= self._next_heartbeat_s:
+                link.send_heartbeat()
+                self._next_heartbeat_s = now + 1.0
+
+    def _wait_s(self) -> float:
+        """How long the next receive may block (wall seconds)."""
+        wait = 0.1
+        if self.phase is Phase.FLY and self.vt_ms is not None and self._tick_due():
+            if self.fix_ms != self.vt_ms:
+                wait = max(0.0, self.vt_rx_s + self.cfg.settle_s - time.monotonic())
+            else:
+                wait = 0.0
+        elif self.phase is Phase.FLY and self._extrapolating() and self.rate:
+            wait = min(wait, 0.5 * self.dt_ms / 1000.0 / self.rate)
+        return wait
+
+    # --------------------------------------------------------------------------- engage
+
+    def _engage(self) -> None:
+        """Arm and switch to GUIDED, checking both COMMAND_ACKs; stream the position at the step rate."""
+        link, cfg = self._link, self.cfg
+        assert link is not None
+        role = cfg.role.value
+        try:
+            ack = link.arm(cfg.command_timeout_s, cfg.command_retries)
+            _log.info("%s: armed", role)
+            ack = link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.command_retries)
+            _log.info("%s: GUIDED", role)
+        except CommandError as exc:
+            if self._stop_requested:
+                raise _Stop("stopped", "stopped while engaging") from None
+            raise _Stop("refused", str(exc)) from None
+        self._state_valid_after_s = link.last_rx_s  # when the GUIDED ACK was read
+        self.armed, self.mode = True, GUIDED_MODE
+        intervals = {"LOCAL_POSITION_NED": self.cfg.scenario.dt_s}
+        if cfg.lean_telemetry:
+            intervals.update({"GLOBAL_POSITION_INT": -1.0, "ATTITUDE": -1.0, "VFR_HUD": -1.0})
+        for name, interval_s in intervals.items():
+            # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
+            try:
+                link.set_message_interval(getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.command_retries)
+            except CommandError as exc:
+                _log.warning("%s: %s (keeping the vehicle's default)", role, exc)
+        self.counters.engagements += 1
+        self.last_control_ms = None  # act at once on the newest tick
+        self.phase = Phase.FLY
+
+    # --------------------------------------------------------------------------- receive
+
+    def _handle(self, msg: Message) -> None:
+        link = self._link
+        assert link is not None
+        if not link.from_vehicle(msg):
+            return
+        rx_s = link.last_rx_s
+        self.last_rx_s = max(self.last_rx_s, rx_s)
+        mtype = msg.get_type()
+        if mtype in TIMED_TYPES:
+            self._vehicle_time(int(msg.time_boot_ms), rx_s)
+        if mtype == "HEARTBEAT":
+            self._on_heartbeat(msg, rx_s)
+        elif mtype == "LOCAL_POSITION_NED":
+            self.local_ms = int(msg.time_boot_ms)
+            self._on_fix(from_local_position_ned(msg.time_boot_ms, msg.x, msg.y, msg.vx, msg.vy), rx_s)
+        elif mtype == "GLOBAL_POSITION_INT":
+            if self.local_ms is None or msg.time_boot_ms - self.local_ms > _LOCAL_FRESH_S * 1000:
+                self._on_fix(from_global_position_int(self.cfg.scenario.origin, msg.time_boot_ms, msg.lat, msg.lon, msg.vx, msg.vy), rx_s)
+        elif mtype == "NAMED_VALUE_INT":
+            self._on_named_value(str(msg.name).rstrip("\x00"), int(msg.value), int(msg.time_boot_ms))
+        elif mtype == "STATUSTEXT":
+            self._on_statustext(str(msg.text).rstrip("\x00"))
+
+    def _vehicle_time(self, t_ms: int, rx_s: float) -> None:
+        if self.vt_ms is not None and t_ms < self.vt_ms - self.cfg.restart_jump_s * 1000.0:
+            self._on_restart(t_ms)
+        if self.vt_ms is None or t_ms > self.vt_ms:
+            self.vt_ms = t_ms
+            self.vt_rx_s = rx_s
+            self._update_rate(rx_s, t_ms)
+
+    def _update_rate(self, wall_s: float, t_ms: int) -> None:
+        """Vehicle seconds per wall second, over windows of at least half a wall second."""
+        if self._rate_ref is None:
+            self._rate_ref = (wall_s, t_ms)
+            return
+        w0, t0 = self._rate_ref
+        if wall_s - w0 >= 0.5:
+            rate = (t_ms - t0) / 1000.0 / (wall_s - w0)
+            self.rate = rate if self.rate is None else 0.5 * (self.rate + rate)
+            self._rate_ref = (wall_s, t_ms)
+
+    def _on_restart(self, t_ms: int) -> None:
+        role = self.cfg.role.value
+        _log.warning("%s: vehicle clock went back from %.1f s to %.1f s: the vehicle restarted; re-initialising",
+                     role, (self.vt_ms or 0) / 1000.0, t_ms / 1000.0)
+        self.counters.restarts += 1
+        self._reset_vehicle_state()
+        if self.phase in (Phase.FLY, Phase.PAUSED):
+            self.phase = Phase.ENGAGE
+        self._say(M.MAV_SEVERITY_WARNING, f"{role}: vehicle restart seen, re-engaging")
+
+    def _on_heartbeat(self, msg: Message, rx_s: float) -> None:
+        if not self._link or not self._link.is_vehicle_heartbeat(msg) or rx_s < self._state_valid_after_s:
+            return
+        self.armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        self.mode = int(msg.custom_mode)
+        in_control = self.armed and self.mode == GUIDED_MODE
+        role = self.cfg.role.value
+        if self.phase is Phase.FLY and not in_control:
+            if self._gap_seen:
+                _log.warning("%s: after the link gap the vehicle is %s in mode %d: re-engaging", role, "armed" if self.armed else "disarmed", self.mode)
+                self.phase = Phase.ENGAGE
+            else:
+                _log.warning("%s: the vehicle left GUIDED or was disarmed (mode %d, %s): pausing until it is back",
+                             role, self.mode, "armed" if self.armed else "disarmed")
+                self.counters.pauses += 1
+                self.phase = Phase.PAUSED
+        elif self.phase is Phase.PAUSED and in_control:
+            _log.info("%s: armed in GUIDED again: resuming", role)
+            self.last_control_ms = None
+            self.phase = Phase.FLY
+
+    def _on_fix(self, m: Measurement, rx_s: float) -> None:
+        if not (math.isfinite(m.east_m) and math.isfinite(m.north_m) and math.isfinite(m.vel_east_m_s) and math.isfinite(m.vel_north_m_s)):
+            self.counters.fixes_rejected += 1
+            return
+        if self.filter.update(m.t_s, (m.east_m, m.north_m), (m.vel_east_m_s, m.vel_north_m_s)):
+            self.counters.fixes += 1
+        else:
+            self.counters.fixes_rejected += 1
+        t_ms = int(round(m.t_s * 1000.0))
+        if self.fix_ms is None or t_ms >= self.fix_ms:
+            self.fix_ms = t_ms
+            self.fix_rx_s = rx_s
+
+    def _on_named_value(self, name: str, value: int, stamp_ms: int) -> None:
+        if name not in ("RADAR_ON", "IDENT", "HIT", "MSN_END"):
+            return
+        if self.flags.set(name, value, stamp_ms):
+            _log.info("%s: %s = %d at %.1f s", self.cfg.role.value, name, value, stamp_ms / 1000.0)
+        if name == "HIT" and value == 1:
+            raise _Stop("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
+        if name == "MSN_END" and value in END_STATUS:
+            raise _Stop(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
+
+    def _on_statustext(self, text: str) -> None:
+        _log.info("%s: vehicle says: %s", self.cfg.role.value, text)
+        # The flags normally come as NAMED_VALUE_INT; the texts are the human-readable fallback.
+        stamp = self.vt_ms or 0
+        if text == "SAM radar ON":
+            self.flags.set("RADAR_ON", 1, stamp)
+        elif text == "SAM radar OFF":
+            self.flags.set("RADAR_ON", 0, stamp)
+        elif text == "Target identified":
+            self.flags.set("IDENT", 1, stamp)
+        elif text == "Target hit":
+            raise _Stop("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
+        elif text.startswith("Mission end: "):
+            what = text[len("Mission end: "):]
+            status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(what, what.replace(" ", "_"))
+            raise _Stop(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
+
+    # --------------------------------------------------------------------------- control
+
+    def _tick_due(self) -> bool:
+        """A vehicle tick newer than the last control step is known."""
+        if self.vt_ms is None:
+            return False
+        return self.last_control_ms is None or self.vt_ms >= self.last_control_ms + self.dt_ms - 1
+
+    def _extrapolating(self) -> bool:
+        return not self.cfg.lockstep and self.rate is not None and self.rate > 0 and self.vt_ms is not None
+
+    def _maybe_control(self, now: float) -> None:
+        if self.phase is not Phase.FLY or self.vt_ms is None:
+            return
+        if self._tick_due():
+            if self.fix_ms != self.vt_ms and now < self.vt_rx_s + self.cfg.settle_s:
+                return  # the tick's fix is probably still on its way
+            trigger = self.fix_rx_s if self.fix_ms == self.vt_ms else self.vt_rx_s
+            self._control(self.vt_ms, trigger)
+            return
+        if self._extrapolating():
+            assert self.rate is not None and self.last_control_ms is not None
+            silent_s = now - self.last_rx_s
+            if silent_s < 1.5 * self.dt_ms / 1000.0 / self.rate:
+                return
+            est_ms = self.vt_ms + (now - self.vt_rx_s) * self.rate * 1000.0
+            tick_ms = int(est_ms // self.dt_ms) * self.dt_ms
+            if tick_ms >= self.last_control_ms + self.dt_ms:
+                self.counters.extrapolated_steps += 1
+                self._control(tick_ms, None)
+
+    def _control(self, t_ms: int, trigger_rx_s: Optional[float]) -> None:
+        """One control step at vehicle time t_ms."""
+        link = self._link
+        assert link is not None
+        if self.last_control_ms is not None and t_ms > self.last_control_ms + self.dt_ms:
+            self.counters.skipped_ticks += (t_ms - self.last_control_ms) // self.dt_ms - 1
+        self.last_control_ms = t_ms
+        if self.fly_start_ms is None:
+            self.fly_start_ms = t_ms
+        self.counters.control_steps += 1
+        now = time.monotonic()
+        if self._first_control_wall_s is None:
+            self._first_control_wall_s = now
+            self._first_control_cpu_s = time.process_time()
+        self._last_control_wall_s = now
+        self._last_control_cpu_s = time.process_time()
+        setpoint, why = self._decide(t_ms)
+        if why is None:
+            if self._holding is not None:
+                _log.info("%s: %s over, resuming", self.cfg.role.value, self._holding)
+                self._say(M.MAV_SEVERITY_INFO, f"{self.cfg.role.value}: telemetry back, resuming")
+                self._holding = None
+        else:
+            self._hold_reason(why)
+        link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2)
+        self.counters.setpoints_sent += 1
+        if trigger_rx_s is not None:
+            self.latencies_s.append(time.monotonic() - trigger_rx_s)
+        if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
+            raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
+
+    def _decide(self, t_ms: int) -> tuple[Setpoint, Optional[str]]:
+        """The setpoint for vehicle time t_ms, and why it is the hold (None if it is not)."""
+        if not self.filter.initialised:
+            return HOLD, "no position fix yet"
+        t_s = t_ms / 1000.0
+        self.filter.predict_to(t_s)
+        gap_s = t_s - self.filter.last_measurement_t_s
+        if gap_s > self.cfg.hold_after_s:
+            self._gap_seen = True
+            return HOLD, f"telemetry gap {gap_s:.1f} s"
+        f = self.filter
+        x_m, y_m = f.pos_m
+        self.world.mirror(0, self.role_index, x_m, y_m, f.speed_m_s, f.heading_rad,
+                          bool(self.flags.get("RADAR_ON")), bool(self.flags.get("IDENT")))
+        step = t_ms // self.dt_ms
+        action = self.pilot.action(self.world, self.role_index, int(step))
+        if action.shape != (2,) or not np.all(np.isfinite(action)):
+            self.counters.nonfinite_actions += 1
+            self.pilot.reset()
+            return HOLD, "non-finite action"
+        self._gap_seen = False
+        return action_to_setpoint((float(action[0]), float(action[1])), self.spec), None
+
+    def _hold_reason(self, why: str) -> None:
+        self.counters.holds += 1
+        kind = why.split(" ")[0]
+        if self._holding is None or self._holding.split(" ")[0] != kind:
+            self.counters.hold_episodes += 1
+            _log.warning("%s: %s: sending the hold setpoint (no turn, no acceleration)", self.cfg.role.value, why)
+            self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, holding")
+        self._holding = why
+
+    def _check_silence(self, now: float) -> None:
+        silent_s = now - self.last_rx_s
+        if silent_s > self.cfg.lost_after_s:
+            raise _Stop("lost", f"no message from the vehicle for {silent_s:.1f} s")
+        if self.phase is not Phase.FLY or self._extrapolating():
+            return
+        if silent_s > self.cfg.silence_hold_s and now - self._last_silence_hold_s >= 1.0:
+            self._last_silence_hold_s = now
+            self._gap_seen = True
+            self._hold_reason(f"link silent {silent_s:.1f} s")
+            link = self._link
+            assert link is not None
+            link.send_setpoint(self.vt_ms or 0, HOLD.yaw_rate_rad_s, HOLD.accel_m_s2)
+            self.counters.setpoints_sent += 1
+
+    def _say(self, severity: int, text: str) -> None:
+        if self._link is not None:
+            self._link.send_statustext(severity, text)
+
+    # ---------------------------------------------------------------------------- result
+
+    def _result(self) -> CompanionResult:
+        status, message = self._status if self._status is not None else ("stopped", "stopped")
+        lat = np.asarray(self.latencies_s) * 1000.0
+        latency = {}
+        if lat.size:
+            latency = {"n": float(lat.size), "p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
+        link = self._link
+        return CompanionResult(
+            status=status,
+            role=self.cfg.role.value,
+            message=message,
+            vehicle_time_s=None if self.vt_ms is None else self.vt_ms / 1000.0,
+            flight_wall_s=None if self._first_control_wall_s is None or self._last_control_wall_s is None
+            else self._last_control_wall_s - self._first_control_wall_s,
+            flight_cpu_s=None if self._first_control_wall_s is None else self._last_control_cpu_s - self._first_control_cpu_s,
+            counters=self.counters,
+            link=asdict(link.counters) if link is not None else {},
+            latency_ms=latency,
+            flags=dict(self.flags.values),
+            latency_samples_ms=[round(float(x), 4) for x in lat],
+        )

@@ -1,0 +1,80 @@
+"""What a companion counts, the mission flags it hears, and the result it reports."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Optional
+
+from mavlink_bridge.companion.config import EXIT_OK, EXIT_VEHICLE
+
+
+@dataclass
+class CompanionCounters:
+    control_steps: int = 0
+    setpoints_sent: int = 0
+    extrapolated_steps: int = 0
+    """Control steps on an extrapolated vehicle clock (no telemetry)."""
+    holds: int = 0
+    """Hold setpoints sent."""
+    hold_episodes: int = 0
+    """Times the companion went into hold (gap, silence, non-finite action)."""
+    nonfinite_actions: int = 0
+    fixes: int = 0
+    fixes_rejected: int = 0
+    restarts: int = 0
+    engagements: int = 0
+    pauses: int = 0
+    skipped_ticks: int = 0
+    """Vehicle ticks that passed without a control step (the companion fell behind)."""
+
+
+@dataclass
+class MissionFlags:
+    """The flags the vehicles announce (NAMED_VALUE_INT), each with the vehicle time it was stamped."""
+
+    values: dict[str, int] = field(default_factory=dict)
+    stamps_ms: dict[str, int] = field(default_factory=dict)
+
+    def set(self, name: str, value: int, stamp_ms: int) -> bool:
+        """Take a value unless an older message overtook a newer one; True if it changed."""
+        if stamp_ms < self.stamps_ms.get(name, -1):
+            return False
+        self.stamps_ms[name] = stamp_ms
+        changed = self.values.get(name) != value
+        self.values[name] = value
+        return changed
+
+    def get(self, name: str) -> int:
+        return self.values.get(name, 0)
+
+
+@dataclass
+class CompanionResult:
+    status: str
+    role: str
+    message: str
+    vehicle_time_s: Optional[float]
+    flight_wall_s: Optional[float]
+    """Wall seconds between the first and the last control step."""
+    flight_cpu_s: Optional[float]
+    """This process's CPU seconds between the first and the last control step."""
+    counters: CompanionCounters
+    link: dict[str, int]
+    latency_ms: dict[str, float]
+    """Telemetry received -> setpoint sent, wall clock: n, p50, p99, max."""
+    flags: dict[str, int]
+    latency_samples_ms: list[float] = field(default_factory=list)
+    """Every control step's latency (for benchmarks that pool several companions)."""
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_VEHICLE if self.status in ("lost", "no_vehicle", "refused") else EXIT_OK
+
+    def as_dict(self) -> dict[str, object]:
+        d = asdict(self)
+        d["exit_code"] = self.exit_code
+        return d
+
+
+END_STATUS = {1: "success", 2: "geofence", 3: "episode_cap"}
+"""MSN_END values -> status."""

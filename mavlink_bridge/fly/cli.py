@@ -1,0 +1,112 @@
+"""``python -m mavlink_bridge.fly``: fly whole missions (see :mod:`mavlink_bridge.fly`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+from types import FrameType
+from typing import Any, Optional, Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
+from mavlink_bridge.fly.missions import ChildFailed, MissionRunner
+from mavlink_bridge.fly.report import print_report
+from mavlink_bridge.fly.scoring import summarise
+from mavlink_bridge.processes import ChildProcesses
+from tssac_core.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
+from tssac_core.sim.scenario import ScenarioError
+
+EXIT_FAILED = 1
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C."""
+
+
+def _on_sigterm(signum: int, _frame: Optional[FrameType]) -> None:
+    raise _Terminated()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        cfg = config_from_args(argv)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (UsageError, ScenarioError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        print(f"{PROG}: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    children = ChildProcesses()
+    rows: list[dict[str, Any]] = []
+    error: Optional[str] = None
+    interrupted = False
+    code = 0
+    tmp: Optional[tempfile.TemporaryDirectory[str]] = None
+    started = time.monotonic()
+    try:
+        if cfg.logs_dir is not None:
+            work = cfg.logs_dir
+            work.mkdir(parents=True, exist_ok=True)
+        else:
+            tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
+            work = Path(tmp.name)
+        if cfg.signing_key_path is None and cfg.scenario.link.signing:
+            cfg = dataclasses.replace(cfg, signing_key_path=make_signing_key(work))
+        runner = MissionRunner(cfg, children, work)
+        with tqdm(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr) as bar:
+            for i in range(cfg.episodes):
+                row = runner.fly(i)
+                rows.append(row)
+                children.forget_finished()
+                bar.update(1)
+                bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
+                if row.get("end") == "timeout":
+                    error = f"mission {i} did not end within {cfg.mission_timeout_s:g} s"
+                    code = EXIT_FAILED
+                    break
+    except KeyboardInterrupt:
+        interrupted = True
+        code = EXIT_INTERRUPTED
+    except ChildFailed as exc:
+        error = str(exc)
+        code = EXIT_FAILED
+    except (UsageError, ScenarioError) as exc:
+        error = str(exc)
+        code = EXIT_BAD_INPUT
+    finally:
+        # No second signal may cut the clean-up short: the children are in their own sessions.
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        children.stop_all()
+        signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
+        summary = summarise(rows, cfg)
+        summary["interrupted"] = interrupted
+        summary["error"] = error
+        summary["wall_time_s"] = round(time.monotonic() - started, 3)
+        if cfg.json_path is not None:
+            write_json(cfg.json_path, summary)
+        if tmp is not None:
+            tmp.cleanup()
+    print_report(summary, cfg)
+    if interrupted:
+        print(f"interrupted after {len(rows)} of {cfg.episodes} missions" + (f"; wrote {cfg.json_path}" if cfg.json_path else ""), file=sys.stderr)
+    if error is not None:
+        print(f"{PROG}: error: {error}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,148 @@
+"""``fly``'s settings (`FlyConfig`) from its command line, checked before any process starts."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NoReturn, Optional, Sequence
+
+from mavlink_bridge.link import parse_connection
+from mavlink_bridge.signing_key import read_signing_key
+from tssac_core.cli import UsageError
+from tssac_core.deploy.numpy_actor import load_actor, pilot_file
+from tssac_core.errors import CheckpointError
+from tssac_core.sim.scenario import ROLES, Scenario, load
+
+PROG = "python -m mavlink_bridge.fly"
+REPO = Path(__file__).resolve().parents[2]
+DEFAULT_MODELS = REPO / "models" / "tssac"
+GUIDANCE = "guidance"
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    scenario_path: Path
+    scenario: Scenario
+    models: Optional[Path]
+    """None = the guidance controller."""
+    episodes: int
+    seed: int
+    lockstep: bool
+    speedup: float
+    json_path: Optional[Path]
+    tlog_dir: Optional[Path]
+    plot_path: Optional[Path]
+    signing_key_path: Optional[Path]
+    connect: Optional[tuple[str, str, str]]
+    logs_dir: Optional[Path]
+    mission_timeout_s: float
+    startup_timeout_s: float
+    progress: bool
+    lean_telemetry: bool = False
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{message} (see --help)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Fly whole missions over MAVLink: a SITL world plus one companion process per UAV.")
+    p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario file (scenarios/strike.yaml, scenarios/random.yaml)")
+    who = p.add_mutually_exclusive_group()
+    who.add_argument("--models", type=Path, metavar="DIR", help=f"directory with decoy.pt, detect.pt, strike.pt (default {DEFAULT_MODELS.relative_to(REPO)})")
+    who.add_argument("--pilot", choices=[GUIDANCE], help="fly every UAV with the rule-based guidance controller")
+    p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="mission i uses seed S + i for its random layout and sensor noise (default 0)")
+    clock = p.add_mutually_exclusive_group()
+    clock.add_argument("--lockstep", action="store_true",
+                       help="step the world once per round of setpoints (the default; with --connect: the running world is in lockstep)")
+    clock.add_argument("--speedup", type=float, metavar="X", help="run the world in real time times X instead of lockstep")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)")
+    p.add_argument("--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)")
+    p.add_argument("--plot", type=Path, metavar="FILE", help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)")
+    p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions")
+    p.add_argument("--connect", nargs=3, metavar=("DECOY", "DETECT", "STRIKE"), help="fly running vehicles at these connection strings instead of starting a world")
+    p.add_argument("--logs", type=Path, metavar="DIR", help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)")
+    p.add_argument("--lean-telemetry", action="store_true",
+                   help="companions stop the vehicle streams they do not use (GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD): faster, leaner tlogs")
+    p.add_argument("--mission-timeout-s", type=float, default=900.0, metavar="S", help="wall seconds a mission may take (default 900)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
+    a = build_parser().parse_args(argv)
+    if a.episodes <= 0:
+        raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
+        raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
+    if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
+        raise UsageError("--mission-timeout-s must be positive")
+    scenario = load(a.scenario)
+    models: Optional[Path] = None
+    if a.pilot is None:
+        models = (a.models if a.models is not None else DEFAULT_MODELS).resolve()
+        check_models(models)
+    if a.signing_key is not None:
+        read_signing_key(a.signing_key)
+    connect: Optional[tuple[str, str, str]] = None
+    if a.connect is not None:
+        for text in a.connect:
+            try:
+                parse_connection(text)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+        if a.episodes != 1:
+            raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
+        if scenario.layout is None:
+            raise UsageError(f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
+                             "(python -m sim_vehicles --layout-out FILE writes it)")
+        if a.plot is not None:
+            raise UsageError("--plot draws from the world's truth log, which fly has only for the worlds it starts (not with --connect)")
+        connect = (a.connect[0], a.connect[1], a.connect[2])
+    return FlyConfig(
+        scenario_path=a.scenario.resolve(),
+        scenario=scenario,
+        models=models,
+        episodes=a.episodes,
+        seed=a.seed,
+        # A world fly starts runs in lockstep unless --speedup; vehicles it did not start are taken to run in
+        # real time unless --lockstep says otherwise (a companion must not extrapolate a lockstep clock).
+        lockstep=a.lockstep or (a.speedup is None and connect is None),
+        speedup=1.0 if a.speedup is None else float(a.speedup),
+        json_path=a.json,
+        tlog_dir=a.tlog.resolve() if a.tlog is not None else None,
+        plot_path=a.plot,
+        signing_key_path=a.signing_key.resolve() if a.signing_key is not None else None,
+        connect=connect,
+        logs_dir=a.logs.resolve() if a.logs is not None else None,
+        mission_timeout_s=a.mission_timeout_s,
+        startup_timeout_s=60.0,
+        progress=not a.no_progress,
+        lean_telemetry=a.lean_telemetry,
+    )
+
+
+def make_signing_key(directory: Path) -> Path:
+    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only."""
+    path = directory / "signing.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(os.urandom(32))
+    return path
+
+
+def check_models(models: Path) -> None:
+    """The three roles' actors load (CheckpointError otherwise), with a hint when they are missing."""
+    hint = "fly with --pilot guidance, or train with python -m tssac_core.train --out DIR and pass --models DIR"
+    if not models.is_dir():
+        raise UsageError(f"{models}: models directory not found ({hint})")
+    try:
+        for role in ROLES:
+            load_actor(pilot_file(models, role), role)
+    except CheckpointError as exc:
+        raise UsageError(f"{exc} ({hint})") from None

@@ -1,0 +1,48 @@
+"""What ``fly`` shows: the printed summary and the figure-9 style plot of a mission."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mavlink_bridge.fly.config import FlyConfig
+from mavlink_bridge.mission_log import MissionRecord
+from tssac_core.sim.scenario import Layout
+
+
+def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
+    n = summary["episodes"]
+    if not n:
+        return
+    cost = "unknown" if summary["mean_cost"] is None else f"{summary['mean_cost']:.2f}"
+    print(f"success rate {summary['success_rate']:.1%} over {n} missions, mean hazard cost per UAV {cost} "
+          f"(limit {cfg.scenario.cost_limit:g}), mean mission time {summary['mean_mission_time_s'] or 0:.1f} s")
+    for role, fig in summary["roles"].items():
+        parts = [f"  {role:6s}"]
+        if "mean_cost" in fig:
+            parts.append(f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} max {fig['max_cost']:.0f}")
+        if "latency_p50_ms" in fig:
+            parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
+        print("  ".join(parts))
+    for r in summary["missions"]:
+        speed = f", {r['speed_x']:.0f}x real time in flight" if r.get("speed_x") else ""
+        print(f"  mission {r['index']}: {'success' if r.get('success') else r.get('end')}, {r.get('sim_time_s') or 0:.1f} s simulated, "
+              f"{r['wall_time_s']:.1f} s wall{speed}")
+    if cfg.json_path is not None:
+        print(f"wrote {cfg.json_path}")
+
+
+def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> None:
+    """Draw one mission's trajectories and events (``--plot``: FILE, or FILE-NNN.ext when there are several)."""
+    from tssac_core.plots import plot_mission  # matplotlib only when a plot is asked for
+
+    assert cfg.plot_path is not None
+    path = cfg.plot_path
+    if cfg.episodes > 1:
+        path = path.with_name(f"{path.stem}-{index:03d}{path.suffix or '.png'}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    r = cfg.scenario.ranges
+    verdict = "success" if record.success else record.end
+    cost = ", ".join(f"{k} {v:g}" for k, v in record.cost.items())
+    plot_mission(path, layout, record.tracks_km(), (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
+                 record.event_markers_km(), title=f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}",
+                 area_km=cfg.scenario.area_km)

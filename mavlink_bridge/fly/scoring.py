@@ -1,0 +1,80 @@
+"""A mission's outcome (from the world's truth log, or from the companions) and the results JSON."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mavlink_bridge.fly.config import GUIDANCE, FlyConfig
+from mavlink_bridge.mission_log import MissionRecord
+from tssac_core.sim.scenario import ROLES
+
+
+def outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
+    tasks = record.task_done()
+    return {
+        "success": record.success,
+        "end": record.end,
+        "steps": record.steps,
+        "sim_time_s": round(record.sim_time_s, 3),
+        "cost": record.cost,
+        "within_cost_limit": {k: v <= cost_limit for k, v in record.cost.items()},
+        "task_done": tasks,
+        "failsafe_steps": record.failsafe_steps,
+        "world_flight_cpu_s": record.summary.get("flight_cpu_s") if record.summary is not None else None,
+    }
+
+
+def outcome_from_companions(statuses: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    ends = [s.get("status") for s in statuses.values()]
+    success = "success" in ends
+    end = "success" if success else next((e for e in ends if e in ("geofence", "episode_cap")), "unknown")
+    times = [s["vehicle_time_s"] for s in statuses.values() if s.get("vehicle_time_s") is not None]
+    return {"success": success, "end": end, "sim_time_s": max(times) if times else None, "cost": None}
+
+
+def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
+    """The results JSON: success_rate, mean_cost, episodes, per-role figures and the missions."""
+    n = len(rows)
+    out: dict[str, Any] = {
+        "success_rate": float(np.mean([bool(r.get("success")) for r in rows])) if n else None,
+        "mean_cost": None,
+        "episodes": n,
+        "episodes_requested": cfg.episodes,
+        "mean_mission_time_s": None,
+        "roles": {},
+    }
+    times = [r["sim_time_s"] for r in rows if r.get("sim_time_s") is not None]
+    if times:
+        out["mean_mission_time_s"] = float(np.mean(times))
+    costed = [r for r in rows if r.get("cost")]
+    if costed:
+        out["mean_cost"] = float(np.mean([[r["cost"][role.value] for role in ROLES] for r in costed]))
+    for role in ROLES:
+        name = role.value
+        fig: dict[str, Any] = {}
+        if costed:
+            costs = np.array([r["cost"][name] for r in costed])
+            fig.update({"mean_cost": float(costs.mean()), "max_cost": float(costs.max()),
+                        "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean())})
+            fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
+        p50 = [r["companions"][name]["latency_p50_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None]
+        p99 = [r["companions"][name]["latency_p99_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None]
+        if p50:
+            fig["latency_p50_ms"] = float(np.median(p50))
+            fig["latency_p99_ms"] = float(np.max(p99))
+        out["roles"][name] = fig
+    out.update(
+        {
+            "pilot": str(cfg.models) if cfg.models is not None else GUIDANCE,
+            "scenario": str(cfg.scenario_path),
+            "seed": cfg.seed,
+            "clock": ("connected, lockstep" if cfg.lockstep else "connected") if cfg.connect is not None
+            else ("lockstep" if cfg.lockstep else f"speedup {cfg.speedup:g}"),
+            "cost_limit": cfg.scenario.cost_limit,
+            "signing": cfg.signing_key_path is not None,
+            "missions": rows,
+        }
+    )
+    return out

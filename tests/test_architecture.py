@@ -1,0 +1,118 @@
+"""The layout's rules, checked on the source: no import cycles, who may import whom, and what the
+companion and ``import tssac_core`` pull in (each in a fresh interpreter)."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("tssac_core", "mavlink_bridge", "sim_vehicles")
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imports_of(path: Path) -> set[str]:
+    """Every module that ``path`` imports, at any depth of the file (function-level imports count too).
+    ``from pkg import name`` counts as importing ``pkg`` and ``pkg.name`` (the caller keeps the modules)."""
+    tree = ast.parse(path.read_text())
+    found: set[str] = set()
+    package = module_name(path) if path.name == "__init__.py" else module_name(path).rpartition(".")[0]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
+            found.add(base)
+            found |= {f"{base}.{alias.name}" for alias in node.names}  # `from pkg import module`
+    return found
+
+
+def project_graph() -> dict[str, set[str]]:
+    files = [p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py") if p.name != "__main__.py"]
+    modules = {module_name(p): p for p in files}
+    graph = {}
+    for name, path in modules.items():
+        found = imports_of(path) & set(modules)
+        # `from pkg import module` runs pkg/__init__ first, as every import of a submodule does: not an edge to pkg.
+        graph[name] = {m for m in found if m != name and not any(other.startswith(m + ".") for other in found)}
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state and (cycle := visit(nxt)):
+                return cycle
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (cycle := visit(node)):
+            return cycle
+    return None
+
+
+def test_no_import_cycles():
+    graph = project_graph()
+    assert len(graph) > 40  # the walk found the packages
+    assert find_cycle(graph) is None, " -> ".join(find_cycle(graph) or [])
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
+
+
+@pytest.mark.parametrize(("package", "forbidden"), [
+    ("tssac_core", ("pymavlink", "sim_vehicles", "mavlink_bridge")),
+    ("sim_vehicles", ("mavlink_bridge",)),
+    ("mavlink_bridge", ("sim_vehicles",)),
+])
+def test_who_may_import_whom(package: str, forbidden: tuple[str, ...]):
+    offenders = sorted(
+        f"{module_name(p)} imports {m}"
+        for p in (ROOT / package).rglob("*.py")
+        for m in imports_of(p)
+        if m.split(".")[0] in forbidden
+    )
+    assert not offenders, offenders
+
+
+def modules_after(statement: str) -> set[str]:
+    code = f"import sys\n{statement}\nprint(' '.join(sorted(m.split('.')[0] for m in sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return set(out.stdout.split())
+
+
+def test_the_companion_imports_neither_torch_nor_gymnasium():
+    loaded = modules_after("import mavlink_bridge.companion.cli, mavlink_bridge.companion.machine")
+    assert "pymavlink" in loaded and "numpy" in loaded  # it did import the companion
+    assert "torch" not in loaded
+    assert "gymnasium" not in loaded
+
+
+def test_importing_tssac_core_imports_no_gymnasium_but_the_env_registers_itself():
+    assert "gymnasium" not in modules_after("import tssac_core")
+    code = "import gymnasium as gym\nenv = gym.make('tssac_core.sim.env:tssac/Detect-v0')\nprint(env.observation_space.shape)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr

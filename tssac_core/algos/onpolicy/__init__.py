@@ -1,0 +1,1 @@
+"""The paper's on-policy baselines: PPO and PPO-Lagrangian (``ppo``), CPO (``cpo``), and GAE (``gae``)."""

@@ -1,0 +1,6 @@
+"""What flies a trained policy, and what the SITL vehicles and the MAVLink bridge share.
+
+``policy`` (role checkpoints, torch) · ``numpy_actor`` (the exported actor, numpy only) · ``export``
+(checkpoint -> ``<role>.npz``; ``python -m tssac_core.deploy.export``) · ``geodetic`` (the flat-earth frame
+between the world's metres and MAVLink's degrees) · ``truth_log_schema`` (the SITL world's truth log).
+"""

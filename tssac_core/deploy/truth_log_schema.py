@@ -1,0 +1,79 @@
+"""The truth log's format, shared by its writer (:mod:`sim_vehicles.truth_log`) and its reader
+(:mod:`mavlink_bridge.mission_log`), which never import each other: JSON Lines, one object per line,
+written as the mission runs.
+
+Line types (key ``type``):
+
+``header``  (first line) ``scenario`` name, ``digest`` (Scenario.digest()), ``seed``, ``dt_s``,
+            ``clock`` ("realtime" / "lockstep"), ``speedup``, ``roles`` (["decoy", "detect", "strike"]),
+            ``sysids``, ``ports``, ``layout`` (the layout flown, in scenario-file form).
+``step``    one per world step: ``step`` (1, 2, ...), ``t_s`` (simulated time after the step),
+            ``radar_on``, ``identified``, ``hit`` (mission flags after the step) and ``vehicles``:
+            {role: {``x_m``, ``y_m`` (east / north of the area's SW corner), ``v_m_s``, ``phi_rad``
+            (CCW from east), ``cost`` (eq. 11 cost of this step, 0/1), ``cost_total``,
+            ``omega_cmd``, ``u_cmd`` (the action flown, in [-1, 1]), ``armed``, ``mode``
+            ("MANUAL"/"GUIDED"), ``failsafe``}} — true states, no sensor noise.
+``event``   ``step``, ``t_s``, ``event`` (RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END — see
+            ``sim_vehicles.events``), ``value``, ``vehicle`` (role or null).
+``summary`` (last line) ``success`` (target hit), ``end`` ("success", "geofence", "episode_cap" or
+            "stopped"), ``steps``, ``sim_time_s``, ``cost`` ({role: total eq. 11 cost}),
+            ``cost_limit``, ``radar_on``, ``identified``, ``hit``, ``counters`` ({role: link and
+            protocol counters}).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+HEADER, STEP, EVENT, SUMMARY = "header", "step", "event", "summary"
+"""The line types (key ``type``)."""
+ROLES_KEY, VEHICLES_KEY = "roles", "vehicles"
+FLAGS = ("radar_on", "identified", "hit")
+"""The mission flags of a ``step`` line (and of the ``summary``)."""
+
+
+@dataclass(frozen=True)
+class VehicleRow:
+    """One vehicle's true state after a step (see the module docstring for units)."""
+
+    role: str
+    x_m: float
+    y_m: float
+    v_m_s: float
+    phi_rad: float
+    cost: float
+    cost_total: float
+    omega_cmd: float
+    u_cmd: float
+    armed: bool
+    mode: str
+    failsafe: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "x_m": round(self.x_m, 4),
+            "y_m": round(self.y_m, 4),
+            "v_m_s": round(self.v_m_s, 5),
+            "phi_rad": round(self.phi_rad, 7),
+            "cost": self.cost,
+            "cost_total": self.cost_total,
+            "omega_cmd": round(self.omega_cmd, 7),
+            "u_cmd": round(self.u_cmd, 7),
+            "armed": self.armed,
+            "mode": self.mode,
+            "failsafe": self.failsafe,
+        }
+
+
+def encode(record: dict[str, Any]) -> str:
+    """One line of the log (compact JSON, with its newline)."""
+    return json.dumps(record, separators=(",", ":")) + "\n"
+
+
+def read_truth_log(path: str | Path) -> list[dict[str, Any]]:
+    """All records of a truth log (for tests and analysis)."""
+    with open(path, encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]

@@ -1,0 +1,8 @@
+"""``python -m tssac_core.experiments``: see :mod:`tssac_core.experiments.cli`."""
+
+import sys
+
+from tssac_core.cli import run
+from tssac_core.experiments.cli import main
+
+sys.exit(run(main))

@@ -1,0 +1,570 @@
+"""Scenario files: schema, loading, dumping and random layouts.
+
+A scenario is a YAML file (see ``scenarios/*.yaml`` and ``docs/scenarios.md``) loaded into the frozen
+dataclasses below. Every field is checked on load; a bad file raises :class:`ScenarioError`, whose
+message is one line naming the file, the field and what is wrong.
+
+Units: the file speaks km, degrees, m/s and seconds because that is how a mission is described; the
+world (:mod:`tssac_core.sim.world`) converts to metres and radians once.
+
+A scenario has exactly one of ``layout:`` (a fixed layout: the paper's figure 6 mission) or
+``random:`` (ranges for random layouts, section 5.2.2). Random layouts are sampled by rejection until
+they are feasible: no vehicle starts inside (or too close to) a radar, no radar reaches into the SAM's
+detection disk, and every role's zone is reachable from every start without crossing a radar
+(a flood fill on a 1 km grid with radars inflated by the clearance).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from tssac_core.sim.yaml_file import read_yaml
+
+
+class Role(enum.Enum):
+    """The three UAVs, in the order the world stores them (index = position in that order)."""
+
+    DECOY = "decoy"
+    DETECT = "detect"
+    STRIKE = "strike"
+
+    @property
+    def index(self) -> int:
+        return ROLES.index(self)
+
+
+ROLES: tuple[Role, ...] = (Role.DECOY, Role.DETECT, Role.STRIKE)
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be used; ``str()`` is one line: ``file: field: problem``."""
+
+    def __init__(self, source: str, field_path: str, problem: str) -> None:
+        self.source = source
+        self.field_path = field_path
+        self.problem = problem
+        where = f"{source}: {field_path}" if field_path else source
+        super().__init__(f"{where}: {problem}")
+
+
+# --------------------------------------------------------------------------------------- schema
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """Sensor and weapon ranges of Table 3 (km)."""
+
+    strike_launch_km: float = 10.0
+    """R1: the strike UAV's weapon launch range."""
+    detect_km: float = 13.0
+    """R2: the detect UAV's detection range."""
+    sam_launch_km: float = 17.0
+    """R3: the SAM's launch range."""
+    sam_detect_km: float = 20.0
+    """R4: the SAM's detection range."""
+
+
+@dataclass(frozen=True)
+class Radar:
+    """A radar site: a hazard disk (eq. 11 costs 1 per step inside it)."""
+
+    position_km: tuple[float, float]
+    """Centre, (x east, y north) in km from the area's south-west corner."""
+    radius_km: float = 12.0
+    """Detection radius."""
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """One UAV's performance limits (eq. 6 bounds and the action scaling)."""
+
+    speed_min_m_s: float = 150.0
+    """Lower speed bound v_min (a fixed-wing vehicle cannot hover)."""
+    speed_max_m_s: float = 300.0
+    """Upper speed bound v_max."""
+    speed_init_m_s: float = 250.0
+    """Speed at the start of an episode."""
+    turn_rate_max_deg_s: float = 5.0
+    """|omega| at action +-1."""
+    accel_max_m_s2: float = 10.0
+    """|u| at action +-1."""
+
+
+@dataclass(frozen=True)
+class Start:
+    """A vehicle's initial pose."""
+
+    position_km: tuple[float, float]
+    """(x east, y north) in km."""
+    heading_deg: float = 45.0
+    """Heading phi, counter-clockwise from east (the frame of eq. 5)."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where everything is in one episode."""
+
+    sam_km: tuple[float, float]
+    """The SAM site (centre of R3 and R4, and of every role's zone)."""
+    target_km: tuple[float, float]
+    """The target the SAM protects (the observation's l is the distance to it)."""
+    radars: tuple[Radar, ...]
+    """The hazards."""
+    starts: dict[str, Start]
+    """Initial pose per role name (decoy, detect, strike)."""
+
+
+@dataclass(frozen=True)
+class RandomLayout:
+    """Ranges from which random layouts are drawn (section 5.2.2: each episode a new layout)."""
+
+    sam_x_km: tuple[float, float] = (55.0, 75.0)
+    """SAM east coordinate range."""
+    sam_y_km: tuple[float, float] = (55.0, 75.0)
+    """SAM north coordinate range."""
+    target_offset_km: tuple[float, float] = (0.0, 3.0)
+    """Distance of the target from the SAM."""
+    radar_count: int = 3
+    """Number of radar sites."""
+    radar_radius_km: tuple[float, float] = (12.0, 12.0)
+    """Radar radius range."""
+    radar_distance_from_sam_km: tuple[float, float] = (32.0, 45.0)
+    """Distance of each radar centre from the SAM (>= R4 + radius keeps the zones clear)."""
+    radar_bearing_spread_deg: float = 50.0
+    """Radars lie within this angle either side of the SAM -> start-box bearing, i.e. in the way."""
+    start_x_km: tuple[float, float] = (8.0, 18.0)
+    """Start-box east range (all three UAVs start in it)."""
+    start_y_km: tuple[float, float] = (8.0, 18.0)
+    """Start-box north range."""
+    start_heading_deg: tuple[float, float] = (30.0, 60.0)
+    """Initial heading range."""
+    start_separation_km: float = 1.0
+    """Minimum distance between two UAVs at the start."""
+    clearance_km: float = 2.0
+    """Minimum distance from a start to a radar's edge, and the radar inflation for the reachability check."""
+
+
+@dataclass(frozen=True)
+class LinkModel:
+    """Sensor and datalink model, read by the SITL vehicles (sim_vehicles) and the bridge's filter."""
+
+    gps_position_sigma_m: float = 5.0
+    """GPS horizontal position noise, 1 sigma."""
+    gps_velocity_sigma_m_s: float = 0.5
+    """GPS velocity noise, 1 sigma."""
+    gps_rate_hz: float = 10.0
+    """GPS fix rate."""
+    gps_dropout_prob: float = 0.0
+    """Probability that a fix is missing."""
+    packet_loss: float = 0.0
+    """Probability that a MAVLink packet is lost, each direction."""
+    latency_ms: float = 0.0
+    """One-way link latency."""
+    duplication: float = 0.0
+    """Probability that a packet is delivered twice."""
+    reordering: float = 0.0
+    """Probability that a packet is held back behind the next one."""
+    signing: bool = False
+    """Fly with MAVLink 2 message signing (``mavlink_bridge.fly`` makes a fresh key for each run
+    unless ``--signing-key`` gives one)."""
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Geodetic position of the area's south-west corner (for GLOBAL_POSITION_INT)."""
+
+    lat_deg: float = 47.397742
+    lon_deg: float = 8.545594
+    alt_m: float = 5000.0
+    """Flight altitude above mean sea level."""
+
+
+@dataclass(frozen=True)
+class Expect:
+    """What the SITL regression tests require of the shipped models on this scenario."""
+
+    episodes: int = 10
+    """Missions to fly."""
+    min_success_rate: float = 0.95
+    """Minimum fraction of missions with the target hit."""
+    max_mean_cost: float = 3.0
+    """Maximum mean hazard cost per UAV per episode."""
+    speedup: float | None = None
+    """Fly at real time x this instead of lockstep. For links with latency or loss: under lockstep the
+    SITL runs link delays on the wall clock and a lost setpoint holds the world until the vehicle's
+    wall-clock timeout, so a 200 ms link would stretch every 0.1 s step to over 0.4 s of wall time."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A whole mission description (DESIGN.md section 2)."""
+
+    name: str
+    """Short name, used in logs and results."""
+    area_km: float = 100.0
+    """Side of the square area; leaving it ends the episode (eq. 6 position bounds)."""
+    dt_s: float = 0.1
+    """Simulation step (Table 3)."""
+    episode_steps: int = 4000
+    """Episode cap (truncation)."""
+    cost_limit: float = 3.0
+    """C: hazard cost budget per UAV per episode (Table 3)."""
+    ranges: Ranges = field(default_factory=Ranges)
+    """R1-R4."""
+    vehicles: dict[str, VehicleSpec] = field(default_factory=dict)
+    """Limits per role name (decoy, detect, strike)."""
+    layout: Layout | None = None
+    """A fixed layout; exactly one of layout / random."""
+    random: RandomLayout | None = None
+    """Random layouts; exactly one of layout / random."""
+    link: LinkModel = field(default_factory=LinkModel)
+    """Sensor and link model for the SITL."""
+    origin: Origin = field(default_factory=Origin)
+    """Geodetic origin for the SITL."""
+    expect: Expect | None = None
+    """Regression expectations (optional)."""
+
+    def vehicle(self, role: Role) -> VehicleSpec:
+        return self.vehicles[role.value]
+
+    def digest(self) -> str:
+        """A short hash of the task the scenario defines (recorded in checkpoints); the regression
+        expectations are not part of the task, so adding or changing them keeps the digest."""
+        data = to_dict(self)
+        data.pop("expect", None)
+        text = yaml.safe_dump(data, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# ------------------------------------------------------------------------------ generic loading
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp))
+
+
+def _build(tp: Any, value: Any, where: str, source: str) -> Any:
+    """Convert ``value`` (plain YAML data) into type ``tp``, or raise ScenarioError at ``where``."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _build(inner, value, where, source)
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ScenarioError(source, where, f"expected a mapping, got {type(value).__name__}")
+        hints = typing.get_type_hints(tp)
+        names = {f.name for f in dataclasses.fields(tp)}
+        for key in value:
+            if key not in names:
+                raise ScenarioError(source, _join(where, str(key)), f"unknown key (allowed: {', '.join(sorted(names))})")
+        kwargs = {}
+        for f in dataclasses.fields(tp):
+            if f.name in value:
+                kwargs[f.name] = _build(hints[f.name], value[f.name], _join(where, f.name), source)
+            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ScenarioError(source, _join(where, f.name), "missing required field")
+        return tp(**kwargs)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ScenarioError(source, where, f"expected a list, got {type(value).__name__}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_build(args[0], v, f"{where}[{i}]", source) for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ScenarioError(source, where, f"expected a list of {len(args)} numbers, got {len(value)}")
+        return tuple(_build(a, v, f"{where}[{i}]", source) for i, (a, v) in enumerate(zip(args, value)))
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ScenarioError(source, where, f"expected a mapping, got {type(value).__name__}")
+        return {str(k): _build(args[1], v, _join(where, str(k)), source) for k, v in value.items()}
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(source, where, f"expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ScenarioError(source, where, f"expected a finite number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ScenarioError(source, where, f"expected an integer, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(source, where, f"expected true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ScenarioError(source, where, f"expected a string, got {value!r}")
+        return value
+    raise TypeError(f"unsupported schema type {_type_name(tp)} at {where}")  # a bug in the schema
+
+
+def _join(where: str, name: str) -> str:
+    return f"{where}.{name}" if where else name
+
+
+def _plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value) if getattr(value, f.name) is not None}
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+def to_dict(scenario: Scenario) -> dict[str, Any]:
+    """Plain data (what the YAML file holds) for a scenario; ``from_dict(to_dict(s)) == s``."""
+    return _plain(scenario)
+
+
+def from_dict(data: Any, source: str = "<scenario>") -> Scenario:
+    """Build and validate a scenario from plain data; raises ScenarioError."""
+    scenario = _build(Scenario, data, "", source)
+    validate(scenario, source)
+    return scenario
+
+
+def load(path: str | Path) -> Scenario:
+    """Load and validate a scenario file; raises ScenarioError (one line) on any problem."""
+    return from_dict(read_yaml(path, ScenarioError), str(path))
+
+
+def dump(scenario: Scenario, path: str | Path) -> None:
+    """Write a scenario file that :func:`load` reads back equal."""
+    Path(path).write_text(yaml.safe_dump(to_dict(scenario), sort_keys=False))
+
+
+# ----------------------------------------------------------------------------------- validation
+
+
+def validate(s: Scenario, source: str) -> None:
+    """Semantic checks beyond types; raises ScenarioError naming the field."""
+
+    def check(ok: bool, where: str, problem: str) -> None:
+        if not ok:
+            raise ScenarioError(source, where, problem)
+
+    check(s.area_km > 0, "area_km", f"must be positive, got {s.area_km}")
+    check(0 < s.dt_s <= 1.0, "dt_s", f"must be in (0, 1] s, got {s.dt_s}")
+    check(s.episode_steps > 0, "episode_steps", f"must be positive, got {s.episode_steps}")
+    check(s.cost_limit >= 0, "cost_limit", f"must be >= 0, got {s.cost_limit}")
+    r = s.ranges
+    for name in ("strike_launch_km", "detect_km", "sam_launch_km", "sam_detect_km"):
+        check(getattr(r, name) > 0, f"ranges.{name}", "must be positive")
+    check(
+        r.strike_launch_km < r.detect_km < r.sam_launch_km < r.sam_detect_km,
+        "ranges",
+        "inconsistent: need R1 strike_launch_km < R2 detect_km < R3 sam_launch_km < R4 sam_detect_km, got "
+        f"{r.strike_launch_km} / {r.detect_km} / {r.sam_launch_km} / {r.sam_detect_km}",
+    )
+    names = [role.value for role in ROLES]
+    for key in s.vehicles:
+        check(key in names, f"vehicles.{key}", f"unknown role (allowed: {', '.join(names)})")
+    for name in names:
+        check(name in s.vehicles, f"vehicles.{name}", "missing required vehicle")
+        v = s.vehicles[name]
+        where = f"vehicles.{name}"
+        check(v.speed_min_m_s > 0, f"{where}.speed_min_m_s", "must be positive (a fixed-wing UAV cannot hover)")
+        check(v.speed_min_m_s < v.speed_max_m_s, f"{where}.speed_max_m_s", "must be above speed_min_m_s")
+        check(
+            v.speed_min_m_s <= v.speed_init_m_s <= v.speed_max_m_s,
+            f"{where}.speed_init_m_s",
+            f"must lie in [speed_min_m_s, speed_max_m_s] = [{v.speed_min_m_s}, {v.speed_max_m_s}]",
+        )
+        check(0 < v.turn_rate_max_deg_s <= 90, f"{where}.turn_rate_max_deg_s", "must be in (0, 90] deg/s")
+        check(0 < v.accel_max_m_s2 <= 100, f"{where}.accel_max_m_s2", "must be in (0, 100] m/s^2")
+    check((s.layout is None) != (s.random is None), "layout", "give exactly one of 'layout' (fixed) or 'random'")
+    if s.layout is not None:
+        _validate_layout(s, s.layout, source)
+    if s.random is not None:
+        _validate_random(s, s.random, source)
+    lk = s.link
+    for name in ("gps_dropout_prob", "packet_loss", "duplication", "reordering"):
+        check(0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}")
+    for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s", "latency_ms"):
+        check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
+    check(0 < lk.gps_rate_hz <= 100, "link.gps_rate_hz", "must be in (0, 100] Hz")
+    check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
+    check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
+    if s.expect is not None:
+        check(s.expect.episodes > 0, "expect.episodes", "must be positive")
+        check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
+        check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
+        check(s.expect.speedup is None or s.expect.speedup > 0, "expect.speedup", "must be positive")
+
+
+def _max_radius_km(s: Scenario) -> float:
+    return s.area_km / 4
+
+
+def _validate_layout(s: Scenario, lay: Layout, source: str) -> None:
+    def inside(p: tuple[float, float]) -> bool:
+        return 0 <= p[0] <= s.area_km and 0 <= p[1] <= s.area_km
+
+    if not inside(lay.sam_km):
+        raise ScenarioError(source, "layout.sam_km", f"{lay.sam_km} is outside the {s.area_km} km area")
+    if not inside(lay.target_km):
+        raise ScenarioError(source, "layout.target_km", f"{lay.target_km} is outside the {s.area_km} km area")
+    for i, radar in enumerate(lay.radars):
+        where = f"layout.radars[{i}]"
+        if not 0 < radar.radius_km <= _max_radius_km(s):
+            raise ScenarioError(source, f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)")
+        if not inside(radar.position_km):
+            raise ScenarioError(source, f"{where}.position_km", f"{radar.position_km} is outside the area")
+    names = [role.value for role in ROLES]
+    for key in lay.starts:
+        if key not in names:
+            raise ScenarioError(source, f"layout.starts.{key}", f"unknown role (allowed: {', '.join(names)})")
+    for name in names:
+        if name not in lay.starts:
+            raise ScenarioError(source, f"layout.starts.{name}", "missing required start")
+        if not inside(lay.starts[name].position_km):
+            raise ScenarioError(source, f"layout.starts.{name}.position_km", "outside the area")
+    problem = infeasibility(s, lay, clearance_km=0.0)
+    if problem is not None:
+        raise ScenarioError(source, problem[0], problem[1])
+
+
+def _validate_random(s: Scenario, rnd: RandomLayout, source: str) -> None:
+    for f in dataclasses.fields(rnd):
+        value = getattr(rnd, f.name)
+        if isinstance(value, tuple) and value[0] > value[1]:
+            raise ScenarioError(source, f"random.{f.name}", f"range is empty: {value[0]} > {value[1]}")
+    lo, hi = rnd.radar_radius_km
+    if not (0 < lo and hi <= _max_radius_km(s)):
+        raise ScenarioError(source, "random.radar_radius_km", f"out of range: {rnd.radar_radius_km} (allowed (0, {_max_radius_km(s)}] km)")
+    if rnd.radar_count < 0 or rnd.radar_count > 10:
+        raise ScenarioError(source, "random.radar_count", f"must be in [0, 10], got {rnd.radar_count}")
+    for name in ("sam_x_km", "sam_y_km", "start_x_km", "start_y_km"):
+        a, b = getattr(rnd, name)
+        if a < 0 or b > s.area_km:
+            raise ScenarioError(source, f"random.{name}", f"range {a}..{b} leaves the {s.area_km} km area")
+    # One draw proves the ranges can produce a feasible layout at all.
+    try:
+        sample_layout(s, np.random.default_rng(0))
+    except RuntimeError as exc:
+        raise ScenarioError(source, "random", str(exc)) from None
+
+
+# -------------------------------------------------------------------------------- feasibility
+
+
+GRID_KM = 1.0
+
+
+def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, str] | None:
+    """Why a layout is unusable, as (field, problem), or None if it is feasible.
+
+    Checks: no start inside a radar (plus ``clearance_km``), and every role's zone reachable from its
+    start through radar-free cells of the area (radars inflated by ``clearance_km``).
+    """
+    r = s.ranges
+    for name, start in lay.starts.items():
+        for i, radar in enumerate(lay.radars):
+            d = math.dist(start.position_km, radar.position_km)
+            if d <= radar.radius_km + clearance_km:
+                return f"layout.starts.{name}", f"starts inside (or within {clearance_km} km of) radar {i} ({d:.1f} km from its centre)"
+    n = int(round(s.area_km / GRID_KM))
+    centres = (np.arange(n) + 0.5) * GRID_KM
+    gx, gy = np.meshgrid(centres, centres, indexing="ij")
+    free = np.ones((n, n), dtype=bool)
+    for radar in lay.radars:
+        free &= np.hypot(gx - radar.position_km[0], gy - radar.position_km[1]) > radar.radius_km + clearance_km
+    d_sam = np.hypot(gx - lay.sam_km[0], gy - lay.sam_km[1])
+    zones = {
+        Role.DECOY.value: (d_sam > r.sam_launch_km) & (d_sam <= r.sam_detect_km),
+        Role.DETECT.value: (d_sam > r.strike_launch_km) & (d_sam <= r.detect_km),
+        Role.STRIKE.value: d_sam < r.strike_launch_km,
+    }
+    cells = {name: (min(int(st.position_km[0] / GRID_KM), n - 1), min(int(st.position_km[1] / GRID_KM), n - 1)) for name, st in lay.starts.items()}
+    reached: list[np.ndarray] = []
+    for name, cell in cells.items():
+        reach = next((c for c in reached if c[cell]), None)  # starts in one component share a fill
+        if reach is None:
+            seed = np.zeros_like(free)
+            seed[cell] = True
+            reach = _flood(seed, free | seed)
+            reached.append(reach)
+        if not (reach & zones[name] & free).any():
+            return f"layout.starts.{name}", f"its zone cannot be reached from {lay.starts[name].position_km} without crossing a radar"
+    return None
+
+
+def _flood(seed: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """4-connected flood fill of ``passable`` cells from ``seed``: every cell of the components it touches.
+
+    Whole runs at a time (a run: a maximal stretch of passable cells along a row, or along a column):
+    a run that holds a reached cell is reached entirely. Rows and columns alternate until nothing grows,
+    which ends on the same cells as growing by one neighbour per pass, in a few passes instead of one per
+    cell of the longest path (the reachability check of every sampled layout runs it).
+    """
+    along_rows = _run_ids(passable)
+    along_cols = _run_ids(passable.T).T
+    reach = seed & passable
+    while True:
+        grown = _fill_runs(_fill_runs(reach, along_rows, passable), along_cols, passable)
+        if np.array_equal(grown, reach):
+            return reach
+        reach = grown
+
+
+def _run_ids(passable: np.ndarray) -> np.ndarray:
+    """An id per cell of the run of passable cells along its row that it belongs to (blocked cells get the
+    id of the run before them: callers mask them out)."""
+    start = passable.copy()
+    start[:, 1:] &= ~passable[:, :-1]  # a run starts at a passable cell after a blocked one or the edge
+    return np.cumsum(start, axis=None).reshape(passable.shape)
+
+
+def _fill_runs(reach: np.ndarray, run_ids: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """``reach`` grown to the whole of every run it touches."""
+    touched = np.zeros(int(run_ids.max()) + 1, dtype=bool)
+    touched[run_ids[reach]] = True
+    return touched[run_ids] & passable
+
+
+def sample_layout(s: Scenario, rng: np.random.Generator, max_tries: int = 1000) -> Layout:
+    """Draw one feasible layout from ``s.random`` (the fixed layout if the scenario has one)."""
+    if s.random is None:
+        assert s.layout is not None
+        return s.layout
+    rnd = s.random
+    r4 = s.ranges.sam_detect_km
+    for _ in range(max_tries):
+        sam = (rng.uniform(*rnd.sam_x_km), rng.uniform(*rnd.sam_y_km))
+        off_d, off_a = rng.uniform(*rnd.target_offset_km), rng.uniform(-math.pi, math.pi)
+        target = (sam[0] + off_d * math.cos(off_a), sam[1] + off_d * math.sin(off_a))
+        box_centre = (sum(rnd.start_x_km) / 2, sum(rnd.start_y_km) / 2)
+        axis = math.atan2(box_centre[1] - sam[1], box_centre[0] - sam[0])
+        radars = []
+        for _k in range(rnd.radar_count):
+            radius = rng.uniform(*rnd.radar_radius_km)
+            lo = max(rnd.radar_distance_from_sam_km[0], r4 + radius)  # zones stay clear of hazards
+            dist = rng.uniform(lo, max(lo, rnd.radar_distance_from_sam_km[1]))
+            bearing = axis + math.radians(rng.uniform(-rnd.radar_bearing_spread_deg, rnd.radar_bearing_spread_deg))
+            radars.append(Radar((sam[0] + dist * math.cos(bearing), sam[1] + dist * math.sin(bearing)), radius))
+        starts: dict[str, Start] = {}
+        for role in ROLES:
+            for _attempt in range(50):
+                p = (rng.uniform(*rnd.start_x_km), rng.uniform(*rnd.start_y_km))
+                if all(math.dist(p, q.position_km) >= rnd.start_separation_km for q in starts.values()):
+                    break
+            starts[role.value] = Start(p, rng.uniform(*rnd.start_heading_deg))
+        layout = Layout(sam, target, tuple(radars), starts)
+        inside = all(0 <= c <= s.area_km for c in (*sam, *target))
+        if inside and infeasibility(s, layout, rnd.clearance_km) is None:
+            return layout
+    raise RuntimeError(f"no feasible layout in {max_tries} draws: the random ranges leave no way to the zones")

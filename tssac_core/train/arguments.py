@@ -1,0 +1,116 @@
+"""The training command's arguments: argv -> `TrainConfig`, and a `TrainConfig` back to argv."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any, Sequence
+
+from tssac_core.cli import UsageError
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.scenario import ROLES
+from tssac_core.train.config import ALGOS, DEFAULT_SCENARIO, SELECTIONS, TrainConfig
+
+DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
+
+
+def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
+    """The run's TrainConfig, --out, --resume and --no-progress (see `parse_cli` for --seeds)."""
+    cfg, out, resume, quiet, _ = parse_cli(argv)
+    return cfg, out, resume, quiet
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise UsageError(f"--seeds: {text!r} is not a comma-separated list of integers") from None
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise UsageError(f"--seeds: give one or more distinct seeds, got {text!r}")
+    return seeds
+
+
+def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, tuple[int, ...] | None]:
+    p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=DESCRIPTION)
+    p.add_argument("--algo", choices=ALGOS, default="tssac", help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
+    p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
+    p.add_argument("--seeds", help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
+                   "--out/seed<N>/ (replaces --seed)")
+    p.add_argument("--epochs", type=int, default=50, help="epochs per role (Table 3: 50)")
+    p.add_argument("--steps-per-epoch", type=int, default=4000, help="learner decisions per epoch (Table 3: 4000)")
+    p.add_argument("--roles", default="decoy,detect,strike", help="comma-separated, in curriculum order")
+    p.add_argument("--envs", type=int, default=4, help="parallel worlds (default 4)")
+    p.add_argument("--update-every", type=int, default=1, help="one gradient update per this many decisions (default 1)")
+    p.add_argument("--start-steps", type=int, default=4000, help="uniform random actions for this many decisions first (from-scratch roles)")
+    p.add_argument("--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions")
+    p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
+    p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="route", help="observation (default route = extended + the way around the radars; paper = eq. 7)")
+    p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
+    p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
+    p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
+    p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
+    p.add_argument("--selection", choices=SELECTIONS, help="which validated epoch a role ships: the best mission success among the "
+                   "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
+                   "(success: default of sac, sac_penalty, ppo)")
+    p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
+    p.add_argument("--teammates", type=Path, help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
+                   "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")
+    p.add_argument("--stop-at-task-success", type=float, default=0.0, metavar="FRACTION",
+                   help="end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a learner setting (SacConfig or OnPolicyConfig field), e.g. --set lr=3e-4 or --set multiplier_signal=q_c")
+    p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    a = p.parse_args(argv)
+    roles = tuple(r.strip() for r in a.roles.split(",") if r.strip())
+    for r in roles:
+        if r not in [x.value for x in ROLES]:
+            raise UsageError(f"--roles: unknown role {r!r}")
+    if list(roles) != [x.value for x in ROLES if x.value in roles]:
+        raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
+    if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
+        raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
+    if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:
+        raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
+    if not 0.0 <= a.stop_at_task_success <= 1.0:
+        raise UsageError(f"--stop-at-task-success must be a fraction in [0, 1], got {a.stop_at_task_success:g}")
+    overrides: dict[str, Any] = {}
+    for item in a.set:
+        key, _, value = item.partition("=")
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError:
+            overrides[key] = value  # a word, e.g. multiplier_signal=q_c; SacConfig checks it
+    cfg = TrainConfig(
+        algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
+        envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
+        observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
+        validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
+        init_from=str(a.init_from) if a.init_from else "", teammates=str(a.teammates) if a.teammates else "",
+        stop_at_task_success=a.stop_at_task_success, selection=a.selection or "",
+    )
+    return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
+
+
+def train_argv(cfg: TrainConfig) -> tuple[str, ...]:
+    """The arguments (without --out) that `parse_args` turns back into ``cfg``."""
+    argv = ["--algo", cfg.algo, "--scenario", cfg.scenario, "--seed", str(cfg.seed), "--epochs", str(cfg.epochs),
+            "--steps-per-epoch", str(cfg.steps_per_epoch), "--roles", ",".join(cfg.roles), "--envs", str(cfg.envs),
+            "--update-every", str(cfg.update_every), "--start-steps", str(cfg.start_steps),
+            "--update-after", str(cfg.update_after), "--action-repeat", str(cfg.action_repeat),
+            "--observation", cfg.observation, "--penalty", repr(cfg.penalty), "--threads", str(cfg.threads),
+            "--route-margin-km", repr(cfg.route_margin_km), "--cost-margin-km", repr(cfg.cost_margin_km),
+            "--validation-episodes", str(cfg.validation_episodes),
+            "--stop-at-task-success", repr(cfg.stop_at_task_success)]
+    if cfg.selection:
+        argv += ["--selection", cfg.selection]
+    if cfg.init_from:
+        argv += ["--init-from", cfg.init_from]
+    if cfg.teammates:
+        argv += ["--teammates", cfg.teammates]
+    for key, value in cfg.sac.items():
+        argv += ["--set", f"{key}={json.dumps(value, separators=(',', ':'))}"]
+    return tuple(argv)

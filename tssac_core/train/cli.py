@@ -1,0 +1,120 @@
+"""``python -m tssac_core.train``: train the team, role by role (Algorithm 1).
+
+Examples::
+
+    python -m tssac_core.train --algo tssac --seed 0 --out runs/tssac-0
+    python -m tssac_core.train --algo sac_lag --seed 1 --epochs 20 --out runs/sac_lag-1
+    python -m tssac_core.train --out runs/tssac-0 --resume        # after a crash or kill -9
+    python -m tssac_core.train --algo tssac --seeds 0,1,2 --out runs/tssac   # one job per seed: runs/tssac/seed<N>/
+
+The run directory's contents: :mod:`tssac_core.train.rundir`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+import torch
+from tqdm import tqdm
+
+from tssac_core.cli import UsageError, run, write_json
+from tssac_core.sim.scenario import Role
+from tssac_core.train.arguments import parse_cli, train_argv
+from tssac_core.train.config import ON_POLICY, TrainConfig
+from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.loop import train_role
+from tssac_core.train.onpolicy_loop import train_role_onpolicy
+from tssac_core.train.rundir import prepare_run, write_plots
+
+logger = logging.getLogger("tssac_core.train")
+
+SEEDS_FILE = "seeds.json"
+"""``--seeds`` writes the list of its seeds here, in --out, so that ``--out DIR --resume`` continues them all."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    cfg, out, resume, quiet, seeds = parse_cli(argv)
+    if seeds is not None or (resume and (out / SEEDS_FILE).is_file()):
+        return train_seeds(cfg, seeds, out, resume)
+    cfg, scenario = prepare_run(cfg, out, resume)
+    torch.set_num_threads(cfg.threads)
+    total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
+    start = time.perf_counter()
+    with tqdm(total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05) as bar:
+        for role_name in cfg.roles:
+            role = Role(role_name)
+            if (out / f"{role_name}.pt").is_file():
+                logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
+                continue
+            if cfg.algo in ON_POLICY:
+                train_role_onpolicy(cfg, scenario, role, out, resume, bar)
+            else:
+                train_role(cfg, scenario, role, out, resume, bar)
+            write_plots(out, scenario.cost_limit)
+    write_plots(out, scenario.cost_limit)
+    print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")
+    return 0
+
+
+def seed_dir(out: Path, seed: int) -> Path:
+    return out / f"seed{seed}"
+
+
+def saved_config(run_dir: Path) -> TrainConfig:
+    """The TrainConfig in ``run_dir/config.json`` (UsageError naming the file if it cannot be read)."""
+    path = run_dir / "config.json"
+    try:
+        saved = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--resume: {path} is not readable ({exc})") from None
+    return config_from_saved(saved, path)
+
+
+def train_seeds(cfg: TrainConfig, seeds: tuple[int, ...] | None, out: Path, resume: bool) -> int:
+    """``--seeds``: one training job per seed (``out/seed<N>``, what ``--seed N --out out/seed<N>`` writes), run
+    by the experiments' job executor; on --resume the seeds of ``out/seeds.json``. Exit 0 when every seed finished."""
+    from tssac_core.experiments.executors import LOCAL, execute
+    from tssac_core.experiments.grid import AlgoEntry, Job
+    from tssac_core.experiments.jobs import Status, job_state
+
+    seeds_path = out / SEEDS_FILE
+    if resume:
+        try:
+            saved = json.loads(seeds_path.read_text())["seeds"]
+        except (OSError, ValueError, KeyError, TypeError):
+            raise UsageError(f"--resume: {seeds_path} is missing or not readable (nothing to resume)") from None
+        if seeds is not None and tuple(seeds) != tuple(saved):
+            raise UsageError(f"--seeds {','.join(map(str, seeds))}: {out} holds seeds {','.join(map(str, saved))}")
+        seeds = tuple(int(s) for s in saved)
+    assert seeds is not None
+    entry = AlgoEntry(cfg.algo, cfg.algo)
+    if resume:
+        # Each seed's config.json wins, as for a single run: it is resumed as it was started.
+        jobs = [Job(entry, s, seed_dir(out, s), train_argv(saved_config(seed_dir(out, s)))) for s in seeds]
+    else:
+        if seeds_path.is_file() or any((seed_dir(out, s) / "config.json").is_file() for s in seeds):
+            raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
+        jobs = [Job(entry, s, seed_dir(out, s), train_argv(dataclasses.replace(cfg, seed=s))) for s in seeds]
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(seeds_path, {"seeds": list(seeds)})
+    states = [job_state(job) for job in jobs]
+    conflicts = [s for s in states if s.status is Status.CONFLICT]
+    if conflicts:
+        raise UsageError(f"{conflicts[0].job.out}: {conflicts[0].detail}")
+    launches = execute(states, LOCAL, parallel=len(seeds))
+    failed = [launch.job.name for launch in launches if launch.returncode != 0]
+    if failed:
+        print(f"error: {', '.join(failed)} failed: see train.log in their directories", file=sys.stderr)
+        return 1
+    print(f"trained seeds {', '.join(map(str, seeds))} with {cfg.algo}; results in {out}/seed<N>")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))

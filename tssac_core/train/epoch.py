@@ -1,0 +1,105 @@
+"""What every training loop shares: the earlier roles as teammates, the role's worlds, one epoch's
+figures, the stop rule, and shipping the role."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.deploy.export import export_actor
+from tssac_core.deploy.policy import Policy
+from tssac_core.sim.env import RoleTask, TaskStep
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.scenario import ROLES, Role, Scenario
+from tssac_core.sim.team import Pilot
+from tssac_core.train.config import TrainConfig, reward_config
+from tssac_core.train.rundir import role_checkpoint
+from tssac_core.train.validation import EpochSelector
+
+logger = logging.getLogger("tssac_core.train")
+
+
+def teammates_for(role: Role, cfg: TrainConfig, out: Path) -> dict[str, Pilot]:
+    """Earlier roles fly their trained policies (the judgement condition); later ones are parked."""
+    pilots: dict[str, Pilot] = {}
+    for earlier in ROLES[: role.index]:
+        pilots[earlier.value] = Policy.load(role_checkpoint(cfg, out, earlier), earlier)
+    return pilots
+
+
+def make_task(cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, Pilot]) -> RoleTask:
+    """The training worlds of one role: its reward, its (tightened) cost, its teammates, its seed."""
+    return RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index,
+                    reward_config=reward_config(cfg), cost_margin_m=cfg.cost_margin_km * 1000.0)
+
+
+def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
+    """The epoch's training task success reached ``cfg.stop_at_task_success`` (never when that is 0)."""
+    return cfg.stop_at_task_success > 0 and row["task_success"] >= cfg.stop_at_task_success
+
+
+@dataclass
+class EpochLog:
+    """Accumulates one epoch's figures."""
+
+    returns: list[float] = field(default_factory=list)
+    costs: list[float] = field(default_factory=list)
+    hazard_costs: list[float] = field(default_factory=list)
+    tasks: list[float] = field(default_factory=list)
+    successes: list[float] = field(default_factory=list)
+    stats: list[UpdateStats] = field(default_factory=list)
+    env_time: float = 0.0
+    update_time: float = 0.0
+
+    def record_episodes(self, step: TaskStep, ended: np.ndarray) -> None:
+        """Add the figures of the episodes that ended at this step (``ended``, (N,) bool)."""
+        self.returns += step.episode_return[ended].tolist()
+        self.costs += step.episode_cost[ended].tolist()
+        self.hazard_costs += step.episode_hazard_cost[ended].tolist()
+        self.tasks += step.episode_task[ended].astype(float).tolist()
+        self.successes += step.episode_success[ended].astype(float).tolist()
+
+    def row(self, role: Role, epoch: int, env_steps: int, updates: int, steps: int) -> dict[str, Any]:
+        def mean(xs: list[float]) -> float:
+            return float(np.mean(xs)) if xs else math.nan
+
+        row: dict[str, Any] = {
+            "role": role.value,
+            "epoch": epoch,
+            "env_steps": env_steps,
+            "episodes": len(self.returns),
+            "return": mean(self.returns),
+            "cost": mean(self.costs),
+            "hazard_cost": mean(self.hazard_costs),
+            "task_success": mean(self.tasks),
+            "mission_success": mean(self.successes),
+        }
+        for f in dataclasses.fields(UpdateStats):
+            row[f.name] = mean([getattr(s, f.name) for s in self.stats])
+        row["env_steps_per_s"] = steps / self.env_time if self.env_time > 0 else math.nan
+        row["updates_per_s"] = len(self.stats) / self.update_time if self.update_time > 0 else math.nan
+        row["updates"] = updates
+        return row
+
+
+def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
+    logger.info("%s: task success %.2f in epoch %d (%d decisions) reaches --stop-at-task-success: role done", role.value,
+                row["task_success"], epoch, row["env_steps"])
+
+
+def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
+    """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's),
+    and its actor as ``<role>.npz`` (tssac_core.deploy.numpy_actor)."""
+    best = selector.finish(out / f"{role.value}.pt", write_checkpoint)
+    if (out / f"{role.value}.pt").is_file():
+        export_actor(out / f"{role.value}.pt")  # <role>.npz: what the companion flies, without torch
+    if best is not None:
+        logger.info("%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)", role.value, best.epoch,
+                    best.mission_success, best.mean_cost)

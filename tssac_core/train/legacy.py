@@ -1,0 +1,42 @@
+"""What runs written by older versions of TSSAC mean, in one place.
+
+- ``config.json``: settings that did not exist when a run was written take the value the run used
+  (`OLDER_RUN_SETTINGS`, and the multiplier signal of the SAC family: `config_from_saved`).
+- Pickles: role checkpoints (``<role>.pt``) and resume states (``resume/<role>.pt``) hold plain dicts,
+  tensors, numpy arrays and builtins; they name no module of ``tssac_core`` (tests/test_legacy.py checks the
+  shipped models and this version's own files), so the package's layout can change without breaking them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from tssac_core.cli import UsageError
+from tssac_core.train.config import SAC_MULTIPLIER_ALGOS, SELECTIONS, TrainConfig
+
+OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0, "selection": "within_limit"}
+"""Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly, and
+every algorithm shipped the best epoch within the cost limit)."""
+
+
+def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainConfig:
+    """The TrainConfig of a run's config.json; keys it lacks take their value from before they existed.
+
+    A file that is not a training configuration of this TSSAC (not a mapping, settings it does not know,
+    no roles) raises UsageError naming ``source``.
+    """
+    if not isinstance(saved, dict):
+        raise UsageError(f"{source}: not a training configuration")
+    unknown = sorted(set(saved) - {f.name for f in dataclasses.fields(TrainConfig)})
+    if unknown:
+        raise UsageError(f"{source}: settings this TSSAC does not know: {', '.join(unknown)}")
+    full = {**OLDER_RUN_SETTINGS, **saved}
+    if not isinstance(full.get("roles"), list):
+        raise UsageError(f"{source}: roles: expected a list of role names")
+    if full.get("algo") in SAC_MULTIPLIER_ALGOS and isinstance(full.get("sac"), dict) and "multiplier_signal" not in full["sac"]:
+        full["sac"] = {**full["sac"], "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
+    if full["selection"] not in SELECTIONS:
+        raise UsageError(f"{source}: selection: expected one of {', '.join(SELECTIONS)}, got {full['selection']!r}")
+    return TrainConfig(**{**full, "roles": tuple(full["roles"])})

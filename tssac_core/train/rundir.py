@@ -1,0 +1,151 @@
+"""A run directory: ``config.json``, ``metrics.csv``, the role checkpoints, the plots, and ``resume/``.
+
+Output in ``--out``: ``config.json``, ``metrics.csv`` (one row per role and epoch), one checkpoint per role
+(``decoy.pt``, ``detect.pt``, ``strike.pt``) and its exported actor (``<role>.npz``),
+``fig7_return_cost.png`` and ``fig8_multiplier.png``, and ``resume/`` (the last completed epoch: learner,
+replay buffer, worlds and random states), from which ``--resume`` continues, losing at most the epoch that
+was running.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.cli import UsageError, write_json
+from tssac_core.deploy.policy import CheckpointInfo, package_versions, save_role_checkpoint, torch_save_atomic
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.scenario import ROLES, Role, Scenario, load
+from tssac_core.train.config import TrainConfig, check_learner_settings, with_recorded_defaults
+from tssac_core.train.legacy import config_from_saved
+
+
+def role_checkpoint(cfg: TrainConfig, out: Path, role: Role) -> Path:
+    """Where a trained earlier role is: in this run if it trains that role (or has no ``teammates``), else in ``teammates``."""
+    if cfg.teammates and role.value not in cfg.roles:
+        return Path(cfg.teammates) / f"{role.value}.pt"
+    return out / f"{role.value}.pt"
+
+
+def save_trained_role(path: Path, cfg: TrainConfig, scenario: Scenario, role: Role, hidden_sizes: tuple[int, ...],
+                      actor_state: dict[str, torch.Tensor], learner_state: dict[str, Any], env_steps: int, updates: int, epoch: int) -> None:
+    """Write a role checkpoint: the deployable actor, what it fits, and the learner's state for transfer."""
+    mode = ObservationMode(cfg.observation)
+    info = CheckpointInfo(
+        role=role,
+        algo=cfg.algo,
+        observation_mode=mode,
+        obs_dim=mode.size,
+        act_dim=2,
+        hidden_sizes=hidden_sizes,
+        scenario_digest=scenario.digest(),
+        versions=package_versions(),
+        metrics={"epoch": epoch, "env_steps": env_steps, "updates": updates},
+        action_repeat=cfg.action_repeat,
+    )
+    save_role_checkpoint(path, info, actor_state, learner_state)
+
+
+def role_position(cfg: TrainConfig, role: Role) -> int:
+    return list(cfg.roles).index(role.value)
+
+
+def save_resume_state(path: Path, state: dict[str, Any]) -> None:
+    """Write a resume state (`SeedRole.resume_state`) atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch_save_atomic(state, path)
+
+
+def read_resume_state(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    return torch.load(io.BytesIO(path.read_bytes()), map_location="cpu", weights_only=False)
+
+
+METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
+                 *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates",
+                 "val_mission_success", "val_task_success", "val_cost", "best_epoch", "hazard_cost"]
+
+
+def append_metrics(path: Path, row: dict[str, Any]) -> None:
+    """Append one epoch's row; a resumed run keeps the columns its file was started with."""
+    new = not path.is_file()
+    fields = METRIC_FIELDS
+    if not new:
+        with path.open(newline="") as fh:
+            fields = next(csv.reader(fh), METRIC_FIELDS)
+    with path.open("a", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:
+    """On resume, drop rows of epochs that were not checkpointed (they will be run again)."""
+    if not path.is_file():
+        return
+    with path.open() as fh:
+        rows = [r for r in csv.DictReader(fh) if (r["role"], int(r["epoch"])) in keep]
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=METRIC_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def completed_epochs(out: Path, role: str) -> int:
+    """Epochs of ``role`` that a resume can skip: all if its checkpoint exists, else the resume state's."""
+    if (out / f"{role}.pt").is_file():
+        return -1
+    state = out / "resume" / f"{role}.pt"
+    if state.is_file():
+        return int(torch.load(io.BytesIO(state.read_bytes()), map_location="cpu", weights_only=False)["epoch"])
+    return 0
+
+
+def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig, Scenario]:
+    """Check the run and set up ``out``: config.json written (or, on --resume, read: it wins), earlier roles
+    present, metrics of epochs that were not checkpointed dropped. Returns the run's config and scenario."""
+    config_path = out / "config.json"
+    if resume:
+        if not config_path.is_file():
+            raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
+        try:
+            saved = json.loads(config_path.read_text())
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--resume: {config_path} is not readable ({exc})") from None
+        cfg = config_from_saved(saved, config_path)
+    elif config_path.is_file():
+        raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
+    else:
+        cfg = with_recorded_defaults(cfg)
+    scenario = load(cfg.scenario)
+    check_learner_settings(cfg, scenario)
+    for role_name in cfg.roles:
+        role = Role(role_name)
+        for earlier in ROLES[: role.index]:
+            path = role_checkpoint(cfg, out, earlier)
+            if earlier.value not in cfg.roles and not path.is_file():
+                raise UsageError(f"training {role.value} needs {path} (train {earlier.value} first)")
+    out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+    keep = set()
+    for role_name in cfg.roles:
+        done = completed_epochs(out, role_name)
+        keep |= {(role_name, e) for e in range(1, (cfg.epochs if done < 0 else done) + 1)}
+    truncate_metrics(out / "metrics.csv", keep)
+    return cfg, scenario
+
+
+def write_plots(out: Path, cost_limit: float) -> None:
+    from tssac_core.plots import plot_training
+
+    plot_training(out / "metrics.csv", out, cost_limit)
