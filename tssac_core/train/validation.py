@@ -19,10 +19,23 @@ PPO) = the highest mission success, whatever the cost: selecting them within C w
 their safety mechanism (plain SAC's decoy flew 96% of the validation missions at a cost of 60-420 per
 mission and shipped the one epoch within C, at 44%), and the comparison is between learners, not
 between selections. Ties go to the lower cost, then to the earlier epoch.
+
+Tail-aware selection (``tail=True``, TrainConfig.selection "tail"): a mean over a few dozen missions cannot see
+a failure that comes once in a hundred missions, so the best of 25 such epochs is often one that has them (the
+winner's curse; models/tssac/README.md). Each epoch is screened on its missions with the role's figures of
+:mod:`tssac_core.stats`: the upper end of the 95% bootstrap interval of its mean cost, the fraction of its
+UAV-missions within C, its CVaR_0.95 and worst cost. An epoch is *feasible* when that upper bound is within
+C; the key is (feasible, mission success if feasible, within-C fraction, -upper bound, -epoch). The best
+TAIL_CANDIDATES epochs by that key are kept, and when the role ends each of them flies
+TAIL_FINAL_FACTOR x as many fresh selection missions (another draw from the training seed, never an
+evaluation seed); the role ships the best of them by the same key on those missions alone, so that the
+figure it is chosen by is not the one it was screened by.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import shutil
 from dataclasses import asdict, dataclass
@@ -31,14 +44,23 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from tssac_core.deploy.policy import Policy
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.deploy.policy import Policy
-from tssac_core.sim.scenario import ROLES, Role, Scenario, sample_layout
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, sample_layout
 from tssac_core.sim.team import GUIDANCE, Pilot
+from tssac_core.stats import bootstrap_mean_interval, cvar, within_fraction
+
+logger = logging.getLogger(__name__)
 
 SEED_TAG = 0x5A11D
 """Mixed into the validation layouts' seed, so they differ from the training layouts of the same seed."""
+FINAL_TAG = 1
+"""Mixed in as well for the tail selection's final missions, a draw separate from the screening missions."""
+TAIL_CANDIDATES = 3
+"""Tail selection: the epochs kept from the screening for the final missions."""
+TAIL_FINAL_FACTOR = 5
+"""Tail selection: each candidate flies this many times the screening's number of missions at the role's end."""
 
 
 @dataclass(frozen=True)
@@ -49,26 +71,72 @@ class Score:
     mean_cost: float
     """The role's mean hazard cost per mission."""
     cost_limit: float
+    cost_high: float = float("nan")
+    """The upper end of the 95% bootstrap interval of the role's mean cost (NaN in states older than it)."""
+    within_limit_fraction: float = float("nan")
+    """The fraction of the role's UAV-missions with cost <= C."""
+    cvar95_cost: float = float("nan")
+    max_cost: float = float("nan")
+    missions: int = 0
 
     def key(self, within_limit: bool = True) -> tuple[bool, float, float, int]:
         """The larger the better (module docstring); ``within_limit``: the cost limit comes first."""
         within = self.mean_cost <= self.cost_limit or not within_limit
         return (within, self.mission_success if within else 0.0, -self.mean_cost, -self.epoch)
 
+    def tail_key(self) -> tuple[bool, float, float, float, int]:
+        """The tail selection's key, the larger the better: (feasible, success if feasible, within-C fraction,
+        -upper bound of the mean cost, -epoch); feasible = that upper bound is within C."""
+        feasible = self.cost_high <= self.cost_limit
+        return (feasible, self.mission_success if feasible else 0.0, self.within_limit_fraction, -self.cost_high, -self.epoch)
+
+    def columns(self) -> dict[str, float]:
+        """The validation's metrics.csv columns."""
+        return {"val_mission_success": self.mission_success, "val_task_success": self.task_success,
+                "val_cost": self.mean_cost, "val_cost_high": self.cost_high,
+                "val_within_limit": self.within_limit_fraction, "val_cvar95_cost": self.cvar95_cost,
+                "val_max_cost": self.max_cost}
+
+
+def score_missions(epoch: int, success: np.ndarray, task_done: np.ndarray, role_cost: np.ndarray, cost_limit: float) -> Score:
+    """One role's Score from its missions: success (M,), its task done (M,) and its cost (M,)."""
+    high = bootstrap_mean_interval(role_cost).high
+    return Score(epoch, float(success.mean()), float(task_done.mean()), float(role_cost.mean()), cost_limit, high,
+                 within_fraction(role_cost, cost_limit), cvar(role_cost), float(role_cost.max()), int(len(role_cost)))
+
 
 class EpochSelector:
-    """Validates each epoch's checkpoint of one role and keeps the best as ``resume/<role>-best.pt``."""
+    """Validates each epoch's checkpoint of one role and keeps the best as ``resume/<role>-best.pt``
+    (with ``tail``, also the TAIL_CANDIDATES best as ``resume/<role>-e<epoch>.pt``)."""
 
     def __init__(self, scenario: Scenario, role: Role, out: Path, episodes: int, seed: int,
-                 teammates: Mapping[str, Pilot], mode: ObservationMode, within_limit: bool = True) -> None:
+                 teammates: Mapping[str, Pilot], mode: ObservationMode, within_limit: bool = True,
+                 tail: bool = False) -> None:
         self.scenario, self.role, self.episodes, self.mode = scenario, role, episodes, mode
-        self.within_limit = within_limit
+        self.within_limit, self.tail = within_limit, tail
+        self.seed = seed
         rng = np.random.default_rng([seed, role.index, SEED_TAG])
         self.layouts = [sample_layout(scenario, rng) for _ in range(episodes)]
         self.pilots: list[Pilot] = [teammates.get(r.value) if r.index < role.index else GUIDANCE for r in ROLES]
+        self.out = out
         self.candidate = out / "resume" / f"{role.value}-last.pt"
         self.best_path = out / "resume" / f"{role.value}-best.pt"
         self.best: Score | None = None
+        self.top: list[Score] = []
+        """Tail selection: the best TAIL_CANDIDATES screened epochs, best first."""
+
+    def _better(self, a: Score, b: Score) -> bool:
+        return a.tail_key() > b.tail_key() if self.tail else a.key(self.within_limit) > b.key(self.within_limit)
+
+    def _fly(self, checkpoint: Path, layouts: list[Layout], epoch: int) -> Score:
+        pilots = list(self.pilots)
+        pilots[self.role.index] = Policy.load(checkpoint, self.role)
+        results = fly_missions(self.scenario, pilots, len(layouts), 0, self.mode, layouts=layouts)
+        j = self.role.index
+        return score_missions(epoch, results.success, results.task_done[:, j], results.cost[:, j], self.scenario.cost_limit)
+
+    def _epoch_path(self, epoch: int) -> Path:
+        return self.out / "resume" / f"{self.role.value}-e{epoch}.pt"
 
     def after_epoch(self, epoch: int, write_checkpoint: Callable[[Path], None]) -> dict[str, float]:
         """Write this epoch's checkpoint, validate it, keep it if best; returns the metrics columns."""
@@ -76,31 +144,55 @@ class EpochSelector:
             return {}
         self.candidate.parent.mkdir(parents=True, exist_ok=True)
         write_checkpoint(self.candidate)
-        pilots = list(self.pilots)
-        pilots[self.role.index] = Policy.load(self.candidate, self.role)
-        results = fly_missions(self.scenario, pilots, len(self.layouts), 0, self.mode, layouts=self.layouts)
-        j = self.role.index
-        score = Score(epoch, float(results.success.mean()), float(results.task_done[:, j].mean()),
-                      float(results.cost[:, j].mean()), self.scenario.cost_limit)
-        if self.best is None or score.key(self.within_limit) > self.best.key(self.within_limit):
+        score = self._fly(self.candidate, self.layouts, epoch)
+        if self.best is None or self._better(score, self.best):
             _copy_atomic(self.candidate, self.best_path)
             self.best = score
-        return {"val_mission_success": score.mission_success, "val_task_success": score.task_success,
-                "val_cost": score.mean_cost, "best_epoch": self.best.epoch}
+        if self.tail:
+            self._keep_candidate(score)
+        return {**score.columns(), "best_epoch": self.best.epoch}
+
+    def _keep_candidate(self, score: Score) -> None:
+        ranked = sorted([*self.top, score], key=Score.tail_key, reverse=True)
+        kept, dropped = ranked[:TAIL_CANDIDATES], ranked[TAIL_CANDIDATES:]
+        if any(k is score for k in kept):
+            _copy_atomic(self.candidate, self._epoch_path(score.epoch))
+        for old in dropped:
+            self._epoch_path(old.epoch).unlink(missing_ok=True)
+        self.top = kept
 
     def finish(self, final: Path, write_checkpoint: Callable[[Path], None]) -> Score | None:
         """Ship the best epoch's checkpoint as ``final`` (without validation: the last epoch's)."""
         if self.best is None:
             write_checkpoint(final)
+        elif self.tail and self.top:
+            self.best = self._final_selection()
+            _copy_atomic(self._epoch_path(self.best.epoch), final)
         else:
             _copy_atomic(self.best_path, final)
         return self.best
 
+    def _final_selection(self) -> Score:
+        """Fly every candidate on the final selection missions; the best by the tail key on those. Writes
+        ``selection-<role>.json`` with both figures of every candidate."""
+        rng = np.random.default_rng([self.seed, self.role.index, SEED_TAG, FINAL_TAG])
+        layouts = [sample_layout(self.scenario, rng) for _ in range(self.episodes * TAIL_FINAL_FACTOR)]
+        finals = [self._fly(self._epoch_path(s.epoch), layouts, s.epoch) for s in self.top]
+        best = max(finals, key=Score.tail_key)
+        record = {"role": self.role.value, "shipped_epoch": best.epoch,
+                  "candidates": [{"screening": asdict(s), "final": asdict(f)} for s, f in zip(self.top, finals)]}
+        (self.out / f"selection-{self.role.value}.json").write_text(json.dumps(record, indent=2) + "\n")
+        logger.info("%s: tail selection ships epoch %d of %s (final missions: success %.3f, cost %.2f, upper %.2f, "
+                    "within C %.4f)", self.role.value, best.epoch, [s.epoch for s in self.top], best.mission_success,
+                    best.mean_cost, best.cost_high, best.within_limit_fraction)
+        return best
+
     def state_dict(self) -> dict[str, Any]:
-        return {"best": asdict(self.best) if self.best else None}
+        return {"best": asdict(self.best) if self.best else None, "top": [asdict(s) for s in self.top]}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.best = Score(**state["best"]) if state.get("best") else None
+        self.top = [Score(**s) for s in state.get("top", [])]
 
 
 def _copy_atomic(src: Path, dst: Path) -> None:
