@@ -4,10 +4,15 @@ Examples::
 
     python -m tssac_core.evaluate --controller guidance --scenario scenarios/random.yaml --episodes 50 --seed 7
     python -m tssac_core.evaluate --models models/tssac --scenario scenarios/random.yaml --episodes 50 --json out.json
+    python -m tssac_core.evaluate --models models/tssac --seed 770001 --mission 417     # one mission again, alone
 
-Prints the success rate (target hit), the mean hazard cost per UAV per episode and per-role figures;
-``--json`` writes them with the keys ``success_rate``, ``mean_cost``, ``episodes`` and one entry per
-role name.
+Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
+its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
+the cost limit C, the worst cost, CVaR_0.95) and the costliest UAV-missions; ``--json`` writes them with the
+keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interval95``, ``episodes``, one
+entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
+Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.missions), so
+``--seed S --mission k`` flies any one of them again alone.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from tqdm import tqdm
 
@@ -34,12 +39,15 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     who.add_argument("--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)")
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default: scenarios/random.yaml)")
     p.add_argument("--episodes", type=int, default=50, help="missions to fly (default 50)")
-    p.add_argument("--seed", type=int, default=12345, help="seed of the layouts (default 12345, never used in training)")
+    p.add_argument("--seed", type=int, default=12345, help="mission k flies the layout of seed S + k (default 12345, never used in training)")
+    p.add_argument("--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions)")
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     if args.episodes <= 0:
         raise UsageError("--episodes must be positive")
+    if args.mission is not None and args.mission < 0:
+        raise UsageError(f"--mission must be >= 0, got {args.mission}")
     return args
 
 
@@ -55,8 +63,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load(args.scenario)
     pilots = load_pilots(args.models)
-    with tqdm(total=args.episodes, desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
-        results = fly_missions(scenario, pilots, args.episodes, args.seed, progress=bar.update)
+    indices = [args.mission] if args.mission is not None else list(range(args.episodes))
+    with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
+        results = fly_missions(scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices)
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {
@@ -66,14 +75,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             "cost_limit": scenario.cost_limit,
         }
     )
-    print(f"success rate {summary['success_rate']:.1%} over {summary['episodes']} missions, mean hazard cost per UAV {summary['mean_cost']:.2f} (limit {scenario.cost_limit:g})")
-    for role, fig in summary["roles"].items():
-        print(f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} max {fig['max_cost']:.0f}  "
-              f"left the area {fig['left_area_rate']:.1%}  return {fig['mean_return']:.1f}")
+    print_summary(summary, scenario.cost_limit)
     if args.json:
         write_json(args.json, summary)
         print(f"wrote {args.json}")
     return 0
+
+
+def print_summary(summary: dict[str, Any], cost_limit: float) -> None:
+    """The summary's figures, intervals and tails, and its worst missions, on stdout."""
+    lo, hi = summary["success_interval95"]
+    clo, chi = summary["mean_cost_interval95"]
+    print(f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {summary['episodes']} missions, "
+          f"mean hazard cost per UAV {summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f}; limit {cost_limit:g})")
+    for role, fig in summary["roles"].items():
+        print(f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} within C {fig['within_cost_limit']:.1%} "
+              f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}  left the area {fig['left_area_rate']:.1%}  "
+              f"return {fig['mean_return']:.1f}")
+    for row in summary["worst_missions"]:
+        print(f"  worst: mission {row['mission']} (layout seed {row['seed']}) {row['role']} cost {row['cost']:.0f}")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,10 @@
-"""Fly whole three-UAV missions in the batched world and score them."""
+"""Fly whole three-UAV missions in the batched world and score them.
+
+Every mission draws its layout from its own seed: mission ``k`` of a run seeded ``S`` is
+``sample_layout(scenario, numpy.random.default_rng(S + k))``, the same rule as ``mavlink_bridge.fly`` and the
+SITL world, so any one mission can be flown again alone (``--seed S --mission k``, or ``--seed S+k --mission 0``),
+in either world, and a run can be split by mission index (shards) without changing any mission.
+"""
 
 from __future__ import annotations
 
@@ -13,6 +19,20 @@ from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Pilot, Team
 from tssac_core.sim.world import World
+from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, worst_missions
+
+WORST_MISSIONS = 10
+"""How many of the costliest UAV-missions a summary lists."""
+
+
+def mission_seed(seed: int, index: int) -> int:
+    """The seed of mission ``index``'s layout in a run seeded ``seed``."""
+    return seed + index
+
+
+def mission_layout(scenario: Scenario, seed: int, index: int) -> Layout:
+    """The layout of mission ``index``: the scenario's fixed one, or a draw from its own seed (module docstring)."""
+    return sample_layout(scenario, np.random.default_rng(mission_seed(seed, index)))
 
 
 @dataclass
@@ -28,27 +48,42 @@ class MissionResults:
     out_of_area: np.ndarray
     """The UAV flew out of the area, which ended its mission, (M, 3) bool."""
     layouts: list[Layout] = field(default_factory=list)
+    seeds: list[int] = field(default_factory=list)
+    """Each mission's layout seed (`mission_seed`), when its layout came from one."""
+    indices: list[int] = field(default_factory=list)
+    """Each mission's index in its run (``--mission``), when its layout came from a seed."""
     trajectories: np.ndarray | None = None
     """(M, T, 3, 2) positions in metres if recorded (NaN after a mission ended)."""
 
     def summary(self, cost_limit: float) -> dict[str, Any]:
-        """The JSON figures: ``success_rate``, ``mean_cost`` (per UAV per episode), ``episodes``, per role."""
+        """The JSON figures: ``success_rate`` with its 95% Wilson interval, ``mean_cost`` (per UAV per episode) with
+        its 95% bootstrap interval over missions, ``episodes``, per role the tail (within C, worst, CVaR_0.95), and
+        the costliest UAV-missions (:mod:`tssac_core.stats`)."""
         per_role = {}
         for j, role in enumerate(ROLES):
             per_role[role.value] = {
                 "mean_cost": float(self.cost[:, j].mean()),
                 "max_cost": float(self.cost[:, j].max()),
                 "within_cost_limit": float((self.cost[:, j] <= cost_limit).mean()),
+                "cvar95_cost": cvar(self.cost[:, j]),
                 "task_success_rate": float(self.task_done[:, j].mean()),
                 "left_area_rate": float(self.out_of_area[:, j].mean()),
                 "mean_return": float(self.returns[:, j].mean()),
             }
+        rate = wilson_interval(int(self.success.sum()), int(len(self.success)))
+        mean = bootstrap_mean_interval(self.cost)
+        worst = worst_missions(self.cost, self.seeds, [r.value for r in ROLES], WORST_MISSIONS) if self.seeds else []
+        for row in worst:
+            row["mission"] = self.indices[row["mission"]]
         return {
             "success_rate": float(self.success.mean()),
+            "success_interval95": [rate.low, rate.high],
             "mean_cost": float(self.cost.mean()),
+            "mean_cost_interval95": [mean.low, mean.high],
             "episodes": int(len(self.success)),
             "mean_mission_time_s": float(self.time_s.mean()),
             "roles": per_role,
+            "worst_missions": worst,
         }
 
 
@@ -61,15 +96,20 @@ def fly_missions(
     record: bool = False,
     progress: Callable[[int], None] | None = None,
     layouts: list[Layout] | None = None,
+    indices: Sequence[int] | None = None,
 ) -> MissionResults:
-    """Fly ``episodes`` missions at once (one world each) on layouts drawn with ``seed``.
+    """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
+    seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
     number of missions that finished since the last call.
     """
+    seeds: list[int] = []
+    index_list: list[int] = []
     if layouts is None:
-        rng = np.random.default_rng(seed)
-        layouts = [sample_layout(scenario, rng) for _ in range(episodes)]
+        index_list = list(range(episodes) if indices is None else indices)
+        seeds = [mission_seed(seed, k) for k in index_list]
+        layouts = [mission_layout(scenario, seed, k) for k in index_list]
     world = World(scenario, len(layouts))
     active = tuple(p is not None for p in pilots)
     world.reset(np.arange(len(layouts)), layouts, active)
@@ -101,5 +141,7 @@ def fly_missions(
         time_s=world.steps * scenario.dt_s,
         out_of_area=out,
         layouts=layouts,
+        seeds=seeds,
+        indices=index_list,
         trajectories=np.stack(track, axis=1) if record else None,
     )
