@@ -90,7 +90,7 @@ def test_paper_grid():
         (("  epochs: 1\n", "  epochs: many\n"), "train.epochs: expected an integer, got 'many'"),
         (("  epochs: 1\n", "  epochs: 0\n"), "train.epochs: must be >= 1"),
         (("  envs: 1\n", "  envs: 1\n  speed: 3\n"), "train.speed: unknown key"),
-        (("  envs: 1\n", "  envs: 1\n  selection: best\n"), "train.selection: expected one of within_limit, success, got 'best'"),
+        (("  envs: 1\n", "  envs: 1\n  selection: best\n"), "train.selection: expected one of within_limit, success, tail, got 'best'"),
         (("  scenario: scenarios/strike.yaml", "  scenario: scenarios/nowhere.yaml"), "train.scenario: file not found"),
         (("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"), "algos[1].penalty: only sac_penalty takes a penalty"),
         (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: unknown algorithm 'sarsa'"),

@@ -80,5 +80,5 @@ def test_a_run_from_before_the_setting_shipped_within_the_limit():
         assert (difference == "") is same, difference
         if not same:
             assert "selection: 'within_limit' in its config.json, 'success' in the grid" in difference
-    with pytest.raises(UsageError, match="selection: expected one of within_limit, success, got 'best'"):
+    with pytest.raises(UsageError, match="selection: expected one of within_limit, success, tail, got 'best'"):
         config_from_saved(saved(cfg, selection="best"))

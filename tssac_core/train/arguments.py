@@ -53,7 +53,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
     p.add_argument("--selection", choices=SELECTIONS, help="which validated epoch a role ships: the best mission success among the "
                    "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
-                   "(success: default of sac, sac_penalty, ppo)")
+                   "(success: default of sac, sac_penalty, ppo), or tail: screen every epoch on the upper bound of its cost and its "
+                   "within-C fraction, and choose among the best three on more missions (tssac_core.train.validation)")
     p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
     p.add_argument("--teammates", type=Path, help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
                    "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")

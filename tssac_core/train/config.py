@@ -74,7 +74,9 @@ class TrainConfig:
     epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
     selection: str = ""
     """Which validated epoch a role ships (tssac_core.train.validation): "within_limit", the best mission success
-    among the epochs within the cost limit; "success", the best mission success whatever the cost. "" (the
+    among the epochs within the cost limit; "success", the best mission success whatever the cost; "tail", the
+    tail-aware selection (the upper bound of the role's cost within the limit, then success, judged again on more
+    missions among the best three; for validation on hundreds of missions). "" (the
     default): the algorithm's own, "within_limit" for the learners that are given the limit
     (CONSTRAINED_ALGOS), "success" for those that are not (sac, sac_penalty, ppo)."""
     sac: dict[str, Any] = field(default_factory=dict)
@@ -86,7 +88,7 @@ SAC_MULTIPLIER_ALGOS = tuple(algo for algo, variant in SAC_FAMILY.items() if var
 
 CONSTRAINED_ALGOS = (*SAC_MULTIPLIER_ALGOS, "ppo_lag", "cpo")
 """The learners that are given the cost limit C: they ship the best epoch within it (TrainConfig.selection)."""
-SELECTIONS = ("within_limit", "success")
+SELECTIONS = ("within_limit", "success", "tail")
 
 
 def selects_within_limit(cfg: TrainConfig) -> bool:

@@ -151,7 +151,8 @@ def open_seed_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, 
     buffer = ReplayBuffer(mode.size, 2, min(sac_cfg.replay_size, cfg.epochs * cfg.steps_per_epoch))
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg))
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg),
+                             tail=cfg.selection == "tail")
     rng = np.random.default_rng([cfg.seed, role.index])
     return SeedRole(cfg, role, out, task, buffer, selector, rng, task.reset(),
                     recent_costs=collections.deque(maxlen=sac_cfg.cost_window))

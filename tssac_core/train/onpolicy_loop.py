@@ -151,7 +151,8 @@ def train_role_onpolicy(cfg: TrainConfig, scenario: Scenario, role: Role, out: P
     learner = make_learner(mode.size, 2, config)
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg))
+    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg),
+                             tail=cfg.selection == "tail")
     finished: deque[tuple[float, int]] = deque(maxlen=config.cost_window)
     ep_len = np.zeros(cfg.envs, dtype=np.int64)
     start_epoch, env_steps, updates = 0, 0, 0

@@ -71,7 +71,8 @@ def read_resume_state(path: Path) -> dict[str, Any] | None:
 
 METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
                  *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates",
-                 "val_mission_success", "val_task_success", "val_cost", "best_epoch", "hazard_cost"]
+                 "val_mission_success", "val_task_success", "val_cost", "best_epoch", "hazard_cost",
+                 "val_cost_high", "val_within_limit", "val_cvar95_cost", "val_max_cost"]
 
 
 def append_metrics(path: Path, row: dict[str, Any]) -> None:
