@@ -30,7 +30,8 @@ Example (``experiments/paper.yaml`` is the full one)::
 
 Every key of ``train`` is an argument of ``python -m tssac_core.train`` (``steps_per_epoch`` is
 ``--steps-per-epoch``) and is passed to every job alike; a key left out is the command's default.
-``sac_set`` holds the ``--set`` overrides of the SAC family (tssac, sac_lag, sac, sac_penalty),
+``preset: FILE`` reads a preset (:mod:`tssac_core.train.preset`, e.g. ``configs/paper.yaml``) whose values the
+keys of ``train`` override. ``sac_set`` holds the ``--set`` overrides of the SAC family (tssac, sac_lag, sac, sac_penalty),
 ``onpolicy_set`` those of ppo, ppo_lag and cpo (the two learners have different settings), and an
 entry's own ``set`` is applied on top for that entry only. Paths are relative to the directory the
 command runs in, as on every other command line. A bad file raises :class:`GridError`, one line:
@@ -52,6 +53,7 @@ from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.train.arguments import parse_args as parse_train_args
 from tssac_core.train.config import ALGOS, ON_POLICY, SELECTIONS, TrainConfig, check_learner_settings
+from tssac_core.train.preset import load_preset
 from tssac_core.sim.yaml_file import read_yaml
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -223,11 +225,22 @@ def load_grid(path: str | Path) -> Grid:
     r = _Reader(source)
     top = r.mapping(data, "", allowed={"seeds", "algos", "train", "evaluation", "transfer"}, required={"seeds", "algos", "train", "evaluation"})
     seeds = r.seeds(top["seeds"], "seeds")
-    train_data = r.mapping(top["train"], "train", allowed={f.name for f in dataclasses.fields(TrainArgs)} | {"sac_set", "onpolicy_set"},
-                           required={"scenario"})
-    train = r.train_args(train_data)
+    train_fields = {f.name for f in dataclasses.fields(TrainArgs)}
+    train_data = r.mapping(top["train"], "train", allowed=train_fields | {"sac_set", "onpolicy_set", "preset"})
+    preset = load_preset(r.string(train_data["preset"], "train.preset")) if "preset" in train_data else None
     family_sets = {"sac": r.overrides(train_data.get("sac_set", {}), "train.sac_set"),
                    "onpolicy": r.overrides(train_data.get("onpolicy_set", {}), "train.onpolicy_set")}
+    if preset is not None:  # the preset's values first, the grid file's own on top
+        outside = sorted(set(preset.values) - train_fields)
+        if outside:
+            raise GridError(source, "train.preset", f"{preset.source}: {', '.join(outside)}: not a grid training argument "
+                            f"(the grid's are {', '.join(sorted(train_fields))})")
+        train_data = {**preset.values, **{k: v for k, v in train_data.items() if k != "preset"}}
+        family_sets = {family: {**preset.learner_settings(example), **family_sets[family]}
+                       for family, example in (("sac", "tssac"), ("onpolicy", "ppo"))}
+    if "scenario" not in train_data:
+        raise GridError(source, "train.scenario", "missing required field (in the grid file or its preset)")
+    train = r.train_args(train_data)
     if not isinstance(top["algos"], list) or not top["algos"]:
         raise GridError(source, "algos", "expected a non-empty list of algorithms")
     algos = tuple(r.algo_entry(item, f"algos[{i}]", family_sets) for i, item in enumerate(top["algos"]))

@@ -11,6 +11,7 @@ from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.config import ALGOS, DEFAULT_SCENARIO, SELECTIONS, TrainConfig
+from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
 
@@ -32,7 +33,13 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 
 
 def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, tuple[int, ...] | None]:
+    first = argparse.ArgumentParser(add_help=False)
+    first.add_argument("--preset", type=Path)
+    preset_path = first.parse_known_args(argv)[0].preset
+    preset = load_preset(preset_path) if preset_path is not None else None
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=DESCRIPTION)
+    p.add_argument("--preset", type=Path, metavar="FILE", help="a recipe file (configs/paper.yaml, configs/shipped.yaml): its "
+                   "settings are the defaults, the flags given here override them (tssac_core.train.preset)")
     p.add_argument("--algo", choices=ALGOS, default="tssac", help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
@@ -65,6 +72,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    if preset is not None:
+        p.set_defaults(**preset.argparse_defaults())
     a = p.parse_args(argv)
     roles = tuple(r.strip() for r in a.roles.split(",") if r.strip())
     for r in roles:
@@ -78,7 +87,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
     if not 0.0 <= a.stop_at_task_success <= 1.0:
         raise UsageError(f"--stop-at-task-success must be a fraction in [0, 1], got {a.stop_at_task_success:g}")
-    overrides: dict[str, Any] = {}
+    overrides: dict[str, Any] = dict(preset.learner_settings(a.algo)) if preset is not None else {}
     for item in a.set:
         key, _, value = item.partition("=")
         try:
