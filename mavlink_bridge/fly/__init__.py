@@ -4,6 +4,7 @@ Examples::
 
     python -m mavlink_bridge.fly --scenario scenarios/strike.yaml --pilot guidance --json out.json --plot mission.png
     python -m mavlink_bridge.fly --scenario scenarios/random.yaml --models models/tssac --episodes 10 --seed 3 --tlog tlogs/
+    python -m mavlink_bridge.fly --scenario scenarios/random.yaml --seed 3 --mission 7 --plot m7.png   # mission 7 again, alone
     python -m mavlink_bridge.fly --scenario layout.yaml --pilot guidance --connect udpout:127.0.0.1:14560 udpout:127.0.0.1:14570 udpout:127.0.0.1:14580
 
 For each mission: the layout is the scenario's fixed one, or a random one drawn with
@@ -12,7 +13,11 @@ fixed-layout scenario file that the SITL world and the companions both read. The
 its own process (``python -m sim_vehicles``, OS-assigned ports, lockstep by default) and one
 companion process per UAV (``python -m mavlink_bridge.companion``) connects to its vehicle. When the
 world ends (target hit, a UAV leaving the area, or the episode cap) the outcome is read from the
-world's truth log: success, hazard cost per UAV, mission time in simulated seconds.
+world's truth log: success, hazard cost per UAV, mission time in simulated seconds. The JSON and the
+printout carry the keys of ``tssac_core.evaluate`` (mission k of seed S is the same layout in both worlds):
+the success rate with its 95% Wilson interval, the mean cost per UAV with its 95% bootstrap interval over
+missions, per role the fraction within C, the worst cost and CVaR_0.95, and the costliest UAV-missions
+(``worst_missions``: index, seed, role, cost), each of which ``--seed S --mission K`` flies again.
 
 Every child runs in its own process group; Ctrl-C, SIGTERM, a crash of any child or a mission
 timeout stops them all (SIGTERM, then SIGKILL after a grace period) and the results of the missions

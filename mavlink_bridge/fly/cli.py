@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             cfg = dataclasses.replace(cfg, signing_key_path=make_signing_key(work))
         runner = MissionRunner(cfg, children, work)
         with tqdm(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr) as bar:
-            for i in range(cfg.episodes):
+            for i in cfg.indices():
                 row = runner.fly(i)
                 rows.append(row)
                 children.forget_finished()

@@ -42,6 +42,12 @@ class FlyConfig:
     startup_timeout_s: float
     progress: bool
     lean_telemetry: bool = False
+    mission: Optional[int] = None
+    """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
+
+    def indices(self) -> range:
+        """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1."""
+        return range(self.mission, self.mission + 1) if self.mission is not None else range(self.episodes)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -57,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     who.add_argument("--pilot", choices=[GUIDANCE], help="fly every UAV with the rule-based guidance controller")
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="mission i uses seed S + i for its random layout and sensor noise (default 0)")
+    p.add_argument("--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions; with --plot)")
     clock = p.add_mutually_exclusive_group()
     clock.add_argument("--lockstep", action="store_true",
                        help="step the world once per round of setpoints (the default; with --connect: the running world is in lockstep)")
@@ -78,6 +85,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     a = build_parser().parse_args(argv)
     if a.episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.mission is not None and a.mission < 0:
+        raise UsageError(f"--mission must be >= 0, got {a.mission}")
+    if a.mission is not None and a.episodes != 1:
+        raise UsageError("--mission flies one mission: leave --episodes out")
     if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
@@ -110,6 +121,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         models=models,
         episodes=a.episodes,
         seed=a.seed,
+        mission=a.mission,
         # A world fly starts runs in lockstep unless --speedup; vehicles it did not start are taken to run in
         # real time unless --lockstep says otherwise (a companion must not extrapolate a lockstep clock).
         lockstep=a.lockstep or (a.speedup is None and connect is None),

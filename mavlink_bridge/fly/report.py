@@ -13,16 +13,24 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
     n = summary["episodes"]
     if not n:
         return
-    cost = "unknown" if summary["mean_cost"] is None else f"{summary['mean_cost']:.2f}"
-    print(f"success rate {summary['success_rate']:.1%} over {n} missions, mean hazard cost per UAV {cost} "
-          f"(limit {cfg.scenario.cost_limit:g}), mean mission time {summary['mean_mission_time_s'] or 0:.1f} s")
+    lo, hi = summary["success_interval95"]
+    cost = "unknown"
+    if summary["mean_cost"] is not None:
+        clo, chi = summary["mean_cost_interval95"]
+        cost = f"{summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f})"
+    print(f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {n} missions, mean hazard cost "
+          f"per UAV {cost} (limit {cfg.scenario.cost_limit:g}), mean mission time {summary['mean_mission_time_s'] or 0:.1f} s")
     for role, fig in summary["roles"].items():
         parts = [f"  {role:6s}"]
         if "mean_cost" in fig:
-            parts.append(f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} max {fig['max_cost']:.0f}")
+            parts.append(f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} within C {fig['within_cost_limit']:.1%} "
+                         f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}")
         if "latency_p50_ms" in fig:
             parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
         print("  ".join(parts))
+    for w in summary["worst_missions"]:
+        print(f"  worst: mission {w['mission']} (seed {w['seed']}) {w['role']} cost {w['cost']:.0f}: fly again with --seed "
+              f"{cfg.seed} --mission {w['mission']} --plot FILE")
     for r in summary["missions"]:
         speed = f", {r['speed_x']:.0f}x real time in flight" if r.get("speed_x") else ""
         print(f"  mission {r['index']}: {'success' if r.get('success') else r.get('end')}, {r.get('sim_time_s') or 0:.1f} s simulated, "

@@ -9,6 +9,10 @@ import numpy as np
 from mavlink_bridge.fly.config import GUIDANCE, FlyConfig
 from mavlink_bridge.mission_log import MissionRecord
 from tssac_core.sim.scenario import ROLES
+from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, worst_missions
+
+WORST_MISSIONS = 10
+"""How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""
 
 
 def outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
@@ -35,11 +39,16 @@ def outcome_from_companions(statuses: dict[str, dict[str, Any]]) -> dict[str, An
 
 
 def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
-    """The results JSON: success_rate, mean_cost, episodes, per-role figures and the missions."""
+    """The results JSON: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
+    tail (within C, worst, CVaR_0.95), the costliest UAV-missions and the missions: the keys of
+    ``tssac_core.evaluate``'s JSON (tssac_core.stats), with the cost figures None when the cost is unknown."""
     n = len(rows)
+    wins = int(sum(bool(r.get("success")) for r in rows))
     out: dict[str, Any] = {
-        "success_rate": float(np.mean([bool(r.get("success")) for r in rows])) if n else None,
+        "success_rate": wins / n if n else None,
+        "success_interval95": [wilson_interval(wins, n).low, wilson_interval(wins, n).high] if n else None,
         "mean_cost": None,
+        "mean_cost_interval95": None,
         "episodes": n,
         "episodes_requested": cfg.episodes,
         "mean_mission_time_s": None,
@@ -49,15 +58,23 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
     if times:
         out["mean_mission_time_s"] = float(np.mean(times))
     costed = [r for r in rows if r.get("cost")]
+    out["worst_missions"] = []
     if costed:
-        out["mean_cost"] = float(np.mean([[r["cost"][role.value] for role in ROLES] for r in costed]))
+        cost = np.array([[r["cost"][role.value] for role in ROLES] for r in costed], dtype=np.float64)
+        interval = bootstrap_mean_interval(cost)
+        out["mean_cost"] = float(cost.mean())
+        out["mean_cost_interval95"] = [interval.low, interval.high]
+        worst = worst_missions(cost, [r["seed"] for r in costed], [role.value for role in ROLES], WORST_MISSIONS)
+        for w in worst:
+            w["mission"] = costed[w["mission"]]["index"]
+        out["worst_missions"] = worst
     for role in ROLES:
         name = role.value
         fig: dict[str, Any] = {}
         if costed:
             costs = np.array([r["cost"][name] for r in costed])
             fig.update({"mean_cost": float(costs.mean()), "max_cost": float(costs.max()),
-                        "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean())})
+                        "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean()), "cvar95_cost": cvar(costs)})
             fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
         p50 = [r["companions"][name]["latency_p50_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None]
         p99 = [r["companions"][name]["latency_p99_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None]
