@@ -100,6 +100,13 @@ def test_expectations(strike_path, tmp_path):
     assert "expect.speedup: must be positive" in error_of(data, tmp_path)
     data["expect"] = {"episodes": 0}
     assert "expect.episodes: must be positive" in error_of(data, tmp_path)
+    data["expect"] = {"episodes": 6, "min_success_low95": 0.6, "max_cost_high95": 3.0}
+    path.write_text(yaml.safe_dump(data))
+    assert (load(path).expect.min_success_low95, load(path).expect.max_cost_high95) == (0.6, 3.0)
+    data["expect"] = {"episodes": 6, "min_success_low95": 1.5}
+    assert "expect.min_success_low95: must be in [0, 1]" in error_of(data, tmp_path)
+    data["expect"] = {"episodes": 6, "max_cost_high95": -1.0}
+    assert "expect.max_cost_high95: must be >= 0" in error_of(data, tmp_path)
 
 
 def test_radius_out_of_range(strike_path, tmp_path):

@@ -54,7 +54,11 @@ def test_shipped_models_meet_the_scenario_expectations(scenario: Path, tmp_path:
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads(out.read_text())
-    report = f"\n{scenario.name}: success {summary['success_rate']:.0%}, mean cost {summary['mean_cost']:.2f}\n{table(summary)}"
+    report = (f"\n{scenario.name}: success {summary['success_rate']:.0%} {summary['success_interval95']}, mean cost "
+              f"{summary['mean_cost']:.2f} {summary['mean_cost_interval95']}\n{table(summary)}")
     assert summary["episodes"] == expect.episodes, report
     assert summary["success_rate"] >= expect.min_success_rate, report
     assert summary["mean_cost"] <= expect.max_mean_cost, report
+    assert summary["success_interval95"][0] >= expect.min_success_low95, report
+    if expect.max_cost_high95 is not None:
+        assert summary["mean_cost_interval95"][1] <= expect.max_cost_high95, report

@@ -200,6 +200,12 @@ class Expect:
     """Minimum fraction of missions with the target hit."""
     max_mean_cost: float = 3.0
     """Maximum mean hazard cost per UAV per episode."""
+    min_success_low95: float = 0.0
+    """The lower end of the success rate's 95% Wilson interval must reach this (tssac_core.stats)."""
+    max_cost_high95: float | None = None
+    """The upper end of the mean cost's 95% bootstrap interval over missions must stay within this (None: no bound).
+    Unlike the mean, it sees one costly mission among few: a single UAV 30 steps inside a radar in one of six
+    missions is a mean of 1.7 but an upper bound of 5."""
     speedup: float | None = None
     """Fly at real time x this instead of lockstep. For links with latency or loss: under lockstep the
     SITL runs link delays on the wall clock and a lost setpoint holds the world until the vehicle's
@@ -403,6 +409,8 @@ def validate(s: Scenario, source: str) -> None:
         check(s.expect.episodes > 0, "expect.episodes", "must be positive")
         check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
         check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
+        check(0 <= s.expect.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
+        check(s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0")
         check(s.expect.speedup is None or s.expect.speedup > 0, "expect.speedup", "must be positive")
 
 
