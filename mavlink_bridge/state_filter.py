@@ -630,6 +630,13 @@ class VehicleStateFilter:
         self._require_initialised()
         return math.sqrt(max(0.0, float(np.trace(self._backend.pos_cov()))))
 
+    @property
+    def position_sigma_major_m(self) -> float:
+        """Standard deviation of the position along its worst direction: sqrt of the largest eigenvalue of the
+        2x2 position covariance (m; what the runtime-assurance monitor widens its margin by)."""
+        self._require_initialised()
+        return math.sqrt(max(0.0, float(np.linalg.eigvalsh(self._backend.pos_cov())[-1])))
+
     # -- internals ------------------------------------------------------------------------------
 
     def _snapshot(self, t_s: float) -> None:

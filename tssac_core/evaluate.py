@@ -5,6 +5,7 @@ Examples::
     python -m tssac_core.evaluate --controller guidance --scenario scenarios/random.yaml --episodes 50 --seed 7
     python -m tssac_core.evaluate --models models/tssac --scenario scenarios/random.yaml --episodes 50 --json out.json
     python -m tssac_core.evaluate --models models/tssac --seed 770001 --mission 417     # one mission again, alone
+    python -m tssac_core.evaluate --models models/tssac --episodes 1000 --seed 9 --shield --json shielded.json
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
@@ -12,12 +13,16 @@ the cost limit C, the worst cost, CVaR_0.95) and the costliest UAV-missions; ``-
 keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interval95``, ``episodes``, one
 entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
 Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.missions), so
-``--seed S --mission k`` flies any one of them again alone.
+``--seed S --mission k`` flies any one of them again alone. ``--shield`` flies every UAV through the
+runtime-assurance monitor (:mod:`tssac_core.deploy.shield`, ``docs/runtime_assurance.md``) and adds its counts
+under ``shield``: interventions per UAV-mission and the fraction of flight time under the backup. Off by
+default: the learned policy is measured alone.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -26,7 +31,8 @@ from tqdm import tqdm
 
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.sim.missions import fly_missions
-from tssac_core.sim.scenario import ROLES, load
+from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.sim.scenario import ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
@@ -41,6 +47,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--episodes", type=int, default=50, help="missions to fly (default 50)")
     p.add_argument("--seed", type=int, default=12345, help="mission k flies the layout of seed S + k (default 12345, never used in training)")
     p.add_argument("--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions)")
+    p.add_argument("--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)")
+    p.add_argument("--shield-margin-m", type=float, default=ShieldConfig.margin_m, metavar="M",
+                   help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})")
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -48,6 +57,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         raise UsageError("--episodes must be positive")
     if args.mission is not None and args.mission < 0:
         raise UsageError(f"--mission must be >= 0, got {args.mission}")
+    if not args.shield_margin_m >= 0:
+        raise UsageError("--shield-margin-m must be >= 0")
     return args
 
 
@@ -59,13 +70,26 @@ def load_pilots(models: Path | None) -> list[Pilot]:
     return list(load_team(models))
 
 
+def compare_shield(models: Path | None, scenario: Scenario, episodes: int, seed: int,
+                   shield: ShieldConfig | None = None) -> dict[str, dict[str, Any]]:
+    """A team (a models directory, None = the guidance controller) on the same missions with the monitor off
+    and on: ``{"off": summary, "on": summary}`` (the "with monitor" column of Table 4: success, cost, and the
+    time under the backup, ``on["shield"]["backup_time_fraction"]``)."""
+    pilots = load_pilots(models)
+    off = fly_missions(scenario, pilots, episodes, seed).summary(scenario.cost_limit)
+    on = fly_missions(scenario, pilots, episodes, seed, shield=shield or ShieldConfig()).summary(scenario.cost_limit)
+    return {"off": off, "on": on}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load(args.scenario)
     pilots = load_pilots(args.models)
+    shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
-        results = fly_missions(scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices)
+        results = fly_missions(scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices,
+                               shield=shield)
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {
@@ -75,6 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "cost_limit": scenario.cost_limit,
         }
     )
+    if shield is not None:
+        summary["shield"]["config"] = dataclasses.asdict(shield)
     print_summary(summary, scenario.cost_limit)
     if args.json:
         write_json(args.json, summary)
@@ -94,6 +120,11 @@ def print_summary(summary: dict[str, Any], cost_limit: float) -> None:
               f"return {fig['mean_return']:.1f}")
     for row in summary["worst_missions"]:
         print(f"  worst: mission {row['mission']} (layout seed {row['seed']}) {row['role']} cost {row['cost']:.0f}")
+    if "shield" in summary:
+        sh = summary["shield"]
+        print(f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission (max {sh['max_interventions_per_uav_mission']}), "
+              f"{sh['backup_time_fraction']:.2%} of flight time under the backup, {sh['uav_missions_with_cost']} UAV-missions with cost, "
+              f"{sh['uavs_left_area']} UAVs left the area")
 
 
 if __name__ == "__main__":

@@ -17,7 +17,9 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
-from tssac_core.sim.team import Pilot, Team
+from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.deploy.shield_world import MonitorCounts, WorldMonitor
+from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
 from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, worst_missions
 
@@ -54,6 +56,10 @@ class MissionResults:
     """Each mission's index in its run (``--mission``), when its layout came from a seed."""
     trajectories: np.ndarray | None = None
     """(M, T, 3, 2) positions in metres if recorded (NaN after a mission ended)."""
+    monitor: MonitorCounts | None = None
+    """The runtime-assurance monitor's counts per mission and UAV, when it flew (``shield``)."""
+    backup_track: np.ndarray | None = None
+    """(M, T, 3) bool: the backup flew that step, if recorded with the monitor."""
 
     def summary(self, cost_limit: float) -> dict[str, Any]:
         """The JSON figures: ``success_rate`` with its 95% Wilson interval, ``mean_cost`` (per UAV per episode) with
@@ -75,7 +81,7 @@ class MissionResults:
         worst = worst_missions(self.cost, self.seeds, [r.value for r in ROLES], WORST_MISSIONS) if self.seeds else []
         for row in worst:
             row["mission"] = self.indices[row["mission"]]
-        return {
+        summary: dict[str, Any] = {
             "success_rate": float(self.success.mean()),
             "success_interval95": [rate.low, rate.high],
             "mean_cost": float(self.cost.mean()),
@@ -85,6 +91,31 @@ class MissionResults:
             "roles": per_role,
             "worst_missions": worst,
         }
+        if self.monitor is not None:
+            summary["shield"] = monitor_summary(self.monitor, self.cost, self.out_of_area)
+        return summary
+
+
+def monitor_summary(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.ndarray) -> dict[str, Any]:
+    """The monitor's figures: interventions per UAV-mission, the fraction of flight time under the backup,
+    and the hazards that the guarantee is about (UAV-missions with any cost, UAVs that left the area)."""
+    flown = counts.flown_steps.sum()
+    per_role = {}
+    for j, role in enumerate(ROLES):
+        per_role[role.value] = {
+            "interventions_per_mission": float(counts.interventions[:, j].mean()),
+            "backup_time_fraction": float(counts.backup_steps[:, j].sum() / max(1, counts.flown_steps[:, j].sum())),
+        }
+    return {
+        "interventions_per_uav_mission": float(counts.interventions.mean()),
+        "max_interventions_per_uav_mission": int(counts.interventions.max()),
+        "max_switches_per_uav_mission": int(counts.switches.max()),
+        "backup_time_fraction": float(counts.backup_steps.sum() / max(1, flown)),
+        "unprotected_time_fraction": float(counts.unprotected_steps.sum() / max(1, flown)),
+        "uav_missions_with_cost": int((cost > 0).sum()),
+        "uavs_left_area": int(out_of_area.sum()),
+        "roles": per_role,
+    }
 
 
 def fly_missions(
@@ -97,12 +128,14 @@ def fly_missions(
     progress: Callable[[int], None] | None = None,
     layouts: list[Layout] | None = None,
     indices: Sequence[int] | None = None,
+    shield: ShieldConfig | None = None,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
-    number of missions that finished since the last call.
+    number of missions that finished since the last call. ``shield``: fly every UAV through the
+    runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) with these margins.
     """
     seeds: list[int] = []
     index_list: list[int] = []
@@ -119,6 +152,8 @@ def fly_missions(
     cfg = RewardConfig()
     routes = RouteMap()
     team = Team(pilots, mode)
+    monitor = None if shield is None else WorldMonitor(world, [decision_interval(p) for p in pilots], shield)
+    backup_track: list[np.ndarray] = []
     while world.running.any():
         if record:
             pos = np.stack([world.x_m, world.y_m], axis=-1)
@@ -126,7 +161,12 @@ def fly_missions(
         moving = world.active & world.running[:, None]
         was_running = world.running.copy()
         detour_prev = routes.detour_m(world)
-        result = world.step(team.actions(world))
+        actions = team.actions(world)
+        if monitor is not None:
+            actions = monitor.actions(world, actions)
+            if record:
+                backup_track.append(monitor.engaged & moving)
+        result = world.step(actions)
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area
         if progress is not None:
@@ -144,4 +184,6 @@ def fly_missions(
         seeds=seeds,
         indices=index_list,
         trajectories=np.stack(track, axis=1) if record else None,
+        monitor=None if monitor is None else monitor.counts,
+        backup_track=np.stack(backup_track, axis=1) if record and monitor is not None else None,
     )

@@ -31,6 +31,11 @@ def check_pilot(pilot: Pilot, role_name: str) -> None:
     raise ValueError(f"pilot for {role_name} must be 'guidance', None or a callable obs -> action, got {pilot!r}")
 
 
+def decision_interval(pilot: Pilot) -> int:
+    """World steps between a pilot's decisions: its ``action_repeat`` (1 for the guidance controller)."""
+    return max(1, int(getattr(pilot, "action_repeat", 1))) if callable(pilot) else 1
+
+
 class Team:
     """The pilots of the three vehicles of a World; holds actions of pilots with an action_repeat."""
 
@@ -59,7 +64,7 @@ class Team:
                 actions[:, j] = guided[:, j]
             elif callable(pilot):
                 mode = getattr(pilot, "observation_mode", self.default_mode)
-                repeat = int(getattr(pilot, "action_repeat", 1))
+                repeat = decision_interval(pilot)
                 due = world.steps % repeat == 0
                 if due.any():  # between decisions nobody needs the pilot: skip its forward pass
                     fresh = np.asarray(pilot(observe(world, j, mode, self.routes)), dtype=np.float64)

@@ -1,0 +1,220 @@
+"""The runtime-assurance monitor: hostile policies stay out of the radars and inside the area, the
+hysteresis bounds the switches, and one vehicle's monitor decides as the batched world's does."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from tssac_core.deploy.shield import (
+    Hazards,
+    Limits,
+    Memory,
+    ShieldConfig,
+    backup_clearance,
+    circle_clearance,
+    constant_rollout,
+    decide,
+)
+from tssac_core.deploy.shield_world import VehicleMonitor, WorldMonitor
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.observation import ObservationMode, observe
+from tssac_core.sim.scenario import load, sample_layout
+from tssac_core.sim.world import World
+
+
+class SteerIntoRadar:
+    """A hostile policy: full speed, full turn towards the nearest radar's centre (1 s decisions)."""
+
+    observation_mode = ObservationMode.EXTENDED
+    action_repeat = 10
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        bearing = np.arctan2(obs[:, 13], obs[:, 12])  # nearest radar, relative to the heading
+        return np.stack([np.clip(3.0 * bearing, -1.0, 1.0), np.ones(len(obs))], axis=1)
+
+
+class SteerOutOfArea:
+    """A hostile policy: full speed, full turn towards the nearest edge of the area."""
+
+    observation_mode = ObservationMode.EXTENDED
+    action_repeat = 10
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x, y = obs[:, 0], obs[:, 1]
+        edges = np.stack([x, 1 - x, y, 1 - y], axis=1)
+        target = np.array([math.pi, 0.0, -math.pi / 2, math.pi / 2])[np.argmin(edges, axis=1)]
+        err = np.angle(np.exp(1j * (target - np.arctan2(obs[:, 4], obs[:, 3]))))
+        return np.stack([np.clip(3.0 * err, -1.0, 1.0), np.ones(len(obs))], axis=1)
+
+
+@pytest.fixture
+def short_random(random_path):
+    return dataclasses.replace(load(random_path), episode_steps=1500)
+
+
+def test_policy_steering_into_radars_never_enters_one(short_random):
+    pilots = [SteerIntoRadar()] * 3
+    alone = fly_missions(short_random, pilots, episodes=8, seed=31)
+    assert (alone.cost > 0).mean() > 0.9  # the policy does reach the radars on its own
+    shielded = fly_missions(short_random, pilots, episodes=8, seed=31, shield=ShieldConfig())
+    assert shielded.cost.max() == 0.0
+    assert not shielded.out_of_area.any()
+    assert shielded.monitor is not None and shielded.monitor.interventions.min() >= 1
+    assert shielded.monitor.unprotected_steps.sum() == 0
+
+
+def test_policy_steering_out_of_the_area_stays_in(short_random):
+    pilots = [SteerOutOfArea()] * 3
+    alone = fly_missions(short_random, pilots, episodes=8, seed=32)
+    assert alone.out_of_area.any(axis=1).all()  # every mission ends with a UAV out of the area
+    shielded = fly_missions(short_random, pilots, episodes=8, seed=32, shield=ShieldConfig())
+    assert not shielded.out_of_area.any()
+    assert shielded.cost.max() == 0.0
+    assert (shielded.time_s == short_random.episode_steps * short_random.dt_s).all()  # flown to the cap, inside
+
+
+def test_hysteresis_bounds_the_switches(short_random):
+    """Steering into a radar makes a monitor without hysteresis hand over and back again and again."""
+    pilots = [SteerIntoRadar()] * 3
+    loose = ShieldConfig(release_margin_m=0.0, release_decisions=1)
+    chatter = fly_missions(short_random, pilots, episodes=4, seed=33, shield=loose)
+    held = fly_missions(short_random, pilots, episodes=4, seed=33, shield=ShieldConfig())
+    assert chatter.monitor is not None and held.monitor is not None
+    assert chatter.cost.max() == 0.0 and held.cost.max() == 0.0
+    decisions = short_random.episode_steps // SteerIntoRadar.action_repeat
+    assert chatter.monitor.switches.max() > decisions / 4  # a hand-over every few decisions
+    # Each engagement lasts at least release_decisions decisions: at most one switch pair per 3 + 1 decisions.
+    cfg = ShieldConfig()
+    assert held.monitor.switches.max() <= 2 * decisions / (cfg.release_decisions + 1)
+    assert held.monitor.switches.max() * 4 < chatter.monitor.switches.max()
+
+
+def test_vehicle_monitor_decides_as_the_batched_world(short_random):
+    """The companion's monitor (one vehicle, its own calls) and the batched world's take the same decisions."""
+    scenario = dataclasses.replace(short_random, episode_steps=600)
+    rng = np.random.default_rng(34)
+    layouts = [sample_layout(scenario, rng) for _ in range(3)]
+    world = World(scenario, len(layouts))
+    world.reset(np.arange(len(layouts)), layouts)
+    cfg = ShieldConfig()
+    batched = WorldMonitor(world, [10] * 3, cfg)
+    singles = {}
+    for i, lay in enumerate(layouts):
+        one = World(scenario, 1)
+        one.reset([0], [lay])
+        for j in range(3):
+            singles[i, j] = VehicleMonitor(one, j, cfg)
+    pilot = SteerIntoRadar()
+    engaged_seen = 0
+    while world.running.any() and world.steps[0] < scenario.episode_steps:
+        proposed = np.stack([pilot(observe(world, j, pilot.observation_mode)) for j in range(3)], axis=1)
+        due = world.steps[0] % 10 == 0
+        state = (world.x_m.copy(), world.y_m.copy(), world.v_m_s.copy(), world.phi_rad.copy())
+        actions = batched.actions(world, proposed)
+        if due:
+            for (i, j), mon in singles.items():
+                if not world.running[i]:
+                    continue
+                d = mon.decide(state[0][i, j], state[1][i, j], state[2][i, j], state[3][i, j], proposed[i, j], 10, cfg.margin_m)
+                np.testing.assert_array_equal(d.action[0], actions[i, j])
+                assert bool(d.engaged[0]) == bool(batched.engaged[i, j])
+                engaged_seen += int(d.engaged[0])
+        world.step(actions)
+    assert engaged_seen > 0  # the comparison covered decisions under the backup too
+
+
+def test_backups_are_what_the_world_flies(random_path):
+    """A constant-speed maximum-rate turn flown by the world stays on the circle the monitor checks, and the
+    monitor's rollout is the world's eq. 5 integration."""
+    s = load(random_path)
+    world = World(s, 1)
+    world.reset([0], [sample_layout(s, np.random.default_rng(1))])
+    x, y, v, phi = world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0]
+    c = world.c
+    lim = Limits(c.speed_min_m_s[:1], c.speed_max_m_s[:1], c.turn_rate_max_rad_s[:1], c.accel_max_m_s2[:1])
+    action = np.array([[1.0, 0.0]])
+    xs, ys, _, _ = constant_rollout(np.array([x]), np.array([y]), np.array([v]), np.array([phi]), action, lim, c.dt_s, 720)
+    r = v / c.turn_rate_max_rad_s[0]
+    cx, cy = x - r * math.sin(phi), y + r * math.cos(phi)
+    flown = []
+    for _ in range(720):
+        world.step(np.tile(np.array([1.0, 0.0]), (1, 3, 1)))
+        flown.append((world.x_m[0, 0], world.y_m[0, 0]))
+    flown_xy = np.array(flown)
+    np.testing.assert_allclose(flown_xy[:, 0], xs[0], atol=1e-6)
+    np.testing.assert_allclose(flown_xy[:, 1], ys[0], atol=1e-6)
+    np.testing.assert_allclose(np.hypot(flown_xy[:, 0] - cx, flown_xy[:, 1] - cy), r, atol=1e-6)
+    # The braking turn: 15 s of spiral from 300 m/s down to v_min, then the 1.72 km circle.
+    world.reset([0], [sample_layout(s, np.random.default_rng(1))])
+    world.v_m_s[0, 0] = 300.0
+    x, y, phi = world.x_m[0, 0], world.y_m[0, 0], world.phi_rad[0, 0]
+    brake = np.array([[-1.0, -1.0]])
+    xs, ys, vs, _ = constant_rollout(np.array([x]), np.array([y]), np.array([300.0]), np.array([phi]), brake, lim, c.dt_s, 400)
+    flown = []
+    for _ in range(400):
+        world.step(np.tile(brake[0], (1, 3, 1)))
+        flown.append((world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0]))
+    flown_xyv = np.array(flown)
+    np.testing.assert_allclose(flown_xyv[:, 0], xs[0], atol=1e-6)
+    np.testing.assert_allclose(flown_xyv[:, 1], ys[0], atol=1e-6)
+    np.testing.assert_allclose(flown_xyv[:, 2], vs[0], atol=1e-9)
+    assert vs[0, 149] == 150.0 and vs[0, 148] > 150.0
+
+
+def test_pending_commands_are_flown_first():
+    """With commands still on the link, the monitor decides from where they leave the vehicle."""
+    hz = Hazards(np.array([[[50_000.0, 50_000.0]]]), np.array([[12_000.0]]), 100_000.0)
+    lim = Limits(np.array([150.0]), np.array([300.0]), np.radians([5.0]), np.array([10.0]))
+    cfg = ShieldConfig()
+    state = np.array([[30_000.0, 45_000.0, 280.0, 0.3]])
+    pending = np.tile(np.array([[0.5, 1.0]]), (1, 20, 1))
+    proposed = np.array([[-0.2, 0.0]])
+    with_queue = decide(state, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg, pending)
+    xs, ys, vs, ps = constant_rollout(state[:, 0], state[:, 1], state[:, 2], state[:, 3], pending[:, 0], lim, 0.1, 20)
+    moved = np.array([[xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1]]])
+    direct = decide(moved, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg)
+    assert with_queue.clearance_m[0] == pytest.approx(direct.clearance_m[0], abs=1e-6)
+    assert with_queue.clearance_m[0] != pytest.approx(decide(state, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg).clearance_m[0])
+
+
+def test_circle_clearance_by_hand():
+    hz = Hazards(np.array([[[50_000.0, 50_000.0]]]), np.array([[12_000.0]]), 100_000.0)
+    # A circle of radius 3 km centred 20 km east of the radar: 20 - 12 - 3 = 5 km from the disk; 27 km from the east edge.
+    c = circle_clearance(np.array([70_000.0]), np.array([50_000.0]), np.array([3_000.0]), hz)
+    assert c[0] == pytest.approx(5_000.0)
+    # ... and 2 km from the north edge when centred at y = 95 km (far from the radar).
+    c = circle_clearance(np.array([90_000.0]), np.array([95_000.0]), np.array([3_000.0]), hz)
+    assert c[0] == pytest.approx(2_000.0)
+
+
+def test_head_on_at_a_radar_turns_in_time():
+    """Flying straight at a radar, the monitor passes the action while a backup clears the disk and engages
+    at the last decision that still has one; the backup then never comes nearer than the margin."""
+    hz = Hazards(np.array([[[50_000.0, 50_000.0]]]), np.array([[12_000.0]]), 100_000.0)
+    lim = Limits(np.array([150.0]), np.array([300.0]), np.radians([5.0]), np.array([10.0]))
+    cfg = ShieldConfig()
+    mem = Memory.initial(1)
+    state = np.array([[20_000.0, 50_000.0, 300.0, 0.0]])
+    engaged_at = None
+    for k in range(120):
+        d = decide(state, np.array([[0.0, 1.0]]), mem, hz, lim, 0.1, 10, cfg.margin_m, cfg)
+        mem = d.memory
+        if d.engaged[0] and engaged_at is None:
+            engaged_at = k
+        xs, ys, vs, ps = constant_rollout(state[:, 0], state[:, 1], state[:, 2], state[:, 3], d.action, lim, 0.1, 10)
+        state = np.array([[xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1]]])
+        gap = math.hypot(state[0, 0] - 50_000.0, state[0, 1] - 50_000.0) - 12_000.0
+        assert gap >= cfg.margin_m
+    assert engaged_at is not None
+    # At 300 m/s a constant-speed circle (r = 3.44 km) needs its centre 12 + 3.44 + 0.1 km from the radar's,
+    # i.e. a turn sqrt(15.54^2 - 3.44^2) = 15.15 km from the radar's centre; the braking turn (ending on a
+    # 1.72 km circle) lets the UAV come a little nearer before it must turn.
+    x_at = 20_000.0 + 300.0 * engaged_at
+    assert 14_000.0 < 50_000.0 - x_at < 15_150.0
+    # The remembered backups all start where the vehicle is: their clearance from there is the margin or more.
+    clear = backup_clearance(state[:, 0], state[:, 1], state[:, 2], state[:, 3], hz, lim, 0.1, np.array([0]))
+    assert clear.max() >= cfg.margin_m

@@ -1,0 +1,401 @@
+"""Runtime assurance (Simplex): a monitor that lets a UAV fly its policy's action only if it can still be saved.
+
+Pure functions, numpy only (the MAVLink companion imports this module and must not import torch or
+gymnasium), vectorised over M vehicles: the batched world's evaluation (M = 3 N) and a companion (M = 1)
+call the same :func:`decide` and take the same decision for the same state. The argument, with its
+numbers, is in ``docs/runtime_assurance.md``; in short:
+
+* **Backups.** Four fixed manoeuvres, each one constant command held for ever: a maximum-rate turn
+  (left or right) at constant speed (u = 0), a circle of radius r = v / omega_max; or a maximum-rate turn
+  while braking at the maximum rate (u = -1), a spiral that ends, once v reaches v_min (at most
+  (v_max - v_min) / a_max = 15 s), on the circle of radius v_min / omega_max (1.72 km instead of 3.44 km
+  at top speed). A fixed wing holds either for ever.
+* **Clearance of a backup** from a state: the smallest distance from its path to the edge of a radar's
+  disk or of the area. The final circle is exact (its centre's distance to each radar centre minus the
+  radar's radius and r; to each edge minus r); the braking spiral's points are the world's own eq. 5
+  samples at dt, less v_max dt / 2 (no point of an arc between two samples is farther than that from one
+  of them). A state from which some backup has clearance >= margin is *recoverable*.
+* **Decision** (at each of the policy's decisions, every ``steps`` world steps): predict the path from
+  the estimate, first through the commands already sent but not yet flown (``pending``: the link's
+  latency), then ``steps`` steps of the proposed action (eq. 5-6 integrated as the world does). The
+  action passes if (a) every predicted point is at least margin + v_max dt / 2 from every disk and edge,
+  and (b) some backup from the predicted end state has clearance >= margin. Passed: fly it and remember
+  that backup. Failed: fly the backup remembered at the last decision, which starts exactly where the
+  vehicle is when the command takes effect (it was planned from that decision's predicted end state,
+  or the vehicle is already flying it): by induction the UAV never comes nearer than margin to a disk
+  or an edge.
+* **Hysteresis.** Once engaged, control goes back to the policy only after its action has passed with
+  margin + ``release_margin_m`` for ``release_decisions`` consecutive decisions, so each engagement lasts
+  at least that many decisions and the switch count is bounded by the decisions / release_decisions.
+* **No recoverable start.** If the first decision finds no passing action and no backup clear of the
+  margin, the vehicle is *unprotected*: it flies the backup with the largest clearance (the best it
+  can do) and is counted; it becomes protected at the first action that passes.
+
+Frames and units as in :mod:`tssac_core.sim.world`: x east, y north from the area's south-west corner (m),
+heading phi counter-clockwise from east (rad), speed v (m/s); actions [omega, u] in [-1, 1] scaled by
+the vehicle's limits (eq. 8).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TURNS = np.array([[1.0, 0.0], [-1.0, 0.0], [1.0, -1.0], [-1.0, -1.0]])
+"""The backups' final commands [omega, u]: a left / right maximum-rate turn at constant speed, then the same
+while braking at the maximum rate (omega > 0 turns left, counter-clockwise)."""
+N_TURNS = len(TURNS)
+
+
+@dataclass(frozen=True)
+class ShieldConfig:
+    """The monitor's margins and hysteresis."""
+
+    margin_m: float = 100.0
+    """Clearance every accepted path and backup keeps from a radar's disk and from the area's edges (what
+    covers the estimate's error comes on top of it, see :func:`estimate_margin_m`)."""
+    release_margin_m: float = 1000.0
+    """Extra clearance the policy's action needs, while the backup flies, to get control back."""
+    release_decisions: int = 3
+    """Consecutive decisions that must pass with the extra clearance before control goes back."""
+    sigma_k: float = 3.0
+    """Companion: the margin grows by sigma_k times the position estimate's largest standard deviation."""
+    straight_leads_s: tuple[float, ...] = (0.0, 4.0, 8.0, 16.0, 32.0)
+    """Each backup first flies straight for one of these times (at constant speed, or braking for the braking
+    turns), then turns for ever: 0 is the plain loiter circle; the longer ones carry a UAV through a gap
+    between two radars that is too narrow for a circle, or past a radar it is flying along."""
+    braking_backups: bool = True
+    """Also the backups that brake to v_min while they turn (their 1.72 km final circle fits where the
+    3.44 km one at top speed does not; False: constant-speed turns only, cheaper to check)."""
+    timing_slack_s: float = 0.5
+    """Companion off lockstep: the margin grows by v_max times this (commands that arrive late or are
+    lost on the link: the vehicle flies the previous one meanwhile)."""
+
+    def __post_init__(self) -> None:
+        for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"ShieldConfig.{name} must be a finite number >= 0, got {value}")
+        if not self.straight_leads_s or any(not (math.isfinite(t) and t >= 0) for t in self.straight_leads_s):
+            raise ValueError(f"ShieldConfig.straight_leads_s must be times >= 0, got {self.straight_leads_s}")
+        if self.release_decisions < 1:
+            raise ValueError(f"ShieldConfig.release_decisions must be >= 1, got {self.release_decisions}")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Each vehicle's limits (eq. 6, 8), arrays of shape (M,)."""
+
+    speed_min_m_s: np.ndarray
+    speed_max_m_s: np.ndarray
+    turn_rate_max_rad_s: np.ndarray
+    accel_max_m_s2: np.ndarray
+
+    def select(self, idx: np.ndarray) -> Limits:
+        return Limits(self.speed_min_m_s[idx], self.speed_max_m_s[idx], self.turn_rate_max_rad_s[idx], self.accel_max_m_s2[idx])
+
+
+@dataclass(frozen=True)
+class Hazards:
+    """What the vehicles must keep out of: radar disks (unused slots: radius 0) and the square area."""
+
+    centres_m: np.ndarray
+    """(M, K, 2) radar centres, x over y."""
+    radii_m: np.ndarray
+    """(M, K) radar radii (0: an unused slot, never a hazard)."""
+    area_m: float
+    """The area is [0, area_m]^2 (eq. 6 position bounds)."""
+
+    def select(self, idx: np.ndarray) -> Hazards:
+        return Hazards(self.centres_m[idx], self.radii_m[idx], self.area_m)
+
+
+@dataclass(frozen=True)
+class Memory:
+    """What the monitor remembers per vehicle between decisions, (M,) arrays."""
+
+    engaged: np.ndarray
+    """The backup is flying."""
+    protected: np.ndarray
+    """A backup clear of the margin is known from the state the next command starts from."""
+    backup: np.ndarray
+    """Which backup (candidate index: lead * N_TURNS + turn) flies when the monitor engages (or flies now)."""
+    lead_left: np.ndarray
+    """World steps of the backup's straight lead still to fly."""
+    passes: np.ndarray
+    """While engaged: consecutive decisions whose proposed action passed with the release margin."""
+
+    @staticmethod
+    def initial(m: int) -> Memory:
+        """Before the first decision: nothing known, nothing engaged."""
+        z = np.zeros(m, np.int64)
+        return Memory(np.zeros(m, bool), np.zeros(m, bool), z, z.copy(), z.copy())
+
+    def select(self, idx: np.ndarray) -> Memory:
+        return Memory(self.engaged[idx], self.protected[idx], self.backup[idx], self.lead_left[idx], self.passes[idx])
+
+    def merged(self, idx: np.ndarray, part: Memory) -> Memory:
+        """A copy with vehicles ``idx`` replaced by ``part``."""
+        out = Memory(self.engaged.copy(), self.protected.copy(), self.backup.copy(), self.lead_left.copy(), self.passes.copy())
+        out.engaged[idx], out.protected[idx], out.backup[idx] = part.engaged, part.protected, part.backup
+        out.lead_left[idx], out.passes[idx] = part.lead_left, part.passes
+        return out
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What one decision gives, (M,) arrays unless said."""
+
+    action: np.ndarray
+    """(M, 2) the action to fly for the next interval: the proposed one or a backup's."""
+    memory: Memory
+    engaged: np.ndarray
+    """The backup flies this interval."""
+    engaged_now: np.ndarray
+    """The backup took over at this decision (an intervention)."""
+    released_now: np.ndarray
+    """Control went back to the policy at this decision."""
+    unprotected: np.ndarray
+    """No passing action and no clear backup: flying the best backup without a guarantee."""
+    clearance_m: np.ndarray
+    """The proposed action's clearance: min((a) its path's, (b) its best backup's), in metres."""
+
+
+# ------------------------------------------------------------------------------- kinematics
+
+
+def _sinc(half: np.ndarray) -> np.ndarray:
+    return np.sinc(half / np.pi)
+
+
+def constant_rollout(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, action: np.ndarray, lim: Limits,
+                     dt_s: float, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. 5-6 integrated as the world does, ``steps`` steps of one constant action per vehicle.
+
+    ``x, y, v, phi`` are (M,), ``action`` (M, 2) [omega, u] in [-1, 1] (clipped). Returns the states after
+    steps 1..steps, each (M, steps). With a constant u the speed after k steps is clip(v + k u a dt) (the
+    world clips each step; for a constant sign of u that is the same), and each step's displacement is the
+    chord of its arc at the step's mean speed, v_m dt sinc(omega dt / 2) along phi + omega dt / 2: one
+    cumulative sum instead of a loop.
+    """
+    a = np.clip(action, -1.0, 1.0)
+    theta = a[:, 0] * lim.turn_rate_max_rad_s * dt_s  # heading change per step
+    dv = a[:, 1] * lim.accel_max_m_s2 * dt_s
+    k = np.arange(steps + 1, dtype=np.float64)
+    speeds = np.clip(v[:, None] + k * dv[:, None], lim.speed_min_m_s[:, None], lim.speed_max_m_s[:, None])  # (M, steps+1)
+    headings = phi[:, None] + k * theta[:, None]
+    chord = 0.5 * (speeds[:, :-1] + speeds[:, 1:]) * dt_s * _sinc(0.5 * theta)[:, None]
+    mid = headings[:, :-1] + 0.5 * theta[:, None]
+    xs = x[:, None] + np.cumsum(chord * np.cos(mid), axis=1)
+    ys = y[:, None] + np.cumsum(chord * np.sin(mid), axis=1)
+    return xs, ys, speeds[:, 1:], headings[:, 1:]
+
+
+def step_actions(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, actions: np.ndarray, lim: Limits,
+                 dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fly a queue of actions, one per step: ``actions`` (M, L, 2). Returns the state after the last, (M,) each."""
+    for j in range(actions.shape[1]):
+        xs, ys, vs, ps = constant_rollout(x, y, v, phi, actions[:, j], lim, dt_s, 1)
+        x, y, v, phi = xs[:, 0], ys[:, 0], vs[:, 0], ps[:, 0]
+    return x, y, v, phi
+
+
+# -------------------------------------------------------------------------------- clearance
+
+
+def point_clearance(xs: np.ndarray, ys: np.ndarray, hz: Hazards) -> np.ndarray:
+    """Distance of points (M, S) to the nearest radar disk's edge or area edge (negative: inside / outside), (M, S)."""
+    a = hz.area_m
+    edge = np.minimum(np.minimum(xs, a - xs), np.minimum(ys, a - ys))
+    dx = xs[:, :, None] - hz.centres_m[:, None, :, 0]
+    dy = ys[:, :, None] - hz.centres_m[:, None, :, 1]
+    radar = np.hypot(dx, dy) - hz.radii_m[:, None, :]
+    radar = np.where(hz.radii_m[:, None, :] > 0, radar, np.inf)
+    return np.minimum(edge, radar.min(axis=2, initial=np.inf))
+
+
+def circle_clearance(cx: np.ndarray, cy: np.ndarray, r: np.ndarray, hz: Hazards) -> np.ndarray:
+    """Clearance of whole circles (centres (M,), radii (M,)) from every disk and edge: exact, (M,)."""
+    a = hz.area_m
+    edge = np.minimum(np.minimum(cx, a - cx), np.minimum(cy, a - cy)) - r
+    d = np.hypot(cx[:, None] - hz.centres_m[:, :, 0], cy[:, None] - hz.centres_m[:, :, 1])
+    radar = np.where(hz.radii_m > 0, d - hz.radii_m - r[:, None], np.inf)
+    return np.minimum(edge, radar.min(axis=1, initial=np.inf))
+
+
+def brake_steps(lim: Limits, dt_s: float) -> int:
+    """World steps after which a braking backup has reached v_min from any speed: ceil((v_max - v_min) / (a dt))."""
+    return int(np.ceil(np.max((lim.speed_max_m_s - lim.speed_min_m_s) / (lim.accel_max_m_s2 * dt_s)) - 1e-9))
+
+
+def segment_clearance(px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.ndarray, hz: Hazards) -> np.ndarray:
+    """Clearance of whole straight segments P -> Q (M,) from every disk and edge: exact, (M,).
+
+    The distance to an edge is linear along a segment, so its least value is at an end (the area is convex)."""
+    a = hz.area_m
+    edge = np.minimum.reduce([px, a - px, py, a - py, qx, a - qx, qy, a - qy])
+    dx, dy = (qx - px)[:, None], (qy - py)[:, None]
+    cx, cy = hz.centres_m[:, :, 0] - px[:, None], hz.centres_m[:, :, 1] - py[:, None]
+    length2 = dx * dx + dy * dy
+    t = np.clip((cx * dx + cy * dy) / np.maximum(length2, 1e-12), 0.0, 1.0)
+    radar = np.hypot(cx - t * dx, cy - t * dy) - hz.radii_m
+    radar = np.where(hz.radii_m > 0, radar, np.inf)
+    return np.minimum(edge, radar.min(axis=1, initial=np.inf))
+
+
+def lead_steps(cfg: ShieldConfig, dt_s: float, steps: int) -> np.ndarray:
+    """Each straight lead in world steps, a multiple of the decision interval (so a backup's command changes
+    only at a decision), (L,)."""
+    interval_s = steps * dt_s
+    return np.array([steps * round(t / interval_s) for t in cfg.straight_leads_s], dtype=np.int64)
+
+
+def _lead_ends(v: np.ndarray, u: float, lim: Limits, dt_s: float, leads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance flown straight and the speed at the end of each lead, (M, L) each: the world's steps at the
+    mean of each step's speeds, the speed clipped to its bounds (a constant u: clip(v + k u a dt))."""
+    k = np.arange(int(leads.max()) + 1, dtype=np.float64)
+    speeds = np.clip(v[:, None] + k * (u * lim.accel_max_m_s2 * dt_s)[:, None], lim.speed_min_m_s[:, None], lim.speed_max_m_s[:, None])
+    travelled = np.concatenate([np.zeros((len(v), 1)), np.cumsum(0.5 * (speeds[:, :-1] + speeds[:, 1:]) * dt_s, axis=1)], axis=1)
+    return travelled[:, leads], speeds[:, leads]
+
+
+def backup_clearance(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, hz: Hazards, lim: Limits,
+                     dt_s: float, leads: np.ndarray, brake: np.ndarray | None = None) -> np.ndarray:
+    """Clearance of every backup flown from each state for ever, (M, L * N_TURNS) (candidate lead * N_TURNS + turn).
+
+    A backup flies straight for its lead (u = the turn's u), then its turn for ever. The lead is a straight
+    segment (exact clearance); a constant-speed turn is a circle of radius v / omega_max (exact); a braking
+    turn is a spiral (the world's samples, less v_max dt / 2) that ends on the circle of radius
+    v_min / omega_max. ``brake`` (M,) bool: evaluate the braking backups only there (-inf elsewhere).
+    """
+    m, n_leads = len(x), len(leads)
+    out = np.full((m, n_leads, N_TURNS), -np.inf)
+    cos, sin = np.cos(phi), np.sin(phi)
+    for u in (0.0, -1.0):
+        rows = np.arange(m) if u == 0.0 or brake is None else np.flatnonzero(brake)
+        if rows.size == 0:
+            continue
+        r_lim, r_hz = lim.select(rows), hz.select(rows)
+        px, py, pc, ps = x[rows], y[rows], cos[rows], sin[rows]
+        dist, qv = _lead_ends(v[rows], u, r_lim, dt_s, leads)  # (R, L)
+        qx, qy = px[:, None] + dist * pc[:, None], py[:, None] + dist * ps[:, None]
+        # Every lead of every row as one batch of R * L segments (a lead of 0 is a point: its own clearance).
+        rep = np.repeat(np.arange(len(rows)), n_leads)
+        b_hz, b_lim = r_hz.select(rep), r_lim.select(rep)
+        bx, by, bc, bs = np.repeat(px, n_leads), np.repeat(py, n_leads), np.repeat(pc, n_leads), np.repeat(ps, n_leads)
+        ex, ey, ev = qx.reshape(-1), qy.reshape(-1), qv.reshape(-1)
+        lead = np.where(dist.reshape(-1) > 0, segment_clearance(bx, by, ex, ey, b_hz), np.inf)
+        for j in (0, 1) if u == 0.0 else (2, 3):
+            sign = TURNS[j, 0]
+            if u == 0.0:  # the circle from the end of the lead
+                r = ev / b_lim.turn_rate_max_rad_s
+                turn = circle_clearance(ex - sign * r * bs, ey + sign * r * bc, r, b_hz)
+            else:
+                n = brake_steps(b_lim, dt_s)
+                xs, ys, _, hs = constant_rollout(ex, ey, ev, np.arctan2(bs, bc), np.broadcast_to(TURNS[j], (len(ex), 2)), b_lim, dt_s, n)
+                spiral = point_clearance(xs, ys, b_hz).min(axis=1) - b_lim.speed_max_m_s * dt_s / 2
+                r = b_lim.speed_min_m_s / b_lim.turn_rate_max_rad_s  # after n steps v = v_min
+                circle = circle_clearance(xs[:, -1] - sign * r * np.sin(hs[:, -1]), ys[:, -1] + sign * r * np.cos(hs[:, -1]), r, b_hz)
+                turn = np.minimum(spiral, circle)
+            out[rows, :, j] = np.minimum(lead, turn).reshape(len(rows), n_leads)
+    return out.reshape(m, n_leads * N_TURNS)
+
+
+def choose_backup(clearance: np.ndarray, margin_m: np.ndarray) -> np.ndarray:
+    """Which backup to remember, (M,): among those clear of the margin the shortest lead, at constant speed
+    before braking, then the clearest; when none is clear, the clearest of all."""
+    n_cand = clearance.shape[1]
+    lead_i, turn_j = np.divmod(np.arange(n_cand), N_TURNS)
+    rank = lead_i * 2 + (TURNS[turn_j, 1] != 0)  # lower is preferred
+    clear = clearance >= margin_m[:, None]
+    key = np.where(clear, rank * 1e7 - np.minimum(clearance, 1e6), np.inf)
+    return np.where(clear.any(axis=1), np.argmin(key, axis=1), np.argmax(clearance, axis=1))
+
+
+def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
+    """The command a backup flies now, (M, 2): straight ([0, u]) during its lead, then its turn."""
+    turn = TURNS[backup % N_TURNS]
+    return np.where((lead_left > 0)[:, None], np.stack([np.zeros(len(turn)), turn[:, 1]], axis=1), turn)
+
+
+# --------------------------------------------------------------------------------- decision
+
+
+def decide(state: np.ndarray, proposed: np.ndarray, memory: Memory, hz: Hazards, lim: Limits, dt_s: float, steps: int,
+           margin_m: np.ndarray | float, cfg: ShieldConfig, pending: np.ndarray | None = None) -> Decision:
+    """One decision of the monitor for M vehicles.
+
+    ``state`` (M, 4): the estimate x, y, v, phi now; ``proposed`` (M, 2) the policy's action, to be held for
+    ``steps`` world steps of ``dt_s``; ``pending`` (M, L, 2) the commands already sent that the vehicle will
+    fly first (the link's latency; None or L = 0 in the batched world); ``margin_m`` scalar or (M,) the
+    clearance to keep (:attr:`ShieldConfig.margin_m`, plus :func:`estimate_margin_m` in a companion).
+    """
+    m = len(state)
+    margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
+    x, y, v, phi = (np.asarray(state[:, i], dtype=np.float64) for i in range(4))
+    if pending is not None and pending.shape[1]:
+        x, y, v, phi = step_actions(x, y, v, phi, pending, lim, dt_s)
+    proposed = np.clip(np.asarray(proposed, dtype=np.float64), -1.0, 1.0)
+    leads = lead_steps(cfg, dt_s, steps)
+    xs, ys, vs, ps = constant_rollout(x, y, v, phi, proposed, lim, dt_s, steps)
+    path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2  # (a)
+    ex, ey, ev, ep = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
+    # (b) The braking backups (a 150-step spiral each) only where no constant-speed one clears the release margin.
+    ends = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=np.zeros(m, bool))
+    need_brake = (ends.max(axis=1) < margin + cfg.release_margin_m) & (path >= margin) & cfg.braking_backups
+    if need_brake.any():
+        ends = np.maximum(ends, backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=need_brake))
+    best_end = choose_backup(ends, margin)
+    clearance = np.minimum(path, ends.max(axis=1))
+    passes = clearance >= margin
+    passes_release = clearance >= margin + cfg.release_margin_m
+
+    engaged, protected = memory.engaged, memory.protected
+    backup, lead_left = memory.backup.copy(), memory.lead_left.copy()
+    count = np.where(engaged & passes_release, memory.passes + 1, 0)
+    # An unprotected vehicle has no guarantee to keep: any passing action is better than its backup.
+    release = engaged & ((count >= cfg.release_decisions) | (passes & ~protected))
+    fly_proposed = (~engaged & passes) | release
+    engage = ~engaged & ~passes
+    # A vehicle with no known backup (its first decision failed) takes the clearest one from where it is.
+    lost = ~fly_proposed & ~protected
+    protected = protected.copy()
+    if lost.any():
+        lx, ly, lv, lp = x[lost], y[lost], v[lost], phi[lost]
+        sub_hz, sub_lim = hz.select(lost), lim.select(lost)
+        here = backup_clearance(lx, ly, lv, lp, sub_hz, sub_lim, dt_s, leads, brake=np.full(len(lx), cfg.braking_backups))
+        pick = choose_backup(here, margin[lost])
+        backup[lost] = pick
+        lead_left[lost] = leads[pick // N_TURNS]
+        protected[lost] = here[np.arange(len(here)), pick] >= margin[lost]
+    now_engaged = ~fly_proposed
+    action = np.where(now_engaged[:, None], backup_action(backup, lead_left), proposed)
+    lead_left = np.where(now_engaged, np.maximum(lead_left - steps, 0), leads[best_end // N_TURNS])
+    new_memory = Memory(
+        engaged=now_engaged,
+        protected=np.where(fly_proposed, True, protected),
+        backup=np.where(fly_proposed, best_end, backup),
+        lead_left=lead_left,
+        passes=np.where(now_engaged, count, 0),
+    )
+    return Decision(
+        action=action,
+        memory=new_memory,
+        engaged=now_engaged,
+        engaged_now=engage,
+        released_now=release,
+        unprotected=now_engaged & ~new_memory.protected,
+        clearance_m=clearance,
+    )
+
+
+def estimate_margin_m(cfg: ShieldConfig, position_sigma_major_m: float, speed_max_m_s: float, realtime: bool) -> float:
+    """A companion's margin: the base, sigma_k times the estimate's largest position standard deviation
+    (sqrt of the largest eigenvalue of the Kalman filter's position covariance), and off lockstep v_max
+    times the timing slack (a command lost or late on the link)."""
+    margin = cfg.margin_m + cfg.sigma_k * max(0.0, position_sigma_major_m)
+    if realtime:
+        margin += speed_max_m_s * cfg.timing_slack_s
+    return margin

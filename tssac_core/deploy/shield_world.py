@@ -1,0 +1,133 @@
+"""The runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) driven over a batched :class:`World`.
+
+Each vehicle is decided for at its pilot's decisions (every ``action_repeat`` world steps, every step for
+the guidance controller), with the world's exact state: no estimate error, no latency. Between decisions
+the action the monitor chose is held, as the pilots hold theirs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tssac_core.deploy.shield import (
+    Decision,
+    Hazards,
+    Limits,
+    Memory,
+    ShieldConfig,
+    decide,
+)
+from tssac_core.sim.world import N_ROLES, World
+
+
+@dataclass
+class MonitorCounts:
+    """Per world and vehicle, (N, 3)."""
+
+    interventions: np.ndarray
+    """Times the backup took over."""
+    backup_steps: np.ndarray
+    """World steps flown under the backup."""
+    flown_steps: np.ndarray
+    """World steps flown at all."""
+    unprotected_steps: np.ndarray
+    """Steps flown with no passing action and no clear backup (no guarantee)."""
+    switches: np.ndarray
+    """Hand-overs either way."""
+
+
+class WorldMonitor:
+    """Holds the monitor's memory for every vehicle of a World and filters the team's actions."""
+
+    def __init__(self, world: World, repeats: list[int], cfg: ShieldConfig) -> None:
+        if len(repeats) != N_ROLES:
+            raise ValueError(f"one decision interval per role, got {repeats}")
+        self.cfg = cfg
+        self.repeats = np.asarray(repeats, dtype=np.int64)
+        n = world.n
+        c = world.c
+        self.limits = Limits(
+            speed_min_m_s=np.tile(c.speed_min_m_s, n),
+            speed_max_m_s=np.tile(c.speed_max_m_s, n),
+            turn_rate_max_rad_s=np.tile(c.turn_rate_max_rad_s, n),
+            accel_max_m_s2=np.tile(c.accel_max_m_s2, n),
+        )
+        self.memory = Memory.initial(n * N_ROLES)
+        self._flying = np.zeros((n, N_ROLES, 2))
+        self._layout_version = -1
+        self._hazards: Hazards | None = None
+        zeros = np.zeros((n, N_ROLES), dtype=np.int64)
+        self.counts = MonitorCounts(zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy())
+        self._engaged = np.zeros((n, N_ROLES), dtype=bool)
+        self._unprotected = np.zeros((n, N_ROLES), dtype=bool)
+
+    @property
+    def engaged(self) -> np.ndarray:
+        """(N, 3): the backup flies."""
+        return self._engaged
+
+    def hazards(self, world: World) -> Hazards:
+        """The layout per vehicle (each world's radars repeated for its three UAVs), rebuilt on a new layout."""
+        if self._hazards is None or self._layout_version != world.layout_version:
+            centres = np.repeat(world.radar_m, N_ROLES, axis=0)
+            radii = np.repeat(world.radar_r_m, N_ROLES, axis=0)
+            self._hazards = Hazards(centres, radii, world.c.area_m)
+            self._layout_version = world.layout_version
+        return self._hazards
+
+    def actions(self, world: World, proposed: np.ndarray) -> np.ndarray:
+        """The actions (N, 3, 2) to step the world with, given the pilots' ``proposed`` ones."""
+        moving = world.active & world.running[:, None]
+        for repeat in np.unique(self.repeats):
+            due = moving & (world.steps[:, None] % repeat == 0) & (self.repeats[None, :] == repeat)
+            if due.any():
+                self._decide(world, proposed, due, int(repeat))
+        self.counts.flown_steps += moving
+        self.counts.backup_steps += moving & self._engaged
+        self.counts.unprotected_steps += moving & self._unprotected
+        return np.where(moving[..., None], self._flying, proposed)
+
+    def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
+        flat = np.flatnonzero(due.reshape(-1))
+        state = np.stack([world.x_m, world.y_m, world.v_m_s, world.phi_rad], axis=-1).reshape(-1, 4)[flat]
+        d = decide(state, proposed.reshape(-1, 2)[flat], self.memory.select(flat), self.hazards(world).select(flat),
+                   self.limits.select(flat), world.c.dt_s, steps, self.cfg.margin_m, self.cfg)
+        self.memory = self.memory.merged(flat, d.memory)
+        w, j = np.unravel_index(flat, due.shape)
+        self._flying[w, j] = d.action
+        self._engaged[w, j] = d.engaged
+        self._unprotected[w, j] = d.unprotected
+        self.counts.interventions[w, j] += d.engaged_now
+        self.counts.switches[w, j] += d.engaged_now.astype(np.int64) + d.released_now
+        return d
+
+
+class VehicleMonitor:
+    """The monitor for one vehicle (a companion computer): the same :func:`decide`, M = 1, with the margin
+    and the pending commands the caller measures (Kalman covariance, link latency)."""
+
+    def __init__(self, world: World, role_index: int, cfg: ShieldConfig) -> None:
+        if world.n != 1:
+            raise ValueError(f"a vehicle monitor watches one world, got {world.n}")
+        c = world.c
+        self.cfg = cfg
+        self.dt_s = c.dt_s
+        self.hazards = Hazards(world.radar_m.copy(), world.radar_r_m.copy(), c.area_m)
+        j = role_index
+        self.limits = Limits(c.speed_min_m_s[j:j + 1], c.speed_max_m_s[j:j + 1], c.turn_rate_max_rad_s[j:j + 1], c.accel_max_m_s2[j:j + 1])
+        self.memory = Memory.initial(1)
+
+    def reset(self) -> None:
+        self.memory = Memory.initial(1)
+
+    def decide(self, x_m: float, y_m: float, v_m_s: float, phi_rad: float, proposed: np.ndarray, steps: int,
+               margin_m: float, pending: np.ndarray | None = None) -> Decision:
+        """One decision: the action to fly for the next ``steps`` steps and whether the backup flies."""
+        state = np.array([[x_m, y_m, v_m_s, phi_rad]])
+        queue = None if pending is None else np.asarray(pending, dtype=np.float64).reshape(1, -1, 2)
+        d = decide(state, np.asarray(proposed, dtype=np.float64).reshape(1, 2), self.memory, self.hazards, self.limits,
+                   self.dt_s, steps, margin_m, self.cfg, queue)
+        self.memory = d.memory
+        return d
