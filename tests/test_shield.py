@@ -9,6 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from mavlink_bridge.companion_shield import CompanionShield
+from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.deploy.shield import (
     Hazards,
     Limits,
@@ -18,11 +20,12 @@ from tssac_core.deploy.shield import (
     circle_clearance,
     constant_rollout,
     decide,
+    estimate_margin_m,
 )
 from tssac_core.deploy.shield_world import VehicleMonitor, WorldMonitor
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode, observe
-from tssac_core.sim.scenario import load, sample_layout
+from tssac_core.sim.scenario import Role, load, sample_layout
 from tssac_core.sim.world import World
 
 
@@ -218,3 +221,41 @@ def test_head_on_at_a_radar_turns_in_time():
     # The remembered backups all start where the vehicle is: their clearance from there is the margin or more.
     clear = backup_clearance(state[:, 0], state[:, 1], state[:, 2], state[:, 3], hz, lim, 0.1, np.array([0]))
     assert clear.max() >= cfg.margin_m
+
+
+def test_companion_monitor_margin_and_pending(random_path):
+    """The companion's monitor: the same decisions as the batched world's under lockstep with an exact estimate;
+    off lockstep it flies the round trip's commands first and widens the margin by 3 sigma and the slack."""
+    s = load(random_path)
+    lay = sample_layout(s, np.random.default_rng(35))
+    world = World(s, 1)
+    world.reset([0], [lay])
+    cfg = ShieldConfig()
+    lockstep = CompanionShield(world, Role.DECOY, s, cfg, lockstep=True)
+    reference = VehicleMonitor(world, 0, cfg)
+    state = (world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0])
+    for k in range(30):
+        proposed = np.array([1.0 if k % 7 < 3 else -0.5, 0.3])
+        action, _ = lockstep.action(True, 10, proposed, state, 0.0)
+        lockstep.sent(action)
+        d = reference.decide(*state, proposed, 10, cfg.margin_m)
+        np.testing.assert_array_equal(action, d.action[0])
+        xs, ys, vs, ps = constant_rollout(*(np.array([q]) for q in state), action[None], reference.limits, s.dt_s, 10)
+        state = (xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1])
+    assert lockstep.pending_ticks() == 0
+    slow = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0))
+    realtime = CompanionShield(world, Role.DECOY, slow, cfg, lockstep=False)
+    assert realtime.pending_ticks() == 4  # 2 x 0.2 s of 0.1 s ticks
+    assert estimate_margin_m(cfg, 5.0, 300.0, realtime=True) == pytest.approx(100.0 + 15.0 + 150.0)
+    assert estimate_margin_m(cfg, 5.0, 300.0, realtime=False) == pytest.approx(115.0)
+
+
+def test_filter_major_axis_sigma():
+    f = VehicleStateFilter(FilterNoise.from_sensor(15.0, 1.5, max_accel_m_s2=10.0, max_turn_rate_rad_s=math.radians(5.0)))
+    rng = np.random.default_rng(36)
+    for k in range(50):
+        t = 0.1 * k
+        f.update(t, (250.0 * t + rng.normal(0, 15.0), rng.normal(0, 15.0)), (250.0 + rng.normal(0, 1.5), rng.normal(0, 1.5)))
+    major, drms = f.position_sigma_major_m, f.position_sigma_m
+    assert drms / math.sqrt(2) <= major <= drms  # the largest of two variances: between half and all of the trace
+    assert 0.5 < major < 15.0  # the filter knows the position better than one fix
