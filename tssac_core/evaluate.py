@@ -30,8 +30,8 @@ from typing import Any, Sequence
 from tqdm import tqdm
 
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.sim.missions import fly_missions
 from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot
 

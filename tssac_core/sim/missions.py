@@ -13,15 +13,20 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.deploy.shield_world import MonitorCounts, WorldMonitor
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
-from tssac_core.deploy.shield import ShieldConfig
-from tssac_core.deploy.shield_world import MonitorCounts, WorldMonitor
 from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
-from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, worst_missions
+from tssac_core.stats import (
+    bootstrap_mean_interval,
+    cvar,
+    wilson_interval,
+    worst_missions,
+)
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions a summary lists."""
