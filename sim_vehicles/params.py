@@ -10,6 +10,12 @@ name               type    access     meaning
 ``SIM_ACCEL_MAX``  REAL32  read-only  acceleration limit (|afx| is clipped to it), m/s/s
 ``SIM_SPD_MIN``    REAL32  read-only  minimum speed, m/s
 ``SIM_SPD_MAX``    REAL32  read-only  maximum speed, m/s
+``WP_LOITER_RAD``  REAL32  settable   loiter / RTL circle radius, m (1 .. 32767; ArduPlane's name and
+                                      default 60: the radius flown is at least v / (0.8 turn limit))
+``FS_GCS_ENABL``   INT32   settable   datalink failsafe: 0 off (ArduPlane's default), 1 on
+``FS_LONG_TIMEOUT`` REAL32 settable   datalink failsafe after this many wall seconds without a client
+                                      message (1 .. 300, default 5, as ArduPlane)
+``FS_LONG_ACTN``   INT32   settable   0: RTL from MANUAL, continue in auto modes; 1: RTL from any mode
 =================  ======  =========  ==========================================================
 
 The limits are read-only because they are the world's physics (the scenario's ``vehicles:``
@@ -86,5 +92,9 @@ def vehicle_params(sysid: int, setpoint_timeout_s: float, dt_s: float, turn_max_
             Param("SIM_ACCEL_MAX", accel_max_m_s2, real),
             Param("SIM_SPD_MIN", speed_min_m_s, real),
             Param("SIM_SPD_MAX", speed_max_m_s, real),
+            Param("WP_LOITER_RAD", 60.0, real, writable=True, low=1.0, high=32767.0),
+            Param("FS_GCS_ENABL", 0.0, int32, writable=True, low=0.0, high=1.0),
+            Param("FS_LONG_TIMEOUT", 5.0, real, writable=True, low=1.0, high=300.0),
+            Param("FS_LONG_ACTN", 0.0, int32, writable=True, low=0.0, high=1.0),
         ]
     )

@@ -132,18 +132,32 @@ def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Ms
     return mav.vfr_hud_encode(truth.speed_m_s, truth.speed_m_s, heading_deg, throttle, alt_m, 0.0)
 
 
-SENSORS_PRESENT = mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_AHRS | mavlink2.MAV_SYS_STATUS_GEOFENCE | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
-"""GPS (the noise model), AHRS (true attitude), geofence (the area bounds), pre-arm check (GPS fix)."""
+INERTIAL_SENSORS = mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mavlink2.MAV_SYS_STATUS_SENSOR_3D_MAG
+"""The AHRS's gyro, accelerometer and magnetometer: the attitude is the true one, so they are always healthy."""
+SENSORS_PRESENT = (
+    INERTIAL_SENSORS
+    | mavlink2.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink2.MAV_SYS_STATUS_AHRS
+    | mavlink2.MAV_SYS_STATUS_GEOFENCE
+    | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
+)
+"""Gyro, accelerometer, magnetometer and AHRS (true attitude), GPS (the noise model), geofence (the area bounds),
+pre-arm check (GPS fix). MAVSDK's ``health_all_ok`` needs the first three and the GPS healthy, and a HOME_POSITION."""
 
 
 def sys_status(mav: MAV, gps_ok: bool, fence_ok: bool, errors_comm: int) -> Msg:
     """SYS_STATUS with the sensors we simulate; battery unknown (UINT16_MAX / -1)."""
-    health = mavlink2.MAV_SYS_STATUS_AHRS
+    health = mavlink2.MAV_SYS_STATUS_AHRS | INERTIAL_SENSORS
     if gps_ok:
         health |= mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
     if fence_ok:
         health |= mavlink2.MAV_SYS_STATUS_GEOFENCE
     return mav.sys_status_encode(SENSORS_PRESENT, SENSORS_PRESENT, health, 0, UINT16_MAX, -1, -1, 0, min(UINT16_MAX, errors_comm), 0, 0, 0, 0)
+
+
+def extended_sys_state(mav: MAV) -> Msg:
+    """EXTENDED_SYS_STATE: not a VTOL, always in the air (the vehicles fly from the first step)."""
+    return mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_IN_AIR)
 
 
 def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
@@ -168,8 +182,11 @@ CAPABILITIES = (
     | mavlink2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_INT
 )
-"""AUTOPILOT_VERSION.capabilities (MAVLink has no capability bit for signing)."""
+"""AUTOPILOT_VERSION.capabilities (MAVLink has no capability bit for signing). MISSION_INT: ground stations
+(MAVSDK) refuse to start a mission, fence or rally download without it; the vehicle has none of them
+(MISSION_COUNT 0) and refuses uploads. No FTP bit: MAVLink FTP is answered with NAKs."""
 SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | mavlink2.FIRMWARE_VERSION_TYPE_DEV
 """0.1.0-dev in ArduPilot's (major, minor, patch, type) byte layout."""
 

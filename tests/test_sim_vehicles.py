@@ -298,12 +298,15 @@ def test_parameter_protocol() -> None:
         c.mav.param_request_list_send(2, 1)
         values = {}
         deadline = time.monotonic() + 3.0
-        while time.monotonic() < deadline and len(values) < 7:
+        names = {"SYSID_THISMAV", "GUID_TIMEOUT", "SIM_DT", "SIM_TURN_MAX", "SIM_ACCEL_MAX", "SIM_SPD_MIN", "SIM_SPD_MAX"}
+        names |= {"WP_LOITER_RAD", "FS_GCS_ENABL", "FS_LONG_TIMEOUT", "FS_LONG_ACTN"}
+        while time.monotonic() < deadline and len(values) < len(names):
             m = c.wait_type("PARAM_VALUE", 0.5)
             if m is not None:
                 values[m.param_id] = m
-        assert set(values) == {"SYSID_THISMAV", "GUID_TIMEOUT", "SIM_DT", "SIM_TURN_MAX", "SIM_ACCEL_MAX", "SIM_SPD_MIN", "SIM_SPD_MAX"}
-        assert {m.param_count for m in values.values()} == {7} and sorted(m.param_index for m in values.values()) == list(range(7))
+        assert set(values) == names
+        n = len(names)
+        assert {m.param_count for m in values.values()} == {n} and sorted(m.param_index for m in values.values()) == list(range(n))
         assert values["SYSID_THISMAV"].param_value == 2 and values["SYSID_THISMAV"].param_type == M.MAV_PARAM_TYPE_INT32
         assert values["SIM_TURN_MAX"].param_value == pytest.approx(5.0)
         c.mav.param_request_read_send(2, 1, b"SIM_DT", -1)

@@ -1,0 +1,274 @@
+"""What a vehicle does with the messages its clients send: commands, modes, setpoints, parameters,
+missions, FTP and time sync.
+
+:class:`CommandHandler` reads messages and answers them; it changes the vehicle's state only through
+:class:`sim_vehicles.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
+Every COMMAND_LONG / COMMAND_INT is answered with a COMMAND_ACK to its sender. Messages addressed to
+another system or component are ignored (counted), except those that arrive from a ``--out`` ground
+station for a sibling vehicle: they are routed to it, as an autopilot routes between its links.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sim_vehicles import modes, setpoints
+from sim_vehicles.mavlink_io import Address
+from sim_vehicles.modes import FlightMode
+
+if TYPE_CHECKING:
+    from sim_vehicles.vehicle import Vehicle
+
+_log = logging.getLogger(__name__)
+M = mavlink2
+Msg = mavlink2.MAVLink_message
+CommandResult = tuple[int, list[Msg]]
+
+FTP_OP_ACK, FTP_OP_NAK = 128, 129
+FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS = 1, 2
+FTP_ERR_UNKNOWN_COMMAND = 7
+FTP_PAYLOAD_LEN = 251
+"""MAVLink FTP: every request is NAKed with UnknownCommand (session ends are ACKed), so clients that try FTP
+first (MAVProxy's parameter download) fall back to the parameter protocol at once instead of timing out."""
+MISSION_UPLOAD_REFUSAL = "Mission upload refused: no AUTO mode here"
+
+
+class CommandHandler:
+    """The incoming side of one vehicle (see the module docstring)."""
+
+    def __init__(self, vehicle: Vehicle) -> None:
+        self.v = vehicle
+        self.sibling: Callable[[int], Vehicle | None] | None = None
+        """sysid -> the vehicle of that sysid in the same SITL (set by the runner, for --out routing)."""
+        self._handlers: dict[str, Callable[[Msg, Address], None]] = {
+            "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
+            "SET_MODE": self._on_set_mode,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
+            "PARAM_REQUEST_LIST": self._on_param_request_list,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_set,
+            "MISSION_REQUEST_LIST": self._on_mission_request_list,
+            "MISSION_REQUEST_INT": self._on_mission_request_item,
+            "MISSION_REQUEST": self._on_mission_request_item,
+            "MISSION_COUNT": self._on_mission_upload,
+            "MISSION_CLEAR_ALL": self._on_mission_clear_all,
+            "FILE_TRANSFER_PROTOCOL": self._on_ftp,
+            "TIMESYNC": self._on_timesync,
+        }
+        self._commands: dict[int, Callable[[tuple[float, ...]], CommandResult]] = {
+            M.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
+            M.MAV_CMD_DO_SET_MODE: self._cmd_do_set_mode,
+            M.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_return_to_launch,
+            M.MAV_CMD_NAV_LOITER_UNLIM: self._cmd_loiter_unlimited,
+            M.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_capabilities,
+            M.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
+            M.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
+        }
+
+    # ------------------------------------------------------------------------------ dispatch
+
+    def handle(self, msg: Msg, addr: Address) -> None:
+        v = self.v
+        target_system = getattr(msg, "target_system", 0)
+        target_component = getattr(msg, "target_component", 0)
+        if target_system not in (0, v.sysid) and addr in v.outputs and self.sibling is not None:
+            other = self.sibling(target_system)
+            if other is not None:  # a --out ground station shares one port for every vehicle
+                other.commands.handle(msg, addr)
+                return
+        if target_system not in (0, v.sysid) or target_component not in (0, v.compid):
+            v.counters.not_for_us += 1
+            return
+        handler = self._handlers.get(msg.get_type())
+        if handler is None:
+            return
+        try:
+            handler(msg, addr)
+        except Exception:
+            # A bug reached by some field value must not take the vehicle (and the world) down.
+            v.counters.handler_errors += 1
+            _log.exception("%s: handling %s failed", v.role, msg.get_type())
+
+    def _reply_ack(self, command: int, result: int, msg: Msg, addr: Address) -> None:
+        self.v.send(self.v.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), addr)
+
+    # ------------------------------------------------------------------------------ commands
+
+    def _on_command_long(self, msg: Msg, addr: Address) -> None:
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
+        self._command(msg.command, params, msg, addr)
+
+    def _on_command_int(self, msg: Msg, addr: Address) -> None:
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
+        self._command(msg.command, params, msg, addr)
+
+    def _command(self, command: int, params: tuple[float, ...], msg: Msg, addr: Address) -> None:
+        """Run a command and answer it with a COMMAND_ACK (always), then any messages it produced."""
+        v = self.v
+        v.counters.commands += 1
+        handler = self._commands.get(command)
+        if handler is None:
+            v.counters.commands_unsupported += 1
+            result, replies = M.MAV_RESULT_UNSUPPORTED, []
+        else:
+            result, replies = handler(params)
+        self._reply_ack(command, result, msg, addr)
+        for reply in replies:
+            v.send(reply, addr)
+
+    def _cmd_arm_disarm(self, p: tuple[float, ...]) -> CommandResult:
+        if abs(p[0] - 1.0) < 1e-3:
+            self.v.set_armed(True)
+            return M.MAV_RESULT_ACCEPTED, []
+        if abs(p[0]) < 1e-3:
+            self.v.set_armed(False)
+            return M.MAV_RESULT_ACCEPTED, []
+        return M.MAV_RESULT_DENIED, []
+
+    def _cmd_do_set_mode(self, p: tuple[float, ...]) -> CommandResult:
+        if not (math.isfinite(p[0]) and math.isfinite(p[1])):
+            return M.MAV_RESULT_DENIED, []
+        return self._set_mode(int(round(p[0])), int(round(p[1]))), []
+
+    def _cmd_return_to_launch(self, p: tuple[float, ...]) -> CommandResult:
+        self.v.set_mode(FlightMode.RTL, "MAV_CMD_NAV_RETURN_TO_LAUNCH")
+        return M.MAV_RESULT_ACCEPTED, []
+
+    def _cmd_loiter_unlimited(self, p: tuple[float, ...]) -> CommandResult:
+        self.v.set_mode(FlightMode.LOITER, "MAV_CMD_NAV_LOITER_UNLIM")
+        return M.MAV_RESULT_ACCEPTED, []
+
+    def _on_set_mode(self, msg: Msg, addr: Address) -> None:
+        # ArduPilot answers the SET_MODE message with a COMMAND_ACK whose command is the message id (11).
+        self._reply_ack(M.MAVLINK_MSG_ID_SET_MODE, self._set_mode(msg.base_mode, msg.custom_mode), msg, addr)
+
+    def _set_mode(self, base_mode: int, custom_mode: int) -> int:
+        v = self.v
+        if not base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            v.statustext(M.MAV_SEVERITY_WARNING, "Set mode: base_mode needs CUSTOM_MODE_ENABLED")
+            return M.MAV_RESULT_DENIED
+        try:
+            mode = FlightMode(custom_mode)
+        except ValueError:
+            v.statustext(M.MAV_SEVERITY_WARNING, modes.refusal(custom_mode))
+            return M.MAV_RESULT_DENIED
+        v.set_mode(mode)
+        return M.MAV_RESULT_ACCEPTED
+
+    def _cmd_request_message(self, p: tuple[float, ...]) -> CommandResult:
+        msgs = self.v.requested(int(p[0]) if math.isfinite(p[0]) else -1)
+        if msgs is None:
+            return M.MAV_RESULT_UNSUPPORTED, []
+        return (M.MAV_RESULT_ACCEPTED, msgs) if msgs else (M.MAV_RESULT_FAILED, [])
+
+    def _cmd_request_capabilities(self, p: tuple[float, ...]) -> CommandResult:
+        return M.MAV_RESULT_ACCEPTED, self.v.build(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+
+    def _cmd_set_message_interval(self, p: tuple[float, ...]) -> CommandResult:
+        ok = self.v.set_stream_interval(int(p[0]) if math.isfinite(p[0]) else -1, p[1])
+        return ok, []
+
+    def _cmd_get_message_interval(self, p: tuple[float, ...]) -> CommandResult:
+        mid = int(p[0]) if math.isfinite(p[0]) else -1
+        interval_us = self.v.stream_interval_us(mid)
+        if interval_us is None:
+            return M.MAV_RESULT_UNSUPPORTED, []
+        return M.MAV_RESULT_ACCEPTED, [self.v.mav.message_interval_encode(mid, interval_us)]
+
+    # ----------------------------------------------------------------------------- setpoints
+
+    def _on_position_target(self, msg: Msg, addr: Address) -> None:
+        self._setpoint(setpoints.parse_position_target(msg), msg.time_boot_ms)
+
+    def _on_attitude_target(self, msg: Msg, addr: Address) -> None:
+        self._setpoint(setpoints.parse_attitude_target(msg), msg.time_boot_ms)
+
+    def _on_global_target(self, msg: Msg, addr: Address) -> None:
+        self.v.reject(setpoints.GLOBAL_REFUSAL)
+
+    def _setpoint(self, parsed: setpoints.Demand | setpoints.Refusal, stamp_ms: int) -> None:
+        if isinstance(parsed, setpoints.Refusal):
+            self.v.reject(parsed)
+        else:
+            self.v.fly_demand(parsed, stamp_ms)
+
+    # ---------------------------------------------------------------------------- parameters
+
+    def _param_value(self, index: int) -> Msg:
+        params = self.v.params
+        p = params.at(index)
+        assert p is not None
+        return self.v.mav.param_value_encode(p.name.encode("ascii"), p.value, p.param_type, len(params), index)
+
+    def _on_param_request_list(self, msg: Msg, addr: Address) -> None:
+        for i in range(len(self.v.params)):
+            self.v.send(self._param_value(i), addr)
+
+    def _on_param_request_read(self, msg: Msg, addr: Address) -> None:
+        params = self.v.params
+        index = msg.param_index if msg.param_index >= 0 else params.index(msg.param_id)
+        if index is None or params.at(index) is None:
+            _log.info("%s: PARAM_REQUEST_READ of unknown parameter %r / %d", self.v.role, msg.param_id, msg.param_index)
+            return
+        self.v.send(self._param_value(index), addr)
+
+    def _on_param_set(self, msg: Msg, addr: Address) -> None:
+        v = self.v
+        index = v.params.index(msg.param_id)
+        if index is None:
+            _log.info("%s: PARAM_SET of unknown parameter %r", v.role, msg.param_id)
+            return
+        refused = v.params.set(msg.param_id, float(msg.param_value))
+        if refused is not None:
+            v.statustext(M.MAV_SEVERITY_WARNING, f"Param refused: {refused}", addr)
+            v.send(self._param_value(index), addr)
+            return
+        v.send(self._param_value(index))  # a changed value goes to every client
+
+    # ---------------------------------------------------------------- missions, FTP, time
+
+    def _on_mission_request_list(self, msg: Msg, addr: Address) -> None:
+        # No mission, fence or rally items: ground stations ask on connect and wait for an answer.
+        self.v.send(self.v.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type), addr)
+
+    def _on_mission_request_item(self, msg: Msg, addr: Address) -> None:
+        # There are no items to send.
+        ack = self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type)
+        self.v.send(ack, addr)
+
+    def _on_mission_upload(self, msg: Msg, addr: Address) -> None:
+        self.v.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
+        self.v.send(self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_UNSUPPORTED, msg.mission_type), addr)
+
+    def _on_mission_clear_all(self, msg: Msg, addr: Address) -> None:
+        self.v.send(self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_ACCEPTED, msg.mission_type), addr)
+
+    def _on_ftp(self, msg: Msg, addr: Address) -> None:
+        payload = bytes(msg.payload)
+        if len(payload) < 12:
+            return
+        seq, session, opcode = struct.unpack_from("<HBB", payload)
+        if opcode in (FTP_OP_ACK, FTP_OP_NAK):
+            return  # a reply, not a request
+        if opcode in (FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS):
+            reply, data = FTP_OP_ACK, b""
+        else:
+            reply, data = FTP_OP_NAK, bytes((FTP_ERR_UNKNOWN_COMMAND,))
+        # seq + 1, session, opcode, size, req_opcode, burst_complete, padding, offset, data
+        header = struct.pack("<HBBBBBBI", (seq + 1) % 65536, session, reply, len(data), opcode, 0, 0, 0)
+        body = (header + data).ljust(FTP_PAYLOAD_LEN, b"\0")
+        self.v.send(self.v.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)), addr)
+
+    def _on_timesync(self, msg: Msg, addr: Address) -> None:
+        if msg.tc1 == 0:  # a request; answer with our (simulated) clock in ns
+            self.v.send(self.v.mav.timesync_encode(int(round(self.v.clock.sim_s * 1e9)), msg.ts1), addr)
