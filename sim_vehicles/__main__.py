@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import socket
 import sys
 import threading
 from collections.abc import Sequence
@@ -67,6 +68,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here")
     p.add_argument("--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here")
     p.add_argument("--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)")
+    p.add_argument(
+        "--out",
+        action="append",
+        default=[],
+        metavar="udpout:HOST:PORT",
+        help="also stream every vehicle to this ground-station address and take its commands (repeatable)",
+    )
     p.add_argument("--linger-s", type=float, default=1.0, metavar="S", help="simulated seconds to keep serving after the mission ends (default 1.0)")
     p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="warning", help="log level on stderr (default warning)")
     return p
@@ -91,7 +99,21 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         tlog_dir=args.tlog_dir,
         setpoint_timeout_s=args.setpoint_timeout_s,
         linger_s=args.linger_s,
+        outputs=tuple(parse_output(o) for o in args.out),
     )
+
+
+def parse_output(text: str) -> tuple[str, int]:
+    """``udpout:HOST:PORT`` (or ``HOST:PORT``) -> (IPv4 address, port); raises ValueError with one line."""
+    spec = text[len("udpout:") :] if text.startswith("udpout:") else text
+    host, sep, port_text = spec.rpartition(":")
+    if not sep or not host or not port_text.isdigit():
+        raise ValueError(f"--out {text!r}: expected udpout:HOST:PORT")
+    try:
+        address = socket.gethostbyname(host)
+    except OSError:
+        raise ValueError(f"--out {text!r}: cannot resolve host {host!r}") from None
+    return address, int(port_text)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -66,6 +66,9 @@ class SitlConfig:
     """Failsafe after this long without a setpoint while armed in GUIDED (sim s; wall s at a lockstep barrier)."""
     linger_s: float = 1.0
     """After the mission ends, keep serving this many simulated seconds (paced in real time under lockstep)."""
+    outputs: tuple[tuple[str, int], ...] = ()
+    """Ground-station addresses (``--out udpout:HOST:PORT``): every vehicle streams to each from the start and
+    takes commands from it, as ArduPilot SITL's ``--out`` (a listening ground station sees all three)."""
 
     def __post_init__(self) -> None:
         if not (self.speedup > 0.0 and self.speedup < float("inf")):
@@ -78,6 +81,10 @@ class SitlConfig:
             raise ValueError(f"base port must be 0 or in 1..{65535 - 2 * PORT_STRIDE}, got {self.base_port}")
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError(f"signing key must be 32 bytes, got {len(self.signing_key)}")
+
+        for host, port in self.outputs:
+            if not (1 <= port <= 65535):
+                raise ValueError(f"--out port must be in 1..65535, got {port} for {host}")
 
     def port_for(self, index: int) -> int:
         """The UDP port vehicle ``index`` binds (0 = OS-assigned)."""

@@ -295,11 +295,17 @@ class Vehicle:
 
     # ------------------------------------------------------------------------------- datalink
 
+    def add_outputs(self, outputs: tuple[Address, ...]) -> None:
+        """Ground stations (``--out``) that get every stream from the start and whose commands are taken."""
+        self.outputs = tuple(outputs)
+        for out in self.outputs:
+            self.endpoint.peers.setdefault(out, self.clock.wall_s)
+
     def poll_socket(self) -> None:
         """Move waiting datagrams from the socket into the incoming link channel."""
-        self.endpoint.expire_peers(self.clock.wall_s)
         for out in self.outputs:  # --out ground stations are never forgotten
-            self.endpoint.peers.setdefault(out, self.clock.wall_s)
+            self.endpoint.peers[out] = self.clock.wall_s
+        self.endpoint.expire_peers(self.clock.wall_s)
         for data, addr in self.endpoint.receive():
             self.rx.push(self.clock.link_s, (data, addr))
 

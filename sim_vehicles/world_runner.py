@@ -196,6 +196,8 @@ class WorldRunner:
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)
             vehicle = Vehicle(setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event)
+            vehicle.add_outputs(config.outputs)
+            vehicle.commands.sibling = self._vehicle_by_sysid
             vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
             self.vehicles.append(vehicle)
         if config.truth_log is not None:
@@ -215,6 +217,9 @@ class WorldRunner:
                 self._truth = TruthLog(Path(config.truth_log), header)
             except OSError as exc:
                 raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
+
+    def _vehicle_by_sysid(self, sysid: int) -> Vehicle | None:
+        return next((v for v in self.vehicles if v.sysid == sysid), None)
 
     @property
     def endpoints(self) -> list[Endpoint]:
