@@ -31,11 +31,15 @@ Msg = mavlink2.MAVLink_message
 CommandResult = tuple[int, list[Msg]]
 
 FTP_OP_ACK, FTP_OP_NAK = 128, 129
-FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS = 1, 2
+FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS, FTP_OPEN_FILE_RO = 1, 2, 4
 FTP_ERR_UNKNOWN_COMMAND = 7
 FTP_PAYLOAD_LEN = 251
+FTP_PARAM_FILE = b"@PARAM/param.pck"
 """MAVLink FTP: every request is NAKed with UnknownCommand (session ends are ACKed), so clients that try FTP
-first (MAVProxy's parameter download) fall back to the parameter protocol at once instead of timing out."""
+first fall back to the parameter protocol instead of timing out. A request for ArduPilot's parameter file is
+also answered through the parameter protocol at once (every PARAM_VALUE, as for PARAM_REQUEST_LIST):
+MAVProxy, which asks for it on connect and otherwise retries only on its next 1 Hz check, lists the
+parameters as soon as they arrive."""
 MISSION_UPLOAD_REFUSAL = "Mission upload refused: no AUTO mode here"
 
 
@@ -268,6 +272,9 @@ class CommandHandler:
         header = struct.pack("<HBBBBBBI", (seq + 1) % 65536, session, reply, len(data), opcode, 0, 0, 0)
         body = (header + data).ljust(FTP_PAYLOAD_LEN, b"\0")
         self.v.send(self.v.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)), addr)
+        size = payload[4]
+        if opcode == FTP_OPEN_FILE_RO and payload[12 : 12 + size].startswith(FTP_PARAM_FILE):
+            self._on_param_request_list(msg, addr)
 
     def _on_timesync(self, msg: Msg, addr: Address) -> None:
         if msg.tc1 == 0:  # a request; answer with our (simulated) clock in ns

@@ -1,0 +1,193 @@
+"""Real ground stations against the SITL vehicles over 127.0.0.1: MAVProxy 1.8 (its console driven through
+a pipe) and MAVSDK 4 (the native binding, no server), as a drone developer would use them. Every wait is
+bounded; each test stops its clients and the SITL by itself.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import select
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sitl_helpers import REPO, STRIKE, sitl
+from sim_vehicles.modes import FlightMode
+
+mavsdk = pytest.importorskip("mavsdk", minversion="4.0")
+from mavsdk import ComponentType, Configuration, Mavsdk  # noqa: E402
+from mavsdk.plugins.action import Action  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionRaw  # noqa: E402
+from mavsdk.plugins.offboard import Offboard, VelocityBodyYawspeed  # noqa: E402
+from mavsdk.plugins.telemetry import FlightMode as SdkFlightMode  # noqa: E402
+from mavsdk.plugins.telemetry import Telemetry  # noqa: E402
+
+MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
+
+
+def _wait(predicate, timeout_s: float, interval_s: float = 0.02) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(interval_s)
+    return bool(predicate())
+
+
+class _Console:
+    """MAVProxy's console through a pipe: lines with their arrival time since start."""
+
+    def __init__(self, port: int, cwd: Path) -> None:
+        self.t0 = time.monotonic()
+        self.proc = subprocess.Popen(
+            [sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{port}", "--no-state"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            cwd=cwd,
+        )
+        assert self.proc.stdout is not None
+        fcntl.fcntl(self.proc.stdout, fcntl.F_SETFL, os.O_NONBLOCK)
+        self.lines: list[tuple[float, str]] = []
+        self._partial = ""
+
+    def wait_line(self, part: str, timeout_s: float) -> float | None:
+        """Seconds since start at which a line containing ``part`` arrived (None: not within the timeout)."""
+        assert self.proc.stdout is not None
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for t, line in self.lines:
+                if part in line:
+                    return t
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            if select.select([self.proc.stdout], [], [], min(remaining, 0.05))[0]:
+                chunk = self.proc.stdout.read() or ""
+                now = time.monotonic() - self.t0
+                text = self._partial + chunk
+                *done, self._partial = text.split("\n")
+                self.lines += [(now, line) for line in done]
+
+    def send(self, command: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()  # EOF ends MAVProxy's input loop
+        try:
+            self.proc.wait(3.0)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(3.0)
+
+
+@pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is a dev dependency (pip install -e .[dev])")
+@pytest.mark.timeout(60)
+def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path: Path) -> None:
+    with sitl(speedup=1.0) as s:
+        console = _Console(s.ports[0], tmp_path)
+        try:
+            detected = console.wait_line("Detected vehicle 1:1", 15.0)
+            listed = console.wait_line("Received 11 parameters", 10.0)
+            assert detected is not None and listed is not None, console.lines[-10:]
+            print(f"MAVProxy: vehicle detected {detected:.2f} s after start, parameters listed {listed - detected:.2f} s later")
+            assert listed - detected < 2.0  # MAVLink FTP is NAKed: no 12 s wait for its time-out
+            console.send("mode")
+            assert console.wait_line("Available modes", 5.0) is not None
+            console.send("arm throttle")
+            console.send("mode LOITER")
+            assert console.wait_line("Mode LOITER", 10.0) is not None, console.lines[-10:]
+            assert s.vehicle(0).armed and s.vehicle(0).mode is FlightMode.LOITER
+        finally:
+            console.close()
+        s.stop()
+
+
+def _mavsdk_connect(url: str) -> Mavsdk:
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    sdk.add_any_connection(url)
+    return sdk
+
+
+@pytest.mark.timeout(60)
+def test_mavsdk_health_mission_offboard_yaw_rate_and_stop() -> None:
+    with sitl(speedup=10.0) as s:
+        sdk = _mavsdk_connect(f"udpout://127.0.0.1:{s.ports[2]}")
+        try:
+            t0 = time.monotonic()
+            system = sdk.first_autopilot(5.0)
+            assert system is not None
+            telemetry = Telemetry(system)
+            assert _wait(telemetry.health_all_ok, 5.0), telemetry.health()
+            healthy_s = time.monotonic() - t0
+            assert telemetry.in_air() and telemetry.flight_mode() == SdkFlightMode.MANUAL
+            assert MissionRaw(system).download_mission() == []
+            Action(system).arm()
+            offboard = Offboard(system)
+            offboard.set_velocity_body(VelocityBodyYawspeed(250.0, 0.0, 0.0, 5.0))
+            samples: list[tuple[float, float]] = []
+            handle = telemetry.subscribe_attitude_euler(lambda e, *_: samples.append((e.timestamp_us * 1e-6, e.yaw_deg)))
+            offboard.start()
+            started = time.monotonic()
+            # MAVSDK streams setpoints for 3 s after start(): it counts only PX4's or ArduCopter's
+            # offboard modes as offboard, not ArduPlane's GUIDED (see docs/mavlink.md).
+            _wait(lambda: time.monotonic() - started > 2.5, 3.0)
+            telemetry.unsubscribe_attitude_euler(handle)
+            offboard.stop()
+            assert _wait(lambda: telemetry.flight_mode() == SdkFlightMode.HOLD, 3.0)
+            assert s.vehicle(2).mode is FlightMode.LOITER
+        finally:
+            sdk.destroy()
+        s.stop()
+    # The turn rate over the samples where the vehicle turned at a steady rate (simulated time).
+    turning = [(t, y) for (t, y), (t2, y2) in zip(samples, samples[1:]) if t2 > t and abs(((y2 - y + 180) % 360) - 180) > 1e-3]
+    assert len(turning) > 50
+    ta, tb = turning[5][0], turning[-5][0]
+    unwrapped = sum(((b[1] - a[1] + 180) % 360) - 180 for a, b in zip(turning[5:-4], turning[6:-4]))
+    rate = unwrapped / (tb - ta)
+    print(f"MAVSDK: health_all_ok after {healthy_s:.2f} s; offboard yaw rate {rate:.3f} deg/s over {tb - ta:.1f} s simulated")
+    assert healthy_s < 5.0 and rate == pytest.approx(5.0, rel=0.05)
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.timeout(60)
+def test_listening_mavsdk_sees_all_three_vehicles_through_out() -> None:
+    port = _free_udp_port()
+    sdk = _mavsdk_connect(f"udpin://127.0.0.1:{port}")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sim_vehicles", "--scenario", str(STRIKE), "--base-port", "0", "--speedup", "5", "--out", f"udpout:127.0.0.1:{port}"],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
+    try:
+        t0 = time.monotonic()
+        assert _wait(lambda: len(sdk.get_systems()) == 3, 15.0), "the listening ground station did not see three vehicles"
+        seen_s = time.monotonic() - t0
+        systems = {sys_.get_system_id(): sys_ for sys_ in sdk.get_systems()}
+        assert set(systems) == {1, 2, 3}
+        Action(systems[2]).arm()  # a command through the --out link reaches the detect UAV
+        telemetry = Telemetry(systems[2])
+        assert _wait(telemetry.armed, 3.0) and not Telemetry(systems[1]).armed()
+        print(f"MAVSDK udpin: three vehicles seen {seen_s:.2f} s after the SITL started")
+    finally:
+        sdk.destroy()
+        proc.terminate()
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0 and "end reason=stopped" in out, err
