@@ -14,6 +14,10 @@ body + yawspeed)       and yaw ignored; +16 / 32 allowed)           a fixed wing
 THRUST_YAW_RATE        SET_ATTITUDE_TARGET, mask 128 (attitude      ``body_yaw_rate`` (rad/s, clockwise +),
 (MAVSDK attitude       ignored; +1 / 2 roll / pitch rates           ``thrust`` in [0, 1]: 0.5 holds speed,
 rate)                  ignored)                                     1 / 0 full acceleration / deceleration
+VELOCITY_NED           SET_POSITION_TARGET_LOCAL_NED, frame 1      ``vx`` north, ``vy`` east (m/s): the
+(MAVSDK velocity       (LOCAL_NED), mask 2503 (positions,           course to fly and its speed; ``vz``
+NED + yaw)             accelerations, yaw rate ignored; +1024)      must be 0; ``yaw`` is not used (a fixed
+                                                                    wing's heading follows its course)
 =====================  ==========================================  =====================================
 
 Anything else is refused with a reason short enough for one STATUSTEXT (under 50 characters) that
@@ -42,6 +46,9 @@ ACCEL_MASK_OPTIONAL = M.POSITION_TARGET_TYPEMASK_AY_IGNORE | M.POSITION_TARGET_T
 VELOCITY_MASK = _POS | _ACC | _YAW
 """1479: vx (vy, vz) and yaw_rate used (MAVSDK's velocity-body form)."""
 VELOCITY_MASK_OPTIONAL = M.POSITION_TARGET_TYPEMASK_VY_IGNORE | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+NED_VELOCITY_MASK = _POS | _ACC | M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+"""2503: vx north, vy east (vz) used, yaw rate ignored (MAVSDK's velocity-NED form; its yaw is not used)."""
+NED_VELOCITY_MASK_OPTIONAL = _YAW
 ATTITUDE_MASK = M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 """128: body rates and thrust used, the quaternion ignored."""
 ATTITUDE_MASK_OPTIONAL = M.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE | M.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
@@ -54,6 +61,7 @@ class SetpointForm(enum.Enum):
     ACCEL_YAW_RATE = "accel"
     VELOCITY_YAW_RATE = "velocity"
     THRUST_YAW_RATE = "thrust"
+    VELOCITY_NED = "velocity_ned"
 
 
 @dataclass(frozen=True)
@@ -62,13 +70,15 @@ class Demand:
 
     form: SetpointForm
     yaw_rate_rad_s: float
-    """NED, clockwise-positive."""
+    """NED, clockwise-positive (0 for VELOCITY_NED, which steers to ``course_rad`` instead)."""
     accel_m_s2: float | None = None
     """Forward acceleration (ACCEL_YAW_RATE)."""
     speed_m_s: float | None = None
     """Forward speed (VELOCITY_YAW_RATE)."""
     thrust: float | None = None
     """[0, 1] (THRUST_YAW_RATE)."""
+    course_rad: float | None = None
+    """Course to fly, counter-clockwise from east like the world's heading (VELOCITY_NED)."""
 
 
 @dataclass(frozen=True)
@@ -87,12 +97,14 @@ def _finite(*values: float) -> bool:
 
 
 def parse_position_target(msg: mavlink2.MAVLink_message) -> Demand | Refusal:
-    """SET_POSITION_TARGET_LOCAL_NED -> a demand of the ACCEL or VELOCITY form, or a refusal."""
-    if msg.coordinate_frame not in BODY_FRAMES:
-        return Refusal("frame", f"SP frame {msg.coordinate_frame}: use 8 or 12 (body)")
+    """SET_POSITION_TARGET_LOCAL_NED -> a demand of the ACCEL, VELOCITY or VELOCITY_NED form, or a refusal."""
     mask = msg.type_mask
     if mask & M.POSITION_TARGET_TYPEMASK_FORCE_SET:
         return Refusal("force", "SP force bit 512: clear it")
+    if msg.coordinate_frame == M.MAV_FRAME_LOCAL_NED:
+        return _parse_ned_velocity(msg)
+    if msg.coordinate_frame not in BODY_FRAMES:
+        return Refusal("frame", f"SP frame {msg.coordinate_frame}: use 8/12 (body), 1 (NED)")
     if mask & ~ACCEL_MASK_OPTIONAL == ACCEL_MASK:
         if not _finite(msg.afx, msg.yaw_rate):
             return Refusal("finite", "SP afx/yaw_rate not finite: send numbers")
@@ -106,6 +118,19 @@ def parse_position_target(msg: mavlink2.MAVLink_message) -> Demand | Refusal:
             return Refusal("side", "SP vy/vz: fixed wing, send vy = vz = 0")
         return Demand(SetpointForm.VELOCITY_YAW_RATE, float(msg.yaw_rate), speed_m_s=float(msg.vx))
     return Refusal("mask", f"SP mask {mask}: use 1479 (vx) or 1087 (afx)")
+
+
+def _parse_ned_velocity(msg: mavlink2.MAVLink_message) -> Demand | Refusal:
+    if msg.type_mask & ~NED_VELOCITY_MASK_OPTIONAL != NED_VELOCITY_MASK:
+        return Refusal("ned_mask", f"SP frame 1 mask {msg.type_mask}: use 2503 (vN, vE)")
+    if not _finite(msg.vx, msg.vy, msg.vz):
+        return Refusal("finite", "SP vx/vy/vz not finite: send numbers")
+    if abs(msg.vz) > SIDE_SPEED_TOLERANCE_M_S:
+        return Refusal("side", "SP vz: level flight here, send vz = 0")
+    speed = math.hypot(msg.vx, msg.vy)
+    if speed <= SIDE_SPEED_TOLERANCE_M_S:
+        return Refusal("no_course", "SP vN = vE = 0: a fixed wing needs a course")
+    return Demand(SetpointForm.VELOCITY_NED, 0.0, speed_m_s=speed, course_rad=math.atan2(msg.vx, msg.vy))
 
 
 def parse_attitude_target(msg: mavlink2.MAVLink_message) -> Demand | Refusal:
@@ -140,7 +165,7 @@ def accel_command(
     if demand.form is SetpointForm.ACCEL_YAW_RATE:
         assert demand.accel_m_s2 is not None
         a = demand.accel_m_s2
-    elif demand.form is SetpointForm.VELOCITY_YAW_RATE:
+    elif demand.form in (SetpointForm.VELOCITY_YAW_RATE, SetpointForm.VELOCITY_NED):
         assert demand.speed_m_s is not None
         target = min(speed_max_m_s, max(speed_min_m_s, demand.speed_m_s))
         a = (target - speed_m_s) / dt_s

@@ -379,7 +379,10 @@ class Vehicle:
         su, t = self.setup, self.truth
         sp = self.setpoint
         if self.in_loop and sp is not None:
-            omega = min(su.turn_rate_max_rad_s, max(-su.turn_rate_max_rad_s, -sp.demand.yaw_rate_rad_s))
+            if sp.demand.course_rad is not None:
+                omega = navigation.course_turn_rate(t.phi_rad, sp.demand.course_rad, su.turn_rate_max_rad_s)
+            else:
+                omega = min(su.turn_rate_max_rad_s, max(-su.turn_rate_max_rad_s, -sp.demand.yaw_rate_rad_s))
             accel = accel_command(sp.demand, t.speed_m_s, su.accel_max_m_s2, su.speed_min_m_s, su.speed_max_m_s, su.dt_s)
             return omega, accel
         orbit = self.orbit

@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from sitl_helpers import GUIDED, MANUAL, Client, mavlink2, sitl
+from sitl_helpers import GUIDED, MANUAL, Client, mavlink2, scenario, sitl, wait_until
+from sim_vehicles.config import LockstepStart
 from sim_vehicles import navigation, setpoints
 from sim_vehicles.modes import FlightMode
 
@@ -44,7 +45,11 @@ def test_setpoint_parsing_forms_and_refusals_fit_a_statustext() -> None:
     fast = setpoints.Demand(setpoints.SetpointForm.VELOCITY_YAW_RATE, 0.0, speed_m_s=1000.0)
     assert setpoints.accel_command(fast, 300.0, 10.0, 150.0, 300.0, 0.1) == 0.0  # clipped to SIM_SPD_MAX
     assert setpoints.accel_command(att, 250.0, 10.0, 150.0, 300.0, 0.1) == pytest.approx(5.0)
+    ned = setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 1, 2503, 0, 0, 0, 0, 260.0, 0, 0, 0, 0, 1.0, 0))
+    assert ned.form is setpoints.SetpointForm.VELOCITY_NED and ned.speed_m_s == pytest.approx(260.0)
+    assert ned.course_rad == pytest.approx(0.0)  # due east (the world's heading convention); yaw 1.0 not used
     refused = [
+        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 6, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
         setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 1, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
         setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 8, 3576, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
         setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 8, 1479, 0, 0, 0, 250, 3.0, 0, 0, 0, 0, 0, 0)),
@@ -54,9 +59,9 @@ def test_setpoint_parsing_forms_and_refusals_fit_a_statustext() -> None:
         setpoints.parse_attitude_target(mav.set_attitude_target_encode(0, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 1.5)),
     ]
     kinds = [r.kind for r in refused if isinstance(r, setpoints.Refusal)]
-    assert kinds == ["frame", "mask", "side", "finite", "att_mask", "att_rates", "thrust"]
+    assert kinds == ["frame", "ned_mask", "mask", "side", "finite", "att_mask", "att_rates", "thrust"]
     assert all(len(r.text) < 50 for r in refused if isinstance(r, setpoints.Refusal))
-    assert "1479" in refused[1].text and "1087" in refused[1].text  # what to send instead
+    assert "1479" in refused[2].text and "1087" in refused[2].text  # what to send instead
 
 
 def test_orbit_guidance_converges_onto_the_circle() -> None:
@@ -75,25 +80,54 @@ def test_orbit_guidance_converges_onto_the_circle() -> None:
     assert max(abs(d - radius) for d in dist[-1000:]) < 0.01 * radius
 
 
-@pytest.mark.timeout(30)
-def test_velocity_body_and_attitude_target_fly_speed_and_turn_rate() -> None:
-    with sitl(speedup=20.0) as s, Client(s.ports[0]) as c:
+def _fly_until(c: Client, send, done, timeout_s: float = 15.0) -> bool:
+    """Send a setpoint every 20 ms of wall time until ``done()`` (bounded): robust to a slow machine."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        send()
+        c.collect(0.02)
+        if done():
+            return True
+    return False
+
+
+def _guided(c: Client, sysid: int) -> None:
+    """Armed in GUIDED, with a setpoint timeout long enough for a loaded machine's scheduling gaps."""
+    c.mav.param_set_send(sysid, 1, b"GUID_TIMEOUT", 10.0, M.MAV_PARAM_TYPE_REAL32)
+    assert c.wait_type("PARAM_VALUE", 2.0, param_id="GUID_TIMEOUT") is not None
+    c.arm()
+    assert c.set_mode(GUIDED).result == M.MAV_RESULT_ACCEPTED
+
+
+@pytest.mark.timeout(60)
+def test_velocity_body_attitude_target_and_velocity_ned_fly_speed_and_turn() -> None:
+    with sitl(speedup=10.0) as s, Client(s.ports[0]) as c:
         v = s.vehicle(0)
         c.connect()
-        c.arm()
-        assert c.set_mode(GUIDED).result == M.MAV_RESULT_ACCEPTED
-        deadline = time.monotonic() + 0.6  # 12 s simulated: 250 -> 280 m/s takes 3 s at 10 m/s^2
-        while time.monotonic() < deadline:
-            c.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_BODY_NED, VELOCITY_MASK, 0, 0, 0, 280.0, 0, 0, 0, 0, 0, 0, math.radians(3.0))
-            c.collect(0.02)
-        assert v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6)
-        assert -v.truth.turn_rate_rad_s == pytest.approx(math.radians(3.0), rel=1e-6)  # clockwise in NED
+        _guided(c, 1)
+        # Velocity body (MAVSDK's form): 250 -> 280 m/s at 10 m/s^2 (3 s), yaw rate 3 deg/s clockwise.
+        rate = math.radians(3.0)
+        assert _fly_until(
+            c,
+            lambda: c.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_BODY_NED, VELOCITY_MASK, 0, 0, 0, 280.0, 0, 0, 0, 0, 0, 0, rate),
+            lambda: v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6) and -v.truth.turn_rate_rad_s == pytest.approx(rate, rel=1e-6),
+        )
         # SET_ATTITUDE_TARGET: body yaw rate and thrust (0.5 holds the speed).
-        deadline = time.monotonic() + 0.3
-        while time.monotonic() < deadline:
-            c.mav.set_attitude_target_send(0, 1, 1, 128, [1, 0, 0, 0], 0, 0, -0.04, 0.5)
-            c.collect(0.02)
-        assert v.truth.turn_rate_rad_s == pytest.approx(0.04, rel=1e-6) and v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6)
+        assert _fly_until(
+            c,
+            lambda: c.mav.set_attitude_target_send(0, 1, 1, 128, [1, 0, 0, 0], 0, 0, -0.04, 0.5),
+            lambda: v.truth.turn_rate_rad_s == pytest.approx(0.04, rel=1e-6),
+        )
+        assert v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6)
+        # Velocity NED: a course 0.5 rad left of the current heading at 260 m/s, reached and held.
+        course = v.truth.phi_rad + 0.5
+        vn, ve = 260.0 * math.sin(course), 260.0 * math.cos(course)
+        assert _fly_until(
+            c,
+            lambda: c.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, 2503, 0, 0, 0, vn, ve, 0, 0, 0, 0, 0, 0),
+            lambda: abs(navigation.wrap_pi(v.truth.phi_rad - course)) < 1e-3 and v.truth.speed_m_s == pytest.approx(260.0, abs=1e-3),
+            timeout_s=30.0,
+        )
         assert v.counters.setpoints_rejected == 0 and not v.failsafe
         s.stop()
 
@@ -103,49 +137,65 @@ def test_refusals_say_what_to_send_each_second_not_once() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[1]) as c:
         c.connect()
         msgs = []
-        deadline = time.monotonic() + 1.5  # a 20 Hz stream of a mask nobody flies
+        deadline = time.monotonic() + 3.0  # a 20 Hz stream of a mask nobody flies
         while time.monotonic() < deadline:
             c.mav.set_position_target_local_ned_send(0, 2, 1, M.MAV_FRAME_BODY_NED, 3576, 0, 0, 0, 100, 0, 0, 0, 0, 0, 0, 0)
             msgs += c.collect(0.05)
         texts = _texts(msgs, "SP mask 3576")
-        assert len(texts) == 2, texts  # at t = 0 and t = 1 s: rate-limited, and repeated
+        assert 2 <= len(texts) <= 4, texts  # about one a second of ~60 refused: repeated, and rate-limited
         assert all(len(t) < 50 and "1479" in t for t in texts)
-        assert s.vehicle(1).counters.refusal_texts_suppressed >= 15
+        assert s.vehicle(1).counters.refusal_texts_suppressed >= 20
         s.stop()
 
 
-@pytest.mark.timeout(40)
+@pytest.mark.timeout(240)
 def test_loiter_circles_where_it_is_and_rtl_flies_home_then_circles() -> None:
-    with sitl(speedup=50.0) as s, Client(s.ports[0]) as loiter, Client(s.ports[2]) as rtl:
-        for c in (loiter, rtl):
+    # The world holds at t = 0 until the decoy is armed in GUIDED, so nobody flies off while the clients
+    # connect (at 50x a slow start would be minutes of flight); every UAV then circles: no geofence end.
+    config = {"speedup": 50.0, "hold_start": True, "lockstep_start": LockstepStart.ANY}
+    with sitl(scenario(episode_steps=8000), **config) as s, Client(s.ports[0]) as loiter, Client(s.ports[1]) as circle_c, Client(s.ports[2]) as rtl:
+        for c in (loiter, circle_c, rtl):
             c.connect()
             c.arm()
+        assert circle_c.set_mode(int(FlightMode.CIRCLE)).result == M.MAV_RESULT_ACCEPTED
         home = (s.vehicle(2).setup.home_east_m, s.vehicle(2).setup.home_north_m)
+        assert loiter.set_mode(GUIDED).result == M.MAV_RESULT_ACCEPTED  # the world starts
         # LOITER at once: the circle passes through where the decoy is.
         assert loiter.set_mode(LOITER).result == M.MAV_RESULT_ACCEPTED
         orbit = s.vehicle(0).orbit
         assert orbit is not None and orbit.center is not None
-        # The strike UAV flies out straight (MANUAL) for > 60 s, then RTL.
-        out = rtl.wait(lambda m: m.get_type() == "LOCAL_POSITION_NED" and math.hypot(m.y - home[0], m.x - home[1]) > 15_000.0, 5.0, 0.2)
-        assert out is not None
+        # The strike UAV flies out straight (MANUAL) for about 50 s, then RTL.
+        strike, clock = s.vehicle(2), s.runner.clock
+
+        def from_home() -> float:
+            return math.hypot(strike.truth.east_m - home[0], strike.truth.north_m - home[1])
+
+        assert wait_until(lambda: from_home() > 12_000.0, 60.0), (from_home(), clock.sim_s)
         assert rtl.set_mode(RTL).result == M.MAV_RESULT_ACCEPTED
-        radius = s.vehicle(2).orbit.radius_m
-        track: list[tuple[float, float, float, float]] = []  # (t, distance from home, heading) of the strike UAV
+        radius, rtl_from_s, out_m = strike.orbit.radius_m, clock.sim_s, from_home()
+        # Back in (out_m - radius) / v, settled within about two minutes more (the turn-limited approach).
+        until_s = rtl_from_s + (out_m - radius) / strike.truth.speed_m_s + 180.0
+        track: list[tuple[float, float, float]] = []  # (t, distance from home, heading) of the strike UAV
         circle: list[float] = []  # the decoy's distance from its loiter centre
-        deadline = time.monotonic() + 4.0  # 200 s simulated
-        while time.monotonic() < deadline:
-            rtl.collect(0.02)
-            loiter.collect(0.005)
-            t2, t0 = s.vehicle(2).truth, s.vehicle(0).truth
-            track.append((s.runner.clock.sim_s, math.hypot(t2.east_m - home[0], t2.north_m - home[1]), t2.phi_rad, 0.0))
+        turns: list[float] = []  # the detect UAV's turn rate in CIRCLE
+        deadline = time.monotonic() + 150.0  # ~4 s of wall time on an idle machine; bounded for a starved one
+        while time.monotonic() < deadline and clock.sim_s < until_s:
+            time.sleep(0.02)  # sample the true states; the clients need not read their telemetry
+            t0, t1 = s.vehicle(0).truth, s.vehicle(1).truth
+            turns.append(t1.turn_rate_rad_s)
+            track.append((clock.sim_s, from_home(), strike.truth.phi_rad))
             circle.append(math.hypot(t0.east_m - orbit.center[0], t0.north_m - orbit.center[1]))
         s.stop()
+    print(f"RTL from {out_m / 1000:.1f} km: {track[-1][0] - rtl_from_s:.0f} s simulated")
+    assert clock.sim_s >= until_s, "the world did not fly long enough"
+    # CIRCLE: a constant clockwise turn at v / R.
+    assert turns and all(w == pytest.approx(-s.vehicle(1).truth.speed_m_s / s.vehicle(1).orbit.radius_m) for w in turns)
     # LOITER: on its circle all the time.
     assert max(abs(d - orbit.radius_m) for d in circle) < 0.02 * orbit.radius_m
-    # RTL: from > 15 km out back over home, then on the circle round it for the last 60 s.
-    assert track[0][1] > 15_000.0
-    last = [(d, phi) for t, d, phi, _ in track if t >= track[-1][0] - 60.0]
-    assert track[-1][0] - track[0][0] > 150.0 and max(abs(d - radius) for d, _ in last) < 0.02 * radius
+    # RTL: from > 12 km out back over home, then on the circle round it for the last 60 s.
+    assert out_m > 12_000.0
+    last = [(d, phi) for t, d, phi in track if t >= until_s - 60.0]
+    assert max(abs(d - radius) for d, _ in last) < 0.02 * radius
     turned = sum(abs(navigation.wrap_pi(b[1] - a[1])) for a, b in zip(last, last[1:]))
     assert turned > math.pi  # circling, not passing through
 
@@ -162,7 +212,7 @@ def test_datalink_failsafe_switches_to_rtl_after_fs_long_timeout() -> None:
         silent_from = time.monotonic()  # neither client sends anything now
         text = on.wait(lambda m: m.get_type() == "STATUSTEXT" and m.text.startswith("Failsafe: no link"), 3.0)
         lost_after = time.monotonic() - silent_from
-        assert text is not None and "RTL" in text.text and 1.0 <= lost_after < 1.6
+        assert text is not None and "RTL" in text.text and 0.9 <= lost_after < 3.0
         assert on.wait(lambda m: m.get_type() == "HEARTBEAT" and m.custom_mode == RTL, 1.0) is not None
         assert off.wait(lambda m: m.get_type() == "HEARTBEAT", 1.0).custom_mode == MANUAL  # FS_GCS_ENABL 0 (default)
         on.heartbeat()
@@ -191,7 +241,10 @@ def test_ground_station_chores_ftp_nak_missions_health_home_modes() -> None:
         assert c.wait_type("MISSION_ACK", 1.0, type=M.MAV_MISSION_UNSUPPORTED) is not None
         assert any("upload refused" in t for t in _texts(c.log, "Mission"))
         # Health, in-air state and home, streamed.
-        msgs = c.collect(0.5)  # 5 s simulated
+        msgs, start_ms = [], c.latest_ms
+        deadline = time.monotonic() + 30.0
+        while c.latest_ms < start_ms + 3500 and time.monotonic() < deadline:  # 3.5 s simulated
+            msgs += c.collect(0.05)
         status = next(m for m in msgs if m.get_type() == "SYS_STATUS")
         inertial = M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL | M.MAV_SYS_STATUS_SENSOR_3D_MAG
         for field in ("onboard_control_sensors_present", "onboard_control_sensors_enabled", "onboard_control_sensors_health"):

@@ -42,10 +42,10 @@ def _wait(predicate, timeout_s: float, interval_s: float = 0.02) -> bool:
 class _Console:
     """MAVProxy's console through a pipe: lines with their arrival time since start."""
 
-    def __init__(self, port: int, cwd: Path) -> None:
+    def __init__(self, port: int, cwd: Path, master: str | None = None) -> None:
         self.t0 = time.monotonic()
         self.proc = subprocess.Popen(
-            [sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{port}", "--no-state"],
+            [sys.executable, str(MAVPROXY), f"--master={master or f'udpout:127.0.0.1:{port}'}", "--no-state"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
@@ -164,12 +164,16 @@ def _free_udp_port() -> int:
         return int(sock.getsockname()[1])
 
 
+@pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is a dev dependency (pip install -e .[dev])")
 @pytest.mark.timeout(60)
-def test_listening_mavsdk_sees_all_three_vehicles_through_out() -> None:
-    port = _free_udp_port()
-    sdk = _mavsdk_connect(f"udpin://127.0.0.1:{port}")
+def test_listening_mavsdk_and_mavproxy_see_all_three_vehicles_through_out(tmp_path: Path) -> None:
+    """Two ground stations that only listen, one --out each: both see sysids 1-3; commands go through."""
+    sdk_port, proxy_port = _free_udp_port(), _free_udp_port()
+    sdk = _mavsdk_connect(f"udpin://127.0.0.1:{sdk_port}")
+    console = _Console(proxy_port, tmp_path, master=f"udpin:127.0.0.1:{proxy_port}")
+    outs = ["--out", f"udpout:127.0.0.1:{sdk_port}", "--out", f"udpout:127.0.0.1:{proxy_port}"]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sim_vehicles", "--scenario", str(STRIKE), "--base-port", "0", "--speedup", "5", "--out", f"udpout:127.0.0.1:{port}"],
+        [sys.executable, "-m", "sim_vehicles", "--scenario", str(STRIKE), "--base-port", "0", "--speedup", "5", *outs],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -178,16 +182,18 @@ def test_listening_mavsdk_sees_all_three_vehicles_through_out() -> None:
     )
     try:
         t0 = time.monotonic()
-        assert _wait(lambda: len(sdk.get_systems()) == 3, 15.0), "the listening ground station did not see three vehicles"
+        assert _wait(lambda: len(sdk.get_systems()) == 3, 15.0), "the listening MAVSDK did not see three vehicles"
         seen_s = time.monotonic() - t0
-        systems = {sys_.get_system_id(): sys_ for sys_ in sdk.get_systems()}
+        systems = {system.get_system_id(): system for system in sdk.get_systems()}
         assert set(systems) == {1, 2, 3}
-        Action(systems[2]).arm()  # a command through the --out link reaches the detect UAV
-        telemetry = Telemetry(systems[2])
-        assert _wait(telemetry.armed, 3.0) and not Telemetry(systems[1]).armed()
-        print(f"MAVSDK udpin: three vehicles seen {seen_s:.2f} s after the SITL started")
+        Action(systems[2]).arm()  # a command through the --out link reaches the detect UAV only
+        assert _wait(Telemetry(systems[2]).armed, 3.0) and not Telemetry(systems[1]).armed()
+        for sysid in (1, 2, 3):
+            assert console.wait_line(f"Detected vehicle {sysid}:1", 10.0) is not None, console.lines[-10:]
+        print(f"--out: MAVSDK (udpin) saw three vehicles {seen_s:.2f} s after the SITL started; MAVProxy (udpin) too")
     finally:
         sdk.destroy()
+        console.close()
         proc.terminate()
         out, err = proc.communicate(timeout=10)
     assert proc.returncode == 0 and "end reason=stopped" in out, err
