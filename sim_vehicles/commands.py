@@ -14,16 +14,12 @@ import logging
 import math
 import struct
 from collections.abc import Callable
-from typing import TYPE_CHECKING
-
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import modes, setpoints
 from sim_vehicles.mavlink_io import Address
 from sim_vehicles.modes import FlightMode
-
-if TYPE_CHECKING:
-    from sim_vehicles.vehicle import Vehicle
+from sim_vehicles.vehicle import Vehicle
 
 _log = logging.getLogger(__name__)
 M = mavlink2
@@ -87,8 +83,8 @@ class CommandHandler:
         target_component = getattr(msg, "target_component", 0)
         if target_system not in (0, v.sysid) and addr in v.outputs and self.sibling is not None:
             other = self.sibling(target_system)
-            if other is not None:  # a --out ground station shares one port for every vehicle
-                other.commands.handle(msg, addr)
+            if other is not None and other.handler is not None:  # a --out ground station shares one port
+                other.handler.handle(msg, addr)
                 return
         if target_system not in (0, v.sysid) or target_component not in (0, v.compid):
             v.counters.not_for_us += 1

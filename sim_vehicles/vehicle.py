@@ -6,8 +6,9 @@ The vehicle owns its :class:`~sim_vehicles.mavlink_io.MavEndpoint` (socket, fram
 (:mod:`sim_vehicles.world_runner`) asks it for its action (:meth:`Vehicle.action`), steps the world,
 hands it the new true state (:meth:`Vehicle.observe`) and lets it publish (:meth:`Vehicle.publish`).
 
-What arrives from clients is handled by :class:`sim_vehicles.commands.CommandHandler` (commands,
-modes, setpoints, parameters, missions, FTP); it changes this state only through the methods here
+What arrives from clients is handled by the :class:`MessageHandler` the runner attaches,
+:class:`sim_vehicles.commands.CommandHandler` (commands, modes, setpoints, parameters, missions, FTP),
+which imports this module and not the other way round; it changes this state only through the methods here
 (:meth:`Vehicle.set_mode`, :meth:`Vehicle.set_armed`, :meth:`Vehicle.fly_demand`, ...).
 
 * Modes (:mod:`sim_vehicles.modes`, ArduPlane's numbers): MANUAL holds heading and speed; GUIDED
@@ -30,13 +31,12 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import BinaryIO
+from typing import BinaryIO, Protocol
 
 import numpy as np
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sim_vehicles import navigation, telemetry
-from sim_vehicles.commands import CommandHandler
 from sim_vehicles.events import EventKind, MissionEvent, MissionFlags
 from sim_vehicles.link import GpsFix, GpsReceiver, LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint
@@ -203,6 +203,12 @@ class RefusalLimiter:
 REFUSAL_INTERVAL_S = 1.0
 """A refused setpoint stream (20 Hz from MAVSDK) gets one STATUSTEXT per second."""
 
+class MessageHandler(Protocol):
+    """The incoming side of a vehicle: reads a client's message, answers it, changes the vehicle's state."""
+
+    def handle(self, msg: mavlink2.MAVLink_message, addr: Address) -> None: ...
+
+
 EventSink = Callable[[str, str, int], None]
 """(role, event name, value) -> None: arming, mode and failsafe changes for the truth log."""
 
@@ -260,7 +266,8 @@ class Vehicle:
         self.orbit: Orbit | None = None
         self.datalink = DatalinkWatch()
         self.refusals = RefusalLimiter(REFUSAL_INTERVAL_S)
-        self.commands = CommandHandler(self)
+        self.handler: MessageHandler | None = None
+        """What handles incoming messages (:class:`sim_vehicles.commands.CommandHandler`, attached by the runner)."""
 
     # ------------------------------------------------------------------------------ properties
 
@@ -321,7 +328,8 @@ class Vehicle:
             for msg in msgs:
                 if self._tlog is not None:
                     self._write_tlog(bytes(msg.get_msgbuf()))
-                self.commands.handle(msg, addr)
+                assert self.handler is not None, "no message handler attached"
+                self.handler.handle(msg, addr)
 
     def flush(self) -> None:
         """Send the frames the outgoing channel delivers now, packed into datagrams per destination.

@@ -54,6 +54,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from sim_vehicles.commands import CommandHandler
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.events import EventKind, MissionEnd, MissionFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
@@ -197,7 +198,9 @@ class WorldRunner:
                 self._tlogs.append(tlog)
             vehicle = Vehicle(setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event)
             vehicle.add_outputs(config.outputs)
-            vehicle.commands.sibling = self._vehicle_by_sysid
+            handler = CommandHandler(vehicle)
+            handler.sibling = self._vehicle_by_sysid
+            vehicle.handler = handler
             vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
             self.vehicles.append(vehicle)
         if config.truth_log is not None:

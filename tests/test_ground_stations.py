@@ -91,21 +91,23 @@ class _Console:
 
 
 @pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is a dev dependency (pip install -e .[dev])")
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(180)
 def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path: Path) -> None:
     with sitl(speedup=1.0) as s:
         console = _Console(s.ports[0], tmp_path)
         try:
-            detected = console.wait_line("Detected vehicle 1:1", 15.0)
-            listed = console.wait_line("Received 11 parameters", 10.0)
+            detected = console.wait_line("Detected vehicle 1:1", 60.0)
+            listed = console.wait_line("Received 11 parameters", 30.0)
             assert detected is not None and listed is not None, console.lines[-10:]
             print(f"MAVProxy: vehicle detected {detected:.2f} s after start, parameters listed {listed - detected:.2f} s later")
-            assert listed - detected < 2.0  # MAVLink FTP is NAKed: no 12 s wait for its time-out
+            # MAVLink FTP is NAKed and the parameter file answered by PARAM_VALUEs: about 1 s (MAVProxy's first
+            # 1 Hz check) instead of its 12 s FTP time-out; the bound leaves room for a loaded machine.
+            assert listed - detected < 5.0
             console.send("mode")
-            assert console.wait_line("Available modes", 5.0) is not None
+            assert console.wait_line("Available modes", 30.0) is not None
             console.send("arm throttle")
             console.send("mode LOITER")
-            assert console.wait_line("Mode LOITER", 10.0) is not None, console.lines[-10:]
+            assert console.wait_line("Mode LOITER", 30.0) is not None, console.lines[-10:]
             assert s.vehicle(0).armed and s.vehicle(0).mode is FlightMode.LOITER
         finally:
             console.close()
@@ -165,7 +167,7 @@ def _free_udp_port() -> int:
 
 
 @pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is a dev dependency (pip install -e .[dev])")
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(180)
 def test_listening_mavsdk_and_mavproxy_see_all_three_vehicles_through_out(tmp_path: Path) -> None:
     """Two ground stations that only listen, one --out each: both see sysids 1-3; commands go through."""
     sdk_port, proxy_port = _free_udp_port(), _free_udp_port()
@@ -182,14 +184,14 @@ def test_listening_mavsdk_and_mavproxy_see_all_three_vehicles_through_out(tmp_pa
     )
     try:
         t0 = time.monotonic()
-        assert _wait(lambda: len(sdk.get_systems()) == 3, 15.0), "the listening MAVSDK did not see three vehicles"
+        assert _wait(lambda: len(sdk.get_systems()) == 3, 60.0), "the listening MAVSDK did not see three vehicles"
         seen_s = time.monotonic() - t0
         systems = {system.get_system_id(): system for system in sdk.get_systems()}
         assert set(systems) == {1, 2, 3}
         Action(systems[2]).arm()  # a command through the --out link reaches the detect UAV only
         assert _wait(Telemetry(systems[2]).armed, 3.0) and not Telemetry(systems[1]).armed()
         for sysid in (1, 2, 3):
-            assert console.wait_line(f"Detected vehicle {sysid}:1", 10.0) is not None, console.lines[-10:]
+            assert console.wait_line(f"Detected vehicle {sysid}:1", 60.0) is not None, console.lines[-10:]
         print(f"--out: MAVSDK (udpin) saw three vehicles {seen_s:.2f} s after the SITL started; MAVProxy (udpin) too")
     finally:
         sdk.destroy()
