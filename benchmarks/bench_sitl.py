@@ -3,8 +3,8 @@
 Starts ``python -m sim_vehicles --lockstep`` as a subprocess (OS-assigned ports on 127.0.0.1), arms
 all three vehicles in GUIDED from one client process, then plays the lockstep protocol as fast as it
 can: per step, wait for every vehicle's SYSTEM_TIME tick, then send each one a
-SET_POSITION_TARGET_LOCAL_NED stamped with that tick's time_boot_ms. The client only peeks at frame
-headers (one MAVLink frame per datagram) and decodes just the ticks, so the figure is the SITL's.
+SET_POSITION_TARGET_LOCAL_NED stamped with that tick's time_boot_ms. The client only walks frame
+headers and decodes just the ticks, so the figure is the SITL's.
 
     python benchmarks/bench_sitl.py [--steps 3000] [--warmup 100] [--json benchmarks/results/sitl.json]
 
@@ -52,24 +52,30 @@ class MinimalLink:
         self.mav.seq = (self.mav.seq + 1) % 256
 
     def drain(self) -> list[mavlink2.MAVLink_message]:
-        """Read what is waiting; decode only SYSTEM_TIME, COMMAND_ACK and NAMED_VALUE_INT frames."""
+        """Read what is waiting; decode only SYSTEM_TIME, COMMAND_ACK and NAMED_VALUE_INT frames.
+
+        A datagram may hold several frames (the vehicles pack a step's telemetry into one): the frames are
+        walked by their headers (MAVLink 2: 10 header bytes, payload, 2 CRC bytes, 13 if signed).
+        """
         out = []
         while True:
             try:
                 data = self.sock.recv(65535)
             except BlockingIOError:
                 return out
-            if len(data) < 12 or data[0] != mavlink2.PROTOCOL_MARKER_V2:
-                continue
-            msg_id = data[7] | (data[8] << 8) | (data[9] << 16)
-            if msg_id == mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME:
-                msg = self.mav.decode(bytearray(data))
-                self.latest_ms = max(self.latest_ms, msg.time_boot_ms)
-            elif msg_id in (mavlink2.MAVLINK_MSG_ID_COMMAND_ACK, mavlink2.MAVLINK_MSG_ID_NAMED_VALUE_INT):
-                msg = self.mav.decode(bytearray(data))
-                if msg.get_type() == "NAMED_VALUE_INT" and msg.name == "MSN_END":
-                    self.ended = True
-                out.append(msg)
+            i = 0
+            while i + 12 <= len(data) and data[i] == mavlink2.PROTOCOL_MARKER_V2:
+                size = 12 + data[i + 1] + (13 if data[i + 2] & mavlink2.MAVLINK_IFLAG_SIGNED else 0)
+                frame, i = data[i : i + size], i + size
+                msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
+                if msg_id == mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME:
+                    msg = self.mav.decode(bytearray(frame))
+                    self.latest_ms = max(self.latest_ms, msg.time_boot_ms)
+                elif msg_id in (mavlink2.MAVLINK_MSG_ID_COMMAND_ACK, mavlink2.MAVLINK_MSG_ID_NAMED_VALUE_INT):
+                    msg = self.mav.decode(bytearray(frame))
+                    if msg.get_type() == "NAMED_VALUE_INT" and msg.name == "MSN_END":
+                        self.ended = True
+                    out.append(msg)
 
     def command(self, command: int, *params: float, timeout_s: float = 2.0) -> None:
         p = list(params) + [0.0] * (7 - len(params))
