@@ -64,8 +64,8 @@ def test_paper_grid():
     assert [j.name for j in jobs[:10]] == [f"{n}-seed0" for n in names] + ["tssac-seed1"]  # seed-major: a cut-short grid fills every row
     by_name = {j.name: j for j in jobs}
     tssac, ppo, pen = by_name["tssac-seed1"].config(), by_name["ppo-seed1"].config(), by_name["sac_pen50-seed2"].config()
-    assert tssac.sac == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
-    assert ppo.sac == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
+    assert tssac.learner == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
+    assert ppo.learner == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     # each ships its epoch by its own rule: within C where the learner is given C (docs/decisions.md)
     assert [selects_within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [True, True, False, False, True, True, False, False, False]
@@ -80,7 +80,7 @@ def test_paper_grid():
     assert strike.out == Path("results/runs/transfer-strike-sac_lag-seed0") and strike.roles == ("strike",)
     assert (cfg.algo, cfg.roles, cfg.teammates, cfg.stop_at_task_success, cfg.epochs, cfg.validation_episodes) == (
         "sac_lag", ("strike",), "models/tssac", 0.9, 25, 0)
-    assert cfg.sac == tssac.sac and (cfg.steps_per_epoch, cfg.action_repeat, cfg.start_steps) == (4000, 10, 0)  # the grid's settings
+    assert cfg.learner == tssac.learner and (cfg.steps_per_epoch, cfg.action_repeat, cfg.start_steps) == (4000, 10, 0)  # the grid's settings
 
 
 @pytest.mark.parametrize(
@@ -155,7 +155,7 @@ def test_smoke_grid_trains_every_job(smoke):
         assert log.count("runner: ") == 1 and "--no-progress" in log and f"--out {run_dir}" in log
         config = json.loads((run_dir / "config.json").read_text())
         assert config["epochs"] == 1
-        assert config["sac"] == {"hidden_sizes": [16, 16], "batch_size": 8, "multiplier_signal": "episode_cost"}
+        assert config["learner"] == {"hidden_sizes": [16, 16], "batch_size": 8, "multiplier_signal": "episode_cost"}
 
 
 def test_second_invocation_starts_nothing(smoke, capsys):
@@ -314,7 +314,7 @@ def test_a_run_from_before_multiplier_signal_is_a_conflict(smoke, tmp_path, caps
     run_dir = results / "runs" / "tssac-seed0"
     run_dir.mkdir(parents=True)
     config = json.loads((smoke / "runs" / "tssac-seed0" / "config.json").read_text())
-    assert config["sac"].pop("multiplier_signal") == "episode_cost"
+    assert config["learner"].pop("multiplier_signal") == "episode_cost"
     (run_dir / "config.json").write_text(json.dumps(config))
     assert run(main, ["--grid", "experiments/smoke.yaml", "--results", str(results), "--dry-run"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if "tssac-seed0" in x)

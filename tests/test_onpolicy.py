@@ -1,5 +1,5 @@
 """Tests of the on-policy baselines: GAE, PPO's loss, log-probs of stored actions, CPO's solver and
-step, the PPO-Lag multiplier, and train_role_onpolicy's outputs and resume."""
+step, the PPO-Lag multiplier, and the training loop's on-policy outputs and resume."""
 
 from __future__ import annotations
 
@@ -44,7 +44,8 @@ from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.sim.scenario import Radar, Role, load
 from tssac_core.train.config import TrainConfig, onpolicy_config
 from tssac_core.train.rundir import METRIC_FIELDS
-from tssac_core.train.onpolicy_loop import measured_episode_cost, train_role_onpolicy
+from tssac_core.train.learners import measured_episode_cost
+from tssac_core.train.loop import train_role
 
 torch.set_num_threads(1)
 
@@ -334,7 +335,7 @@ def test_cpo_update_keeps_the_trust_region_and_lowers_the_cost_surrogate_when_in
 def tiny_config(algo: str, epochs: int = 2) -> TrainConfig:
     root = Path(__file__).resolve().parent.parent
     return TrainConfig(algo=algo, scenario=str(root / "scenarios" / "strike.yaml"), seed=7, epochs=epochs, steps_per_epoch=200,
-                       roles=("decoy",), envs=2, threads=1, validation_episodes=2, sac={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4})
+                       roles=("decoy",), envs=2, threads=1, validation_episodes=2, learner={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4})
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -346,7 +347,7 @@ def rows(out: Path) -> list[dict[str, str]]:
 def test_tiny_run_writes_metrics_and_a_deployable_checkpoint(algo, tmp_path):
     cfg = tiny_config(algo)
     scenario = load(cfg.scenario)
-    train_role_onpolicy(cfg, scenario, Role.DECOY, tmp_path, resume=False, bar=tqdm(disable=True))
+    train_role(cfg, scenario, Role.DECOY, tmp_path, resume=False, bar=tqdm(disable=True))
     r = rows(tmp_path)
     assert list(r[0]) == METRIC_FIELDS
     assert [(x["role"], int(x["epoch"]), int(x["env_steps"])) for x in r] == [("decoy", 1, 200), ("decoy", 2, 400)]
@@ -375,9 +376,9 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
     straight, split = tmp_path / "straight", tmp_path / "split"
     straight.mkdir()
     split.mkdir()
-    train_role_onpolicy(tiny_config(algo, epochs=2), scenario, Role.DECOY, straight, resume=False, bar=tqdm(disable=True))
-    train_role_onpolicy(tiny_config(algo, epochs=1), scenario, Role.DECOY, split, resume=False, bar=tqdm(disable=True))
-    train_role_onpolicy(tiny_config(algo, epochs=2), scenario, Role.DECOY, split, resume=True, bar=tqdm(disable=True))
+    train_role(tiny_config(algo, epochs=2), scenario, Role.DECOY, straight, resume=False, bar=tqdm(disable=True))
+    train_role(tiny_config(algo, epochs=1), scenario, Role.DECOY, split, resume=False, bar=tqdm(disable=True))
+    train_role(tiny_config(algo, epochs=2), scenario, Role.DECOY, split, resume=True, bar=tqdm(disable=True))
     a = read_checkpoint(straight / "decoy.pt")
     b = read_checkpoint(split / "decoy.pt")
     assert all(torch.equal(a["actor"][k], b["actor"][k]) for k in a["actor"])
@@ -390,9 +391,9 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
     # The whole resume state matches too: worlds, episode lengths, the finished-episode window.
     sa = torch.load(straight / "resume" / "decoy.pt", weights_only=False)
     sb = torch.load(split / "resume" / "decoy.pt", weights_only=False)
-    assert sa["finished"] == sb["finished"] and len(sa["finished"]) > 2
-    np.testing.assert_array_equal(sa["ep_len"], sb["ep_len"])
-    assert sa["ep_len"].max() > 0  # an episode was running at the boundary
+    assert sa["learner"]["finished"] == sb["learner"]["finished"] and len(sa["learner"]["finished"]) > 2
+    np.testing.assert_array_equal(sa["learner"]["ep_len"], sb["learner"]["ep_len"])
+    assert sa["learner"]["ep_len"].max() > 0  # an episode was running at the boundary
     np.testing.assert_array_equal(sa["obs"], sb["obs"])
     (world_a, rng_a, ret_a, cost_a), (world_b, rng_b, ret_b, cost_b) = pickle.loads(sa["task"]), pickle.loads(sb["task"])
     assert rng_a.bit_generator.state == rng_b.bit_generator.state
@@ -403,7 +404,7 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
     for k in arrays:
         np.testing.assert_array_equal(getattr(world_a, k), getattr(world_b, k), err_msg=k)
     if algo == "ppo_lag":
-        assert sa["learner"]["multiplier"]["beta"].item() == sb["learner"]["multiplier"]["beta"].item() > 0.0
+        assert sa["learner"]["learner"]["multiplier"]["beta"].item() == sb["learner"]["learner"]["multiplier"]["beta"].item() > 0.0
     for x, y in zip(ra, rb):
         assert {k: v for k, v in x.items() if k not in timing} == {k: v for k, v in y.items() if k not in timing}
 
@@ -416,6 +417,6 @@ def test_config_from_train_config():
     repeat = TrainConfig(algo="ppo", scenario=tiny_config("ppo").scenario, action_repeat=3)
     assert onpolicy_config(repeat, scenario).episode_steps == math.ceil(scenario.episode_steps / 3)
     with pytest.raises(ValueError, match="polyak"):
-        onpolicy_config(TrainConfig(algo="ppo", sac={"polyak": 0.9}), scenario)
+        onpolicy_config(TrainConfig(algo="ppo", learner={"polyak": 0.9}), scenario)
     with pytest.raises(ValueError, match="not an on-policy"):
         onpolicy_config(TrainConfig(algo="sac"), scenario)

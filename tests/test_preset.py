@@ -20,10 +20,10 @@ def test_a_preset_sets_the_defaults_and_the_command_line_wins(tmp_path: Path):
                       "sac_set: {hidden_sizes: [8, 8], lr: 0.01}\nonpolicy_set: {hidden_sizes: [4, 4]}\n")
     cfg, _, _, _ = parse_args(["--preset", str(preset), "--out", "x"])
     assert (cfg.epochs, cfg.envs, cfg.roles) == (7, 3, ("decoy", "detect"))
-    assert cfg.sac == {"gamma": 0.9, "hidden_sizes": [8, 8], "lr": 0.01}
+    assert cfg.learner == {"gamma": 0.9, "hidden_sizes": [8, 8], "lr": 0.01}
     cfg, _, _, _ = parse_args(["--preset", str(preset), "--epochs", "2", "--set", "lr=0.5", "--algo", "ppo", "--out", "x"])
     assert cfg.epochs == 2 and cfg.envs == 3
-    assert cfg.sac == {"gamma": 0.9, "hidden_sizes": [4, 4], "lr": 0.5}  # the on-policy family's settings
+    assert cfg.learner == {"gamma": 0.9, "hidden_sizes": [4, 4], "lr": 0.5}  # the on-policy family's settings
 
 
 @pytest.mark.parametrize(("text", "message"), [
@@ -50,7 +50,7 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
     single, _, _, _ = parse_args(["--preset", "configs/paper.yaml", "--algo", "sac_lag", "--seed", "1", "--out", "x"])
     assert job.config() == single
     ppo = next(j for j in grid.jobs(tmp_path) if j.entry.algo == "ppo")
-    assert ppo.config().sac == {"hidden_sizes": [128, 128], "gamma": 0.995}
+    assert ppo.config().learner == {"hidden_sizes": [128, 128], "gamma": 0.995}
     text = (ROOT / "experiments" / "smoke.yaml").read_text()
     assert "preset" not in text  # a grid may still carry its whole recipe inline
     own = tmp_path / "g.yaml"

@@ -47,7 +47,7 @@ def test_outputs(trained):
     for role in ("decoy", "detect", "strike"):  # each shipped role's actor, exported for the companion
         assert pilot_file(trained, Role(role)) == trained / f"{role}.npz"
     # The multiplier's measurement, left to its default on the command line, is recorded.
-    assert json.loads((trained / "config.json").read_text())["sac"]["multiplier_signal"] == "episode_cost"
+    assert json.loads((trained / "config.json").read_text())["learner"]["multiplier_signal"] == "episode_cost"
 
 
 def test_runs_from_before_a_setting_resume_with_what_they_used():
@@ -57,10 +57,10 @@ def test_runs_from_before_a_setting_resume_with_what_they_used():
 
     old = {"algo": "tssac", "roles": ["decoy"], "sac": {"gamma": 0.995}}
     cfg = config_from_saved(old)
-    assert cfg.cost_margin_km == 0.0 and cfg.sac == {"gamma": 0.995, "multiplier_signal": "q_c"}
-    assert config_from_saved({**old, "algo": "sac"}).sac == {"gamma": 0.995}
-    new = {**old, "cost_margin_km": 1.0, "sac": {"multiplier_signal": "episode_cost"}}
-    assert config_from_saved(new).sac == {"multiplier_signal": "episode_cost"}
+    assert cfg.cost_margin_km == 0.0 and cfg.learner == {"gamma": 0.995, "multiplier_signal": "q_c"}
+    assert config_from_saved({**old, "algo": "sac"}).learner == {"gamma": 0.995}
+    new = {**old, "cost_margin_km": 1.0, "learner": {"multiplier_signal": "episode_cost"}}
+    assert config_from_saved(new).learner == {"multiplier_signal": "episode_cost"}
 
 
 def test_same_seed_same_run(trained, tmp_path):
@@ -229,30 +229,41 @@ def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content
 
 
 def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(tmp_path):
-    """SeedRole.episode_cost: the mean learner cost of the last cost_window episodes; a resume state
+    """OffPolicyLearner.episode_cost: the mean learner cost of the last cost_window episodes; a resume state
     carries them, so a resumed run's multiplier sees what the uninterrupted one saw."""
-    from tssac_core.algos.sac_lagrangian import SacConfig
+    import dataclasses
+
+    from tssac_core.sim.observation import ObservationMode
     from tssac_core.sim.scenario import load
     from tssac_core.train.config import TrainConfig
-    from tssac_core.train.epoch import EpochLog
-    from tssac_core.train.loop import open_seed_role
+    from tssac_core.train.epoch import EpochLog, make_task
+    from tssac_core.train.learners import OffPolicyLearner
 
-    cfg = TrainConfig(algo="sac_lag", seed=4, roles=("decoy",), envs=2, action_repeat=10, validation_episodes=0)
+    cfg = TrainConfig(algo="sac_lag", seed=4, roles=("decoy",), envs=2, action_repeat=10, validation_episodes=0,
+                      learner={"cost_window": 3})
     scenario = load(cfg.scenario)
-    sac_cfg = SacConfig(cost_window=3)
-    run = open_seed_role(cfg, scenario, Role.DECOY, tmp_path, sac_cfg)
-    assert run.episode_cost(sac_cfg, uses_multiplier=True) == 0.0  # no episode has ended yet
+    mode = ObservationMode(cfg.observation)
+    learner = OffPolicyLearner(cfg, scenario, Role.DECOY, mode)
+    task = make_task(cfg, scenario, Role.DECOY, mode, {})
+    obs = task.reset()
+    assert learner.episode_cost() == 0.0  # no episode has ended yet
     log = EpochLog()
     rng = np.random.default_rng(0)
     for _ in range(2000):  # random flight: episodes end by the 400-decision cap at the latest
-        run.collect(rng.uniform(-1.0, 1.0, (2, 2)), log)
+        action = rng.uniform(-1.0, 1.0, (2, 2))
+        step = task.step(action, repeat=cfg.action_repeat)
+        ended = step.terminated | step.truncated
+        learner.store(obs, action, step, ended)
+        obs = step.obs
+        if ended.any():
+            log.record_episodes(step, ended)
         if len(log.costs) >= 5:
             break
     assert len(log.costs) >= 5 and len(set(log.costs)) > 1, log.costs  # the window's choice matters
-    assert run.episode_cost(sac_cfg, uses_multiplier=True) == pytest.approx(np.mean(log.costs[-3:]))
-    assert run.episode_cost(sac_cfg, uses_multiplier=False) is None
-    assert run.episode_cost(SacConfig(multiplier_signal="q_c"), uses_multiplier=True) is None
-    state = run.resume_state({}, torch.get_rng_state())
-    resumed = open_seed_role(cfg, scenario, Role.DECOY, tmp_path, sac_cfg)
-    resumed.restore(state)
+    assert learner.episode_cost() == pytest.approx(np.mean(log.costs[-3:]))
+    assert OffPolicyLearner(dataclasses.replace(cfg, algo="sac"), scenario, Role.DECOY, mode).episode_cost() is None
+    q_c = OffPolicyLearner(dataclasses.replace(cfg, learner={"multiplier_signal": "q_c"}), scenario, Role.DECOY, mode)
+    assert q_c.episode_cost() is None
+    resumed = OffPolicyLearner(cfg, scenario, Role.DECOY, mode)
+    resumed.restore(learner.state())
     assert list(resumed.recent_costs) == log.costs[-3:] and resumed.recent_costs.maxlen == 3

@@ -10,7 +10,8 @@ import pytest
 from tssac_core.cli import UsageError
 from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.arguments import parse_cli
-from tssac_core.train.config import ALGOS, TrainConfig, default_selection, selects_within_limit, with_recorded_defaults
+from tssac_core.train.algorithms import ALGORITHMS
+from tssac_core.train.config import TrainConfig, default_selection, selects_within_limit, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.validation import Score
 
@@ -55,11 +56,11 @@ def test_the_tail_selection_puts_the_upper_bound_of_the_cost_first():
 
 
 def test_only_the_learners_given_the_limit_are_selected_within_it():
-    assert {a: default_selection(a) for a in ALGOS} == {
+    assert {a: default_selection(a) for a in ALGORITHMS} == {
         "tssac": "within_limit", "sac_lag": "within_limit", "ppo_lag": "within_limit", "cpo": "within_limit",
         "sac": "success", "sac_penalty": "success", "ppo": "success"}
     cfg, *_ = parse_cli(["--algo", "sac", "--out", "r"])
-    assert cfg.selection == "" and not selects_within_limit(cfg)
+    assert cfg.selection is None and not selects_within_limit(cfg)
     assert with_recorded_defaults(cfg).selection == "success"  # what config.json records
     cfg, *_ = parse_cli(["--algo", "sac", "--selection", "within_limit", "--out", "r"])
     assert selects_within_limit(cfg) and with_recorded_defaults(cfg).selection == "within_limit"

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from tssac_core.files import replace_durably
+
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
@@ -41,4 +43,4 @@ def write_json(path: str | Path, data: Any) -> None:
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(target.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(target)
+    replace_durably(tmp, target)

@@ -1,9 +1,13 @@
-"""Figures from training metrics: figure 7 (return and cost per epoch) and figure 8 (the multiplier)."""
+"""Figures of one run and one mission: figure 7 (return and cost per epoch) and figure 8 (the multiplier) from a
+run's metrics.csv, and figure 9 (a mission's trajectories, with its events labelled without overlap)."""
 
 from __future__ import annotations
 
 import csv
+import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -89,8 +93,7 @@ def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[f
             xs, ys = zip(*pts)
             ax.plot(xs, ys, color=ROLE_COLOURS.get(role, None), lw=1.5, label=f"{role} UAV")
             ax.plot(xs[0], ys[0], "o", color=ROLE_COLOURS.get(role, None))
-    for label, x, y in events:
-        ax.annotate(label, (x, y), fontsize=8, xytext=(4, 4), textcoords="offset points")
+    for _, x, y in events:
         ax.plot(x, y, "kx")
     ax.set_xlim(0, area_km)
     ax.set_ylim(0, area_km)
@@ -100,5 +103,45 @@ def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[f
     ax.set_title(title)
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
+    place_labels(ax, events)  # after the layout: the labels are placed in the figure's final pixels
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+LABEL_RADII_PT = (6.0, 14.0, 24.0, 36.0, 50.0, 66.0, 84.0, 104.0)
+LABEL_ANGLES_DEG = (45.0, 135.0, -45.0, -135.0, 90.0, -90.0, 0.0, 180.0, 22.5, 157.5, -22.5, -157.5)
+
+
+def place_labels(ax: Any, events: "Sequence[tuple[str, float, float]]") -> list[Any]:
+    """Annotate each (label, x, y) event so that no two labels overlap each other or leave the axes: each
+    takes the first free spot on rings of growing radius around its point (a thin line joins a label set
+    further out to its point). Events often fall together (radar on, identified and hit within a few km),
+    where fixed offsets pile the words on top of each other. Returns the text artists."""
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    placed: list[Any] = []
+    texts = []
+    for label, x, y in events:
+        text = None
+        for radius in LABEL_RADII_PT:
+            for angle in LABEL_ANGLES_DEG:
+                dx, dy = radius * math.cos(math.radians(angle)), radius * math.sin(math.radians(angle))
+                text = ax.annotate(label, (x, y), xytext=(dx, dy), textcoords="offset points", fontsize=7.5,
+                                   ha="left" if dx > 1 else "right" if dx < -1 else "center",
+                                   va="bottom" if dy > 1 else "top" if dy < -1 else "center",
+                                   bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
+                                   arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.35"} if radius > LABEL_RADII_PT[0] else None)
+                box = text.get_window_extent(renderer)
+                inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+                if inside and not any(box.overlaps(other) for other in placed):
+                    placed.append(box)
+                    break
+                text.remove()
+                text = None
+            if text is not None:
+                break
+        if text is None:  # nowhere free (dozens of events in one spot): the first ring, overlapping
+            text = ax.annotate(label, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7.5)
+        texts.append(text)
+    return texts

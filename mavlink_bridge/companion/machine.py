@@ -176,9 +176,9 @@ class Companion:
         assert link is not None
         role = cfg.role.value
         try:
-            ack = link.arm(cfg.command_timeout_s, cfg.command_retries)
+            link.arm(cfg.command_timeout_s, cfg.command_retries)
             _log.info("%s: armed", role)
-            ack = link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.command_retries)
+            link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.command_retries)
             _log.info("%s: GUIDED", role)
         except CommandError as exc:
             if self._stop_requested:

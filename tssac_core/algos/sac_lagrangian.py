@@ -20,7 +20,7 @@ from __future__ import annotations
 import copy
 import enum
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,8 +48,13 @@ class Variant(enum.Enum):
 MULTIPLIER_VARIANTS = (Variant.SAC_LAG, Variant.TSSAC)
 """The variants that learn the cost multiplier beta (eq. 15)."""
 
-MULTIPLIER_SIGNALS = ("episode_cost", "q_c")
-"""SacConfig.multiplier_signal's values."""
+class MultiplierSignal(enum.StrEnum):
+    """SacConfig.multiplier_signal: what eq. 15 and 17 compare with C (a str: it reads as its word)."""
+
+    EPISODE_COST = "episode_cost"
+    """The mean measured cost of the last `cost_window` training episodes, on Q^c's scale."""
+    Q_C = "q_c"
+    """The mean Q^c of the current policy on recent transitions (eq. 15 literally)."""
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,7 @@ class SacConfig:
     """SAC_PENALTY only: reward r + penalty * c, penalty <= 0 (paper's experiment: 0, -10, -15,
     -50). Must be 0 for the other variants."""
 
-    multiplier_signal: str = "episode_cost"
+    multiplier_signal: MultiplierSignal = MultiplierSignal.EPISODE_COST
     """What eq. 15 and 17 compare with C; read by the training loop, which passes the measurement to
     `update`. "episode_cost": the mean measured cost of the last `cost_window` training episodes,
     converted to Q^c's scale (`cost_on_qc_scale`), as PID-Lagrangian (Stooke et al. 2020) and
@@ -152,8 +157,8 @@ class SacConfig:
             (self.cost_limit >= 0.0, f"cost_limit must be >= 0, got {self.cost_limit}"),
             (self.episode_steps >= 1, f"episode_steps must be >= 1, got {self.episode_steps}"),
             (
-                self.multiplier_signal in MULTIPLIER_SIGNALS,
-                f"multiplier_signal must be one of {', '.join(MULTIPLIER_SIGNALS)}, got {self.multiplier_signal!r}",
+                self.multiplier_signal in list(MultiplierSignal),
+                f"multiplier_signal must be one of {', '.join(MultiplierSignal)}, got {self.multiplier_signal!r}",
             ),
             (self.cost_window >= 1, f"cost_window must be >= 1, got {self.cost_window}"),
             (self.batch_size >= 1, f"batch_size must be >= 1, got {self.batch_size}"),
@@ -169,6 +174,7 @@ class SacConfig:
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+        object.__setattr__(self, "multiplier_signal", MultiplierSignal(self.multiplier_signal))
 
     @property
     def qc_limit(self) -> float:
@@ -198,74 +204,6 @@ def load_optimiser(optim: torch.optim.Optimizer, state: dict[str, Any]) -> None:
     optim.load_state_dict(state)
     for group in optim.param_groups:
         group.update(flags)
-
-
-# --- the steps after the critics', shared with the K-seed learner (scalars here, (K,) there) ----
-
-
-def multiplier_terms(
-    multiplier: DampedLagrangeMultiplier, active: bool, qc_mean: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(beta, xi, beta - xi) at the policy's cost ``qc_mean``: eq. 16's damping and the effective
-    multiplier; xi and the multiplier are 0 without one (SAC, SAC_PENALTY)."""
-    if not active:
-        zero = torch.zeros_like(qc_mean)
-        return multiplier.beta, zero, zero
-    return multiplier.beta, multiplier.damping(qc_mean), multiplier.effective(qc_mean)
-
-
-def measured_cost(
-    cfg: SacConfig,
-    qc_mean: torch.Tensor,
-    episode_cost: float | Sequence[float] | None,
-    recent_qc_mean: Callable[[], torch.Tensor] | None,
-) -> torch.Tensor:
-    """What eq. 15 and 17 compare with C, on Q^c's scale (SacConfig.multiplier_signal): the recent
-    episodes' measured cost if given, else the mean Q^c on the recent batch (``recent_qc_mean``, computed
-    only then), else the update batch's ``qc_mean``."""
-    if episode_cost is not None:
-        return cfg.cost_on_qc_scale(episode_cost)
-    if recent_qc_mean is not None:
-        with torch.no_grad():
-            return recent_qc_mean()
-    return qc_mean
-
-
-def step_actor_and_alpha(
-    actor_optim: torch.optim.Optimizer,
-    alpha_optim: torch.optim.Optimizer,
-    actor_params: list[torch.Tensor],
-    alpha: torch.Tensor,
-    actor_loss: torch.Tensor,
-    alpha_loss: torch.Tensor,
-) -> None:
-    """One Adam step of the actor (eq. 12/16) and of alpha (eq. 14), alpha projected onto >= 0 (see
-    SacConfig.alpha_init). One backward pass for both losses: they share no parameter (the actor loss
-    uses a detached alpha, eq. 14 a detached log_pi). inputs=: no gradients for the critics' weights,
-    which the actor loss must not train. K seeds' losses are summed: each seed gets its own gradient."""
-    actor_optim.zero_grad()
-    alpha_optim.zero_grad()
-    torch.autograd.backward([actor_loss.sum(), alpha_loss.sum()], inputs=[*actor_params, alpha])
-    actor_optim.step()
-    alpha_optim.step()
-    with torch.no_grad():
-        alpha.clamp_(min=0.0)
-
-
-def step_multiplier_and_targets(
-    multiplier: DampedLagrangeMultiplier,
-    active: bool,
-    qc_mean: torch.Tensor,
-    targets: list[torch.Tensor],
-    onlines: list[torch.Tensor],
-    polyak: float,
-) -> torch.Tensor:
-    """The multiplier's step, eq. 15 (projected inside; returns its loss, 0 without a multiplier), then
-    the soft target update target <- polyak * target + (1 - polyak) * online."""
-    beta_loss = multiplier.update(qc_mean) if active else torch.zeros_like(qc_mean)
-    with torch.no_grad():
-        torch._foreach_lerp_(targets, onlines, 1.0 - polyak)
-    return beta_loss
 
 
 @dataclass(frozen=True)
@@ -373,7 +311,7 @@ class SacLagrangian:
             rewards = rewards + cfg.penalty * costs
         alpha = self.alpha.detach().clone()  # the value used below, kept for the stats
 
-        # Targets, eq. 13: soft value with the min of the twin target critics; no entropy in cost.
+        # Eq. 13, targets: soft value with the min of the twin target critics; no entropy in the cost.
         with torch.no_grad():
             next_actions, next_log_pi = self.actor(next_obs)
             next_q_r = self.q_r_target(next_obs, next_actions)
@@ -384,35 +322,58 @@ class SacLagrangian:
             next_v_c = self.q_c_target(next_obs, next_actions)[0].clamp(min=0.0)
             y_c = losses.critic_target(costs, terminated, next_v_c, cfg.gamma)
 
-        # Critic losses, eq. 13.
+        # Eq. 13, critic losses: one backward pass and one Adam step for the three critics.
         q_r_loss = losses.critic_loss(self.q_r(obs, actions), y_r)
         q_c_loss = losses.critic_loss(self.q_c(obs, actions), y_c)
         self.critic_optim.zero_grad()
         (q_r_loss + q_c_loss).backward()
         self.critic_optim.step()
 
-        # Actor loss, eq. 12 (SAC_LAG) / eq. 16 (TSSAC). The multiplier measures Q^c at the
-        # policy's own actions, the cost-to-go of the current policy that eq. 4's g(pi) constrains
-        # (WCSAC's saclag.py uses the replayed actions instead).
+        # The policy's Q values at its own actions, the cost-to-go that eq. 4's g(pi) constrains (WCSAC's
+        # saclag.py uses the replayed actions instead). Without a multiplier (SAC, SAC_PENALTY) Q^c is only
+        # measured: no graph, no backward pass.
         pi_actions, log_pi = self.actor(obs)
         q_r_pi = self.q_r(obs, pi_actions)
-        # Without a multiplier (SAC, SAC_PENALTY) Q^c is only measured: no graph, no backward pass.
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[0]
         qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
 
-        def recent_qc_mean() -> torch.Tensor:
-            assert recent is not None
-            return self.q_c(recent.observations, self.actor(recent.observations)[0])[0].clamp(min=0.0).mean()
+        # What eq. 15 and 17 compare with C, on Q^c's scale (SacConfig.multiplier_signal): the recent episodes'
+        # measured cost, else the mean Q^c of the current policy on the recent transitions, else on the batch.
+        if episode_cost is not None:
+            measured = cfg.cost_on_qc_scale(episode_cost)
+        elif recent is not None:
+            with torch.no_grad():
+                measured = self.q_c(recent.observations, self.actor(recent.observations)[0])[0].clamp(min=0.0).mean()
+        else:
+            measured = qc_mean
 
-        measured = measured_cost(cfg, qc_mean, episode_cost, recent_qc_mean if recent is not None else None)
-        beta, xi, multiplier = multiplier_terms(self.multiplier, self.uses_multiplier, measured)
+        # Eq. 17, the damping xi = k_d (C - measured), and the multiplier of Q^c in the actor loss: beta - xi
+        # (eq. 16; k_d = 0 for SAC_LAG: beta, eq. 12), 0 without a multiplier.
+        beta = self.multiplier.beta
+        if self.uses_multiplier:
+            xi, multiplier = self.multiplier.damping(measured), self.multiplier.effective(measured)
+        else:
+            xi, multiplier = torch.zeros_like(measured), torch.zeros_like(measured)
+
+        # Eq. 12 / 16, the actor loss, and eq. 14, alpha's loss (log_pi a constant there): one backward pass for
+        # both (they share no parameter: the actor loss uses a detached alpha); inputs= keeps the critics' weights
+        # out of it. Alpha is projected onto >= 0 after its step (SacConfig.alpha_init).
         actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
-        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)  # eq. 14, log_pi a constant
-        step_actor_and_alpha(self.actor_optim, self.alpha_optim, self._actor_params, self.alpha, actor_loss, alpha_loss)
-        beta_loss = step_multiplier_and_targets(
-            self.multiplier, self.uses_multiplier, measured, self._targets, self._onlines, cfg.polyak
-        )
+        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
+        self.actor_optim.zero_grad()
+        self.alpha_optim.zero_grad()
+        torch.autograd.backward([actor_loss, alpha_loss], inputs=[*self._actor_params, self.alpha])
+        self.actor_optim.step()
+        self.alpha_optim.step()
+        with torch.no_grad():
+            self.alpha.clamp_(min=0.0)
+
+        # Eq. 15, the multiplier's projected step (DampedLagrangeMultiplier.update), then Polyak averaging of the
+        # targets: target <- polyak * target + (1 - polyak) * online.
+        beta_loss = self.multiplier.update(measured) if self.uses_multiplier else torch.zeros_like(measured)
+        with torch.no_grad():
+            torch._foreach_lerp_(self._targets, self._onlines, 1.0 - cfg.polyak)
 
         scalars = torch.stack(
             [

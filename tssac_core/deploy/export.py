@@ -19,6 +19,7 @@ from torch import nn
 from tssac_core.deploy.numpy_actor import FORMAT, FORMAT_VERSION, NumpyPolicy, sha256_file
 from tssac_core.deploy.policy import Policy, checkpoint_info, read_checkpoint, torch_save_atomic
 from tssac_core.errors import CheckpointError
+from tssac_core.files import replace_durably
 from tssac_core.sim.scenario import ROLES
 
 
@@ -35,7 +36,7 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
     target = Path(out) if out is not None else src.with_suffix(".npz")
     tmp = target.with_name(target.name + ".tmp.npz")
     np.savez(tmp, **arrays)
-    tmp.replace(target)
+    replace_durably(tmp, target)
     return target
 
 

@@ -20,6 +20,7 @@ import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.errors import CheckpointError
+from tssac_core.files import replace_durably
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 
@@ -85,11 +86,11 @@ def save_role_checkpoint(
 
 
 def torch_save_atomic(obj: Any, path: str | Path) -> None:
-    """torch.save to a temporary file, then rename: a crash never leaves a half-written file."""
+    """torch.save to a temporary file, then rename durably (tssac_core.files): a crash never leaves a half-written file."""
     target = Path(path)
     tmp = target.with_name(target.name + ".tmp")
     torch.save(obj, tmp)
-    tmp.replace(target)
+    replace_durably(tmp, target)
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:

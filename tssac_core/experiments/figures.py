@@ -1,8 +1,9 @@
 """The paper's figures 7-12 from a grid's runs and evaluations (PNG, matplotlib's Agg backend).
 
-- fig7_training.png: return and cost per epoch of the detect and strike roles, every algorithm, mean over
-  seeds, with the cost threshold C;
-- fig8_multiplier.png: the multiplier beta (and beta - xi) per epoch, with damping (tssac) and without (sac_lag);
+- fig7_training.png: return and cost per epoch of the detect and strike roles, the paper's five algorithms
+  (tssac, sac_lag, sac, ppo, cpo), mean over seeds with the seeds' range as a band, with the cost threshold C;
+- fig8_multiplier.png: the multiplier beta (band over seeds) and beta - xi per epoch, with damping (tssac) and
+  without (sac_lag);
 - fig9_mission.png: one evaluation mission's trajectories (the first layout, flown by a TSSAC team);
 - fig10_test_boxplots.png: per-episode test return and cost of each role, per algorithm (seeds pooled);
 - fig11_generalization.png: success rate and cost on the generalisation scenario, per algorithm;
@@ -24,6 +25,7 @@ import numpy as np  # noqa: E402
 from tssac_core.sim.missions import MissionResults  # noqa: E402
 from tssac_core.plots import plot_mission  # noqa: E402
 from tssac_core.sim.scenario import ROLES, Scenario  # noqa: E402
+from tssac_core.train.algorithms import algorithm  # noqa: E402
 
 Rows = list[dict[str, str]]
 Curves = dict[str, list[Rows]]
@@ -32,8 +34,8 @@ Curves = dict[str, list[Rows]]
 DPI = 90
 
 
-def mean_curve(runs: list[Rows], role: str, key: str) -> tuple[list[int], list[float]]:
-    """Per epoch, the mean of ``key`` over the runs that have a finite value there."""
+def seed_curves(runs: list[Rows], role: str, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per epoch: (epochs, mean, min, max) of ``key`` over the seeds that have a finite value there."""
     by_epoch: dict[int, list[float]] = {}
     for rows in runs:
         for r in rows:
@@ -46,43 +48,75 @@ def mean_curve(runs: list[Rows], role: str, key: str) -> tuple[list[int], list[f
             if math.isfinite(value):
                 by_epoch.setdefault(int(r["epoch"]), []).append(value)
     epochs = sorted(by_epoch)
-    return epochs, [float(np.mean(by_epoch[e])) for e in epochs]
+    values = [np.asarray(by_epoch[e]) for e in epochs]
+    return (np.asarray(epochs), np.asarray([v.mean() for v in values]), np.asarray([v.min() for v in values]),
+            np.asarray([v.max() for v in values]))
+
+
+def mean_curve(runs: list[Rows], role: str, key: str) -> tuple[list[int], list[float]]:
+    """Per epoch, the mean of ``key`` over the runs that have a finite value there."""
+    epochs, mean, _, _ = seed_curves(runs, role, key)
+    return [int(e) for e in epochs], [float(m) for m in mean]
+
+
+def band(ax: Any, runs: list[Rows], role: str, key: str, colour: str, label: str, ls: str = "-") -> None:
+    """The mean over seeds as a line, the seeds' range (min to max) as a shaded band."""
+    x, mean, low, high = seed_curves(runs, role, key)
+    if not len(x):
+        return
+    ax.plot(x, mean, color=colour, ls=ls, lw=1.4, label=label)
+    if len(runs) > 1:
+        ax.fill_between(x, low, high, color=colour, alpha=0.15, lw=0)
+
+
+def seeds_label(name: str, runs: list[Rows]) -> str:
+    return f"{name} ({len(runs)} seed{'' if len(runs) == 1 else 's'})"
 
 
 def fig7_training(path: Path, curves: Curves, cost_limit: float) -> None:
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), squeeze=False)
+    """Figure 7: return and cost per epoch of the detect and strike roles, one colour per algorithm: the mean
+    over seeds, and the seeds' range as a band. ``curves``: the paper's five algorithms (penalties: figure 12)."""
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), squeeze=False, sharex=True)
+    panels = iter("ABCD")
     for col, role in enumerate(("detect", "strike")):
-        for name, runs in curves.items():
+        for i, (name, runs) in enumerate(curves.items()):
             for row, key in enumerate(("return", "cost")):
-                x, y = mean_curve(runs, role, key)
-                axes[row][col].plot(x, y, marker=".", label=f"{name} ({len(runs)} seed{'' if len(runs) == 1 else 's'})")
-        axes[0][col].set_title(f"{role} UAV: average epoch return")
-        axes[1][col].set_title(f"{role} UAV: average epoch cost")
-        axes[1][col].axhline(cost_limit, color="red", ls="--", label=f"cost threshold C = {cost_limit:g}")
+                band(axes[row][col], runs, role, key, f"C{i}", seeds_label(name, runs))
+        for row, what in enumerate(("task performance: average epoch return", "safety: average epoch cost")):
+            axes[row][col].set_title(f"({next(panels)}) {role} UAV, {what}", fontsize=10)
+            axes[row][col].set_ylabel("return" if row == 0 else "hazard cost per episode")
+            axes[row][col].grid(alpha=0.3)
+        axes[1][col].axhline(cost_limit, color="red", ls="--", lw=1, label=f"cost threshold C = {cost_limit:g}")
         axes[1][col].set_yscale("symlog", linthresh=10)  # early epochs cost hundreds, the limit is 3
         axes[1][col].set_ylim(bottom=0)
         axes[1][col].set_xlabel("epoch")
-    axes[1][1].legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
+    handles, labels = axes[1][1].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 6), fontsize=8, frameon=False)
+    fig.suptitle("Training of the five algorithms (line: mean over seeds; band: the seeds' range)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
 
 
 def fig8_multiplier(path: Path, curves: Curves) -> None:
-    """``curves`` maps a label (e.g. "tssac (damped)") to its runs."""
-    fig, axes = plt.subplots(1, len(ROLES), figsize=(4.5 * len(ROLES), 3.4), squeeze=False)
+    """Figure 8: the cost multiplier beta per epoch (solid) and the effective beta - xi (dotted), with damping
+    (tssac) and without (sac_lag); mean over seeds, the band the seeds' range of beta. ``curves`` maps a label
+    (e.g. "tssac (damped)") to its runs."""
+    fig, axes = plt.subplots(1, len(ROLES), figsize=(4.6 * len(ROLES), 3.8), squeeze=False, sharey=True)
     for col, role in enumerate(ROLES):
         ax = axes[0][col]
         for i, (label, runs) in enumerate(curves.items()):
-            colour = f"C{i}"
-            x, y = mean_curve(runs, role.value, "beta")
-            ax.plot(x, y, color=colour, label=f"{label}: beta")
+            band(ax, runs, role.value, "beta", f"C{i}", f"{seeds_label(label, runs)}: beta")
             x, y = mean_curve(runs, role.value, "beta_minus_xi")
-            ax.plot(x, y, color=colour, ls=":", label=f"{label}: beta - xi")
-        ax.set_title(f"{role.value} UAV: cost multiplier (mean over seeds)")
+            ax.plot(x, y, color=f"C{i}", ls=":", lw=1.2, label=f"{label}: beta - xi")
+        ax.set_title(f"({'ABC'[col]}) {role.value} UAV", fontsize=10)
         ax.set_xlabel("epoch")
-        ax.legend(fontsize=7)
-    fig.tight_layout()
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("cost multiplier")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8, frameon=False)
+    fig.suptitle("Cost multiplier beta with and without damping (line: mean over seeds; band: the seeds' range)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
 
@@ -173,9 +207,10 @@ def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_epi
     written: list[Path] = []
     cost_limit = float(summary["cost_limit"])
     done = [a for a in summary["algorithms"] if a["seeds"]]
-    if curves:
+    paper = {a["name"]: curves[a["name"]] for a in done if a["name"] in curves and algorithm(a["algo"]).in_figure7}
+    if paper:
         written.append(results / "fig7_training.png")
-        fig7_training(written[-1], curves, cost_limit)
+        fig7_training(written[-1], paper, cost_limit)
     damping = {f"{a['name']} ({'damped' if a['algo'] == 'tssac' else 'no damping'})": curves[a["name"]]
                for a in done if a["algo"] in ("tssac", "sac_lag") and a["name"] in curves}
     if damping:

@@ -52,7 +52,8 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.train.arguments import parse_args as parse_train_args
-from tssac_core.train.config import ALGOS, ON_POLICY, SELECTIONS, TrainConfig, check_learner_settings
+from tssac_core.train.algorithms import ALGORITHMS, Selection, algorithm
+from tssac_core.train.config import TrainConfig, check_learner_settings
 from tssac_core.train.preset import load_preset
 from tssac_core.sim.yaml_file import read_yaml
 
@@ -196,7 +197,7 @@ class Grid:
 
 def learner_family(algo: str) -> str:
     """``sac`` or ``onpolicy``: the learner an algorithm trains with (its ``--set`` family, ``sac_set`` or ``onpolicy_set``)."""
-    return "onpolicy" if algo in ON_POLICY else "sac"
+    return algorithm(algo).family.value
 
 
 def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
@@ -353,8 +354,8 @@ class _Reader:
                 raise self.fail("train.observation", f"expected one of {', '.join(modes)}, got {data['observation']!r}")
             values["observation"] = data["observation"]
         if "selection" in data:
-            if data["selection"] not in SELECTIONS:
-                raise self.fail("train.selection", f"expected one of {', '.join(SELECTIONS)}, got {data['selection']!r}")
+            if data["selection"] not in list(Selection):
+                raise self.fail("train.selection", f"expected one of {', '.join(Selection)}, got {data['selection']!r}")
             values["selection"] = data["selection"]
         return TrainArgs(**values)
 
@@ -368,7 +369,7 @@ class _Reader:
             name = self.string(data[key], f"{where}.{key}")
             if name not in entries:
                 raise self.fail(f"{where}.{key}", f"{name!r} is not an entry of algos ({', '.join(entries)})")
-            if (entries[name].algo == "tssac") != must_transfer:  # only TSSAC transfers
+            if algorithm(entries[name].algo).transfers != must_transfer:
                 raise self.fail(f"{where}.{key}", f"{name!r} is {entries[name].algo}: 'with' needs tssac (it transfers), 'without' another algorithm")
             sides[key] = entries[name]
         roles = data.get("roles", list(TransferExperiment.roles))
@@ -394,8 +395,8 @@ class _Reader:
         """``tssac`` or ``{algo: sac_penalty, penalty: -10, name: sac_pen10, set: {...}}``."""
         data = {"algo": item} if isinstance(item, str) else self.mapping(item, where, allowed={"algo", "name", "penalty", "set"}, required={"algo"})
         algo = self.string(data["algo"], f"{where}.algo")
-        if algo not in ALGOS:
-            raise self.fail(f"{where}.algo", f"unknown algorithm {algo!r} (choose from {', '.join(ALGOS)})")
+        if algo not in ALGORITHMS:
+            raise self.fail(f"{where}.algo", f"unknown algorithm {algo!r} (choose from {', '.join(ALGORITHMS)})")
         name = self.string(data.get("name", algo), f"{where}.name")
         if not NAME_PATTERN.match(name):
             raise self.fail(f"{where}.name", f"{name!r} may hold only letters, digits, '_', '-' and '.' (it names directories)")

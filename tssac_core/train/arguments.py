@@ -10,7 +10,8 @@ from typing import Any, Sequence
 from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
-from tssac_core.train.config import ALGOS, DEFAULT_SCENARIO, SELECTIONS, TrainConfig
+from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection
+from tssac_core.train.config import DEFAULT_SCENARIO, TrainConfig
 from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
@@ -40,7 +41,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=DESCRIPTION)
     p.add_argument("--preset", type=Path, metavar="FILE", help="a recipe file (configs/paper.yaml, configs/shipped.yaml): its "
                    "settings are the defaults, the flags given here override them (tssac_core.train.preset)")
-    p.add_argument("--algo", choices=ALGOS, default="tssac", help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
+    p.add_argument("--algo", choices=list(ALGORITHMS), type=Algo, default=Algo.TSSAC, help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
     p.add_argument("--seeds", help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
@@ -58,7 +59,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
     p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
     p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
-    p.add_argument("--selection", choices=SELECTIONS, help="which validated epoch a role ships: the best mission success among the "
+    p.add_argument("--selection", choices=list(Selection), type=Selection, help="which validated epoch a role ships: the best mission success among the "
                    "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
                    "(success: default of sac, sac_penalty, ppo), or tail: screen every epoch on the upper bound of its cost and its "
                    "within-C fraction, and choose among the best three on more missions (tssac_core.train.validation)")
@@ -67,7 +68,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
                    "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")
     p.add_argument("--stop-at-task-success", type=float, default=0.0, metavar="FRACTION",
                    help="end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)")
-    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2: this machine's cores)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1, whatever the machine: runs beside each other want a core each)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a learner setting (SacConfig or OnPolicyConfig field), e.g. --set lr=3e-4 or --set multiplier_signal=q_c")
     p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
@@ -97,10 +98,10 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     cfg = TrainConfig(
         algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
         envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
-        observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, sac=overrides,
+        observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, learner=overrides,
         validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
         init_from=str(a.init_from) if a.init_from else "", teammates=str(a.teammates) if a.teammates else "",
-        stop_at_task_success=a.stop_at_task_success, selection=a.selection or "",
+        stop_at_task_success=a.stop_at_task_success, selection=a.selection,
     )
     return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
 
@@ -121,6 +122,6 @@ def train_argv(cfg: TrainConfig) -> tuple[str, ...]:
         argv += ["--init-from", cfg.init_from]
     if cfg.teammates:
         argv += ["--teammates", cfg.teammates]
-    for key, value in cfg.sac.items():
+    for key, value in cfg.learner.items():
         argv += ["--set", f"{key}={json.dumps(value, separators=(',', ':'))}"]
     return tuple(argv)

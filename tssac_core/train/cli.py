@@ -26,11 +26,10 @@ from tqdm import tqdm
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import parse_cli, train_argv
-from tssac_core.train.config import ON_POLICY, TrainConfig
+from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.loop import train_role
-from tssac_core.train.onpolicy_loop import train_role_onpolicy
-from tssac_core.train.rundir import prepare_run, write_plots
+from tssac_core.train.rundir import prepare_run, shipped, write_plots
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -49,13 +48,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     with tqdm(total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05) as bar:
         for role_name in cfg.roles:
             role = Role(role_name)
-            if (out / f"{role_name}.pt").is_file():
+            if shipped(out, role):
                 logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
                 continue
-            if cfg.algo in ON_POLICY:
-                train_role_onpolicy(cfg, scenario, role, out, resume, bar)
-            else:
-                train_role(cfg, scenario, role, out, resume, bar)
+            train_role(cfg, scenario, role, out, resume, bar)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
     print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")

@@ -1,4 +1,5 @@
-"""A training run's settings: `TrainConfig`, the algorithms, and the learner configs built from them."""
+"""A training run's settings: `TrainConfig`, and the learner configs built from them (the algorithms' table:
+:mod:`tssac_core.train.algorithms`)."""
 
 from __future__ import annotations
 
@@ -8,27 +9,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tssac_core.algos.onpolicy.ppo import OnPolicyAlgo, OnPolicyConfig
-from tssac_core.algos.sac_lagrangian import MULTIPLIER_VARIANTS, SacConfig, Variant
+from tssac_core.algos.onpolicy.ppo import OnPolicyConfig
+from tssac_core.algos.sac_lagrangian import SacConfig
 from tssac_core.cli import UsageError
+from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.routes import RouteConfig
 from tssac_core.sim.scenario import Scenario
+from tssac_core.train.algorithms import Algo, Family, Selection, algorithm
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "random.yaml"
-SAC_FAMILY = {v.value: v for v in Variant}
-ON_POLICY = ("ppo", "ppo_lag", "cpo")
-ALGOS = (*SAC_FAMILY, *ON_POLICY)
-ONPOLICY_ALGOS = {a.value: a for a in OnPolicyAlgo}
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """One training run: an algorithm, a seed, the role curriculum."""
 
-    algo: str = "tssac"
-    """tssac, sac_lag, sac, sac_penalty (off-policy, tssac_core.algos.sac_lagrangian) or ppo, ppo_lag, cpo
-    (on-policy, tssac_core.train.onpolicy_loop)."""
+    algo: Algo = Algo.TSSAC
+    """The algorithm (tssac_core.train.algorithms: its family, whether it is constrained, whether it transfers)."""
     scenario: str = str(DEFAULT_SCENARIO)
     """Scenario file (random layouts: every episode a new one, section 5.2.3)."""
     seed: int = 0
@@ -52,8 +50,9 @@ class TrainConfig:
     """Decision interval: the learner's action is held for this many 0.1 s world steps (1: the paper)."""
     penalty: float = 0.0
     """sac_penalty: reward r + penalty * c."""
-    threads: int = 2
-    """torch threads (this machine has 2 cores)."""
+    threads: int = 1
+    """torch threads. 1 by default, whatever the machine: at Table 3's sizes a second thread gains little
+    (benchmarks/RESULTS.md), and runs beside each other (the grid's jobs, ``--seeds``) each want one core."""
     route_margin_km: float = 3.0
     """Reward: the way around the radars keeps this far from them (tssac_core.sim.routes.RouteConfig)."""
     cost_margin_km: float = 1.0
@@ -72,41 +71,48 @@ class TrainConfig:
     stop_at_task_success: float = 0.0
     """End a role after the first epoch whose task success in training reaches this fraction (0: train every
     epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
-    selection: str = ""
-    """Which validated epoch a role ships (tssac_core.train.validation): "within_limit", the best mission success
-    among the epochs within the cost limit; "success", the best mission success whatever the cost; "tail", the
-    tail-aware selection (the upper bound of the role's cost within the limit, then success, judged again on more
-    missions among the best three; for validation on hundreds of missions). "" (the
-    default): the algorithm's own, "within_limit" for the learners that are given the limit
-    (CONSTRAINED_ALGOS), "success" for those that are not (sac, sac_penalty, ppo)."""
-    sac: dict[str, Any] = field(default_factory=dict)
-    """Overrides of SacConfig fields (Table 3 defaults)."""
+    selection: Selection | None = None
+    """Which validated epoch a role ships (tssac_core.train.algorithms.Selection, tssac_core.train.validation);
+    None: the algorithm's own (Algorithm.default_selection): within the limit for the learners that are given
+    it, by success for those that are not (sac, sac_penalty, ppo)."""
+    learner: dict[str, Any] = field(default_factory=dict)
+    """Overrides of the learner's settings (``--set``): SacConfig fields for the off-policy family (Table 3
+    defaults), OnPolicyConfig fields for the on-policy one."""
+
+    def __post_init__(self) -> None:
+        # Words from the command line or a config.json become their enums (ValueError for a word that is none).
+        object.__setattr__(self, "algo", Algo(self.algo))
+        object.__setattr__(self, "selection", Selection(self.selection) if self.selection else None)
+        ObservationMode(self.observation)
 
 
-SAC_MULTIPLIER_ALGOS = tuple(algo for algo, variant in SAC_FAMILY.items() if variant in MULTIPLIER_VARIANTS)
-"""The SAC family's algorithms with a learned multiplier (SacConfig.multiplier_signal matters)."""
+def has_multiplier_signal(algo: str) -> bool:
+    """An off-policy algorithm with a learned multiplier (its SacConfig.multiplier_signal matters)."""
+    a = algorithm(algo)
+    return a.family is Family.OFF_POLICY and a.constrained
 
-CONSTRAINED_ALGOS = (*SAC_MULTIPLIER_ALGOS, "ppo_lag", "cpo")
-"""The learners that are given the cost limit C: they ship the best epoch within it (TrainConfig.selection)."""
-SELECTIONS = ("within_limit", "success", "tail")
+
+def selection_of(cfg: TrainConfig) -> Selection:
+    """TrainConfig.selection, resolved."""
+    return cfg.selection or algorithm(cfg.algo).default_selection
 
 
 def selects_within_limit(cfg: TrainConfig) -> bool:
     """Whether the run ships the best epoch within the cost limit (TrainConfig.selection, resolved)."""
-    return (cfg.selection or default_selection(cfg.algo)) == "within_limit"
+    return selection_of(cfg) is Selection.WITHIN_LIMIT
 
 
-def default_selection(algo: str) -> str:
+def default_selection(algo: str) -> Selection:
     """TrainConfig.selection's default: a learner that is not given the cost limit is not judged by it either."""
-    return "within_limit" if algo in CONSTRAINED_ALGOS else "success"
+    return algorithm(algo).default_selection
 
 
 def with_recorded_defaults(cfg: TrainConfig) -> TrainConfig:
     """``cfg`` with the settings whose default changed written out, so that a run's config.json records
-    which it used: TSSAC's and SAC-Lagrangian's multiplier_signal in ``sac`` ("q_c" before), and the
+    which it used: TSSAC's and SAC-Lagrangian's multiplier_signal in ``learner`` ("q_c" before), and the
     epoch selection (every algorithm's was "within_limit" before)."""
-    if cfg.algo in SAC_MULTIPLIER_ALGOS and "multiplier_signal" not in cfg.sac:
-        cfg = dataclasses.replace(cfg, sac={**cfg.sac, "multiplier_signal": SacConfig.multiplier_signal})
+    if has_multiplier_signal(cfg.algo) and "multiplier_signal" not in cfg.learner:
+        cfg = dataclasses.replace(cfg, learner={**cfg.learner, "multiplier_signal": SacConfig.multiplier_signal})
     if not cfg.selection:
         cfg = dataclasses.replace(cfg, selection=default_selection(cfg.algo))
     return cfg
@@ -119,44 +125,50 @@ def reward_config(cfg: TrainConfig) -> RewardConfig:
 def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
     # The learner's episode is counted in decisions: the Q^c limit converts C over that many.
     decisions = math.ceil(scenario.episode_steps / cfg.action_repeat)
-    fields = {"variant": SAC_FAMILY[cfg.algo], "cost_limit": scenario.cost_limit, "episode_steps": decisions}
+    variant = algorithm(cfg.algo).variant
+    if variant is None:
+        raise ValueError(f"not an off-policy algorithm: {cfg.algo!r}")
+    fields = {"variant": variant, "cost_limit": scenario.cost_limit, "episode_steps": decisions}
     if cfg.algo == "sac_penalty":
         fields["penalty"] = cfg.penalty
-    fields.update(cfg.sac)
+    fields.update(cfg.learner)
     if "hidden_sizes" in fields:
         fields["hidden_sizes"] = tuple(fields["hidden_sizes"])
     return SacConfig(**fields)
 
 
 def onpolicy_config(cfg: TrainConfig, scenario: Scenario) -> OnPolicyConfig:
-    """The OnPolicyConfig of a run: algorithm, C and the episode cap from the scenario, then ``cfg.sac``'s
+    """The OnPolicyConfig of a run: algorithm, C and the episode cap from the scenario, then ``cfg.learner``'s
     overrides (ValueError naming the key for one that OnPolicyConfig does not have)."""
-    if cfg.algo not in ONPOLICY_ALGOS:
-        raise ValueError(f"not an on-policy algorithm: {cfg.algo!r} (choose from {', '.join(ONPOLICY_ALGOS)})")
+    onpolicy = algorithm(cfg.algo).onpolicy
+    if onpolicy is None:
+        raise ValueError(f"not an on-policy algorithm: {cfg.algo!r}")
     names = {f.name for f in dataclasses.fields(OnPolicyConfig)} - {"algo"}
-    for key in cfg.sac:
+    for key in cfg.learner:
         if key not in names:
             raise ValueError(f"unknown OnPolicyConfig field {key!r}")
     # The learner's episode is counted in decisions (as sac_config does for the Q^c limit).
     fields: dict[str, Any] = {
-        "algo": ONPOLICY_ALGOS[cfg.algo],
+        "algo": onpolicy,
         "cost_limit": scenario.cost_limit,
         "episode_steps": math.ceil(scenario.episode_steps / cfg.action_repeat),
     }
-    fields.update(cfg.sac)
+    fields.update(cfg.learner)
     fields["hidden_sizes"] = tuple(fields.get("hidden_sizes", OnPolicyConfig.hidden_sizes))
     return OnPolicyConfig(**fields)
 
 
 def check_learner_settings(cfg: TrainConfig, scenario: Scenario) -> None:
     """Build the algorithm's config once, so that a bad --set fails before any work, in one line."""
+    if cfg.init_from and algorithm(cfg.algo).family is Family.ON_POLICY:
+        raise UsageError(f"--init-from: {cfg.algo} trains every role from scratch (the SAC family can be initialised)")
     try:
-        if cfg.algo in ON_POLICY:
-            check_override_kinds(cfg.sac, OnPolicyConfig)
+        if algorithm(cfg.algo).family is Family.ON_POLICY:
+            check_override_kinds(cfg.learner, OnPolicyConfig)
             onpolicy_config(cfg, scenario)
         else:
-            check_override_kinds(cfg.sac, SacConfig)
-            for key in cfg.sac:
+            check_override_kinds(cfg.learner, SacConfig)
+            for key in cfg.learner:
                 if key not in {f.name for f in dataclasses.fields(SacConfig)} or key == "variant":
                     raise ValueError(f"unknown SacConfig field {key!r}")
             sac_config(cfg, scenario)

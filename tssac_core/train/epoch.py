@@ -14,7 +14,8 @@ import numpy as np
 
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.deploy.export import export_actor
-from tssac_core.deploy.policy import Policy
+from tssac_core.deploy.policy import Policy, read_checkpoint
+from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import RoleTask, TaskStep
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario
@@ -97,9 +98,15 @@ def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
     """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's),
     and its actor as ``<role>.npz`` (tssac_core.deploy.numpy_actor)."""
-    best = selector.finish(out / f"{role.value}.pt", write_checkpoint)
-    if (out / f"{role.value}.pt").is_file():
-        export_actor(out / f"{role.value}.pt")  # <role>.npz: what the companion flies, without torch
+    final = out / f"{role.value}.pt"
+    try:
+        best = selector.finish(final, write_checkpoint)
+    except CheckpointError as exc:  # the best epoch's file was damaged: never ship it
+        logger.warning("%s; shipping the last epoch instead", exc)
+        write_checkpoint(final)
+        best = None
+    read_checkpoint(final)  # what ships loads (CheckpointError otherwise: one line, and the role is not finished)
+    export_actor(final)  # <role>.npz: what the companion flies, without torch
     if best is not None:
         logger.info("%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)", role.value, best.epoch,
                     best.mission_success, best.mean_cost)

@@ -1,7 +1,9 @@
 """What runs written by older versions of TSSAC mean, in one place.
 
 - ``config.json``: settings that did not exist when a run was written take the value the run used
-  (`OLDER_RUN_SETTINGS`, and the multiplier signal of the SAC family: `config_from_saved`).
+  (`OLDER_RUN_SETTINGS`, and the multiplier signal of the SAC family: `config_from_saved`); the learner
+  settings, ``learner`` now, were ``sac`` (`RENAMED_SETTINGS`).
+- Resume states written before the one format (one per learner family): :func:`tssac_core.train.resume.from_legacy`.
 - Pickles: role checkpoints (``<role>.pt``) and resume states (``resume/<role>.pt``) hold plain dicts,
   tensors, numpy arrays and builtins; they name no module of ``tssac_core`` (tests/test_legacy.py checks the
   shipped models and this version's own files), so the package's layout can change without breaking them.
@@ -14,11 +16,16 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.cli import UsageError
-from tssac_core.train.config import SAC_MULTIPLIER_ALGOS, SELECTIONS, TrainConfig
+from tssac_core.train.algorithms import ALGORITHMS, Selection
+from tssac_core.train.config import TrainConfig, has_multiplier_signal
 
 OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0, "selection": "within_limit"}
 """Settings that a config.json written before they existed means (those runs trained on eq. 11 exactly, and
 every algorithm shipped the best epoch within the cost limit)."""
+
+
+RENAMED_SETTINGS = {"sac": "learner"}
+"""config.json keys of older runs -> their TrainConfig field now."""
 
 
 def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainConfig:
@@ -29,14 +36,18 @@ def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainCo
     """
     if not isinstance(saved, dict):
         raise UsageError(f"{source}: not a training configuration")
+    saved = {RENAMED_SETTINGS.get(key, key): value for key, value in saved.items()}
     unknown = sorted(set(saved) - {f.name for f in dataclasses.fields(TrainConfig)})
     if unknown:
         raise UsageError(f"{source}: settings this TSSAC does not know: {', '.join(unknown)}")
     full = {**OLDER_RUN_SETTINGS, **saved}
     if not isinstance(full.get("roles"), list):
         raise UsageError(f"{source}: roles: expected a list of role names")
-    if full.get("algo") in SAC_MULTIPLIER_ALGOS and isinstance(full.get("sac"), dict) and "multiplier_signal" not in full["sac"]:
-        full["sac"] = {**full["sac"], "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
-    if full["selection"] not in SELECTIONS:
-        raise UsageError(f"{source}: selection: expected one of {', '.join(SELECTIONS)}, got {full['selection']!r}")
+    if full.get("algo") not in ALGORITHMS:
+        raise UsageError(f"{source}: algo: expected one of {', '.join(ALGORITHMS)}, got {full.get('algo')!r}")
+    learner = full.get("learner")
+    if has_multiplier_signal(full["algo"]) and isinstance(learner, dict) and "multiplier_signal" not in learner:
+        full["learner"] = {**learner, "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
+    if full["selection"] not in [None, "", *Selection]:
+        raise UsageError(f"{source}: selection: expected one of {', '.join(Selection)}, got {full['selection']!r}")
     return TrainConfig(**{**full, "roles": tuple(full["roles"])})

@@ -25,10 +25,11 @@ from typing import Any
 
 from tssac_core.cli import UsageError
 from tssac_core.sim.yaml_file import read_yaml
-from tssac_core.train.config import ON_POLICY, TrainConfig
+from tssac_core.train.algorithms import Family, family_of
+from tssac_core.train.config import TrainConfig
 
 SET_KEYS = ("set", "sac_set", "onpolicy_set")
-NOT_IN_PRESET = ("sac",)
+NOT_IN_PRESET = ("learner",)
 PATH_FIELDS = ("scenario", "init_from", "teammates")
 """TrainConfig fields a preset does not set directly (its learner settings go under SET_KEYS)."""
 
@@ -61,7 +62,7 @@ class Preset:
 
     def learner_settings(self, algo: str) -> dict[str, Any]:
         """The ``--set`` values for ``algo``: ``set``, then its family's (``sac_set`` or ``onpolicy_set``)."""
-        family = "onpolicy_set" if algo in ON_POLICY else "sac_set"
+        family = "onpolicy_set" if family_of(algo) is Family.ON_POLICY else "sac_set"
         return {**self.sets.get("set", {}), **self.sets.get(family, {})}
 
 

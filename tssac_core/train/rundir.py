@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import io
 import json
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -20,11 +20,17 @@ import torch
 
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.cli import UsageError, write_json
-from tssac_core.deploy.policy import CheckpointInfo, package_versions, save_role_checkpoint, torch_save_atomic
+from tssac_core.deploy.numpy_actor import NumpyPolicy
+from tssac_core.deploy.policy import CheckpointInfo, checkpoint_info, learner_state, package_versions, read_checkpoint, save_role_checkpoint
+from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario, load
-from tssac_core.train.config import TrainConfig, check_learner_settings, with_recorded_defaults
+from tssac_core.algos.networks import SquashedGaussianActor
+from tssac_core.train.config import TrainConfig, check_learner_settings, sac_config, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.resume import read_resume_state
+
+logger = logging.getLogger("tssac_core.train")
 
 
 def role_checkpoint(cfg: TrainConfig, out: Path, role: Role) -> Path:
@@ -55,18 +61,6 @@ def save_trained_role(path: Path, cfg: TrainConfig, scenario: Scenario, role: Ro
 
 def role_position(cfg: TrainConfig, role: Role) -> int:
     return list(cfg.roles).index(role.value)
-
-
-def save_resume_state(path: Path, state: dict[str, Any]) -> None:
-    """Write a resume state (`SeedRole.resume_state`) atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch_save_atomic(state, path)
-
-
-def read_resume_state(path: Path) -> dict[str, Any] | None:
-    if not path.is_file():
-        return None
-    return torch.load(io.BytesIO(path.read_bytes()), map_location="cpu", weights_only=False)
 
 
 METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
@@ -101,14 +95,30 @@ def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:
         writer.writerows(rows)
 
 
+def shipped(out: Path, role: Role | str) -> bool:
+    """``role`` is finished: its ``<role>.pt`` loads as a role checkpoint, and its ``<role>.npz`` export too if there
+    is one. A file that exists but does not load is reported (one line) and the role is trained again (from its
+    resume state)."""
+    name = Role(role).value
+    pt, npz = out / f"{name}.pt", out / f"{name}.npz"
+    if not pt.is_file():
+        return False
+    try:
+        checkpoint_info(read_checkpoint(pt), pt)
+        if npz.is_file():
+            NumpyPolicy.load(npz)
+    except CheckpointError as exc:
+        logger.warning("%s; training %s again from its resume state", exc, name)
+        return False
+    return True
+
+
 def completed_epochs(out: Path, role: str) -> int:
-    """Epochs of ``role`` that a resume can skip: all if its checkpoint exists, else the resume state's."""
-    if (out / f"{role}.pt").is_file():
+    """Epochs of ``role`` that a resume can skip: all if it shipped (`shipped`), else the resume state's."""
+    if shipped(out, role):
         return -1
-    state = out / "resume" / f"{role}.pt"
-    if state.is_file():
-        return int(torch.load(io.BytesIO(state.read_bytes()), map_location="cpu", weights_only=False)["epoch"])
-    return 0
+    state = read_resume_state(out, role)
+    return state.epoch if state is not None else 0
 
 
 def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig, Scenario]:
@@ -129,6 +139,8 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
         cfg = with_recorded_defaults(cfg)
     scenario = load(cfg.scenario)
     check_learner_settings(cfg, scenario)
+    if cfg.init_from:
+        check_init_from(cfg, scenario)
     for role_name in cfg.roles:
         role = Role(role_name)
         for earlier in ROLES[: role.index]:
@@ -150,3 +162,17 @@ def write_plots(out: Path, cost_limit: float) -> None:
     from tssac_core.plots import plot_training
 
     plot_training(out / "metrics.csv", out, cost_limit)
+
+
+def check_init_from(cfg: TrainConfig, scenario: Scenario) -> None:
+    """--init-from: a role checkpoint with the learner state and networks of this run's sizes (CheckpointError, one
+    line, before any work otherwise)."""
+    state = learner_state(cfg.init_from)
+    hidden = sac_config(cfg, scenario).hidden_sizes
+    with torch.random.fork_rng():  # a throwaway actor, only for its shapes: the run's random streams stay untouched
+        wanted = SquashedGaussianActor(ObservationMode(cfg.observation).size, 2, hidden).state_dict()
+    have = state.get("actor", {})
+    shapes = {k: tuple(v.shape) for k, v in have.items()} if isinstance(have, dict) else {}
+    if shapes != {k: tuple(v.shape) for k, v in wanted.items()}:
+        raise CheckpointError(f"--init-from {cfg.init_from}: its actor's layers {sorted(set(shapes.values()))} do not fit this "
+                              f"run's (hidden_sizes {list(hidden)}, observation {cfg.observation})")

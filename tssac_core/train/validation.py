@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -44,7 +43,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from tssac_core.deploy.policy import Policy
+from tssac_core.deploy.policy import Policy, read_checkpoint
+from tssac_core.files import replace_durably
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, sample_layout
@@ -196,6 +196,8 @@ class EpochSelector:
 
 
 def _copy_atomic(src: Path, dst: Path) -> None:
+    """Copy a checkpoint durably; CheckpointError (one line) if ``src`` does not load: never ship an unreadable file."""
+    read_checkpoint(src)
     tmp = dst.with_name(dst.name + ".tmp")
     shutil.copyfile(src, tmp)
-    os.replace(tmp, dst)
+    replace_durably(tmp, dst)
