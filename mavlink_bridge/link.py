@@ -11,10 +11,17 @@ Connection strings follow pymavlink / MAVProxy:
 * ``udpout:HOST:PORT`` — send to the vehicle at HOST:PORT from an OS-assigned local port (what the
   bundled SITL prints). The vehicle learns us from our first datagram, so we send HEARTBEATs
   while waiting for it (:meth:`MavLink.wait_heartbeat`).
-* ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer whoever sent last.
+* ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer the vehicle (below).
 
 Receiving keeps UDP's datagram boundaries: every datagram is parsed on its own, so a truncated frame
-never swallows the start of the next datagram. Messages that arrive while a command waits for its
+never swallows the start of the next datagram. Only the vehicle is heard: with ``udpout`` a datagram
+from any address but the vehicle's is dropped unread (counted in ``foreign_rx``); with ``udpin`` the
+first sender of an accepted message is the vehicle (with signing, the sender of the latest correctly
+signed one). With signing, every frame is verified by
+:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier` — signature first, then the stream's
+timestamp — before it is believed; pymavlink only decodes (its own check records a forged frame's
+timestamp before it compares the signature, and one far-future forgery would lock the vehicle's stream
+out). So mission events (NAMED_VALUE_INT ``MSN_END``, ``HIT``) are as authenticated as everything else. Messages that arrive while a command waits for its
 COMMAND_ACK are kept and returned by later :meth:`MavLink.recv` calls, never dropped. Every
 wait is bounded on ``time.monotonic()``; no wait uses the vehicle's clock (a silent vehicle has none).
 
@@ -39,6 +46,7 @@ from pathlib import Path
 from typing import BinaryIO, Callable, Optional
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
     "CommandError",
@@ -57,7 +65,6 @@ Message = mavlink2.MAVLink_message
 M = mavlink2
 
 MAX_DATAGRAM = 65535
-_EPOCH_2015_S = 1420070400
 _TLOG_FLUSH_S = 1.0
 
 SETPOINT_TYPE_MASK = (
@@ -127,7 +134,12 @@ class LinkCounters:
     bad_data_rx: int = 0
     """Frames pymavlink could not decode (bad CRC, garbage, unknown id)."""
     signature_rejected: int = 0
-    """Unsigned, wrongly signed or replayed messages (signing on)."""
+    """Unsigned, wrongly signed or replayed messages (signing on): the sum of the next three."""
+    unsigned_rx: int = 0
+    bad_signature_rx: int = 0
+    replayed_rx: int = 0
+    foreign_rx: int = 0
+    """Datagrams from an address other than the vehicle's, dropped unread."""
     truncated_rx: int = 0
     """Datagrams that ended inside a frame."""
     socket_errors_rx: int = 0
@@ -186,7 +198,11 @@ class MavLink:
         self._sock.setblocking(False)
         self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        self.mav.robust_parsing = True
+        """Packs (and signs) what we send."""
+        self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        """Frames and decodes what we receive; it has no key, so pymavlink never checks a signature."""
+        self._rx.robust_parsing = True
+        self._verifier: Optional[SignatureVerifier] = None
         if signing_key is not None:
             self.setup_signing(signing_key, signing_link_id)
         if tlog_path is not None:
@@ -213,7 +229,8 @@ class MavLink:
         signing.sign_outgoing = True
         signing.allow_unsigned_callback = None
         signing.link_id = link_id
-        signing.timestamp = int((max(time.time(), _EPOCH_2015_S) - _EPOCH_2015_S) * 100 * 1000)
+        signing.timestamp = now_10us()
+        self._verifier = SignatureVerifier(key)
 
     @property
     def signing(self) -> bool:
@@ -274,34 +291,61 @@ class MavLink:
                 self._warn_rate_limited("recvfrom", self.counters.socket_errors_rx, exc)
                 return
             now = time.monotonic()
+            sender = (str(addr[0]), int(addr[1]))
+            if self.spec.kind == "udpout" and sender != self._peer:
+                self.counters.foreign_rx += 1
+                continue
             self.counters.datagrams_rx += 1
-            if self.spec.kind == "udpin":
-                self._peer = (str(addr[0]), int(addr[1]))
-            self._parse_datagram(data, now)
+            msgs = self._parse_datagram(data)
+            if self.spec.kind == "udpin" and sender != self._peer:
+                # udpin: the first sender of an accepted message is the vehicle; with signing, a vehicle
+                # that moved is followed to the address its correctly signed frames now come from.
+                if not msgs or (self._peer is not None and self._verifier is None):
+                    self.counters.foreign_rx += 1
+                    continue
+                self._peer = sender
+            for msg in msgs:
+                self.counters.messages_rx += 1
+                self._log_frame(bytes(msg.get_msgbuf()))
+                self._backlog.append((msg, now))
 
-    def _parse_datagram(self, data: bytes, rx_s: float) -> None:
+    def _parse_datagram(self, data: bytes) -> list[Message]:
+        """The accepted messages of one datagram (with signing: correctly signed and fresh)."""
         try:
-            msgs = self.mav.parse_buffer(data) or []
+            msgs = self._rx.parse_buffer(data) or []
         except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
             self.counters.bad_data_rx += 1
             _log.debug("pymavlink failed on a datagram: %r", exc)
             msgs = []
-        if self.mav.buf_len() > 0:
+        if self._rx.buf_len() > 0:
             # The datagram ended inside a frame: drop the partial frame (UDP keeps datagram boundaries).
             self.counters.truncated_rx += 1
-            self.mav.buf = bytearray()
-            self.mav.buf_index = 0
-            self.mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
+            self._rx.buf = bytearray()
+            self._rx.buf_index = 0
+            self._rx.expected_length = mavlink2.HEADER_LEN_V1 + 2
+        accepted: list[Message] = []
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
-                if "signature" in str(getattr(msg, "reason", "")).lower():
-                    self.counters.signature_rejected += 1
-                else:
-                    self.counters.bad_data_rx += 1
+                self.counters.bad_data_rx += 1
                 continue
-            self.counters.messages_rx += 1
-            self._log_frame(bytes(msg.get_msgbuf()))
-            self._backlog.append((msg, rx_s))
+            if self._verifier is not None and not self._signature_accepted(bytes(msg.get_msgbuf())):
+                continue
+            accepted.append(msg)
+        return accepted
+
+    def _signature_accepted(self, frame: bytes) -> bool:
+        assert self._verifier is not None
+        verdict = self._verifier.check(frame)
+        if verdict is Verdict.OK:
+            return True
+        self.counters.signature_rejected += 1
+        if verdict is Verdict.UNSIGNED:
+            self.counters.unsigned_rx += 1
+        elif verdict is Verdict.BAD_SIGNATURE:
+            self.counters.bad_signature_rx += 1
+        else:
+            self.counters.replayed_rx += 1
+        return False
 
     # ------------------------------------------------------------------------------- send
 
@@ -309,6 +353,8 @@ class MavLink:
         """Pack (and sign) one message and send it; False if the socket refused it (counted, logged)."""
         if self._closed:
             return False
+        if self._verifier is not None:
+            refresh_outgoing_timestamp(self.mav.signing)
         buf = msg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
         self._log_frame(buf)

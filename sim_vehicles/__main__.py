@@ -64,6 +64,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--hold-start", action="store_true", help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED")
     p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
+    p.add_argument(
+        "--unsigned-monitors",
+        action="store_true",
+        help="with --signing-key: let passive monitors in with unsigned HEARTBEAT/RADIO_STATUS (4 at most, 2 kB/s of telemetry each)",
+    )
     p.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
     p.add_argument("--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here")
     p.add_argument("--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here")
@@ -94,6 +99,7 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         lockstep_start=LockstepStart(args.lockstep_start),
         hold_start=args.hold_start,
         signing_key=key,
+        unsigned_monitors=args.unsigned_monitors,
         truth_log=args.truth_log,
         layout_out=args.layout_out,
         tlog_dir=args.tlog_dir,

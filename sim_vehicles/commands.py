@@ -188,19 +188,20 @@ class CommandHandler:
     # ----------------------------------------------------------------------------- setpoints
 
     def _on_position_target(self, msg: Msg, addr: Address) -> None:
-        self._setpoint(setpoints.parse_position_target(msg), msg.time_boot_ms)
+        self._setpoint(setpoints.parse_position_target(msg))
 
     def _on_attitude_target(self, msg: Msg, addr: Address) -> None:
-        self._setpoint(setpoints.parse_attitude_target(msg), msg.time_boot_ms)
+        self._setpoint(setpoints.parse_attitude_target(msg))
 
     def _on_global_target(self, msg: Msg, addr: Address) -> None:
         self.v.reject(setpoints.GLOBAL_REFUSAL)
 
-    def _setpoint(self, parsed: setpoints.Demand | setpoints.Refusal, stamp_ms: int) -> None:
+    def _setpoint(self, parsed: setpoints.Demand | setpoints.Refusal) -> None:
+        # Its time_boot_ms stamp was read at the socket (Vehicle.poll_socket: the lockstep barrier).
         if isinstance(parsed, setpoints.Refusal):
             self.v.reject(parsed)
         else:
-            self.v.fly_demand(parsed, stamp_ms)
+            self.v.fly_demand(parsed)
 
     # ---------------------------------------------------------------------------- parameters
 

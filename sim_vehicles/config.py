@@ -56,6 +56,9 @@ class SitlConfig:
     10x the few wall seconds that companions take to start are a minute of uncontrolled flight."""
     signing_key: bytes | None = None
     """32-byte MAVLink 2 signing key; None = signing off."""
+    unsigned_monitors: bool = False
+    """With signing: accept unsigned HEARTBEAT / RADIO_STATUS from passive monitors (at most 4, each with a
+    telemetry budget of 2,000 bytes/s; they can command nothing). Off: nobody without the key gets telemetry."""
     truth_log: Path | None = None
     """JSON Lines truth log (states, costs, events, summary); None = no log."""
     layout_out: Path | None = None

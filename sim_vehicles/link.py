@@ -15,7 +15,15 @@ sigma ``gps_position_sigma_m`` and ``gps_velocity_sigma_m_s`` (white: no correla
   the channel has been delivered (at most :data:`REORDER_HOLD_MAX_S` past its due time).
 
 Channel time is the caller's *link clock*: scaled wall time (simulated seconds while the simulation
-keeps real time or a speed-up), plain wall time under lockstep — see :mod:`sim_vehicles.world_runner`.
+keeps real time or a speed-up), simulated time while a lockstep world steps — see
+:mod:`sim_vehicles.world_runner`.
+
+Random draws: an item pushed with a ``key`` (an int naming it: message id, step, occurrence) gets its
+loss, duplication and reordering draws from a hash of the channel's seed and that key, not from the
+channel's sequence; items without a key draw from the sequence. So the fate of a step's telemetry or of
+the setpoint that answers it does not depend on how many heartbeats, retries or wall-clock-timed frames
+went through the channel before: a lockstep mission over a lossy link is repeatable. ``lossless`` items
+(the lockstep tick) are only delayed.
 """
 
 from __future__ import annotations
@@ -119,6 +127,7 @@ class LinkChannel(Generic[D]):
         self._reorder = model.reordering
         self._latency_s = model.latency_ms / 1000.0
         self._rng = rng
+        self._key_seed = int(rng.integers(0, 2**63))
         self._ideal = self._loss == 0.0 and self._dup == 0.0 and self._reorder == 0.0 and self._latency_s == 0.0
         self._ready: deque[D] = deque()  # the ideal channel's fast path: delivered in order, at once
         self._heap: list[_Queued[D]] = []
@@ -130,13 +139,16 @@ class LinkChannel(Generic[D]):
     def ideal(self) -> bool:
         return self._ideal
 
-    def push(self, now_s: float, item: D) -> None:
-        """Send ``item`` into the channel at link time ``now_s``."""
+    def push(self, now_s: float, item: D, key: int | None = None, lossless: bool = False) -> None:
+        """Send ``item`` into the channel at link time ``now_s`` (``key``, ``lossless``: see the module docstring)."""
         self.counters.pushed += 1
         if self._ideal:
             self._ready.append(item)
             return
-        u_loss, u_dup, u_reorder = self._rng.random(3)
+        if lossless:
+            heapq.heappush(self._heap, _Queued(now_s + self._latency_s, next(self._seq), item))
+            return
+        u_loss, u_dup, u_reorder = self._rng.random(3) if key is None else keyed_uniforms(self._key_seed, key)
         if u_loss < self._loss:
             self.counters.lost += 1
             return
@@ -181,3 +193,24 @@ class LinkChannel(Generic[D]):
         if self._held is not None:
             times.append(self._held[1])
         return min(times) if times else None
+
+
+_MASK64 = (1 << 64) - 1
+
+
+def _mix64(x: int) -> int:
+    """SplitMix64's finaliser: a bijective scramble of 64 bits."""
+    x = (x + 0x9E3779B97F4A7C15) & _MASK64
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return x ^ (x >> 31)
+
+
+def keyed_uniforms(seed: int, key: int) -> tuple[float, float, float]:
+    """Three uniforms in [0, 1) determined by (seed, key) alone."""
+    h = _mix64(seed ^ _mix64(key & _MASK64))
+    out = []
+    for _ in range(3):
+        h = _mix64(h)
+        out.append((h >> 11) * (1.0 / (1 << 53)))
+    return out[0], out[1], out[2]

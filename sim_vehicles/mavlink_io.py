@@ -1,30 +1,45 @@
-"""One vehicle's MAVLink 2 endpoint on UDP: socket, framing, signing checks, peers.
+"""One vehicle's MAVLink 2 endpoint on UDP: socket, framing, signing checks, clients.
 
-:class:`MavEndpoint` wraps a UDP socket bound like pymavlink's ``udpin:HOST:PORT`` and pymavlink's
-MAVLink protocol object (dialect ardupilotmega, wire protocol 2.0). It does not use
+:class:`MavEndpoint` wraps a UDP socket bound like pymavlink's ``udpin:HOST:PORT`` and two pymavlink
+MAVLink protocol objects (dialect ardupilotmega, wire protocol 2.0): one that packs (and signs) what the
+vehicle sends, one without a key that only decodes frames already checked here. It does not use
 ``mavutil.mavudp`` because the vehicle needs what that class hides: the sender of every datagram
-(peers are learned only from datagrams holding a valid message, and forgotten after
-:data:`PEER_TIMEOUT_S` of silence), per-datagram framing (UDP keeps
-datagram boundaries, so a truncated frame must not swallow the next datagram), a bind that fails
-when the port is taken (``mavudp`` sets SO_REUSEADDR), and socket errors counted rather than
-swallowed.
+(clients are learned only from datagrams holding an accepted message, and forgotten after
+:data:`PEER_TIMEOUT_S` of silence), per-datagram framing (UDP keeps datagram boundaries, so a truncated
+frame must not swallow the next datagram), a bind that fails when the port is taken (``mavudp`` sets
+SO_REUSEADDR), and socket errors counted rather than swallowed.
 
 Every datagram is split into frames here; a frame is decoded only if its CRC (with the message's
-CRC_EXTRA) matches. Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned,
-wrongly signed and replayed messages are dropped and counted in :class:`RxCounters`; nothing that
-arrives on the socket can raise out of :meth:`MavEndpoint.parse`.
+CRC_EXTRA) matches and, with signing, its signature verifies (:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
+signature first, then the stream's timestamp — pymavlink's own check records the timestamp first).
+Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned, wrongly signed and replayed
+messages are dropped and counted in :class:`RxCounters`; a header that does not check out (unknown id,
+bad CRC, cut off) is rescanned from its next byte, so a valid frame behind it in the same datagram is
+still found. Nothing that arrives on the socket can raise out of :meth:`MavEndpoint.parse`.
+
+Who gets telemetry:
+
+* **clients** (:attr:`MavEndpoint.peers`): senders of an accepted message — with signing, a correctly
+  signed, fresh one; without signing, any valid one. At most :data:`MAX_PEERS` at once.
+* **monitors** (:attr:`MavEndpoint.monitors`, only with signing and ``unsigned_monitors``): senders of an
+  *unsigned* HEARTBEAT or RADIO_STATUS, the passive displays and radios PX4 lets in. At most
+  :data:`MAX_MONITORS`, each with a telemetry budget of :data:`MONITOR_BYTES_PER_S` (what does not fit
+  is not sent to it, counted). Off by default: with signing on and default settings, nobody without the
+  key gets a byte. A wrongly signed frame is never a monitor's: it is refused.
 """
 
 from __future__ import annotations
 
+import enum
 import errno
 import logging
 import socket
 import struct
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
 
 from sim_vehicles import signing
 
@@ -35,9 +50,24 @@ MAX_DATAGRAM = 65535
 RCVBUF_BYTES = 1 << 20
 PEER_TIMEOUT_S = 30.0
 """A client silent this long (wall clock) is forgotten; ground stations and companions send at 1 Hz or more."""
+MAX_PEERS = 16
+"""Clients served at once; a new one beyond this is refused (counted) until another falls silent."""
+MAX_MONITORS = 4
+"""Unsigned monitors served at once (signing on, ``unsigned_monitors`` set)."""
+MONITOR_BYTES_PER_S = 2000
+"""Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
 _V1, _V2 = mavlink2.PROTOCOL_MARKER_V1, mavlink2.PROTOCOL_MARKER_V2
 _SIG_LEN = mavlink2.MAVLINK_SIGNATURE_BLOCK_LEN
 _IFLAG_SIGNED = mavlink2.MAVLINK_IFLAG_SIGNED
+
+
+class Sender(enum.Enum):
+    """What a datagram's accepted messages make of its sender."""
+
+    CLIENT = "client"
+    """A signed, fresh message (or, without signing, any valid one): full telemetry, commands obeyed."""
+    MONITOR = "monitor"
+    """Only unsigned HEARTBEAT / RADIO_STATUS under signing, monitors allowed: budgeted telemetry, nothing obeyed."""
 
 
 @dataclass
@@ -58,8 +88,12 @@ class RxCounters:
     bad_signature: int = 0
     replayed: int = 0
     """Signed frames whose timestamp is not newer than their stream's (or too old for a new stream)."""
+    monitor_frames: int = 0
+    """Unsigned HEARTBEAT / RADIO_STATUS accepted from monitors."""
     decode_errors: int = 0
     socket_errors: int = 0
+    peers_refused: int = 0
+    """Datagrams from a would-be client or monitor while the table was full."""
 
     @property
     def rejected(self) -> int:
@@ -75,6 +109,34 @@ class TxCounters:
     """Datagrams handed to the socket (one per peer)."""
     bytes: int = 0
     socket_errors: int = 0
+    monitor_throttled: int = 0
+    """Datagrams not sent to a monitor because its budget was spent."""
+
+
+class _Check(enum.Enum):
+    """One frame's fate in :meth:`MavEndpoint.parse`."""
+
+    RESCAN = "rescan"
+    """Not a frame after all (unknown id, bad CRC): look for one from the next byte."""
+    REJECTED = "rejected"
+    """A whole frame, refused (unsigned, wrongly signed, replayed) and counted."""
+    CLIENT = "client"
+    MONITOR = "monitor"
+
+
+@dataclass
+class Parsed:
+    """The accepted messages of one datagram and what they make of its sender (None: nothing accepted)."""
+
+    messages: list[mavlink2.MAVLink_message] = field(default_factory=list)
+    sender: Sender | None = None
+
+
+@dataclass
+class _Monitor:
+    last_seen_s: float
+    tokens: float = float(MONITOR_BYTES_PER_S)
+    refilled_s: float = 0.0
 
 
 class EndpointError(OSError):
@@ -82,9 +144,9 @@ class EndpointError(OSError):
 
 
 class MavEndpoint:
-    """A MAVLink system's UDP endpoint: bind, receive, frame + decode, encode, send to peers."""
+    """A MAVLink system's UDP endpoint: bind, receive, frame + check + decode, encode, send to clients."""
 
-    def __init__(self, host: str, port: int, sysid: int, compid: int, signing_key: bytes | None = None) -> None:
+    def __init__(self, host: str, port: int, sysid: int, compid: int, signing_key: bytes | None = None, unsigned_monitors: bool = False) -> None:
         self.sysid = sysid
         self.compid = compid
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -99,11 +161,19 @@ class MavEndpoint:
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
         self.host, self.port = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        self.signing = signing_key is not None
+        """Packs (and signs) what this system sends; never decodes."""
+        self._decoder = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        """Decodes frames this endpoint has already checked (no key: pymavlink's signature check never runs)."""
+        self.verifier: SignatureVerifier | None = None
         if signing_key is not None:
             signing.enable_signing(self.mav, signing_key)
+            self.verifier = SignatureVerifier(signing_key)
+        self.signing = signing_key is not None
+        self.unsigned_monitors = unsigned_monitors and self.signing
         self.peers: dict[Address, float] = {}
-        """Clients, by address: time.monotonic() of their last valid message."""
+        """Clients, by address: time.monotonic() of their last accepted message."""
+        self.monitors: dict[Address, _Monitor] = {}
+        """Unsigned monitors (signing on, ``unsigned_monitors``), by address."""
         self.rx = RxCounters()
         self.tx = TxCounters()
         self._closed = False
@@ -112,6 +182,11 @@ class MavEndpoint:
 
     def fileno(self) -> int:
         return self._sock.fileno()
+
+    @property
+    def has_clients(self) -> bool:
+        """Anyone to send telemetry to (clients or monitors)."""
+        return bool(self.peers) or bool(self.monitors)
 
     def receive(self, max_datagrams: int = 256) -> list[tuple[bytes, Address]]:
         """Drain up to ``max_datagrams`` waiting datagrams (non-blocking)."""
@@ -130,9 +205,13 @@ class MavEndpoint:
         return out
 
     def sendto(self, data: bytes, dest: Address | None = None) -> None:
-        """Send one datagram to ``dest``, or to every known peer if None."""
-        targets = list(self.peers) if dest is None else [dest]
+        """Send one datagram to ``dest``, or to every client and monitor if None (monitors within budget)."""
+        targets = list(self.peers) + [a for a in self.monitors if a not in self.peers] if dest is None else [dest]
         for addr in targets:
+            monitor = self.monitors.get(addr) if addr not in self.peers else None
+            if monitor is not None and not self._spend(monitor, len(data)):
+                self.tx.monitor_throttled += 1
+                continue
             try:
                 self._sock.sendto(data, addr)
             except OSError as exc:
@@ -143,12 +222,56 @@ class MavEndpoint:
             self.tx.packets += 1
             self.tx.bytes += len(data)
 
+    @staticmethod
+    def _spend(monitor: _Monitor, size: int) -> bool:
+        """Token bucket: MONITOR_BYTES_PER_S, at most one second's worth saved up."""
+        now = time.monotonic()
+        monitor.tokens = min(float(MONITOR_BYTES_PER_S), monitor.tokens + (now - monitor.refilled_s) * MONITOR_BYTES_PER_S)
+        monitor.refilled_s = now
+        if size > monitor.tokens:
+            return False
+        monitor.tokens -= size
+        return True
+
+    def admit(self, addr: Address, sender: Sender) -> bool:
+        """Record a datagram's sender as a client or monitor; True if it is a new one (it gets a snapshot)."""
+        now = time.monotonic()
+        if sender is Sender.CLIENT or addr in self.peers:
+            if addr in self.peers:
+                self.peers[addr] = now
+                return False
+            if len(self.peers) >= MAX_PEERS:
+                self._refuse(addr, "clients")
+                return False
+            self.peers[addr] = now
+            self.monitors.pop(addr, None)
+            _log.info("sysid %d: new client %s:%d", self.sysid, addr[0], addr[1])
+            return True
+        monitor = self.monitors.get(addr)
+        if monitor is not None:
+            monitor.last_seen_s = now
+            return False
+        if len(self.monitors) >= MAX_MONITORS:
+            self._refuse(addr, "monitors")
+            return False
+        self.monitors[addr] = _Monitor(last_seen_s=now, refilled_s=now)
+        _log.info("sysid %d: new unsigned monitor %s:%d", self.sysid, addr[0], addr[1])
+        return True
+
+    def _refuse(self, addr: Address, table: str) -> None:
+        self.rx.peers_refused += 1
+        if self.rx.peers_refused in (1, 10, 100, 1000) or self.rx.peers_refused % 10000 == 0:
+            _log.warning("sysid %d: %s table full, %s:%d refused (%d so far)", self.sysid, table, addr[0], addr[1], self.rx.peers_refused)
+
     def expire_peers(self, now_wall_s: float, timeout_s: float = PEER_TIMEOUT_S) -> None:
-        """Forget clients that sent nothing valid for ``timeout_s`` wall seconds (they stop getting telemetry)."""
+        """Forget clients and monitors that sent nothing accepted for ``timeout_s`` wall seconds."""
         for addr, last in list(self.peers.items()):
             if now_wall_s - last > timeout_s:
                 del self.peers[addr]
-                _log.info("sysid %d: peer %s:%d silent for %.0f s, forgotten", self.sysid, addr[0], addr[1], now_wall_s - last)
+                _log.info("sysid %d: client %s:%d silent for %.0f s, forgotten", self.sysid, addr[0], addr[1], now_wall_s - last)
+        for addr, monitor in list(self.monitors.items()):
+            if now_wall_s - monitor.last_seen_s > timeout_s:
+                del self.monitors[addr]
 
     def close(self) -> None:
         if not self._closed:
@@ -159,16 +282,18 @@ class MavEndpoint:
 
     def encode(self, msg: mavlink2.MAVLink_message) -> bytes:
         """Pack (and sign, if signing is on) one message from this system."""
+        if self.signing:
+            refresh_outgoing_timestamp(self.mav.signing)
         buf = msg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
         self.mav.total_packets_sent += 1
         self.mav.total_bytes_sent += len(buf)
         return buf
 
-    def parse(self, data: bytes, addr: Address) -> list[mavlink2.MAVLink_message]:
-        """Decode every valid frame of one datagram; learn ``addr`` as a peer if any was valid."""
+    def parse(self, data: bytes, addr: Address) -> Parsed:
+        """Check and decode every frame of one datagram (clients are recorded by :meth:`admit`)."""
         self.rx.datagrams += 1
-        msgs: list[mavlink2.MAVLink_message] = []
+        out = Parsed()
         i, n = 0, len(data)
         while i < n:
             magic = data[i]
@@ -188,63 +313,59 @@ class MavEndpoint:
                 continue
             frame = data[i : i + size]
             verdict = self._check_frame(frame)
-            if verdict == "bad_crc":
-                self.rx.bad_crc += 1
+            if verdict is _Check.RESCAN:  # not a frame after all (unknown id, bad CRC): rescan from the next byte
                 i += 1
                 continue
             i += size
-            if verdict != "ok":
+            if verdict is _Check.REJECTED:
                 continue
             msg = self._decode(frame)
-            if msg is not None:
-                msgs.append(msg)
-        if msgs:
-            if addr not in self.peers:
-                _log.info("sysid %d: new peer %s:%d", self.sysid, addr[0], addr[1])
-            self.peers[addr] = time.monotonic()
-        self.rx.messages += len(msgs)
-        return msgs
+            if msg is None:
+                continue
+            out.messages.append(msg)
+            sender = Sender.CLIENT if verdict is _Check.CLIENT else Sender.MONITOR
+            if out.sender is not Sender.CLIENT:
+                out.sender = sender
+        self.rx.messages += len(out.messages)
+        return out
 
-    def _check_frame(self, frame: bytes) -> str:
-        """'ok', 'bad_crc', or the name of the counter already incremented for a rejected frame."""
+    def _check_frame(self, frame: bytes) -> _Check:
+        """Whether a frame vouches for a client or a monitor, was refused (counted), or is no frame at all."""
         signed = frame[0] == _V2 and bool(frame[2] & _IFLAG_SIGNED)
         msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16) if frame[0] == _V2 else frame[5]
         msg_type = mavlink2.mavlink_map.get(msg_id)
         if msg_type is None:
+            # Its CRC cannot be checked, so its length cannot be trusted either: it may be garbage
+            # claiming a long frame over the next real one.
             self.rx.unknown_id += 1
-            return "unknown_id"
+            return _Check.RESCAN
         end = len(frame) - (_SIG_LEN if signed else 0)
         crc = mavlink2.x25crc(bytes(frame[1 : end - 2]))
         crc.accumulate(bytes((msg_type.crc_extra,)))
         if crc.crc != struct.unpack_from("<H", frame, end - 2)[0]:
-            return "bad_crc"
-        if self.signing:
-            if not signed:
-                if not signing.allow_unsigned(self.mav, msg_id):
-                    self.rx.unsigned_rejected += 1
-                    return "unsigned_rejected"
-            elif signing.is_replay(self.mav, frame):
-                self.rx.replayed += 1
-                return "replayed"
-        return "ok"
+            self.rx.bad_crc += 1
+            return _Check.RESCAN
+        if self.verifier is None:
+            return _Check.CLIENT
+        verdict = self.verifier.check(frame)
+        if verdict is Verdict.OK:
+            return _Check.CLIENT
+        if verdict is Verdict.UNSIGNED:
+            if self.unsigned_monitors and msg_id in signing.MONITOR_IDS:
+                self.rx.monitor_frames += 1
+                return _Check.MONITOR
+            self.rx.unsigned_rejected += 1
+        elif verdict is Verdict.BAD_SIGNATURE:
+            self.rx.bad_signature += 1
+        else:
+            self.rx.replayed += 1
+        return _Check.REJECTED
 
     def _decode(self, frame: bytes) -> mavlink2.MAVLink_message | None:
-        signed = frame[0] == _V2 and bool(frame[2] & _IFLAG_SIGNED)
-        stream_key = signing.signature_stream(frame)[0] if (signed and self.signing) else None
-        saved = self.mav.signing.stream_timestamps.get(stream_key) if stream_key is not None else None
         try:
-            return self.mav.decode(bytearray(frame))
+            return self._decoder.decode(bytearray(frame))
         except mavlink2.MAVError:
-            if stream_key is not None:
-                self.rx.bad_signature += 1
-                # pymavlink records a stream's timestamp before it checks the signature; undo that, so a
-                # forged frame with a far-future timestamp cannot lock the real sender out.
-                if saved is None:
-                    self.mav.signing.stream_timestamps.pop(stream_key, None)
-                else:
-                    self.mav.signing.stream_timestamps[stream_key] = saved
-            else:
-                self.rx.decode_errors += 1
+            self.rx.decode_errors += 1
             return None
         except Exception as exc:  # a pymavlink bug on hostile input must not take the vehicle down
             self.rx.decode_errors += 1

@@ -39,10 +39,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sim_vehicles import navigation, telemetry
 from sim_vehicles.events import EventKind, MissionEvent, MissionFlags
 from sim_vehicles.link import GpsFix, GpsReceiver, LinkChannel
-from sim_vehicles.mavlink_io import Address, MavEndpoint
+from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
 from sim_vehicles.modes import AUTONOMOUS, FlightMode
 from sim_vehicles.params import ParamTable, vehicle_params
-from sim_vehicles.setpoints import Demand, Refusal, accel_command
+from sim_vehicles.setpoints import Demand, Refusal, accel_command, parse_attitude_target, parse_position_target
 from sim_vehicles.telemetry import VehicleTruth
 from tssac_core.sim.scenario import LinkModel, Origin
 
@@ -72,6 +72,8 @@ DEFAULT_INTERVALS_S: dict[int, float | None] = {
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
 }
 """Default stream intervals in simulated seconds (None = off); SET_MESSAGE_INTERVAL changes them."""
+MAX_INTERVAL_US = 2**31 - 1
+"""Longest stream interval SET_MESSAGE_INTERVAL accepts (~36 min): MESSAGE_INTERVAL.interval_us is an int32."""
 GPS_GATED = frozenset({M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED})
 """Streams that carry a GPS fix: sent when due *and* a fix newer than the last one sent exists."""
 REQUESTABLE = frozenset(DEFAULT_INTERVALS_S) | {M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN}
@@ -90,6 +92,8 @@ class Clock:
     """time.monotonic() of the current loop iteration."""
     unix_start_s: float = 0.0
     """Unix time of simulated time 0 (SYSTEM_TIME, tlog timestamps)."""
+    lockstep: bool = False
+    """The world runs in lockstep: every SYSTEM_TIME is a step tick, delayed by the link but never lost."""
 
     @property
     def time_boot_ms(self) -> int:
@@ -234,8 +238,10 @@ class Vehicle:
         self.endpoint = endpoint
         self.clock = clock
         self.flags = flags
-        self.tx: LinkChannel[tuple[bytes, Address | None]] = LinkChannel(setup.link, rngs.tx)
-        self.rx: LinkChannel[tuple[bytes, Address]] = LinkChannel(setup.link, rngs.rx)
+        self.tx: LinkChannel[tuple[bytes, Address | None, int]] = LinkChannel(setup.link, rngs.tx)
+        """Frames out: (frame, destination or None for every client, the tick's time_boot_ms or -1)."""
+        self.rx: LinkChannel[tuple[Parsed, Address]] = LinkChannel(setup.link, rngs.rx)
+        """Datagrams in, already checked and decoded at the socket (see :meth:`poll_socket`)."""
         self.gps = GpsReceiver(setup.link, rngs.gps)
         self.params: ParamTable = vehicle_params(
             setup.sysid,
@@ -260,6 +266,16 @@ class Vehicle:
         self.loop_since_wall_s = 0.0
         """Wall time the vehicle last came under companion control (for the lockstep barrier)."""
         self._credit_ms = -1
+        """Newest step a client has answered with a setpoint (at the socket, before the link model)."""
+        self.tick_seen_ms = -1
+        """Newest step tick (SYSTEM_TIME) the datalink has delivered to the clients."""
+        self._entry_credit_ms = -1
+        """The credit when the vehicle last came under companion control (it holds the world once it grows)."""
+        self._sent_step_ms = -1
+        self._sent_in_step: dict[int, int] = {}
+        """Frames sent per message id at time _sent_step_ms: the occurrence part of their link-model key."""
+        self._rx_setpoints: dict[int, int] = {}
+        """Datagrams holding a setpoint, per stamp: the occurrence part of their link-model key."""
         self.last_action = (0.0, 0.0)
         self.truth = VehicleTruth(setup.home_east_m, setup.home_north_m, setup.speed_min_m_s, 0.0, 0.0, 0.0)
         self._streams = {mid: _Stream(iv) for mid, iv in DEFAULT_INTERVALS_S.items()}
@@ -290,9 +306,18 @@ class Vehicle:
         """Under companion control: armed in GUIDED and not in failsafe (the lockstep barrier waits for it)."""
         return self.armed and self.guided and not self.failsafe
 
-    def ready_for(self, time_boot_ms: int) -> bool:
-        """A setpoint stamped for (or unstamped and received at) the step at ``time_boot_ms`` has arrived."""
-        return self._credit_ms >= time_boot_ms
+    @property
+    def holds_world(self) -> bool:
+        """Lockstep barrier member: in the loop, and its client has answered a tick since it took control.
+
+        Until that first answer the world does not wait for it: the client may still be waiting for the
+        COMMAND_ACK of the mode change, which a lossy, slow link delivers only as simulated time runs.
+        """
+        return self.in_loop and self._credit_ms > self._entry_credit_ms
+
+    def answered(self) -> bool:
+        """Lockstep: a client has answered the newest step tick the datalink delivered (see :meth:`poll_socket`)."""
+        return self._credit_ms >= self.tick_seen_ms
 
     @property
     def system_status(self) -> int:
@@ -309,27 +334,60 @@ class Vehicle:
             self.endpoint.peers.setdefault(out, self.clock.wall_s)
 
     def poll_socket(self) -> None:
-        """Move waiting datagrams from the socket into the incoming link channel."""
+        """Check and decode waiting datagrams and move them into the incoming link channel.
+
+        Checking (signatures, replays) happens here, at the socket, so that the link model acts on
+        messages: a setpoint the link then loses or delays still tells the lockstep barrier that its
+        client has answered the step (:meth:`answered`). The vehicle flies the previous command until
+        the setpoint arrives, or through the step if it never does, as a real vehicle would.
+        """
         for out in self.outputs:  # --out ground stations are never forgotten
             self.endpoint.peers[out] = self.clock.wall_s
         self.endpoint.expire_peers(self.clock.wall_s)
         for data, addr in self.endpoint.receive():
-            self.rx.push(self.clock.link_s, (data, addr))
+            parsed = self.endpoint.parse(data, addr)
+            if parsed.sender is None:
+                continue  # nothing accepted: it never reaches the vehicle, and its sender is nobody
+            key = None
+            for msg in parsed.messages:
+                if self._credit(msg):
+                    stamp = int(msg.time_boot_ms)
+                    if len(self._rx_setpoints) > 256:  # only recent stamps matter; clients may send any
+                        self._rx_setpoints.clear()
+                    n = self._rx_setpoints[stamp] = self._rx_setpoints.get(stamp, -1) + 1
+                    key = hash((msg.get_msgId(), stamp, n))
+            self.rx.push(self.clock.link_s, (parsed, addr), key)
 
     def process_incoming(self) -> None:
-        """Parse and handle the datagrams the incoming channel delivers now."""
-        for data, addr in self.rx.pop_due(self.clock.link_s):
-            new_peer = addr not in self.endpoint.peers
-            msgs = self.endpoint.parse(data, addr)
-            if msgs:
+        """Handle the datagrams the incoming channel delivers now."""
+        for parsed, addr in self.rx.pop_due(self.clock.link_s):
+            if parsed.sender is Sender.CLIENT:  # an unsigned monitor keeps no datalink alive
                 self._heard_client()
-                if new_peer:
-                    self.send_snapshot(addr)
-            for msg in msgs:
+            assert parsed.sender is not None
+            if self.endpoint.admit(addr, parsed.sender):
+                self.send_snapshot(addr)
+            for msg in parsed.messages:
                 if self._tlog is not None:
                     self._write_tlog(bytes(msg.get_msgbuf()))
                 assert self.handler is not None, "no message handler attached"
                 self.handler.handle(msg, addr)
+
+    def _credit(self, msg: mavlink2.MAVLink_message) -> bool:
+        """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now)."""
+        mtype = msg.get_type()
+        if mtype == "SET_POSITION_TARGET_LOCAL_NED":
+            parsed = parse_position_target(msg)
+        elif mtype == "SET_ATTITUDE_TARGET":
+            parsed = parse_attitude_target(msg)
+        else:
+            return False
+        if isinstance(parsed, Refusal):
+            return False
+        if msg.target_system not in (0, self.sysid) or msg.target_component not in (0, self.compid):
+            return False
+        stamp = int(msg.time_boot_ms)
+        self._credit_ms = max(self._credit_ms, self.tick_seen_ms if stamp == 0 else min(stamp, self.clock.time_boot_ms))
+        return True
 
     def flush(self) -> None:
         """Send the frames the outgoing channel delivers now, packed into datagrams per destination.
@@ -339,7 +397,8 @@ class Vehicle:
         step instead of one per message. Loss, duplication and latency still act on every frame.
         """
         batches: dict[Address | None, list[bytes]] = {}
-        for data, dest in self.tx.pop_due(self.clock.link_s):
+        for data, dest, tick_ms in self.tx.pop_due(self.clock.link_s):
+            self.tick_seen_ms = max(self.tick_seen_ms, tick_ms)
             frames = batches.setdefault(dest, [])
             if frames and len(frames[-1]) + len(data) <= COALESCE_BYTES:
                 frames[-1] += data
@@ -356,12 +415,19 @@ class Vehicle:
 
     def send(self, msg: mavlink2.MAVLink_message, dest: Address | None = None) -> None:
         """Queue one message for ``dest`` (None: every peer) on the outgoing link."""
-        if dest is None and not self.endpoint.peers:
+        if dest is None and not self.endpoint.has_clients:
             return
         buf = self.endpoint.encode(msg)
         if self._tlog is not None:
             self._write_tlog(buf)
-        self.tx.push(self.clock.link_s, (buf, dest))
+        # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
+        mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
+        tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
+        if now_ms != self._sent_step_ms:
+            self._sent_step_ms, self._sent_in_step = now_ms, {}
+        n = self._sent_in_step[mid] = self._sent_in_step.get(mid, 0) + 1
+        lossless = self.clock.lockstep and tick_ms >= 0
+        self.tx.push(self.clock.link_s, (buf, dest, tick_ms), hash((mid, now_ms, n)), lossless)
 
     def _write_tlog(self, frame: bytes) -> None:
         assert self._tlog is not None
@@ -442,7 +508,7 @@ class Vehicle:
                 if fix is None or fix.time_s <= stream.last_fix_s:
                     continue  # stays due until a fresh fix arrives
                 stream.last_fix_s = fix.time_s
-            if self.endpoint.peers:
+            if self.endpoint.has_clients:
                 for msg in self.build(mid):
                     self.send(msg)
             nxt = stream.next_due_s + stream.interval_s
@@ -529,7 +595,7 @@ class Vehicle:
             stream.interval_s = None
         elif interval_us == 0:
             stream.interval_s = DEFAULT_INTERVALS_S[mid]
-        elif interval_us > 0 and math.isfinite(interval_us):
+        elif 0 < interval_us <= MAX_INTERVAL_US:  # also false for NaN
             stream.interval_s = interval_us / 1e6
         else:
             return M.MAV_RESULT_DENIED
@@ -541,7 +607,7 @@ class Vehicle:
         stream = self._streams.get(mid)
         if stream is None:
             return None
-        return -1 if stream.interval_s is None else int(round(stream.interval_s * 1e6))
+        return -1 if stream.interval_s is None else min(MAX_INTERVAL_US, int(round(stream.interval_s * 1e6)))
 
     # -------------------------------------------------------------------------- state changes
 
@@ -587,8 +653,9 @@ class Vehicle:
             # The setpoint timeout runs from the moment the companion takes control.
             self.last_setpoint_s = self.clock.sim_s
             self.loop_since_wall_s = self.clock.wall_s
+            self._entry_credit_ms = self._credit_ms
 
-    def fly_demand(self, demand: Demand, stamp_ms: int) -> bool:
+    def fly_demand(self, demand: Demand) -> bool:
         """Fly a parsed setpoint if armed in GUIDED (True), else count it as ignored (False)."""
         if not (self.armed and self.guided):
             self.counters.setpoints_ignored += 1
@@ -598,8 +665,6 @@ class Vehicle:
         self.setpoint = Setpoint(demand, now)
         self.last_setpoint_s = now
         self.counters.setpoints_accepted += 1
-        current_ms = self.clock.time_boot_ms
-        self._credit_ms = max(self._credit_ms, current_ms if stamp_ms == 0 else min(stamp_ms, current_ms))
         if self.failsafe:
             self.clear_failsafe()
         return True

@@ -26,13 +26,21 @@ All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step 
   setpoint timeout is measured on the wall clock there, because simulated time stands still while
   the world waits for it); its next setpoint brings it back into the loop. While nobody is in the
   loop (all disarmed, in MANUAL or in failsafe) the world runs at real time (times ``speedup``).
+  "Current step" means the newest step tick (SYSTEM_TIME) the vehicle's datalink has delivered: with
+  link latency the world runs that many steps ahead of what its clients have seen, as a real vehicle
+  flies on while its telemetry and the answers travel, and a setpoint counts as an answer when it
+  reaches the socket, whatever the link model then does to it (a lost setpoint: the step is flown on
+  the previous command).
 * ``--hold-start`` (real time): the same start gate as lockstep, then real time x ``speedup``.
   After every lockstep step each vehicle sends SYSTEM_TIME (the step "tick"), so a client sees every
   step even when its other streams are slower than the step rate. While the world holds still,
   each vehicle sends a snapshot (heartbeat, status, flags, position) once per wall second.
 
 The link models (latency, reordering hold) run on the *link clock*: wall time times ``speedup``
-(simulated seconds while the simulation keeps up) in real-time mode, wall time under lockstep.
+(simulated seconds while the simulation keeps up) in real-time mode; under lockstep simulated time
+while the world steps in lockstep, and wall time times ``speedup`` while it holds at the start, runs
+paced (nobody in the loop) or lingers — so a lockstep mission with a lossy, slow link stays repeatable
+and runs at lockstep speed.
 
 Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
 MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
@@ -131,9 +139,11 @@ class WorldRunner:
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
         self.flags = MissionFlags()
-        self.clock = Clock(unix_start_s=time.time())
+        self.clock = Clock(unix_start_s=time.time(), lockstep=self.lockstep)
         self._stop = threading.Event()
         self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
+        self._paced = not self.lockstep
+        """Lockstep with nobody in the loop: the world runs at real time x speedup."""
         self._end: MissionEnd | None = None
         self._first_step_cpu_s: float | None = None
         """This process's CPU clock at the first world step (the summary reports the flight's CPU)."""
@@ -167,7 +177,7 @@ class WorldRunner:
         c = self.world.c
         for i, role in enumerate(ROLES):
             try:
-                endpoint = MavEndpoint(config.host, config.port_for(i), i + 1, 1, config.signing_key)
+                endpoint = MavEndpoint(config.host, config.port_for(i), i + 1, 1, config.signing_key, config.unsigned_monitors)
             except EndpointError as exc:
                 raise SitlError(str(exc.strerror)) from None
             start = self.layout.starts[role.value]
@@ -245,7 +255,7 @@ class WorldRunner:
 
     def _loop(self) -> None:
         self._wall0 = time.monotonic()
-        self._tick_clock(self._wall0)
+        self.clock.wall_s = self._wall0
         for v in self.vehicles:
             v.publish(tick=self.lockstep)  # t = 0: first GPS fix, stream schedules start
         self._anchor(self._wall0)
@@ -267,20 +277,25 @@ class WorldRunner:
                 break
             select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))
 
+    @property
+    def _link_on_sim_time(self) -> bool:
+        """Lockstep steps drive the link clock (it stands still while the world waits at the barrier)."""
+        return self.lockstep and self._phase is _Phase.RUN and not self._paced
+
     def _tick_clock(self, now_wall: float) -> None:
+        if not self._link_on_sim_time:
+            self.clock.link_s += (now_wall - self.clock.wall_s) * self.config.speedup
         self.clock.wall_s = now_wall
-        rate = 1.0 if self.lockstep else self.config.speedup
-        self.clock.link_s = (now_wall - self._wall0) * rate
 
     def _wait_s(self, now_wall: float, deadline_wall: float | None) -> float:
         waits = [MAX_SELECT_S]
         if deadline_wall is not None:
             waits.append(deadline_wall - now_wall)
-        rate = 1.0 if self.lockstep else self.config.speedup
-        for v in self.vehicles:
-            due = v.next_link_due_s()
-            if due is not None:
-                waits.append((due - self.clock.link_s) / rate)
+        if not self._link_on_sim_time:  # on simulated time, only steps bring link deliveries closer
+            for v in self.vehicles:
+                due = v.next_link_due_s()
+                if due is not None:
+                    waits.append((due - self.clock.link_s) / self.config.speedup)
         return max(0.0, min(waits))
 
     # --------------------------------------------------------------------------- advancing
@@ -301,7 +316,8 @@ class WorldRunner:
         return None
 
     def _start_gate_open(self) -> bool:
-        ready = [v.armed and v.mode is FlightMode.GUIDED for v in self.vehicles]
+        # Lockstep: armed in GUIDED and the client has answered a tick (its mode change acknowledged).
+        ready = [v.holds_world if self.lockstep else v.armed and v.mode is FlightMode.GUIDED for v in self.vehicles]
         return all(ready) if self.config.lockstep_start is LockstepStart.ALL else any(ready)
 
     def _anchor(self, now: float) -> None:
@@ -327,7 +343,7 @@ class WorldRunner:
         return now if n == MAX_CATCHUP_STEPS else self._next_step_wall()
 
     def _advance_lockstep(self, now: float) -> float | None:
-        in_loop = [v for v in self.vehicles if v.in_loop]
+        in_loop = [v for v in self.vehicles if v.holds_world]
         if not in_loop:
             if not self._paced:
                 _log.info("lockstep: no vehicle in the loop; running at %g x real time", self.config.speedup)
@@ -337,21 +353,31 @@ class WorldRunner:
         if self._paced:
             self._paced = False
             self._barrier_wall = now
-        current_ms = self.clock.time_boot_ms
-        waiting = [v for v in in_loop if not v.ready_for(current_ms)]
+        waiting = [v for v in in_loop if not v.answered()]
         for v in waiting:
             since = max(self._barrier_wall, v.loop_since_wall_s)
             if now - since > v.setpoint_timeout_s:
                 v.enter_failsafe(f"no setpoint for {v.setpoint_timeout_s:g} s wall")
-        waiting = [v for v in waiting if v.in_loop]
+        waiting = [v for v in waiting if v.holds_world]
         if waiting:
             keepalive = self._keepalive(now)
             return min([keepalive] + [max(self._barrier_wall, v.loop_since_wall_s) + v.setpoint_timeout_s for v in waiting])
-        if not any(v.in_loop for v in self.vehicles):
+        if not any(v.holds_world for v in self.vehicles):
             return now  # every waiting vehicle just failed safe: run paced from the next iteration
-        self._step()
-        self._barrier_wall = now
-        return now + min(v.setpoint_timeout_s for v in self.vehicles)
+        n = 0
+        while True:
+            self._step()
+            self._barrier_wall = now
+            n += 1
+            if self._phase is not _Phase.RUN or n == MAX_CATCHUP_STEPS:
+                break
+            # Setpoints the link delivers at the new step time are flown from it on.
+            for v in self.vehicles:
+                v.process_incoming()
+            # With link latency the newest tick the clients have seen may already be answered: step on.
+            if not all(v.answered() for v in self.vehicles if v.holds_world) or not any(v.holds_world for v in self.vehicles):
+                break
+        return now if n == MAX_CATCHUP_STEPS else now + min(v.setpoint_timeout_s for v in self.vehicles)
 
     def _advance_linger(self, now: float) -> float | None:
         end_s = self._end_sim_s + self.config.linger_s
@@ -386,6 +412,8 @@ class WorldRunner:
         v_before = w.v_m_s[0].copy()
         result = w.step(actions)
         step = int(w.steps[0])
+        if self._link_on_sim_time:
+            self.clock.link_s += step * self.dt_s - self.clock.sim_s
         self.clock.sim_s = step * self.dt_s
         self._last_output_wall = self.clock.wall_s
         self.flags.radar_on = bool(w.radar_on[0])
@@ -486,6 +514,7 @@ class WorldRunner:
             "link_in": asdict(v.rx.counters),
             "gps": {"fixes": v.gps.fixes, "dropouts": v.gps.dropouts},
             "peers": len(v.endpoint.peers),
+            "monitors": len(v.endpoint.monitors),
         }
 
     def close(self) -> None:

@@ -546,11 +546,11 @@ def test_signing_rejects_unsigned_wrong_and_replayed_commands() -> None:
         with Client(s.ports[0], key=key) as good:
             hb = good.connect()
             assert hb._signed  # the vehicle signs what it sends
-            # Unsigned: a monitor may send heartbeats (and so receive telemetry), but not command.
+            # Unsigned: neither heartbeats nor commands get in (no --unsigned-monitors), and nothing comes back.
             with Client(s.ports[0]) as unsigned:
-                unsigned.connect()
+                unsigned.heartbeat()
                 assert unsigned.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout_s=0.3, retries=2) is None
-                assert rx.unsigned_rejected >= 2 and not v.armed
+                assert rx.unsigned_rejected >= 3 and not v.armed and unsigned.log == []
             # Wrong key: rejected as a bad signature.
             with Client(s.ports[0], key=bytes(32)) as wrong:
                 for _ in range(3):

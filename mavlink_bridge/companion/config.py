@@ -58,7 +58,8 @@ class CompanionConfig:
     restart_jump_s: float = 1.0
     """A vehicle clock that goes back by more than this is a restart (reordering is far smaller)."""
     settle_s: float = 0.005
-    """Wall seconds to wait for the tick's position fix once the tick is known (it usually comes in the same burst)."""
+    """Wall seconds to wait for the tick's position fix once the tick is known (it usually comes in the same burst);
+    not used under lockstep, where a step's telemetry is one datagram and a missing fix was lost."""
     duration_s: Optional[float] = None
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF

@@ -161,7 +161,7 @@ class Companion:
         wait = 0.1
         if self.phase is Phase.FLY and self.vt_ms is not None and self._tick_due():
             if self.fix_ms != self.vt_ms:
-                wait = max(0.0, self.vt_rx_s + self.cfg.settle_s - time.monotonic())
+                wait = max(0.0, self.vt_rx_s + self._settle_s - time.monotonic())
             else:
                 wait = 0.0
         elif self.phase is Phase.FLY and self._extrapolating() and self.rate:
@@ -322,6 +322,12 @@ class Companion:
             return False
         return self.last_control_ms is None or self.vt_ms >= self.last_control_ms + self.dt_ms - 1
 
+    @property
+    def _settle_s(self) -> float:
+        """How long a known tick waits for its fix. Not at all under lockstep: the vehicle sends a step's
+        telemetry in one datagram and then waits for us, so a fix that is not there was lost by the link."""
+        return 0.0 if self.cfg.lockstep else self.cfg.settle_s
+
     def _extrapolating(self) -> bool:
         return not self.cfg.lockstep and self.rate is not None and self.rate > 0 and self.vt_ms is not None
 
@@ -329,7 +335,7 @@ class Companion:
         if self.phase is not Phase.FLY or self.vt_ms is None:
             return
         if self._tick_due():
-            if self.fix_ms != self.vt_ms and now < self.vt_rx_s + self.cfg.settle_s:
+            if self.fix_ms != self.vt_ms and now < self.vt_rx_s + self._settle_s:
                 return  # the tick's fix is probably still on its way
             trigger = self.fix_rx_s if self.fix_ms == self.vt_ms else self.vt_rx_s
             self._control(self.vt_ms, trigger)

@@ -6,8 +6,10 @@ import dataclasses
 import json
 import logging
 import os
+import re
 import resource
 import select
+import signal
 import sys
 import time
 from pathlib import Path
@@ -52,11 +54,35 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _tail(path: Optional[Path], lines: int = 1) -> str:
+_ALARMING = re.compile(r"\b(CRITICAL|ERROR|WARNING)\b|error:|Error\b|Exception\b")
+
+
+def last_meaningful_line(path: Optional[Path], max_chars: int = 240) -> str:
+    """The line of a child's log that best says why it died: a traceback's exception line or the last
+    error or warning, else the last line ("" for a missing or empty log). Traceback frames are skipped."""
     if path is None or not path.exists():
         return ""
-    text = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    return " | ".join(text[-lines:])
+    lines = [ln.rstrip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    candidates = [ln for ln in lines if not ln[0].isspace() and not ln.startswith("Traceback (most recent call last)")]
+    alarming = [ln for ln in candidates if _ALARMING.search(ln)]
+    line = (alarming or candidates or [""])[-1]
+    return line if len(line) <= max_chars else line[: max_chars - 3] + "..."
+
+
+def child_failure(what: str, child: Child, rc: int, when: str = "") -> str:
+    """One line: which child died, how (its exit code, or the signal that killed it), and its last words."""
+    if rc < 0:
+        try:
+            name = signal.Signals(-rc).name
+        except ValueError:
+            name = "unknown signal"
+        how = f"was killed by signal {-rc} ({name})"
+    else:
+        how = f"exited with code {rc}"
+    how += f" {when}" if when else ""
+    last = last_meaningful_line(child.log_path)
+    said = f'; its last log line: "{last}"' if last else "; its log is empty"
+    return f"{what} (pid {child.pid}) {how}{said}"
 
 
 class MissionRunner:
@@ -143,7 +169,8 @@ class MissionRunner:
                 buf += out.read() or b""
                 if b"\nready" in b"\n" + buf:
                     break
-                raise ChildFailed(f"the SITL world exited with code {sitl.poll()} before it was ready: {_tail(log) or buf.decode(errors='replace').strip()}")
+                printed = "" if last_meaningful_line(log) else f"; it printed {buf.decode(errors='replace').strip()!r}"
+                raise ChildFailed(child_failure("the SITL world", sitl, sitl.poll() or 0, "before it was ready") + printed)
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise ChildFailed(f"the SITL world was not ready within {self.cfg.startup_timeout_s:g} s")
@@ -185,12 +212,12 @@ class MissionRunner:
             for c in companions:
                 rc = c.poll()
                 if rc is not None and rc != 0:
-                    raise ChildFailed(f"mission {index}: companion {c.name} (pid {c.pid}) exited with code {rc}: {_tail(c.log_path)}")
+                    raise ChildFailed(f"mission {index}: " + child_failure(f"companion {c.name}", c, rc))
             if sitl is not None:
                 rc = sitl.poll()
                 if rc is not None:
                     if rc != 0:
-                        raise ChildFailed(f"mission {index}: the SITL world (pid {sitl.pid}) exited with code {rc}: {_tail(sitl.log_path)}")
+                        raise ChildFailed(f"mission {index}: " + child_failure("the SITL world", sitl, rc))
                     break
             elif all(c.poll() is not None for c in companions):
                 break
@@ -210,7 +237,7 @@ class MissionRunner:
         for c in companions:
             rc = c.poll()
             if rc not in (0, None) and c not in late:
-                raise ChildFailed(f"mission {index}: companion {c.name} (pid {c.pid}) exited with code {rc}: {_tail(c.log_path)}")
+                raise ChildFailed(f"mission {index}: " + child_failure(f"companion {c.name}", c, rc))
         return False
 
     @staticmethod

@@ -2,5 +2,6 @@
 
 ``policy`` (role checkpoints, torch) · ``numpy_actor`` (the exported actor, numpy only) · ``export``
 (checkpoint -> ``<role>.npz``; ``python -m tssac_core.deploy.export``) · ``geodetic`` (the flat-earth frame
-between the world's metres and MAVLink's degrees) · ``truth_log_schema`` (the SITL world's truth log).
+between the world's metres and MAVLink's degrees) · ``truth_log_schema`` (the SITL world's truth log) ·
+``mavlink_signing`` (MAVLink 2 signatures verified before their timestamps count; standard library only).
 """

@@ -47,6 +47,17 @@ class Role(enum.Enum):
 ROLES: tuple[Role, ...] = (Role.DECOY, Role.DETECT, Role.STRIKE)
 
 
+MAX_MAGNITUDE = 1e9
+"""No number in a scenario file is larger than this (in size): what the checks below do not bound, this does."""
+MAX_AREA_KM = 1000.0
+"""The feasibility check walks a 1 km grid of the area: 10^6 cells at most."""
+MAX_EPISODE_STEPS = 1_000_000
+"""About 28 hours of flight at dt = 0.1 s: longer episodes are a typo, and buffers are sized by it."""
+MAX_SPEED_M_S = 1000.0
+MAX_LATENCY_MS = 60_000.0
+MAX_EXPECT_EPISODES = 100_000
+
+
 class ScenarioError(ValueError):
     """A scenario file that cannot be used; ``str()`` is one line: ``file: field: problem``."""
 
@@ -298,13 +309,19 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
         return {str(k): _build(args[1], v, _join(where, str(k)), source) for k, v in value.items()}
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(source, where, f"expected a number, got {value!r}")
+            raise ScenarioError(source, where, f"expected a number, got {_short(value)}")
+        if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
+            raise ScenarioError(source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
         if not math.isfinite(value):
             raise ScenarioError(source, where, f"expected a finite number, got {value!r}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise ScenarioError(source, where, f"out of range: {value!r} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(source, where, f"expected an integer, got {value!r}")
+            raise ScenarioError(source, where, f"expected an integer, got {_short(value)}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise ScenarioError(source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
         return value
     if tp is bool:
         if not isinstance(value, bool):
@@ -315,6 +332,14 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
             raise ScenarioError(source, where, f"expected a string, got {value!r}")
         return value
     raise TypeError(f"unsupported schema type {_type_name(tp)} at {where}")  # a bug in the schema
+
+
+def _short(value: Any, max_chars: int = 40) -> str:
+    """``repr(value)`` cut to ``max_chars`` (a 4,000-digit integer makes no error line readable)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**max_chars:
+        return f"an integer of {len(str(abs(value)))} digits"
+    text = repr(value)
+    return text if len(text) <= max_chars else text[: max_chars - 3] + "..."
 
 
 def _join(where: str, name: str) -> str:
@@ -363,13 +388,13 @@ def validate(s: Scenario, source: str) -> None:
         if not ok:
             raise ScenarioError(source, where, problem)
 
-    check(s.area_km > 0, "area_km", f"must be positive, got {s.area_km}")
+    check(0 < s.area_km <= MAX_AREA_KM, "area_km", f"must be in (0, {MAX_AREA_KM:g}] km, got {s.area_km}")
     check(0 < s.dt_s <= 1.0, "dt_s", f"must be in (0, 1] s, got {s.dt_s}")
-    check(s.episode_steps > 0, "episode_steps", f"must be positive, got {s.episode_steps}")
+    check(0 < s.episode_steps <= MAX_EPISODE_STEPS, "episode_steps", f"must be in 1..{MAX_EPISODE_STEPS}, got {s.episode_steps}")
     check(s.cost_limit >= 0, "cost_limit", f"must be >= 0, got {s.cost_limit}")
     r = s.ranges
     for name in ("strike_launch_km", "detect_km", "sam_launch_km", "sam_detect_km"):
-        check(getattr(r, name) > 0, f"ranges.{name}", "must be positive")
+        check(0 < getattr(r, name) <= s.area_km, f"ranges.{name}", f"must be in (0, area_km = {s.area_km}] km")
     check(
         r.strike_launch_km < r.detect_km < r.sam_launch_km < r.sam_detect_km,
         "ranges",
@@ -384,7 +409,7 @@ def validate(s: Scenario, source: str) -> None:
         v = s.vehicles[name]
         where = f"vehicles.{name}"
         check(v.speed_min_m_s > 0, f"{where}.speed_min_m_s", "must be positive (a fixed-wing UAV cannot hover)")
-        check(v.speed_min_m_s < v.speed_max_m_s, f"{where}.speed_max_m_s", "must be above speed_min_m_s")
+        check(v.speed_min_m_s < v.speed_max_m_s <= MAX_SPEED_M_S, f"{where}.speed_max_m_s", f"must be above speed_min_m_s and at most {MAX_SPEED_M_S:g} m/s")
         check(
             v.speed_min_m_s <= v.speed_init_m_s <= v.speed_max_m_s,
             f"{where}.speed_init_m_s",
@@ -400,18 +425,19 @@ def validate(s: Scenario, source: str) -> None:
     lk = s.link
     for name in ("gps_dropout_prob", "packet_loss", "duplication", "reordering"):
         check(0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}")
-    for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s", "latency_ms"):
+    for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s"):
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
+    check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
     check(0 < lk.gps_rate_hz <= 100, "link.gps_rate_hz", "must be in (0, 100] Hz")
     check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
     check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
     if s.expect is not None:
-        check(s.expect.episodes > 0, "expect.episodes", "must be positive")
+        check(0 < s.expect.episodes <= MAX_EXPECT_EPISODES, "expect.episodes", f"must be in 1..{MAX_EXPECT_EPISODES}")
         check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
         check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
         check(0 <= s.expect.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
         check(s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0")
-        check(s.expect.speedup is None or s.expect.speedup > 0, "expect.speedup", "must be positive")
+        check(s.expect.speedup is None or 0 < s.expect.speedup <= 1000, "expect.speedup", "must be in (0, 1000]")
 
 
 def _max_radius_km(s: Scenario) -> float:

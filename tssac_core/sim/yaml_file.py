@@ -24,3 +24,7 @@ def read_yaml(path: str | Path, error: FileError) -> Any:
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1}" if mark is not None else ""
         raise error(source, "", f"not valid YAML{at}: {getattr(exc, 'problem', exc)}") from None
+    except (ValueError, OverflowError, RecursionError) as exc:
+        # e.g. an integer of more than 4,300 digits (Python's int-from-string limit), or nesting too deep
+        reason = str(exc).split(";")[0] or type(exc).__name__
+        raise error(source, "", f"a value cannot be read: {reason}") from None

@@ -1,0 +1,153 @@
+"""MAVLink 2 message signing checked in the right order: signature first, then the timestamp.
+
+Both ends of our links (the SITL vehicles in ``sim_vehicles``, the companions in ``mavlink_bridge``)
+verify incoming frames with :class:`SignatureVerifier` instead of pymavlink's
+``MAVLink.check_signature``. pymavlink 2.4 records a stream's timestamp *before* it compares the
+signature (``signing.stream_timestamps[stream_key] = timestamp`` precedes the SHA-256 check in the
+generated ``check_signature``), and its ``allow_unsigned_callback`` then lets a wrongly signed
+HEARTBEAT through: one forged frame with a far-future timestamp on a legitimate stream makes every
+later genuine frame of that stream look like a replay. Here a frame's timestamp is believed only after
+its signature verifies, so a frame without the key changes nothing.
+
+The wire format (MAVLink 2 signing, https://mavlink.io/en/guide/message_signing.html): a signed frame
+ends in a 13-byte block ``link_id (1) | timestamp (6, little-endian, 10 us units since 2015-01-01) |
+signature (6)``, with ``signature = SHA-256(key + frame[:-6])[:6]``. A *stream* is (link id, system id,
+component id); a frame is fresh if its timestamp is newer than the stream's last accepted one, or, for a
+stream not seen yet, no more than one minute older than our clock (MAVLink's rule; pymavlink's
+constant). This module uses the wall clock for that (``time.time()``), and the senders here keep their
+outgoing timestamps at or above the wall clock (:func:`refresh_outgoing_timestamp`), so a stream that
+has been sending for hours is still "new-stream fresh" for a client that joins late.
+
+Pure standard library (hashlib, hmac, struct): tssac_core imports no pymavlink, and both sides, which
+never import each other, share this one implementation.
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import hmac
+import struct
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = [
+    "KEY_LEN",
+    "NEW_STREAM_MAX_AGE_10US",
+    "SIGNATURE_BLOCK_LEN",
+    "SignatureVerifier",
+    "SigningCounters",
+    "Verdict",
+    "is_signed",
+    "now_10us",
+    "refresh_outgoing_timestamp",
+    "signature_stream",
+]
+
+KEY_LEN = 32
+SIGNATURE_BLOCK_LEN = 13
+"""link id (1) + timestamp (6) + signature (6)."""
+NEW_STREAM_MAX_AGE_10US = 6000 * 1000
+"""A stream's first frame may be this far behind our clock: one minute (MAVLink's rule)."""
+EPOCH_2015_UNIX_S = 1420070400
+_MAGIC_V2 = 0xFD
+_IFLAG_SIGNED = 0x01
+_HEADER_LEN_V2 = 10
+
+StreamKey = tuple[int, int, int]
+"""(link id, system id, component id)."""
+
+
+class Verdict(enum.Enum):
+    """What :meth:`SignatureVerifier.check` concluded about one frame."""
+
+    OK = "ok"
+    UNSIGNED = "unsigned"
+    BAD_SIGNATURE = "bad_signature"
+    REPLAYED = "replayed"
+    """Correctly signed, but not newer than its stream's last frame (or too old for a new stream)."""
+
+
+@dataclass
+class SigningCounters:
+    """Frames checked, by verdict."""
+
+    ok: int = 0
+    unsigned: int = 0
+    bad_signature: int = 0
+    replayed: int = 0
+
+
+def now_10us(now_unix_s: float | None = None) -> int:
+    """The signing clock: 10 us units since 2015-01-01 (0 before that)."""
+    t = time.time() if now_unix_s is None else now_unix_s
+    return int((max(t, EPOCH_2015_UNIX_S) - EPOCH_2015_UNIX_S) * 100_000)
+
+
+class _SigningState(Protocol):
+    timestamp: int
+
+
+def refresh_outgoing_timestamp(signing: _SigningState) -> None:
+    """Keep a pymavlink ``MAVLinkSigning.timestamp`` at or above the wall clock before packing a frame.
+
+    pymavlink only adds 1 (10 us) per frame it signs, so after a minute of sending fewer than 100,000
+    frames per second a sender's stream falls more than a minute behind real time, and a receiver
+    that joins then refuses it as a stale new stream.
+    """
+    signing.timestamp = max(int(signing.timestamp), now_10us())
+
+
+def is_signed(frame: bytes | bytearray) -> bool:
+    """A MAVLink 2 frame with the SIGNED incompatibility flag."""
+    return len(frame) >= 3 and frame[0] == _MAGIC_V2 and bool(frame[2] & _IFLAG_SIGNED)
+
+
+def signature_stream(frame: bytes | bytearray) -> tuple[StreamKey, int]:
+    """(stream key, timestamp in 10 us units) of a signed MAVLink 2 frame."""
+    link_id = frame[-SIGNATURE_BLOCK_LEN]
+    lo, hi = struct.unpack_from("<IH", frame, len(frame) - 12)
+    return (link_id, frame[5], frame[6]), lo | (hi << 32)
+
+
+class SignatureVerifier:
+    """Checks signed MAVLink 2 frames against one key; remembers each stream's newest verified timestamp.
+
+    Streams enter the table only with a verified signature, so only holders of the key can grow it
+    (at most 256 link ids x 255 x 255 ids, each an int: no bound is needed against outsiders).
+    """
+
+    def __init__(self, key: bytes) -> None:
+        if len(key) != KEY_LEN:
+            raise ValueError(f"signing key must be {KEY_LEN} bytes, got {len(key)}")
+        self._key = bytes(key)
+        self.streams: dict[StreamKey, int] = {}
+        """Newest verified timestamp per stream."""
+        self.counters = SigningCounters()
+
+    def signature_ok(self, frame: bytes | bytearray) -> bool:
+        """The frame is signed and its signature is this key's (no state is read or changed)."""
+        if not is_signed(frame) or len(frame) < _HEADER_LEN_V2 + 2 + SIGNATURE_BLOCK_LEN:
+            return False
+        expected = hashlib.sha256(self._key + bytes(frame[:-6])).digest()[:6]
+        return hmac.compare_digest(expected, bytes(frame[-6:]))
+
+    def check(self, frame: bytes | bytearray, now_unix_s: float | None = None) -> Verdict:
+        """Verify one whole frame (CRC already checked); on OK the stream's timestamp moves forward."""
+        if not is_signed(frame):
+            self.counters.unsigned += 1
+            return Verdict.UNSIGNED
+        if not self.signature_ok(frame):
+            self.counters.bad_signature += 1
+            return Verdict.BAD_SIGNATURE
+        # Only now, with the signature verified, is the timestamp worth anything.
+        stream, stamp = signature_stream(frame)
+        last = self.streams.get(stream)
+        fresh = stamp > last if last is not None else stamp + NEW_STREAM_MAX_AGE_10US >= now_10us(now_unix_s)
+        if not fresh:
+            self.counters.replayed += 1
+            return Verdict.REPLAYED
+        self.streams[stream] = stamp
+        self.counters.ok += 1
+        return Verdict.OK
