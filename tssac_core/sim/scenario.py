@@ -432,12 +432,12 @@ def validate(s: Scenario, source: str) -> None:
     check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
     check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
     if s.expect is not None:
-        check(0 < s.expect.episodes <= MAX_EXPECT_EPISODES, "expect.episodes", f"must be in 1..{MAX_EXPECT_EPISODES}")
+        check(0 < s.expect.episodes <= MAX_EXPECT_EPISODES, "expect.episodes", f"must be positive and at most {MAX_EXPECT_EPISODES}")
         check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
         check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
         check(0 <= s.expect.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
         check(s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0")
-        check(s.expect.speedup is None or 0 < s.expect.speedup <= 1000, "expect.speedup", "must be in (0, 1000]")
+        check(s.expect.speedup is None or 0 < s.expect.speedup <= 1000, "expect.speedup", "must be positive and at most 1000")
 
 
 def _max_radius_km(s: Scenario) -> float:
