@@ -43,7 +43,7 @@ import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Callable, Optional
+from typing import BinaryIO, Callable, Optional, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
@@ -61,7 +61,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-Message = mavlink2.MAVLink_message
+Message: TypeAlias = mavlink2.MAVLink_message
 M = mavlink2
 
 MAX_DATAGRAM = 65535

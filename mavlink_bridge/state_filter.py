@@ -379,6 +379,7 @@ class _TurnEkf(ExtendedKalmanFilter):
     """filterpy's extended filter, with eq. 5 as its (non-linear) state transition."""
 
     dt_s = 0.1
+    x: NDArray[np.float64]
 
     def predict_x(self, u: object = 0) -> None:
         self.x = _ct_fx(self.x, self.dt_s)

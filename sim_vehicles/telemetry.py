@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -28,8 +29,8 @@ SATELLITES = 12
 HDOP_X100 = 100
 """GPS_RAW_INT.eph: a nominal HDOP of 1.0 (the noise model has no geometry)."""
 
-MAV = mavlink2.MAVLink
-Msg = mavlink2.MAVLink_message
+MAV: TypeAlias = mavlink2.MAVLink
+Msg: TypeAlias = mavlink2.MAVLink_message
 
 
 @dataclass(frozen=True)

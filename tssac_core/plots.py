@@ -67,7 +67,7 @@ ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
 
 
 def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[float, float]]"], ranges_km: tuple[float, float, float, float],
-                 events: "list[tuple[str, float, float]]" = (), title: str = "", area_km: float = 100.0) -> None:
+                 events: Sequence[tuple[str, float, float]] = (), title: str = "", area_km: float = 100.0) -> None:
     """Figure 9: one mission's trajectories over the radars, the SAM's rings and the zones, with events.
 
     ``layout_`` is a :class:`tssac_core.sim.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;

@@ -108,7 +108,7 @@ def worst_missions(cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str],
     order = np.argsort(-c, axis=None, kind="stable")[:count]
     rows = []
     for flat in order:
-        i, j = np.unravel_index(int(flat), c.shape)
+        i, j = (int(k) for k in np.unravel_index(int(flat), c.shape))
         if c[i, j] <= 0:
             break
         rows.append({"mission": int(i), "seed": int(seeds[i]), "role": roles[j], "cost": float(c[i, j])})

@@ -187,7 +187,7 @@ class SacConfig:
         return torch.as_tensor(episode_cost, dtype=torch.float32) * qc_limit(1.0, self.gamma, self.episode_steps)
 
 
-def fast_adam(params: list[torch.Tensor], lr: float) -> torch.optim.Adam:
+def fast_adam(params: Sequence[torch.Tensor], lr: float) -> torch.optim.Adam:
     """Adam with torch's fused CPU kernel: one pass over each tensor instead of a chain of
     elementwise kernels (the step on Table 3's critics measured 2.4x faster). The same update
     rule; the rounding of the result can differ in the last bit from the default implementation."""
@@ -265,10 +265,10 @@ class SacLagrangian:
             clamp_effective=config.clamp_effective,
             upper=config.multiplier_max,
         )
-        self._actor_params = list(self.actor.parameters())
-        self._critic_params = [*self.q_r.parameters(), *self.q_c.parameters()]
-        self._targets = [*self.q_r_target.parameters(), *self.q_c_target.parameters()]
-        self._onlines = [*self.q_r.parameters(), *self.q_c.parameters()]
+        self._actor_params: list[torch.Tensor] = list(self.actor.parameters())
+        self._critic_params: list[torch.Tensor] = [*self.q_r.parameters(), *self.q_c.parameters()]
+        self._targets: list[torch.Tensor] = [*self.q_r_target.parameters(), *self.q_c_target.parameters()]
+        self._onlines: list[torch.Tensor] = [*self.q_r.parameters(), *self.q_c.parameters()]
         self.reset_optimisers()
 
     def reset_optimisers(self) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from torch import nn
@@ -29,7 +29,7 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
     policy = Policy.load(src)
     linears = [m for m in policy.actor.net if isinstance(m, nn.Linear)]
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, **policy.info.fields(), "source": src.name, "source_sha256": sha256_file(src)}
-    arrays: dict[str, np.ndarray] = {"meta": np.array(json.dumps(meta))}
+    arrays: dict[str, Any] = {"meta": np.array(json.dumps(meta))}
     for i, layer in enumerate(linears):
         arrays[f"w{i}"] = layer.weight.detach().numpy().astype(np.float32)
         arrays[f"b{i}"] = layer.bias.detach().numpy().astype(np.float32)

@@ -97,7 +97,7 @@ class TrainArgs:
     """torch threads of each job (``--jobs`` jobs run at once)."""
     validation_episodes: int = TrainConfig.validation_episodes
     observation: str = TrainConfig.observation
-    selection: str = TrainConfig.selection
+    selection: str = ""
     """"" (default): each algorithm's own epoch selection; a word pins one for every job (TrainConfig.selection)."""
 
 

@@ -243,7 +243,8 @@ def _row_starts(n: int, k: int) -> np.ndarray:
 @functools.lru_cache(maxsize=16)
 def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``mode`` as (size, N) arrays: same-shape operands for the clip."""
-    return tuple(np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
+    low, high = (np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
+    return low, high
 
 
 def _clip_to_bounds(obs: np.ndarray, mode: ObservationMode) -> np.ndarray:

@@ -24,7 +24,7 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import yaml
@@ -294,7 +294,8 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
                 kwargs[f.name] = _build(hints[f.name], value[f.name], _join(where, f.name), source)
             elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 raise ScenarioError(source, _join(where, f.name), "missing required field")
-        return tp(**kwargs)
+        build: Callable[..., Any] = tp  # a dataclass type (dataclasses.fields above), called with its fields
+        return build(**kwargs)
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
             raise ScenarioError(source, where, f"expected a list, got {type(value).__name__}")

@@ -128,7 +128,7 @@ def sac_config(cfg: TrainConfig, scenario: Scenario) -> SacConfig:
     variant = algorithm(cfg.algo).variant
     if variant is None:
         raise ValueError(f"not an off-policy algorithm: {cfg.algo!r}")
-    fields = {"variant": variant, "cost_limit": scenario.cost_limit, "episode_steps": decisions}
+    fields: dict[str, Any] = {"variant": variant, "cost_limit": scenario.cost_limit, "episode_steps": decisions}
     if cfg.algo == "sac_penalty":
         fields["penalty"] = cfg.penalty
     fields.update(cfg.learner)

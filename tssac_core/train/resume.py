@@ -42,7 +42,7 @@ class ResumeState:
     """The last completed epoch."""
     env_steps: int
     updates: int
-    task: dict[str, Any]
+    task: bytes
     """The worlds (RoleTask.snapshot)."""
     obs: np.ndarray
     torch_rng: torch.Tensor
@@ -105,7 +105,7 @@ def read_resume_state(out: Path, role: Role | str) -> ResumeState | None:
 def from_legacy(data: dict[str, Any]) -> dict[str, Any]:
     """A resume state written before the one format (it has no ``format`` key): the off-policy loop's (with a
     replay ``buffer``) or the on-policy loop's (with ``ep_len``), as a version-2 dict."""
-    common = {k: data[k] for k in ("epoch", "env_steps", "updates", "task", "obs", "torch_rng", "selector") if k in data}
+    common: dict[str, Any] = {k: data[k] for k in ("epoch", "env_steps", "updates", "task", "obs", "torch_rng", "selector") if k in data}
     if "buffer" in data:
         learner = {"learner": data["learner"], "buffer": data["buffer"], "rng": data["rng"],
                    "transferred": data["transferred"], "recent_costs": data.get("recent_costs", [])}
