@@ -16,7 +16,8 @@ Cases (figures: lower is better unless said):
   HEARTBEAT) from a client without the key: bytes of telemetry it receives in the next 2 s.
 * ``peer_flood``: signing off; 300 sockets each send one HEARTBEAT: clients the vehicle then serves and
   bytes it sends per second (to all of them).
-* ``message_interval``: SET_MESSAGE_INTERVAL(ATTITUDE, 3e38 us): its result (2 = MAV_RESULT_DENIED is right, 0 = ACCEPTED), then
+* ``message_interval``: SET_MESSAGE_INTERVAL(ATTITUDE, 3e38 us): its result (2 = MAV_RESULT_DENIED is right, 0 =
+ACCEPTED), then
   GET_MESSAGE_INTERVAL: whether MESSAGE_INTERVAL comes back and handler errors logged.
 * ``unknown_id_header``: 5 datagrams of a garbage header claiming an unknown message id whose length covers a
   valid COMMAND_LONG behind it: commands acknowledged (5 is right).
@@ -46,9 +47,9 @@ from typing import Any
 os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
+import tssac_core  # noqa: E402
 from sim_vehicles.config import SitlConfig  # noqa: E402
 from sim_vehicles.world_runner import WorldRunner  # noqa: E402
-import tssac_core  # noqa: E402
 from tssac_core.sim.scenario import LinkModel, dump, load  # noqa: E402
 
 M = mavlink2
@@ -84,7 +85,9 @@ class World:
 class Peer:
     """A raw UDP socket with a pymavlink encoder/decoder (its own signing state)."""
 
-    def __init__(self, port: int, key: bytes | None = None, sysid: int = 255, compid: int = 190, link_id: int = 1) -> None:
+    def __init__(
+        self, port: int, key: bytes | None = None, sysid: int = 255, compid: int = 190, link_id: int = 1
+    ) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.dest = ("127.0.0.1", port)
@@ -156,7 +159,9 @@ def case_poison_vehicle() -> dict[str, Any]:
             for i in range(3):
                 evil.sock.sendto(_forge(forged, 255, 190, 1, WRONG_KEY, _now_10us() + ONE_YEAR_10US + i), evil.dest)
             time.sleep(0.2)
-            acks = sum(good.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION) is not None for _ in range(20))
+            acks = sum(
+                good.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION) is not None for _ in range(20)
+            )
             out[f"{kind}_genuine_refused_of_20"] = 20 - acks
         finally:
             good.close()
@@ -205,7 +210,11 @@ def case_message_interval() -> dict[str, Any]:
         p.heartbeat()
         p.recv(0.3)
         ack = p.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, 3e38)
-        p.send(p.mav.command_long_encode(1, 1, M.MAV_CMD_GET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 0, 0, 0, 0, 0, 0))
+        p.send(
+            p.mav.command_long_encode(
+                1, 1, M.MAV_CMD_GET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 0, 0, 0, 0, 0, 0
+            )
+        )
         got = [m for m in p.recv(0.5) if m.get_type() in ("MESSAGE_INTERVAL", "COMMAND_ACK")]
         v = world.runner.vehicles[0]
         return {
@@ -227,7 +236,9 @@ def case_unknown_id_header() -> dict[str, Any]:
         p.recv(0.3)
         acks = 0
         for _ in range(5):
-            valid = p.mav.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0).pack(p.mav)
+            valid = p.mav.command_long_encode(
+                1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+            ).pack(p.mav)
             garbage = bytes([0xFD, len(valid) - 2, 0, 0, 0, 1, 1, 0xEE, 0xEE, 0xEE])  # claims 10 + len - 2 + 2 bytes
             p.sock.sendto(garbage + valid, p.dest)
             deadline = time.monotonic() + 0.3
@@ -245,8 +256,23 @@ def _companion(world: World, key_file: Path | None, tmp: Path) -> tuple[subproce
     layout = tmp / "layout.yaml"
     dump(dataclasses.replace(world.scenario, layout=world.runner.layout, random=None), layout)
     status = tmp / "status.json"
-    cmd = [sys.executable, "-m", "mavlink_bridge.companion", "--connect", f"udpout:127.0.0.1:{world.port}", "--role", "decoy",
-           "--pilot", "guidance", "--scenario", str(layout), "--status-json", str(status), "--log-level", "warning"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mavlink_bridge.companion",
+        "--connect",
+        f"udpout:127.0.0.1:{world.port}",
+        "--role",
+        "decoy",
+        "--pilot",
+        "guidance",
+        "--scenario",
+        str(layout),
+        "--status-json",
+        str(status),
+        "--log-level",
+        "warning",
+    ]
     if key_file is not None:
         cmd += ["--signing-key", str(key_file)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
@@ -319,8 +345,11 @@ def case_poison_companion() -> dict[str, Any]:
             failsafe = v.failsafe
             _stop(proc)
             counters = json.loads(status.read_text()).get("link", {}) if status.exists() else {}
-            return {"vehicle_failsafe_3s_after": failsafe, "companion_signature_rejected": counters.get("signature_rejected"),
-                    "companion_foreign_rx": counters.get("foreign_rx")}
+            return {
+                "vehicle_failsafe_3s_after": failsafe,
+                "companion_signature_rejected": counters.get("signature_rejected"),
+                "companion_foreign_rx": counters.get("foreign_rx"),
+            }
         finally:
             _stop(proc)
             world.close()

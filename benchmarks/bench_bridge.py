@@ -28,8 +28,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -45,13 +46,32 @@ def _cpu_ticks() -> tuple[int, int]:
     return sum(fields) - idle, sum(fields)
 
 
-def run_fly(scenario: Path, episodes: int, models: Optional[Path], work: Path, extra: Sequence[str] = ()) -> dict[str, Any]:
+def run_fly(
+    scenario: Path, episodes: int, models: Path | None, work: Path, extra: Sequence[str] = ()
+) -> dict[str, Any]:
     """One fly run; its JSON, the pooled latency samples and the machine load during it."""
     out = work / "fly.json"
     logs = work / "logs"
     who = ["--models", str(models)] if models is not None else ["--pilot", "guidance"]
-    argv = [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(scenario), *who, "--lockstep", "--episodes", str(episodes),
-            "--seed", "0", "--json", str(out), "--logs", str(logs), "--no-progress", *extra]
+    argv = [
+        sys.executable,
+        "-m",
+        "mavlink_bridge.fly",
+        "--scenario",
+        str(scenario),
+        *who,
+        "--lockstep",
+        "--episodes",
+        str(episodes),
+        "--seed",
+        "0",
+        "--json",
+        str(out),
+        "--logs",
+        str(logs),
+        "--no-progress",
+        *extra,
+    ]
     env = dict(os.environ, PYTHONPATH=str(REPO))
     busy0, total0 = _cpu_ticks()
     t0 = time.monotonic()
@@ -59,7 +79,9 @@ def run_fly(scenario: Path, episodes: int, models: Optional[Path], work: Path, e
     wall_s = time.monotonic() - t0
     busy1, total1 = _cpu_ticks()
     if proc.returncode != 0:
-        raise SystemExit(f"fly failed ({proc.returncode}): {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ''}")
+        raise SystemExit(
+            f"fly failed ({proc.returncode}): {proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ''}"
+        )
     results = json.loads(out.read_text())
     samples: list[float] = []
     for status in sorted(logs.glob("mission-*/*.status.json")):
@@ -67,8 +89,14 @@ def run_fly(scenario: Path, episodes: int, models: Optional[Path], work: Path, e
     hz = os.sysconf("SC_CLK_TCK")
     machine_busy_s = (busy1 - busy0) / hz
     cpus = os.cpu_count() or 1
-    return {"results": results, "samples": samples, "wall_s": wall_s, "machine_busy_s": machine_busy_s,
-            "machine_capacity_s": (total1 - total0) / hz, "cpus": cpus}
+    return {
+        "results": results,
+        "samples": samples,
+        "wall_s": wall_s,
+        "machine_busy_s": machine_busy_s,
+        "machine_capacity_s": (total1 - total0) / hz,
+        "cpus": cpus,
+    }
 
 
 def summarise(name: str, run: dict[str, Any]) -> dict[str, Any]:
@@ -116,11 +144,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--episodes", type=int, default=3, help="missions per pilot (default 3)")
     p.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "strike.yaml")
-    p.add_argument("--models", type=Path, default=REPO / "models" / "tssac", help="trained policies (skipped if missing)")
+    p.add_argument(
+        "--models", type=Path, default=REPO / "models" / "tssac", help="trained policies (skipped if missing)"
+    )
     p.add_argument("--json", type=Path, default=REPO / "benchmarks" / "results" / "bridge.json")
-    p.add_argument("--lean-telemetry", action="store_true", help="also fly with fly --lean-telemetry (streams the companions do not use off)")
+    p.add_argument(
+        "--lean-telemetry",
+        action="store_true",
+        help="also fly with fly --lean-telemetry (streams the companions do not use off)",
+    )
     args = p.parse_args(argv)
-    pilots: list[tuple[str, Optional[Path], tuple[str, ...]]] = [("guidance", None, ())]
+    pilots: list[tuple[str, Path | None, tuple[str, ...]]] = [("guidance", None, ())]
     if args.lean_telemetry:
         pilots.append(("guidance, lean telemetry", None, ("--lean-telemetry",)))
     if all((args.models / f"{r}.pt").is_file() for r in ("decoy", "detect", "strike")):
@@ -134,14 +168,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             fig = summarise(name, run_fly(args.scenario, args.episodes, models, Path(tmp), extra))
         figures.append(fig)
         lat = fig["latency_ms"]
-        print(f"  {name}: success {fig['success_rate']:.0%}, latency p50 {lat['p50']:.2f} ms p99 {lat['p99']:.2f} ms max {lat['max']:.1f} ms "
-              f"(target p99 < {TARGET_P99_MS:g})")
-        print(f"  {fig['missions_per_minute']:.2f} missions/min; a {fig['mission_sim_time_s']:.0f} s mission: {fig['mission_wall_s']:.1f} s wall "
-              f"({fig['mission_speed_x']:.1f}x real time), flight {fig['flight_wall_s']:.1f} s ({fig['flight_speed_x']:.1f}x; target {TARGET_SPEED_X:g}x)")
-        print(f"  CPU {fig['mission_cpu_s']:.1f} s per mission ({fig['cpu_s_per_sim_s'] * 1000:.0f} ms per simulated s); "
-              f"other load on the machine {fig['other_load_cpus']:.2f} CPUs; bound on an idle machine {fig['idle_machine_speed_x_bound']:.0f}x")
-        print(f"  flight alone: {fig['flight_cpu_s']:.1f} CPU s ({fig['flight_cpu_ms_per_step']:.2f} ms per 0.1 s step, world and companions); "
-              f"bound on an idle machine {fig['idle_machine_flight_speed_x_bound']:.0f}x")
+        print(
+            f"  {name}: success {fig['success_rate']:.0%}, latency p50 {lat['p50']:.2f} ms p99 {lat['p99']:.2f} ms max "
+            f"{lat['max']:.1f} ms "
+            f"(target p99 < {TARGET_P99_MS:g})"
+        )
+        print(
+            f"  {fig['missions_per_minute']:.2f} missions/min; a {fig['mission_sim_time_s']:.0f} s mission: "
+            f"{fig['mission_wall_s']:.1f} s wall "
+            f"({fig['mission_speed_x']:.1f}x real time), flight {fig['flight_wall_s']:.1f} s "
+            f"({fig['flight_speed_x']:.1f}x; target {TARGET_SPEED_X:g}x)"
+        )
+        print(
+            f"  CPU {fig['mission_cpu_s']:.1f} s per mission ({fig['cpu_s_per_sim_s'] * 1000:.0f} ms per simulated s); "
+            f"other load on the machine {fig['other_load_cpus']:.2f} CPUs; bound on an idle machine "
+            f"{fig['idle_machine_speed_x_bound']:.0f}x"
+        )
+        print(
+            f"  flight alone: {fig['flight_cpu_s']:.1f} CPU s ({fig['flight_cpu_ms_per_step']:.2f} ms per 0.1 s step, "
+            f"world and companions); "
+            f"bound on an idle machine {fig['idle_machine_flight_speed_x_bound']:.0f}x"
+        )
     out = {
         "scenario": str(args.scenario.relative_to(REPO) if args.scenario.is_relative_to(REPO) else args.scenario),
         "clock": "lockstep",

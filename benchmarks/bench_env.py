@@ -70,8 +70,12 @@ def main() -> None:
     }
     figures["targets"] = {"gym_steps_per_s": 10_000, "world_steps_per_s_n1024": 5_000_000}
     # The load average says whether other work shared the cores (the figures are per wall-clock second).
-    figures["machine"] = {"python": platform.python_version(), "numpy": np.__version__, "cpus": os.cpu_count(),
-                          "load_average_1min": os.getloadavg()[0]}
+    figures["machine"] = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "cpus": os.cpu_count(),
+        "load_average_1min": os.getloadavg()[0],
+    }
     for key, value in figures.items():
         if isinstance(value, float):
             print(f"{key:40s} {value:14,.0f}")

@@ -17,9 +17,9 @@ import logging
 import math
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -167,9 +167,7 @@ def run_once(track: Track, noise: FilterNoise, model: FilterModel, rng: np.rando
     }
 
 
-def evaluate(
-    track: Track, noise: FilterNoise, model: FilterModel, runs: int, seed: int
-) -> dict[str, Optional[float]]:
+def evaluate(track: Track, noise: FilterNoise, model: FilterModel, runs: int, seed: int) -> dict[str, float | None]:
     """Average figures over `runs` seeded noise draws (gap error: mean and max)."""
     rows = [run_once(track, noise, model, np.random.default_rng(seed + r)) for r in range(runs)]
     out: dict[str, float] = {}
@@ -184,7 +182,7 @@ def evaluate(
     return {k: (None if math.isnan(v) else round(v, 3)) for k, v in out.items()}
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20, help="noise draws per case (default 20)")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
@@ -203,11 +201,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     # Give the constant-velocity model its best shot: its acceleration noise must cover turns.
     for accel in (5.0, 10.0, 20.0, 40.0):
         cases.append(
-            (f"constant_velocity_accel{accel:g}", FilterModel.CONSTANT_VELOCITY, FilterNoise(
-                POS_SIGMA_M, VEL_SIGMA_M_S, accel_sigma_m_s2=accel))
+            (
+                f"constant_velocity_accel{accel:g}",
+                FilterModel.CONSTANT_VELOCITY,
+                FilterNoise(POS_SIGMA_M, VEL_SIGMA_M_S, accel_sigma_m_s2=accel),
+            )
         )
     tracks = {"constant_turn_250ms_3degs": constant_turn_track(), "manoeuvring": manoeuvring_track()}
-    track_results: dict[str, dict[str, dict[str, Optional[float]]]] = {}
+    track_results: dict[str, dict[str, dict[str, float | None]]] = {}
     results: dict[str, object] = {
         "settings": {
             "runs": args.runs,
@@ -224,7 +225,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "tracks": track_results,
     }
     for track_name, track in tracks.items():
-        per_case: dict[str, dict[str, Optional[float]]] = {}
+        per_case: dict[str, dict[str, float | None]] = {}
         for case_name, model, noise in cases:
             per_case[case_name] = evaluate(track, noise, model, args.runs, args.seed)
             _log.info("%-28s %-34s %s", track_name, case_name, per_case[case_name])

@@ -93,7 +93,11 @@ class MinimalLink:
         raise BenchError(f"no COMMAND_ACK for command {command} from {self.addr}")
 
     def setpoint(self, stamp_ms: int) -> None:
-        self.send(self.mav.set_position_target_local_ned_encode(stamp_ms, 0, 0, mavlink2.MAV_FRAME_BODY_FRD, SETPOINT_MASK, 0, 0, 0, 0, 0, 0, 0.0, 0, 0, 0, 0.0))
+        self.send(
+            self.mav.set_position_target_local_ned_encode(
+                stamp_ms, 0, 0, mavlink2.MAV_FRAME_BODY_FRD, SETPOINT_MASK, 0, 0, 0, 0, 0, 0, 0.0, 0, 0, 0, 0.0
+            )
+        )
 
 
 def _cpu_s(pid: int) -> float | None:
@@ -106,7 +110,18 @@ def _cpu_s(pid: int) -> float | None:
 
 
 def start_sitl(scenario: Path, timeout_s: float) -> tuple[subprocess.Popen[bytes], list[tuple[str, int]]]:
-    cmd = [sys.executable, "-m", "sim_vehicles", "--scenario", str(scenario), "--lockstep", "--base-port", "0", "--linger-s", "0"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "sim_vehicles",
+        "--scenario",
+        str(scenario),
+        "--lockstep",
+        "--base-port",
+        "0",
+        "--linger-s",
+        "0",
+    ]
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=env)
     assert proc.stdout is not None
@@ -183,11 +198,15 @@ def run(steps: int, warmup: int, scenario: Path, timeout_s: float) -> dict[str, 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--steps", type=int, default=3000, help="measured steps (default 3000; the strike scenario caps at 4000)")
+    p.add_argument(
+        "--steps", type=int, default=3000, help="measured steps (default 3000; the strike scenario caps at 4000)"
+    )
     p.add_argument("--warmup", type=int, default=100, help="steps before the clock starts (default 100)")
     p.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "strike.yaml")
     p.add_argument("--timeout-s", type=float, default=300.0, help="give up after this long")
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "sitl.json", help="write the result here")
+    p.add_argument(
+        "--json", type=Path, default=ROOT / "benchmarks" / "results" / "sitl.json", help="write the result here"
+    )
     args = p.parse_args(argv)
     try:
         result = run(args.steps, args.warmup, args.scenario, args.timeout_s)

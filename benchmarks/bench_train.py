@@ -73,7 +73,9 @@ Matmul = tuple[int, int, int]
 # --- timing ---------------------------------------------------------------------------------------
 
 
-def timed_rounds(blocks: dict[str, Callable[[], int]], threads: int, seconds: float, rounds: int) -> dict[str, dict[str, float]]:
+def timed_rounds(
+    blocks: dict[str, Callable[[], int]], threads: int, seconds: float, rounds: int
+) -> dict[str, dict[str, float]]:
     """Run each block (returns how many units it did) for seconds / rounds per round, alternating the
     blocks within each round; median rates per wall second and per CPU second of this process."""
     torch.set_num_threads(threads)
@@ -224,7 +226,9 @@ def forward(layers: Sequence[tuple[int, int]], members: int = 1) -> list[Matmul]
     return [(BATCH, k, n) for k, n in layers for _ in range(members)]
 
 
-def backward(layers: Sequence[tuple[int, int]], members: int = 1, weights: bool = True, first_input: bool = False) -> list[Matmul]:
+def backward(
+    layers: Sequence[tuple[int, int]], members: int = 1, weights: bool = True, first_input: bool = False
+) -> list[Matmul]:
     """Weight gradients x^T g (k, B, n) and input gradients g W^T (B, n, k); the first layer's input
     gradient only when its input needs one (the actions, when the actor loss flows through a critic)."""
     out: list[Matmul] = []
@@ -242,10 +246,14 @@ def our_matmuls(recent: bool, cost_in_actor: bool) -> list[Matmul]:
     actor, critic = layer_sizes(OBS_DIM, 2 * ACT_DIM), layer_sizes(OBS_DIM + ACT_DIM, 1)
     to_actor = 3 if cost_in_actor else 2
     return (
-        forward(actor) + forward(critic, 3)  # targets: pi(s'), twin target critics, target cost critic
-        + forward(critic, 3) + backward(critic, 3)  # critic step
-        + forward(actor) + forward(critic, 3)  # actor step: pi(s) and the critics at its actions ...
-        + backward(critic, to_actor, weights=False, first_input=True) + backward(actor)  # ... back to the actor
+        forward(actor)
+        + forward(critic, 3)  # targets: pi(s'), twin target critics, target cost critic
+        + forward(critic, 3)
+        + backward(critic, 3)  # critic step
+        + forward(actor)
+        + forward(critic, 3)  # actor step: pi(s) and the critics at its actions ...
+        + backward(critic, to_actor, weights=False, first_input=True)
+        + backward(actor)  # ... back to the actor
         + (forward(actor) + forward(critic, 1) if recent else [])  # Q^c on the recent batch
     )
 
@@ -257,9 +265,14 @@ def sb3_matmuls() -> list[Matmul]:
     trunk = layer_sizes(OBS_DIM, HIDDEN[-1])[:-1]
     actor = [*trunk, (HIDDEN[-1], ACT_DIM), (HIDDEN[-1], ACT_DIM)]
     return (
-        forward(actor) + forward(actor) + forward(critic, 2)  # pi(s), then targets: pi(s'), target critics
-        + forward(critic, 2) + backward(critic, 2)  # critic step
-        + forward(critic, 2) + backward(critic, 2, weights=True, first_input=True) + backward(actor)  # actor step
+        forward(actor)
+        + forward(actor)
+        + forward(critic, 2)  # pi(s), then targets: pi(s'), target critics
+        + forward(critic, 2)
+        + backward(critic, 2)  # critic step
+        + forward(critic, 2)
+        + backward(critic, 2, weights=True, first_input=True)
+        + backward(actor)  # actor step
     )
 
 
@@ -324,8 +337,10 @@ def main() -> None:
     per_threads: dict[str, dict[str, Any]] = {}
     for threads in thread_counts:
         rates = timed_rounds(blocks, threads, args.seconds, args.rounds)
-        row: dict[str, Any] = {"updates_per_s": {k: v["per_s"] for k, v in rates.items()},
-                               "updates_per_cpu_s": {k: v["per_cpu_s"] for k, v in rates.items()}}
+        row: dict[str, Any] = {
+            "updates_per_s": {k: v["per_s"] for k, v in rates.items()},
+            "updates_per_cpu_s": {k: v["per_cpu_s"] for k, v in rates.items()},
+        }
         mm_s = {name: matmul_seconds(s, threads) for name, s in shapes.items()}
         row["matmul_gflop_per_s"] = flops(shapes["ours_tssac"]) / mm_s["ours_tssac"] / 1e9
         row["bound_updates_per_s"] = {name: 1.0 / t for name, t in mm_s.items()}
@@ -341,20 +356,31 @@ def main() -> None:
 
         print(f"--- {threads} thread(s) ---")
         for name, rate in rates.items():
-            print(f"{name:12s} {rate['per_s']:7.1f} updates/s ({rate['per_cpu_s']:6.1f} per CPU-s)  "
-                  f"{gflop[name]:.3f} GFLOP/update -> {rate['per_s'] * gflop[name]:5.1f} GFLOP/s, "
-                  f"{row['fraction_of_bound'][name]:.0%} of its bound {row['bound_updates_per_s'][name]:.0f}/s")
+            print(
+                f"{name:12s} {rate['per_s']:7.1f} updates/s ({rate['per_cpu_s']:6.1f} per CPU-s)  "
+                f"{gflop[name]:.3f} GFLOP/update -> {rate['per_s'] * gflop[name]:5.1f} GFLOP/s, "
+                f"{row['fraction_of_bound'][name]:.0%} of its bound {row['bound_updates_per_s'][name]:.0f}/s"
+            )
         print(f"torch.mm on the update's shapes: {row['matmul_gflop_per_s']:.0f} GFLOP/s")
         for name, ratio in row.get("ours_over_sb3", {}).items():
             print(f"{name} / sb3_sac: {ratio:.2f}")
         if "loop" in row:
             loop = row["loop"]
-            print(f"training loop: {loop['env_steps_per_s']:.0f} env-steps/s, {loop['updates_per_s']:.0f} updates/s "
-                  f"({loop['env_fraction']:.0%} env, {loop['update_fraction']:.0%} updates)")
+            print(
+                f"training loop: {loop['env_steps_per_s']:.0f} env-steps/s, {loop['updates_per_s']:.0f} updates/s "
+                f"({loop['env_fraction']:.0%} env, {loop['update_fraction']:.0%} updates)"
+            )
 
     figures["threads"] = per_threads
-    figures["config"] = {"batch": BATCH, "hidden": list(HIDDEN), "obs_dim": OBS_DIM, "act_dim": ACT_DIM,
-                         "buffer_rows": FILL, "seconds": args.seconds, "rounds": args.rounds}
+    figures["config"] = {
+        "batch": BATCH,
+        "hidden": list(HIDDEN),
+        "obs_dim": OBS_DIM,
+        "act_dim": ACT_DIM,
+        "buffer_rows": FILL,
+        "seconds": args.seconds,
+        "rounds": args.rounds,
+    }
     figures["machine"] = {
         "python": platform.python_version(),
         "torch": torch.__version__,

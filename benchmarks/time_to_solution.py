@@ -25,8 +25,9 @@ import json
 import math
 import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_MIN = 60.0
@@ -55,7 +56,10 @@ def reported_wall_s(run: Path) -> float | None:
     log = run / "train.log"
     if not log.is_file():
         return None
-    found = [int(s) for s in re.findall(r"^trained .* in (\d+) s; results in ", log.read_text(errors="replace"), re.MULTILINE)]
+    found = [
+        int(s)
+        for s in re.findall(r"^trained .* in (\d+) s; results in ", log.read_text(errors="replace"), re.MULTILINE)
+    ]
     return float(sum(found)) if found else None
 
 
@@ -67,7 +71,9 @@ def time_to_solution(run: Path, wall_s: float | None = None) -> dict[str, Any]:
     per_epoch = epoch_seconds(rows)
     roles = list(dict.fromkeys(role for role, _, _ in per_epoch))
     last_role = roles[-1]
-    shipped = int(float([r for r in rows if r["role"] == last_role][-1]["best_epoch"] or 0)) or max(e for ro, e, _ in per_epoch if ro == last_role)
+    shipped = int(float([r for r in rows if r["role"] == last_role][-1]["best_epoch"] or 0)) or max(
+        e for ro, e, _ in per_epoch if ro == last_role
+    )
     until = 0
     for i, (role, epoch, _) in enumerate(per_epoch):
         if role == last_role and epoch == shipped:
@@ -92,14 +98,22 @@ def time_to_solution(run: Path, wall_s: float | None = None) -> dict[str, Any]:
     evaluation = run / "eval_random.json"
     if evaluation.is_file():
         ev = json.loads(evaluation.read_text())
-        result["shipped_team"] = {"success_rate": ev["success_rate"], "mean_cost": ev["mean_cost"], "episodes": ev["episodes"]}
+        result["shipped_team"] = {
+            "success_rate": ev["success_rate"],
+            "mean_cost": ev["mean_cost"],
+            "episodes": ev["episodes"],
+        }
     return result
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("runs", nargs="*", type=Path, default=[ROOT / "models" / "tssac"], help="run directories (default models/tssac)")
-    p.add_argument("--wall-s", type=float, help="the run's whole wall time, if its train.log is not there (one run only)")
+    p.add_argument(
+        "runs", nargs="*", type=Path, default=[ROOT / "models" / "tssac"], help="run directories (default models/tssac)"
+    )
+    p.add_argument(
+        "--wall-s", type=float, help="the run's whole wall time, if its train.log is not there (one run only)"
+    )
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "time_to_solution.json")
     a = p.parse_args(argv)
     if a.wall_s is not None and len(a.runs) != 1:
@@ -109,12 +123,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         r = time_to_solution(run, a.wall_s)
         results.append(r)
         team = r.get("shipped_team")
-        quality = f"shipped team {100 * team['success_rate']:.0f}% success, cost {team['mean_cost']:.2f}" if team else "no eval_random.json"
-        wall = f"; with validation ~{r['wall_s_to_solution_estimate'] / 60:.1f} min" if "wall_s_to_solution_estimate" in r else ""
-        print(f"{run}: {r['epochs_to_solution']} of {r['epochs']} epochs, training {r['training_s_to_solution'] / 60:.1f} min "
-              f"to the shipped team{wall} (target < {TARGET_MIN:.0f} min at >= {100 * TARGET_SUCCESS:.0f}%); {quality}")
+        quality = (
+            f"shipped team {100 * team['success_rate']:.0f}% success, cost {team['mean_cost']:.2f}"
+            if team
+            else "no eval_random.json"
+        )
+        wall = (
+            f"; with validation ~{r['wall_s_to_solution_estimate'] / 60:.1f} min"
+            if "wall_s_to_solution_estimate" in r
+            else ""
+        )
+        print(
+            f"{run}: {r['epochs_to_solution']} of {r['epochs']} epochs, training "
+            f"{r['training_s_to_solution'] / 60:.1f} min "
+            f"to the shipped team{wall} (target < {TARGET_MIN:.0f} min at >= {100 * TARGET_SUCCESS:.0f}%); {quality}"
+        )
     a.json.parent.mkdir(parents=True, exist_ok=True)
-    a.json.write_text(json.dumps({"target_minutes": TARGET_MIN, "target_success": TARGET_SUCCESS, "runs": results}, indent=2) + "\n")
+    a.json.write_text(
+        json.dumps({"target_minutes": TARGET_MIN, "target_success": TARGET_SUCCESS, "runs": results}, indent=2) + "\n"
+    )
     print(f"wrote {a.json}")
     return 0
 

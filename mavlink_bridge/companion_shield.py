@@ -86,8 +86,14 @@ class CompanionShield:
             return 0
         return round(2.0 * self.latency_s / self.dt_s)
 
-    def action(self, decision: bool, steps: int, proposed: np.ndarray, state: tuple[float, float, float, float],
-               sigma_major_m: float) -> tuple[np.ndarray, str | None]:
+    def action(
+        self,
+        decision: bool,
+        steps: int,
+        proposed: np.ndarray,
+        state: tuple[float, float, float, float],
+        sigma_major_m: float,
+    ) -> tuple[np.ndarray, str | None]:
         """The action to send this tick and a STATUSTEXT to say (a hand-over), or None.
 
         ``decision``: the pilot decided this tick (its action holds for ``steps`` ticks); otherwise the
@@ -96,7 +102,7 @@ class CompanionShield:
         if decision:
             margin = estimate_margin_m(self.cfg, sigma_major_m, self.speed_max_m_s, realtime=not self.lockstep)
             n = min(self.pending_ticks(), len(self._sent))
-            pending = np.array(list(self._sent)[len(self._sent) - n:]) if n else None
+            pending = np.array(list(self._sent)[len(self._sent) - n :]) if n else None
             d = self.monitor.decide(*state, proposed=proposed, steps=steps, margin_m=margin, pending=pending)
             self._held = d.action[0].copy()
             self.counters.decisions += 1

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from tssac_core.deploy.geodetic import geodetic_to_local
 from tssac_core.sim.scenario import Origin, VehicleSpec
 
+
 @dataclass(frozen=True)
 class Measurement:
     """One position/velocity fix in the world frame, stamped with the vehicle's clock."""
@@ -39,7 +40,9 @@ def from_local_position_ned(time_boot_ms: int, x_m: float, y_m: float, vx_m_s: f
     return Measurement(time_boot_ms / 1000.0, float(y_m), float(x_m), float(vy_m_s), float(vx_m_s))
 
 
-def from_global_position_int(origin: Origin, time_boot_ms: int, lat_e7: int, lon_e7: int, vx_cm_s: int, vy_cm_s: int) -> Measurement:
+def from_global_position_int(
+    origin: Origin, time_boot_ms: int, lat_e7: int, lon_e7: int, vx_cm_s: int, vy_cm_s: int
+) -> Measurement:
     """GLOBAL_POSITION_INT fields -> world measurement."""
     east, north = geodetic_to_local(origin, lat_e7 * 1e-7, lon_e7 * 1e-7)
     return Measurement(time_boot_ms / 1000.0, east, north, vy_cm_s / 100.0, vx_cm_s / 100.0)

@@ -21,7 +21,8 @@ signed one). With signing, every frame is verified by
 :class:`tssac_core.deploy.mavlink_signing.SignatureVerifier` — signature first, then the stream's
 timestamp — before it is believed; pymavlink only decodes (its own check records a forged frame's
 timestamp before it compares the signature, and one far-future forgery would lock the vehicle's stream
-out). So mission events (NAMED_VALUE_INT ``MSN_END``, ``HIT``) are as authenticated as everything else. Messages that arrive while a command waits for its
+out). So mission events (NAMED_VALUE_INT ``MSN_END``, ``HIT``) are as authenticated as everything else. Messages that
+arrive while a command waits for its
 COMMAND_ACK are kept and returned by later :meth:`MavLink.recv` calls, never dropped. Every
 wait is bounded on ``time.monotonic()``; no wait uses the vehicle's clock (a silent vehicle has none).
 
@@ -41,11 +42,13 @@ import select
 import socket
 import struct
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Callable, Optional, TypeAlias
+from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -90,7 +93,7 @@ class LinkError(Exception):
 class CommandError(LinkError):
     """A COMMAND_LONG that was not acknowledged, or acknowledged with a result other than ACCEPTED."""
 
-    def __init__(self, command: int, result: Optional[int], message: str) -> None:
+    def __init__(self, command: int, result: int | None, message: str) -> None:
         self.command = command
         self.result = result
         super().__init__(message)
@@ -166,9 +169,9 @@ class MavLink:
         source_component: int = M.MAV_COMP_ID_ONBOARD_COMPUTER,
         target_system: int = 0,
         target_component: int = M.MAV_COMP_ID_AUTOPILOT1,
-        signing_key: Optional[bytes] = None,
+        signing_key: bytes | None = None,
         signing_link_id: int = 1,
-        tlog_path: Optional[Path] = None,
+        tlog_path: Path | None = None,
     ) -> None:
         try:
             self.spec = parse_connection(connection)
@@ -180,8 +183,8 @@ class MavLink:
         self._backlog: collections.deque[tuple[Message, float]] = collections.deque()
         self.last_rx_s = 0.0
         """When the datagram of the message :meth:`recv` returned last was read (time.monotonic())."""
-        self._peer: Optional[tuple[str, int]] = None
-        self._tlog: Optional[BinaryIO] = None
+        self._peer: tuple[str, int] | None = None
+        self._tlog: BinaryIO | None = None
         self._tlog_flushed = time.monotonic()
         self._closed = False
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -202,7 +205,7 @@ class MavLink:
         self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         """Frames and decodes what we receive; it has no key, so pymavlink never checks a signature."""
         self._rx.robust_parsing = True
-        self._verifier: Optional[SignatureVerifier] = None
+        self._verifier: SignatureVerifier | None = None
         if signing_key is not None:
             self.setup_signing(signing_key, signing_link_id)
         if tlog_path is not None:
@@ -241,7 +244,7 @@ class MavLink:
 
     # ---------------------------------------------------------------------------- receive
 
-    def recv(self, timeout_s: float = 0.0) -> Optional[Message]:
+    def recv(self, timeout_s: float = 0.0) -> Message | None:
         """The next message, waiting up to ``timeout_s`` (wall clock) for one; None if none came."""
         if self._backlog:
             return self._pop()
@@ -372,7 +375,9 @@ class MavLink:
 
     def send_heartbeat(self) -> bool:
         """Our HEARTBEAT (an onboard controller, no autopilot)."""
-        return self.send(self.mav.heartbeat_encode(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE))
+        return self.send(
+            self.mav.heartbeat_encode(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE)
+        )
 
     def send_statustext(self, severity: int, text: str) -> bool:
         """STATUSTEXT (cut to one 50-character chunk)."""
@@ -400,8 +405,9 @@ class MavLink:
 
     # ------------------------------------------------------------------------------ waits
 
-    def wait_heartbeat(self, timeout_s: float, heartbeat_interval_s: float = 1.0,
-                       stop: Optional[Callable[[], bool]] = None) -> Message:
+    def wait_heartbeat(
+        self, timeout_s: float, heartbeat_interval_s: float = 1.0, stop: Callable[[], bool] | None = None
+    ) -> Message:
         """Wait for an autopilot HEARTBEAT (learning the target system), sending ours meanwhile.
 
         Other messages received meanwhile stay queued for :meth:`recv`. Raises LinkError on timeout.
@@ -445,7 +451,9 @@ class MavLink:
         """Sent by our target autopilot (system and component)."""
         return msg.get_srcSystem() == self.target_system and msg.get_srcComponent() == self.target_component
 
-    def command_long(self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3) -> Message:
+    def command_long(
+        self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3
+    ) -> Message:
         """Send COMMAND_LONG until its COMMAND_ACK arrives (``retries`` attempts, ``timeout_s`` each).
 
         Returns the ACK (whatever its result); raises CommandError if none came. Other messages
@@ -477,13 +485,22 @@ class MavLink:
             ack_rx_s = self.last_rx_s
             self._push_back(skipped)
             self.last_rx_s = ack_rx_s  # the ACK's (or, on failure, the last message's) receive time
-        raise CommandError(command, None, f"{_command_name(command)}: no COMMAND_ACK from the vehicle after {max(1, retries)} attempts of {timeout_s:g} s")
+        raise CommandError(
+            command,
+            None,
+            f"{_command_name(command)}: no COMMAND_ACK from the vehicle after {max(1, retries)} attempts of "
+            f"{timeout_s:g} s",
+        )
 
-    def command_checked(self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3) -> Message:
+    def command_checked(
+        self, command: int, params: tuple[float, ...] = (), timeout_s: float = 1.0, retries: int = 3
+    ) -> Message:
         """:meth:`command_long`, raising CommandError unless the result is MAV_RESULT_ACCEPTED."""
         ack = self.command_long(command, params, timeout_s, retries)
         if ack.result != M.MAV_RESULT_ACCEPTED:
-            raise CommandError(command, ack.result, f"{_command_name(command)} refused by the vehicle: {_result_name(ack.result)}")
+            raise CommandError(
+                command, ack.result, f"{_command_name(command)} refused by the vehicle: {_result_name(ack.result)}"
+            )
         return ack
 
     def arm(self, timeout_s: float = 1.0, retries: int = 3) -> Message:
@@ -492,12 +509,18 @@ class MavLink:
 
     def set_mode(self, custom_mode: int, timeout_s: float = 1.0, retries: int = 3) -> Message:
         """MAV_CMD_DO_SET_MODE with CUSTOM_MODE_ENABLED and the autopilot's mode number, checked."""
-        return self.command_checked(M.MAV_CMD_DO_SET_MODE, (float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(custom_mode)), timeout_s, retries)
+        return self.command_checked(
+            M.MAV_CMD_DO_SET_MODE, (float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(custom_mode)), timeout_s, retries
+        )
 
-    def set_message_interval(self, message_id: int, interval_s: float, timeout_s: float = 1.0, retries: int = 3) -> Message:
+    def set_message_interval(
+        self, message_id: int, interval_s: float, timeout_s: float = 1.0, retries: int = 3
+    ) -> Message:
         """MAV_CMD_SET_MESSAGE_INTERVAL, checked: ``interval_s`` > 0, or -1 to stop the stream."""
         interval_us = -1.0 if interval_s < 0 else interval_s * 1e6
-        return self.command_checked(M.MAV_CMD_SET_MESSAGE_INTERVAL, (float(message_id), interval_us), timeout_s, retries)
+        return self.command_checked(
+            M.MAV_CMD_SET_MESSAGE_INTERVAL, (float(message_id), interval_us), timeout_s, retries
+        )
 
     def _ack_for_us(self, ack: Message) -> bool:
         # MAVLink 2 COMMAND_ACK carries target fields; an autopilot that leaves them 0 addresses everyone.

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from tssac_core.deploy.truth_log_schema import EVENT, FLAGS, HEADER, ROLES_KEY, STEP, SUMMARY, VEHICLES_KEY
 from tssac_core.sim.scenario import ROLES
@@ -33,7 +33,7 @@ class MissionRecord:
     """What one truth log says about a mission."""
 
     header: dict[str, Any]
-    summary: Optional[dict[str, Any]]
+    summary: dict[str, Any] | None
     """None if the world was killed before it could write one."""
     tracks_m: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     events: list[dict[str, Any]] = field(default_factory=list)
@@ -104,8 +104,8 @@ def read_mission(path: Path) -> MissionRecord:
         lines = Path(path).read_text(encoding="utf-8").splitlines()
     except OSError as exc:
         raise TruthLogError(f"{path}: cannot read truth log ({exc.strerror or exc})") from None
-    header: Optional[dict[str, Any]] = None
-    record: Optional[MissionRecord] = None
+    header: dict[str, Any] | None = None
+    record: MissionRecord | None = None
     for n, line in enumerate(lines, 1):
         if not line.strip():
             continue

@@ -19,9 +19,10 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Optional, Sequence
+from typing import IO
 
 _log = logging.getLogger(__name__)
 
@@ -45,13 +46,13 @@ class Child:
 
     name: str
     process: subprocess.Popen[bytes]
-    log_path: Optional[Path]
+    log_path: Path | None
 
     @property
     def pid(self) -> int:
         return self.process.pid
 
-    def poll(self) -> Optional[int]:
+    def poll(self) -> int | None:
         return self.process.poll()
 
 
@@ -63,10 +64,18 @@ class ChildProcesses:
         self.children: list[Child] = []
         atexit.register(self.stop_all)
 
-    def start(self, name: str, argv: Sequence[str], *, log_path: Optional[Path] = None, stdout_pipe: bool = False,
-              cwd: Optional[Path] = None, env: Optional[dict[str, str]] = None) -> Child:
+    def start(
+        self,
+        name: str,
+        argv: Sequence[str],
+        *,
+        log_path: Path | None = None,
+        stdout_pipe: bool = False,
+        cwd: Path | None = None,
+        env: dict[str, str] | None = None,
+    ) -> Child:
         """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``."""
-        log: Optional[IO[bytes]] = None
+        log: IO[bytes] | None = None
         if log_path is not None:
             log_path.parent.mkdir(parents=True, exist_ok=True)
             log = open(log_path, "wb")
@@ -92,7 +101,7 @@ class ChildProcesses:
     def alive(self) -> list[Child]:
         return [c for c in self.children if c.poll() is None]
 
-    def stop(self, children: Sequence[Child], grace_s: Optional[float] = None) -> None:
+    def stop(self, children: Sequence[Child], grace_s: float | None = None) -> None:
         """SIGTERM each running child's process group, wait up to ``grace_s``, SIGKILL what is left, reap all.
 
         A child that already exited was reaped by ``poll()``: its group id is not signalled any more,
@@ -121,7 +130,7 @@ class ChildProcesses:
             if c.process.stdout is not None and not c.process.stdout.closed:
                 c.process.stdout.close()
 
-    def stop_all(self, grace_s: Optional[float] = None) -> None:
+    def stop_all(self, grace_s: float | None = None) -> None:
         """Stop every child ever started (idempotent)."""
         if self.children:
             self.stop(self.children, grace_s)

@@ -72,7 +72,7 @@ import enum
 import logging
 import math
 from dataclasses import dataclass
-from typing import Optional, Protocol
+from typing import Protocol
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
@@ -217,7 +217,7 @@ class _Backend(Protocol):
     def get(self) -> tuple[FloatArray, FloatArray]: ...
     def set(self, x: FloatArray, p: FloatArray) -> None: ...
     def pos_vel(self) -> tuple[float, float, float, float]: ...
-    def turn_rate_rad_s(self) -> Optional[float]: ...
+    def turn_rate_rad_s(self) -> float | None: ...
     def pos_cov(self) -> FloatArray: ...
 
 
@@ -259,7 +259,7 @@ class _ConstantVelocity:
         x = self._kf.x
         return float(x[0]), float(x[1]), float(x[2]), float(x[3])
 
-    def turn_rate_rad_s(self) -> Optional[float]:
+    def turn_rate_rad_s(self) -> float | None:
         return None
 
     def pos_cov(self) -> FloatArray:
@@ -456,7 +456,7 @@ class _ConstantTurn:
         v, phi = float(x[_V]), float(x[_PHI])
         return float(x[_X]), float(x[_Y]), v * math.cos(phi), v * math.sin(phi)
 
-    def turn_rate_rad_s(self) -> Optional[float]:
+    def turn_rate_rad_s(self) -> float | None:
         return float(self._kf.x[_OMEGA])
 
     def pos_cov(self) -> FloatArray:
@@ -482,7 +482,7 @@ class VehicleStateFilter:
             if model is FilterModel.CONSTANT_VELOCITY
             else _ConstantTurn(self._noise, unscented=model is FilterModel.CONSTANT_TURN)
         )
-        self._t_s: Optional[float] = None
+        self._t_s: float | None = None
         # Posterior after the last applied measurement (or reset): time, mean, covariance.
         self._post_t_s = 0.0
         self._post_x: FloatArray = np.zeros(0)
@@ -620,7 +620,7 @@ class VehicleStateFilter:
         return _wrap_angle_rad(math.atan2(vn, ve))
 
     @property
-    def turn_rate_rad_s(self) -> Optional[float]:
+    def turn_rate_rad_s(self) -> float | None:
         """Estimated turn rate omega (rad/s, counter-clockwise positive); None for constant velocity."""
         self._require_initialised()
         return self._backend.turn_rate_rad_s()

@@ -42,9 +42,14 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Start the SITL vehicles (decoy, detect, strike) of a scenario as MAVLink 2 systems on UDP.")
+    p = _Parser(
+        prog=PROG,
+        description="Start the SITL vehicles (decoy, detect, strike) of a scenario as MAVLink 2 systems on UDP.",
+    )
     p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random layout, GPS noise and link model (default 0)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the random layout, GPS noise and link model (default 0)"
+    )
     p.add_argument("--host", default="127.0.0.1", help="address the vehicles bind (default 127.0.0.1)")
     p.add_argument(
         "--base-port",
@@ -54,25 +59,44 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"UDP port of the decoy; detect P+10, strike P+20 (default {DEFAULT_BASE_PORT}); 0 = OS-assigned ports",
     )
     clock = p.add_mutually_exclusive_group()
-    clock.add_argument("--speedup", type=float, default=None, metavar="X", help="run X times faster than real time (default 1)")
-    clock.add_argument("--lockstep", action="store_true", help="advance one step per round of setpoints from the armed GUIDED vehicles")
+    clock.add_argument(
+        "--speedup", type=float, default=None, metavar="X", help="run X times faster than real time (default 1)"
+    )
+    clock.add_argument(
+        "--lockstep", action="store_true", help="advance one step per round of setpoints from the armed GUIDED vehicles"
+    )
     p.add_argument(
         "--lockstep-start",
         choices=[m.value for m in LockstepStart],
         default=LockstepStart.ALL.value,
         help="lockstep (or --hold-start): start once all (default) or any vehicle is armed in GUIDED",
     )
-    p.add_argument("--hold-start", action="store_true", help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED")
-    p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
+    p.add_argument(
+        "--hold-start",
+        action="store_true",
+        help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED",
+    )
+    p.add_argument(
+        "--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
+    )
     p.add_argument(
         "--unsigned-monitors",
         action="store_true",
-        help="with --signing-key: let passive monitors in with unsigned HEARTBEAT/RADIO_STATUS (4 at most, 2 kB/s of telemetry each)",
+        help=(
+            "with --signing-key: let passive monitors in with unsigned HEARTBEAT/RADIO_STATUS (4 at most, 2 kB/s of "
+            "telemetry each)"
+        ),
     )
     p.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
-    p.add_argument("--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here")
-    p.add_argument("--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here")
-    p.add_argument("--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)")
+    p.add_argument(
+        "--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here"
+    )
+    p.add_argument(
+        "--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here"
+    )
+    p.add_argument(
+        "--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)"
+    )
     p.add_argument(
         "--out",
         action="append",
@@ -80,8 +104,19 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="udpout:HOST:PORT",
         help="also stream every vehicle to this ground-station address and take its commands (repeatable)",
     )
-    p.add_argument("--linger-s", type=float, default=1.0, metavar="S", help="simulated seconds to keep serving after the mission ends (default 1.0)")
-    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="warning", help="log level on stderr (default warning)")
+    p.add_argument(
+        "--linger-s",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="simulated seconds to keep serving after the mission ends (default 1.0)",
+    )
+    p.add_argument(
+        "--log-level",
+        choices=["debug", "info", "warning", "error"],
+        default="warning",
+        help="log level on stderr (default warning)",
+    )
     return p
 
 
@@ -124,7 +159,9 @@ def parse_output(text: str) -> tuple[str, int]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     try:
         config = config_from_args(args)
         runner = WorldRunner(config)
@@ -150,7 +187,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     costs = " ".join(f"cost_{role}={c:g}" for role, c in result.cost.items())
-    print(f"end reason={result.end} success={str(result.success).lower()} steps={result.steps} sim_time_s={result.sim_time_s:.1f} {costs}", flush=True)
+    print(
+        f"end reason={result.end} success={str(result.success).lower()} steps={result.steps} "
+        f"sim_time_s={result.sim_time_s:.1f} {costs}",
+        flush=True,
+    )
     return 0
 
 

@@ -14,6 +14,7 @@ import logging
 import math
 import struct
 from collections.abc import Callable
+
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import modes, setpoints
@@ -100,7 +101,9 @@ class CommandHandler:
             _log.exception("%s: handling %s failed", v.role, msg.get_type())
 
     def _reply_ack(self, command: int, result: int, msg: Msg, addr: Address) -> None:
-        self.v.send(self.v.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), addr)
+        self.v.send(
+            self.v.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), addr
+        )
 
     # ------------------------------------------------------------------------------ commands
 
@@ -240,19 +243,33 @@ class CommandHandler:
 
     def _on_mission_request_list(self, msg: Msg, addr: Address) -> None:
         # No mission, fence or rally items: ground stations ask on connect and wait for an answer.
-        self.v.send(self.v.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type), addr)
+        self.v.send(
+            self.v.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type), addr
+        )
 
     def _on_mission_request_item(self, msg: Msg, addr: Address) -> None:
         # There are no items to send.
-        ack = self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type)
+        ack = self.v.mav.mission_ack_encode(
+            msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type
+        )
         self.v.send(ack, addr)
 
     def _on_mission_upload(self, msg: Msg, addr: Address) -> None:
         self.v.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
-        self.v.send(self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_UNSUPPORTED, msg.mission_type), addr)
+        self.v.send(
+            self.v.mav.mission_ack_encode(
+                msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_UNSUPPORTED, msg.mission_type
+            ),
+            addr,
+        )
 
     def _on_mission_clear_all(self, msg: Msg, addr: Address) -> None:
-        self.v.send(self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_ACCEPTED, msg.mission_type), addr)
+        self.v.send(
+            self.v.mav.mission_ack_encode(
+                msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_ACCEPTED, msg.mission_type
+            ),
+            addr,
+        )
 
     def _on_ftp(self, msg: Msg, addr: Address) -> None:
         payload = bytes(msg.payload)
@@ -268,7 +285,9 @@ class CommandHandler:
         # seq + 1, session, opcode, size, req_opcode, burst_complete, padding, offset, data
         header = struct.pack("<HBBBBBBI", (seq + 1) % 65536, session, reply, len(data), opcode, 0, 0, 0)
         body = (header + data).ljust(FTP_PAYLOAD_LEN, b"\0")
-        self.v.send(self.v.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)), addr)
+        self.v.send(
+            self.v.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)), addr
+        )
         size = payload[4]
         if opcode == FTP_OPEN_FILE_RO and payload[12 : 12 + size].startswith(FTP_PARAM_FILE):
             self._on_param_request_list(msg, addr)

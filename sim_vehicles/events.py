@@ -25,8 +25,8 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
-
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
 from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import StepResult
 
@@ -81,12 +81,23 @@ class MissionEvent:
             return mavlink2.MAV_SEVERITY_WARNING, f"Hazard: {ROLES[v].value} entered radar range"
         if k is EventKind.GEOFENCE:
             return mavlink2.MAV_SEVERITY_CRITICAL, f"Geofence: {ROLES[v].value} left the area"
-        text = {MissionEnd.SUCCESS: "success", MissionEnd.GEOFENCE: "geofence breach", MissionEnd.EPISODE_CAP: "episode cap"}
+        text = {
+            MissionEnd.SUCCESS: "success",
+            MissionEnd.GEOFENCE: "geofence breach",
+            MissionEnd.EPISODE_CAP: "episode cap",
+        }
         return mavlink2.MAV_SEVERITY_NOTICE, f"Mission end: {text.get(MissionEnd(v), str(v))}"
 
     def as_dict(self) -> dict[str, object]:
         role = ROLES[self.vehicle].value if self.vehicle is not None else None
-        return {"type": "event", "step": self.step, "t_s": round(self.time_s, 6), "event": self.kind.value, "value": self.value, "vehicle": role}
+        return {
+            "type": "event",
+            "step": self.step,
+            "t_s": round(self.time_s, 6),
+            "event": self.kind.value,
+            "value": self.value,
+            "vehicle": role,
+        }
 
 
 @dataclass
@@ -99,7 +110,11 @@ class MissionFlags:
     end: MissionEnd | None = None
 
     def named_values(self) -> list[tuple[str, int]]:
-        out = [(EventKind.RADAR.value, int(self.radar_on)), (EventKind.IDENTIFIED.value, int(self.identified)), (EventKind.HIT.value, int(self.hit))]
+        out = [
+            (EventKind.RADAR.value, int(self.radar_on)),
+            (EventKind.IDENTIFIED.value, int(self.identified)),
+            (EventKind.HIT.value, int(self.hit)),
+        ]
         if self.end is not None:
             out.append((EventKind.MISSION_END.value, int(self.end)))
         return out

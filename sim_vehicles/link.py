@@ -72,7 +72,9 @@ class GpsReceiver:
         self.fixes = 0
         self.dropouts = 0
 
-    def sample(self, time_s: float, east_m: float, north_m: float, vel_east_m_s: float, vel_north_m_s: float) -> GpsFix | None:
+    def sample(
+        self, time_s: float, east_m: float, north_m: float, vel_east_m_s: float, vel_north_m_s: float
+    ) -> GpsFix | None:
         """Called at every world step with the true state; returns a new fix if one fell due and survived."""
         if time_s + _EPS_S < self._next_index * self._period_s:
             return None

@@ -10,7 +10,8 @@ frame must not swallow the next datagram), a bind that fails when the port is ta
 SO_REUSEADDR), and socket errors counted rather than swallowed.
 
 Every datagram is split into frames here; a frame is decoded only if its CRC (with the message's
-CRC_EXTRA) matches and, with signing, its signature verifies (:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
+CRC_EXTRA) matches and, with signing, its signature verifies
+(:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
 signature first, then the stream's timestamp — pymavlink's own check records the timestamp first).
 Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned, wrongly signed and replayed
 messages are dropped and counted in :class:`RxCounters`; a header that does not check out (unknown id,
@@ -39,9 +40,9 @@ import time
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
 
 from sim_vehicles import signing
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
 
 _log = logging.getLogger(__name__)
 
@@ -98,7 +99,15 @@ class RxCounters:
     @property
     def rejected(self) -> int:
         """Frames dropped for any reason (for SYS_STATUS.errors_comm)."""
-        return self.truncated + self.bad_crc + self.unknown_id + self.unsigned_rejected + self.bad_signature + self.replayed + self.decode_errors
+        return (
+            self.truncated
+            + self.bad_crc
+            + self.unknown_id
+            + self.unsigned_rejected
+            + self.bad_signature
+            + self.replayed
+            + self.decode_errors
+        )
 
 
 @dataclass
@@ -146,7 +155,15 @@ class EndpointError(OSError):
 class MavEndpoint:
     """A MAVLink system's UDP endpoint: bind, receive, frame + check + decode, encode, send to clients."""
 
-    def __init__(self, host: str, port: int, sysid: int, compid: int, signing_key: bytes | None = None, unsigned_monitors: bool = False) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        sysid: int,
+        compid: int,
+        signing_key: bytes | None = None,
+        unsigned_monitors: bool = False,
+    ) -> None:
         self.sysid = sysid
         self.compid = compid
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -217,7 +234,9 @@ class MavEndpoint:
             except OSError as exc:
                 self.tx.socket_errors += 1
                 if self.tx.socket_errors in (1, 10, 100, 1000) or self.tx.socket_errors % 10000 == 0:
-                    _log.warning("sysid %d: sendto %s failed (%d so far): %s", self.sysid, addr, self.tx.socket_errors, exc)
+                    _log.warning(
+                        "sysid %d: sendto %s failed (%d so far): %s", self.sysid, addr, self.tx.socket_errors, exc
+                    )
                 continue
             self.tx.packets += 1
             self.tx.bytes += len(data)
@@ -226,7 +245,9 @@ class MavEndpoint:
     def _spend(monitor: _Monitor, size: int) -> bool:
         """Token bucket: MONITOR_BYTES_PER_S, at most one second's worth saved up."""
         now = time.monotonic()
-        monitor.tokens = min(float(MONITOR_BYTES_PER_S), monitor.tokens + (now - monitor.refilled_s) * MONITOR_BYTES_PER_S)
+        monitor.tokens = min(
+            float(MONITOR_BYTES_PER_S), monitor.tokens + (now - monitor.refilled_s) * MONITOR_BYTES_PER_S
+        )
         monitor.refilled_s = now
         if size > monitor.tokens:
             return False
@@ -261,14 +282,27 @@ class MavEndpoint:
     def _refuse(self, addr: Address, table: str) -> None:
         self.rx.peers_refused += 1
         if self.rx.peers_refused in (1, 10, 100, 1000) or self.rx.peers_refused % 10000 == 0:
-            _log.warning("sysid %d: %s table full, %s:%d refused (%d so far)", self.sysid, table, addr[0], addr[1], self.rx.peers_refused)
+            _log.warning(
+                "sysid %d: %s table full, %s:%d refused (%d so far)",
+                self.sysid,
+                table,
+                addr[0],
+                addr[1],
+                self.rx.peers_refused,
+            )
 
     def expire_peers(self, now_wall_s: float, timeout_s: float = PEER_TIMEOUT_S) -> None:
         """Forget clients and monitors that sent nothing accepted for ``timeout_s`` wall seconds."""
         for addr, last in list(self.peers.items()):
             if now_wall_s - last > timeout_s:
                 del self.peers[addr]
-                _log.info("sysid %d: client %s:%d silent for %.0f s, forgotten", self.sysid, addr[0], addr[1], now_wall_s - last)
+                _log.info(
+                    "sysid %d: client %s:%d silent for %.0f s, forgotten",
+                    self.sysid,
+                    addr[0],
+                    addr[1],
+                    now_wall_s - last,
+                )
         for addr, monitor in list(self.monitors.items()):
             if now_wall_s - monitor.last_seen_s > timeout_s:
                 del self.monitors[addr]

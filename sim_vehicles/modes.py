@@ -41,7 +41,13 @@ AUTONOMOUS = frozenset({FlightMode.CIRCLE, FlightMode.RTL, FlightMode.LOITER})
 """Modes in which the autopilot steers by itself (navigation.py)."""
 
 _REFUSED = {
-    2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB", 7: "CRUISE", 8: "AUTOTUNE",
+    2: "STABILIZE",
+    3: "TRAINING",
+    4: "ACRO",
+    5: "FBWA",
+    6: "FBWB",
+    7: "CRUISE",
+    8: "AUTOTUNE",
 }
 """ArduPlane's pilot modes: they fly the sticks, and there is no RC input here."""
 

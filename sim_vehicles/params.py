@@ -81,7 +81,15 @@ class ParamTable:
         return None
 
 
-def vehicle_params(sysid: int, setpoint_timeout_s: float, dt_s: float, turn_max_deg_s: float, accel_max_m_s2: float, speed_min_m_s: float, speed_max_m_s: float) -> ParamTable:
+def vehicle_params(
+    sysid: int,
+    setpoint_timeout_s: float,
+    dt_s: float,
+    turn_max_deg_s: float,
+    accel_max_m_s2: float,
+    speed_min_m_s: float,
+    speed_max_m_s: float,
+) -> ParamTable:
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
     return ParamTable(
         [

@@ -2,7 +2,8 @@
 
 Key file (``--signing-key FILE``): either exactly 32 raw bytes, or 64 hexadecimal characters (surrounding
 whitespace and a trailing newline allowed). MAVProxy's ``signing setup PASSPHRASE`` uses
-``sha256(PASSPHRASE)`` as the key, so ``python -c "import hashlib;print(hashlib.sha256(b'PASSPHRASE').hexdigest())" > key.hex``
+``sha256(PASSPHRASE)`` as the key, so ``python -c "import hashlib;print(hashlib.sha256(b'PASSPHRASE').hexdigest())" >
+key.hex``
 makes a file that matches it.
 
 With a key the vehicle signs everything it sends (:func:`enable_signing`: the same
@@ -18,6 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
 from tssac_core.deploy.mavlink_signing import KEY_LEN, now_10us
 
 MONITOR_IDS = frozenset({mavlink2.MAVLINK_MSG_ID_HEARTBEAT, mavlink2.MAVLINK_MSG_ID_RADIO_STATUS})

@@ -18,8 +18,8 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from sim_vehicles.link import GpsFix
+from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from tssac_core.sim.scenario import Origin
 
 GRAVITY_M_S2 = 9.80665
@@ -67,7 +67,9 @@ def heartbeat(mav: MAV, armed: bool, custom_mode: int, guided: bool, system_stat
         base_mode |= mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
     if guided:
         base_mode |= mavlink2.MAV_MODE_FLAG_GUIDED_ENABLED
-    return mav.heartbeat_encode(mavlink2.MAV_TYPE_FIXED_WING, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, custom_mode, system_status, 3)
+    return mav.heartbeat_encode(
+        mavlink2.MAV_TYPE_FIXED_WING, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, custom_mode, system_status, 3
+    )
 
 
 def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -> Msg:
@@ -89,13 +91,34 @@ def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -
 
 def local_position_ned(mav: MAV, fix: GpsFix) -> Msg:
     """LOCAL_POSITION_NED of a GPS fix: x north = world y, y east = world x, z 0 (flight altitude)."""
-    return mav.local_position_ned_encode(int(round(fix.time_s * 1000.0)), fix.north_m, fix.east_m, 0.0, fix.vel_north_m_s, fix.vel_east_m_s, 0.0)
+    return mav.local_position_ned_encode(
+        int(round(fix.time_s * 1000.0)), fix.north_m, fix.east_m, 0.0, fix.vel_north_m_s, fix.vel_east_m_s, 0.0
+    )
 
 
-def gps_raw_int(mav: MAV, origin: Origin, fix: GpsFix | None, has_fix: bool, time_boot_ms: int, position_sigma_m: float, velocity_sigma_m_s: float) -> Msg:
+def gps_raw_int(
+    mav: MAV,
+    origin: Origin,
+    fix: GpsFix | None,
+    has_fix: bool,
+    time_boot_ms: int,
+    position_sigma_m: float,
+    velocity_sigma_m_s: float,
+) -> Msg:
     """GPS_RAW_INT: the latest fix, fix_type 3D while it is fresh, NO_FIX otherwise (time_usec = time since boot)."""
     if fix is None:
-        return mav.gps_raw_int_encode(time_boot_ms * 1000, mavlink2.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, UINT16_MAX, UINT16_MAX, UINT16_MAX, UINT16_MAX, 0)
+        return mav.gps_raw_int_encode(
+            time_boot_ms * 1000,
+            mavlink2.GPS_FIX_TYPE_NO_FIX,
+            0,
+            0,
+            0,
+            UINT16_MAX,
+            UINT16_MAX,
+            UINT16_MAX,
+            UINT16_MAX,
+            0,
+        )
     lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
     speed = math.hypot(fix.vel_east_m_s, fix.vel_north_m_s)
     cog = heading_cdeg(math.atan2(fix.vel_north_m_s, fix.vel_east_m_s))
@@ -133,7 +156,11 @@ def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Ms
     return mav.vfr_hud_encode(truth.speed_m_s, truth.speed_m_s, heading_deg, throttle, alt_m, 0.0)
 
 
-INERTIAL_SENSORS = mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mavlink2.MAV_SYS_STATUS_SENSOR_3D_MAG
+INERTIAL_SENSORS = (
+    mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink2.MAV_SYS_STATUS_SENSOR_3D_MAG
+)
 """The AHRS's gyro, accelerometer and magnetometer: the attitude is the true one, so they are always healthy."""
 SENSORS_PRESENT = (
     INERTIAL_SENSORS
@@ -153,7 +180,9 @@ def sys_status(mav: MAV, gps_ok: bool, fence_ok: bool, errors_comm: int) -> Msg:
         health |= mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
     if fence_ok:
         health |= mavlink2.MAV_SYS_STATUS_GEOFENCE
-    return mav.sys_status_encode(SENSORS_PRESENT, SENSORS_PRESENT, health, 0, UINT16_MAX, -1, -1, 0, min(UINT16_MAX, errors_comm), 0, 0, 0, 0)
+    return mav.sys_status_encode(
+        SENSORS_PRESENT, SENSORS_PRESENT, health, 0, UINT16_MAX, -1, -1, 0, min(UINT16_MAX, errors_comm), 0, 0, 0, 0
+    )
 
 
 def extended_sys_state(mav: MAV) -> Msg:
@@ -169,12 +198,26 @@ def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
 def home_position(mav: MAV, origin: Origin, home_east_m: float, home_north_m: float, time_s: float) -> Msg:
     """HOME_POSITION: the start position at sea level; local x/y/z in the LOCAL_POSITION_NED frame."""
     lat, lon = local_to_geodetic(origin, home_east_m, home_north_m)
-    return mav.home_position_encode(deg_e7(lat), deg_e7(lon), 0, home_north_m, home_east_m, origin.alt_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(round(time_s * 1e6)))
+    return mav.home_position_encode(
+        deg_e7(lat),
+        deg_e7(lon),
+        0,
+        home_north_m,
+        home_east_m,
+        origin.alt_m,
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        0.0,
+        0.0,
+        int(round(time_s * 1e6)),
+    )
 
 
 def gps_global_origin(mav: MAV, origin: Origin, time_s: float) -> Msg:
     """GPS_GLOBAL_ORIGIN: the LOCAL_POSITION_NED origin (area's SW corner, flight altitude)."""
-    return mav.gps_global_origin_encode(deg_e7(origin.lat_deg), deg_e7(origin.lon_deg), int(round(origin.alt_m * 1000.0)), int(round(time_s * 1e6)))
+    return mav.gps_global_origin_encode(
+        deg_e7(origin.lat_deg), deg_e7(origin.lon_deg), int(round(origin.alt_m * 1000.0)), int(round(time_s * 1e6))
+    )
 
 
 CAPABILITIES = (

@@ -23,7 +23,15 @@ class TruthLog:
         self._write({"type": HEADER, **header})
 
     def step(self, step: int, time_s: float, flags: dict[str, bool], rows: list[VehicleRow]) -> None:
-        self._write({"type": STEP, "step": step, "t_s": round(time_s, 6), **flags, VEHICLES_KEY: {r.role: r.as_dict() for r in rows}})
+        self._write(
+            {
+                "type": STEP,
+                "step": step,
+                "t_s": round(time_s, 6),
+                **flags,
+                VEHICLES_KEY: {r.role: r.as_dict() for r in rows},
+            }
+        )
 
     def event(self, record: dict[str, Any]) -> None:
         self._write(record)

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 from typing import BinaryIO, Protocol
 
 import numpy as np
-
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
 from sim_vehicles import navigation, telemetry
 from sim_vehicles.events import EventKind, MissionEvent, MissionFlags
 from sim_vehicles.link import GpsFix, GpsReceiver, LinkChannel
@@ -206,6 +206,7 @@ class RefusalLimiter:
 
 REFUSAL_INTERVAL_S = 1.0
 """A refused setpoint stream (20 Hz from MAVSDK) gets one STATUSTEXT per second."""
+
 
 class MessageHandler(Protocol):
     """The incoming side of a vehicle: reads a client's message, answers it, changes the vehicle's state."""
@@ -457,14 +458,23 @@ class Vehicle:
                 omega = navigation.course_turn_rate(t.phi_rad, sp.demand.course_rad, su.turn_rate_max_rad_s)
             else:
                 omega = min(su.turn_rate_max_rad_s, max(-su.turn_rate_max_rad_s, -sp.demand.yaw_rate_rad_s))
-            accel = accel_command(sp.demand, t.speed_m_s, su.accel_max_m_s2, su.speed_min_m_s, su.speed_max_m_s, su.dt_s)
+            accel = accel_command(
+                sp.demand, t.speed_m_s, su.accel_max_m_s2, su.speed_min_m_s, su.speed_max_m_s, su.dt_s
+            )
             return omega, accel
         orbit = self.orbit
         if self.armed and self.mode in AUTONOMOUS and orbit is not None:
             if orbit.center is None:
                 return navigation.circle_turn_rate(t.speed_m_s, orbit.radius_m, orbit.ccw, su.turn_rate_max_rad_s), 0.0
             omega = navigation.orbit_turn_rate(
-                t.east_m, t.north_m, t.phi_rad, t.speed_m_s, orbit.center, orbit.radius_m, orbit.ccw, su.turn_rate_max_rad_s
+                t.east_m,
+                t.north_m,
+                t.phi_rad,
+                t.speed_m_s,
+                orbit.center,
+                orbit.radius_m,
+                orbit.ccw,
+                su.turn_rate_max_rad_s,
             )
             return omega, 0.0
         return 0.0, 0.0
@@ -518,7 +528,8 @@ class Vehicle:
             self.send(telemetry.system_time(self.mav, self.clock.unix_start_s, now))
 
     def send_snapshot(self, dest: Address | None = None) -> None:
-        """The current state at once (a new peer; a lockstep world holding still): heartbeat, status, flags, position."""
+        """The current state at once (a new peer; a lockstep world holding still): heartbeat, status, flags,
+        position."""
         for mid in (
             M.MAVLINK_MSG_ID_HEARTBEAT,
             M.MAVLINK_MSG_ID_SYS_STATUS,
@@ -538,7 +549,9 @@ class Vehicle:
             self.fence_breached = True
         severity, text = event.statustext()
         self.send(telemetry.statustext(self.mav, severity, text))
-        self.send(telemetry.named_value_int(self.mav, int(round(event.time_s * 1000.0)), event.kind.value_name, event.value))
+        self.send(
+            telemetry.named_value_int(self.mav, int(round(event.time_s * 1000.0)), event.kind.value_name, event.value)
+        )
 
     def build(self, mid: int) -> list[mavlink2.MAVLink_message]:
         """The message(s) of one id for the current state ([] if there is nothing to say, e.g. no fix yet)."""
@@ -548,14 +561,20 @@ class Vehicle:
         if mid == M.MAVLINK_MSG_ID_HEARTBEAT:
             return [telemetry.heartbeat(mav, self.armed, int(self.mode), self.guided, self.system_status)]
         if mid == M.MAVLINK_MSG_ID_SYS_STATUS:
-            return [telemetry.sys_status(mav, self.gps.has_fix(now), not self.fence_breached, self.endpoint.rx.rejected)]
+            return [
+                telemetry.sys_status(mav, self.gps.has_fix(now), not self.fence_breached, self.endpoint.rx.rejected)
+            ]
         if mid == M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
             return [telemetry.extended_sys_state(mav)]
         if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME:
             return [telemetry.system_time(mav, self.clock.unix_start_s, now)]
         if mid == M.MAVLINK_MSG_ID_GPS_RAW_INT:
             lk = self.setup.link
-            return [telemetry.gps_raw_int(mav, o, fix, self.gps.has_fix(now), ms, lk.gps_position_sigma_m, lk.gps_velocity_sigma_m_s)]
+            return [
+                telemetry.gps_raw_int(
+                    mav, o, fix, self.gps.has_fix(now), ms, lk.gps_position_sigma_m, lk.gps_velocity_sigma_m_s
+                )
+            ]
         if mid == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             return [] if fix is None else [telemetry.global_position_int(mav, o, fix, t.phi_rad)]
         if mid == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
@@ -580,7 +599,6 @@ class Vehicle:
     def event(self, name: str, value: int) -> None:
         if self._on_event is not None:
             self._on_event(self.role, name, value)
-
 
     def requested(self, mid: int) -> list[mavlink2.MAVLink_message] | None:
         """MAV_CMD_REQUEST_MESSAGE: the message(s) of ``mid`` now ([] if there is nothing yet), None if unknown."""

@@ -68,8 +68,8 @@ from sim_vehicles.events import EventKind, MissionEnd, MissionFlags, events_from
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
-from tssac_core.deploy.truth_log_schema import VehicleRow
 from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
+from tssac_core.deploy.truth_log_schema import VehicleRow
 from tssac_core.sim.scenario import ROLES, Layout, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 
@@ -108,7 +108,8 @@ class Endpoint:
 
     @property
     def connection_string(self) -> str:
-        """pymavlink / MAVProxy connection string of a client (``udpout:HOST:PORT``; a wildcard bind reads as loopback)."""
+        """pymavlink / MAVProxy connection string of a client (``udpout:HOST:PORT``; a wildcard bind reads as
+        loopback)."""
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
         return f"udpout:{host}:{self.port}"
 
@@ -177,7 +178,9 @@ class WorldRunner:
         c = self.world.c
         for i, role in enumerate(ROLES):
             try:
-                endpoint = MavEndpoint(config.host, config.port_for(i), i + 1, 1, config.signing_key, config.unsigned_monitors)
+                endpoint = MavEndpoint(
+                    config.host, config.port_for(i), i + 1, 1, config.signing_key, config.unsigned_monitors
+                )
             except EndpointError as exc:
                 raise SitlError(str(exc.strerror)) from None
             start = self.layout.starts[role.value]
@@ -206,7 +209,9 @@ class WorldRunner:
                     endpoint.close()
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)
-            vehicle = Vehicle(setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event)
+            vehicle = Vehicle(
+                setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event
+            )
             vehicle.add_outputs(config.outputs)
             handler = CommandHandler(vehicle)
             handler.sibling = self._vehicle_by_sysid
@@ -361,7 +366,9 @@ class WorldRunner:
         waiting = [v for v in waiting if v.holds_world]
         if waiting:
             keepalive = self._keepalive(now)
-            return min([keepalive] + [max(self._barrier_wall, v.loop_since_wall_s) + v.setpoint_timeout_s for v in waiting])
+            return min(
+                [keepalive] + [max(self._barrier_wall, v.loop_since_wall_s) + v.setpoint_timeout_s for v in waiting]
+            )
         if not any(v.holds_world for v in self.vehicles):
             return now  # every waiting vehicle just failed safe: run paced from the next iteration
         n = 0
@@ -375,7 +382,9 @@ class WorldRunner:
             for v in self.vehicles:
                 v.process_incoming()
             # With link latency the newest tick the clients have seen may already be answered: step on.
-            if not all(v.answered() for v in self.vehicles if v.holds_world) or not any(v.holds_world for v in self.vehicles):
+            if not all(v.answered() for v in self.vehicles if v.holds_world) or not any(
+                v.holds_world for v in self.vehicles
+            ):
                 break
         return now if n == MAX_CATCHUP_STEPS else now + min(v.setpoint_timeout_s for v in self.vehicles)
 
@@ -428,7 +437,9 @@ class WorldRunner:
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
         if self._truth is not None:
             flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
-            self._truth.step(step, self.clock.sim_s, flags, [self._row(v, float(result.cost[0, v.index])) for v in self.vehicles])
+            self._truth.step(
+                step, self.clock.sim_s, flags, [self._row(v, float(result.cost[0, v.index])) for v in self.vehicles]
+            )
         for event in events:
             _log.info("t=%.1f s: %s", event.time_s, event.statustext()[1])
             if event.kind is EventKind.MISSION_END:
@@ -474,16 +485,32 @@ class WorldRunner:
 
     def _vehicle_event(self, role: str, name: str, value: int) -> None:
         if self._truth is not None:
-            self._truth.event({"type": "event", "step": int(self.world.steps[0]), "t_s": round(self.clock.sim_s, 6), "event": name, "value": value, "vehicle": role})
+            self._truth.event(
+                {
+                    "type": "event",
+                    "step": int(self.world.steps[0]),
+                    "t_s": round(self.clock.sim_s, 6),
+                    "event": name,
+                    "value": value,
+                    "vehicle": role,
+                }
+            )
 
     # ------------------------------------------------------------------------------- finish
 
     def _finish(self) -> None:
         w = self.world
-        end = {MissionEnd.SUCCESS: "success", MissionEnd.GEOFENCE: "geofence", MissionEnd.EPISODE_CAP: "episode_cap", None: "stopped"}[self._end]
+        end = {
+            MissionEnd.SUCCESS: "success",
+            MissionEnd.GEOFENCE: "geofence",
+            MissionEnd.EPISODE_CAP: "episode_cap",
+            None: "stopped",
+        }[self._end]
         cost = {v.role: float(w.cost_total[0, v.index]) for v in self.vehicles}
         steps = int(w.steps[0])
-        self.result = RunResult(end=end, success=bool(w.hit[0]), steps=steps, sim_time_s=round(steps * self.dt_s, 6), cost=cost)
+        self.result = RunResult(
+            end=end, success=bool(w.hit[0]), steps=steps, sim_time_s=round(steps * self.dt_s, 6), cost=cost
+        )
         _log.info("run ended: %s after %d steps (%.1f s simulated)", end, self.result.steps, self.result.sim_time_s)
         if self._truth is not None:
             self._truth.summary(
@@ -498,7 +525,9 @@ class WorldRunner:
                     "identified": bool(w.identified[0]),
                     "hit": bool(w.hit[0]),
                     "counters": {v.role: self.counters_of(v) for v in self.vehicles},
-                    "flight_cpu_s": None if self._first_step_cpu_s is None else round(time.process_time() - self._first_step_cpu_s, 4),
+                    "flight_cpu_s": None
+                    if self._first_step_cpu_s is None
+                    else round(time.process_time() - self._first_step_cpu_s, 4),
                 }
             )
         self.close()
@@ -534,4 +563,3 @@ class WorldRunner:
                 self._truth.close()
             except OSError as exc:
                 _log.error("closing the truth log failed: %s", exc)
-

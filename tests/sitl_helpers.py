@@ -95,8 +95,12 @@ def lockstep(**config: Any) -> dict[str, Any]:
 class Client:
     """A ground-station / companion-style pymavlink client (``udpout:127.0.0.1:PORT``)."""
 
-    def __init__(self, port: int, key: bytes | None = None, source_system: int = 255, source_component: int = 190) -> None:
-        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=source_system, source_component=source_component)
+    def __init__(
+        self, port: int, key: bytes | None = None, source_system: int = 255, source_component: int = 190
+    ) -> None:
+        self.conn = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=source_system, source_component=source_component
+        )
         # Telemetry at 20x real time is ~1000 datagrams/s: leave room for a test thread that is slow to read.
         self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         if key is not None:
@@ -135,7 +139,12 @@ class Client:
                 return None
             select.select([self.conn.fd], [], [], min(remaining, 0.05))
 
-    def wait(self, predicate: Callable[[mavlink2.MAVLink_message], bool], timeout_s: float, heartbeat_every_s: float | None = None) -> mavlink2.MAVLink_message | None:
+    def wait(
+        self,
+        predicate: Callable[[mavlink2.MAVLink_message], bool],
+        timeout_s: float,
+        heartbeat_every_s: float | None = None,
+    ) -> mavlink2.MAVLink_message | None:
         """The first message satisfying ``predicate`` within ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
         next_hb = time.monotonic()
@@ -149,15 +158,21 @@ class Client:
         return None
 
     def wait_type(self, mtype: str, timeout_s: float, **fields: Any) -> mavlink2.MAVLink_message | None:
-        return self.wait(lambda m: m.get_type() == mtype and all(getattr(m, k) == v for k, v in fields.items()), timeout_s)
+        return self.wait(
+            lambda m: m.get_type() == mtype and all(getattr(m, k) == v for k, v in fields.items()), timeout_s
+        )
 
     def connect(self, timeout_s: float = 5.0) -> mavlink2.MAVLink_message:
         """Send heartbeats until the vehicle's heartbeat arrives (the vehicle learns us from ours)."""
-        hb = self.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1, timeout_s, heartbeat_every_s=0.2)
+        hb = self.wait(
+            lambda m: m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1, timeout_s, heartbeat_every_s=0.2
+        )
         assert hb is not None, "no heartbeat from the vehicle"
         return hb
 
-    def command(self, command: int, *params: float, target: int = 0, timeout_s: float = 1.0, retries: int = 3) -> mavlink2.MAVLink_message | None:
+    def command(
+        self, command: int, *params: float, target: int = 0, timeout_s: float = 1.0, retries: int = 3
+    ) -> mavlink2.MAVLink_message | None:
         """COMMAND_LONG, retried until its COMMAND_ACK arrives; the ACK or None."""
         p = list(params) + [0.0] * (7 - len(params))
         for attempt in range(retries):
@@ -172,12 +187,25 @@ class Client:
         assert ack is not None and ack.result == mavlink2.MAV_RESULT_ACCEPTED, ack
 
     def set_mode(self, mode: int, target: int = 0) -> mavlink2.MAVLink_message | None:
-        return self.command(mavlink2.MAV_CMD_DO_SET_MODE, mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, target=target)
+        return self.command(
+            mavlink2.MAV_CMD_DO_SET_MODE, mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, target=target
+        )
 
-    def setpoint(self, yaw_rate_rad_s: float, accel_m_s2: float, stamp_ms: int | None = None, target: int = 0, mask: int = SETPOINT_MASK, frame: int = mavlink2.MAV_FRAME_BODY_FRD) -> None:
-        """Heading-rate (NED, clockwise +) / forward-acceleration setpoint, stamped with the latest vehicle time by default."""
+    def setpoint(
+        self,
+        yaw_rate_rad_s: float,
+        accel_m_s2: float,
+        stamp_ms: int | None = None,
+        target: int = 0,
+        mask: int = SETPOINT_MASK,
+        frame: int = mavlink2.MAV_FRAME_BODY_FRD,
+    ) -> None:
+        """Heading-rate (NED, clockwise +) / forward-acceleration setpoint, stamped with the latest vehicle time by
+        default."""
         stamp = self.latest_ms if stamp_ms is None else stamp_ms
-        self.mav.set_position_target_local_ned_send(stamp, target, 0, frame, mask, 0, 0, 0, 0, 0, 0, accel_m_s2, 0, 0, 0, yaw_rate_rad_s)
+        self.mav.set_position_target_local_ned_send(
+            stamp, target, 0, frame, mask, 0, 0, 0, 0, 0, 0, accel_m_s2, 0, 0, 0, yaw_rate_rad_s
+        )
 
     def collect(self, duration_s: float) -> list[mavlink2.MAVLink_message]:
         """Everything received in the next ``duration_s`` seconds."""

@@ -57,11 +57,7 @@ def random_batch(seed: int, n: int = 16, obs_dim: int = OBS_DIM) -> ReplaySample
 
 
 def all_tensors(agent: SacLagrangian) -> dict[str, torch.Tensor]:
-    out = {
-        f"{name}.{key}": value
-        for name, net in agent.networks().items()
-        for key, value in net.state_dict().items()
-    }
+    out = {f"{name}.{key}": value for name, net in agent.networks().items() for key, value in net.state_dict().items()}
     out["alpha"] = agent.alpha.detach()
     out["beta"] = agent.multiplier.beta
     return out
@@ -479,9 +475,7 @@ def test_transfer_copies_networks_and_resets_the_rest() -> None:
 
     copied = transfer(target, source_state)
 
-    expected = {
-        f"{name}.{key}" for name in TRANSFERRED_NETWORKS for key in source_state[name]
-    }
+    expected = {f"{name}.{key}" for name in TRANSFERRED_NETWORKS for key in source_state[name]}
     assert set(copied) == expected and len(copied) == len(expected)
     target_tensors = all_tensors(target)
     for name in copied:
@@ -640,7 +634,9 @@ def q_c_everywhere(learner: SacLagrangian, value: float) -> None:
 
 def test_episode_cost_drives_the_multiplier_whatever_q_c_says() -> None:
     """Given a measured episode cost, eq. 15 and 17 compare it (on Q^c's scale) with C; Q^c is ignored."""
-    cfg = SacConfig(variant=Variant.TSSAC, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100, gamma=0.99, beta_init=1.0)
+    cfg = SacConfig(
+        variant=Variant.TSSAC, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100, gamma=0.99, beta_init=1.0
+    )
     per_cost = qc_limit(1.0, 0.99, 100)
     assert float(cfg.cost_on_qc_scale(3.0)) == pytest.approx(cfg.qc_limit)  # C maps onto the Q^c limit
     obs = torch.zeros(4, 2)

@@ -33,7 +33,9 @@ def imports_of(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
+                base = ".".join(
+                    package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else [])
+                )
             found.add(base)
             found |= {f"{base}.{alias.name}" for alias in node.names}  # `from pkg import module`
     return found
@@ -59,7 +61,7 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
         stack.append(node)
         for nxt in sorted(graph[node]):
             if state.get(nxt) == 1:
-                return stack[stack.index(nxt):] + [nxt]
+                return stack[stack.index(nxt) :] + [nxt]
             if nxt not in state and (cycle := visit(nxt)):
                 return cycle
         stack.pop()
@@ -82,11 +84,14 @@ def test_the_cycle_finder_finds_a_cycle():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
 
 
-@pytest.mark.parametrize(("package", "forbidden"), [
-    ("tssac_core", ("pymavlink", "sim_vehicles", "mavlink_bridge")),
-    ("sim_vehicles", ("mavlink_bridge",)),
-    ("mavlink_bridge", ("sim_vehicles",)),
-])
+@pytest.mark.parametrize(
+    ("package", "forbidden"),
+    [
+        ("tssac_core", ("pymavlink", "sim_vehicles", "mavlink_bridge")),
+        ("sim_vehicles", ("mavlink_bridge",)),
+        ("mavlink_bridge", ("sim_vehicles",)),
+    ],
+)
 def test_who_may_import_whom(package: str, forbidden: tuple[str, ...]):
     offenders = sorted(
         f"{module_name(p)} imports {m}"
@@ -113,6 +118,10 @@ def test_the_companion_imports_neither_torch_nor_gymnasium():
 
 def test_importing_tssac_core_imports_no_gymnasium_but_the_env_registers_itself():
     assert "gymnasium" not in modules_after("import tssac_core")
-    code = "import gymnasium as gym\nenv = gym.make('tssac_core.sim.env:tssac/Detect-v0')\nprint(env.observation_space.shape)"
+    code = (
+        "import gymnasium as gym\n"
+        "env = gym.make('tssac_core.sim.env:tssac/Detect-v0')\n"
+        "print(env.observation_space.shape)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -10,10 +10,10 @@ import struct
 import time
 
 import pytest
-
 from sitl_helpers import GUIDED, MANUAL, Client, mavlink2, scenario, sitl, wait_until
-from sim_vehicles.config import LockstepStart
+
 from sim_vehicles import navigation, setpoints
+from sim_vehicles.config import LockstepStart
 from sim_vehicles.modes import FlightMode
 
 M = mavlink2
@@ -33,9 +33,13 @@ def _texts(msgs: list, part: str) -> list[str]:
 def test_setpoint_parsing_forms_and_refusals_fit_a_statustext() -> None:
     mav = M.MAVLink(None)
     body = M.MAV_FRAME_BODY_NED
-    vel = setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, body, 1479, 0, 0, 0, 260.0, 0, 0, 0, 0, 0, 0, 0.1))
+    vel = setpoints.parse_position_target(
+        mav.set_position_target_local_ned_encode(0, 1, 1, body, 1479, 0, 0, 0, 260.0, 0, 0, 0, 0, 0, 0, 0.1)
+    )
     assert vel == setpoints.Demand(setpoints.SetpointForm.VELOCITY_YAW_RATE, pytest.approx(0.1), speed_m_s=260.0)
-    acc = setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 12, 1087, 0, 0, 0, 0, 0, 0, 2.0, 0, 0, 0, -0.05))
+    acc = setpoints.parse_position_target(
+        mav.set_position_target_local_ned_encode(0, 1, 1, 12, 1087, 0, 0, 0, 0, 0, 0, 2.0, 0, 0, 0, -0.05)
+    )
     assert acc == setpoints.Demand(setpoints.SetpointForm.ACCEL_YAW_RATE, pytest.approx(-0.05), accel_m_s2=2.0)
     att = setpoints.parse_attitude_target(mav.set_attitude_target_encode(0, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0.05, 0.75))
     assert att == setpoints.Demand(setpoints.SetpointForm.THRUST_YAW_RATE, pytest.approx(0.05), thrust=0.75)
@@ -45,15 +49,27 @@ def test_setpoint_parsing_forms_and_refusals_fit_a_statustext() -> None:
     fast = setpoints.Demand(setpoints.SetpointForm.VELOCITY_YAW_RATE, 0.0, speed_m_s=1000.0)
     assert setpoints.accel_command(fast, 300.0, 10.0, 150.0, 300.0, 0.1) == 0.0  # clipped to SIM_SPD_MAX
     assert setpoints.accel_command(att, 250.0, 10.0, 150.0, 300.0, 0.1) == pytest.approx(5.0)
-    ned = setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 1, 2503, 0, 0, 0, 0, 260.0, 0, 0, 0, 0, 1.0, 0))
+    ned = setpoints.parse_position_target(
+        mav.set_position_target_local_ned_encode(0, 1, 1, 1, 2503, 0, 0, 0, 0, 260.0, 0, 0, 0, 0, 1.0, 0)
+    )
     assert ned.form is setpoints.SetpointForm.VELOCITY_NED and ned.speed_m_s == pytest.approx(260.0)
     assert ned.course_rad == pytest.approx(0.0)  # due east (the world's heading convention); yaw 1.0 not used
     refused = [
-        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 6, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
-        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 1, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
-        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 8, 3576, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)),
-        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 8, 1479, 0, 0, 0, 250, 3.0, 0, 0, 0, 0, 0, 0)),
-        setpoints.parse_position_target(mav.set_position_target_local_ned_encode(0, 1, 1, 8, 1479, 0, 0, 0, math.nan, 0, 0, 0, 0, 0, 0, 0)),
+        setpoints.parse_position_target(
+            mav.set_position_target_local_ned_encode(0, 1, 1, 6, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+        ),
+        setpoints.parse_position_target(
+            mav.set_position_target_local_ned_encode(0, 1, 1, 1, 1479, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+        ),
+        setpoints.parse_position_target(
+            mav.set_position_target_local_ned_encode(0, 1, 1, 8, 3576, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+        ),
+        setpoints.parse_position_target(
+            mav.set_position_target_local_ned_encode(0, 1, 1, 8, 1479, 0, 0, 0, 250, 3.0, 0, 0, 0, 0, 0, 0)
+        ),
+        setpoints.parse_position_target(
+            mav.set_position_target_local_ned_encode(0, 1, 1, 8, 1479, 0, 0, 0, math.nan, 0, 0, 0, 0, 0, 0, 0)
+        ),
         setpoints.parse_attitude_target(mav.set_attitude_target_encode(0, 1, 1, 7, [1, 0, 0, 0], 0, 0, 0, 0.5)),
         setpoints.parse_attitude_target(mav.set_attitude_target_encode(0, 1, 1, 128, [1, 0, 0, 0], 0.2, 0, 0, 0.5)),
         setpoints.parse_attitude_target(mav.set_attitude_target_encode(0, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 1.5)),
@@ -109,8 +125,13 @@ def test_velocity_body_attitude_target_and_velocity_ned_fly_speed_and_turn() -> 
         rate = math.radians(3.0)
         assert _fly_until(
             c,
-            lambda: c.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_BODY_NED, VELOCITY_MASK, 0, 0, 0, 280.0, 0, 0, 0, 0, 0, 0, rate),
-            lambda: v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6) and -v.truth.turn_rate_rad_s == pytest.approx(rate, rel=1e-6),
+            lambda: c.mav.set_position_target_local_ned_send(
+                0, 1, 1, M.MAV_FRAME_BODY_NED, VELOCITY_MASK, 0, 0, 0, 280.0, 0, 0, 0, 0, 0, 0, rate
+            ),
+            lambda: (
+                v.truth.speed_m_s == pytest.approx(280.0, abs=1e-6)
+                and -v.truth.turn_rate_rad_s == pytest.approx(rate, rel=1e-6)
+            ),
         )
         # SET_ATTITUDE_TARGET: body yaw rate and thrust (0.5 holds the speed).
         assert _fly_until(
@@ -124,8 +145,13 @@ def test_velocity_body_attitude_target_and_velocity_ned_fly_speed_and_turn() -> 
         vn, ve = 260.0 * math.sin(course), 260.0 * math.cos(course)
         assert _fly_until(
             c,
-            lambda: c.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, 2503, 0, 0, 0, vn, ve, 0, 0, 0, 0, 0, 0),
-            lambda: abs(navigation.wrap_pi(v.truth.phi_rad - course)) < 1e-3 and v.truth.speed_m_s == pytest.approx(260.0, abs=1e-3),
+            lambda: c.mav.set_position_target_local_ned_send(
+                0, 1, 1, M.MAV_FRAME_LOCAL_NED, 2503, 0, 0, 0, vn, ve, 0, 0, 0, 0, 0, 0
+            ),
+            lambda: (
+                abs(navigation.wrap_pi(v.truth.phi_rad - course)) < 1e-3
+                and v.truth.speed_m_s == pytest.approx(260.0, abs=1e-3)
+            ),
             timeout_s=30.0,
         )
         assert v.counters.setpoints_rejected == 0 and not v.failsafe
@@ -139,7 +165,9 @@ def test_refusals_say_what_to_send_each_second_not_once() -> None:
         msgs = []
         deadline = time.monotonic() + 3.0  # a 20 Hz stream of a mask nobody flies
         while time.monotonic() < deadline:
-            c.mav.set_position_target_local_ned_send(0, 2, 1, M.MAV_FRAME_BODY_NED, 3576, 0, 0, 0, 100, 0, 0, 0, 0, 0, 0, 0)
+            c.mav.set_position_target_local_ned_send(
+                0, 2, 1, M.MAV_FRAME_BODY_NED, 3576, 0, 0, 0, 100, 0, 0, 0, 0, 0, 0, 0
+            )
             msgs += c.collect(0.05)
         texts = _texts(msgs, "SP mask 3576")
         assert 2 <= len(texts) <= 4, texts  # about one a second of ~60 refused: repeated, and rate-limited
@@ -153,7 +181,12 @@ def test_loiter_circles_where_it_is_and_rtl_flies_home_then_circles() -> None:
     # The world holds at t = 0 until the decoy is armed in GUIDED, so nobody flies off while the clients
     # connect (at 50x a slow start would be minutes of flight); every UAV then circles: no geofence end.
     config = {"speedup": 50.0, "hold_start": True, "lockstep_start": LockstepStart.ANY}
-    with sitl(scenario(episode_steps=8000), **config) as s, Client(s.ports[0]) as loiter, Client(s.ports[1]) as circle_c, Client(s.ports[2]) as rtl:
+    with (
+        sitl(scenario(episode_steps=8000), **config) as s,
+        Client(s.ports[0]) as loiter,
+        Client(s.ports[1]) as circle_c,
+        Client(s.ports[2]) as rtl,
+    ):
         for c in (loiter, circle_c, rtl):
             c.connect()
             c.arm()
@@ -247,8 +280,14 @@ def test_ground_station_chores_ftp_nak_missions_health_home_modes() -> None:
             msgs += c.collect(0.05)
         status = next(m for m in msgs if m.get_type() == "SYS_STATUS")
         inertial = M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL | M.MAV_SYS_STATUS_SENSOR_3D_MAG
-        for field in ("onboard_control_sensors_present", "onboard_control_sensors_enabled", "onboard_control_sensors_health"):
-            assert getattr(status, field) & inertial == inertial and getattr(status, field) & M.MAV_SYS_STATUS_SENSOR_GPS
+        for field in (
+            "onboard_control_sensors_present",
+            "onboard_control_sensors_enabled",
+            "onboard_control_sensors_health",
+        ):
+            assert (
+                getattr(status, field) & inertial == inertial and getattr(status, field) & M.MAV_SYS_STATUS_SENSOR_GPS
+            )
         assert [m.landed_state for m in msgs if m.get_type() == "EXTENDED_SYS_STATE"][:1] == [M.MAV_LANDED_STATE_IN_AIR]
         assert sum(1 for m in msgs if m.get_type() == "HOME_POSITION") >= 3
         # Modes: RTL by command, AUTO refused with a reason.

@@ -19,13 +19,14 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 import numpy as np
 import pytest
-
 from sitl_helpers import EXACT_LINK, REPO, STRIKE, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
+
 from mavlink_bridge.companion import cli as companion_cli
 from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
@@ -56,7 +57,7 @@ class UdpRelay:
         self.up.bind(("127.0.0.1", 0))
         self.port = self.down.getsockname()[1]
         self.upstream = ("127.0.0.1", upstream_port)
-        self.companion: Optional[tuple[str, int]] = None
+        self.companion: tuple[str, int] | None = None
         self.drop_to_companion = threading.Event()
         self.dropped = 0
         self.to_vehicle: list[tuple[float, Any]] = []
@@ -134,8 +135,22 @@ class CompanionProcess:
         self.status_path = tmp / f"{role}.status.json"
         self.log_path = tmp / f"{role}.log"
         self.tlog_path = tmp / f"{role}.tlog"
-        argv = [sys.executable, "-m", "mavlink_bridge.companion", "--connect", f"udpout:127.0.0.1:{port}", "--role", role,
-                "--scenario", str(scenario_file), "--status-json", str(self.status_path), "--tlog", str(self.tlog_path), *args]
+        argv = [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.companion",
+            "--connect",
+            f"udpout:127.0.0.1:{port}",
+            "--role",
+            role,
+            "--scenario",
+            str(scenario_file),
+            "--status-json",
+            str(self.status_path),
+            "--tlog",
+            str(self.tlog_path),
+            *args,
+        ]
         if "--model" not in args:
             argv += ["--pilot", "guidance"]
         self._log = open(self.log_path, "wb")
@@ -278,7 +293,10 @@ def test_companion_arms_guides_and_the_vehicle_flies_its_setpoints(tmp_path: Pat
     truth = tmp_path / "truth.jsonl"
     duration_s = 15.0
     # A long setpoint timeout (wall seconds at the lockstep barrier): a loaded test machine must not trip it.
-    with sitl(load(scen_file), truth_log=truth, setpoint_timeout_s=5.0, **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
+    with (
+        sitl(load(scen_file), truth_log=truth, setpoint_timeout_s=5.0, **lockstep()) as s,
+        UdpRelay(s.ports[0]) as relay,
+    ):
         with CompanionProcess(tmp_path, relay.port, scen_file, "--lockstep", "--duration-s", str(duration_s)) as comp:
             code, out = comp.wait(90)
             assert code == 0, comp.log()
@@ -287,7 +305,10 @@ def test_companion_arms_guides_and_the_vehicle_flies_its_setpoints(tmp_path: Pat
         s.stop()
     # Every command was acknowledged as accepted.
     acks = {m.command: m.result for _, m in relay.received("COMMAND_ACK")}
-    assert acks[M.MAV_CMD_COMPONENT_ARM_DISARM] == M.MAV_RESULT_ACCEPTED and acks[M.MAV_CMD_DO_SET_MODE] == M.MAV_RESULT_ACCEPTED
+    assert (
+        acks[M.MAV_CMD_COMPONENT_ARM_DISARM] == M.MAV_RESULT_ACCEPTED
+        and acks[M.MAV_CMD_DO_SET_MODE] == M.MAV_RESULT_ACCEPTED
+    )
     setpoints = {m.time_boot_ms: m for _, m in relay.sent("SET_POSITION_TARGET_LOCAL_NED")}
     n = int(duration_s * 10)
     assert sorted(setpoints) == [100 * k for k in range(n + 1)]  # one per tick, stamped with the tick
@@ -324,7 +345,10 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
     speedup, gap_s = 5.0, 2.0
     # Setpoint timeout 2 s of vehicle time (0.4 s of wall), well inside the gap's 10 s of vehicle time: only
     # the companion's hold setpoints can keep the vehicle out of its failsafe through the gap.
-    with sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=2.0) as s, UdpRelay(s.ports[0]) as relay:
+    with (
+        sitl(load(scen_file), truth_log=truth, speedup=speedup, setpoint_timeout_s=2.0) as s,
+        UdpRelay(s.ports[0]) as relay,
+    ):
         with CompanionProcess(tmp_path, relay.port, scen_file, "--hold-after-s", "0.5") as comp:
             # Long enough for the companion to have measured the vehicle's clock rate (0.5 s windows).
             _until(lambda: len(relay.sent("SET_POSITION_TARGET_LOCAL_NED")) >= 60, 30.0, "the companion to fly")
@@ -333,7 +357,11 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
             time.sleep(gap_s)
             relay.drop_to_companion.clear()
             gap_end = time.monotonic()
-            _until(lambda: any(t > gap_end for t, m in relay.sent("STATUSTEXT") if "resuming" in m.text), 10.0, "the companion to resume")
+            _until(
+                lambda: any(t > gap_end for t, m in relay.sent("STATUSTEXT") if "resuming" in m.text),
+                10.0,
+                "the companion to resume",
+            )
             time.sleep(0.5)
             stopped_ms = s.vehicle(0).clock.time_boot_ms  # after this the vehicle is on its own: its failsafe may fire
             comp.proc.send_signal(signal.SIGTERM)
@@ -364,7 +392,14 @@ def test_companion_holds_through_a_telemetry_gap_and_resumes(tmp_path: Path) -> 
     types = set()
     while (m := tlog.recv_msg()) is not None:
         types.add(m.get_type())
-    assert {"HEARTBEAT", "LOCAL_POSITION_NED", "COMMAND_LONG", "COMMAND_ACK", "SET_POSITION_TARGET_LOCAL_NED", "STATUSTEXT"} <= types
+    assert {
+        "HEARTBEAT",
+        "LOCAL_POSITION_NED",
+        "COMMAND_LONG",
+        "COMMAND_ACK",
+        "SET_POSITION_TARGET_LOCAL_NED",
+        "STATUSTEXT",
+    } <= types
 
 
 @pytest.mark.timeout(120)
@@ -374,13 +409,20 @@ def test_companion_reengages_a_restarted_vehicle(tmp_path: Path) -> None:
     with sitl(scen, speedup=5.0) as first, UdpRelay(first.ports[0]) as relay:
         with CompanionProcess(tmp_path, relay.port, scen_file) as comp:
             # Long enough that the new vehicle's clock (from 0) is clearly behind: a reboot, not reordering.
-            _until(lambda: first.vehicle(0).counters.setpoints_accepted > 50 and first.runner.clock.sim_s > 15.0, 30.0, "the first vehicle to fly")
+            _until(
+                lambda: first.vehicle(0).counters.setpoints_accepted > 50 and first.runner.clock.sim_s > 15.0,
+                30.0,
+                "the first vehicle to fly",
+            )
             with sitl(scen, speedup=5.0) as second:
                 # The vehicle "reboots": same address for the companion, a new autopilot whose clock starts at 0.
                 relay.switch_upstream(second.ports[0])
                 first.stop()
-                _until(lambda: second.vehicle(0).in_loop and second.vehicle(0).counters.setpoints_accepted > 20, 30.0,
-                       "the restarted vehicle to be armed in GUIDED and flown")
+                _until(
+                    lambda: second.vehicle(0).in_loop and second.vehicle(0).counters.setpoints_accepted > 20,
+                    30.0,
+                    "the restarted vehicle to be armed in GUIDED and flown",
+                )
                 second.stop()
             comp.proc.send_signal(signal.SIGTERM)
             code, _ = comp.wait(15)
@@ -395,10 +437,37 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A decoy checkpoint from ``python -m tssac_core.train`` with tiny settings (untrained, action_repeat 5)."""
     out = tmp_path_factory.mktemp("train") / "run"
     train = subprocess.run(
-        [sys.executable, "-m", "tssac_core.train", "--roles", "decoy", "--epochs", "1", "--steps-per-epoch", "50", "--validation-episodes", "0",
-         "--update-after", "1000", "--action-repeat", "5", "--set", "hidden_sizes=[16]", "--scenario", str(STRIKE),
-         "--out", str(out), "--threads", "1", "--no-progress"],
-        capture_output=True, text=True, cwd=REPO, env=_env(), timeout=150,
+        [
+            sys.executable,
+            "-m",
+            "tssac_core.train",
+            "--roles",
+            "decoy",
+            "--epochs",
+            "1",
+            "--steps-per-epoch",
+            "50",
+            "--validation-episodes",
+            "0",
+            "--update-after",
+            "1000",
+            "--action-repeat",
+            "5",
+            "--set",
+            "hidden_sizes=[16]",
+            "--scenario",
+            str(STRIKE),
+            "--out",
+            str(out),
+            "--threads",
+            "1",
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=150,
     )
     assert train.returncode == 0, train.stderr
     return out / "decoy.pt"
@@ -409,7 +478,9 @@ def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path
     model = tiny_checkpoint
     scen_file = _scenario_file(tmp_path)
     with sitl(load(scen_file), **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
-        with CompanionProcess(tmp_path, relay.port, scen_file, "--model", str(model), "--lockstep", "--duration-s", "3") as comp:
+        with CompanionProcess(
+            tmp_path, relay.port, scen_file, "--model", str(model), "--lockstep", "--duration-s", "3"
+        ) as comp:
             code, text = comp.wait(90)
             assert code == 0 and "status=duration" in text, comp.log()
         s.stop()
@@ -426,8 +497,8 @@ def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path
     assert len(decisions) > 1
     # The first decision is the policy's action on the observation training builds for the start state
     # (noise-free fixes: the filter starts exactly there), so the bridge's observation is training's.
-    from tssac_core.sim.observation import observe
     from tssac_core.deploy.policy import Policy
+    from tssac_core.sim.observation import observe
     from tssac_core.sim.routes import RouteMap
 
     policy = Policy.load(model, Role.DECOY)
@@ -443,12 +514,16 @@ def test_companion_holds_when_the_policy_returns_nan(tmp_path: Path, tiny_checkp
     import torch
 
     data = torch.load(tiny_checkpoint, map_location="cpu", weights_only=False)
-    data["actor"] = {k: torch.full_like(v, float("nan")) if v.is_floating_point() else v for k, v in data["actor"].items()}
+    data["actor"] = {
+        k: torch.full_like(v, float("nan")) if v.is_floating_point() else v for k, v in data["actor"].items()
+    }
     broken = tmp_path / "decoy.pt"
     torch.save(data, broken)
     scen_file = _scenario_file(tmp_path)
     with sitl(load(scen_file), **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
-        with CompanionProcess(tmp_path, relay.port, scen_file, "--model", str(broken), "--lockstep", "--duration-s", "2") as comp:
+        with CompanionProcess(
+            tmp_path, relay.port, scen_file, "--model", str(broken), "--lockstep", "--duration-s", "2"
+        ) as comp:
             code, text = comp.wait(90)
             assert code == 0 and "status=duration" in text, comp.log()
             status = comp.status()
@@ -467,15 +542,24 @@ def test_companion_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.C
         (base + ["--pilot", "guidance", "--scenario", str(bad)], "bad.yaml"),
         (base + ["--pilot", "guidance", "--scenario", str(REPO / "scenarios" / "random.yaml")], "--layout-out"),
         (base + ["--model", str(tmp_path / "none.pt"), "--scenario", str(STRIKE)], "checkpoint not found"),
-        (["--connect", "tcp:1.2.3.4:5", "--role", "decoy", "--pilot", "guidance", "--scenario", str(STRIKE)], "udpout:HOST:PORT"),
+        (
+            ["--connect", "tcp:1.2.3.4:5", "--role", "decoy", "--pilot", "guidance", "--scenario", str(STRIKE)],
+            "udpout:HOST:PORT",
+        ),
         (base + ["--scenario", str(STRIKE)], "one of the arguments --model --pilot is required"),
     ]
     for argv, needle in cases:
         assert companion_cli.main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and needle in err[0], (argv, err)
-    proc = subprocess.run([sys.executable, "-m", "mavlink_bridge.companion", *cases[1][0]], capture_output=True, text=True,
-                          cwd=REPO, env=_env(), timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.companion", *cases[1][0]],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=60,
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "--layout-out" in proc.stderr
 
 
@@ -484,8 +568,22 @@ def test_companion_without_a_vehicle_gives_up_with_exit_3(tmp_path: Path, capsys
     silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     silent.bind(("127.0.0.1", 0))
     try:
-        code = companion_cli.main(["--connect", f"udpout:127.0.0.1:{silent.getsockname()[1]}", "--role", "strike", "--pilot", "guidance",
-                                   "--scenario", str(STRIKE), "--timeout-s", "0.5", "--status-json", str(tmp_path / "s.json")])
+        code = companion_cli.main(
+            [
+                "--connect",
+                f"udpout:127.0.0.1:{silent.getsockname()[1]}",
+                "--role",
+                "strike",
+                "--pilot",
+                "guidance",
+                "--scenario",
+                str(STRIKE),
+                "--timeout-s",
+                "0.5",
+                "--status-json",
+                str(tmp_path / "s.json"),
+            ]
+        )
     finally:
         silent.close()
     assert code == 3

@@ -23,7 +23,9 @@ from tssac_core.sim.world import KM, StepResult
 def test_check_env(role, observation):
     env = gym.make(f"tssac/{role}-v0", observation=observation)
     check_env(env.unwrapped)
-    assert env.observation_space.shape == ({"paper": 5, "extended": EXTENDED_SIZE, "route": EXTENDED_SIZE + 2}[observation],)
+    assert env.observation_space.shape == (
+        {"paper": 5, "extended": EXTENDED_SIZE, "route": EXTENDED_SIZE + 2}[observation],
+    )
 
 
 def rollout(env, seed, steps=300):
@@ -123,9 +125,21 @@ def test_route_observation_points_the_way_around_the_radars(strike_path):
 def result(**kw) -> StepResult:
     z = np.zeros((1, 3))
     zb = np.zeros((1, 3), dtype=bool)
-    base = dict(cost=z, zone_dist_prev_m=z, zone_dist_m=z, in_zone=zb, task_completed=zb, out_of_area=zb, hazard_entered=zb,
-                radar_on_changed=np.zeros(1, bool), identified_now=np.zeros(1, bool), hit_now=np.zeros(1, bool),
-                terminated=np.zeros(1, bool), truncated=np.zeros(1, bool), moving=np.ones((1, 3), bool))
+    base = dict(
+        cost=z,
+        zone_dist_prev_m=z,
+        zone_dist_m=z,
+        in_zone=zb,
+        task_completed=zb,
+        out_of_area=zb,
+        hazard_entered=zb,
+        radar_on_changed=np.zeros(1, bool),
+        identified_now=np.zeros(1, bool),
+        hit_now=np.zeros(1, bool),
+        terminated=np.zeros(1, bool),
+        truncated=np.zeros(1, bool),
+        moving=np.ones((1, 3), bool),
+    )
     base.update(kw)
     return StepResult(**base)
 
@@ -138,7 +152,11 @@ def test_reward_terms():
     # Step penalty alone (eq. 10, k3 r_step).
     np.testing.assert_allclose(reward(result(), MOVING, cfg), [[-0.1, -0.1, -0.1]])
     # Approach: 25 m closer to the zone is +0.025 (km); moving away is negative.
-    r = reward(result(zone_dist_prev_m=np.array([[1000.0, 1000.0, 1000.0]]), zone_dist_m=np.array([[975.0, 1025.0, 1000.0]])), MOVING, cfg)
+    r = reward(
+        result(zone_dist_prev_m=np.array([[1000.0, 1000.0, 1000.0]]), zone_dist_m=np.array([[975.0, 1025.0, 1000.0]])),
+        MOVING,
+        cfg,
+    )
     np.testing.assert_allclose(r, [[-0.075, -0.125, -0.1]])
     # Success +10 to the role whose task completed (eq. 9).
     done = np.array([[False, True, False]])
@@ -146,7 +164,9 @@ def test_reward_terms():
     # Holding the zone cancels the step penalty.
     np.testing.assert_allclose(reward(result(in_zone=np.array([[True, False, True]])), MOVING, cfg), [[0.0, -0.1, 0.0]])
     # Leaving the area.
-    np.testing.assert_allclose(reward(result(out_of_area=np.array([[False, False, True]])), MOVING, cfg), [[-0.1, -0.1, -20.1]])
+    np.testing.assert_allclose(
+        reward(result(out_of_area=np.array([[False, False, True]])), MOVING, cfg), [[-0.1, -0.1, -20.1]]
+    )
     # Weights scale their terms.
     k = RewardConfig(k1=2.0, k3=0.5)
     np.testing.assert_allclose(reward(result(task_completed=done), MOVING, k), [[-0.05, 19.95, -0.05]])
@@ -156,7 +176,9 @@ def test_reward_terms():
 
 def test_approach_reward_matches_distance_to_sam_outside_the_zone(strike_path):
     """Straight-line mode: outside its zone the approach term is the paper's d_{t-1} - d_t to the SAM, in km."""
-    task = RoleTask(load(strike_path), Role.DECOY, n=1, teammates="none", seed=0, reward_config=RewardConfig(around_radars=False))
+    task = RoleTask(
+        load(strike_path), Role.DECOY, n=1, teammates="none", seed=0, reward_config=RewardConfig(around_radars=False)
+    )
     task.reset()
     w = task.world
     d0 = w.sam_dist_m[0, 0]
@@ -270,7 +292,9 @@ def test_unused_radar_slots_do_not_change_the_observation(strike_path):
     for w in (snug, roomy):
         w.reset([0], [s.layout])
     for j in range(3):
-        np.testing.assert_array_equal(observe(snug, j, ObservationMode.EXTENDED), observe(roomy, j, ObservationMode.EXTENDED))
+        np.testing.assert_array_equal(
+            observe(snug, j, ObservationMode.EXTENDED), observe(roomy, j, ObservationMode.EXTENDED)
+        )
     one = World(s, 1, max_radars=1)
     lay = s.layout
     one.reset([0], [type(lay)(lay.sam_km, lay.target_km, lay.radars[:1], lay.starts)])

@@ -26,7 +26,24 @@ def test_guidance_solves_random_layouts(random_path):
 
 def test_evaluate_writes_json(tmp_path, strike_path, capsys):
     out = tmp_path / "r" / "eval.json"
-    assert main(["--controller", "guidance", "--scenario", str(strike_path), "--episodes", "2", "--seed", "1", "--json", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "--controller",
+                "guidance",
+                "--scenario",
+                str(strike_path),
+                "--episodes",
+                "2",
+                "--seed",
+                "1",
+                "--json",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     data = json.loads(out.read_text())
     assert data["success_rate"] == 1.0 and data["episodes"] == 2 and data["mean_cost"] == 0.0
     assert set(data["roles"]) == {"decoy", "detect", "strike"}
@@ -83,25 +100,54 @@ def test_the_summary_has_intervals_tails_and_the_worst_missions_by_index_and_see
     cost[7, 2], cost[31, 0] = 640.0, 2.0
     success = np.ones(n, dtype=bool)
     success[7] = False
-    results = MissionResults(success=success, cost=cost, returns=np.zeros((n, 3)), task_done=np.ones((n, 3), dtype=bool),
-                             time_s=np.full(n, 300.0), out_of_area=np.zeros((n, 3), dtype=bool),
-                             seeds=[5000 + k for k in range(10, 10 + n)], indices=list(range(10, 10 + n)))
+    results = MissionResults(
+        success=success,
+        cost=cost,
+        returns=np.zeros((n, 3)),
+        task_done=np.ones((n, 3), dtype=bool),
+        time_s=np.full(n, 300.0),
+        out_of_area=np.zeros((n, 3), dtype=bool),
+        seeds=[5000 + k for k in range(10, 10 + n)],
+        indices=list(range(10, 10 + n)),
+    )
     summary = results.summary(3.0)
     assert summary["success_rate"] == 39 / 40
     assert summary["success_interval95"] == [wilson_interval(39, 40).low, wilson_interval(39, 40).high]
     low, high = summary["mean_cost_interval95"]
     assert low == 0.0 < summary["mean_cost"] < high
     strike = summary["roles"]["strike"]
-    assert (strike["within_cost_limit"], strike["max_cost"], strike["cvar95_cost"]) == (39 / 40, 640.0, 320.0)  # worst 2 of 40
+    assert (strike["within_cost_limit"], strike["max_cost"], strike["cvar95_cost"]) == (
+        39 / 40,
+        640.0,
+        320.0,
+    )  # worst 2 of 40
     assert summary["roles"]["decoy"]["within_cost_limit"] == 1.0  # 2.0 is within C
-    assert summary["worst_missions"] == [{"mission": 17, "seed": 5017, "role": "strike", "cost": 640.0},
-                                         {"mission": 41, "seed": 5041, "role": "decoy", "cost": 2.0}]
+    assert summary["worst_missions"] == [
+        {"mission": 17, "seed": 5017, "role": "strike", "cost": 640.0},
+        {"mission": 41, "seed": 5041, "role": "decoy", "cost": 2.0},
+    ]
 
 
 def test_evaluate_flies_one_mission_again_with_mission(tmp_path, random_path, capsys):
     out = tmp_path / "one.json"
-    assert main(["--controller", "guidance", "--scenario", str(random_path), "--seed", "100", "--mission", "2", "--json", str(out),
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "--controller",
+                "guidance",
+                "--scenario",
+                str(random_path),
+                "--seed",
+                "100",
+                "--mission",
+                "2",
+                "--json",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     data = json.loads(out.read_text())
     s = load(random_path)
     again = fly_missions(s, [GUIDANCE] * 3, episodes=1, seed=102).summary(s.cost_limit)

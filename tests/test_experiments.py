@@ -17,11 +17,17 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
+from tssac_core.experiments.cli import main, train
 from tssac_core.experiments.figures import clipped_error, penalty_entries
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
-from tssac_core.experiments.report import pooled_cost, steps_to_threshold, training_wall_s, transfer_speedup, within_limit
-from tssac_core.experiments.cli import main, train
+from tssac_core.experiments.report import (
+    pooled_cost,
+    steps_to_threshold,
+    training_wall_s,
+    transfer_speedup,
+    within_limit,
+)
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
 
@@ -57,30 +63,75 @@ def test_paper_grid():
     names = [e.name for e in grid.algos]
     assert names == ["tssac", "sac_lag", "sac", "ppo", "cpo", "ppo_lag", "sac_pen10", "sac_pen15", "sac_pen50"]
     assert [e.penalty for e in grid.algos if e.algo == "sac_penalty"] == [-10.0, -15.0, -50.0]  # penalty 0 is sac
-    assert grid.seeds == (0, 1, 2) and grid.train.epochs == 25 and grid.evaluation.episodes == 50 and grid.evaluation.seed == 12345
+    assert (
+        grid.seeds == (0, 1, 2)
+        and grid.train.epochs == 25
+        and grid.evaluation.episodes == 50
+        and grid.evaluation.seed == 12345
+    )
     assert grid.train.validation_episodes == 50
     jobs = grid.jobs(Path("results"))
     assert len(jobs) == 27 and jobs[0].out == Path("results/runs/tssac-seed0")
-    assert [j.name for j in jobs[:10]] == [f"{n}-seed0" for n in names] + ["tssac-seed1"]  # seed-major: a cut-short grid fills every row
+    assert [j.name for j in jobs[:10]] == [f"{n}-seed0" for n in names] + [
+        "tssac-seed1"
+    ]  # seed-major: a cut-short grid fills every row
     by_name = {j.name: j for j in jobs}
-    tssac, ppo, pen = by_name["tssac-seed1"].config(), by_name["ppo-seed1"].config(), by_name["sac_pen50-seed2"].config()
+    tssac, ppo, pen = (
+        by_name["tssac-seed1"].config(),
+        by_name["ppo-seed1"].config(),
+        by_name["sac_pen50-seed2"].config(),
+    )
     assert tssac.learner == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
     assert ppo.learner == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     # each ships its epoch by its own rule: within C where the learner is given C (docs/decisions.md)
-    assert [selects_within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [True, True, False, False, True, True, False, False, False]
-    assert load_grid("results/earlier/grid-10-epochs/paper.yaml").train.selection == "within_limit"  # pinned: its runs were
+    assert [selects_within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [
+        True,
+        True,
+        False,
+        False,
+        True,
+        True,
+        False,
+        False,
+        False,
+    ]
+    assert (
+        load_grid("results/earlier/grid-10-epochs/paper.yaml").train.selection == "within_limit"
+    )  # pinned: its runs were
     for cfg in (tssac, ppo, pen):  # the shared arguments are the same for every algorithm
-        assert (cfg.epochs, cfg.steps_per_epoch, cfg.envs, cfg.action_repeat, cfg.update_every, cfg.start_steps, cfg.threads) == (25, 4000, 1, 10, 2, 0, 1)
+        assert (
+            cfg.epochs,
+            cfg.steps_per_epoch,
+            cfg.envs,
+            cfg.action_repeat,
+            cfg.update_every,
+            cfg.start_steps,
+            cfg.threads,
+        ) == (25, 4000, 1, 10, 2, 0, 1)
     transfer = grid.transfer_jobs(Path("results"))  # the transfer experiment: each role alone, both sides, every seed
-    assert [j.name for j in transfer[:4]] == ["transfer-detect-tssac-seed0", "transfer-detect-sac_lag-seed0",
-                                              "transfer-strike-tssac-seed0", "transfer-strike-sac_lag-seed0"] and len(transfer) == 12
+    assert [j.name for j in transfer[:4]] == [
+        "transfer-detect-tssac-seed0",
+        "transfer-detect-sac_lag-seed0",
+        "transfer-strike-tssac-seed0",
+        "transfer-strike-sac_lag-seed0",
+    ] and len(transfer) == 12
     strike = transfer[3]
     cfg = strike.config()
     assert strike.out == Path("results/runs/transfer-strike-sac_lag-seed0") and strike.roles == ("strike",)
     assert (cfg.algo, cfg.roles, cfg.teammates, cfg.stop_at_task_success, cfg.epochs, cfg.validation_episodes) == (
-        "sac_lag", ("strike",), "models/tssac", 0.9, 25, 0)
-    assert cfg.learner == tssac.learner and (cfg.steps_per_epoch, cfg.action_repeat, cfg.start_steps) == (4000, 10, 0)  # the grid's settings
+        "sac_lag",
+        ("strike",),
+        "models/tssac",
+        0.9,
+        25,
+        0,
+    )
+    assert cfg.learner == tssac.learner and (cfg.steps_per_epoch, cfg.action_repeat, cfg.start_steps) == (
+        4000,
+        10,
+        0,
+    )  # the grid's settings
 
 
 @pytest.mark.parametrize(
@@ -90,23 +141,50 @@ def test_paper_grid():
         (("  epochs: 1\n", "  epochs: many\n"), "train.epochs: expected an integer, got 'many'"),
         (("  epochs: 1\n", "  epochs: 0\n"), "train.epochs: must be >= 1"),
         (("  envs: 1\n", "  envs: 1\n  speed: 3\n"), "train.speed: unknown key"),
-        (("  envs: 1\n", "  envs: 1\n  selection: best\n"), "train.selection: expected one of within_limit, success, tail, got 'best'"),
+        (
+            ("  envs: 1\n", "  envs: 1\n  selection: best\n"),
+            "train.selection: expected one of within_limit, success, tail, got 'best'",
+        ),
         (("  scenario: scenarios/strike.yaml", "  scenario: scenarios/nowhere.yaml"), "train.scenario: file not found"),
-        (("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"), "algos[1].penalty: only sac_penalty takes a penalty"),
+        (
+            ("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"),
+            "algos[1].penalty: only sac_penalty takes a penalty",
+        ),
         (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: unknown algorithm 'sarsa'"),
         (("  - sac_lag\n", "  - {algo: sac_lag, name: tssac}\n"), "algos[1].name: 'tssac' is used twice"),
-        (("  - sac_lag\n", "  - {algo: ppo, set: {alpha_init: 0.2}}\n"), "algos[1] (ppo): invalid learner settings (--set): unknown OnPolicyConfig field 'alpha_init'"),
-        (("batch_size: 8", "batch_sise: 8"), "algos[0] (tssac): invalid learner settings (--set): unknown SacConfig field 'batch_sise'"),
+        (
+            ("  - sac_lag\n", "  - {algo: ppo, set: {alpha_init: 0.2}}\n"),
+            "algos[1] (ppo): invalid learner settings (--set): unknown OnPolicyConfig field 'alpha_init'",
+        ),
+        (
+            ("batch_size: 8", "batch_sise: 8"),
+            "algos[0] (tssac): invalid learner settings (--set): unknown SacConfig field 'batch_sise'",
+        ),
         (("  episodes: 2", "  episodes: [2]"), "evaluation.episodes: expected an integer"),
         (("seeds: [0]", "seeds: [0"), "not valid YAML"),
-        *[(("evaluation:", f"transfer: {{{t}}}\nevaluation:"), message) for t, message in (
-            ("teammates: models/tssac, with: sac_lag, without: tssac", "transfer.with: 'sac_lag' is sac_lag: 'with' needs tssac"),
-            ("teammates: models/tssac, with: tssac, without: ppo", "transfer.without: 'ppo' is not an entry of algos (tssac, sac_lag)"),
-            ("teammates: models/tssac, with: tssac, without: sac_lag, roles: [decoy]", "transfer.roles: expected a list of detect and/or strike"),
-            ("teammates: nowhere, with: tssac, without: sac_lag", "transfer.teammates: nowhere/decoy.pt not found"),
-            ("teammates: models/tssac, with: tssac, without: sac_lag, task_success: 1.5", "transfer.task_success: expected a fraction"),
-            ("teammates: models/tssac, with: tssac", "transfer.without: missing required field"),
-        )],
+        *[
+            (("evaluation:", f"transfer: {{{t}}}\nevaluation:"), message)
+            for t, message in (
+                (
+                    "teammates: models/tssac, with: sac_lag, without: tssac",
+                    "transfer.with: 'sac_lag' is sac_lag: 'with' needs tssac",
+                ),
+                (
+                    "teammates: models/tssac, with: tssac, without: ppo",
+                    "transfer.without: 'ppo' is not an entry of algos (tssac, sac_lag)",
+                ),
+                (
+                    "teammates: models/tssac, with: tssac, without: sac_lag, roles: [decoy]",
+                    "transfer.roles: expected a list of detect and/or strike",
+                ),
+                ("teammates: nowhere, with: tssac, without: sac_lag", "transfer.teammates: nowhere/decoy.pt not found"),
+                (
+                    "teammates: models/tssac, with: tssac, without: sac_lag, task_success: 1.5",
+                    "transfer.task_success: expected a fraction",
+                ),
+                ("teammates: models/tssac, with: tssac", "transfer.without: missing required field"),
+            )
+        ],
     ],
 )
 def test_malformed_grid_is_one_line(tmp_path, capsys, change, message):
@@ -123,9 +201,13 @@ def test_malformed_grid_is_one_line(tmp_path, capsys, change, message):
 def test_choosing_jobs_for_a_mode_that_trains_none_is_refused(tmp_path, capsys, mode, chooser):
     """--only and --finish-by pick what to train; beside --report-only or --compact they would be ignored in silence."""
     results = tmp_path / "r"
-    assert run(main, ["--grid", str(ROOT / "experiments" / "smoke.yaml"), "--results", str(results), mode, *chooser]) == 2
+    assert (
+        run(main, ["--grid", str(ROOT / "experiments" / "smoke.yaml"), "--results", str(results), mode, *chooser]) == 2
+    )
     err = capsys.readouterr().err.strip()
-    assert err == f"error: {chooser[0]} chooses jobs to train, and {mode} trains nothing (it works on every finished run)", err
+    assert (
+        err == f"error: {chooser[0]} chooses jobs to train, and {mode} trains nothing (it works on every finished run)"
+    ), err
     assert not results.exists()
 
 
@@ -178,8 +260,12 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
     assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
     assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
-    assert "## The mean cost against the limit" in table and re.search(r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M)
-    assert rows[4] == "| guidance controller | — | 100.0% | 0.00 | 100.0% | — | — | — |"  # it solves the fixed mission safely
+    assert "## The mean cost against the limit" in table and re.search(
+        r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M
+    )
+    assert (
+        rows[4] == "| guidance controller | — | 100.0% | 0.00 | 100.0% | — | — | — |"
+    )  # it solves the fixed mission safely
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
     data = json.loads((smoke / "experiments.json").read_text())
@@ -229,7 +315,9 @@ def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys)
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(results)]) == 0
     assert "2 jobs: 2 finished, 0 to run" in capsys.readouterr().out
     assert {p: p.read_text() for p in caches} == caches
-    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0  # again: nothing changes
+    assert (
+        main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0
+    )  # again: nothing changes
     assert all(np.array_equal(a, b) for a, b in zip(before, [p.act(obs) for p in load_team(run_dir)]))
 
 
@@ -262,18 +350,28 @@ def test_transfer_runs_train_their_role_beside_the_teammates_and_are_reported(sm
     results = tmp_path / "results"
     shutil.copytree(smoke, results)
     teammates = results / "runs" / "tssac-seed0"
-    text = smoke_text(("evaluation:", f"transfer: {{teammates: {teammates}, with: tssac, without: sac_lag, roles: [detect], epochs: 1}}\nevaluation:"))
+    text = smoke_text(
+        (
+            "evaluation:",
+            f"transfer: {{teammates: {teammates}, with: tssac, without: sac_lag, roles: [detect], "
+            f"epochs: 1}}\nevaluation:",
+        )
+    )
     grid = write_grid(tmp_path / "g.yaml", text)
     assert main(["--grid", str(grid), "--results", str(results), "--jobs", "2"]) == 0
     assert "4 jobs: 2 finished, 2 to run" in capsys.readouterr().out
     for side in ("tssac", "sac_lag"):
         run_dir = results / "runs" / f"transfer-detect-{side}-seed0"
-        assert sorted(p.name for p in run_dir.glob("*.pt")) == ["detect.pt"]  # one role; the teammates stay where they are
+        assert sorted(p.name for p in run_dir.glob("*.pt")) == [
+            "detect.pt"
+        ]  # one role; the teammates stay where they are
     log = (results / "runs" / "transfer-detect-tssac-seed0" / LOG_NAME).read_text()
     assert f"transferred 30 tensors from {teammates / 'decoy.pt'}" in log
     assert "## Transfer experiment" in (results / "table4.md").read_text()
     data = json.loads((results / "experiments.json").read_text())["transfer_experiment"]
-    assert data["detect"]["with"]["seeds"] == 1 and data["detect"]["without"]["seeds"] == 1 and data["roles"] == ["detect"]
+    assert (
+        data["detect"]["with"]["seeds"] == 1 and data["detect"]["without"]["seeds"] == 1 and data["roles"] == ["detect"]
+    )
     assert main(["--grid", str(grid), "--results", str(results), "--dry-run"]) == 0
     assert [line.split()[0] for line in capsys.readouterr().out.splitlines()] == ["finished"] * 4
     assert main(["--grid", str(grid), "--results", str(results), "--compact"]) == 0
@@ -281,7 +379,8 @@ def test_transfer_runs_train_their_role_beside_the_teammates_and_are_reported(sm
 
 
 def test_only_trains_the_jobs_its_patterns_name(smoke, tmp_path, capsys):
-    """With tssac-seed0 finished and sac_lag-seed0 new, --only 'tssac-*' starts nothing; a pattern naming no job is one line."""
+    """With tssac-seed0 finished and sac_lag-seed0 new, --only 'tssac-*' starts nothing; a pattern naming no job is
+    one line."""
     results = tmp_path / "results"
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
     grid = ["--grid", "experiments/smoke.yaml", "--results", str(results)]
@@ -292,7 +391,10 @@ def test_only_trains_the_jobs_its_patterns_name(smoke, tmp_path, capsys):
     assert not (results / "runs" / "sac_lag-seed0").exists()
     assert run(main, [*grid, "--only", "tssac-*", "--only", "sac-seed*"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == "error: --only 'sac-seed*' matches none of the jobs of experiments/smoke.yaml (see --dry-run for their names)", err
+    assert (
+        err == "error: --only 'sac-seed*' matches none of the jobs of experiments/smoke.yaml "
+        "(see --dry-run for their names)"
+    ), err
     assert not (results / "runs" / "sac_lag-seed0").exists()
 
 
@@ -321,11 +423,14 @@ def test_a_run_from_before_multiplier_signal_is_a_conflict(smoke, tmp_path, caps
     assert line.startswith("conflict") and "'multiplier_signal': 'q_c'" in line
 
 
-@pytest.mark.parametrize("content, message", [
-    ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
-    ('[1, 2]', "not a training configuration"),
-    ('{"algo": "tssac", "roles": "decoy"}', "roles: expected a list"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
+        ("[1, 2]", "not a training configuration"),
+        ('{"algo": "tssac", "roles": "decoy"}', "roles: expected a list"),
+    ],
+)
 def test_a_config_json_this_version_cannot_read_is_a_conflict_not_a_crash(tmp_path, capsys, content, message):
     results = tmp_path / "r"
     run_dir = results / "runs" / "tssac-seed0"
@@ -348,8 +453,13 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     grid_path = write_grid(tmp_path / "one.yaml", smoke_text(("  - sac_lag\n", ""), ("  epochs: 1\n", "  epochs: 2\n")))
     results = tmp_path / "results"
     run_dir = results / "runs" / "tssac-seed0"
-    runner = subprocess.Popen([sys.executable, "-m", "tssac_core.experiments", "--grid", str(grid_path), "--results", str(results)],
-                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    runner = subprocess.Popen(
+        [sys.executable, "-m", "tssac_core.experiments", "--grid", str(grid_path), "--results", str(results)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (run_dir / "resume" / "decoy.pt").is_file() and runner.poll() is None:
         time.sleep(0.02)
@@ -371,7 +481,9 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     assert epochs == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]  # nothing run twice
     log = (run_dir / LOG_NAME).read_text()
     assert log.count("runner: ") == 3 and len(re.findall(r"runner: stopped after \d+ s", log)) == 1, log
-    assert training_wall_s(run_dir) > int(re.search(r"trained .* in (\d+) s", log).group(1))  # the stopped invocation counts
+    assert training_wall_s(run_dir) > int(
+        re.search(r"trained .* in (\d+) s", log).group(1)
+    )  # the stopped invocation counts
 
 
 # ------------------------------------------------------------------------------------ --finish-by
@@ -396,16 +508,28 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     finished run of its own, goes by its family's (tssac's); a PPO run, with none in its family, is started."""
     from tssac_core.experiments.deadline import deadline_filter
 
-    grid = load_grid(write_grid(tmp_path / "three.yaml", smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"), ("  - sac_lag\n", "  - sac_lag\n  - ppo\n"))))
+    grid = load_grid(
+        write_grid(
+            tmp_path / "three.yaml",
+            smoke_text(("seeds: [0]", "seeds: [0, 1, 2]"), ("  - sac_lag\n", "  - sac_lag\n  - ppo\n")),
+        )
+    )
     results = tmp_path / "results"
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text("trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n")
+    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
+        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
+    )
     partial = results / "runs" / "tssac-seed2"
     write_metrics(partial, [("decoy", 1, 20, 0.0)])  # the decoy's epoch, one of the three roles' one each
-    (partial / "config.json").write_text((results / "runs" / "tssac-seed0" / "config.json").read_text().replace('"seed": 0', '"seed": 2'))
+    (partial / "config.json").write_text(
+        (results / "runs" / "tssac-seed0" / "config.json").read_text().replace('"seed": 0', '"seed": 2')
+    )
     states = [job_state(j) for j in grid.jobs(results)]
     jobs = {s.job.name: s.job for s in states}
-    assert job_state(jobs["tssac-seed0"]).status is Status.FINISHED and job_state(jobs["tssac-seed2"]).status is Status.PARTIAL
+    assert (
+        job_state(jobs["tssac-seed0"]).status is Status.FINISHED
+        and job_state(jobs["tssac-seed2"]).status is Status.PARTIAL
+    )
     clock = lambda: 1000.0  # noqa: E731
     tight, loose = deadline_filter(states, 1500.0, clock), deadline_filter(states, 1700.0, clock)
     assert not tight(jobs["tssac-seed1"]) and loose(jobs["tssac-seed1"])  # 600 s from 1000 ends at 1600
@@ -426,7 +550,9 @@ def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke,
     may_start = deadline_filter(states, 1500.0, lambda: 1000.0)
     assert may_start(jobs["sac_lag-seed0"])  # nothing to go by yet
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text("trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n")
+    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
+        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
+    )
     assert not may_start(jobs["sac_lag-seed0"])  # 600 s from 1000 ends after 1500
 
 
@@ -474,12 +600,20 @@ def test_transfer_speedup(tmp_path):
 def test_error_bars_stop_where_the_quantity_does():
     """mean ± std of a cost (0.5 ± 1.8) must not reach below 0, nor a rate (94 ± 9) above 100%."""
     np.testing.assert_allclose(clipped_error([0.5, 4.0], [1.8, 1.0], 0.0), [[0.5, 1.0], [1.8, 1.0]])
-    np.testing.assert_allclose(clipped_error([94.0, 6.0, np.nan], [9.0, 0.0, 0.0], 0.0, 100.0), [[9.0, 0.0, np.nan], [6.0, 0.0, np.nan]])
+    np.testing.assert_allclose(
+        clipped_error([94.0, 6.0, np.nan], [9.0, 0.0, 0.0], 0.0, 100.0), [[9.0, 0.0, np.nan], [6.0, 0.0, np.nan]]
+    )
 
 
 def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
     entry = lambda name, algo, penalty=0.0: {"name": name, "algo": algo, "penalty": penalty}  # noqa: E731
-    done = [entry("tssac", "tssac"), entry("sac", "sac"), entry("ppo", "ppo"), entry("p50", "sac_penalty", -50.0), entry("p10", "sac_penalty", -10.0)]
+    done = [
+        entry("tssac", "tssac"),
+        entry("sac", "sac"),
+        entry("ppo", "ppo"),
+        entry("p50", "sac_penalty", -50.0),
+        entry("p10", "sac_penalty", -10.0),
+    ]
     bars = penalty_entries(done)
     assert [(a["name"], a["penalty"]) for a in bars] == [("sac", 0.0), ("p10", -10.0), ("p50", -50.0), ("tssac", 0.0)]
     bars = penalty_entries([*done, entry("p0", "sac_penalty", 0.0)])
@@ -487,20 +621,29 @@ def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
 
 
 def test_transfer_experiment_figures_and_table(tmp_path):
-    from tssac_core.experiments.report import table_markdown, transfer_experiment, transfer_experiment_markdown
+    from tssac_core.experiments.report import transfer_experiment, transfer_experiment_markdown
 
-    text = smoke_text(("seeds: [0]", "seeds: [0, 1]"), ("evaluation:", "transfer: {teammates: models/tssac, with: tssac, without: sac_lag, epochs: 3}\nevaluation:"))
+    text = smoke_text(
+        ("seeds: [0]", "seeds: [0, 1]"),
+        ("evaluation:", "transfer: {teammates: models/tssac, with: tssac, without: sac_lag, epochs: 3}\nevaluation:"),
+    )
     grid = load_grid(write_grid(tmp_path / "g.yaml", text))
     jobs = {j.name: j for j in grid.transfer_jobs(tmp_path)}
     assert len(jobs) == 8 and jobs["transfer-detect-tssac-seed1"].config().epochs == 3
     write_metrics(jobs["transfer-detect-tssac-seed0"].out, [("detect", 1, 20, 0.95)])  # stopped at its first epoch
     write_metrics(jobs["transfer-detect-tssac-seed1"].out, [("detect", 1, 20, 0.5), ("detect", 2, 40, 1.0)])
-    write_metrics(jobs["transfer-detect-sac_lag-seed0"].out, [("detect", e, 20 * e, 0.1 * e) for e in (1, 2, 3)])  # never: 60, a bound
+    write_metrics(
+        jobs["transfer-detect-sac_lag-seed0"].out, [("detect", e, 20 * e, 0.1 * e) for e in (1, 2, 3)]
+    )  # never: 60, a bound
     write_metrics(jobs["transfer-detect-sac_lag-seed1"].out, [("detect", 1, 20, 0.0), ("detect", 2, 40, 0.9)])
     runs = [jobs[n] for n in jobs if "detect" in n]
     x = transfer_experiment(grid, runs)
     detect = x["detect"]
-    assert detect["with"]["per_seed"] == {"0": 20, "1": 40} and detect["with"]["mean_steps"] == 30 and not detect["with"]["mean_is_lower_bound"]
+    assert (
+        detect["with"]["per_seed"] == {"0": 20, "1": 40}
+        and detect["with"]["mean_steps"] == 30
+        and not detect["with"]["mean_is_lower_bound"]
+    )
     assert detect["without"]["per_seed"] == {"0": None, "1": 40} and detect["without"]["mean_steps"] == 50
     assert detect["speedup"] == pytest.approx(50 / 30) and detect["speedup_is_lower_bound"]
     assert x["strike"]["with"]["seeds"] == 0 and x["strike"]["speedup"] is None  # nothing finished yet: no figure
@@ -538,6 +681,6 @@ def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_sto
         "INFO tssac_core.train: decoy epoch 3: ... stopped after 9 s\n"  # not the runner's line
         "=== 2026-11-22 16:06:40 runner: stopped after 100 s; the next run resumes it\n"
         "=== 2026-11-22 16:10:00 runner: python -m tssac_core.train --resume ...\n"
-        "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n")
+        "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n"
+    )
     assert training_wall_s(tmp_path) == 600.0
-

@@ -44,7 +44,11 @@ def _quick_scenario(tmp: Path, strike_km: float = 8.0) -> Path:
         sam_km=(65.0, 65.0),
         target_km=(66.0, 64.0),
         radars=(Radar((20.0, 20.0), 12.0), Radar((15.0, 85.0), 12.0), Radar((88.0, 15.0), 10.0)),
-        starts={"decoy": Start((46.5, 65.0), 90.0), "detect": Start((65.0, 53.5), 0.0), "strike": Start((65.0 + strike_km, 65.0), 180.0)},
+        starts={
+            "decoy": Start((46.5, 65.0), 90.0),
+            "detect": Start((65.0, 53.5), 0.0),
+            "strike": Start((65.0 + strike_km, 65.0), 180.0),
+        },
     )
     path = tmp / f"quick-{strike_km:g}.yaml"
     dump(dataclasses.replace(base, name="quick", layout=layout), path)
@@ -70,8 +74,14 @@ def _start_fly(args: list[str]) -> subprocess.Popen[bytes]:
     # SIGINT back to its default in the child: a test run started in the background (`cmd &` in a
     # script) inherits SIGINT ignored, and Python then installs no KeyboardInterrupt handler, so fly
     # would not see the Ctrl-C these tests send it.
-    return subprocess.Popen([sys.executable, "-m", "mavlink_bridge.fly", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            cwd=REPO, env=_env(), preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    return subprocess.Popen(
+        [sys.executable, "-m", "mavlink_bridge.fly", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env=_env(),
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
 
 
 def _read_until(proc: subprocess.Popen[bytes], pattern: str, timeout_s: float) -> tuple[str, re.Match[str]]:
@@ -104,9 +114,28 @@ def test_fly_guidance_strike_mission_in_lockstep(tmp_path: Path) -> None:
     out, tlogs, plot = tmp_path / "fly.json", tmp_path / "tlogs", tmp_path / "mission.png"
     t0 = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(STRIKE), "--pilot", "guidance", "--lockstep",
-         "--json", str(out), "--tlog", str(tlogs), "--plot", str(plot), "--no-progress"],
-        capture_output=True, text=True, cwd=REPO, env=_env(), timeout=280,
+        [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.fly",
+            "--scenario",
+            str(STRIKE),
+            "--pilot",
+            "guidance",
+            "--lockstep",
+            "--json",
+            str(out),
+            "--tlog",
+            str(tlogs),
+            "--plot",
+            str(plot),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=280,
     )
     wall_s = time.monotonic() - t0
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -116,19 +145,35 @@ def test_fly_guidance_strike_mission_in_lockstep(tmp_path: Path) -> None:
     mission = results["missions"][0]
     assert mission["success"] and mission["end"] == "success" and all(mission["task_done"].values())
     # The same mission in the batched world takes 2,670 steps with no hazard cost.
-    assert mission["steps"] == pytest.approx(2670, abs=30) and mission["sim_time_s"] == pytest.approx(mission["steps"] / 10)
+    assert mission["steps"] == pytest.approx(2670, abs=30) and mission["sim_time_s"] == pytest.approx(
+        mission["steps"] / 10
+    )
     assert results["mean_cost"] == pytest.approx(np.mean(list(mission["cost"].values())))
     assert set(results["roles"]) == {"decoy", "detect", "strike"}
     for role, comp in mission["companions"].items():
         assert comp["status"] == "success" and comp["exit_code"] == 0 and comp["holds"] == 0, (role, comp)
         assert comp["latency_p50_ms"] > 0
     assert not mission["failsafe_steps"]
-    print(f"strike mission in lockstep: {wall_s:.1f} s wall, {mission['sim_time_s']:.0f} s simulated, {mission.get('speed_x')}x in flight")
+    print(
+        f"strike mission in lockstep: {wall_s:.1f} s wall, {mission['sim_time_s']:.0f} s simulated, "
+        f"{mission.get('speed_x')}x in flight"
+    )
     # One .tlog per vehicle, readable by pymavlink's mavlogdump.py.
     for role in ("decoy", "detect", "strike"):
         tlog = tlogs / "mission-000" / f"{role}.tlog"
-        dump_ = subprocess.run([sys.executable, "-m", "pymavlink.tools.mavlogdump", "--types", "HEARTBEAT,COMMAND_ACK,SET_POSITION_TARGET_LOCAL_NED", str(tlog)],
-                               capture_output=True, text=True, timeout=120)
+        dump_ = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pymavlink.tools.mavlogdump",
+                "--types",
+                "HEARTBEAT,COMMAND_ACK,SET_POSITION_TARGET_LOCAL_NED",
+                str(tlog),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert dump_.returncode == 0, dump_.stderr[-500:]
         lines = dump_.stdout.splitlines()
         assert sum("SET_POSITION_TARGET_LOCAL_NED" in ln for ln in lines) >= 2600
@@ -150,9 +195,31 @@ def test_fly_speedup_signed_random_layouts(tmp_path: Path) -> None:
     assert mission_layout(scen, 3, 2) == scen.layout
     out = tmp_path / "fly.json"
     proc = subprocess.run(
-        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--speedup", "10",
-         "--episodes", "2", "--seed", "4", "--signing-key", str(key), "--json", str(out), "--no-progress"],
-        capture_output=True, text=True, cwd=REPO, env=_env(), timeout=220,
+        [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.fly",
+            "--scenario",
+            str(_quick_scenario(tmp_path)),
+            "--pilot",
+            "guidance",
+            "--speedup",
+            "10",
+            "--episodes",
+            "2",
+            "--seed",
+            "4",
+            "--signing-key",
+            str(key),
+            "--json",
+            str(out),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=220,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     results = json.loads(out.read_text())
@@ -165,11 +232,26 @@ def test_fly_speedup_signed_random_layouts(tmp_path: Path) -> None:
 @pytest.mark.timeout(240)
 def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"
-    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--episodes", "5",
-                       "--json", str(out), "--no-progress"])
+    proc = _start_fly(
+        [
+            "--scenario",
+            str(_quick_scenario(tmp_path, strike_km=25.0)),
+            "--pilot",
+            "guidance",
+            "--episodes",
+            "5",
+            "--json",
+            str(out),
+            "--no-progress",
+        ]
+    )
     try:
         log, _ = _read_until(proc, r"mission 1: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 150)
-        running = [int(p) for m in re.finditer(r"mission \d+: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", log) for p in m.groups()]
+        running = [
+            int(p)
+            for m in re.finditer(r"mission \d+: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", log)
+            for p in m.groups()
+        ]
         time.sleep(1.0)  # mission 1 in flight
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
@@ -186,8 +268,19 @@ def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_pat
 @pytest.mark.timeout(240)
 def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"
-    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--episodes", "3",
-                       "--json", str(out), "--no-progress"])
+    proc = _start_fly(
+        [
+            "--scenario",
+            str(_quick_scenario(tmp_path, strike_km=25.0)),
+            "--pilot",
+            "guidance",
+            "--episodes",
+            "3",
+            "--json",
+            str(out),
+            "--no-progress",
+        ]
+    )
     try:
         _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
         pids = [int(p) for p in match.groups()]
@@ -209,7 +302,9 @@ def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
 @pytest.mark.sitl
 @pytest.mark.timeout(180)
 def test_a_killed_fly_leaves_no_orphans(tmp_path: Path) -> None:
-    proc = _start_fly(["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--no-progress"])
+    proc = _start_fly(
+        ["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--no-progress"]
+    )
     try:
         _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
         pids = [int(p) for p in match.groups()]
@@ -234,8 +329,32 @@ def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.Capture
         (["--scenario", str(STRIKE), "--models", str(tmp_path / "nowhere")], "--pilot guidance"),
         (["--scenario", str(bad), "--pilot", "guidance"], "bad.yaml"),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--episodes", "0"], "--episodes"),
-        (["--scenario", str(RANDOM), "--pilot", "guidance", "--connect", "udpout:127.0.0.1:1", "udpout:127.0.0.1:2", "udpout:127.0.0.1:3"], "fixed layout"),
-        (["--scenario", str(STRIKE), "--pilot", "guidance", "--connect", "udpout:127.0.0.1:1", "tcp:x:2", "udpout:127.0.0.1:3"], "udpout:HOST:PORT"),
+        (
+            [
+                "--scenario",
+                str(RANDOM),
+                "--pilot",
+                "guidance",
+                "--connect",
+                "udpout:127.0.0.1:1",
+                "udpout:127.0.0.1:2",
+                "udpout:127.0.0.1:3",
+            ],
+            "fixed layout",
+        ),
+        (
+            [
+                "--scenario",
+                str(STRIKE),
+                "--pilot",
+                "guidance",
+                "--connect",
+                "udpout:127.0.0.1:1",
+                "tcp:x:2",
+                "udpout:127.0.0.1:3",
+            ],
+            "udpout:HOST:PORT",
+        ),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--signing-key", str(bad)], "signing key"),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--speedup", "2", "--lockstep"], "not allowed"),
     ]
@@ -249,6 +368,12 @@ def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.Capture
         assert fly.main(argv) == 2, argv
         err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
         assert len(err) == 1 and needle in err[0], (argv, err)
-    proc = subprocess.run([sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(bad), "--pilot", "guidance"],
-                          capture_output=True, text=True, cwd=REPO, env=_env(), timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(bad), "--pilot", "guidance"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=60,
+    )
     assert proc.returncode == 2 and proc.stdout == "" and len(proc.stderr.strip().splitlines()) == 1

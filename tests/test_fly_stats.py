@@ -27,7 +27,11 @@ def test_fly_and_evaluate_draw_mission_k_from_the_same_seed():
 def test_mission_flies_one_mission_of_the_seed():
     cfg = config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance", "--seed", "3", "--mission", "7"])
     assert list(cfg.indices()) == [7] and cfg.episodes == 1
-    assert list(config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance", "--episodes", "3"]).indices()) == [0, 1, 2]
+    assert list(config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance", "--episodes", "3"]).indices()) == [
+        0,
+        1,
+        2,
+    ]
     with pytest.raises(UsageError, match="--mission must be >= 0"):
         config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance", "--mission", "-2"])
     with pytest.raises(UsageError, match="--mission flies one mission"):
@@ -36,8 +40,14 @@ def test_mission_flies_one_mission_of_the_seed():
 
 def _row(index: int, seed: int, success: bool, decoy: float = 0.0, strike: float = 0.0) -> dict:
     cost = {"decoy": decoy, "detect": 0.0, "strike": strike}
-    return {"index": index, "seed": seed, "success": success, "sim_time_s": 250.0, "cost": cost,
-            "task_done": {"decoy": True, "detect": True, "strike": success}}
+    return {
+        "index": index,
+        "seed": seed,
+        "success": success,
+        "sim_time_s": 250.0,
+        "cost": cost,
+        "task_done": {"decoy": True, "detect": True, "strike": success},
+    }
 
 
 def test_the_summary_has_the_intervals_tails_and_worst_missions_of_evaluate():
@@ -53,12 +63,16 @@ def test_the_summary_has_the_intervals_tails_and_worst_missions_of_evaluate():
     assert low == 0.0 and high > out["mean_cost"]
     strike = out["roles"]["strike"]
     assert (strike["within_cost_limit"], strike["max_cost"], strike["cvar95_cost"]) == (0.95, 523.0, 523.0)
-    assert out["worst_missions"] == [{"mission": 4, "seed": 9004, "role": "strike", "cost": 523.0},
-                                     {"mission": 11, "seed": 9011, "role": "decoy", "cost": 2.0}]
+    assert out["worst_missions"] == [
+        {"mission": 4, "seed": 9004, "role": "strike", "cost": 523.0},
+        {"mission": 11, "seed": 9011, "role": "decoy", "cost": 2.0},
+    ]
 
 
 def test_without_a_truth_log_the_cost_figures_are_unknown():
     cfg = config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance"])
     out = summarise([{"index": 0, "seed": 0, "success": True, "sim_time_s": 200.0, "cost": None}], cfg)
     assert out["mean_cost"] is None and out["mean_cost_interval95"] is None and out["worst_missions"] == []
-    assert out["success_interval95"][0] == pytest.approx(wilson_interval(1, 1).low) and np.isclose(out["success_interval95"][1], 1.0)
+    assert out["success_interval95"][0] == pytest.approx(wilson_interval(1, 1).low) and np.isclose(
+        out["success_interval95"][1], 1.0
+    )

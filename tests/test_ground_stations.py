@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from sitl_helpers import REPO, STRIKE, sitl
+
 from sim_vehicles.modes import FlightMode
 
 mavsdk = pytest.importorskip("mavsdk", minversion="4.0")
@@ -99,7 +99,10 @@ def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path:
             detected = console.wait_line("Detected vehicle 1:1", 60.0)
             listed = console.wait_line("Received 11 parameters", 30.0)
             assert detected is not None and listed is not None, console.lines[-10:]
-            print(f"MAVProxy: vehicle detected {detected:.2f} s after start, parameters listed {listed - detected:.2f} s later")
+            print(
+                f"MAVProxy: vehicle detected {detected:.2f} s after start, parameters listed {listed - detected:.2f} s "
+                f"later"
+            )
             # MAVLink FTP is NAKed and the parameter file answered by PARAM_VALUEs: about 1 s (MAVProxy's first
             # 1 Hz check) instead of its 12 s FTP time-out; the bound leaves room for a loaded machine.
             assert listed - detected < 5.0
@@ -137,7 +140,9 @@ def test_mavsdk_health_mission_offboard_yaw_rate_and_stop() -> None:
             offboard = Offboard(system)
             offboard.set_velocity_body(VelocityBodyYawspeed(250.0, 0.0, 0.0, 5.0))
             samples: list[tuple[float, float]] = []
-            handle = telemetry.subscribe_attitude_euler(lambda e, *_: samples.append((e.timestamp_us * 1e-6, e.yaw_deg)))
+            handle = telemetry.subscribe_attitude_euler(
+                lambda e, *_: samples.append((e.timestamp_us * 1e-6, e.yaw_deg))
+            )
             offboard.start()
             started = time.monotonic()
             # MAVSDK streams setpoints for 3 s after start(): it counts only PX4's or ArduCopter's
@@ -151,12 +156,17 @@ def test_mavsdk_health_mission_offboard_yaw_rate_and_stop() -> None:
             sdk.destroy()
         s.stop()
     # The turn rate over the samples where the vehicle turned at a steady rate (simulated time).
-    turning = [(t, y) for (t, y), (t2, y2) in zip(samples, samples[1:]) if t2 > t and abs(((y2 - y + 180) % 360) - 180) > 1e-3]
+    turning = [
+        (t, y) for (t, y), (t2, y2) in zip(samples, samples[1:]) if t2 > t and abs(((y2 - y + 180) % 360) - 180) > 1e-3
+    ]
     assert len(turning) > 50
     ta, tb = turning[5][0], turning[-5][0]
     unwrapped = sum(((b[1] - a[1] + 180) % 360) - 180 for a, b in zip(turning[5:-4], turning[6:-4]))
     rate = unwrapped / (tb - ta)
-    print(f"MAVSDK: health_all_ok after {healthy_s:.2f} s; offboard yaw rate {rate:.3f} deg/s over {tb - ta:.1f} s simulated")
+    print(
+        f"MAVSDK: health_all_ok after {healthy_s:.2f} s; offboard yaw rate {rate:.3f} deg/s over {tb - ta:.1f} s "
+        f"simulated"
+    )
     assert healthy_s < 5.0 and rate == pytest.approx(5.0, rel=0.05)
 
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tssac_core.deploy.policy import Policy
 from tssac_core.sim.env import RoleTask
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.deploy.policy import Policy
 from tssac_core.sim.scenario import Layout, Radar, Role, Start, dump, load
 from tssac_core.train.cli import main
 
@@ -25,7 +25,11 @@ def easy_scenario(tmp: Path) -> Path:
         sam_km=(50.0, 50.0),
         target_km=(51.0, 49.0),
         radars=(Radar((88.0, 12.0), 8.0),),
-        starts={"decoy": Start((76.0, 50.0), 90.0), "detect": Start((10.0, 90.0), 0.0), "strike": Start((12.0, 90.0), 0.0)},
+        starts={
+            "decoy": Start((76.0, 50.0), 90.0),
+            "detect": Start((10.0, 90.0), 0.0),
+            "strike": Start((12.0, 90.0), 0.0),
+        },
     )
     path = tmp / "easy.yaml"
     dump(dataclasses.replace(base, name="easy", episode_steps=1200, layout=layout), path)
@@ -52,10 +56,46 @@ def test_short_training_raises_the_return(tmp_path: Path) -> None:
     scenario = easy_scenario(tmp_path)
     out = tmp_path / "run"
     start = time.monotonic()
-    assert main(["--algo", "sac_lag", "--seed", "1", "--roles", "decoy", "--scenario", str(scenario), "--epochs", "8", "--validation-episodes", "0",
-                 "--steps-per-epoch", "600", "--envs", "2", "--action-repeat", "10", "--update-every", "1", "--start-steps", "0",
-                 "--update-after", "200", "--set", "hidden_sizes=[64,64]", "--set", "alpha_init=0.2", "--threads", "1",
-                 "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "--algo",
+                "sac_lag",
+                "--seed",
+                "1",
+                "--roles",
+                "decoy",
+                "--scenario",
+                str(scenario),
+                "--epochs",
+                "8",
+                "--validation-episodes",
+                "0",
+                "--steps-per-epoch",
+                "600",
+                "--envs",
+                "2",
+                "--action-repeat",
+                "10",
+                "--update-every",
+                "1",
+                "--start-steps",
+                "0",
+                "--update-after",
+                "200",
+                "--set",
+                "hidden_sizes=[64,64]",
+                "--set",
+                "alpha_init=0.2",
+                "--threads",
+                "1",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     elapsed = time.monotonic() - start
     straight_on = greedy_return(None, scenario)  # flying straight on never reaches the ring: -0.1 per step
     trained = greedy_return(Policy.load(out / "decoy.pt"), scenario)

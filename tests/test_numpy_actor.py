@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tssac_core.errors import CheckpointError
 from tssac_core.deploy.export import compact_checkpoint, export_actor
 from tssac_core.deploy.numpy_actor import NumpyPolicy, load_actor, pilot_file
 from tssac_core.deploy.policy import Policy
+from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import ROLES, Role
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -38,7 +38,10 @@ def test_exported_actor_acts_like_the_torch_policy(models: Path, role: Role):
     torch_policy = Policy.load(models / f"{role.value}.pt", role)
     numpy_policy = NumpyPolicy.load(models / f"{role.value}.npz", role)
     assert (numpy_policy.observation_mode, numpy_policy.action_repeat, numpy_policy.obs_dim) == (
-        torch_policy.observation_mode, torch_policy.action_repeat, torch_policy.info.obs_dim)
+        torch_policy.observation_mode,
+        torch_policy.action_repeat,
+        torch_policy.info.obs_dim,
+    )
     obs = np.random.default_rng(1).uniform(-1.5, 1.5, (500, numpy_policy.obs_dim)).astype(np.float32)
     batch = numpy_policy.act(obs)
     assert batch.shape == (500, 2) and batch.dtype == np.float64
@@ -113,7 +116,18 @@ def _rewrite(path: Path, **change) -> None:
         (lambda p: _rewrite(p, b2=None), "layer 2 is missing"),
         (lambda p: _rewrite(p, b0=np.full(128, np.nan, np.float32)), "non-finite weights"),
     ],
-    ids=["garbage", "missing", "no-meta", "format", "version", "mode", "obs-size", "layer-shape", "layer-missing", "nan"],
+    ids=[
+        "garbage",
+        "missing",
+        "no-meta",
+        "format",
+        "version",
+        "mode",
+        "obs-size",
+        "layer-shape",
+        "layer-missing",
+        "nan",
+    ],
 )
 def test_a_bad_export_is_one_clear_line(models: Path, damage, message: str):
     path = models / "detect.npz"
@@ -131,9 +145,21 @@ def test_an_export_for_another_role_is_refused(models: Path):
 def test_export_command(models: Path, tmp_path: Path):
     for npz in models.glob("*.npz"):
         npz.unlink()
-    out = subprocess.run([sys.executable, "-m", "tssac_core.deploy.export", str(models)], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "tssac_core.deploy.export", str(models)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.count("wrote ") == 3 and "actor 24->128->128->4" in out.stdout
     assert all(pilot_file(models, r).suffix == ".npz" for r in ROLES)
-    bad = subprocess.run([sys.executable, "-m", "tssac_core.deploy.export", str(tmp_path / "nothing")], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    bad = subprocess.run(
+        [sys.executable, "-m", "tssac_core.deploy.export", str(tmp_path / "nothing")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "not a role checkpoint" in bad.stderr

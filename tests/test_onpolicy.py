@@ -14,6 +14,7 @@ import pytest
 import torch
 from tqdm import tqdm
 
+from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.onpolicy.cpo import (
     FEASIBLE_ACTIVE,
     FEASIBLE_INTERIOR,
@@ -27,7 +28,6 @@ from tssac_core.algos.onpolicy.cpo import (
     line_search_accepts,
 )
 from tssac_core.algos.onpolicy.gae import gae
-from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.onpolicy.ppo import (
     OnPolicyAlgo,
     OnPolicyBatch,
@@ -43,9 +43,9 @@ from tssac_core.algos.onpolicy.ppo import (
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.sim.scenario import Radar, Role, load
 from tssac_core.train.config import TrainConfig, onpolicy_config
-from tssac_core.train.rundir import METRIC_FIELDS
 from tssac_core.train.learners import measured_episode_cost
 from tssac_core.train.loop import train_role
+from tssac_core.train.rundir import METRIC_FIELDS
 
 torch.set_num_threads(1)
 
@@ -141,7 +141,9 @@ def test_saturated_actions_get_finite_log_probs_and_rollout_ratios_start_at_one(
     torch.testing.assert_close(log_prob_of_actions(actor, obs, a), log_pi)
 
 
-def random_batch(seed: int, n: int = 64, obs_dim: int = 4, cost_rate: float = 0.3) -> tuple[SquashedGaussianActor, OnPolicyBatch]:
+def random_batch(
+    seed: int, n: int = 64, obs_dim: int = 4, cost_rate: float = 0.3
+) -> tuple[SquashedGaussianActor, OnPolicyBatch]:
     """An actor and a batch of its own actions with random advantages and returns."""
     torch.manual_seed(seed)
     actor = SquashedGaussianActor(obs_dim, 2, SMALL)
@@ -149,12 +151,22 @@ def random_batch(seed: int, n: int = 64, obs_dim: int = 4, cost_rate: float = 0.
     actions, log_pi = sample_actions(actor, obs)
     g = torch.Generator().manual_seed(seed)
     adv_c = (torch.rand(n, generator=g) < cost_rate).float() * torch.randn(n, generator=g)
-    batch = OnPolicyBatch(obs, actions, log_pi, torch.randn(n, generator=g), adv_c, torch.randn(n, generator=g), torch.rand(n, generator=g))
+    batch = OnPolicyBatch(
+        obs,
+        actions,
+        log_pi,
+        torch.randn(n, generator=g),
+        adv_c,
+        torch.randn(n, generator=g),
+        torch.rand(n, generator=g),
+    )
     return actor, batch
 
 
 def test_ppo_lag_multiplier_rises_above_the_limit_falls_below_and_stays_non_negative():
-    config = OnPolicyConfig(algo=OnPolicyAlgo.PPO_LAG, hidden_sizes=SMALL, epochs=1, minibatch=32, cost_limit=3.0, beta_lr=0.1)
+    config = OnPolicyConfig(
+        algo=OnPolicyAlgo.PPO_LAG, hidden_sizes=SMALL, epochs=1, minibatch=32, cost_limit=3.0, beta_lr=0.1
+    )
     actor, batch = random_batch(2)
     learner = Ppo(4, 2, config)
     learner.actor.load_state_dict(actor.state_dict())
@@ -171,7 +183,9 @@ def test_ppo_lag_multiplier_rises_above_the_limit_falls_below_and_stays_non_nega
 
 def test_ppo_update_stops_at_target_kl_and_keeps_its_state_through_a_round_trip():
     actor, batch = random_batch(3)
-    config = OnPolicyConfig(algo=OnPolicyAlgo.PPO_LAG, hidden_sizes=SMALL, epochs=50, minibatch=16, lr=1e-2, target_kl=0.01)
+    config = OnPolicyConfig(
+        algo=OnPolicyAlgo.PPO_LAG, hidden_sizes=SMALL, epochs=50, minibatch=16, lr=1e-2, target_kl=0.01
+    )
     learner = Ppo(4, 2, config)
     learner.actor.load_state_dict(actor.state_dict())
     stats = learner.update(batch, episode_cost=5.0)
@@ -208,7 +222,9 @@ def best_in_trust_region(g: torch.Tensor, b: torch.Tensor, c: float) -> tuple[fl
     L = torch.linalg.cholesky(H)
     theta = torch.linspace(0, 2 * math.pi, 2001, dtype=torch.float64)
     rho = torch.linspace(0, 1, 401, dtype=torch.float64)
-    z = math.sqrt(2 * DELTA) * torch.stack([torch.outer(rho, theta.cos()), torch.outer(rho, theta.sin())], -1).reshape(-1, 2)
+    z = math.sqrt(2 * DELTA) * torch.stack([torch.outer(rho, theta.cos()), torch.outer(rho, theta.sin())], -1).reshape(
+        -1, 2
+    )
     x = torch.linalg.solve_triangular(L.T, z.T, upper=True).T  # H = L L^T, x = L^-T z
     constraint = x @ b + c
     feasible = constraint <= 0
@@ -266,13 +282,21 @@ def test_cpo_infeasible_case_takes_the_recovery_step():
 
 def test_line_search_conditions():
     assert line_search_accepts(kl=0.005, surr_r_gain=0.1, surr_c_rise=0.01, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE)
-    assert not line_search_accepts(kl=0.02, surr_r_gain=0.1, surr_c_rise=0.0, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE)
-    assert not line_search_accepts(kl=0.005, surr_r_gain=-0.1, surr_c_rise=0.0, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE)
-    assert not line_search_accepts(kl=0.005, surr_r_gain=0.1, surr_c_rise=0.03, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE)
+    assert not line_search_accepts(
+        kl=0.02, surr_r_gain=0.1, surr_c_rise=0.0, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE
+    )
+    assert not line_search_accepts(
+        kl=0.005, surr_r_gain=-0.1, surr_c_rise=0.0, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE
+    )
+    assert not line_search_accepts(
+        kl=0.005, surr_r_gain=0.1, surr_c_rise=0.03, c=-0.02, max_kl=0.01, case=FEASIBLE_ACTIVE
+    )
     # infeasible: the reward may fall, the cost may not rise
     assert line_search_accepts(kl=0.005, surr_r_gain=-0.1, surr_c_rise=-0.01, c=0.05, max_kl=0.01, case=INFEASIBLE)
     assert not line_search_accepts(kl=0.005, surr_r_gain=0.1, surr_c_rise=0.001, c=0.05, max_kl=0.01, case=RECOVERABLE)
-    assert not line_search_accepts(kl=math.nan, surr_r_gain=0.1, surr_c_rise=0.0, c=-1.0, max_kl=0.01, case=FEASIBLE_INTERIOR)
+    assert not line_search_accepts(
+        kl=math.nan, surr_r_gain=0.1, surr_c_rise=0.0, c=-1.0, max_kl=0.01, case=FEASIBLE_INTERIOR
+    )
 
 
 def test_constraint_value_is_per_decision():
@@ -299,7 +323,9 @@ def test_fisher_vector_product_is_the_hessian_of_the_kl():
             tensors.append(theta[offset : offset + n].reshape(shape))
             offset += n
         names = [name for name, _ in actor.net.named_parameters()]  # the actor's parameters are its MLP's
-        mean, log_std = torch.func.functional_call(actor.net, dict(zip(names, tensors)), (obs,), strict=True).chunk(2, dim=-1)
+        mean, log_std = torch.func.functional_call(actor.net, dict(zip(names, tensors)), (obs,), strict=True).chunk(
+            2, dim=-1
+        )
         return gaussian_kl(mean_old, log_std_old, mean, log_std.clamp(-20, 2)).mean()
 
     hessian = torch.autograd.functional.hessian(kl_of, theta0)
@@ -334,8 +360,18 @@ def test_cpo_update_keeps_the_trust_region_and_lowers_the_cost_surrogate_when_in
 
 def tiny_config(algo: str, epochs: int = 2) -> TrainConfig:
     root = Path(__file__).resolve().parent.parent
-    return TrainConfig(algo=algo, scenario=str(root / "scenarios" / "strike.yaml"), seed=7, epochs=epochs, steps_per_epoch=200,
-                       roles=("decoy",), envs=2, threads=1, validation_episodes=2, learner={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4})
+    return TrainConfig(
+        algo=algo,
+        scenario=str(root / "scenarios" / "strike.yaml"),
+        seed=7,
+        epochs=epochs,
+        steps_per_epoch=200,
+        roles=("decoy",),
+        envs=2,
+        threads=1,
+        validation_episodes=2,
+        learner={"hidden_sizes": [16, 16], "minibatch": 64, "epochs": 4},
+    )
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -395,7 +431,10 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
     np.testing.assert_array_equal(sa["learner"]["ep_len"], sb["learner"]["ep_len"])
     assert sa["learner"]["ep_len"].max() > 0  # an episode was running at the boundary
     np.testing.assert_array_equal(sa["obs"], sb["obs"])
-    (world_a, rng_a, ret_a, cost_a), (world_b, rng_b, ret_b, cost_b) = pickle.loads(sa["task"]), pickle.loads(sb["task"])
+    (world_a, rng_a, ret_a, cost_a), (world_b, rng_b, ret_b, cost_b) = (
+        pickle.loads(sa["task"]),
+        pickle.loads(sb["task"]),
+    )
     assert rng_a.bit_generator.state == rng_b.bit_generator.state
     np.testing.assert_array_equal(ret_a, ret_b)
     np.testing.assert_array_equal(cost_a, cost_b)
@@ -404,7 +443,11 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
     for k in arrays:
         np.testing.assert_array_equal(getattr(world_a, k), getattr(world_b, k), err_msg=k)
     if algo == "ppo_lag":
-        assert sa["learner"]["learner"]["multiplier"]["beta"].item() == sb["learner"]["learner"]["multiplier"]["beta"].item() > 0.0
+        assert (
+            sa["learner"]["learner"]["multiplier"]["beta"].item()
+            == sb["learner"]["learner"]["multiplier"]["beta"].item()
+            > 0.0
+        )
     for x, y in zip(ra, rb):
         assert {k: v for k, v in x.items() if k not in timing} == {k: v for k, v in y.items() if k not in timing}
 
@@ -412,7 +455,9 @@ def test_resume_continues_exactly_where_the_last_epoch_ended(algo, tmp_path):
 def test_config_from_train_config():
     scenario = load(tiny_config("cpo").scenario)
     config = onpolicy_config(tiny_config("cpo"), scenario)
-    assert config.algo is OnPolicyAlgo.CPO and config.hidden_sizes == (16, 16) and config.cost_limit == scenario.cost_limit
+    assert (
+        config.algo is OnPolicyAlgo.CPO and config.hidden_sizes == (16, 16) and config.cost_limit == scenario.cost_limit
+    )
     assert config.episode_steps == scenario.episode_steps
     repeat = TrainConfig(algo="ppo", scenario=tiny_config("ppo").scenario, action_repeat=3)
     assert onpolicy_config(repeat, scenario).episode_steps == math.ceil(scenario.episode_steps / 3)

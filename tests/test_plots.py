@@ -15,8 +15,14 @@ def test_clustered_event_labels_do_not_overlap():
     ax.set_xlim(0, 100)
     ax.set_ylim(0, 100)
     # A mission's usual cluster (radar on, identified, hit, within a few km near the SAM), plus a corner event.
-    events = [("radar on", 64.0, 62.0), ("identified", 65.0, 63.0), ("hit", 66.0, 63.5), ("hazard (strike)", 65.5, 62.5),
-              ("left area (decoy)", 99.5, 99.5), ("hazard (detect)", 64.5, 62.8)]
+    events = [
+        ("radar on", 64.0, 62.0),
+        ("identified", 65.0, 63.0),
+        ("hit", 66.0, 63.5),
+        ("hazard (strike)", 65.5, 62.5),
+        ("left area (decoy)", 99.5, 99.5),
+        ("hazard (detect)", 64.5, 62.8),
+    ]
     fig.tight_layout()
     texts = place_labels(ax, events)
     renderer = fig.canvas.get_renderer()
@@ -35,8 +41,10 @@ def test_the_old_fixed_offset_would_overlap():
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     ax.set_xlim(0, 100)
     ax.set_ylim(0, 100)
-    texts = [ax.annotate(label, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7.5)
-             for label, x, y in [("radar on", 64.0, 62.0), ("identified", 65.0, 63.0)]]
+    texts = [
+        ax.annotate(label, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7.5)
+        for label, x, y in [("radar on", 64.0, 62.0), ("identified", 65.0, 63.0)]
+    ]
     renderer = fig.canvas.get_renderer()
     a, b = (t.get_window_extent(renderer) for t in texts)
     assert a.overlaps(b)

@@ -16,22 +16,29 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def test_a_preset_sets_the_defaults_and_the_command_line_wins(tmp_path: Path):
     preset = tmp_path / "p.yaml"
-    preset.write_text("epochs: 7\nenvs: 3\nroles: [decoy, detect]\nset: {gamma: 0.9}\n"
-                      "sac_set: {hidden_sizes: [8, 8], lr: 0.01}\nonpolicy_set: {hidden_sizes: [4, 4]}\n")
+    preset.write_text(
+        "epochs: 7\nenvs: 3\nroles: [decoy, detect]\nset: {gamma: 0.9}\n"
+        "sac_set: {hidden_sizes: [8, 8], lr: 0.01}\nonpolicy_set: {hidden_sizes: [4, 4]}\n"
+    )
     cfg, _, _, _ = parse_args(["--preset", str(preset), "--out", "x"])
     assert (cfg.epochs, cfg.envs, cfg.roles) == (7, 3, ("decoy", "detect"))
     assert cfg.learner == {"gamma": 0.9, "hidden_sizes": [8, 8], "lr": 0.01}
-    cfg, _, _, _ = parse_args(["--preset", str(preset), "--epochs", "2", "--set", "lr=0.5", "--algo", "ppo", "--out", "x"])
+    cfg, _, _, _ = parse_args(
+        ["--preset", str(preset), "--epochs", "2", "--set", "lr=0.5", "--algo", "ppo", "--out", "x"]
+    )
     assert cfg.epochs == 2 and cfg.envs == 3
     assert cfg.learner == {"gamma": 0.9, "hidden_sizes": [4, 4], "lr": 0.5}  # the on-policy family's settings
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("epoch: 3\n", "epoch: unknown key"),
-    ("epochs: three\n", "epochs: expected an integer"),
-    ("sac_set: 3\n", "sac_set: expected a mapping"),
-    ("[1, 2]\n", "expected a mapping of training settings"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("epoch: 3\n", "epoch: unknown key"),
+        ("epochs: three\n", "epochs: expected an integer"),
+        ("sac_set: 3\n", "sac_set: expected a mapping"),
+        ("[1, 2]\n", "expected a mapping of training settings"),
+    ],
+)
 def test_a_bad_preset_is_one_line(tmp_path: Path, capsys, text: str, message: str):
     preset = tmp_path / "p.yaml"
     preset.write_text(text)
@@ -54,6 +61,9 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
     text = (ROOT / "experiments" / "smoke.yaml").read_text()
     assert "preset" not in text  # a grid may still carry its whole recipe inline
     own = tmp_path / "g.yaml"
-    own.write_text((ROOT / "experiments" / "paper.yaml").read_text().replace(
-        "  preset: configs/paper.yaml", "  preset: configs/paper.yaml\n  epochs: 3"))
+    own.write_text(
+        (ROOT / "experiments" / "paper.yaml")
+        .read_text()
+        .replace("  preset: configs/paper.yaml", "  preset: configs/paper.yaml\n  epochs: 3")
+    )
     assert load_grid(own).train.epochs == 3

@@ -20,15 +20,15 @@ import time
 from pathlib import Path
 
 import pytest
+from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, sitl, wait_until
+from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us
 from mavlink_bridge.fly.missions import child_failure
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
-from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, sitl, wait_until
-from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 from sim_vehicles.link import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us
 from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
 
@@ -53,7 +53,9 @@ def _heartbeat() -> mavlink2.MAVLink_message:
 
 
 def _request_home() -> mavlink2.MAVLink_message:
-    return M.MAVLink_command_long_message(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)
+    return M.MAVLink_command_long_message(
+        1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+    )
 
 
 class _Raw:
@@ -158,7 +160,9 @@ def test_unsigned_monitors_only_when_allowed_bounded_and_never_obeyed() -> None:
             for m in monitors:
                 m.heartbeat()
             wrong.send(_signed(_heartbeat(), 255, 190, 1, WRONG_KEY, now_10us()))
-            assert wait_until(lambda: len(v.endpoint.monitors) == MAX_MONITORS and v.endpoint.rx.peers_refused >= 2, 2.0)
+            assert wait_until(
+                lambda: len(v.endpoint.monitors) == MAX_MONITORS and v.endpoint.rx.peers_refused >= 2, 2.0
+            )
             first = monitors[0]
             assert first.wait_type("HEARTBEAT", 2.0) is not None  # it can watch
             assert first.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout_s=0.3, retries=2) is None  # not command
@@ -218,7 +222,10 @@ def test_absurd_message_intervals_are_refused_and_get_always_answers() -> None:
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         ack = c.command(M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-        assert c.wait_type("MESSAGE_INTERVAL", 1.0, message_id=M.MAVLINK_MSG_ID_ATTITUDE, interval_us=2_000_000_000) is not None
+        assert (
+            c.wait_type("MESSAGE_INTERVAL", 1.0, message_id=M.MAVLINK_MSG_ID_ATTITUDE, interval_us=2_000_000_000)
+            is not None
+        )
         assert v.counters.handler_errors == 0
         s.stop()
 
@@ -261,12 +268,18 @@ def _fly_lockstep(steps: int, seed: int, truth_log: Path) -> tuple[int, int]:
     """A client answering every tick of vehicle 0 over a 30%-loss, 200 ms link: (steps flown, failsafes)."""
     link = LinkModel(gps_position_sigma_m=0.0, gps_velocity_sigma_m_s=0.0, packet_loss=0.3, latency_ms=200.0)
     # GUID_TIMEOUT 2 s: a step held for a lost setpoint would end in the wall-clock failsafe.
-    with sitl(scenario(link), seed=seed, setpoint_timeout_s=2.0, truth_log=truth_log, **lockstep()) as s, Client(s.ports[0]) as c:
+    with (
+        sitl(scenario(link), seed=seed, setpoint_timeout_s=2.0, truth_log=truth_log, **lockstep()) as s,
+        Client(s.ports[0]) as c,
+    ):
         v = s.vehicle(0)
         c.connect(timeout_s=10.0)
         # 30% loss each way: a command and its ACK both get through about half the time.
         assert c.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout_s=0.5, retries=20) is not None
-        assert c.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, timeout_s=0.5, retries=20) is not None
+        assert (
+            c.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, timeout_s=0.5, retries=20)
+            is not None
+        )
         t0 = time.monotonic()
         answered: set[int] = set()
         while s.runner.world.steps[0] < steps and time.monotonic() < t0 + 20.0:
@@ -289,7 +302,17 @@ def test_lockstep_over_a_lossy_slow_link_runs_in_simulated_time_and_repeats(tmp_
     tracks = []
     for i in range(2):
         rows = [r for r in read_truth_log(tmp_path / f"truth{i}.jsonl") if r["type"] == "step" and r["step"] <= steps]
-        tracks.append([(r["step"], r["vehicles"]["decoy"]["x_m"], r["vehicles"]["decoy"]["phi_rad"], r["vehicles"]["decoy"]["omega_cmd"]) for r in rows])
+        tracks.append(
+            [
+                (
+                    r["step"],
+                    r["vehicles"]["decoy"]["x_m"],
+                    r["vehicles"]["decoy"]["phi_rad"],
+                    r["vehicles"]["decoy"]["omega_cmd"],
+                )
+                for r in rows
+            ]
+        )
     assert len(tracks[0]) == steps and tracks[0] == tracks[1]
     # The link acted: some commands flown late or never (a step flown on the previous command).
     omegas = [t[3] for t in tracks[0]]
@@ -300,7 +323,7 @@ def test_lockstep_over_a_lossy_slow_link_runs_in_simulated_time_and_repeats(tmp_
 
 
 def _flying(v: object, timeout_s: float = 60.0) -> None:
-    assert wait_until(lambda: getattr(v, "in_loop") and getattr(v, "endpoint").peers, timeout_s), "the companion did not engage"
+    assert wait_until(lambda: v.in_loop and v.endpoint.peers, timeout_s), "the companion did not engage"
 
 
 @pytest.mark.timeout(180)
@@ -331,9 +354,14 @@ def test_signed_companion_refuses_forgeries_on_the_vehicles_own_address_and_stre
     scen_file = _scenario_file(tmp_path)
     key_file = tmp_path / "key.bin"
     key_file.write_bytes(KEY)
-    with sitl(load(scen_file), setpoint_timeout_s=5.0, signing_key=KEY, **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
+    with (
+        sitl(load(scen_file), setpoint_timeout_s=5.0, signing_key=KEY, **lockstep()) as s,
+        UdpRelay(s.ports[0]) as relay,
+    ):
         v = s.vehicle(0)
-        with CompanionProcess(tmp_path, relay.port, scen_file, "--lockstep", "--duration-s", "8", "--signing-key", str(key_file)) as comp:
+        with CompanionProcess(
+            tmp_path, relay.port, scen_file, "--lockstep", "--duration-s", "8", "--signing-key", str(key_file)
+        ) as comp:
             _flying(v)
             assert relay.companion is not None
             # From the relay's port, i.e. the vehicle's address as the companion sees it; the vehicle's stream
@@ -382,9 +410,13 @@ def test_fly_says_which_child_died_how_and_its_last_words(tmp_path: Path) -> Non
         lines = {mode: child_failure(f"companion {mode}", c, c.poll() or 0) for mode, c in dead.items()}
     finally:
         children.stop_all()
-    assert lines["raise"].endswith('exited with code 1; its last log line: "ValueError: policy returned a matrix of the wrong shape"')
-    assert lines["exit"].endswith('exited with code 3; its last log line: "WARNING decoy: link silent 2.0 s: sending the hold setpoint"')
-    assert "was killed by signal 9 (SIGKILL); its last log line: \"WARNING decoy: link silent" in lines["kill"]
+    assert lines["raise"].endswith(
+        'exited with code 1; its last log line: "ValueError: policy returned a matrix of the wrong shape"'
+    )
+    assert lines["exit"].endswith(
+        'exited with code 3; its last log line: "WARNING decoy: link silent 2.0 s: sending the hold setpoint"'
+    )
+    assert 'was killed by signal 9 (SIGKILL); its last log line: "WARNING decoy: link silent' in lines["kill"]
     assert lines["silent"].endswith("exited with code 5; its log is empty")
     assert all(ln.startswith(f"companion {m} (pid {dead[m].pid}) ") and "\n" not in ln for m, ln in lines.items())
 
@@ -403,7 +435,9 @@ def test_fly_says_which_child_died_how_and_its_last_words(tmp_path: Path) -> Non
         ("cost_limit: 3.0", "cost_limit: .nan", "expected a finite number"),
     ],
 )
-def test_absurd_numbers_in_a_scenario_are_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], old: str, new: str, says: str) -> None:
+def test_absurd_numbers_in_a_scenario_are_one_clear_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], old: str, new: str, says: str
+) -> None:
     text = STRIKE.read_text()
     assert old in text
     path = tmp_path / "bad.yaml"

@@ -14,9 +14,33 @@ from tssac_core.cli import run
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.train.cli import main
 
-TINY = ["--algo", "sac_lag", "--seed", "2", "--roles", "decoy", "--steps-per-epoch", "40", "--start-steps", "20",
-        "--update-after", "20", "--envs", "2", "--action-repeat", "10", "--validation-episodes", "2",
-        "--set", "hidden_sizes=[16,16]", "--set", "batch_size=16", "--threads", "1", "--no-progress"]
+TINY = [
+    "--algo",
+    "sac_lag",
+    "--seed",
+    "2",
+    "--roles",
+    "decoy",
+    "--steps-per-epoch",
+    "40",
+    "--start-steps",
+    "20",
+    "--update-after",
+    "20",
+    "--envs",
+    "2",
+    "--action-repeat",
+    "10",
+    "--validation-episodes",
+    "2",
+    "--set",
+    "hidden_sizes=[16,16]",
+    "--set",
+    "batch_size=16",
+    "--threads",
+    "1",
+    "--no-progress",
+]
 
 
 def epochs(out: Path) -> list[int]:
@@ -79,8 +103,17 @@ def test_a_damaged_shipped_checkpoint_is_not_finished(two_epochs: Path, tmp_path
 
 def test_init_from_a_checkpoint_of_another_size_is_one_line(two_epochs: Path, tmp_path: Path, capsys):
     out = tmp_path / "bigger"
-    argv = [*TINY, "--epochs", "1", "--set", "hidden_sizes=[32,32]", "--init-from", str(two_epochs / "decoy.pt"),
-            "--out", str(out)]
+    argv = [
+        *TINY,
+        "--epochs",
+        "1",
+        "--set",
+        "hidden_sizes=[32,32]",
+        "--init-from",
+        str(two_epochs / "decoy.pt"),
+        "--out",
+        str(out),
+    ]
     assert run(main, argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--init-from" in err and "[32, 32]" in err
@@ -93,14 +126,27 @@ def test_resume_states_of_the_two_older_formats_are_read(tmp_path: Path):
 
     from tssac_core.train.resume import load_state_file
 
-    common = {"task": {"w": 1}, "obs": np.zeros((2, 3)), "torch_rng": torch.get_rng_state(), "epoch": 4, "env_steps": 80,
-              "updates": 30, "selector": {"best": None}}
+    common = {
+        "task": {"w": 1},
+        "obs": np.zeros((2, 3)),
+        "torch_rng": torch.get_rng_state(),
+        "epoch": 4,
+        "env_steps": 80,
+        "updates": 30,
+        "selector": {"best": None},
+    }
     off = {**common, "learner": {"variant": "tssac"}, "buffer": {"n": 1}, "rng": {"state": 1}, "transferred": True}
     on = {**common, "algo": "cpo", "learner": {"pi": 1}, "ep_len": np.ones(2), "finished": [(1.0, 3)]}
     for name, data in (("off", off), ("on", on)):
         torch.save(data, tmp_path / f"{name}.pt")
     a, b = load_state_file(tmp_path / "off.pt"), load_state_file(tmp_path / "on.pt")
-    assert (a.epoch, a.updates, a.learner["buffer"], a.learner["recent_costs"], a.learner["transferred"]) == (4, 30, {"n": 1}, [], True)
+    assert (a.epoch, a.updates, a.learner["buffer"], a.learner["recent_costs"], a.learner["transferred"]) == (
+        4,
+        30,
+        {"n": 1},
+        [],
+        True,
+    )
     assert (b.algo, b.learner["finished"], b.learner["learner"]) == ("cpo", [(1.0, 3)], {"pi": 1})
     torch.save({"something": "else"}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="not a resume state"):

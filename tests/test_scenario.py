@@ -11,7 +11,17 @@ import numpy as np
 import pytest
 import yaml
 
-from tssac_core.sim.scenario import Layout, Radar, ScenarioError, dump, from_dict, infeasibility, load, sample_layout, to_dict
+from tssac_core.sim.scenario import (
+    Layout,
+    Radar,
+    ScenarioError,
+    dump,
+    from_dict,
+    infeasibility,
+    load,
+    sample_layout,
+    to_dict,
+)
 
 
 @pytest.mark.parametrize("name", ["strike.yaml", "random.yaml"])
@@ -29,7 +39,10 @@ def test_digest_follows_the_task_not_the_expectations(random_path):
     from tssac_core.sim.scenario import Expect
 
     s = load(random_path)
-    assert dataclasses.replace(s, expect=Expect(episodes=3, min_success_rate=0.5, max_mean_cost=9.0)).digest() == s.digest()
+    assert (
+        dataclasses.replace(s, expect=Expect(episodes=3, min_success_rate=0.5, max_mean_cost=9.0)).digest()
+        == s.digest()
+    )
     assert dataclasses.replace(s, cost_limit=4.0).digest() != s.digest()
 
 
@@ -54,7 +67,10 @@ def test_walled_in_start_is_infeasible(strike_path):
     lay = s.layout
     # Ring the strike UAV's start with overlapping radars: no way out.
     cx, cy = lay.starts["strike"].position_km
-    ring = tuple(Radar((cx + 9 * math.cos(a), cy + 9 * math.sin(a)), 5.0) for a in np.linspace(0, 2 * math.pi, 12, endpoint=False))
+    ring = tuple(
+        Radar((cx + 9 * math.cos(a), cy + 9 * math.sin(a)), 5.0)
+        for a in np.linspace(0, 2 * math.pi, 12, endpoint=False)
+    )
     walled = Layout(lay.sam_km, lay.target_km, ring, lay.starts)
     assert infeasibility(s, lay, 0.0) is None
     problem = infeasibility(s, walled, 0.0)
@@ -164,7 +180,12 @@ def test_cli_reports_bad_scenario_in_one_line(strike_path, tmp_path):
     data["ranges"]["sam_launch_km"] = "far"
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(data))
-    proc = subprocess.run([sys.executable, "-m", "tssac_core.evaluate", "--scenario", str(path), "--episodes", "1"], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "tssac_core.evaluate", "--scenario", str(path), "--episodes", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "ranges.sam_launch_km: expected a number" in lines[0]

@@ -122,7 +122,9 @@ def test_vehicle_monitor_decides_as_the_batched_world(short_random):
             for (i, j), mon in singles.items():
                 if not world.running[i]:
                     continue
-                d = mon.decide(state[0][i, j], state[1][i, j], state[2][i, j], state[3][i, j], proposed[i, j], 10, cfg.margin_m)
+                d = mon.decide(
+                    state[0][i, j], state[1][i, j], state[2][i, j], state[3][i, j], proposed[i, j], 10, cfg.margin_m
+                )
                 np.testing.assert_array_equal(d.action[0], actions[i, j])
                 assert bool(d.engaged[0]) == bool(batched.engaged[i, j])
                 engaged_seen += int(d.engaged[0])
@@ -140,7 +142,9 @@ def test_backups_are_what_the_world_flies(random_path):
     c = world.c
     lim = Limits(c.speed_min_m_s[:1], c.speed_max_m_s[:1], c.turn_rate_max_rad_s[:1], c.accel_max_m_s2[:1])
     action = np.array([[1.0, 0.0]])
-    xs, ys, _, _ = constant_rollout(np.array([x]), np.array([y]), np.array([v]), np.array([phi]), action, lim, c.dt_s, 720)
+    xs, ys, _, _ = constant_rollout(
+        np.array([x]), np.array([y]), np.array([v]), np.array([phi]), action, lim, c.dt_s, 720
+    )
     r = v / c.turn_rate_max_rad_s[0]
     cx, cy = x - r * math.sin(phi), y + r * math.cos(phi)
     flown = []
@@ -156,7 +160,9 @@ def test_backups_are_what_the_world_flies(random_path):
     world.v_m_s[0, 0] = 300.0
     x, y, phi = world.x_m[0, 0], world.y_m[0, 0], world.phi_rad[0, 0]
     brake = np.array([[-1.0, -1.0]])
-    xs, ys, vs, _ = constant_rollout(np.array([x]), np.array([y]), np.array([300.0]), np.array([phi]), brake, lim, c.dt_s, 400)
+    xs, ys, vs, _ = constant_rollout(
+        np.array([x]), np.array([y]), np.array([300.0]), np.array([phi]), brake, lim, c.dt_s, 400
+    )
     flown = []
     for _ in range(400):
         world.step(np.tile(brake[0], (1, 3, 1)))
@@ -181,12 +187,15 @@ def test_pending_commands_are_flown_first():
     moved = np.array([[xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1]]])
     direct = decide(moved, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg)
     assert with_queue.clearance_m[0] == pytest.approx(direct.clearance_m[0], abs=1e-6)
-    assert with_queue.clearance_m[0] != pytest.approx(decide(state, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg).clearance_m[0])
+    assert with_queue.clearance_m[0] != pytest.approx(
+        decide(state, proposed, Memory.initial(1), hz, lim, 0.1, 10, 100.0, cfg).clearance_m[0]
+    )
 
 
 def test_circle_clearance_by_hand():
     hz = Hazards(np.array([[[50_000.0, 50_000.0]]]), np.array([[12_000.0]]), 100_000.0)
-    # A circle of radius 3 km centred 20 km east of the radar: 20 - 12 - 3 = 5 km from the disk; 27 km from the east edge.
+    # A circle of radius 3 km centred 20 km east of the radar: 20 - 12 - 3 = 5 km from the disk; 27 km from the east
+    # edge.
     c = circle_clearance(np.array([70_000.0]), np.array([50_000.0]), np.array([3_000.0]), hz)
     assert c[0] == pytest.approx(5_000.0)
     # ... and 2 km from the north edge when centred at y = 95 km (far from the radar).
@@ -251,11 +260,15 @@ def test_companion_monitor_margin_and_pending(random_path):
 
 
 def test_filter_major_axis_sigma():
-    f = VehicleStateFilter(FilterNoise.from_sensor(15.0, 1.5, max_accel_m_s2=10.0, max_turn_rate_rad_s=math.radians(5.0)))
+    f = VehicleStateFilter(
+        FilterNoise.from_sensor(15.0, 1.5, max_accel_m_s2=10.0, max_turn_rate_rad_s=math.radians(5.0))
+    )
     rng = np.random.default_rng(36)
     for k in range(50):
         t = 0.1 * k
-        f.update(t, (250.0 * t + rng.normal(0, 15.0), rng.normal(0, 15.0)), (250.0 + rng.normal(0, 1.5), rng.normal(0, 1.5)))
+        f.update(
+            t, (250.0 * t + rng.normal(0, 15.0), rng.normal(0, 15.0)), (250.0 + rng.normal(0, 1.5), rng.normal(0, 1.5))
+        )
     major, drms = f.position_sigma_major_m, f.position_sigma_m
     assert drms / math.sqrt(2) <= major <= drms  # the largest of two variances: between half and all of the trace
     assert 0.5 < major < 15.0  # the filter knows the position better than one fix

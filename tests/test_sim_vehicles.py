@@ -20,15 +20,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
+
 from sim_vehicles.__main__ import main
 from sim_vehicles.config import SitlConfig
-from tssac_core.deploy.geodetic import geodetic_to_local, heading_cdeg, local_to_geodetic, phi_from_yaw_ned, yaw_ned_from_phi
 from sim_vehicles.link import GpsReceiver, LinkChannel
 from sim_vehicles.signing import SigningKeyError, load_key
-from tssac_core.deploy.truth_log_schema import read_truth_log
 from sim_vehicles.world_runner import WorldRunner
+from tssac_core.deploy.geodetic import (
+    geodetic_to_local,
+    heading_cdeg,
+    local_to_geodetic,
+    phi_from_yaw_ned,
+    yaw_ned_from_phi,
+)
+from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
 from tssac_core.sim.world import World
 
@@ -80,7 +86,9 @@ def test_link_channel_loss_duplication_latency_reordering() -> None:
     # seeded: two channels with the same seed behave identically
     runs = []
     for _ in range(2):
-        ch = LinkChannel(LinkModel(packet_loss=0.3, reordering=0.2, duplication=0.2, latency_ms=5), np.random.default_rng(42))
+        ch = LinkChannel(
+            LinkModel(packet_loss=0.3, reordering=0.2, duplication=0.2, latency_ms=5), np.random.default_rng(42)
+        )
         out = []
         for i in range(200):
             ch.push(i * 0.001, i)
@@ -90,7 +98,10 @@ def test_link_channel_loss_duplication_latency_reordering() -> None:
 
 
 def test_gps_receiver_rate_dropout_and_noise() -> None:
-    gps = GpsReceiver(LinkModel(gps_rate_hz=5.0, gps_dropout_prob=0.25, gps_position_sigma_m=4.0, gps_velocity_sigma_m_s=0.5), np.random.default_rng(1))
+    gps = GpsReceiver(
+        LinkModel(gps_rate_hz=5.0, gps_dropout_prob=0.25, gps_position_sigma_m=4.0, gps_velocity_sigma_m_s=0.5),
+        np.random.default_rng(1),
+    )
     fixes = [gps.sample(k * 0.1, 1000.0, 2000.0, 10.0, -5.0) for k in range(20_000)]
     due = gps.fixes + gps.dropouts
     assert due == 10_000  # every other 0.1 s step at 5 Hz
@@ -147,11 +158,17 @@ def test_heartbeat_and_telemetry_at_their_rates_in_sim_time() -> None:
         assert abs(len(by_type["SYS_STATUS"]) - span_s) <= 1.5
         st = by_type["SYS_STATUS"][-1]
         gps = M.MAV_SYS_STATUS_SENSOR_GPS
-        assert st.onboard_control_sensors_present & gps and st.onboard_control_sensors_enabled & gps and st.onboard_control_sensors_health & gps
+        assert (
+            st.onboard_control_sensors_present & gps
+            and st.onboard_control_sensors_enabled & gps
+            and st.onboard_control_sensors_health & gps
+        )
         # GLOBAL_POSITION_INT and LOCAL_POSITION_NED describe the same (noise-free) fix
         lpn_at = {m.time_boot_ms: m for m in by_type["LOCAL_POSITION_NED"]}
         att_at = {m.time_boot_ms: m for m in by_type["ATTITUDE"]}
-        gpi = next(m for m in reversed(by_type["GLOBAL_POSITION_INT"]) if m.time_boot_ms in lpn_at and m.time_boot_ms in att_at)
+        gpi = next(
+            m for m in reversed(by_type["GLOBAL_POSITION_INT"]) if m.time_boot_ms in lpn_at and m.time_boot_ms in att_at
+        )
         lpn = lpn_at[gpi.time_boot_ms]
         east, north = geodetic_to_local(scen.origin, gpi.lat * 1e-7, gpi.lon * 1e-7)
         assert east == pytest.approx(lpn.y, abs=0.02) and north == pytest.approx(lpn.x, abs=0.02)
@@ -171,7 +188,9 @@ def test_heartbeat_and_telemetry_at_their_rates_in_sim_time() -> None:
         assert not [m for m in msgs if m.get_type() == "VFR_HUD"]
         ack = c.command(M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-        assert c.wait_type("MESSAGE_INTERVAL", 1.0, message_id=M.MAVLINK_MSG_ID_ATTITUDE, interval_us=500_000) is not None
+        assert (
+            c.wait_type("MESSAGE_INTERVAL", 1.0, message_id=M.MAVLINK_MSG_ID_ATTITUDE, interval_us=500_000) is not None
+        )
         s.stop()
 
 
@@ -184,7 +203,10 @@ def test_frames_of_one_step_share_a_datagram() -> None:
     with sitl(scenario(), speedup=20.0) as s, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         sender = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-        sock.sendto(sender.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(sender), ("127.0.0.1", s.ports[0]))
+        sock.sendto(
+            sender.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(sender),
+            ("127.0.0.1", s.ports[0]),
+        )
         frames_per_datagram: list[int] = []
         deadline = time.monotonic() + 1.0
         while time.monotonic() < deadline and len(frames_per_datagram) < 40:
@@ -204,7 +226,11 @@ def test_frames_of_one_step_share_a_datagram() -> None:
 
 @pytest.mark.timeout(30)
 def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
-    with sitl(speedup=10.0) as s, Client(s.ports[0]) as gcs, Client(s.ports[0], source_system=1, source_component=191) as companion:
+    with (
+        sitl(speedup=10.0) as s,
+        Client(s.ports[0]) as gcs,
+        Client(s.ports[0], source_system=1, source_component=191) as companion,
+    ):
         gcs.connect()
         companion.connect()
         # Both receive the stream.
@@ -217,7 +243,12 @@ def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
         # The companion arms; the heartbeat both see says so.
         companion.arm(target=1)
         for client in (gcs, companion):
-            assert client.wait(lambda m: m.get_type() == "HEARTBEAT" and bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED), 2.0) is not None
+            assert (
+                client.wait(
+                    lambda m: m.get_type() == "HEARTBEAT" and bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED), 2.0
+                )
+                is not None
+            )
         s.stop()
 
 
@@ -259,7 +290,14 @@ def test_every_command_long_is_acknowledged() -> None:
         c.mav.set_mode_send(3, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
         ack = c.wait_type("COMMAND_ACK", 1.0, command=M.MAVLINK_MSG_ID_SET_MODE)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-        assert c.wait(lambda m: m.get_type() == "HEARTBEAT" and m.custom_mode == GUIDED and bool(m.base_mode & M.MAV_MODE_FLAG_GUIDED_ENABLED), 2.0)
+        assert c.wait(
+            lambda m: (
+                m.get_type() == "HEARTBEAT"
+                and m.custom_mode == GUIDED
+                and bool(m.base_mode & M.MAV_MODE_FLAG_GUIDED_ENABLED)
+            ),
+            2.0,
+        )
         # Ground-station chores: mission list, time sync.
         c.mav.mission_request_list_send(3, 1, M.MAV_MISSION_TYPE_MISSION)
         assert c.wait_type("MISSION_COUNT", 1.0, count=0) is not None
@@ -298,7 +336,15 @@ def test_parameter_protocol() -> None:
         c.mav.param_request_list_send(2, 1)
         values = {}
         deadline = time.monotonic() + 3.0
-        names = {"SYSID_THISMAV", "GUID_TIMEOUT", "SIM_DT", "SIM_TURN_MAX", "SIM_ACCEL_MAX", "SIM_SPD_MIN", "SIM_SPD_MAX"}
+        names = {
+            "SYSID_THISMAV",
+            "GUID_TIMEOUT",
+            "SIM_DT",
+            "SIM_TURN_MAX",
+            "SIM_ACCEL_MAX",
+            "SIM_SPD_MIN",
+            "SIM_SPD_MAX",
+        }
         names |= {"WP_LOITER_RAD", "FS_GCS_ENABL", "FS_LONG_TIMEOUT", "FS_LONG_ACTN"}
         while time.monotonic() < deadline and len(values) < len(names):
             m = c.wait_type("PARAM_VALUE", 0.5)
@@ -306,7 +352,9 @@ def test_parameter_protocol() -> None:
                 values[m.param_id] = m
         assert set(values) == names
         n = len(names)
-        assert {m.param_count for m in values.values()} == {n} and sorted(m.param_index for m in values.values()) == list(range(n))
+        assert {m.param_count for m in values.values()} == {n} and sorted(
+            m.param_index for m in values.values()
+        ) == list(range(n))
         assert values["SYSID_THISMAV"].param_value == 2 and values["SYSID_THISMAV"].param_type == M.MAV_PARAM_TYPE_INT32
         assert values["SIM_TURN_MAX"].param_value == pytest.approx(5.0)
         c.mav.param_request_read_send(2, 1, b"SIM_DT", -1)
@@ -316,7 +364,9 @@ def test_parameter_protocol() -> None:
         assert s.vehicle(1).setpoint_timeout_s == pytest.approx(2.5)
         c.mav.param_set_send(2, 1, b"SYSID_THISMAV", 9, M.MAV_PARAM_TYPE_INT32)
         assert c.wait_type("PARAM_VALUE", 1.0, param_id="SYSID_THISMAV").param_value == 2
-        assert c.wait(lambda m: False, 0.2) is None and any(m.get_type() == "STATUSTEXT" and "read-only" in m.text for m in c.log)
+        assert c.wait(lambda m: False, 0.2) is None and any(
+            m.get_type() == "STATUSTEXT" and "read-only" in m.text for m in c.log
+        )
         s.stop()
 
 
@@ -374,7 +424,9 @@ def test_guided_setpoints_fly_eq5_exactly(tmp_path: Path) -> None:
     steps = [r for r in read_truth_log(truth) if r["type"] == "step"]
     row = steps[n1 + n2 - 1]
     assert row["step"] == n1 + n2
-    assert row["vehicles"]["decoy"]["x_m"] == pytest.approx(x, abs=1e-3) and row["vehicles"]["decoy"]["y_m"] == pytest.approx(y, abs=1e-3)
+    assert row["vehicles"]["decoy"]["x_m"] == pytest.approx(x, abs=1e-3) and row["vehicles"]["decoy"][
+        "y_m"
+    ] == pytest.approx(y, abs=1e-3)
     assert row["vehicles"]["detect"]["phi_rad"] == pytest.approx(w.phi_rad[0, 1], abs=1e-6)
     assert row["vehicles"]["decoy"]["mode"] == "GUIDED" and row["vehicles"]["detect"]["armed"] is False
 
@@ -518,15 +570,22 @@ def test_lockstep_advances_exactly_one_step_per_setpoint_round() -> None:
             clients[2].setpoint(0.0, 1.0, stamp_ms=ms - 100)
             assert clients[0].wait(lambda m: m.get_type() == "SYSTEM_TIME" and m.time_boot_ms > ms, 0.3) is None
             clients[2].setpoint(0.0, 1.0, stamp_ms=ms)
-            assert clients[0].wait(lambda m: m.get_type() == "SYSTEM_TIME" and m.time_boot_ms == ms + 100, 2.0) is not None
+            assert (
+                clients[0].wait(lambda m: m.get_type() == "SYSTEM_TIME" and m.time_boot_ms == ms + 100, 2.0) is not None
+            )
             ms += 100
             # A companion that goes quiet fails safe after the timeout (wall clock) and stops holding the world.
             t0 = time.monotonic()
             for c in clients[:2]:
                 c.setpoint(0.0, 1.0, stamp_ms=ms)
-            assert clients[2].wait(lambda m: m.get_type() == "STATUSTEXT" and m.text.startswith("Failsafe:"), 3.0) is not None
+            assert (
+                clients[2].wait(lambda m: m.get_type() == "STATUSTEXT" and m.text.startswith("Failsafe:"), 3.0)
+                is not None
+            )
             assert time.monotonic() - t0 >= 0.9
-            assert clients[0].wait(lambda m: m.get_type() == "SYSTEM_TIME" and m.time_boot_ms == ms + 100, 2.0) is not None
+            assert (
+                clients[0].wait(lambda m: m.get_type() == "SYSTEM_TIME" and m.time_boot_ms == ms + 100, 2.0) is not None
+            )
             assert s.vehicle(2).failsafe and not s.vehicle(2).in_loop
         finally:
             for c in clients:
@@ -561,7 +620,9 @@ def test_signing_rejects_unsigned_wrong_and_replayed_commands() -> None:
             good.arm()
             assert v.armed
             # A replayed (byte-identical) signed command is refused.
-            frame = good.mav.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0).pack(good.mav)
+            frame = good.mav.command_long_encode(
+                1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0
+            ).pack(good.mav)
             good.conn.write(frame)
             assert good.wait_type("COMMAND_ACK", 1.0, command=M.MAV_CMD_REQUEST_MESSAGE) is not None
             good.conn.write(frame)
@@ -577,7 +638,9 @@ def test_garbage_on_the_port_is_dropped_and_counted() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[0]) as c:
         v = s.vehicle(0)
         c.connect()
-        valid = c.mav.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0).pack(c.mav)
+        valid = c.mav.command_long_encode(
+            1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+        ).pack(c.mav)
         bad_crc = valid[:-1] + bytes([valid[-1] ^ 0xFF])
         rng = random.Random(7)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -625,15 +688,33 @@ def test_hostile_field_values_never_break_the_vehicle() -> None:
             if kind == 0:
                 c.mav.command_long_send(1, 1, rng.choice(commands), rng.randint(0, 255), *(f() for _ in range(7)))
             elif kind == 1:
-                c.mav.command_int_send(1, 1, rng.randint(0, 21), rng.choice(commands), 0, 0, f(), f(), f(), f(), rng.randint(-2**31, 2**31 - 1), rng.randint(-2**31, 2**31 - 1), f())
+                c.mav.command_int_send(
+                    1,
+                    1,
+                    rng.randint(0, 21),
+                    rng.choice(commands),
+                    0,
+                    0,
+                    f(),
+                    f(),
+                    f(),
+                    f(),
+                    rng.randint(-(2**31), 2**31 - 1),
+                    rng.randint(-(2**31), 2**31 - 1),
+                    f(),
+                )
             elif kind == 2:
                 c.mav.set_mode_send(1, rng.randint(0, 255), rng.randint(0, 2**32 - 1))
             elif kind == 3:
-                c.mav.param_set_send(1, 1, rng.choice([b"GUID_TIMEOUT", b"SYSID_THISMAV", b"NOPE", b"\xff\xfe"]), f(), rng.randint(0, 10))
+                c.mav.param_set_send(
+                    1, 1, rng.choice([b"GUID_TIMEOUT", b"SYSID_THISMAV", b"NOPE", b"\xff\xfe"]), f(), rng.randint(0, 10)
+                )
             elif kind == 4:
                 c.mav.param_request_read_send(1, 1, b"SIM_DT", rng.randint(-32768, 32767))
             else:
-                c.setpoint(f(), f(), stamp_ms=rng.randint(0, 2**32 - 1), mask=rng.randint(0, 65535), frame=rng.randint(0, 255))
+                c.setpoint(
+                    f(), f(), stamp_ms=rng.randint(0, 2**32 - 1), mask=rng.randint(0, 65535), frame=rng.randint(0, 255)
+                )
             if i % 20 == 0:
                 c.collect(0.005)
         c.collect(0.3)
@@ -703,7 +784,13 @@ def test_mission_events_truth_log_and_tlog(tmp_path: Path) -> None:
         assert ended is not None and ended.value == 1
         c.collect(0.3)
         texts = [m.text for m in c.log if m.get_type() == "STATUSTEXT"]
-        for expected in ("SAM radar ON", "Target identified", "Hazard: detect entered radar range", "Target hit", "Mission end: success"):
+        for expected in (
+            "SAM radar ON",
+            "Target identified",
+            "Hazard: detect entered radar range",
+            "Target hit",
+            "Mission end: success",
+        ):
             assert expected in texts
         named = {(m.name, m.value) for m in c.log if m.get_type() == "NAMED_VALUE_INT"}
         assert {("RADAR_ON", 1), ("IDENT", 1), ("HAZARD", 1), ("HIT", 1), ("MSN_END", 1)} <= named
@@ -741,7 +828,14 @@ def test_random_scenario_layout_is_seeded_and_written(tmp_path: Path) -> None:
 
 def _run_cli(args: list[str], timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, "-m", "sim_vehicles", *args], capture_output=True, text=True, timeout=timeout_s, cwd=REPO, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "sim_vehicles", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        cwd=REPO,
+        env=env,
+    )
 
 
 @pytest.mark.timeout(60)
@@ -784,7 +878,19 @@ def _main_exit_code(argv: list[str]) -> int:
 def test_cli_sigterm_stops_cleanly(tmp_path: Path) -> None:
     truth = tmp_path / "truth.jsonl"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "sim_vehicles", "--scenario", str(STRIKE), "--base-port", "0", "--speedup", "5", "--truth-log", str(truth)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "sim_vehicles",
+        "--scenario",
+        str(STRIKE),
+        "--base-port",
+        "0",
+        "--speedup",
+        "5",
+        "--truth-log",
+        str(truth),
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO, env=env)
     try:
         assert proc.stdout is not None
@@ -795,7 +901,11 @@ def test_cli_sigterm_stops_cleanly(tmp_path: Path) -> None:
             if select.select([proc.stdout], [], [], 0.5)[0]:
                 buf += os.read(proc.stdout.fileno(), 4096)
         lines = buf.decode().splitlines()
-        assert [ln.split()[:2] for ln in lines[:3]] == [["decoy", "sysid=1"], ["detect", "sysid=2"], ["strike", "sysid=3"]]
+        assert [ln.split()[:2] for ln in lines[:3]] == [
+            ["decoy", "sysid=1"],
+            ["detect", "sysid=2"],
+            ["strike", "sysid=3"],
+        ]
         port = int(lines[0].rsplit(":", 1)[1])
         assert lines[0].split()[2] == f"udpout:127.0.0.1:{port}"
         with Client(port) as c:

@@ -48,14 +48,34 @@ def test_shipped_models_meet_the_scenario_expectations(scenario: Path, tmp_path:
     out = tmp_path / "fly.json"
     clock = ["--lockstep"] if expect.speedup is None else ["--speedup", str(expect.speedup)]
     proc = subprocess.run(
-        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(scenario), "--models", str(MODELS),
-         "--episodes", str(expect.episodes), "--seed", str(EVAL_SEED), *clock, "--json", str(out), "--no-progress"],
-        capture_output=True, text=True, timeout=880, env=dict(os.environ, PYTHONPATH=str(REPO)),
+        [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.fly",
+            "--scenario",
+            str(scenario),
+            "--models",
+            str(MODELS),
+            "--episodes",
+            str(expect.episodes),
+            "--seed",
+            str(EVAL_SEED),
+            *clock,
+            "--json",
+            str(out),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=880,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads(out.read_text())
-    report = (f"\n{scenario.name}: success {summary['success_rate']:.0%} {summary['success_interval95']}, mean cost "
-              f"{summary['mean_cost']:.2f} {summary['mean_cost_interval95']}\n{table(summary)}")
+    report = (
+        f"\n{scenario.name}: success {summary['success_rate']:.0%} {summary['success_interval95']}, mean cost "
+        f"{summary['mean_cost']:.2f} {summary['mean_cost_interval95']}\n{table(summary)}"
+    )
     assert summary["episodes"] == expect.episodes, report
     assert summary["success_rate"] >= expect.min_success_rate, report
     assert summary["mean_cost"] <= expect.max_mean_cost, report

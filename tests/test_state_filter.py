@@ -75,7 +75,11 @@ def run_filter(model: FilterModel, meas: Measurements) -> dict[str, np.ndarray]:
 # turn rate 0.37 deg/s; raw fixes 14.1 m).
 POS_RMS_LIMIT_M = 3.0
 SPEED_RMS_LIMIT_M_S = 1.0
-HEADING_RMS_LIMIT_DEG = {FilterModel.CONSTANT_TURN: 0.3, FilterModel.CONSTANT_TURN_EKF: 0.3, FilterModel.CONSTANT_VELOCITY: 0.6}
+HEADING_RMS_LIMIT_DEG = {
+    FilterModel.CONSTANT_TURN: 0.3,
+    FilterModel.CONSTANT_TURN_EKF: 0.3,
+    FilterModel.CONSTANT_VELOCITY: 0.6,
+}
 TURN_MODELS = [FilterModel.CONSTANT_TURN, FilterModel.CONSTANT_TURN_EKF]
 HEADING_MAX_LIMIT_DEG = 1.0
 

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tssac_core.stats import bootstrap_mean_interval, cvar, mission_statistics, wilson_interval, within_fraction, worst_missions
+from tssac_core.stats import (
+    bootstrap_mean_interval,
+    cvar,
+    mission_statistics,
+    wilson_interval,
+    within_fraction,
+    worst_missions,
+)
 
 
 def test_wilson_interval_matches_the_hand_computed_bounds():
@@ -49,9 +56,11 @@ def test_cvar_is_the_mean_of_the_worst_five_percent():
 def test_the_worst_missions_name_their_seed_and_role():
     cost = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 700.0], [0.0, 12.0, 0.0]])
     rows = worst_missions(cost, seeds=[101, 102, 103], roles=["decoy", "detect", "strike"], count=10)
-    assert rows == [{"mission": 1, "seed": 102, "role": "strike", "cost": 700.0},
-                    {"mission": 2, "seed": 103, "role": "detect", "cost": 12.0},
-                    {"mission": 1, "seed": 102, "role": "decoy", "cost": 5.0}]
+    assert rows == [
+        {"mission": 1, "seed": 102, "role": "strike", "cost": 700.0},
+        {"mission": 2, "seed": 103, "role": "detect", "cost": 12.0},
+        {"mission": 1, "seed": 102, "role": "decoy", "cost": 5.0},
+    ]
 
 
 def test_mission_statistics_has_the_intervals_and_every_roles_tail():

@@ -21,8 +21,27 @@ from tssac_core.deploy.policy import CheckpointError, Policy, load_team
 from tssac_core.sim.scenario import Role
 from tssac_core.train.cli import main
 
-TINY = ["--epochs", "2", "--validation-episodes", "2", "--steps-per-epoch", "200", "--start-steps", "100", "--update-after", "100", "--envs", "2",
-        "--set", "hidden_sizes=[32,32]", "--set", "batch_size=32", "--threads", "1", "--no-progress"]
+TINY = [
+    "--epochs",
+    "2",
+    "--validation-episodes",
+    "2",
+    "--steps-per-epoch",
+    "200",
+    "--start-steps",
+    "100",
+    "--update-after",
+    "100",
+    "--envs",
+    "2",
+    "--set",
+    "hidden_sizes=[32,32]",
+    "--set",
+    "batch_size=32",
+    "--threads",
+    "1",
+    "--no-progress",
+]
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -38,10 +57,20 @@ def trained(tmp_path_factory) -> Path:
 
 
 def test_outputs(trained):
-    for name in ("config.json", "metrics.csv", "decoy.pt", "detect.pt", "strike.pt", "fig7_return_cost.png", "fig8_multiplier.png"):
+    for name in (
+        "config.json",
+        "metrics.csv",
+        "decoy.pt",
+        "detect.pt",
+        "strike.pt",
+        "fig7_return_cost.png",
+        "fig8_multiplier.png",
+    ):
         assert (trained / name).is_file(), name
     r = rows(trained)
-    assert [(x["role"], int(x["epoch"])) for x in r] == [(role, e) for role in ("decoy", "detect", "strike") for e in (1, 2)]
+    assert [(x["role"], int(x["epoch"])) for x in r] == [
+        (role, e) for role in ("decoy", "detect", "strike") for e in (1, 2)
+    ]
     assert float(r[-1]["updates"]) > 0 and float(r[-1]["updates_per_s"]) > 0
     assert all(x["beta_minus_xi"] not in ("", "nan") for x in r[1:])
     for role in ("decoy", "detect", "strike"):  # each shipped role's actor, exported for the companion
@@ -74,7 +103,23 @@ def test_same_seed_same_run(trained, tmp_path):
 def test_transfer_initialises_the_next_role(tmp_path):
     """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
     out = tmp_path / "t"
-    args = ["--epochs", "1", "--validation-episodes", "0", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000", "--set", "hidden_sizes=[16]", "--no-progress", "--threads", "1"]
+    args = [
+        "--epochs",
+        "1",
+        "--validation-episodes",
+        "0",
+        "--steps-per-epoch",
+        "20",
+        "--envs",
+        "2",
+        "--update-after",
+        "1000",
+        "--set",
+        "hidden_sizes=[16]",
+        "--no-progress",
+        "--threads",
+        "1",
+    ]
     assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
     a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(out / "detect.pt", weights_only=False)["actor"]
@@ -91,8 +136,25 @@ def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_
     from tssac_core.cli import run
 
     out = tmp_path / "strike-only"
-    args = ["--epochs", "1", "--validation-episodes", "0", "--steps-per-epoch", "20", "--envs", "2", "--update-after", "1000",
-            "--set", "hidden_sizes=[32,32]", "--no-progress", "--threads", "1", "--roles", "strike"]
+    args = [
+        "--epochs",
+        "1",
+        "--validation-episodes",
+        "0",
+        "--steps-per-epoch",
+        "20",
+        "--envs",
+        "2",
+        "--update-after",
+        "1000",
+        "--set",
+        "hidden_sizes=[32,32]",
+        "--no-progress",
+        "--threads",
+        "1",
+        "--roles",
+        "strike",
+    ]
     assert main(["--algo", "tssac", "--out", str(out), "--teammates", str(trained), *args]) == 0
     assert sorted(p.name for p in out.glob("*.pt")) == ["strike.pt"]  # nothing of the teammates copied in
     a = torch.load(trained / "detect.pt", weights_only=False)["actor"]
@@ -113,15 +175,55 @@ def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(t
 
     caplog.set_level("INFO")
     models = Path(__file__).resolve().parent.parent / "models" / "tssac"
-    args = ["--roles", "strike", "--teammates", str(models), "--init-from", str(models / "strike.pt"), "--epochs", "3",
-            "--steps-per-epoch", "700", "--envs", "1", "--action-repeat", "10", "--update-after", "100000", "--start-steps", "0",
-            "--validation-episodes", "0", "--set", "hidden_sizes=[128,128]", "--threads", "1", "--no-progress"]
+    args = [
+        "--roles",
+        "strike",
+        "--teammates",
+        str(models),
+        "--init-from",
+        str(models / "strike.pt"),
+        "--epochs",
+        "3",
+        "--steps-per-epoch",
+        "700",
+        "--envs",
+        "1",
+        "--action-repeat",
+        "10",
+        "--update-after",
+        "100000",
+        "--start-steps",
+        "0",
+        "--validation-episodes",
+        "0",
+        "--set",
+        "hidden_sizes=[128,128]",
+        "--threads",
+        "1",
+        "--no-progress",
+    ]
     out = tmp_path / "stopped"
     assert main(["--algo", "sac_lag", "--out", str(out), "--stop-at-task-success", "0.5", *args]) == 0
     r = rows(out)
     assert [int(x["epoch"]) for x in r] == [1] and float(r[0]["task_success"]) >= 0.5 and int(r[0]["episodes"]) >= 1
     assert (out / "strike.pt").is_file() and "reaches --stop-at-task-success" in caplog.text
-    assert run(main, ["--algo", "sac_lag", "--out", str(tmp_path / "k"), "--seeds", "0,1", "--stop-at-task-success", "0.5", *args]) == 2
+    assert (
+        run(
+            main,
+            [
+                "--algo",
+                "sac_lag",
+                "--out",
+                str(tmp_path / "k"),
+                "--seeds",
+                "0,1",
+                "--stop-at-task-success",
+                "0.5",
+                *args,
+            ],
+        )
+        == 2
+    )
     assert "train the seeds one by one" in capsys.readouterr().err
     assert run(main, ["--out", str(tmp_path / "b"), "--stop-at-task-success", "1.5"]) == 2
     assert "--stop-at-task-success must be a fraction" in capsys.readouterr().err
@@ -155,25 +257,74 @@ def test_bad_checkpoints_fail_with_one_line(trained, tmp_path):
         Policy.load(tmp_path / "wrong.pt")
     with pytest.raises(ValueError, match="observation has 5 values"):
         Policy.load(trained / "decoy.pt").act(np.zeros(5))
-    proc = subprocess.run([sys.executable, "-m", "tssac_core.evaluate", "--models", str(tmp_path), "--episodes", "1"], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "tssac_core.evaluate", "--models", str(tmp_path), "--episodes", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "checkpoint not found" in proc.stderr
 
 
 def test_evaluate_flies_trained_models(trained, tmp_path):
     from tssac_core.evaluate import main as evaluate
 
-    assert evaluate(["--models", str(trained), "--scenario", "scenarios/strike.yaml", "--episodes", "2", "--json", str(tmp_path / "e.json"), "--no-progress"]) == 0
+    assert (
+        evaluate(
+            [
+                "--models",
+                str(trained),
+                "--scenario",
+                "scenarios/strike.yaml",
+                "--episodes",
+                "2",
+                "--json",
+                str(tmp_path / "e.json"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "e.json").is_file()
 
 
 def test_resume_after_kill_continues_identically(tmp_path):
     """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
-    args = ["--algo", "sac_lag", "--seed", "5", "--roles", "decoy", "--epochs", "4", "--validation-episodes", "3", "--steps-per-epoch", "300", "--start-steps", "100",
-            "--update-after", "100", "--envs", "2", "--set", "hidden_sizes=[64,64]", "--set", "batch_size=64", "--threads", "1", "--no-progress"]
+    args = [
+        "--algo",
+        "sac_lag",
+        "--seed",
+        "5",
+        "--roles",
+        "decoy",
+        "--epochs",
+        "4",
+        "--validation-episodes",
+        "3",
+        "--steps-per-epoch",
+        "300",
+        "--start-steps",
+        "100",
+        "--update-after",
+        "100",
+        "--envs",
+        "2",
+        "--set",
+        "hidden_sizes=[64,64]",
+        "--set",
+        "batch_size=64",
+        "--threads",
+        "1",
+        "--no-progress",
+    ]
     whole = tmp_path / "whole"
     assert main([*args, "--out", str(whole)]) == 0
     cut = tmp_path / "cut"
-    proc = subprocess.Popen([sys.executable, "-m", "tssac_core.train", *args, "--out", str(cut)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tssac_core.train", *args, "--out", str(cut)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 120
     state = cut / "resume" / "decoy.pt"
     while time.monotonic() < deadline and not state.is_file():
@@ -200,12 +351,15 @@ def test_bad_arguments(tmp_path, capsys):
     assert "train decoy first" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("algo, setting, message", [
-    ("tssac", "hidden_sizes=128x", "hidden_sizes: expected a number, list or boolean, got '128x'"),
-    ("tssac", "multiplier_signal=qc", "multiplier_signal must be one of episode_cost, q_c, got 'qc'"),
-    ("tssac", "multiplier_signal=3", "multiplier_signal: expected a word, got 3"),
-    ("ppo", "gamma=high", "gamma: expected a number, list or boolean, got 'high'"),
-])
+@pytest.mark.parametrize(
+    "algo, setting, message",
+    [
+        ("tssac", "hidden_sizes=128x", "hidden_sizes: expected a number, list or boolean, got '128x'"),
+        ("tssac", "multiplier_signal=qc", "multiplier_signal must be one of episode_cost, q_c, got 'qc'"),
+        ("tssac", "multiplier_signal=3", "multiplier_signal: expected a word, got 3"),
+        ("ppo", "gamma=high", "gamma: expected a number, list or boolean, got 'high'"),
+    ],
+)
 def test_a_bad_learner_setting_is_one_line_before_any_work(tmp_path, capsys, algo, setting, message):
     from tssac_core.cli import run
 
@@ -215,10 +369,13 @@ def test_a_bad_learner_setting_is_one_line_before_any_work(tmp_path, capsys, alg
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("content, message", [
-    ("{not json", "is not readable"),
-    ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("{not json", "is not readable"),
+        ('{"algo": "tssac", "roles": ["decoy"], "warp_drive": 9}', "settings this TSSAC does not know: warp_drive"),
+    ],
+)
 def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content, message):
     from tssac_core.cli import run
 
@@ -239,8 +396,15 @@ def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(t
     from tssac_core.train.epoch import EpochLog, make_task
     from tssac_core.train.learners import OffPolicyLearner
 
-    cfg = TrainConfig(algo="sac_lag", seed=4, roles=("decoy",), envs=2, action_repeat=10, validation_episodes=0,
-                      learner={"cost_window": 3})
+    cfg = TrainConfig(
+        algo="sac_lag",
+        seed=4,
+        roles=("decoy",),
+        envs=2,
+        action_repeat=10,
+        validation_episodes=0,
+        learner={"cost_window": 3},
+    )
     scenario = load(cfg.scenario)
     mode = ObservationMode(cfg.observation)
     learner = OffPolicyLearner(cfg, scenario, Role.DECOY, mode)

@@ -8,9 +8,31 @@ from pathlib import Path
 
 from tssac_core.train.cli import main
 
-TINY = ["--algo", "sac_lag", "--roles", "decoy", "--epochs", "1", "--steps-per-epoch", "40", "--start-steps", "20",
-        "--update-after", "20", "--envs", "2", "--validation-episodes", "0", "--set", "hidden_sizes=[16,16]",
-        "--set", "batch_size=16", "--threads", "1", "--no-progress"]
+TINY = [
+    "--algo",
+    "sac_lag",
+    "--roles",
+    "decoy",
+    "--epochs",
+    "1",
+    "--steps-per-epoch",
+    "40",
+    "--start-steps",
+    "20",
+    "--update-after",
+    "20",
+    "--envs",
+    "2",
+    "--validation-episodes",
+    "0",
+    "--set",
+    "hidden_sizes=[16,16]",
+    "--set",
+    "batch_size=16",
+    "--threads",
+    "1",
+    "--no-progress",
+]
 TIMING = {"env_steps_per_s", "updates_per_s"}
 
 

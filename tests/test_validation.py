@@ -1,4 +1,5 @@
-"""Which epoch a role ships (tssac_core.train.validation): the constrained learners within the cost limit, the others by success."""
+"""Which epoch a role ships (tssac_core.train.validation): the constrained learners within the cost limit, the others
+by success."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ import pytest
 
 from tssac_core.cli import UsageError
 from tssac_core.experiments.jobs import config_difference
-from tssac_core.train.arguments import parse_cli
 from tssac_core.train.algorithms import ALGORITHMS
+from tssac_core.train.arguments import parse_cli
 from tssac_core.train.config import TrainConfig, default_selection, selects_within_limit, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.validation import Score
@@ -57,8 +58,14 @@ def test_the_tail_selection_puts_the_upper_bound_of_the_cost_first():
 
 def test_only_the_learners_given_the_limit_are_selected_within_it():
     assert {a: default_selection(a) for a in ALGORITHMS} == {
-        "tssac": "within_limit", "sac_lag": "within_limit", "ppo_lag": "within_limit", "cpo": "within_limit",
-        "sac": "success", "sac_penalty": "success", "ppo": "success"}
+        "tssac": "within_limit",
+        "sac_lag": "within_limit",
+        "ppo_lag": "within_limit",
+        "cpo": "within_limit",
+        "sac": "success",
+        "sac_penalty": "success",
+        "ppo": "success",
+    }
     cfg, *_ = parse_cli(["--algo", "sac", "--out", "r"])
     assert cfg.selection is None and not selects_within_limit(cfg)
     assert with_recorded_defaults(cfg).selection == "success"  # what config.json records
@@ -71,7 +78,8 @@ def saved(cfg: TrainConfig, **changes) -> dict:
 
 
 def test_a_run_from_before_the_setting_shipped_within_the_limit():
-    """Every algorithm's epochs were selected within C before: an old SAC run is not the grid's SAC run now, a TSSAC one is."""
+    """Every algorithm's epochs were selected within C before: an old SAC run is not the grid's SAC run now, a TSSAC
+    one is."""
     for algo, same in (("sac", False), ("ppo", False), ("tssac", True), ("cpo", True)):
         cfg, *_ = parse_cli(["--algo", algo, "--out", "r"])
         old = saved(cfg)

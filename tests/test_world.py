@@ -28,12 +28,19 @@ def world_with(scenario, lay: Layout, n: int = 1) -> World:
 
 
 def test_straight_flight_is_exact(scenario):
-    w = world_with(scenario, layout(starts={"decoy": ((10.0, 10.0), 30.0), "detect": ((10.0, 20.0), 0.0), "strike": ((10.0, 30.0), 90.0)}))
+    w = world_with(
+        scenario,
+        layout(starts={"decoy": ((10.0, 10.0), 30.0), "detect": ((10.0, 20.0), 0.0), "strike": ((10.0, 30.0), 90.0)}),
+    )
     for _ in range(100):
         w.step(np.zeros((1, 3, 2)))
     dist = 250.0 * 100 * 0.1
-    np.testing.assert_allclose(w.x_m[0], [10 * KM + dist * math.cos(math.radians(30)), 10 * KM + dist, 10 * KM], atol=1e-3)
-    np.testing.assert_allclose(w.y_m[0], [10 * KM + dist * math.sin(math.radians(30)), 20 * KM, 30 * KM + dist], atol=1e-3)
+    np.testing.assert_allclose(
+        w.x_m[0], [10 * KM + dist * math.cos(math.radians(30)), 10 * KM + dist, 10 * KM], atol=1e-3
+    )
+    np.testing.assert_allclose(
+        w.y_m[0], [10 * KM + dist * math.sin(math.radians(30)), 20 * KM, 30 * KM + dist], atol=1e-3
+    )
 
 
 def test_constant_rate_circle_closes(scenario):
@@ -77,7 +84,10 @@ def test_speed_and_heading_bounds(scenario):
 
 
 def test_leaving_the_area_terminates(scenario):
-    w = world_with(scenario, layout(starts={"decoy": ((0.1, 50.0), 180.0), "detect": ((10.0, 20.0), 0.0), "strike": ((10.0, 30.0), 0.0)}))
+    w = world_with(
+        scenario,
+        layout(starts={"decoy": ((0.1, 50.0), 180.0), "detect": ((10.0, 20.0), 0.0), "strike": ((10.0, 30.0), 0.0)}),
+    )
     result = w.step(np.zeros((1, 3, 2)))
     assert not result.terminated[0]
     for _ in range(10):
@@ -92,7 +102,10 @@ def test_leaving_the_area_terminates(scenario):
 
 
 def test_cost_inside_and_outside_radar(scenario):
-    lay = layout(radars=[((40.0, 40.0), 12.0)], starts={"decoy": ((40.0, 27.99), 90.0), "detect": ((40.0, 27.0), 0.0), "strike": ((10.0, 10.0), 0.0)})
+    lay = layout(
+        radars=[((40.0, 40.0), 12.0)],
+        starts={"decoy": ((40.0, 27.99), 90.0), "detect": ((40.0, 27.0), 0.0), "strike": ((10.0, 10.0), 0.0)},
+    )
     w = world_with(scenario, lay)
     assert w.in_hazard[0].tolist() == [False, False, False]
     r = w.step(np.zeros((1, 3, 2)))  # decoy moves 25 m north: 11.985 km from the centre, inside
@@ -169,7 +182,10 @@ def test_parked_vehicles_do_not_move_or_count(scenario):
 
 
 def test_episode_cap_truncates(scenario):
-    w = world_with(scenario, layout(starts={"decoy": ((50.0, 10.0), 0.0), "detect": ((50.0, 20.0), 0.0), "strike": ((50.0, 30.0), 0.0)}))
+    w = world_with(
+        scenario,
+        layout(starts={"decoy": ((50.0, 10.0), 0.0), "detect": ((50.0, 20.0), 0.0), "strike": ((50.0, 30.0), 0.0)}),
+    )
     action = np.zeros((1, 3, 2))
     action[..., 0] = 1.0  # circle forever
     for t in range(scenario.episode_steps):
@@ -181,7 +197,16 @@ def test_episode_cap_truncates(scenario):
 def test_batched_worlds_are_independent(scenario):
     """One step of N worlds equals N single-world steps (the single env is the batched world with N=1)."""
     rng = np.random.default_rng(0)
-    lays = [layout(starts={"decoy": ((10.0 + i, 10.0), 10.0 * i), "detect": ((10.0, 20.0 + i), 0.0), "strike": ((10.0, 30.0), 5.0 * i)}) for i in range(5)]
+    lays = [
+        layout(
+            starts={
+                "decoy": ((10.0 + i, 10.0), 10.0 * i),
+                "detect": ((10.0, 20.0 + i), 0.0),
+                "strike": ((10.0, 30.0), 5.0 * i),
+            }
+        )
+        for i in range(5)
+    ]
     big = World(scenario, 5)
     big.reset(np.arange(5), lays)
     singles = [world_with(scenario, lay) for lay in lays]

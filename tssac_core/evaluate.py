@@ -24,8 +24,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from tqdm import tqdm
 
@@ -41,15 +42,37 @@ DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "rando
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=__doc__.split("\n")[0])
     who = p.add_mutually_exclusive_group()
-    who.add_argument("--controller", choices=[GUIDANCE], help="fly every UAV with the rule-based guidance controller (default without --models)")
-    who.add_argument("--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)")
-    p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default: scenarios/random.yaml)")
+    who.add_argument(
+        "--controller",
+        choices=[GUIDANCE],
+        help="fly every UAV with the rule-based guidance controller (default without --models)",
+    )
+    who.add_argument(
+        "--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)"
+    )
+    p.add_argument(
+        "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default: scenarios/random.yaml)"
+    )
     p.add_argument("--episodes", type=int, default=50, help="missions to fly (default 50)")
-    p.add_argument("--seed", type=int, default=12345, help="mission k flies the layout of seed S + k (default 12345, never used in training)")
-    p.add_argument("--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions)")
-    p.add_argument("--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)")
-    p.add_argument("--shield-margin-m", type=float, default=ShieldConfig.margin_m, metavar="M",
-                   help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=12345,
+        help="mission k flies the layout of seed S + k (default 12345, never used in training)",
+    )
+    p.add_argument(
+        "--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions)"
+    )
+    p.add_argument(
+        "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
+    )
+    p.add_argument(
+        "--shield-margin-m",
+        type=float,
+        default=ShieldConfig.margin_m,
+        metavar="M",
+        help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})",
+    )
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -70,8 +93,9 @@ def load_pilots(models: Path | None) -> list[Pilot]:
     return list(load_team(models))
 
 
-def compare_shield(models: Path | None, scenario: Scenario, episodes: int, seed: int,
-                   shield: ShieldConfig | None = None) -> dict[str, dict[str, Any]]:
+def compare_shield(
+    models: Path | None, scenario: Scenario, episodes: int, seed: int, shield: ShieldConfig | None = None
+) -> dict[str, dict[str, Any]]:
     """A team (a models directory, None = the guidance controller) on the same missions with the monitor off
     and on: ``{"off": summary, "on": summary}`` (the "with monitor" column of Table 4: success, cost, and the
     time under the backup, ``on["shield"]["backup_time_fraction"]``)."""
@@ -88,8 +112,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
-        results = fly_missions(scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices,
-                               shield=shield)
+        results = fly_missions(
+            scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices, shield=shield
+        )
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {
@@ -112,19 +137,29 @@ def print_summary(summary: dict[str, Any], cost_limit: float) -> None:
     """The summary's figures, intervals and tails, and its worst missions, on stdout."""
     lo, hi = summary["success_interval95"]
     clo, chi = summary["mean_cost_interval95"]
-    print(f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {summary['episodes']} missions, "
-          f"mean hazard cost per UAV {summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f}; limit {cost_limit:g})")
+    print(
+        f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {summary['episodes']} "
+        f"missions, "
+        f"mean hazard cost per UAV {summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f}; limit {cost_limit:g})"
+    )
     for role, fig in summary["roles"].items():
-        print(f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} within C {fig['within_cost_limit']:.1%} "
-              f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}  left the area {fig['left_area_rate']:.1%}  "
-              f"return {fig['mean_return']:.1f}")
+        print(
+            f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} within C "
+            f"{fig['within_cost_limit']:.1%} "
+            f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}  left the area {fig['left_area_rate']:.1%}  "
+            f"return {fig['mean_return']:.1f}"
+        )
     for row in summary["worst_missions"]:
         print(f"  worst: mission {row['mission']} (layout seed {row['seed']}) {row['role']} cost {row['cost']:.0f}")
     if "shield" in summary:
         sh = summary["shield"]
-        print(f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission (max {sh['max_interventions_per_uav_mission']}), "
-              f"{sh['backup_time_fraction']:.2%} of flight time under the backup, {sh['uav_missions_with_cost']} UAV-missions with cost, "
-              f"{sh['uavs_left_area']} UAVs left the area")
+        print(
+            f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission (max "
+            f"{sh['max_interventions_per_uav_mission']}), "
+            f"{sh['backup_time_fraction']:.2%} of flight time under the backup, {sh['uav_missions_with_cost']} "
+            f"UAV-missions with cost, "
+            f"{sh['uavs_left_area']} UAVs left the area"
+        )
 
 
 if __name__ == "__main__":

@@ -66,8 +66,15 @@ def plot_training(metrics: Path, out: Path, cost_limit: float) -> None:
 ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
 
 
-def plot_mission(path: Path, layout_: object, tracks_km: dict[str, "list[tuple[float, float]]"], ranges_km: tuple[float, float, float, float],
-                 events: Sequence[tuple[str, float, float]] = (), title: str = "", area_km: float = 100.0) -> None:
+def plot_mission(
+    path: Path,
+    layout_: object,
+    tracks_km: dict[str, list[tuple[float, float]]],
+    ranges_km: tuple[float, float, float, float],
+    events: Sequence[tuple[str, float, float]] = (),
+    title: str = "",
+    area_km: float = 100.0,
+) -> None:
     """Figure 9: one mission's trajectories over the radars, the SAM's rings and the zones, with events.
 
     ``layout_`` is a :class:`tssac_core.sim.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;
@@ -112,7 +119,7 @@ LABEL_RADII_PT = (6.0, 14.0, 24.0, 36.0, 50.0, 66.0, 84.0, 104.0)
 LABEL_ANGLES_DEG = (45.0, 135.0, -45.0, -135.0, 90.0, -90.0, 0.0, 180.0, 22.5, 157.5, -22.5, -157.5)
 
 
-def place_labels(ax: Any, events: "Sequence[tuple[str, float, float]]") -> list[Any]:
+def place_labels(ax: Any, events: Sequence[tuple[str, float, float]]) -> list[Any]:
     """Annotate each (label, x, y) event so that no two labels overlap each other or leave the axes: each
     takes the first free spot on rings of growing radius around its point (a thin line joins a label set
     further out to its point). Events often fall together (radar on, identified and hit within a few km),
@@ -127,11 +134,17 @@ def place_labels(ax: Any, events: "Sequence[tuple[str, float, float]]") -> list[
         for radius in LABEL_RADII_PT:
             for angle in LABEL_ANGLES_DEG:
                 dx, dy = radius * math.cos(math.radians(angle)), radius * math.sin(math.radians(angle))
-                text = ax.annotate(label, (x, y), xytext=(dx, dy), textcoords="offset points", fontsize=7.5,
-                                   ha="left" if dx > 1 else "right" if dx < -1 else "center",
-                                   va="bottom" if dy > 1 else "top" if dy < -1 else "center",
-                                   bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
-                                   arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.35"} if radius > LABEL_RADII_PT[0] else None)
+                text = ax.annotate(
+                    label,
+                    (x, y),
+                    xytext=(dx, dy),
+                    textcoords="offset points",
+                    fontsize=7.5,
+                    ha="left" if dx > 1 else "right" if dx < -1 else "center",
+                    va="bottom" if dy > 1 else "top" if dy < -1 else "center",
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
+                    arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.35"} if radius > LABEL_RADII_PT[0] else None,
+                )
                 box = text.get_window_extent(renderer)
                 inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
                 if inside and not any(box.overlaps(other) for other in placed):

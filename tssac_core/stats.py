@@ -16,8 +16,9 @@ Pure functions over numpy arrays; nothing here flies a mission.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -56,8 +57,9 @@ def wilson_interval(k: int, n: int, z: float = Z_95) -> Interval:
     return Interval(p, low, high)
 
 
-def bootstrap_mean_interval(cost: np.ndarray, resamples: int = BOOTSTRAP_RESAMPLES,
-                            seed: int = BOOTSTRAP_SEED, level: float = 0.95) -> Interval:
+def bootstrap_mean_interval(
+    cost: np.ndarray, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED, level: float = 0.95
+) -> Interval:
     """Mean of ``cost`` over all its entries, with a percentile bootstrap interval over its rows.
 
     ``cost`` is (M,) (one value per mission) or (M, U) (missions x UAVs): a resample draws M missions with
@@ -98,11 +100,16 @@ def within_fraction(values: np.ndarray, limit: float) -> float:
 
 def tail_figures(cost: np.ndarray, limit: float) -> dict[str, float]:
     """One role's tail over its UAV-missions: within the limit, the worst cost, CVaR_0.95."""
-    return {"within_cost_limit": within_fraction(cost, limit), "max_cost": float(np.max(cost)),
-            "cvar95_cost": cvar(cost)}
+    return {
+        "within_cost_limit": within_fraction(cost, limit),
+        "max_cost": float(np.max(cost)),
+        "cvar95_cost": cvar(cost),
+    }
 
 
-def worst_missions(cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str], count: int = 10) -> list[dict[str, Any]]:
+def worst_missions(
+    cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str], count: int = 10
+) -> list[dict[str, Any]]:
     """The ``count`` costliest UAV-missions (cost > 0), worst first: mission index, its layout seed, role, cost."""
     c = np.asarray(cost, dtype=np.float64)
     order = np.argsort(-c, axis=None, kind="stable")[:count]
@@ -115,8 +122,14 @@ def worst_missions(cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str],
     return rows
 
 
-def mission_statistics(success: np.ndarray, cost: np.ndarray, limit: float, roles: Sequence[str],
-                       seeds: Sequence[int] | None = None, worst: int = 10) -> dict[str, Any]:
+def mission_statistics(
+    success: np.ndarray,
+    cost: np.ndarray,
+    limit: float,
+    roles: Sequence[str],
+    seeds: Sequence[int] | None = None,
+    worst: int = 10,
+) -> dict[str, Any]:
     """The interval and tail figures of M missions (``success`` (M,), ``cost`` (M, 3) per UAV), as the JSON
     of ``tssac_core.evaluate`` and ``mavlink_bridge.fly`` carry them."""
     s = np.asarray(success, dtype=bool)

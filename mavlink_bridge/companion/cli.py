@@ -7,9 +7,10 @@ import json
 import logging
 import signal
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn, Optional, Sequence
+from typing import NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, CompanionConfig
 from mavlink_bridge.companion.machine import Companion
@@ -31,37 +32,99 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Fly one SITL (or real) UAV over MAVLink with a trained policy or the guidance controller.")
-    p.add_argument("--connect", required=True, metavar="CONN", help="the vehicle's connection string, e.g. udpout:127.0.0.1:14560")
+    p = _Parser(
+        prog=PROG,
+        description="Fly one SITL (or real) UAV over MAVLink with a trained policy or the guidance controller.",
+    )
+    p.add_argument(
+        "--connect", required=True, metavar="CONN", help="the vehicle's connection string, e.g. udpout:127.0.0.1:14560"
+    )
     p.add_argument("--role", required=True, choices=[r.value for r in Role], help="which UAV this is")
     who = p.add_mutually_exclusive_group(required=True)
-    who.add_argument("--model", type=Path, metavar="FILE", help="the role's trained actor: models/tssac/<role>.npz (numpy only) or <role>.pt (needs torch)")
+    who.add_argument(
+        "--model",
+        type=Path,
+        metavar="FILE",
+        help="the role's trained actor: models/tssac/<role>.npz (numpy only) or <role>.pt (needs torch)",
+    )
     who.add_argument("--pilot", choices=[GUIDANCE], help="fly the rule-based guidance controller")
-    p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies")
-    p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters")
+    p.add_argument(
+        "--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies"
+    )
+    p.add_argument(
+        "--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
+    )
     p.add_argument("--tlog", type=Path, metavar="FILE", help="write every message received and sent to this .tlog")
     p.add_argument("--status-json", type=Path, metavar="FILE", help="write the final status here")
     p.add_argument("--lockstep", action="store_true", help="the vehicle runs in lockstep: never extrapolate its clock")
-    p.add_argument("--timeout-s", type=float, default=30.0, metavar="S", help="wall seconds to wait for the first heartbeat (default 30)")
-    p.add_argument("--command-timeout-s", type=float, default=1.0, metavar="S", help="wall seconds per COMMAND_ACK wait (default 1)")
+    p.add_argument(
+        "--timeout-s",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="wall seconds to wait for the first heartbeat (default 30)",
+    )
+    p.add_argument(
+        "--command-timeout-s",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="wall seconds per COMMAND_ACK wait (default 1)",
+    )
     p.add_argument("--command-retries", type=int, default=10, metavar="N", help="attempts per command (default 10)")
-    p.add_argument("--hold-after-s", type=float, default=0.5, metavar="S", help="vehicle seconds without a fix before the hold setpoint (default 0.5)")
-    p.add_argument("--silence-hold-s", type=float, default=2.0, metavar="S", help="wall seconds of silence before the hold when the clock cannot be extrapolated (default 2)")
-    p.add_argument("--lost-after-s", type=float, default=10.0, metavar="S", help="wall seconds of silence before the vehicle is given up (default 10)")
+    p.add_argument(
+        "--hold-after-s",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="vehicle seconds without a fix before the hold setpoint (default 0.5)",
+    )
+    p.add_argument(
+        "--silence-hold-s",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="wall seconds of silence before the hold when the clock cannot be extrapolated (default 2)",
+    )
+    p.add_argument(
+        "--lost-after-s",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="wall seconds of silence before the vehicle is given up (default 10)",
+    )
     p.add_argument("--duration-s", type=float, metavar="S", help="stop after this many vehicle seconds of flight")
-    p.add_argument("--lean-telemetry", action="store_true", help="stop the vehicle's streams the companion does not use (no ground station sharing it)")
-    p.add_argument("--filter", choices=[m.value for m in FilterModel], default=FilterModel.CONSTANT_TURN_EKF.value, help="Kalman filter model (default constant_turn_ekf)")
-    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"], default="info", help="log level on stderr (default info)")
+    p.add_argument(
+        "--lean-telemetry",
+        action="store_true",
+        help="stop the vehicle's streams the companion does not use (no ground station sharing it)",
+    )
+    p.add_argument(
+        "--filter",
+        choices=[m.value for m in FilterModel],
+        default=FilterModel.CONSTANT_TURN_EKF.value,
+        help="Kalman filter model (default constant_turn_ekf)",
+    )
+    p.add_argument(
+        "--log-level",
+        choices=["debug", "info", "warning", "error"],
+        default="info",
+        help="log level on stderr (default info)",
+    )
     return p
 
 
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     scenario = load(args.scenario)
     if scenario.layout is None:
-        raise UsageError(f"{args.scenario}: scenario has a random layout: give the layout the vehicle flies "
-                         "(the SITL writes it with --layout-out FILE)")
+        raise UsageError(
+            f"{args.scenario}: scenario has a random layout: give the layout the vehicle flies "
+            "(the SITL writes it with --layout-out FILE)"
+        )
     if args.model is not None and not args.model.is_file():
-        raise UsageError(f"{args.model}: checkpoint not found (train one with python -m tssac_core.train, or use --pilot guidance)")
+        raise UsageError(
+            f"{args.model}: checkpoint not found (train one with python -m tssac_core.train, or use --pilot guidance)"
+        )
     return CompanionConfig(
         connection=args.connect,
         role=Role(args.role),
@@ -90,13 +153,15 @@ BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)
 def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
-        logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+        logging.basicConfig(
+            level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+        )
         companion = Companion(config_from_args(args))
     except BAD_INPUT_ERRORS as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
-    def stop(signum: int, _frame: Optional[FrameType]) -> None:
+    def stop(signum: int, _frame: FrameType | None) -> None:
         _log.info("signal %d: stopping", signum)
         companion.request_stop()
 
@@ -113,8 +178,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     lat = result.latency_ms
     lat_text = f" latency_p50_ms={lat['p50']:.3f} latency_p99_ms={lat['p99']:.3f}" if lat else ""
     vt = "-" if result.vehicle_time_s is None else f"{result.vehicle_time_s:.1f}"
-    print(f"end role={result.role} status={result.status} vehicle_time_s={vt} steps={result.counters.control_steps} "
-          f"holds={result.counters.holds} restarts={result.counters.restarts}{lat_text} message={json.dumps(result.message)}", flush=True)
+    print(
+        f"end role={result.role} status={result.status} vehicle_time_s={vt} steps={result.counters.control_steps} "
+        f"holds={result.counters.holds} restarts={result.counters.restarts}{lat_text} "
+        f"message={json.dumps(result.message)}",
+        flush=True,
+    )
     return result.exit_code
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
 
 from mavlink_bridge.state_filter import FilterModel
 from tssac_core.cli import UsageError
@@ -32,12 +31,12 @@ class CompanionConfig:
     role: Role
     scenario: Scenario
     """A scenario with a fixed layout (the one the vehicle flies)."""
-    model: Optional[Path] = None
+    model: Path | None = None
     """A role checkpoint (``decoy.pt`` ...); None = the guidance controller."""
-    signing_key: Optional[bytes] = None
-    tlog: Optional[Path] = None
+    signing_key: bytes | None = None
+    tlog: Path | None = None
     """Write every message received and sent here (.tlog)."""
-    status_json: Optional[Path] = None
+    status_json: Path | None = None
     """Write the final status (counters, latencies) here."""
     lockstep: bool = False
     """The vehicle runs in lockstep: never extrapolate its clock."""
@@ -60,7 +59,7 @@ class CompanionConfig:
     settle_s: float = 0.005
     """Wall seconds to wait for the tick's position fix once the tick is known (it usually comes in the same burst);
     not used under lockstep, where a step's telemetry is one datagram and a missing fix was lost."""
-    duration_s: Optional[float] = None
+    duration_s: float | None = None
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
     source_system: int = 255
@@ -70,9 +69,19 @@ class CompanionConfig:
 
     def __post_init__(self) -> None:
         if self.scenario.layout is None:
-            raise UsageError(f"scenario '{self.scenario.name}' has a random layout: the companion needs the layout the vehicle flies "
-                             "(the SITL writes it with --layout-out FILE)")
-        for name in ("connect_timeout_s", "command_timeout_s", "hold_after_s", "silence_hold_s", "lost_after_s", "restart_jump_s"):
+            raise UsageError(
+                f"scenario '{self.scenario.name}' has a random layout: the companion needs the layout the vehicle "
+                f"flies "
+                "(the SITL writes it with --layout-out FILE)"
+            )
+        for name in (
+            "connect_timeout_s",
+            "command_timeout_s",
+            "hold_after_s",
+            "silence_hold_s",
+            "lost_after_s",
+            "restart_jump_s",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise UsageError(f"--{name.replace('_', '-')} must be a positive number of seconds, got {value}")

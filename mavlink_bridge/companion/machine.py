@@ -10,14 +10,20 @@ import logging
 import math
 import time
 from dataclasses import asdict
-from typing import Optional
 
 import numpy as np
 
 from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, CompanionConfig
 from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
-from mavlink_bridge.frames import HOLD, Measurement, Setpoint, action_to_setpoint, from_global_position_int, from_local_position_ned
+from mavlink_bridge.frames import (
+    HOLD,
+    Measurement,
+    Setpoint,
+    action_to_setpoint,
+    from_global_position_int,
+    from_local_position_ned,
+)
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
@@ -68,15 +74,15 @@ class Companion:
         )
         self.counters = CompanionCounters()
         self.latencies_s: list[float] = []
-        self._first_control_wall_s: Optional[float] = None
-        self._last_control_wall_s: Optional[float] = None
+        self._first_control_wall_s: float | None = None
+        self._last_control_wall_s: float | None = None
         self._first_control_cpu_s = 0.0
         self._last_control_cpu_s = 0.0
         self.phase = Phase.CONNECT
         self._stop_requested = False
-        self._link: Optional[MavLink] = None
+        self._link: MavLink | None = None
         self._reset_vehicle_state()
-        self._status: Optional[tuple[str, str]] = None
+        self._status: tuple[str, str] | None = None
 
     # --------------------------------------------------------------------------- control
 
@@ -88,19 +94,19 @@ class Companion:
         """Forget everything about the vehicle's flight (at start and after a restart)."""
         self.filter = VehicleStateFilter(self.noise, self.cfg.filter_model)
         self.flags = MissionFlags()
-        self.vt_ms: Optional[int] = None  # newest vehicle time seen
+        self.vt_ms: int | None = None  # newest vehicle time seen
         self.vt_rx_s = 0.0  # wall time it was first seen
-        self.fix_ms: Optional[int] = None  # time of the newest position fix
+        self.fix_ms: int | None = None  # time of the newest position fix
         self.fix_rx_s = 0.0
-        self.local_ms: Optional[int] = None  # newest LOCAL_POSITION_NED
-        self.last_control_ms: Optional[int] = None
-        self.fly_start_ms: Optional[int] = None
+        self.local_ms: int | None = None  # newest LOCAL_POSITION_NED
+        self.last_control_ms: int | None = None
+        self.fly_start_ms: int | None = None
         self.armed = False
-        self.mode: Optional[int] = None
+        self.mode: int | None = None
         self._state_valid_after_s = 0.0  # heartbeats read before this wall time predate our last commands
-        self._rate_ref: Optional[tuple[float, int]] = None  # (wall, vehicle ms) for the clock-rate estimate
-        self.rate: Optional[float] = None  # vehicle seconds per wall second
-        self._holding: Optional[str] = None  # why we hold, while we do
+        self._rate_ref: tuple[float, int] | None = None  # (wall, vehicle ms) for the clock-rate estimate
+        self.rate: float | None = None  # vehicle seconds per wall second
+        self._holding: str | None = None  # why we hold, while we do
         self._gap_seen = False  # a gap happened since the last fix: re-engage a disarmed vehicle
         self.pilot.reset()
 
@@ -108,7 +114,9 @@ class Companion:
         """Connect, engage, fly until the mission ends, the vehicle is lost or a stop is requested."""
         cfg = self.cfg
         try:
-            self._link = MavLink(cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system)
+            self._link = MavLink(
+                cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system
+            )
         except LinkError as exc:
             raise UsageError(str(exc)) from None
         link = self._link
@@ -122,7 +130,14 @@ class Companion:
                 if self._stop_requested:
                     raise _Stop("stopped", "stopped before the vehicle answered") from None
                 raise _Stop("no_vehicle", str(exc)) from None
-            _log.info("%s: vehicle sysid %d at %s (type %d, autopilot %d)", cfg.role.value, hb.get_srcSystem(), link.spec, hb.type, hb.autopilot)
+            _log.info(
+                "%s: vehicle sysid %d at %s (type %d, autopilot %d)",
+                cfg.role.value,
+                hb.get_srcSystem(),
+                link.spec,
+                hb.type,
+                hb.autopilot,
+            )
             self.last_rx_s = time.monotonic()
             self.phase = Phase.ENGAGE
             self._loop()
@@ -192,7 +207,9 @@ class Companion:
         for name, interval_s in intervals.items():
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
             try:
-                link.set_message_interval(getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.command_retries)
+                link.set_message_interval(
+                    getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.command_retries
+                )
             except CommandError as exc:
                 _log.warning("%s: %s (keeping the vehicle's default)", role, exc)
         self.counters.engagements += 1
@@ -218,7 +235,12 @@ class Companion:
             self._on_fix(from_local_position_ned(msg.time_boot_ms, msg.x, msg.y, msg.vx, msg.vy), rx_s)
         elif mtype == "GLOBAL_POSITION_INT":
             if self.local_ms is None or msg.time_boot_ms - self.local_ms > _LOCAL_FRESH_S * 1000:
-                self._on_fix(from_global_position_int(self.cfg.scenario.origin, msg.time_boot_ms, msg.lat, msg.lon, msg.vx, msg.vy), rx_s)
+                self._on_fix(
+                    from_global_position_int(
+                        self.cfg.scenario.origin, msg.time_boot_ms, msg.lat, msg.lon, msg.vx, msg.vy
+                    ),
+                    rx_s,
+                )
         elif mtype == "NAMED_VALUE_INT":
             self._on_named_value(str(msg.name).rstrip("\x00"), int(msg.value), int(msg.time_boot_ms))
         elif mtype == "STATUSTEXT":
@@ -245,8 +267,12 @@ class Companion:
 
     def _on_restart(self, t_ms: int) -> None:
         role = self.cfg.role.value
-        _log.warning("%s: vehicle clock went back from %.1f s to %.1f s: the vehicle restarted; re-initialising",
-                     role, (self.vt_ms or 0) / 1000.0, t_ms / 1000.0)
+        _log.warning(
+            "%s: vehicle clock went back from %.1f s to %.1f s: the vehicle restarted; re-initialising",
+            role,
+            (self.vt_ms or 0) / 1000.0,
+            t_ms / 1000.0,
+        )
         self.counters.restarts += 1
         self._reset_vehicle_state()
         if self.phase in (Phase.FLY, Phase.PAUSED):
@@ -262,11 +288,20 @@ class Companion:
         role = self.cfg.role.value
         if self.phase is Phase.FLY and not in_control:
             if self._gap_seen:
-                _log.warning("%s: after the link gap the vehicle is %s in mode %d: re-engaging", role, "armed" if self.armed else "disarmed", self.mode)
+                _log.warning(
+                    "%s: after the link gap the vehicle is %s in mode %d: re-engaging",
+                    role,
+                    "armed" if self.armed else "disarmed",
+                    self.mode,
+                )
                 self.phase = Phase.ENGAGE
             else:
-                _log.warning("%s: the vehicle left GUIDED or was disarmed (mode %d, %s): pausing until it is back",
-                             role, self.mode, "armed" if self.armed else "disarmed")
+                _log.warning(
+                    "%s: the vehicle left GUIDED or was disarmed (mode %d, %s): pausing until it is back",
+                    role,
+                    self.mode,
+                    "armed" if self.armed else "disarmed",
+                )
                 self.counters.pauses += 1
                 self.phase = Phase.PAUSED
         elif self.phase is Phase.PAUSED and in_control:
@@ -275,7 +310,12 @@ class Companion:
             self.phase = Phase.FLY
 
     def _on_fix(self, m: Measurement, rx_s: float) -> None:
-        if not (math.isfinite(m.east_m) and math.isfinite(m.north_m) and math.isfinite(m.vel_east_m_s) and math.isfinite(m.vel_north_m_s)):
+        if not (
+            math.isfinite(m.east_m)
+            and math.isfinite(m.north_m)
+            and math.isfinite(m.vel_east_m_s)
+            and math.isfinite(m.vel_north_m_s)
+        ):
             self.counters.fixes_rejected += 1
             return
         if self.filter.update(m.t_s, (m.east_m, m.north_m), (m.vel_east_m_s, m.vel_north_m_s)):
@@ -310,8 +350,10 @@ class Companion:
         elif text == "Target hit":
             raise _Stop("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
         elif text.startswith("Mission end: "):
-            what = text[len("Mission end: "):]
-            status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(what, what.replace(" ", "_"))
+            what = text[len("Mission end: ") :]
+            status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(
+                what, what.replace(" ", "_")
+            )
             raise _Stop(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
 
     # --------------------------------------------------------------------------- control
@@ -351,7 +393,7 @@ class Companion:
                 self.counters.extrapolated_steps += 1
                 self._control(tick_ms, None)
 
-    def _control(self, t_ms: int, trigger_rx_s: Optional[float]) -> None:
+    def _control(self, t_ms: int, trigger_rx_s: float | None) -> None:
         """One control step at vehicle time t_ms."""
         link = self._link
         assert link is not None
@@ -382,7 +424,7 @@ class Companion:
         if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
             raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
 
-    def _decide(self, t_ms: int) -> tuple[Setpoint, Optional[str]]:
+    def _decide(self, t_ms: int) -> tuple[Setpoint, str | None]:
         """The setpoint for vehicle time t_ms, and why it is the hold (None if it is not)."""
         if not self.filter.initialised:
             return HOLD, "no position fix yet"
@@ -394,8 +436,16 @@ class Companion:
             return HOLD, f"telemetry gap {gap_s:.1f} s"
         f = self.filter
         x_m, y_m = f.pos_m
-        self.world.mirror(0, self.role_index, x_m, y_m, f.speed_m_s, f.heading_rad,
-                          bool(self.flags.get("RADAR_ON")), bool(self.flags.get("IDENT")))
+        self.world.mirror(
+            0,
+            self.role_index,
+            x_m,
+            y_m,
+            f.speed_m_s,
+            f.heading_rad,
+            bool(self.flags.get("RADAR_ON")),
+            bool(self.flags.get("IDENT")),
+        )
         step = t_ms // self.dt_ms
         action = self.pilot.action(self.world, self.role_index, int(step))
         if action.shape != (2,) or not np.all(np.isfinite(action)):
@@ -440,16 +490,24 @@ class Companion:
         lat = np.asarray(self.latencies_s) * 1000.0
         latency = {}
         if lat.size:
-            latency = {"n": float(lat.size), "p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
+            latency = {
+                "n": float(lat.size),
+                "p50": float(np.percentile(lat, 50)),
+                "p99": float(np.percentile(lat, 99)),
+                "max": float(lat.max()),
+            }
         link = self._link
         return CompanionResult(
             status=status,
             role=self.cfg.role.value,
             message=message,
             vehicle_time_s=None if self.vt_ms is None else self.vt_ms / 1000.0,
-            flight_wall_s=None if self._first_control_wall_s is None or self._last_control_wall_s is None
+            flight_wall_s=None
+            if self._first_control_wall_s is None or self._last_control_wall_s is None
             else self._last_control_wall_s - self._first_control_wall_s,
-            flight_cpu_s=None if self._first_control_wall_s is None else self._last_control_cpu_s - self._first_control_cpu_s,
+            flight_cpu_s=None
+            if self._first_control_wall_s is None
+            else self._last_control_cpu_s - self._first_control_cpu_s,
             counters=self.counters,
             link=asdict(link.counters) if link is not None else {},
             latency_ms=latency,

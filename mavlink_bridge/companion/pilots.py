@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -47,7 +47,7 @@ class PolicyPilot:
         self.repeat = max(1, int(self.policy.action_repeat))
         self.mode: ObservationMode = self.policy.observation_mode
         self.routes = RouteMap()
-        self._held: Optional[np.ndarray] = None
+        self._held: np.ndarray | None = None
         self._next_decision = 0
 
     def reset(self) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Optional
 
 from mavlink_bridge.companion.config import EXIT_OK, EXIT_VEHICLE
 
@@ -53,10 +52,10 @@ class CompanionResult:
     status: str
     role: str
     message: str
-    vehicle_time_s: Optional[float]
-    flight_wall_s: Optional[float]
+    vehicle_time_s: float | None
+    flight_wall_s: float | None
     """Wall seconds between the first and the last control step."""
-    flight_cpu_s: Optional[float]
+    flight_cpu_s: float | None
     """This process's CPU seconds between the first and the last control step."""
     counters: CompanionCounters
     link: dict[str, int]

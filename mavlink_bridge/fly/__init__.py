@@ -3,9 +3,12 @@
 Examples::
 
     python -m mavlink_bridge.fly --scenario scenarios/strike.yaml --pilot guidance --json out.json --plot mission.png
-    python -m mavlink_bridge.fly --scenario scenarios/random.yaml --models models/tssac --episodes 10 --seed 3 --tlog tlogs/
-    python -m mavlink_bridge.fly --scenario scenarios/random.yaml --seed 3 --mission 7 --plot m7.png   # mission 7 again, alone
-    python -m mavlink_bridge.fly --scenario layout.yaml --pilot guidance --connect udpout:127.0.0.1:14560 udpout:127.0.0.1:14570 udpout:127.0.0.1:14580
+    python -m mavlink_bridge.fly --scenario scenarios/random.yaml --models models/tssac --episodes 10 --seed 3 --tlog
+    tlogs/
+    python -m mavlink_bridge.fly --scenario scenarios/random.yaml --seed 3 --mission 7 --plot m7.png   # mission 7
+    again, alone
+    python -m mavlink_bridge.fly --scenario layout.yaml --pilot guidance --connect udpout:127.0.0.1:14560
+    udpout:127.0.0.1:14570 udpout:127.0.0.1:14580
 
 For each mission: the layout is the scenario's fixed one, or a random one drawn with
 ``sample_layout(scenario, numpy.random.default_rng(seed + mission index))``; it is written as a

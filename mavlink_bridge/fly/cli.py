@@ -8,9 +8,10 @@ import signal
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -30,7 +31,7 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, handled like Ctrl-C."""
 
 
-def _on_sigterm(signum: int, _frame: Optional[FrameType]) -> None:
+def _on_sigterm(signum: int, _frame: FrameType | None) -> None:
     raise _Terminated()
 
 
@@ -50,10 +51,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     children = ChildProcesses()
     rows: list[dict[str, Any]] = []
-    error: Optional[str] = None
+    error: str | None = None
     interrupted = False
     code = 0
-    tmp: Optional[tempfile.TemporaryDirectory[str]] = None
+    tmp: tempfile.TemporaryDirectory[str] | None = None
     started = time.monotonic()
     try:
         if cfg.logs_dir is not None:
@@ -65,7 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if cfg.signing_key_path is None and cfg.scenario.link.signing:
             cfg = dataclasses.replace(cfg, signing_key_path=make_signing_key(work))
         runner = MissionRunner(cfg, children, work)
-        with tqdm(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr) as bar:
+        with tqdm(
+            total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr
+        ) as bar:
             for i in cfg.indices():
                 row = runner.fly(i)
                 rows.append(row)
@@ -102,7 +105,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             tmp.cleanup()
     print_report(summary, cfg)
     if interrupted:
-        print(f"interrupted after {len(rows)} of {cfg.episodes} missions" + (f"; wrote {cfg.json_path}" if cfg.json_path else ""), file=sys.stderr)
+        print(
+            f"interrupted after {len(rows)} of {cfg.episodes} missions"
+            + (f"; wrote {cfg.json_path}" if cfg.json_path else ""),
+            file=sys.stderr,
+        )
     if error is not None:
         print(f"{PROG}: error: {error}", file=sys.stderr)
     return code

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn, Optional, Sequence
+from typing import NoReturn
 
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
@@ -26,23 +27,23 @@ GUIDANCE = "guidance"
 class FlyConfig:
     scenario_path: Path
     scenario: Scenario
-    models: Optional[Path]
+    models: Path | None
     """None = the guidance controller."""
     episodes: int
     seed: int
     lockstep: bool
     speedup: float
-    json_path: Optional[Path]
-    tlog_dir: Optional[Path]
-    plot_path: Optional[Path]
-    signing_key_path: Optional[Path]
-    connect: Optional[tuple[str, str, str]]
-    logs_dir: Optional[Path]
+    json_path: Path | None
+    tlog_dir: Path | None
+    plot_path: Path | None
+    signing_key_path: Path | None
+    connect: tuple[str, str, str] | None
+    logs_dir: Path | None
     mission_timeout_s: float
     startup_timeout_s: float
     progress: bool
     lean_telemetry: bool = False
-    mission: Optional[int] = None
+    mission: int | None = None
     """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
 
     def indices(self) -> range:
@@ -56,27 +57,94 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Fly whole missions over MAVLink: a SITL world plus one companion process per UAV.")
-    p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario file (scenarios/strike.yaml, scenarios/random.yaml)")
+    p = _Parser(
+        prog=PROG, description="Fly whole missions over MAVLink: a SITL world plus one companion process per UAV."
+    )
+    p.add_argument(
+        "--scenario",
+        required=True,
+        type=Path,
+        metavar="FILE",
+        help="scenario file (scenarios/strike.yaml, scenarios/random.yaml)",
+    )
     who = p.add_mutually_exclusive_group()
-    who.add_argument("--models", type=Path, metavar="DIR", help=f"directory with decoy.pt, detect.pt, strike.pt (default {DEFAULT_MODELS.relative_to(REPO)})")
+    who.add_argument(
+        "--models",
+        type=Path,
+        metavar="DIR",
+        help=f"directory with decoy.pt, detect.pt, strike.pt (default {DEFAULT_MODELS.relative_to(REPO)})",
+    )
     who.add_argument("--pilot", choices=[GUIDANCE], help="fly every UAV with the rule-based guidance controller")
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="mission i uses seed S + i for its random layout and sensor noise (default 0)")
-    p.add_argument("--mission", type=int, metavar="K", help="fly only mission K of --seed (e.g. one of the JSON's worst_missions; with --plot)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="mission i uses seed S + i for its random layout and sensor noise (default 0)",
+    )
+    p.add_argument(
+        "--mission",
+        type=int,
+        metavar="K",
+        help="fly only mission K of --seed (e.g. one of the JSON's worst_missions; with --plot)",
+    )
     clock = p.add_mutually_exclusive_group()
-    clock.add_argument("--lockstep", action="store_true",
-                       help="step the world once per round of setpoints (the default; with --connect: the running world is in lockstep)")
-    clock.add_argument("--speedup", type=float, metavar="X", help="run the world in real time times X instead of lockstep")
-    p.add_argument("--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)")
-    p.add_argument("--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)")
-    p.add_argument("--plot", type=Path, metavar="FILE", help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)")
-    p.add_argument("--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions")
-    p.add_argument("--connect", nargs=3, metavar=("DECOY", "DETECT", "STRIKE"), help="fly running vehicles at these connection strings instead of starting a world")
-    p.add_argument("--logs", type=Path, metavar="DIR", help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)")
-    p.add_argument("--lean-telemetry", action="store_true",
-                   help="companions stop the vehicle streams they do not use (GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD): faster, leaner tlogs")
-    p.add_argument("--mission-timeout-s", type=float, default=900.0, metavar="S", help="wall seconds a mission may take (default 900)")
+    clock.add_argument(
+        "--lockstep",
+        action="store_true",
+        help=(
+            "step the world once per round of setpoints (the default; with --connect: the running world is in lockstep)"
+        ),
+    )
+    clock.add_argument(
+        "--speedup", type=float, metavar="X", help="run the world in real time times X instead of lockstep"
+    )
+    p.add_argument(
+        "--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)"
+    )
+    p.add_argument(
+        "--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)"
+    )
+    p.add_argument(
+        "--plot",
+        type=Path,
+        metavar="FILE",
+        help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)",
+    )
+    p.add_argument(
+        "--signing-key",
+        type=Path,
+        metavar="FILE",
+        help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions",
+    )
+    p.add_argument(
+        "--connect",
+        nargs=3,
+        metavar=("DECOY", "DETECT", "STRIKE"),
+        help="fly running vehicles at these connection strings instead of starting a world",
+    )
+    p.add_argument(
+        "--logs",
+        type=Path,
+        metavar="DIR",
+        help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)",
+    )
+    p.add_argument(
+        "--lean-telemetry",
+        action="store_true",
+        help=(
+            "companions stop the vehicle streams they do not use (GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD): faster, "
+            "leaner tlogs"
+        ),
+    )
+    p.add_argument(
+        "--mission-timeout-s",
+        type=float,
+        default=900.0,
+        metavar="S",
+        help="wall seconds a mission may take (default 900)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -94,13 +162,13 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
         raise UsageError("--mission-timeout-s must be positive")
     scenario = load(a.scenario)
-    models: Optional[Path] = None
+    models: Path | None = None
     if a.pilot is None:
         models = (a.models if a.models is not None else DEFAULT_MODELS).resolve()
         check_models(models)
     if a.signing_key is not None:
         read_signing_key(a.signing_key)
-    connect: Optional[tuple[str, str, str]] = None
+    connect: tuple[str, str, str] | None = None
     if a.connect is not None:
         for text in a.connect:
             try:
@@ -110,10 +178,15 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         if a.episodes != 1:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
         if scenario.layout is None:
-            raise UsageError(f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
-                             "(python -m sim_vehicles --layout-out FILE writes it)")
+            raise UsageError(
+                f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
+                "(python -m sim_vehicles --layout-out FILE writes it)"
+            )
         if a.plot is not None:
-            raise UsageError("--plot draws from the world's truth log, which fly has only for the worlds it starts (not with --connect)")
+            raise UsageError(
+                "--plot draws from the world's truth log, which fly has only for the worlds it starts (not with "
+                "--connect)"
+            )
         connect = (a.connect[0], a.connect[1], a.connect[2])
     return FlyConfig(
         scenario_path=a.scenario.resolve(),

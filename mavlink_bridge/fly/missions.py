@@ -13,7 +13,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +57,7 @@ def _children_cpu_s() -> float:
 _ALARMING = re.compile(r"\b(CRITICAL|ERROR|WARNING)\b|error:|Error\b|Exception\b")
 
 
-def last_meaningful_line(path: Optional[Path], max_chars: int = 240) -> str:
+def last_meaningful_line(path: Path | None, max_chars: int = 240) -> str:
     """The line of a child's log that best says why it died: a traceback's exception line or the last
     error or warning, else the last line ("" for a missing or empty log). Traceback frames are skipped."""
     if path is None or not path.exists():
@@ -106,7 +106,7 @@ class MissionRunner:
         cpu0 = _children_cpu_s()
         t0 = time.monotonic()
         pids: dict[str, int] = {}
-        sitl: Optional[Child] = None
+        sitl: Child | None = None
         if cfg.connect is None:
             sitl, endpoints = self._start_world(mdir, scenario_file, truth, seed)
             pids["sitl"] = sitl.pid
@@ -118,8 +118,14 @@ class MissionRunner:
         timed_out = self._watch(index, sitl, companions, t0)
         wall_s = time.monotonic() - t0
         statuses = {c.name: self._companion_status(c, mdir) for c in companions}
-        row: dict[str, Any] = {"index": index, "seed": seed, "pids": pids, "wall_time_s": round(wall_s, 3),
-                               "cpu_s": round(_children_cpu_s() - cpu0, 3), "companions": statuses}
+        row: dict[str, Any] = {
+            "index": index,
+            "seed": seed,
+            "pids": pids,
+            "wall_time_s": round(wall_s, 3),
+            "cpu_s": round(_children_cpu_s() - cpu0, 3),
+            "companions": statuses,
+        }
         if sitl is not None:
             try:
                 record = read_mission(truth)
@@ -135,7 +141,9 @@ class MissionRunner:
             row["flight_wall_s"] = round(max(flight), 3)
             row["speed_x"] = round(row["sim_time_s"] / max(flight), 1)
         # The CPU the flight took, world and companions, start-up excluded (what bench_bridge reports).
-        cpus = [s.get("flight_cpu_s") for s in statuses.values()] + ([row.get("world_flight_cpu_s")] if sitl is not None else [])
+        cpus = [s.get("flight_cpu_s") for s in statuses.values()] + (
+            [row.get("world_flight_cpu_s")] if sitl is not None else []
+        )
         if cpus and all(c is not None for c in cpus):
             row["flight_cpu_s"] = round(sum(cpus), 3)
         if timed_out:
@@ -145,8 +153,21 @@ class MissionRunner:
 
     def _start_world(self, mdir: Path, scenario_file: Path, truth: Path, seed: int) -> tuple[Child, dict[str, str]]:
         cfg = self.cfg
-        argv = [sys.executable, "-m", "sim_vehicles", "--scenario", str(scenario_file), "--seed", str(seed), "--base-port", "0",
-                "--truth-log", str(truth), "--linger-s", "0.2"]
+        argv = [
+            sys.executable,
+            "-m",
+            "sim_vehicles",
+            "--scenario",
+            str(scenario_file),
+            "--seed",
+            str(seed),
+            "--base-port",
+            "0",
+            "--truth-log",
+            str(truth),
+            "--linger-s",
+            "0.2",
+        ]
         if cfg.lockstep:
             argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
         else:  # the world waits for all three companions, as in lockstep, then runs at real time x speedup
@@ -170,7 +191,9 @@ class MissionRunner:
                 if b"\nready" in b"\n" + buf:
                     break
                 printed = "" if last_meaningful_line(log) else f"; it printed {buf.decode(errors='replace').strip()!r}"
-                raise ChildFailed(child_failure("the SITL world", sitl, sitl.poll() or 0, "before it was ready") + printed)
+                raise ChildFailed(
+                    child_failure("the SITL world", sitl, sitl.poll() or 0, "before it was ready") + printed
+                )
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise ChildFailed(f"the SITL world was not ready within {self.cfg.startup_timeout_s:g} s")
@@ -183,7 +206,9 @@ class MissionRunner:
             if len(parts) == 3 and parts[0] in {r.value for r in ROLES} and parts[1].startswith("sysid="):
                 endpoints[parts[0]] = parts[2]
         if set(endpoints) != {r.value for r in ROLES}:
-            raise ChildFailed(f"the SITL world did not print its three endpoints: {buf.decode(errors='replace').strip()!r}")
+            raise ChildFailed(
+                f"the SITL world did not print its three endpoints: {buf.decode(errors='replace').strip()!r}"
+            )
         return endpoints
 
     def _start_companions(self, index: int, mdir: Path, scenario_file: Path, endpoints: dict[str, str]) -> list[Child]:
@@ -191,8 +216,19 @@ class MissionRunner:
         out = []
         for role in ROLES:
             name = role.value
-            argv = [sys.executable, "-m", "mavlink_bridge.companion", "--connect", endpoints[name], "--role", name,
-                    "--scenario", str(scenario_file), "--status-json", str(mdir / f"{name}.status.json")]
+            argv = [
+                sys.executable,
+                "-m",
+                "mavlink_bridge.companion",
+                "--connect",
+                endpoints[name],
+                "--role",
+                name,
+                "--scenario",
+                str(scenario_file),
+                "--status-json",
+                str(mdir / f"{name}.status.json"),
+            ]
             argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", GUIDANCE]
             if cfg.lockstep:
                 argv += ["--lockstep"]
@@ -205,7 +241,7 @@ class MissionRunner:
             out.append(self.children.start(name, argv, log_path=mdir / f"{name}.log", env=self.env))
         return out
 
-    def _watch(self, index: int, sitl: Optional[Child], companions: list[Child], t0: float) -> bool:
+    def _watch(self, index: int, sitl: Child | None, companions: list[Child], t0: float) -> bool:
         """Wait for the mission to end; True if it timed out. Raises ChildFailed when a child crashes."""
         deadline = t0 + self.cfg.mission_timeout_s
         while True:
@@ -232,7 +268,9 @@ class MissionRunner:
             time.sleep(0.02)
         late = [c for c in companions if c.poll() is None]
         if late:
-            _log.warning("mission %d: %s still running after the world ended: stopping", index, ", ".join(c.name for c in late))
+            _log.warning(
+                "mission %d: %s still running after the world ended: stopping", index, ", ".join(c.name for c in late)
+            )
             self.children.stop(late)
         for c in companions:
             rc = c.poll()

@@ -18,23 +18,36 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
     if summary["mean_cost"] is not None:
         clo, chi = summary["mean_cost_interval95"]
         cost = f"{summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f})"
-    print(f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {n} missions, mean hazard cost "
-          f"per UAV {cost} (limit {cfg.scenario.cost_limit:g}), mean mission time {summary['mean_mission_time_s'] or 0:.1f} s")
+    print(
+        f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {n} missions, mean hazard "
+        f"cost "
+        f"per UAV {cost} (limit {cfg.scenario.cost_limit:g}), mean mission time "
+        f"{summary['mean_mission_time_s'] or 0:.1f} s"
+    )
     for role, fig in summary["roles"].items():
         parts = [f"  {role:6s}"]
         if "mean_cost" in fig:
-            parts.append(f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} within C {fig['within_cost_limit']:.1%} "
-                         f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}")
+            parts.append(
+                f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} within C "
+                f"{fig['within_cost_limit']:.1%} "
+                f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}"
+            )
         if "latency_p50_ms" in fig:
             parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
         print("  ".join(parts))
     for w in summary["worst_missions"]:
-        print(f"  worst: mission {w['mission']} (seed {w['seed']}) {w['role']} cost {w['cost']:.0f}: fly again with --seed "
-              f"{cfg.seed} --mission {w['mission']} --plot FILE")
+        print(
+            f"  worst: mission {w['mission']} (seed {w['seed']}) {w['role']} cost {w['cost']:.0f}: fly again with "
+            f"--seed "
+            f"{cfg.seed} --mission {w['mission']} --plot FILE"
+        )
     for r in summary["missions"]:
         speed = f", {r['speed_x']:.0f}x real time in flight" if r.get("speed_x") else ""
-        print(f"  mission {r['index']}: {'success' if r.get('success') else r.get('end')}, {r.get('sim_time_s') or 0:.1f} s simulated, "
-              f"{r['wall_time_s']:.1f} s wall{speed}")
+        print(
+            f"  mission {r['index']}: {'success' if r.get('success') else r.get('end')}, "
+            f"{r.get('sim_time_s') or 0:.1f} s simulated, "
+            f"{r['wall_time_s']:.1f} s wall{speed}"
+        )
     if cfg.json_path is not None:
         print(f"wrote {cfg.json_path}")
 
@@ -51,6 +64,12 @@ def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: Miss
     r = cfg.scenario.ranges
     verdict = "success" if record.success else record.end
     cost = ", ".join(f"{k} {v:g}" for k, v in record.cost.items())
-    plot_mission(path, layout, record.tracks_km(), (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
-                 record.event_markers_km(), title=f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}",
-                 area_km=cfg.scenario.area_km)
+    plot_mission(
+        path,
+        layout,
+        record.tracks_km(),
+        (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
+        record.event_markers_km(),
+        title=f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}",
+        area_km=cfg.scenario.area_km,
+    )

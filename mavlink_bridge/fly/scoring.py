@@ -73,11 +73,25 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
         fig: dict[str, Any] = {}
         if costed:
             costs = np.array([r["cost"][name] for r in costed])
-            fig.update({"mean_cost": float(costs.mean()), "max_cost": float(costs.max()),
-                        "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean()), "cvar95_cost": cvar(costs)})
+            fig.update(
+                {
+                    "mean_cost": float(costs.mean()),
+                    "max_cost": float(costs.max()),
+                    "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean()),
+                    "cvar95_cost": cvar(costs),
+                }
+            )
             fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
-        p50 = [r["companions"][name]["latency_p50_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None]
-        p99 = [r["companions"][name]["latency_p99_ms"] for r in rows if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None]
+        p50 = [
+            r["companions"][name]["latency_p50_ms"]
+            for r in rows
+            if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None
+        ]
+        p99 = [
+            r["companions"][name]["latency_p99_ms"]
+            for r in rows
+            if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None
+        ]
         if p50:
             fig["latency_p50_ms"] = float(np.median(p50))
             fig["latency_p99_ms"] = float(np.max(p99))
@@ -87,7 +101,8 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
             "pilot": str(cfg.models) if cfg.models is not None else GUIDANCE,
             "scenario": str(cfg.scenario_path),
             "seed": cfg.seed,
-            "clock": ("connected, lockstep" if cfg.lockstep else "connected") if cfg.connect is not None
+            "clock": ("connected, lockstep" if cfg.lockstep else "connected")
+            if cfg.connect is not None
             else ("lockstep" if cfg.lockstep else f"speedup {cfg.speedup:g}"),
             "cost_limit": cfg.scenario.cost_limit,
             "signing": cfg.signing_key_path is not None,

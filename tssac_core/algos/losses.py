@@ -13,9 +13,7 @@ from __future__ import annotations
 import torch
 
 
-def soft_value(
-    next_q_r: torch.Tensor, next_log_pi: torch.Tensor, alpha: torch.Tensor
-) -> torch.Tensor:
+def soft_value(next_q_r: torch.Tensor, next_log_pi: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
     """Eq. 13's V(s') = min_i Q^r_i(s', a') - alpha log pi(a'|s'), a' ~ pi(s'); twin critics."""
     return next_q_r.min(dim=-2).values - alpha * next_log_pi
 

@@ -61,9 +61,7 @@ class SquashedGaussianActor(nn.Module):
         mean, log_std = self.net(obs).chunk(2, dim=-1)
         return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
 
-    def forward(
-        self, obs: torch.Tensor, deterministic: bool = False
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, obs: torch.Tensor, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """Return (action in [-1, 1], log_pi) with shapes (batch, act_dim), (batch,).
 
         The stochastic action is reparametrised (u = mean + std * eps), so log_pi and the action are
@@ -102,9 +100,7 @@ class Critic(nn.Module):
     (uniform in +-1/sqrt(fan_in) for weights and biases).
     """
 
-    def __init__(
-        self, obs_dim: int, act_dim: int, hidden_sizes: Sequence[int], n_members: int = 1
-    ) -> None:
+    def __init__(self, obs_dim: int, act_dim: int, hidden_sizes: Sequence[int], n_members: int = 1) -> None:
         super().__init__()
         self.n_members = n_members
         sizes = [obs_dim + act_dim, *hidden_sizes, 1]
@@ -112,12 +108,8 @@ class Critic(nn.Module):
         self.biases = nn.ParameterList()
         for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
             bound = 1.0 / math.sqrt(fan_in)
-            self.weights.append(
-                nn.Parameter(torch.empty(n_members, fan_in, fan_out).uniform_(-bound, bound))
-            )
-            self.biases.append(
-                nn.Parameter(torch.empty(n_members, 1, fan_out).uniform_(-bound, bound))
-            )
+            self.weights.append(nn.Parameter(torch.empty(n_members, fan_in, fan_out).uniform_(-bound, bound)))
+            self.biases.append(nn.Parameter(torch.empty(n_members, 1, fan_out).uniform_(-bound, bound)))
 
     def forward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """Q-values of all members, shape (n_members, batch)."""

@@ -48,9 +48,7 @@ class ReplayBuffer:
             # The per-transition scalars (rewards, costs, terminated) are single columns.
             self._columns[name] = slice(start, start + width) if name in _VECTORS else start
             start += width
-        self._arrays: dict[str, np.ndarray] = {
-            name: self._rows[:, column] for name, column in self._columns.items()
-        }
+        self._arrays: dict[str, np.ndarray] = {name: self._rows[:, column] for name, column in self._columns.items()}
         self._ptr = 0  # next row to write
         self._size = 0
 
@@ -111,8 +109,7 @@ class ReplayBuffer:
     def state_dict(self) -> dict[str, Any]:
         """The filled rows (tensors, in storage order), the write position and the capacity."""
         state: dict[str, Any] = {
-            name: torch.from_numpy(array[: self._size].copy())
-            for name, array in self._arrays.items()
+            name: torch.from_numpy(array[: self._size].copy()) for name, array in self._arrays.items()
         }
         state.update(ptr=self._ptr, size=self._size, capacity=self.capacity)
         return state
@@ -129,9 +126,7 @@ class ReplayBuffer:
         if size > self.capacity:
             raise ValueError(f"saved buffer holds {size} transitions, capacity is {self.capacity}")
         if size == saved_capacity and saved_capacity != self.capacity:
-            raise ValueError(
-                f"saved buffer was full at capacity {saved_capacity}; this one has {self.capacity}"
-            )
+            raise ValueError(f"saved buffer was full at capacity {saved_capacity}; this one has {self.capacity}")
         for name, array in self._arrays.items():
             rows = state[name].numpy()
             if rows.shape[1:] != array.shape[1:] or len(rows) != size:

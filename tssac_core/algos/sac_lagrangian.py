@@ -48,6 +48,7 @@ class Variant(enum.Enum):
 MULTIPLIER_VARIANTS = (Variant.SAC_LAG, Variant.TSSAC)
 """The variants that learn the cost multiplier beta (eq. 15)."""
 
+
 class MultiplierSignal(enum.StrEnum):
     """SacConfig.multiplier_signal: what eq. 15 and 17 compare with C (a str: it reads as its word)."""
 
@@ -167,8 +168,7 @@ class SacConfig:
             (self.penalty <= 0.0, f"penalty must be <= 0 (r + penalty * c), got {self.penalty}"),
             (
                 self.penalty == 0.0 or self.variant is Variant.SAC_PENALTY,
-                f"penalty is used only by variant sac_penalty, got {self.penalty} with "
-                f"{self.variant.value}",
+                f"penalty is used only by variant sac_penalty, got {self.penalty} with {self.variant.value}",
             ),
         ]
         for ok, message in checks:

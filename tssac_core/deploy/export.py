@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from torch import nn
@@ -28,7 +29,13 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
     src = Path(checkpoint)
     policy = Policy.load(src)
     linears = [m for m in policy.actor.net if isinstance(m, nn.Linear)]
-    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, **policy.info.fields(), "source": src.name, "source_sha256": sha256_file(src)}
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        **policy.info.fields(),
+        "source": src.name,
+        "source_sha256": sha256_file(src),
+    }
     arrays: dict[str, Any] = {"meta": np.array(json.dumps(meta))}
     for i, layer in enumerate(linears):
         arrays[f"w{i}"] = layer.weight.detach().numpy().astype(np.float32)
@@ -71,9 +78,13 @@ def export_paths(targets: Sequence[str]) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tssac_core.deploy.export",
-                                description="Export trained role checkpoints' actors as <role>.npz, which the companion flies without torch.")
-    p.add_argument("targets", nargs="+", metavar="DIR_OR_PT", help="a models directory (every <role>.pt in it) or .pt files")
+    p = argparse.ArgumentParser(
+        prog="python -m tssac_core.deploy.export",
+        description="Export trained role checkpoints' actors as <role>.npz, which the companion flies without torch.",
+    )
+    p.add_argument(
+        "targets", nargs="+", metavar="DIR_OR_PT", help="a models directory (every <role>.pt in it) or .pt files"
+    )
     args = p.parse_args(argv)
     for pt in export_paths(args.targets):
         out = export_actor(pt)

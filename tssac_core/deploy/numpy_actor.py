@@ -110,7 +110,9 @@ def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{p}: not an exported TSSAC actor")
     if meta.get("format_version") != FORMAT_VERSION:
-        raise CheckpointError(f"{p}: exported actor format version {meta.get('format_version')}, this TSSAC reads {FORMAT_VERSION}")
+        raise CheckpointError(
+            f"{p}: exported actor format version {meta.get('format_version')}, this TSSAC reads {FORMAT_VERSION}"
+        )
     try:
         mode = ObservationMode(meta["observation_mode"])
         Role(meta["role"])
@@ -119,7 +121,9 @@ def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]
     except (KeyError, ValueError, TypeError) as exc:
         raise CheckpointError(f"{p}: exported actor metadata is damaged ({exc})") from None
     if sizes[0] != mode.size:
-        raise CheckpointError(f"{p}: observation size {sizes[0]} does not fit the '{mode.value}' observation ({mode.size})")
+        raise CheckpointError(
+            f"{p}: observation size {sizes[0]} does not fit the '{mode.value}' observation ({mode.size})"
+        )
     layers = []
     for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
         w, b = arrays.get(f"w{i}"), arrays.get(f"b{i}")
@@ -148,7 +152,12 @@ def pilot_file(models: str | Path, role: Role) -> Path:
         return pt
     if source == sha256_file(pt):
         return npz
-    logger.warning("%s was exported from another %s: flying the .pt (refresh with python -m tssac_core.deploy.export %s)", npz, pt.name, d)
+    logger.warning(
+        "%s was exported from another %s: flying the .pt (refresh with python -m tssac_core.deploy.export %s)",
+        npz,
+        pt.name,
+        d,
+    )
     return pt
 
 

@@ -65,7 +65,13 @@ def package_versions() -> dict[str, str]:
 
     from tssac_core import __version__
 
-    return {"tssac": __version__, "torch": torch.__version__, "numpy": np.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version()}
+    return {
+        "tssac": __version__,
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "gymnasium": gymnasium.__version__,
+        "python": platform.python_version(),
+    }
 
 
 def save_role_checkpoint(
@@ -86,7 +92,8 @@ def save_role_checkpoint(
 
 
 def torch_save_atomic(obj: Any, path: str | Path) -> None:
-    """torch.save to a temporary file, then rename durably (tssac_core.files): a crash never leaves a half-written file."""
+    """torch.save to a temporary file, then rename durably (tssac_core.files): a crash never leaves a half-written
+    file."""
     target = Path(path)
     tmp = target.with_name(target.name + ".tmp")
     torch.save(obj, tmp)
@@ -105,7 +112,9 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise CheckpointError(f"{p}: not a TSSAC role checkpoint")
     if data.get("format_version") != FORMAT_VERSION:
-        raise CheckpointError(f"{p}: checkpoint format version {data.get('format_version')}, this TSSAC reads {FORMAT_VERSION}")
+        raise CheckpointError(
+            f"{p}: checkpoint format version {data.get('format_version')}, this TSSAC reads {FORMAT_VERSION}"
+        )
     return data
 
 
@@ -114,7 +123,9 @@ def learner_state(path: str | Path) -> dict[str, Any]:
     file has none (a compacted checkpoint holds the actor only)."""
     state = read_checkpoint(path).get("learner")
     if not isinstance(state, dict):
-        raise CheckpointError(f"{path}: holds the actor only (compacted), not the learner state that transfer and --init-from need")
+        raise CheckpointError(
+            f"{path}: holds the actor only (compacted), not the learner state that transfer and --init-from need"
+        )
     return state
 
 
@@ -158,7 +169,10 @@ class Policy:
         if role is not None and Role(role) is not info.role:
             raise CheckpointError(f"{path}: checkpoint is for the {info.role.value} UAV, not the {Role(role).value}")
         if info.obs_dim != info.observation_mode.size:
-            raise CheckpointError(f"{path}: observation size {info.obs_dim} does not fit the '{info.observation_mode.value}' observation ({info.observation_mode.size})")
+            raise CheckpointError(
+                f"{path}: observation size {info.obs_dim} does not fit the '{info.observation_mode.value}' observation "
+                f"({info.observation_mode.size})"
+            )
         actor = SquashedGaussianActor(info.obs_dim, info.act_dim, info.hidden_sizes)
         try:
             actor.load_state_dict(data["actor"])
@@ -172,7 +186,9 @@ class Policy:
         x = torch.as_tensor(np.asarray(obs, dtype=np.float32))
         single = x.ndim == 1
         if x.shape[-1] != self.info.obs_dim:
-            raise ValueError(f"observation has {x.shape[-1]} values, the {self.info.role.value} policy takes {self.info.obs_dim}")
+            raise ValueError(
+                f"observation has {x.shape[-1]} values, the {self.info.role.value} policy takes {self.info.obs_dim}"
+            )
         action, _ = self.actor(x.unsqueeze(0) if single else x, self.deterministic)
         out = action.numpy().astype(np.float64)
         return out[0] if single else out

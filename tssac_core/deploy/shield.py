@@ -94,7 +94,9 @@ class Limits:
     accel_max_m_s2: np.ndarray
 
     def select(self, idx: np.ndarray) -> Limits:
-        return Limits(self.speed_min_m_s[idx], self.speed_max_m_s[idx], self.turn_rate_max_rad_s[idx], self.accel_max_m_s2[idx])
+        return Limits(
+            self.speed_min_m_s[idx], self.speed_max_m_s[idx], self.turn_rate_max_rad_s[idx], self.accel_max_m_s2[idx]
+        )
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,9 @@ class Memory:
 
     def merged(self, idx: np.ndarray, part: Memory) -> Memory:
         """A copy with vehicles ``idx`` replaced by ``part``."""
-        out = Memory(self.engaged.copy(), self.protected.copy(), self.backup.copy(), self.lead_left.copy(), self.passes.copy())
+        out = Memory(
+            self.engaged.copy(), self.protected.copy(), self.backup.copy(), self.lead_left.copy(), self.passes.copy()
+        )
         out.engaged[idx], out.protected[idx], out.backup[idx] = part.engaged, part.protected, part.backup
         out.lead_left[idx], out.passes[idx] = part.lead_left, part.passes
         return out
@@ -170,8 +174,16 @@ def _sinc(half: np.ndarray) -> np.ndarray:
     return np.sinc(half / np.pi)
 
 
-def constant_rollout(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, action: np.ndarray, lim: Limits,
-                     dt_s: float, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def constant_rollout(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    action: np.ndarray,
+    lim: Limits,
+    dt_s: float,
+    steps: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Eq. 5-6 integrated as the world does, ``steps`` steps of one constant action per vehicle.
 
     ``x, y, v, phi`` are (M,), ``action`` (M, 2) [omega, u] in [-1, 1] (clipped). Returns the states after
@@ -184,7 +196,9 @@ def constant_rollout(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarra
     theta = a[:, 0] * lim.turn_rate_max_rad_s * dt_s  # heading change per step
     dv = a[:, 1] * lim.accel_max_m_s2 * dt_s
     k = np.arange(steps + 1, dtype=np.float64)
-    speeds = np.clip(v[:, None] + k * dv[:, None], lim.speed_min_m_s[:, None], lim.speed_max_m_s[:, None])  # (M, steps+1)
+    speeds = np.clip(
+        v[:, None] + k * dv[:, None], lim.speed_min_m_s[:, None], lim.speed_max_m_s[:, None]
+    )  # (M, steps+1)
     headings = phi[:, None] + k * theta[:, None]
     chord = 0.5 * (speeds[:, :-1] + speeds[:, 1:]) * dt_s * _sinc(0.5 * theta)[:, None]
     mid = headings[:, :-1] + 0.5 * theta[:, None]
@@ -193,8 +207,9 @@ def constant_rollout(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarra
     return xs, ys, speeds[:, 1:], headings[:, 1:]
 
 
-def step_actions(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, actions: np.ndarray, lim: Limits,
-                 dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def step_actions(
+    x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, actions: np.ndarray, lim: Limits, dt_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fly a queue of actions, one per step: ``actions`` (M, L, 2). Returns the state after the last, (M,) each."""
     for j in range(actions.shape[1]):
         xs, ys, vs, ps = constant_rollout(x, y, v, phi, actions[:, j], lim, dt_s, 1)
@@ -256,13 +271,28 @@ def _lead_ends(v: np.ndarray, u: float, lim: Limits, dt_s: float, leads: np.ndar
     """Distance flown straight and the speed at the end of each lead, (M, L) each: the world's steps at the
     mean of each step's speeds, the speed clipped to its bounds (a constant u: clip(v + k u a dt))."""
     k = np.arange(int(leads.max()) + 1, dtype=np.float64)
-    speeds = np.clip(v[:, None] + k * (u * lim.accel_max_m_s2 * dt_s)[:, None], lim.speed_min_m_s[:, None], lim.speed_max_m_s[:, None])
-    travelled = np.concatenate([np.zeros((len(v), 1)), np.cumsum(0.5 * (speeds[:, :-1] + speeds[:, 1:]) * dt_s, axis=1)], axis=1)
+    speeds = np.clip(
+        v[:, None] + k * (u * lim.accel_max_m_s2 * dt_s)[:, None],
+        lim.speed_min_m_s[:, None],
+        lim.speed_max_m_s[:, None],
+    )
+    travelled = np.concatenate(
+        [np.zeros((len(v), 1)), np.cumsum(0.5 * (speeds[:, :-1] + speeds[:, 1:]) * dt_s, axis=1)], axis=1
+    )
     return travelled[:, leads], speeds[:, leads]
 
 
-def backup_clearance(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, hz: Hazards, lim: Limits,
-                     dt_s: float, leads: np.ndarray, brake: np.ndarray | None = None) -> np.ndarray:
+def backup_clearance(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    hz: Hazards,
+    lim: Limits,
+    dt_s: float,
+    leads: np.ndarray,
+    brake: np.ndarray | None = None,
+) -> np.ndarray:
     """Clearance of every backup flown from each state for ever, (M, L * N_TURNS) (candidate lead * N_TURNS + turn).
 
     A backup flies straight for its lead (u = the turn's u), then its turn for ever. The lead is a straight
@@ -294,10 +324,14 @@ def backup_clearance(x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarra
                 turn = circle_clearance(ex - sign * r * bs, ey + sign * r * bc, r, b_hz)
             else:
                 n = brake_steps(b_lim, dt_s)
-                xs, ys, _, hs = constant_rollout(ex, ey, ev, np.arctan2(bs, bc), np.broadcast_to(TURNS[j], (len(ex), 2)), b_lim, dt_s, n)
+                xs, ys, _, hs = constant_rollout(
+                    ex, ey, ev, np.arctan2(bs, bc), np.broadcast_to(TURNS[j], (len(ex), 2)), b_lim, dt_s, n
+                )
                 spiral = point_clearance(xs, ys, b_hz).min(axis=1) - b_lim.speed_max_m_s * dt_s / 2
                 r = b_lim.speed_min_m_s / b_lim.turn_rate_max_rad_s  # after n steps v = v_min
-                circle = circle_clearance(xs[:, -1] - sign * r * np.sin(hs[:, -1]), ys[:, -1] + sign * r * np.cos(hs[:, -1]), r, b_hz)
+                circle = circle_clearance(
+                    xs[:, -1] - sign * r * np.sin(hs[:, -1]), ys[:, -1] + sign * r * np.cos(hs[:, -1]), r, b_hz
+                )
                 turn = np.minimum(spiral, circle)
             out[rows, :, j] = np.minimum(lead, turn).reshape(len(rows), n_leads)
     return out.reshape(m, n_leads * N_TURNS)
@@ -323,8 +357,18 @@ def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------- decision
 
 
-def decide(state: np.ndarray, proposed: np.ndarray, memory: Memory, hz: Hazards, lim: Limits, dt_s: float, steps: int,
-           margin_m: np.ndarray | float, cfg: ShieldConfig, pending: np.ndarray | None = None) -> Decision:
+def decide(
+    state: np.ndarray,
+    proposed: np.ndarray,
+    memory: Memory,
+    hz: Hazards,
+    lim: Limits,
+    dt_s: float,
+    steps: int,
+    margin_m: np.ndarray | float,
+    cfg: ShieldConfig,
+    pending: np.ndarray | None = None,
+) -> Decision:
     """One decision of the monitor for M vehicles.
 
     ``state`` (M, 4): the estimate x, y, v, phi now; ``proposed`` (M, 2) the policy's action, to be held for
@@ -365,7 +409,9 @@ def decide(state: np.ndarray, proposed: np.ndarray, memory: Memory, hz: Hazards,
     if lost.any():
         lx, ly, lv, lp = x[lost], y[lost], v[lost], phi[lost]
         sub_hz, sub_lim = hz.select(lost), lim.select(lost)
-        here = backup_clearance(lx, ly, lv, lp, sub_hz, sub_lim, dt_s, leads, brake=np.full(len(lx), cfg.braking_backups))
+        here = backup_clearance(
+            lx, ly, lv, lp, sub_hz, sub_lim, dt_s, leads, brake=np.full(len(lx), cfg.braking_backups)
+        )
         pick = choose_backup(here, margin[lost])
         backup[lost] = pick
         lead_left[lost] = leads[pick // N_TURNS]

@@ -92,8 +92,17 @@ class WorldMonitor:
     def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
         flat = np.flatnonzero(due.reshape(-1))
         state = np.stack([world.x_m, world.y_m, world.v_m_s, world.phi_rad], axis=-1).reshape(-1, 4)[flat]
-        d = decide(state, proposed.reshape(-1, 2)[flat], self.memory.select(flat), self.hazards(world).select(flat),
-                   self.limits.select(flat), world.c.dt_s, steps, self.cfg.margin_m, self.cfg)
+        d = decide(
+            state,
+            proposed.reshape(-1, 2)[flat],
+            self.memory.select(flat),
+            self.hazards(world).select(flat),
+            self.limits.select(flat),
+            world.c.dt_s,
+            steps,
+            self.cfg.margin_m,
+            self.cfg,
+        )
         self.memory = self.memory.merged(flat, d.memory)
         w, j = np.unravel_index(flat, due.shape)
         self._flying[w, j] = d.action
@@ -116,18 +125,42 @@ class VehicleMonitor:
         self.dt_s = c.dt_s
         self.hazards = Hazards(world.radar_m.copy(), world.radar_r_m.copy(), c.area_m)
         j = role_index
-        self.limits = Limits(c.speed_min_m_s[j:j + 1], c.speed_max_m_s[j:j + 1], c.turn_rate_max_rad_s[j:j + 1], c.accel_max_m_s2[j:j + 1])
+        self.limits = Limits(
+            c.speed_min_m_s[j : j + 1],
+            c.speed_max_m_s[j : j + 1],
+            c.turn_rate_max_rad_s[j : j + 1],
+            c.accel_max_m_s2[j : j + 1],
+        )
         self.memory = Memory.initial(1)
 
     def reset(self) -> None:
         self.memory = Memory.initial(1)
 
-    def decide(self, x_m: float, y_m: float, v_m_s: float, phi_rad: float, proposed: np.ndarray, steps: int,
-               margin_m: float, pending: np.ndarray | None = None) -> Decision:
+    def decide(
+        self,
+        x_m: float,
+        y_m: float,
+        v_m_s: float,
+        phi_rad: float,
+        proposed: np.ndarray,
+        steps: int,
+        margin_m: float,
+        pending: np.ndarray | None = None,
+    ) -> Decision:
         """One decision: the action to fly for the next ``steps`` steps and whether the backup flies."""
         state = np.array([[x_m, y_m, v_m_s, phi_rad]])
         queue = None if pending is None else np.asarray(pending, dtype=np.float64).reshape(1, -1, 2)
-        d = decide(state, np.asarray(proposed, dtype=np.float64).reshape(1, 2), self.memory, self.hazards, self.limits,
-                   self.dt_s, steps, margin_m, self.cfg, queue)
+        d = decide(
+            state,
+            np.asarray(proposed, dtype=np.float64).reshape(1, 2),
+            self.memory,
+            self.hazards,
+            self.limits,
+            self.dt_s,
+            steps,
+            margin_m,
+            self.cfg,
+            queue,
+        )
         self.memory = d.memory
         return d

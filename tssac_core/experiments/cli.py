@@ -1,11 +1,13 @@
-"""``python -m tssac_core.experiments``: train a grid of (algorithm x seed) runs, evaluate them, write Table 4 and figures 7-12.
+"""``python -m tssac_core.experiments``: train a grid of (algorithm x seed) runs, evaluate them, write Table 4 and
+figures 7-12.
 
 Examples::
 
     python -m tssac_core.experiments --grid experiments/paper.yaml --dry-run      # the jobs and their status
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2       # train what is missing, then report
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --finish-by 17:30  # only what ends by 17:30
-    python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --only 'tssac-*' --only 'sac_lag-*'  # these first
+    python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --only 'tssac-*' --only 'sac_lag-*'  #
+    these first
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
     python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
@@ -24,18 +26,18 @@ import fnmatch
 import shutil
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from tssac_core.cli import UsageError, run
+from tssac_core.deploy.export import compact_checkpoint
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
+from tssac_core.experiments.executors import LOCAL, execute
 from tssac_core.experiments.figures import plot_figures
 from tssac_core.experiments.grid import Grid, Job, load_grid
-from tssac_core.experiments.executors import LOCAL, execute
 from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
 from tssac_core.experiments.report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
 from tssac_core.sim.missions import MissionResults
-from tssac_core.deploy.export import compact_checkpoint
 from tssac_core.sim.scenario import Scenario, load
 
 Say = Callable[[str], None]
@@ -45,16 +47,24 @@ def say(line: str) -> None:
     print(line, flush=True)
 
 
-def train(grid: Grid, results: Path, parallel: int, report: Say = say, finish_by: float | None = None,
-          only: Sequence[str] = ()) -> list[Launch]:
+def train(
+    grid: Grid,
+    results: Path,
+    parallel: int,
+    report: Say = say,
+    finish_by: float | None = None,
+    only: Sequence[str] = (),
+) -> list[Launch]:
     """Run every job that is not finished (with ``only``, of the jobs those patterns name; with ``finish_by``,
     a POSIX time: those expected to finish by then); refuses (UsageError) if a run directory holds other settings."""
     states = [job_state(job) for job in selected_jobs(grid, results, only)]
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
         more = f" (and {len(conflicts) - 1} more: see --dry-run)" if len(conflicts) > 1 else ""
-        raise UsageError(f"{conflicts[0].job.out} holds a run with other settings than {grid.source} ({conflicts[0].detail}); "
-                         f"move it away or choose another --results{more}")
+        raise UsageError(
+            f"{conflicts[0].job.out} holds a run with other settings than {grid.source} ({conflicts[0].detail}); "
+            f"move it away or choose another --results{more}"
+        )
     todo = sum(s.status is not Status.FINISHED for s in states)
     report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {parallel} at a time")
     if finish_by is None:
@@ -74,7 +84,9 @@ def selected_jobs(grid: Grid, results: Path, only: Sequence[str] = ()) -> list[J
     jobs = all_jobs(grid, results)
     for pattern in only:
         if not any(fnmatch.fnmatchcase(job.name, pattern) for job in jobs):
-            raise UsageError(f"--only {pattern!r} matches none of the jobs of {grid.source} (see --dry-run for their names)")
+            raise UsageError(
+                f"--only {pattern!r} matches none of the jobs of {grid.source} (see --dry-run for their names)"
+            )
     return [job for job in jobs if not only or any(fnmatch.fnmatchcase(job.name, pattern) for pattern in only)]
 
 
@@ -93,7 +105,9 @@ def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
     table, data = write_report(summary, results)
     curves = {e.name: [read_metrics(j.out) for j in finished if j.entry == e] for e in grid.algos}
     curves = {name: runs for name, runs in curves.items() if runs}
-    per_episode = {e.name: [evaluations[(j.name, "random")]["per_episode"] for j in finished if j.entry == e] for e in grid.algos}
+    per_episode = {
+        e.name: [evaluations[(j.name, "random")]["per_episode"] for j in finished if j.entry == e] for e in grid.algos
+    }
     per_episode = {name: runs for name, runs in per_episode.items() if runs}
     figures = plot_figures(results, summary, curves, per_episode, mission_for_fig9(grid, finished))
     for path in (table, data, *figures):
@@ -107,11 +121,16 @@ def mission_for_fig9(grid: Grid, finished: list[Job]) -> tuple[MissionResults, S
         return None
     job = next((j for j in finished if j.entry.algo == "tssac"), finished[0])
     spec = eval_specs(grid)[0]
-    return fly_one(job.out, spec), load(spec.scenario), f"{job.name}: {spec.scenario.name}, layout 1 of seed {spec.seed}"
+    return (
+        fly_one(job.out, spec),
+        load(spec.scenario),
+        f"{job.name}: {spec.scenario.name}, layout 1 of seed {spec.seed}",
+    )
 
 
 def dry_run(grid: Grid, results: Path, report: Say = say, only: Sequence[str] = ()) -> None:
-    """Print every job (with ``only``, those the patterns name) with its status and what running the grid would do with it."""
+    """Print every job (with ``only``, those the patterns name) with its status and what running the grid would do
+    with it."""
     for job in selected_jobs(grid, results, only):
         state = job_state(job)
         what = {
@@ -134,30 +153,62 @@ def compact(grid: Grid, results: Path, report: Say = say) -> None:
             b, a = compact_checkpoint(job.out / f"{role}.pt")
             before, after = before + b, after + a
         shutil.rmtree(job.out / "resume", ignore_errors=True)
-    report(f"compacted {len(finished)} finished runs: role checkpoints {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB, resume/ states deleted")
+    report(
+        f"compacted {len(finished)} finished runs: role checkpoints {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB, "
+        f"resume/ states deleted"
+    )
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=__doc__.split("\n")[0])
     p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
-    p.add_argument("--results", type=Path, default=Path("results"), help="output directory (default results/): runs/, table4.md, experiments.json, figures")
-    p.add_argument("--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)")
-    p.add_argument("--finish-by", metavar="HH:MM", help="start only jobs expected to finish by then (today, local time; or "
-                   "'YYYY-MM-DD HH:MM'), by what the grid's finished runs of the same entry took; the rest wait for the next run")
-    p.add_argument("--only", metavar="PATTERN", action="append", default=[], help="train only the jobs whose names (as --dry-run "
-                   "prints them, e.g. tssac-seed1) match this shell pattern, e.g. 'sac_lag-*'; may be given more than once")
+    p.add_argument(
+        "--results",
+        type=Path,
+        default=Path("results"),
+        help="output directory (default results/): runs/, table4.md, experiments.json, figures",
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)"
+    )
+    p.add_argument(
+        "--finish-by",
+        metavar="HH:MM",
+        help="start only jobs expected to finish by then (today, local time; or "
+        "'YYYY-MM-DD HH:MM'), by what the grid's finished runs of the same entry took; the rest wait for the next run",
+    )
+    p.add_argument(
+        "--only",
+        metavar="PATTERN",
+        action="append",
+        default=[],
+        help="train only the jobs whose names (as --dry-run "
+        "prints them, e.g. tssac-seed1) match this shell pattern, e.g. 'sac_lag-*'; may be given more than once",
+    )
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished")
-    mode.add_argument("--dry-run", action="store_true", help="print the jobs and their status (finished, partial, new, conflict) and exit")
-    mode.add_argument("--compact", action="store_true", help="train nothing: keep only the deployable actor in finished runs' checkpoints "
-                      "and delete their resume/ states (to commit results; their evaluations stay valid)")
+    mode.add_argument(
+        "--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished"
+    )
+    mode.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="print the jobs and their status (finished, partial, new, conflict) and exit",
+    )
+    mode.add_argument(
+        "--compact",
+        action="store_true",
+        help="train nothing: keep only the deployable actor in finished runs' checkpoints "
+        "and delete their resume/ states (to commit results; their evaluations stay valid)",
+    )
     args = p.parse_args(argv)
     if args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
     trains_nothing = "--report-only" if args.report_only else "--compact" if args.compact else None
     if trains_nothing and (args.only or args.finish_by is not None):
         chooser = "--only" if args.only else "--finish-by"
-        raise UsageError(f"{chooser} chooses jobs to train, and {trains_nothing} trains nothing (it works on every finished run)")
+        raise UsageError(
+            f"{chooser} chooses jobs to train, and {trains_nothing} trains nothing (it works on every finished run)"
+        )
     args.finish_by = parse_finish_by(args.finish_by) if args.finish_by is not None else None
     return args
 
@@ -171,11 +222,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.compact:
         compact(grid, args.results)
         return 0
-    launches = [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by, only=args.only)
+    launches = (
+        [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by, only=args.only)
+    )
     make_report(grid, args.results)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]
     if failed:
-        print(f"error: {len(failed)} job(s) failed: {', '.join(f.job.name for f in failed)} (see train.log in their run directories)", file=sys.stderr)
+        print(
+            f"error: {len(failed)} job(s) failed: {', '.join(f.job.name for f in failed)} (see train.log in their run "
+            f"directories)",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

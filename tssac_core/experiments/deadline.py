@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import datetime as dt
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from tssac_core.cli import UsageError
 from tssac_core.experiments.grid import Job, learner_family
@@ -40,7 +40,8 @@ def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:
 
 
 def expected_run_s(states: list[JobState]) -> dict[tuple[str, str | None], float]:
-    """Mean wall seconds of the finished runs, per (entry name, transfer role) and per (learner family, transfer role)."""
+    """Mean wall seconds of the finished runs, per (entry name, transfer role) and per (learner family, transfer
+    role)."""
     walls: dict[tuple[str, str | None], list[float]] = {}
     for s in states:
         if s.status is Status.FINISHED and (wall := training_wall_s(s.job.out)) is not None:
@@ -56,7 +57,9 @@ def share_left(job: Job) -> float:
     return max(0.0, 1.0 - done / total)
 
 
-def deadline_filter(states: list[JobState], finish_by: float, clock: Callable[[], float] = time.time) -> Callable[[Job], bool]:
+def deadline_filter(
+    states: list[JobState], finish_by: float, clock: Callable[[], float] = time.time
+) -> Callable[[Job], bool]:
     """Whether a job, started now, is expected to finish by ``finish_by`` (module docstring); ``states``: the
     grid's jobs as the runner found them. Each decision reads again the jobs that were not finished then, so
     that a run finishing during this invocation informs the next start (the first SAC-family run of a grid

@@ -8,7 +8,7 @@ can resume what another started.
 from __future__ import annotations
 
 import logging
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from tssac_core.experiments.grid import Job
 from tssac_core.experiments.jobs import JobState, Launch, run_jobs
@@ -19,8 +19,13 @@ LOCAL = "local"
 EXECUTORS = (LOCAL,)
 
 
-def execute(states: Sequence[JobState], executor: str = LOCAL, parallel: int = 1,
-            report: Callable[[str], None] = logger.info, may_start: Callable[[Job], bool] = lambda job: True) -> list[Launch]:
+def execute(
+    states: Sequence[JobState],
+    executor: str = LOCAL,
+    parallel: int = 1,
+    report: Callable[[str], None] = logger.info,
+    may_start: Callable[[Job], bool] = lambda job: True,
+) -> list[Launch]:
     """Run every new or partial job of ``states`` (see `tssac_core.experiments.jobs.job_state`) with ``executor``,
     at most ``parallel`` at once; returns the launches in start order. Finished jobs are skipped; conflicts must
     have been refused by the caller (ValueError otherwise)."""

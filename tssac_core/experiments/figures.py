@@ -13,8 +13,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 
@@ -22,8 +23,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tssac_core.sim.missions import MissionResults  # noqa: E402
 from tssac_core.plots import plot_mission  # noqa: E402
+from tssac_core.sim.missions import MissionResults  # noqa: E402
 from tssac_core.sim.scenario import ROLES, Scenario  # noqa: E402
 from tssac_core.train.algorithms import algorithm  # noqa: E402
 
@@ -49,8 +50,12 @@ def seed_curves(runs: list[Rows], role: str, key: str) -> tuple[np.ndarray, np.n
                 by_epoch.setdefault(int(r["epoch"]), []).append(value)
     epochs = sorted(by_epoch)
     values = [np.asarray(by_epoch[e]) for e in epochs]
-    return (np.asarray(epochs), np.asarray([v.mean() for v in values]), np.asarray([v.min() for v in values]),
-            np.asarray([v.max() for v in values]))
+    return (
+        np.asarray(epochs),
+        np.asarray([v.mean() for v in values]),
+        np.asarray([v.min() for v in values]),
+        np.asarray([v.max() for v in values]),
+    )
 
 
 def mean_curve(runs: list[Rows], role: str, key: str) -> tuple[list[int], list[float]]:
@@ -115,7 +120,9 @@ def fig8_multiplier(path: Path, curves: Curves) -> None:
     axes[0][0].set_ylabel("cost multiplier")
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8, frameon=False)
-    fig.suptitle("Cost multiplier beta with and without damping (line: mean over seeds; band: the seeds' range)", fontsize=11)
+    fig.suptitle(
+        "Cost multiplier beta with and without damping (line: mean over seeds; band: the seeds' range)", fontsize=11
+    )
     fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
@@ -132,8 +139,14 @@ def fig9_mission(path: Path, results: MissionResults, scenario: Scenario, title:
     r = scenario.ranges
     cost = ", ".join(f"{role.value} {results.cost[0, j]:g}" for j, role in enumerate(ROLES))
     verdict = "success" if results.success[0] else "failure"
-    plot_mission(path, results.layouts[0], tracks, (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
-                 title=f"{title}\n{verdict}, {results.time_s[0]:.0f} s; hazard cost {cost}", area_km=scenario.area_km)
+    plot_mission(
+        path,
+        results.layouts[0],
+        tracks,
+        (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
+        title=f"{title}\n{verdict}, {results.time_s[0]:.0f} s; hazard cost {cost}",
+        area_km=scenario.area_km,
+    )
 
 
 def fig10_boxplots(path: Path, per_episode: dict[str, list[dict[str, Any]]], cost_limit: float) -> None:
@@ -142,7 +155,12 @@ def fig10_boxplots(path: Path, per_episode: dict[str, list[dict[str, Any]]], cos
     fig, axes = plt.subplots(2, len(ROLES), figsize=(5 * len(ROLES), 7), squeeze=False)
     for col, role in enumerate(ROLES):
         for row, key in enumerate(("return", "cost")):
-            data = [np.concatenate([np.asarray(e[key], dtype=float).reshape(-1, len(ROLES))[:, col] for e in per_episode[n]]) for n in names]
+            data = [
+                np.concatenate(
+                    [np.asarray(e[key], dtype=float).reshape(-1, len(ROLES))[:, col] for e in per_episode[n]]
+                )
+                for n in names
+            ]
             ax = axes[row][col]
             ax.boxplot(data, tick_labels=names)
             ax.tick_params(axis="x", labelrotation=45, labelsize=7)
@@ -163,8 +181,15 @@ def clipped_error(mean: Sequence[float], std: Sequence[float], low: float, high:
     return np.stack([np.minimum(d, np.maximum(m - low, 0.0)), np.minimum(d, np.maximum(high - m, 0.0))])
 
 
-def bar_panel(path: Path, title: str, names: Sequence[str], rates: Sequence[dict[str, Any]], costs: Sequence[dict[str, Any]],
-              cost_limit: float, reference: tuple[str, float, float] | None = None) -> None:
+def bar_panel(
+    path: Path,
+    title: str,
+    names: Sequence[str],
+    rates: Sequence[dict[str, Any]],
+    costs: Sequence[dict[str, Any]],
+    cost_limit: float,
+    reference: tuple[str, float, float] | None = None,
+) -> None:
     """Success rate and cost bars (mean ± std over seeds) per entry; ``reference`` = (label, success, cost)."""
     labels = list(names)
     rate_mean = [100 * (s["mean"] if s["mean"] is not None else math.nan) for s in rates]
@@ -196,12 +221,23 @@ def bar_panel(path: Path, title: str, names: Sequence[str], rates: Sequence[dict
     plt.close(fig)
 
 
-FIGURES = ("fig7_training.png", "fig8_multiplier.png", "fig9_mission.png", "fig10_test_boxplots.png",
-           "fig11_generalization.png", "fig12_penalty.png")
+FIGURES = (
+    "fig7_training.png",
+    "fig8_multiplier.png",
+    "fig9_mission.png",
+    "fig10_test_boxplots.png",
+    "fig11_generalization.png",
+    "fig12_penalty.png",
+)
 
 
-def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_episode: dict[str, list[dict[str, Any]]],
-                 mission: tuple[MissionResults, Scenario, str] | None) -> list[Path]:
+def plot_figures(
+    results: Path,
+    summary: dict[str, Any],
+    curves: Curves,
+    per_episode: dict[str, list[dict[str, Any]]],
+    mission: tuple[MissionResults, Scenario, str] | None,
+) -> list[Path]:
     """Write every figure the data allows under ``results`` and delete those it no longer allows (a figure
     of runs that have since been moved away); returns the paths written."""
     written: list[Path] = []
@@ -211,8 +247,11 @@ def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_epi
     if paper:
         written.append(results / "fig7_training.png")
         fig7_training(written[-1], paper, cost_limit)
-    damping = {f"{a['name']} ({'damped' if a['algo'] == 'tssac' else 'no damping'})": curves[a["name"]]
-               for a in done if a["algo"] in ("tssac", "sac_lag") and a["name"] in curves}
+    damping = {
+        f"{a['name']} ({'damped' if a['algo'] == 'tssac' else 'no damping'})": curves[a["name"]]
+        for a in done
+        if a["algo"] in ("tssac", "sac_lag") and a["name"] in curves
+    }
     if damping:
         written.append(results / "fig8_multiplier.png")
         fig8_multiplier(written[-1], damping)
@@ -226,15 +265,26 @@ def plot_figures(results: Path, summary: dict[str, Any], curves: Curves, per_epi
     if done and "generalization" in guidance:
         g = guidance["generalization"]
         written.append(results / "fig11_generalization.png")
-        bar_panel(written[-1], f"Generalisation: {Path(summary['evaluation']['generalization_scenario']).name}",
-                  [a["name"] for a in done], [a["generalization"]["success_rate"] for a in done],
-                  [a["generalization"]["mean_cost"] for a in done], cost_limit, ("guidance", g["success_rate"], g["mean_cost"]))
+        bar_panel(
+            written[-1],
+            f"Generalisation: {Path(summary['evaluation']['generalization_scenario']).name}",
+            [a["name"] for a in done],
+            [a["generalization"]["success_rate"] for a in done],
+            [a["generalization"]["mean_cost"] for a in done],
+            cost_limit,
+            ("guidance", g["success_rate"], g["mean_cost"]),
+        )
     penalty = penalty_entries(done)
     if any(a["algo"] == "sac_penalty" for a in penalty):
         written.append(results / "fig12_penalty.png")
-        bar_panel(written[-1], "SAC with a hazard penalty vs TSSAC",
-                  [a["name"] if a["algo"] == "tssac" else f"{a['name']} (penalty {a['penalty']:g})" for a in penalty],
-                  [a["random"]["success_rate"] for a in penalty], [a["random"]["mean_cost"] for a in penalty], cost_limit)
+        bar_panel(
+            written[-1],
+            "SAC with a hazard penalty vs TSSAC",
+            [a["name"] if a["algo"] == "tssac" else f"{a['name']} (penalty {a['penalty']:g})" for a in penalty],
+            [a["random"]["success_rate"] for a in penalty],
+            [a["random"]["mean_cost"] for a in penalty],
+            cost_limit,
+        )
     for name in FIGURES:
         if results / name not in written:
             (results / name).unlink(missing_ok=True)

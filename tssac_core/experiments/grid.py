@@ -31,7 +31,8 @@ Example (``experiments/paper.yaml`` is the full one)::
 Every key of ``train`` is an argument of ``python -m tssac_core.train`` (``steps_per_epoch`` is
 ``--steps-per-epoch``) and is passed to every job alike; a key left out is the command's default.
 ``preset: FILE`` reads a preset (:mod:`tssac_core.train.preset`, e.g. ``configs/paper.yaml``) whose values the
-keys of ``train`` override. ``sac_set`` holds the ``--set`` overrides of the SAC family (tssac, sac_lag, sac, sac_penalty),
+keys of ``train`` override. ``sac_set`` holds the ``--set`` overrides of the SAC family (tssac, sac_lag, sac,
+sac_penalty),
 ``onpolicy_set`` those of ppo, ppo_lag and cpo (the two learners have different settings), and an
 entry's own ``set`` is applied on top for that entry only. Paths are relative to the directory the
 command runs in, as on every other command line. A bad file raises :class:`GridError`, one line:
@@ -43,19 +44,20 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Collection
+from typing import Any
 
 from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
-from tssac_core.train.arguments import parse_args as parse_train_args
+from tssac_core.sim.yaml_file import read_yaml
 from tssac_core.train.algorithms import ALGORITHMS, Selection, algorithm
+from tssac_core.train.arguments import parse_args as parse_train_args
 from tssac_core.train.config import TrainConfig, check_learner_settings
 from tssac_core.train.preset import load_preset
-from tssac_core.sim.yaml_file import read_yaml
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -149,7 +151,11 @@ class Job:
 
     @property
     def name(self) -> str:
-        return f"{self.entry.name}-seed{self.seed}" if self.role is None else f"transfer-{self.role}-{self.entry.name}-seed{self.seed}"
+        return (
+            f"{self.entry.name}-seed{self.seed}"
+            if self.role is None
+            else f"transfer-{self.role}-{self.entry.name}-seed{self.seed}"
+        )
 
     @property
     def roles(self) -> tuple[str, ...]:
@@ -174,7 +180,11 @@ class Grid:
     def jobs(self, results: Path) -> list[Job]:
         """Every (entry, seed) run, seed-major: each entry's first seed before any entry's second, so a grid
         stopped part-way (it runs across sessions) has every row of Table 4; directories under ``results/runs``."""
-        return [Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s)) for s in self.seeds for e in self.algos]
+        return [
+            Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s))
+            for s in self.seeds
+            for e in self.algos
+        ]
 
     def transfer_jobs(self, results: Path) -> list[Job]:
         """The transfer experiment's runs (none without a ``transfer:`` section), seed-major, under ``results/runs``."""
@@ -186,8 +196,15 @@ class Grid:
         for s in self.seeds:
             for role in t.roles:
                 for e in (t.with_transfer, t.without_transfer):
-                    argv = (*train_argv(args, e, s), "--roles", role, "--teammates", str(t.teammates),
-                            "--stop-at-task-success", repr(t.task_success))
+                    argv = (
+                        *train_argv(args, e, s),
+                        "--roles",
+                        role,
+                        "--teammates",
+                        str(t.teammates),
+                        "--stop-at-task-success",
+                        repr(t.task_success),
+                    )
                     jobs.append(Job(e, s, Path("unused"), argv, role))
         return [dataclasses.replace(j, out=results / "runs" / j.name) for j in jobs]
 
@@ -196,17 +213,41 @@ class Grid:
 
 
 def learner_family(algo: str) -> str:
-    """``sac`` or ``onpolicy``: the learner an algorithm trains with (its ``--set`` family, ``sac_set`` or ``onpolicy_set``)."""
+    """``sac`` or ``onpolicy``: the learner an algorithm trains with (its ``--set`` family, ``sac_set`` or
+    ``onpolicy_set``)."""
     return algorithm(algo).family.value
 
 
 def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
     """The ``tssac_core.train`` arguments of one run."""
-    argv = ["--algo", entry.algo, "--seed", str(seed), "--scenario", str(args.scenario),
-            "--epochs", str(args.epochs), "--steps-per-epoch", str(args.steps_per_epoch), "--envs", str(args.envs),
-            "--action-repeat", str(args.action_repeat), "--update-every", str(args.update_every),
-            "--start-steps", str(args.start_steps), "--update-after", str(args.update_after), "--threads", str(args.threads),
-            "--validation-episodes", str(args.validation_episodes), "--observation", args.observation]
+    argv = [
+        "--algo",
+        entry.algo,
+        "--seed",
+        str(seed),
+        "--scenario",
+        str(args.scenario),
+        "--epochs",
+        str(args.epochs),
+        "--steps-per-epoch",
+        str(args.steps_per_epoch),
+        "--envs",
+        str(args.envs),
+        "--action-repeat",
+        str(args.action_repeat),
+        "--update-every",
+        str(args.update_every),
+        "--start-steps",
+        str(args.start_steps),
+        "--update-after",
+        str(args.update_after),
+        "--threads",
+        str(args.threads),
+        "--validation-episodes",
+        str(args.validation_episodes),
+        "--observation",
+        args.observation,
+    ]
     if args.selection:
         argv += ["--selection", args.selection]
     if entry.algo == "sac_penalty":
@@ -224,21 +265,34 @@ def load_grid(path: str | Path) -> Grid:
     source = str(path)
     data = read_yaml(path, GridError)
     r = _Reader(source)
-    top = r.mapping(data, "", allowed={"seeds", "algos", "train", "evaluation", "transfer"}, required={"seeds", "algos", "train", "evaluation"})
+    top = r.mapping(
+        data,
+        "",
+        allowed={"seeds", "algos", "train", "evaluation", "transfer"},
+        required={"seeds", "algos", "train", "evaluation"},
+    )
     seeds = r.seeds(top["seeds"], "seeds")
     train_fields = {f.name for f in dataclasses.fields(TrainArgs)}
     train_data = r.mapping(top["train"], "train", allowed=train_fields | {"sac_set", "onpolicy_set", "preset"})
     preset = load_preset(r.string(train_data["preset"], "train.preset")) if "preset" in train_data else None
-    family_sets = {"sac": r.overrides(train_data.get("sac_set", {}), "train.sac_set"),
-                   "onpolicy": r.overrides(train_data.get("onpolicy_set", {}), "train.onpolicy_set")}
+    family_sets = {
+        "sac": r.overrides(train_data.get("sac_set", {}), "train.sac_set"),
+        "onpolicy": r.overrides(train_data.get("onpolicy_set", {}), "train.onpolicy_set"),
+    }
     if preset is not None:  # the preset's values first, the grid file's own on top
         outside = sorted(set(preset.values) - train_fields)
         if outside:
-            raise GridError(source, "train.preset", f"{preset.source}: {', '.join(outside)}: not a grid training argument "
-                            f"(the grid's are {', '.join(sorted(train_fields))})")
+            raise GridError(
+                source,
+                "train.preset",
+                f"{preset.source}: {', '.join(outside)}: not a grid training argument "
+                f"(the grid's are {', '.join(sorted(train_fields))})",
+            )
         train_data = {**preset.values, **{k: v for k, v in train_data.items() if k != "preset"}}
-        family_sets = {family: {**preset.learner_settings(example), **family_sets[family]}
-                       for family, example in (("sac", "tssac"), ("onpolicy", "ppo"))}
+        family_sets = {
+            family: {**preset.learner_settings(example), **family_sets[family]}
+            for family, example in (("sac", "tssac"), ("onpolicy", "ppo"))
+        }
     if "scenario" not in train_data:
         raise GridError(source, "train.scenario", "missing required field (in the grid file or its preset)")
     train = r.train_args(train_data)
@@ -249,13 +303,18 @@ def load_grid(path: str | Path) -> Grid:
     for i, name in enumerate(names):
         if name in names[:i]:
             raise GridError(source, f"algos[{i}].name", f"{name!r} is used twice (give each entry its own name)")
-    ev = r.mapping(top["evaluation"], "evaluation", allowed={f.name for f in dataclasses.fields(Evaluation)}, required={"scenario"})
+    ev = r.mapping(
+        top["evaluation"], "evaluation", allowed={f.name for f in dataclasses.fields(Evaluation)}, required={"scenario"}
+    )
     evaluation = Evaluation(
         scenario=r.scenario(ev["scenario"], "evaluation.scenario"),
         episodes=r.integer(ev.get("episodes", Evaluation.episodes), "evaluation.episodes", minimum=1),
         seed=r.integer(ev.get("seed", Evaluation.seed), "evaluation.seed", minimum=0),
-        generalization_scenario=(r.scenario(ev["generalization_scenario"], "evaluation.generalization_scenario")
-                                 if ev.get("generalization_scenario") is not None else None),
+        generalization_scenario=(
+            r.scenario(ev["generalization_scenario"], "evaluation.generalization_scenario")
+            if ev.get("generalization_scenario") is not None
+            else None
+        ),
     )
     transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
     grid = Grid(Path(path), algos, seeds, train, evaluation, transfer)
@@ -287,12 +346,16 @@ class _Reader:
     def fail(self, where: str, problem: str) -> GridError:
         return GridError(self.source, where, problem)
 
-    def mapping(self, value: Any, where: str, allowed: Collection[str], required: Collection[str] = ()) -> dict[str, Any]:
+    def mapping(
+        self, value: Any, where: str, allowed: Collection[str], required: Collection[str] = ()
+    ) -> dict[str, Any]:
         if not isinstance(value, dict):
             raise self.fail(where, f"expected a mapping, got {type(value).__name__}")
         for key in value:
             if key not in allowed:
-                raise self.fail(f"{where}.{key}" if where else str(key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+                raise self.fail(
+                    f"{where}.{key}" if where else str(key), f"unknown key (allowed: {', '.join(sorted(allowed))})"
+                )
         for key in sorted(required):
             if key not in value:
                 raise self.fail(f"{where}.{key}" if where else key, "missing required field")
@@ -336,16 +399,31 @@ class _Reader:
         if not isinstance(value, dict):
             raise self.fail(where, f"expected a mapping of learner settings, got {type(value).__name__}")
         for key, v in value.items():
-            ok = isinstance(v, (int, float, bool, str)) or v is None or (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
+            ok = (
+                isinstance(v, (int, float, bool, str))
+                or v is None
+                or (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
+            )
             if not isinstance(key, str) or not ok:
-                raise self.fail(f"{where}.{key}", f"expected a number, boolean, word, null or list of numbers, got {v!r}")
+                raise self.fail(
+                    f"{where}.{key}", f"expected a number, boolean, word, null or list of numbers, got {v!r}"
+                )
         return dict(value)
 
     def train_args(self, data: dict[str, Any]) -> TrainArgs:
         """``train:`` without the learner settings; counts as ``tssac_core.train`` accepts them."""
         values: dict[str, Any] = {"scenario": self.scenario(data["scenario"], "train.scenario")}
-        for key, minimum in (("epochs", 1), ("steps_per_epoch", 1), ("envs", 1), ("action_repeat", 1), ("update_every", 1),
-                             ("threads", 1), ("start_steps", 0), ("update_after", 0), ("validation_episodes", 0)):
+        for key, minimum in (
+            ("epochs", 1),
+            ("steps_per_epoch", 1),
+            ("envs", 1),
+            ("action_repeat", 1),
+            ("update_every", 1),
+            ("threads", 1),
+            ("start_steps", 0),
+            ("update_after", 0),
+            ("validation_episodes", 0),
+        ):
             if key in data:
                 values[key] = self.integer(data[key], f"train.{key}", minimum)
         if "observation" in data:
@@ -362,44 +440,75 @@ class _Reader:
     def transfer(self, value: Any, entries: dict[str, AlgoEntry]) -> TransferExperiment:
         """``transfer:``: the transfer experiment; its sides name entries of ``algos`` (their settings apply)."""
         where = "transfer"
-        data = self.mapping(value, where, allowed={"teammates", "with", "without", "roles", "epochs", "task_success", "validation_episodes"},
-                            required={"teammates", "with", "without"})
+        data = self.mapping(
+            value,
+            where,
+            allowed={"teammates", "with", "without", "roles", "epochs", "task_success", "validation_episodes"},
+            required={"teammates", "with", "without"},
+        )
         sides = {}
         for key, must_transfer in (("with", True), ("without", False)):
             name = self.string(data[key], f"{where}.{key}")
             if name not in entries:
                 raise self.fail(f"{where}.{key}", f"{name!r} is not an entry of algos ({', '.join(entries)})")
             if algorithm(entries[name].algo).transfers != must_transfer:
-                raise self.fail(f"{where}.{key}", f"{name!r} is {entries[name].algo}: 'with' needs tssac (it transfers), 'without' another algorithm")
+                raise self.fail(
+                    f"{where}.{key}",
+                    f"{name!r} is {entries[name].algo}: 'with' needs tssac (it transfers), 'without' another algorithm",
+                )
             sides[key] = entries[name]
         roles = data.get("roles", list(TransferExperiment.roles))
-        if not isinstance(roles, list) or not roles or any(r not in ("detect", "strike") for r in roles) or len(set(roles)) != len(roles):
-            raise self.fail(f"{where}.roles", f"expected a list of detect and/or strike (the roles that have a previous role), got {roles!r}")
+        if (
+            not isinstance(roles, list)
+            or not roles
+            or any(r not in ("detect", "strike") for r in roles)
+            or len(set(roles)) != len(roles)
+        ):
+            raise self.fail(
+                f"{where}.roles",
+                f"expected a list of detect and/or strike (the roles that have a previous role), got {roles!r}",
+            )
         teammates = Path(self.string(data["teammates"], f"{where}.teammates"))
         for role in roles:
             for earlier in ROLES[: Role(role).index]:
                 if not (teammates / f"{earlier.value}.pt").is_file():
-                    raise self.fail(f"{where}.teammates", f"{teammates / (earlier.value + '.pt')} not found (training {role} needs the trained {earlier.value})")
+                    raise self.fail(
+                        f"{where}.teammates",
+                        f"{teammates / (earlier.value + '.pt')} not found (training {role} needs the trained "
+                        f"{earlier.value})",
+                    )
         task_success = self.number(data.get("task_success", TransferExperiment.task_success), f"{where}.task_success")
         if not 0.0 < task_success <= 1.0:
             raise self.fail(f"{where}.task_success", f"expected a fraction in (0, 1], got {task_success:g}")
         return TransferExperiment(
-            teammates=teammates, with_transfer=sides["with"], without_transfer=sides["without"], roles=tuple(roles),
+            teammates=teammates,
+            with_transfer=sides["with"],
+            without_transfer=sides["without"],
+            roles=tuple(roles),
             epochs=self.integer(data.get("epochs", TransferExperiment.epochs), f"{where}.epochs", minimum=1),
             task_success=task_success,
-            validation_episodes=self.integer(data.get("validation_episodes", TransferExperiment.validation_episodes),
-                                             f"{where}.validation_episodes", minimum=0),
+            validation_episodes=self.integer(
+                data.get("validation_episodes", TransferExperiment.validation_episodes),
+                f"{where}.validation_episodes",
+                minimum=0,
+            ),
         )
 
     def algo_entry(self, item: Any, where: str, family_sets: dict[str, dict[str, Any]]) -> AlgoEntry:
         """``tssac`` or ``{algo: sac_penalty, penalty: -10, name: sac_pen10, set: {...}}``."""
-        data = {"algo": item} if isinstance(item, str) else self.mapping(item, where, allowed={"algo", "name", "penalty", "set"}, required={"algo"})
+        data = (
+            {"algo": item}
+            if isinstance(item, str)
+            else self.mapping(item, where, allowed={"algo", "name", "penalty", "set"}, required={"algo"})
+        )
         algo = self.string(data["algo"], f"{where}.algo")
         if algo not in ALGORITHMS:
             raise self.fail(f"{where}.algo", f"unknown algorithm {algo!r} (choose from {', '.join(ALGORITHMS)})")
         name = self.string(data.get("name", algo), f"{where}.name")
         if not NAME_PATTERN.match(name):
-            raise self.fail(f"{where}.name", f"{name!r} may hold only letters, digits, '_', '-' and '.' (it names directories)")
+            raise self.fail(
+                f"{where}.name", f"{name!r} may hold only letters, digits, '_', '-' and '.' (it names directories)"
+            )
         penalty = self.number(data.get("penalty", 0.0), f"{where}.penalty")
         if penalty != 0.0 and algo != "sac_penalty":
             raise self.fail(f"{where}.penalty", f"only sac_penalty takes a penalty, not {algo}")

@@ -29,16 +29,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import FrameType
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import tssac_core
 from tssac_core.cli import UsageError
-from tssac_core.experiments.grid import Job
 from tssac_core.deploy.policy import CheckpointError, read_checkpoint
+from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.train.config import TrainConfig, with_recorded_defaults
@@ -89,7 +90,11 @@ def job_state(job: Job) -> JobState:
     config_path = job.out / "config.json"
     if not config_path.is_file():
         if any((job.out / f"{role.value}.pt").is_file() for role in ROLES):
-            return JobState(job, Status.CONFLICT, "role checkpoints without a config.json (not made by tssac_core.train for this grid)")
+            return JobState(
+                job,
+                Status.CONFLICT,
+                "role checkpoints without a config.json (not made by tssac_core.train for this grid)",
+            )
         return JobState(job, Status.NEW)
     try:
         saved = json.loads(config_path.read_text())
@@ -169,15 +174,23 @@ def start(job: Job, resume: bool) -> tuple[subprocess.Popen[bytes], tuple[str, .
     with (job.out / LOG_NAME).open("ab") as log:
         log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: {' '.join(cmd)}\n".encode())
         log.flush()
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=child_environment(),
-                                start_new_session=True)
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=child_environment(),
+            start_new_session=True,
+        )
     return proc, cmd
 
 
 def log_stopped(job: Job, seconds: float) -> None:
     """Record in the job's train.log that the runner stopped it after ``seconds`` of training."""
     with (job.out / LOG_NAME).open("a") as log:
-        log.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: stopped after {seconds:.0f} s; the next run resumes it\n")
+        log.write(
+            f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: stopped after {seconds:.0f} s; the next run resumes it\n"
+        )
 
 
 def stop(proc: subprocess.Popen[bytes], grace_s: float = GRACE_S) -> None:
@@ -213,8 +226,12 @@ def interrupt_on_sigterm() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None] = logger.info,
-             may_start: Callable[[Job], bool] = lambda job: True) -> list[Launch]:
+def run_jobs(
+    states: list[JobState],
+    parallel: int,
+    report: Callable[[str], None] = logger.info,
+    may_start: Callable[[Job], bool] = lambda job: True,
+) -> list[Launch]:
     """Run every new or partial job, at most ``parallel`` at once; returns the launches, in start order.
 
     Finished jobs are skipped; conflicts must have been refused by the caller. A free slot goes to the
@@ -239,7 +256,10 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
                     proc, cmd = start(state.job, resume)
                     running[proc.pid] = (proc, len(launches), time.monotonic())
                     launches.append(Launch(state.job, cmd, resume))
-                    report(f"started {state.job.name}{' (resume)' if resume else ''}: pid {proc.pid}, log {state.job.out / LOG_NAME}")
+                    report(
+                        f"started {state.job.name}{' (resume)' if resume else ''}: pid {proc.pid}, log "
+                        f"{state.job.out / LOG_NAME}"
+                    )
                 for pid, (proc, index, _) in list(running.items()):
                     code = proc.poll()
                     if code is None:
@@ -248,8 +268,10 @@ def run_jobs(states: list[JobState], parallel: int, report: Callable[[str], None
                     launch = launches[index]
                     launches[index] = Launch(launch.job, launch.command, launch.resumed, code)
                     ok = code == 0 and is_finished(launch.job)
-                    report(f"{'finished' if ok else f'FAILED (exit code {code})'} {launch.job.name}"
-                           + ("" if ok else f": see {launch.job.out / LOG_NAME}"))
+                    report(
+                        f"{'finished' if ok else f'FAILED (exit code {code})'} {launch.job.name}"
+                        + ("" if ok else f": see {launch.job.out / LOG_NAME}")
+                    )
                 time.sleep(POLL_S)
         finally:
             for proc, index, started in running.values():

@@ -20,16 +20,17 @@ import hashlib
 import json
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from tssac_core.cli import write_json
+from tssac_core.deploy.policy import checkpoint_info, load_team, read_checkpoint
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
-from tssac_core.deploy.policy import checkpoint_info, load_team, read_checkpoint
 from tssac_core.sim.scenario import ROLES, load
 from tssac_core.sim.team import GUIDANCE, Pilot
 
@@ -92,8 +93,12 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
     ``return`` and ``cost`` (M, 3) per role.
     """
     scenario = load(spec.scenario)
-    key = {"team": team_digest(team) if team is not None else GUIDANCE, "scenario_digest": scenario.digest(),
-           "seed": spec.seed, "episodes": spec.episodes}
+    key = {
+        "team": team_digest(team) if team is not None else GUIDANCE,
+        "scenario_digest": scenario.digest(),
+        "seed": spec.seed,
+        "episodes": spec.episodes,
+    }
     if cache.is_file():
         try:
             cached = json.loads(cache.read_text())
@@ -104,14 +109,20 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
     pilots: list[Pilot] = list(load_team(team)) if team is not None else [GUIDANCE] * len(ROLES)
     results = fly_missions(scenario, pilots, spec.episodes, spec.seed)
     summary = results.summary(scenario.cost_limit)
-    summary.update({
-        "controller": str(team) if team is not None else GUIDANCE,
-        "scenario": str(spec.scenario),
-        "seed": spec.seed,
-        "cost_limit": scenario.cost_limit,
-        "cache_key": key,
-        "per_episode": {"success": results.success.tolist(), "return": results.returns.tolist(), "cost": results.cost.tolist()},
-    })
+    summary.update(
+        {
+            "controller": str(team) if team is not None else GUIDANCE,
+            "scenario": str(spec.scenario),
+            "seed": spec.seed,
+            "cost_limit": scenario.cost_limit,
+            "cache_key": key,
+            "per_episode": {
+                "success": results.success.tolist(),
+                "return": results.returns.tolist(),
+                "cost": results.cost.tolist(),
+            },
+        }
+    )
     write_json(cache, summary)
     return summary
 
@@ -150,8 +161,13 @@ def pooled_cost(evaluations: list[dict[str, Any]], resamples: int = BOOTSTRAP_RE
     idx = np.random.default_rng(0).integers(0, len(per_mission), size=(resamples, len(per_mission)))
     low, high = np.percentile(per_mission[idx].mean(axis=1), [2.5, 97.5])
     limit = evaluations[0]["cost_limit"]
-    return {"uav_missions": int(costs.size), "mean": float(costs.mean()), "ci95": [float(low), float(high)],
-            "over_limit": int((costs > limit).sum()), "largest": sorted(costs.ravel().tolist(), reverse=True)[:3]}
+    return {
+        "uav_missions": int(costs.size),
+        "mean": float(costs.mean()),
+        "ci95": [float(low), float(high)],
+        "over_limit": int((costs > limit).sum()),
+        "largest": sorted(costs.ravel().tolist(), reverse=True)[:3],
+    }
 
 
 def evaluate_all(grid: Grid, finished: list[Job], results: Path, report: Callable[[str], None]) -> Evaluations:
@@ -211,7 +227,9 @@ def _number(text: str) -> float:
         return math.nan
 
 
-def steps_to_threshold(rows: list[dict[str, str]], role: str, threshold: float = TRANSFER_THRESHOLD) -> tuple[int | None, int]:
+def steps_to_threshold(
+    rows: list[dict[str, str]], role: str, threshold: float = TRANSFER_THRESHOLD
+) -> tuple[int | None, int]:
     """(env_steps at the end of the first epoch with task_success >= threshold, or None; the role's total env_steps)."""
     sel = sorted((r for r in rows if r["role"] == role), key=lambda r: int(r["epoch"]))
     total = int(_number(sel[-1]["env_steps"])) if sel else 0
@@ -272,7 +290,9 @@ def transfer_speedup(grid: Grid, finished: list[Job]) -> dict[str, Any]:
         per_algo: dict[str, Any] = {}
         for algo in ("tssac", "sac_lag"):
             entry = next((e for e in grid.algos if e.algo == algo), None)
-            per_algo[algo] = steps_figures([j for j in finished if entry is not None and j.entry == entry], role, TRANSFER_THRESHOLD)
+            per_algo[algo] = steps_figures(
+                [j for j in finished if entry is not None and j.entry == entry], role, TRANSFER_THRESHOLD
+            )
             per_algo[algo]["entry"] = entry.name if entry is not None else None
         out[role] = {**per_algo, **speedup(per_algo["sac_lag"], per_algo["tssac"])}
     return out
@@ -284,42 +304,78 @@ def transfer_experiment(grid: Grid, runs: list[Job]) -> dict[str, Any] | None:
     t = grid.transfer
     if t is None:
         return None
-    out: dict[str, Any] = {"threshold": t.task_success, "teammates": shown(t.teammates), "epochs": t.epochs,
-                           "steps_per_epoch": grid.train.steps_per_epoch, "roles": list(t.roles)}
+    out: dict[str, Any] = {
+        "threshold": t.task_success,
+        "teammates": shown(t.teammates),
+        "epochs": t.epochs,
+        "steps_per_epoch": grid.train.steps_per_epoch,
+        "roles": list(t.roles),
+    }
     for role in t.roles:
-        sides = {side: steps_figures([j for j in runs if j.role == role and j.entry == entry], role, t.task_success)
-                 for side, entry in (("with", t.with_transfer), ("without", t.without_transfer))}
+        sides = {
+            side: steps_figures([j for j in runs if j.role == role and j.entry == entry], role, t.task_success)
+            for side, entry in (("with", t.with_transfer), ("without", t.without_transfer))
+        }
         out[role] = {**sides, **speedup(sides["without"], sides["with"])}
     return out
 
 
-def summarise(grid: Grid, jobs: list[Job], finished: list[Job], evaluations: Evaluations, results: Path,
-              transfer_runs: list[Job] = ()) -> dict[str, Any]:
+def summarise(
+    grid: Grid,
+    jobs: list[Job],
+    finished: list[Job],
+    evaluations: Evaluations,
+    results: Path,
+    transfer_runs: list[Job] = (),
+) -> dict[str, Any]:
     """Everything ``experiments.json`` holds."""
     labels = [spec.label for spec in eval_specs(grid)]
     algorithms = []
     for entry in grid.algos:
         mine = [j for j in finished if j.entry == entry]
-        row: dict[str, Any] = {"name": entry.name, "algo": entry.algo, "penalty": entry.penalty, "seeds": [j.seed for j in mine]}
+        row: dict[str, Any] = {
+            "name": entry.name,
+            "algo": entry.algo,
+            "penalty": entry.penalty,
+            "seeds": [j.seed for j in mine],
+        }
         for label in labels:
-            row[label] = {key: over_seeds({j.seed: evaluations[(j.name, label)][key] for j in mine}) for key in ("success_rate", "mean_cost")}
-            row[label]["within_cost_limit"] = over_seeds({j.seed: within_limit(evaluations[(j.name, label)]) for j in mine})
+            row[label] = {
+                key: over_seeds({j.seed: evaluations[(j.name, label)][key] for j in mine})
+                for key in ("success_rate", "mean_cost")
+            }
+            row[label]["within_cost_limit"] = over_seeds(
+                {j.seed: within_limit(evaluations[(j.name, label)]) for j in mine}
+            )
             row[label]["pooled_cost"] = pooled_cost([evaluations[(j.name, label)] for j in mine])
         walls = {j.seed: w for j in mine if (w := training_wall_s(j.out)) is not None}
         row["training_wall_s"] = over_seeds(walls)
         paper = PAPER_TABLE4.get(entry.algo) if entry.algo != "sac_penalty" else None
         row["paper"] = {"success_rate": paper[0], "mean_cost": paper[1]} if paper else None
         algorithms.append(row)
-    guidance = {label: {**{key: evaluations[(GUIDANCE, label)][key] for key in ("success_rate", "mean_cost", "episodes")},
-                        "within_cost_limit": within_limit(evaluations[(GUIDANCE, label)])} for label in labels}
+    guidance = {
+        label: {
+            **{key: evaluations[(GUIDANCE, label)][key] for key in ("success_rate", "mean_cost", "episodes")},
+            "within_cost_limit": within_limit(evaluations[(GUIDANCE, label)]),
+        }
+        for label in labels
+    }
     ev = grid.evaluation
     return {
         "grid": shown(grid.source),
         "results": shown(results),
-        "evaluation": {"scenario": shown(ev.scenario), "episodes": ev.episodes, "seed": ev.seed,
-                       "generalization_scenario": shown(ev.generalization_scenario) if ev.generalization_scenario else None},
-        "training": {"epochs_per_role": grid.train.epochs, "steps_per_epoch": grid.train.steps_per_epoch,
-                     "action_repeat": grid.train.action_repeat, "paper_epochs_per_role": PAPER_EPOCHS},
+        "evaluation": {
+            "scenario": shown(ev.scenario),
+            "episodes": ev.episodes,
+            "seed": ev.seed,
+            "generalization_scenario": shown(ev.generalization_scenario) if ev.generalization_scenario else None,
+        },
+        "training": {
+            "epochs_per_role": grid.train.epochs,
+            "steps_per_epoch": grid.train.steps_per_epoch,
+            "action_repeat": grid.train.action_repeat,
+            "paper_epochs_per_role": PAPER_EPOCHS,
+        },
         "cost_limit": load(ev.scenario).cost_limit,
         "algorithms": algorithms,
         "guidance": guidance,
@@ -368,10 +424,16 @@ def _minutes(stats: dict[str, Any]) -> str:
 def _budget(training: dict[str, Any]) -> str:
     """The training budget beside the table: every algorithm alike, and how it compares with the paper's."""
     epochs, paper = training["epochs_per_role"], training["paper_epochs_per_role"]
-    text = (f"Training budget, the same for every algorithm: {epochs} epochs x {training['steps_per_epoch']:,} learner decisions "
-            f"per role (one decision per {training['action_repeat']} world steps of 0.1 s).")
+    text = (
+        f"Training budget, the same for every algorithm: {epochs} epochs x {training['steps_per_epoch']:,} learner "
+        f"decisions "
+        f"per role (one decision per {training['action_repeat']} world steps of 0.1 s)."
+    )
     if epochs < paper:
-        text += f" **Shrunk from the paper's {paper} epochs** to fit the grid on this machine: {epochs / paper:.0%} of its training."
+        text += (
+            f" **Shrunk from the paper's {paper} epochs** to fit the grid on this machine: "
+            f"{epochs / paper:.0%} of its training."
+        )
     return text
 
 
@@ -384,29 +446,39 @@ def table_markdown(summary: dict[str, Any]) -> str:
         f"Grid `{summary['grid']}`. Every team flies the same {ev['episodes']} layouts of `{ev['scenario']}` "
         f"(layout seed {ev['seed']}, never used in training). Ours: mean ± sample standard deviation over the "
         "finished seeds. Success = the target was hit (all three tasks). Average cost = hazard cost per UAV "
-        f"per mission (limit C = {summary['cost_limit']:g} per UAV); within C = the share of UAV-missions whose own cost "
+        f"per mission (limit C = {summary['cost_limit']:g} per UAV); within C = the share of UAV-missions whose own "
+        f"cost "
         "is at most C. The paper's figures are its Table 4.",
         "",
         _budget(summary["training"]),
         "",
-        "| algorithm | seeds | success rate | average cost | within C | paper: success rate | paper: average cost | training wall time per seed |",
+        "| algorithm | seeds | success rate | average cost | within C | paper: success rate | paper: average cost | "
+        "training wall time per seed |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for a in summary["algorithms"]:
         paper = a["paper"]
         p_rate, p_cost = (f"{100 * paper['success_rate']:.0f}%", f"{paper['mean_cost']:.1f}") if paper else ("—", "—")
         r = a["random"]
-        lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(r['success_rate'])} | {_cost(r['mean_cost'])} "
-                     f"| {_rate(r['within_cost_limit'])} | {p_rate} | {p_cost} | {_minutes(a['training_wall_s'])} |")
+        lines.append(
+            f"| {a['name']} | {len(a['seeds'])} | {_rate(r['success_rate'])} | {_cost(r['mean_cost'])} "
+            f"| {_rate(r['within_cost_limit'])} | {p_rate} | {p_cost} | {_minutes(a['training_wall_s'])} |"
+        )
     g = summary["guidance"]["random"]
-    lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | {100 * g['within_cost_limit']:.1f}% | — | — | — |")
+    lines.append(
+        f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | "
+        f"{100 * g['within_cost_limit']:.1f}% | — | — | — |"
+    )
     lines += [
         "",
         "## The mean cost against the limit",
         "",
-        f"Every seed's {ev['episodes']} missions pooled: the mean cost per UAV per mission with a 95% bootstrap interval over "
-        "missions, how many UAV-missions cost more than C, and the largest single costs (steps of 0.1 s inside a radar). A "
-        "few long stays inside a radar make the mean: where the interval spans C, these layouts cannot tell on which side of "
+        f"Every seed's {ev['episodes']} missions pooled: the mean cost per UAV per mission with a 95% bootstrap "
+        f"interval over "
+        "missions, how many UAV-missions cost more than C, and the largest single costs (steps of 0.1 s inside a "
+        "radar). A "
+        "few long stays inside a radar make the mean: where the interval spans C, these layouts cannot tell on which "
+        "side of "
         "the limit the algorithm is.",
         "",
         "| algorithm | UAV-missions | mean cost | 95% interval | over C | largest |",
@@ -416,10 +488,16 @@ def table_markdown(summary: dict[str, Any]) -> str:
         c = a["random"]["pooled_cost"]
         if c["mean"] is not None:
             largest = ", ".join(f"{v:.0f}" for v in c["largest"] if v > 0) or "—"
-            lines.append(f"| {a['name']} | {c['uav_missions']} | {c['mean']:.2f} | {c['ci95'][0]:.2f}-{c['ci95'][1]:.2f} "
-                         f"| {c['over_limit']} | {largest} |")
+            lines.append(
+                f"| {a['name']} | {c['uav_missions']} | {c['mean']:.2f} | {c['ci95'][0]:.2f}-{c['ci95'][1]:.2f} "
+                f"| {c['over_limit']} | {largest} |"
+            )
     if summary["left_out"]:
-        lines += ["", f"Left out (not finished, or a run with other settings than the grid: see --dry-run): {', '.join(summary['left_out'])}."]
+        lines += [
+            "",
+            f"Left out (not finished, or a run with other settings than the grid: see --dry-run): "
+            f"{', '.join(summary['left_out'])}.",
+        ]
     if "generalization" in summary["guidance"]:
         lines += [
             "",
@@ -432,18 +510,30 @@ def table_markdown(summary: dict[str, Any]) -> str:
         ]
         for a in summary["algorithms"]:
             r = a["generalization"]
-            lines.append(f"| {a['name']} | {len(a['seeds'])} | {_rate(r['success_rate'])} | {_cost(r['mean_cost'])} | {_rate(r['within_cost_limit'])} |")
+            lines.append(
+                f"| {a['name']} | {len(a['seeds'])} | {_rate(r['success_rate'])} | {_cost(r['mean_cost'])} | "
+                f"{_rate(r['within_cost_limit'])} |"
+            )
         g = summary["guidance"]["generalization"]
-        lines.append(f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | {100 * g['within_cost_limit']:.1f}% |")
+        lines.append(
+            f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | "
+            f"{100 * g['within_cost_limit']:.1f}% |"
+        )
     t = summary["transfer_speedup"]
     lines += [
         "",
         "## Transfer inside the grid's curricula",
         "",
-        f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= {100 * t['threshold']:.0f}%, "
-        "mean over the finished seeds, in the grid's own runs (each role beside that run's earlier roles). A seed that never "
+        f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= "
+        f"{100 * t['threshold']:.0f}%, "
+        "mean over the finished seeds, in the grid's own runs (each role beside that run's earlier roles). A seed that "
+        "never "
         "got there counts with its role's total decisions, so such a mean is a lower bound (>=)."
-        + (" The transfer experiment (last section) measures it beside the same trained earlier roles." if summary.get("transfer_experiment") else ""),
+        + (
+            " The transfer experiment (last section) measures it beside the same trained earlier roles."
+            if summary.get("transfer_experiment")
+            else ""
+        ),
         "",
         "| role | tssac | sac_lag | speed-up (sac_lag / tssac) |",
         "| --- | --- | --- | --- |",
@@ -462,7 +552,9 @@ def table_markdown(summary: dict[str, Any]) -> str:
     ]
     for role in TRANSFER_ROLES:
         r = t[role]
-        lines.append(f"| {role} | {_rate(r['tssac']['mean_task_success'])} | {_rate(r['sac_lag']['mean_task_success'])} |")
+        lines.append(
+            f"| {role} | {_rate(r['tssac']['mean_task_success'])} | {_rate(r['sac_lag']['mean_task_success'])} |"
+        )
     if summary.get("transfer_experiment"):
         lines += transfer_experiment_markdown(summary["transfer_experiment"])
     return "\n".join(lines) + "\n"
@@ -477,27 +569,34 @@ def transfer_experiment_markdown(x: dict[str, Any]) -> list[str]:
         "",
         "## Transfer experiment: decisions to the level, with and without transfer",
         "",
-        f"Each role trained alone with the same trained earlier roles flying (`{x['teammates']}`), stopped at the first "
+        f"Each role trained alone with the same trained earlier roles flying (`{x['teammates']}`), stopped at the "
+        f"first "
         f"epoch whose task success in training reached {100 * x['threshold']:.0f}%, at most {x['epochs']} epochs "
-        f"({cap:,} decisions). `{with_name}` starts from the previous role's networks in `{x['teammates']}` (TSSAC's transfer); "
+        f"({cap:,} decisions). `{with_name}` starts from the previous role's networks in `{x['teammates']}` (TSSAC's "
+        f"transfer); "
         f"`{without_name}` starts from scratch. Per seed, then the mean; a seed that never got there counts with its "
         f"{cap:,} decisions, so such a mean is a lower bound (>=).",
         "",
-        f"| role | {with_name} (transfer): per seed | mean | {without_name} (from scratch): per seed | mean | speed-up |",
+        f"| role | {with_name} (transfer): per seed | mean | {without_name} (from scratch): per seed | mean | speed-up "
+        f"|",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for role in x["roles"]:
         r = x[role]
         speed = "—" if r["speedup"] is None else f"{'>= ' if r['speedup_is_lower_bound'] else ''}{r['speedup']:.1f}x"
-        lines.append(f"| {role} | {_per_seed(r['with'])} | {_mean_steps(r['with'])} | {_per_seed(r['without'])} | "
-                     f"{_mean_steps(r['without'])} | {speed} |")
+        lines.append(
+            f"| {role} | {_per_seed(r['with'])} | {_mean_steps(r['with'])} | {_per_seed(r['without'])} | "
+            f"{_mean_steps(r['without'])} | {speed} |"
+        )
     return lines
 
 
 def _per_seed(figures: dict[str, Any]) -> str:
     if not figures["seeds"]:
         return "—"
-    return ", ".join(f"{v:,}" if v is not None else f"not in {figures['counted'][seed]:,}" for seed, v in figures["per_seed"].items())
+    return ", ".join(
+        f"{v:,}" if v is not None else f"not in {figures['counted'][seed]:,}" for seed, v in figures["per_seed"].items()
+    )
 
 
 def _mean_steps(figures: dict[str, Any]) -> str:

@@ -11,9 +11,10 @@ as ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0`` when this mod
 from __future__ import annotations
 
 import pickle
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -108,7 +109,8 @@ class RoleTask:
         """The learner's cost counts steps within this distance of a radar's disk (0: eq. 11 exactly); the
         mission's own figures (``world.cost_total``, ``episode_hazard_cost``) stay eq. 11."""
         self.routes = RouteMap(reward_config.route)
-        """Route fields of the reward's approach term (the observation's own, in route mode, have the default margins)."""
+        """Route fields of the reward's approach term (the observation's own, in route mode, have the default
+        margins)."""
         self.obs_routes = self.routes if reward_config.route == RouteConfig() else RouteMap()
         self.world = World(scenario, n)
         self.team = Team(self.pilots, observation)
@@ -123,7 +125,9 @@ class RoleTask:
     def n(self) -> int:
         return self.world.n
 
-    def reset(self, index: Sequence[int] | np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
+    def reset(
+        self, index: Sequence[int] | np.ndarray | None = None, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
         """Reset worlds (all if ``index`` is None) and return every world's observation."""
         idx = np.arange(self.n) if index is None else np.asarray(index)
         gen = rng if rng is not None else self.rng
@@ -234,7 +238,9 @@ class UavRoleEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self._needs_reset = True
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         obs = self.task.reset(rng=self.np_random)
         self._needs_reset = False
@@ -249,7 +255,13 @@ class UavRoleEnv(gym.Env):
         self._needs_reset = terminated or truncated
         info = self._info()
         info["cost"] = float(cost[0])
-        return observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[0], float(r[0]), terminated, truncated, info
+        return (
+            observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[0],
+            float(r[0]),
+            terminated,
+            truncated,
+            info,
+        )
 
     def _info(self) -> dict[str, Any]:
         w = self.task.world

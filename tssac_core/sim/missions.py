@@ -8,8 +8,9 @@ in either world, and a run can be split by mission index (shards) without changi
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -75,7 +75,11 @@ class ObservationMode(enum.Enum):
 
     @property
     def size(self) -> int:
-        return {ObservationMode.PAPER: PAPER_SIZE, ObservationMode.EXTENDED: EXTENDED_SIZE, ObservationMode.ROUTE: ROUTE_SIZE}[self]
+        return {
+            ObservationMode.PAPER: PAPER_SIZE,
+            ObservationMode.EXTENDED: EXTENDED_SIZE,
+            ObservationMode.ROUTE: ROUTE_SIZE,
+        }[self]
 
 
 def observation_bounds(mode: ObservationMode) -> tuple[np.ndarray, np.ndarray]:
@@ -169,8 +173,15 @@ def build_observation(
     return _clip_to_bounds(out, mode)
 
 
-def _paper_observation(j: int, c: WorldConstants, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray,
-                       phi_rad: np.ndarray, target_xy_m: np.ndarray) -> np.ndarray:
+def _paper_observation(
+    j: int,
+    c: WorldConstants,
+    x_m: np.ndarray,
+    y_m: np.ndarray,
+    v_m_s: np.ndarray,
+    phi_rad: np.ndarray,
+    target_xy_m: np.ndarray,
+) -> np.ndarray:
     """Eq. 7: [x, y, v, phi, l] scaled to about [0, 1]; ``target_xy_m`` (2, N)."""
     area = c.area_m
     speed = _speed(v_m_s, c, j)
@@ -243,7 +254,9 @@ def _row_starts(n: int, k: int) -> np.ndarray:
 @functools.lru_cache(maxsize=16)
 def _bounds_of(mode: ObservationMode, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``mode`` as (size, N) arrays: same-shape operands for the clip."""
-    low, high = (np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode])
+    low, high = (
+        np.ascontiguousarray(np.broadcast_to(b[:, None], (b.size, n)), dtype=np.float64) for b in _BOUNDS[mode]
+    )
     return low, high
 
 

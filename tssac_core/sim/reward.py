@@ -53,8 +53,13 @@ class _Weights:
         def table(weight: float) -> np.ndarray:
             return np.multiply(np.array([0.0, 1.0]), weight)
 
-        return _Weights(table(cfg.k1 * cfg.success), constant_operand(cfg.k2), constant_operand(cfg.k3 * cfg.step),
-                        table(cfg.hold), table(cfg.out_of_area))
+        return _Weights(
+            table(cfg.k1 * cfg.success),
+            constant_operand(cfg.k2),
+            constant_operand(cfg.k3 * cfg.step),
+            table(cfg.hold),
+            table(cfg.out_of_area),
+        )
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ field into the *detour*: how much longer the way to the disk is than the straigh
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -28,7 +28,9 @@ KNIGHT_MOVES = KING_MOVES + [((a * p, b * q), _SQRT5) for a in (1, -1) for b in 
 """16 neighbours: at most 2.7% longer (the reward uses these: its approach term measures progress)."""
 
 
-def wavefront(goal: np.ndarray, step_cost: np.ndarray, moves: list[tuple[tuple[int, int], float]] = KING_MOVES) -> np.ndarray:
+def wavefront(
+    goal: np.ndarray, step_cost: np.ndarray, moves: list[tuple[tuple[int, int], float]] = KING_MOVES
+) -> np.ndarray:
     """Shortest-path length (in cells) from every cell to the nearest ``goal`` cell.
 
     A move from cell a to cell b of length L costs ``L * (step_cost[a] + step_cost[b]) / 2``; cells of
@@ -78,7 +80,9 @@ whole-grid sweeps 1-5 passes, and the field takes 2.4x less time than with whole
 round: 1.4x, it leaves 10-50 passes; three: 1.8x, a round costs more than the passes it saves)."""
 
 
-def _line_sweeps(padded: np.ndarray, pad: int, weighted: dict[float, np.ndarray], moves: tuple[tuple[tuple[int, int], float], ...]) -> None:
+def _line_sweeps(
+    padded: np.ndarray, pad: int, weighted: dict[float, np.ndarray], moves: tuple[tuple[tuple[int, int], float], ...]
+) -> None:
     """Relax ``padded`` distances in line sweeps: the grid with ``pad`` cells (the longest move's reach) of
     impassable padding round it, at +inf; ``weighted`` holds each move length's L c / 2, padded likewise.
 
@@ -103,7 +107,9 @@ def _line_sweeps(padded: np.ndarray, pad: int, weighted: dict[float, np.ndarray]
 
 
 @functools.lru_cache(maxsize=8)
-def _line_plan(padded_shape: tuple[int, int], pad: int, moves: tuple[tuple[tuple[int, int], float], ...]) -> list[tuple]:
+def _line_plan(
+    padded_shape: tuple[int, int], pad: int, moves: tuple[tuple[tuple[int, int], float], ...]
+) -> list[tuple]:
     """Per direction of a line sweep: (axis, line order, source cells (lines, moves, cells) as flat indices
     into the padded grid, and the source's and destination's entries in the stacked per-move costs)."""
     rows, cols = padded_shape
@@ -123,7 +129,15 @@ def _line_plan(padded_shape: tuple[int, int], pad: int, moves: tuple[tuple[tuple
             src = np.stack([dst + moves[m][0][0] * cols + moves[m][0][1] for m in chosen], axis=1)
             offset = (np.array(chosen) * size)[None, :, None]  # where each move's costs start in the stack
             order = range(n_lines) if step > 0 else range(n_lines - 1, -1, -1)
-            plan.append((axis, list(order), src[list(order)], (src + offset)[list(order)], (dst[:, None, :] + offset)[list(order)]))
+            plan.append(
+                (
+                    axis,
+                    list(order),
+                    src[list(order)],
+                    (src + offset)[list(order)],
+                    (dst[:, None, :] + offset)[list(order)],
+                )
+            )
     return plan
 
 
@@ -215,7 +229,9 @@ def _corner_offsets(n: int, size: int) -> np.ndarray:
     return np.arange(n)[None, :, None] * (size * size) + np.array([0, size, 1, size + 1]).reshape(4, 1, 1)
 
 
-def field_gradient(fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def field_gradient(
+    fields: np.ndarray, grid_m: float, x_m: np.ndarray, y_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Gradient (per cell) of each world's field at positions (N, K): central differences at the nearest
     cell, with the diagonal differences added to smooth the grid metric's preferred directions."""
     size = fields.shape[1]
@@ -261,7 +277,9 @@ class RouteMap:
         cfg = self.cfg
         cx, cy = cell_centres(world.c.area_m, cfg.grid_m)
         inside = radar_depth(world, k, cx, cy, cfg.margin_m) > 0
-        return wavefront(sam_disk(world, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
+        return (
+            wavefront(sam_disk(world, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
+        )
 
     def detour_m(self, world: World, vehicle: int | None = None) -> np.ndarray:
         """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""

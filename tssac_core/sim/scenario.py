@@ -22,9 +22,10 @@ import hashlib
 import math
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import yaml
@@ -287,7 +288,9 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
         names = {f.name for f in dataclasses.fields(tp)}
         for key in value:
             if key not in names:
-                raise ScenarioError(source, _join(where, str(key)), f"unknown key (allowed: {', '.join(sorted(names))})")
+                raise ScenarioError(
+                    source, _join(where, str(key)), f"unknown key (allowed: {', '.join(sorted(names))})"
+                )
         kwargs = {}
         for f in dataclasses.fields(tp):
             if f.name in value:
@@ -312,17 +315,23 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(source, where, f"expected a number, got {_short(value)}")
         if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
+            raise ScenarioError(
+                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
+            )
         if not math.isfinite(value):
             raise ScenarioError(source, where, f"expected a finite number, got {value!r}")
         if abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(source, where, f"out of range: {value!r} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
+            raise ScenarioError(
+                source, where, f"out of range: {value!r} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
+            )
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ScenarioError(source, where, f"expected an integer, got {_short(value)}")
         if abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
+            raise ScenarioError(
+                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
+            )
         return value
     if tp is bool:
         if not isinstance(value, bool):
@@ -349,7 +358,11 @@ def _join(where: str, name: str) -> str:
 
 def _plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value) if getattr(value, f.name) is not None}
+        return {
+            f.name: _plain(getattr(value, f.name))
+            for f in dataclasses.fields(value)
+            if getattr(value, f.name) is not None
+        }
     if isinstance(value, tuple):
         return [_plain(v) for v in value]
     if isinstance(value, dict):
@@ -391,7 +404,11 @@ def validate(s: Scenario, source: str) -> None:
 
     check(0 < s.area_km <= MAX_AREA_KM, "area_km", f"must be in (0, {MAX_AREA_KM:g}] km, got {s.area_km}")
     check(0 < s.dt_s <= 1.0, "dt_s", f"must be in (0, 1] s, got {s.dt_s}")
-    check(0 < s.episode_steps <= MAX_EPISODE_STEPS, "episode_steps", f"must be in 1..{MAX_EPISODE_STEPS}, got {s.episode_steps}")
+    check(
+        0 < s.episode_steps <= MAX_EPISODE_STEPS,
+        "episode_steps",
+        f"must be in 1..{MAX_EPISODE_STEPS}, got {s.episode_steps}",
+    )
     check(s.cost_limit >= 0, "cost_limit", f"must be >= 0, got {s.cost_limit}")
     r = s.ranges
     for name in ("strike_launch_km", "detect_km", "sam_launch_km", "sam_detect_km"):
@@ -410,7 +427,11 @@ def validate(s: Scenario, source: str) -> None:
         v = s.vehicles[name]
         where = f"vehicles.{name}"
         check(v.speed_min_m_s > 0, f"{where}.speed_min_m_s", "must be positive (a fixed-wing UAV cannot hover)")
-        check(v.speed_min_m_s < v.speed_max_m_s <= MAX_SPEED_M_S, f"{where}.speed_max_m_s", f"must be above speed_min_m_s and at most {MAX_SPEED_M_S:g} m/s")
+        check(
+            v.speed_min_m_s < v.speed_max_m_s <= MAX_SPEED_M_S,
+            f"{where}.speed_max_m_s",
+            f"must be above speed_min_m_s and at most {MAX_SPEED_M_S:g} m/s",
+        )
         check(
             v.speed_min_m_s <= v.speed_init_m_s <= v.speed_max_m_s,
             f"{where}.speed_init_m_s",
@@ -425,7 +446,9 @@ def validate(s: Scenario, source: str) -> None:
         _validate_random(s, s.random, source)
     lk = s.link
     for name in ("gps_dropout_prob", "packet_loss", "duplication", "reordering"):
-        check(0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}")
+        check(
+            0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}"
+        )
     for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s"):
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
     check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
@@ -433,12 +456,22 @@ def validate(s: Scenario, source: str) -> None:
     check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
     check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
     if s.expect is not None:
-        check(0 < s.expect.episodes <= MAX_EXPECT_EPISODES, "expect.episodes", f"must be positive and at most {MAX_EXPECT_EPISODES}")
+        check(
+            0 < s.expect.episodes <= MAX_EXPECT_EPISODES,
+            "expect.episodes",
+            f"must be positive and at most {MAX_EXPECT_EPISODES}",
+        )
         check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
         check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
         check(0 <= s.expect.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
-        check(s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0")
-        check(s.expect.speedup is None or 0 < s.expect.speedup <= 1000, "expect.speedup", "must be positive and at most 1000")
+        check(
+            s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0"
+        )
+        check(
+            s.expect.speedup is None or 0 < s.expect.speedup <= 1000,
+            "expect.speedup",
+            "must be positive and at most 1000",
+        )
 
 
 def _max_radius_km(s: Scenario) -> float:
@@ -456,7 +489,9 @@ def _validate_layout(s: Scenario, lay: Layout, source: str) -> None:
     for i, radar in enumerate(lay.radars):
         where = f"layout.radars[{i}]"
         if not 0 < radar.radius_km <= _max_radius_km(s):
-            raise ScenarioError(source, f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)")
+            raise ScenarioError(
+                source, f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)"
+            )
         if not inside(radar.position_km):
             raise ScenarioError(source, f"{where}.position_km", f"{radar.position_km} is outside the area")
     names = [role.value for role in ROLES]
@@ -480,7 +515,11 @@ def _validate_random(s: Scenario, rnd: RandomLayout, source: str) -> None:
             raise ScenarioError(source, f"random.{f.name}", f"range is empty: {value[0]} > {value[1]}")
     lo, hi = rnd.radar_radius_km
     if not (0 < lo and hi <= _max_radius_km(s)):
-        raise ScenarioError(source, "random.radar_radius_km", f"out of range: {rnd.radar_radius_km} (allowed (0, {_max_radius_km(s)}] km)")
+        raise ScenarioError(
+            source,
+            "random.radar_radius_km",
+            f"out of range: {rnd.radar_radius_km} (allowed (0, {_max_radius_km(s)}] km)",
+        )
     if rnd.radar_count < 0 or rnd.radar_count > 10:
         raise ScenarioError(source, "random.radar_count", f"must be in [0, 10], got {rnd.radar_count}")
     for name in ("sam_x_km", "sam_y_km", "start_x_km", "start_y_km"):
@@ -511,7 +550,10 @@ def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, s
         for i, radar in enumerate(lay.radars):
             d = math.dist(start.position_km, radar.position_km)
             if d <= radar.radius_km + clearance_km:
-                return f"layout.starts.{name}", f"starts inside (or within {clearance_km} km of) radar {i} ({d:.1f} km from its centre)"
+                return (
+                    f"layout.starts.{name}",
+                    f"starts inside (or within {clearance_km} km of) radar {i} ({d:.1f} km from its centre)",
+                )
     n = int(round(s.area_km / GRID_KM))
     centres = (np.arange(n) + 0.5) * GRID_KM
     gx, gy = np.meshgrid(centres, centres, indexing="ij")
@@ -524,7 +566,10 @@ def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, s
         Role.DETECT.value: (d_sam > r.strike_launch_km) & (d_sam <= r.detect_km),
         Role.STRIKE.value: d_sam < r.strike_launch_km,
     }
-    cells = {name: (min(int(st.position_km[0] / GRID_KM), n - 1), min(int(st.position_km[1] / GRID_KM), n - 1)) for name, st in lay.starts.items()}
+    cells = {
+        name: (min(int(st.position_km[0] / GRID_KM), n - 1), min(int(st.position_km[1] / GRID_KM), n - 1))
+        for name, st in lay.starts.items()
+    }
     reached: list[np.ndarray] = []
     for name, cell in cells.items():
         reach = next((c for c in reached if c[cell]), None)  # starts in one component share a fill
@@ -534,7 +579,10 @@ def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, s
             reach = _flood(seed, free | seed)
             reached.append(reach)
         if not (reach & zones[name] & free).any():
-            return f"layout.starts.{name}", f"its zone cannot be reached from {lay.starts[name].position_km} without crossing a radar"
+            return (
+                f"layout.starts.{name}",
+                f"its zone cannot be reached from {lay.starts[name].position_km} without crossing a radar",
+            )
     return None
 
 

@@ -11,7 +11,7 @@ A *pilot* is one of:
 
 from __future__ import annotations
 
-from typing import Callable, Sequence, Union
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import World
 
 GUIDANCE = "guidance"
-Pilot = Union[str, Callable[[np.ndarray], np.ndarray], None]
+Pilot = str | Callable[[np.ndarray], np.ndarray] | None
 
 
 def check_pilot(pilot: Pilot, role_name: str) -> None:

@@ -54,7 +54,12 @@ def cached_constant(value: float) -> np.ndarray:
     return constant_operand(value)
 
 
-_ZERO, _HALF, _ONE, _MINUS_ONE = constant_operand(0.0), constant_operand(0.5), constant_operand(1.0), constant_operand(-1.0)
+_ZERO, _HALF, _ONE, _MINUS_ONE = (
+    constant_operand(0.0),
+    constant_operand(0.5),
+    constant_operand(1.0),
+    constant_operand(-1.0),
+)
 _SINC_C3, _SINC_C5 = constant_operand(1.0 / 6.0), constant_operand(1.0 / 120.0)
 _WRAP_EDGES = np.array([-math.pi, math.pi])
 """Heading bins: below -pi, [-pi, pi), at or above pi (``searchsorted(side="right")`` gives 0, 1, 2)."""
@@ -301,10 +306,28 @@ class World:
     def __getstate__(self) -> dict:
         # The broadcast arrays are derived; a pickle holds the state only (and stays small).
         state = self.__dict__.copy()
-        for key in ("_turn_rate", "_accel", "_speed_min", "_speed_max", "_zone_inner", "_zone_outer", "_rate", "_dt", "_half_area",
-                    "_episode_steps", "_trig", "_sam_xy", "_radar_xy", "_radar_r2",
-                    "_points_xy", "_unused_slots", "_moving", "_dt_moving", "_running_steps",
-                    "_running_count"):
+        for key in (
+            "_turn_rate",
+            "_accel",
+            "_speed_min",
+            "_speed_max",
+            "_zone_inner",
+            "_zone_outer",
+            "_rate",
+            "_dt",
+            "_half_area",
+            "_episode_steps",
+            "_trig",
+            "_sam_xy",
+            "_radar_xy",
+            "_radar_r2",
+            "_points_xy",
+            "_unused_slots",
+            "_moving",
+            "_dt_moving",
+            "_running_steps",
+            "_running_count",
+        ):
             state.pop(key, None)
         return state
 
@@ -314,7 +337,9 @@ class World:
         self.__dict__.update(state)
         self._build_constants()
 
-    def reset(self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, bool, bool] = (True, True, True)) -> None:
+    def reset(
+        self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, bool, bool] = (True, True, True)
+    ) -> None:
         """Start worlds ``index`` afresh with the given layouts (one per index)."""
         idx = np.asarray(index, dtype=np.int64)
         if len(idx) != len(layouts):
@@ -363,8 +388,17 @@ class World:
         self._running_steps = self.running.astype(np.int64)  # what a step adds to ``steps``
         self._running_count = np.count_nonzero(self.running)
 
-    def mirror(self, index: int, role_index: int, x_m: float, y_m: float, v_m_s: float, phi_rad: float,
-               radar_on: bool, identified: bool) -> None:
+    def mirror(
+        self,
+        index: int,
+        role_index: int,
+        x_m: float,
+        y_m: float,
+        v_m_s: float,
+        phi_rad: float,
+        radar_on: bool,
+        identified: bool,
+    ) -> None:
         """Set one vehicle's state and the mission flags from an outside estimate.
 
         For a companion computer that keeps a one-world copy of a real (or SITL) vehicle, so that the
@@ -379,7 +413,8 @@ class World:
         self.identified[index] = identified
 
     def step(self, action: np.ndarray) -> StepResult:
-        """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits (eq. 8)."""
+        """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits
+        (eq. 8)."""
         moving = self._moving
         self._move(action, self._dt_moving)
         zone_dist_prev = self.zone_dist_m
@@ -453,7 +488,8 @@ class World:
         return in_zone
 
     def _mission_logic(self, in_zone: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Eq. 9 (Table 1), all conditions at once. Returns (task_completed, radar_on_changed, identified_now, hit_now)."""
+        """Eq. 9 (Table 1), all conditions at once. Returns (task_completed, radar_on_changed, identified_now,
+        hit_now)."""
         radar_on = in_zone[:, 0]
         radar_on_changed = radar_on != self.radar_on
         self.radar_on = radar_on

@@ -80,17 +80,32 @@ class Algorithm:
         return self.family is Family.OFF_POLICY
 
 
-ALGORITHMS: dict[Algo, Algorithm] = {a.name: a for a in (
-    Algorithm(Algo.SAC, Family.OFF_POLICY, constrained=False, transfers=False, variant=Variant.SAC),
-    Algorithm(Algo.SAC_PENALTY, Family.OFF_POLICY, constrained=False, transfers=False, variant=Variant.SAC_PENALTY,
-              in_figure7=False),
-    Algorithm(Algo.SAC_LAG, Family.OFF_POLICY, constrained=True, transfers=False, variant=Variant.SAC_LAG),
-    Algorithm(Algo.TSSAC, Family.OFF_POLICY, constrained=True, transfers=True, variant=Variant.TSSAC),
-    Algorithm(Algo.PPO, Family.ON_POLICY, constrained=False, transfers=False, onpolicy=OnPolicyAlgo.PPO),
-    Algorithm(Algo.PPO_LAG, Family.ON_POLICY, constrained=True, transfers=False, onpolicy=OnPolicyAlgo.PPO_LAG,
-              in_figure7=False),
-    Algorithm(Algo.CPO, Family.ON_POLICY, constrained=True, transfers=False, onpolicy=OnPolicyAlgo.CPO),
-)}
+ALGORITHMS: dict[Algo, Algorithm] = {
+    a.name: a
+    for a in (
+        Algorithm(Algo.SAC, Family.OFF_POLICY, constrained=False, transfers=False, variant=Variant.SAC),
+        Algorithm(
+            Algo.SAC_PENALTY,
+            Family.OFF_POLICY,
+            constrained=False,
+            transfers=False,
+            variant=Variant.SAC_PENALTY,
+            in_figure7=False,
+        ),
+        Algorithm(Algo.SAC_LAG, Family.OFF_POLICY, constrained=True, transfers=False, variant=Variant.SAC_LAG),
+        Algorithm(Algo.TSSAC, Family.OFF_POLICY, constrained=True, transfers=True, variant=Variant.TSSAC),
+        Algorithm(Algo.PPO, Family.ON_POLICY, constrained=False, transfers=False, onpolicy=OnPolicyAlgo.PPO),
+        Algorithm(
+            Algo.PPO_LAG,
+            Family.ON_POLICY,
+            constrained=True,
+            transfers=False,
+            onpolicy=OnPolicyAlgo.PPO_LAG,
+            in_figure7=False,
+        ),
+        Algorithm(Algo.CPO, Family.ON_POLICY, constrained=True, transfers=False, onpolicy=OnPolicyAlgo.CPO),
+    )
+}
 """Every algorithm by its name (``--algo``), in the order of the command's choices."""
 
 

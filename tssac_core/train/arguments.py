@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
@@ -39,38 +40,122 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     preset_path = first.parse_known_args(argv)[0].preset
     preset = load_preset(preset_path) if preset_path is not None else None
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=DESCRIPTION)
-    p.add_argument("--preset", type=Path, metavar="FILE", help="a recipe file (configs/paper.yaml, configs/shipped.yaml): its "
-                   "settings are the defaults, the flags given here override them (tssac_core.train.preset)")
-    p.add_argument("--algo", choices=list(ALGORITHMS), type=Algo, default=Algo.TSSAC, help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)")
-    p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)")
+    p.add_argument(
+        "--preset",
+        type=Path,
+        metavar="FILE",
+        help="a recipe file (configs/paper.yaml, configs/shipped.yaml): its "
+        "settings are the defaults, the flags given here override them (tssac_core.train.preset)",
+    )
+    p.add_argument(
+        "--algo",
+        choices=list(ALGORITHMS),
+        type=Algo,
+        default=Algo.TSSAC,
+        help="learner (default tssac: SAC-Lagrangian, damped multiplier, transfer)",
+    )
+    p.add_argument(
+        "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
-    p.add_argument("--seeds", help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
-                   "--out/seed<N>/ (replaces --seed)")
+    p.add_argument(
+        "--seeds",
+        help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
+        "--out/seed<N>/ (replaces --seed)",
+    )
     p.add_argument("--epochs", type=int, default=50, help="epochs per role (Table 3: 50)")
     p.add_argument("--steps-per-epoch", type=int, default=4000, help="learner decisions per epoch (Table 3: 4000)")
     p.add_argument("--roles", default="decoy,detect,strike", help="comma-separated, in curriculum order")
     p.add_argument("--envs", type=int, default=4, help="parallel worlds (default 4)")
-    p.add_argument("--update-every", type=int, default=1, help="one gradient update per this many decisions (default 1)")
-    p.add_argument("--start-steps", type=int, default=4000, help="uniform random actions for this many decisions first (from-scratch roles)")
-    p.add_argument("--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions")
-    p.add_argument("--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)")
-    p.add_argument("--observation", choices=[m.value for m in ObservationMode], default="route", help="observation (default route = extended + the way around the radars; paper = eq. 7)")
+    p.add_argument(
+        "--update-every", type=int, default=1, help="one gradient update per this many decisions (default 1)"
+    )
+    p.add_argument(
+        "--start-steps",
+        type=int,
+        default=4000,
+        help="uniform random actions for this many decisions first (from-scratch roles)",
+    )
+    p.add_argument(
+        "--update-after", type=int, default=1000, help="no updates before the buffer holds this many transitions"
+    )
+    p.add_argument(
+        "--action-repeat", type=int, default=1, help="hold each action for this many 0.1 s world steps (default 1)"
+    )
+    p.add_argument(
+        "--observation",
+        choices=[m.value for m in ObservationMode],
+        default="route",
+        help="observation (default route = extended + the way around the radars; paper = eq. 7)",
+    )
     p.add_argument("--penalty", type=float, default=0.0, help="sac_penalty: reward r + penalty * c (e.g. -10)")
-    p.add_argument("--route-margin-km", type=float, default=3.0, help="reward and route observation: the way to the zone keeps this far from the radars (default 3)")
-    p.add_argument("--cost-margin-km", type=float, default=1.0, help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)")
-    p.add_argument("--validation-episodes", type=int, default=30, help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)")
-    p.add_argument("--selection", choices=list(Selection), type=Selection, help="which validated epoch a role ships: the best mission success among the "
-                   "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
-                   "(success: default of sac, sac_penalty, ppo), or tail: screen every epoch on the upper bound of its cost and its "
-                   "within-C fraction, and choose among the best three on more missions (tssac_core.train.validation)")
-    p.add_argument("--init-from", type=Path, help="initialise the learner of every trained role from this role checkpoint (fine-tuning)")
-    p.add_argument("--teammates", type=Path, help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
-                   "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)")
-    p.add_argument("--stop-at-task-success", type=float, default=0.0, metavar="FRACTION",
-                   help="end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1, whatever the machine: runs beside each other want a core each)")
-    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a learner setting (SacConfig or OnPolicyConfig field), e.g. --set lr=3e-4 or --set multiplier_signal=q_c")
-    p.add_argument("--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)")
+    p.add_argument(
+        "--route-margin-km",
+        type=float,
+        default=3.0,
+        help="reward and route observation: the way to the zone keeps this far from the radars (default 3)",
+    )
+    p.add_argument(
+        "--cost-margin-km",
+        type=float,
+        default=1.0,
+        help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)",
+    )
+    p.add_argument(
+        "--validation-episodes",
+        type=int,
+        default=30,
+        help="held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)",
+    )
+    p.add_argument(
+        "--selection",
+        choices=list(Selection),
+        type=Selection,
+        help="which validated epoch a role ships: the best mission success among the "
+        "epochs within the cost limit (within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost "
+        "(success: default of sac, sac_penalty, ppo), or tail: screen every epoch on the upper bound of its cost and "
+        "its "
+        "within-C fraction, and choose among the best three on more missions (tssac_core.train.validation)",
+    )
+    p.add_argument(
+        "--init-from",
+        type=Path,
+        help="initialise the learner of every trained role from this role checkpoint (fine-tuning)",
+    )
+    p.add_argument(
+        "--teammates",
+        type=Path,
+        help="directory whose trained earlier roles fly beside (and, for tssac, transfer to) "
+        "the trained roles, e.g. models/tssac with --roles strike (default: --out itself)",
+    )
+    p.add_argument(
+        "--stop-at-task-success",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help=(
+            "end a role after the first epoch whose task success in training reaches this (e.g. 0.9; default 0: never)"
+        ),
+    )
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default 1, whatever the machine: runs beside each other want a core each)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help=(
+            "override a learner setting (SacConfig or OnPolicyConfig field), e.g. --set lr=3e-4 or --set "
+            "multiplier_signal=q_c"
+        ),
+    )
+    p.add_argument(
+        "--out", type=Path, required=True, help="run directory (config, metrics, checkpoints, plots, resume state)"
+    )
     p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     if preset is not None:
@@ -96,26 +181,72 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         except json.JSONDecodeError:
             overrides[key] = value  # a word, e.g. multiplier_signal=q_c; SacConfig checks it
     cfg = TrainConfig(
-        algo=a.algo, scenario=str(a.scenario), seed=a.seed, epochs=a.epochs, steps_per_epoch=a.steps_per_epoch, roles=roles,
-        envs=a.envs, update_every=a.update_every, start_steps=a.start_steps, update_after=a.update_after,
-        observation=a.observation, action_repeat=a.action_repeat, penalty=a.penalty, threads=a.threads, learner=overrides,
-        validation_episodes=a.validation_episodes, route_margin_km=a.route_margin_km, cost_margin_km=a.cost_margin_km,
-        init_from=str(a.init_from) if a.init_from else "", teammates=str(a.teammates) if a.teammates else "",
-        stop_at_task_success=a.stop_at_task_success, selection=a.selection,
+        algo=a.algo,
+        scenario=str(a.scenario),
+        seed=a.seed,
+        epochs=a.epochs,
+        steps_per_epoch=a.steps_per_epoch,
+        roles=roles,
+        envs=a.envs,
+        update_every=a.update_every,
+        start_steps=a.start_steps,
+        update_after=a.update_after,
+        observation=a.observation,
+        action_repeat=a.action_repeat,
+        penalty=a.penalty,
+        threads=a.threads,
+        learner=overrides,
+        validation_episodes=a.validation_episodes,
+        route_margin_km=a.route_margin_km,
+        cost_margin_km=a.cost_margin_km,
+        init_from=str(a.init_from) if a.init_from else "",
+        teammates=str(a.teammates) if a.teammates else "",
+        stop_at_task_success=a.stop_at_task_success,
+        selection=a.selection,
     )
     return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
 
 
 def train_argv(cfg: TrainConfig) -> tuple[str, ...]:
     """The arguments (without --out) that `parse_args` turns back into ``cfg``."""
-    argv = ["--algo", cfg.algo, "--scenario", cfg.scenario, "--seed", str(cfg.seed), "--epochs", str(cfg.epochs),
-            "--steps-per-epoch", str(cfg.steps_per_epoch), "--roles", ",".join(cfg.roles), "--envs", str(cfg.envs),
-            "--update-every", str(cfg.update_every), "--start-steps", str(cfg.start_steps),
-            "--update-after", str(cfg.update_after), "--action-repeat", str(cfg.action_repeat),
-            "--observation", cfg.observation, "--penalty", repr(cfg.penalty), "--threads", str(cfg.threads),
-            "--route-margin-km", repr(cfg.route_margin_km), "--cost-margin-km", repr(cfg.cost_margin_km),
-            "--validation-episodes", str(cfg.validation_episodes),
-            "--stop-at-task-success", repr(cfg.stop_at_task_success)]
+    argv = [
+        "--algo",
+        cfg.algo,
+        "--scenario",
+        cfg.scenario,
+        "--seed",
+        str(cfg.seed),
+        "--epochs",
+        str(cfg.epochs),
+        "--steps-per-epoch",
+        str(cfg.steps_per_epoch),
+        "--roles",
+        ",".join(cfg.roles),
+        "--envs",
+        str(cfg.envs),
+        "--update-every",
+        str(cfg.update_every),
+        "--start-steps",
+        str(cfg.start_steps),
+        "--update-after",
+        str(cfg.update_after),
+        "--action-repeat",
+        str(cfg.action_repeat),
+        "--observation",
+        cfg.observation,
+        "--penalty",
+        repr(cfg.penalty),
+        "--threads",
+        str(cfg.threads),
+        "--route-margin-km",
+        repr(cfg.route_margin_km),
+        "--cost-margin-km",
+        repr(cfg.cost_margin_km),
+        "--validation-episodes",
+        str(cfg.validation_episodes),
+        "--stop-at-task-success",
+        repr(cfg.stop_at_task_success),
+    ]
     if cfg.selection:
         argv += ["--selection", cfg.selection]
     if cfg.init_from:

@@ -17,8 +17,8 @@ import json
 import logging
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import torch
 from tqdm import tqdm
@@ -45,7 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(cfg.threads)
     total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
     start = time.perf_counter()
-    with tqdm(total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05) as bar:
+    with tqdm(
+        total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05
+    ) as bar:
         for role_name in cfg.roles:
             role = Role(role_name)
             if shipped(out, role):
@@ -54,7 +56,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             train_role(cfg, scenario, role, out, resume, bar)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
-    print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; results in {out}")
+    print(
+        f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; "
+        f"results in {out}"
+    )
     return 0
 
 

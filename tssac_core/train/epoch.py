@@ -6,9 +6,10 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -35,10 +36,20 @@ def teammates_for(role: Role, cfg: TrainConfig, out: Path) -> dict[str, Pilot]:
     return pilots
 
 
-def make_task(cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, Pilot]) -> RoleTask:
+def make_task(
+    cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, Pilot]
+) -> RoleTask:
     """The training worlds of one role: its reward, its (tightened) cost, its teammates, its seed."""
-    return RoleTask(scenario, role, cfg.envs, mode, teammates=teammates, seed=cfg.seed * 1000 + role.index,
-                    reward_config=reward_config(cfg), cost_margin_m=cfg.cost_margin_km * 1000.0)
+    return RoleTask(
+        scenario,
+        role,
+        cfg.envs,
+        mode,
+        teammates=teammates,
+        seed=cfg.seed * 1000 + role.index,
+        reward_config=reward_config(cfg),
+        cost_margin_m=cfg.cost_margin_km * 1000.0,
+    )
 
 
 def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
@@ -91,8 +102,13 @@ class EpochLog:
 
 
 def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
-    logger.info("%s: task success %.2f in epoch %d (%d decisions) reaches --stop-at-task-success: role done", role.value,
-                row["task_success"], epoch, row["env_steps"])
+    logger.info(
+        "%s: task success %.2f in epoch %d (%d decisions) reaches --stop-at-task-success: role done",
+        role.value,
+        row["task_success"],
+        epoch,
+        row["env_steps"],
+    )
 
 
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
@@ -108,5 +124,10 @@ def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: 
     read_checkpoint(final)  # what ships loads (CheckpointError otherwise: one line, and the role is not finished)
     export_actor(final)  # <role>.npz: what the companion flies, without torch
     if best is not None:
-        logger.info("%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)", role.value, best.epoch,
-                    best.mission_success, best.mean_cost)
+        logger.info(
+            "%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)",
+            role.value,
+            best.epoch,
+            best.mission_success,
+            best.mean_cost,
+        )

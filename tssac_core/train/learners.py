@@ -41,7 +41,15 @@ import torch
 
 from tssac_core.algos.onpolicy.cpo import Cpo
 from tssac_core.algos.onpolicy.gae import gae
-from tssac_core.algos.onpolicy.ppo import OnPolicyAlgo, OnPolicyBatch, OnPolicyConfig, OnPolicyStats, Ppo, evaluate_values, sample_actions
+from tssac_core.algos.onpolicy.ppo import (
+    OnPolicyAlgo,
+    OnPolicyBatch,
+    OnPolicyConfig,
+    OnPolicyStats,
+    Ppo,
+    evaluate_values,
+    sample_actions,
+)
 from tssac_core.algos.replay import ReplayBuffer
 from tssac_core.algos.sac_lagrangian import SacLagrangian, transfer
 from tssac_core.deploy.policy import learner_state
@@ -89,8 +97,10 @@ class OffPolicyLearner:
             copied = transfer(self.learner, learner_state(source))
         except (RuntimeError, KeyError) as exc:  # load_state_dict: size mismatch, missing or unexpected tensors
             first = str(exc).strip().splitlines()[-1].strip() if str(exc).strip() else type(exc).__name__
-            raise CheckpointError(f"{source}: its networks do not fit this run's (hidden_sizes {list(self.hidden_sizes)}, "
-                                  f"observation {self.cfg.observation}): {first}") from None
+            raise CheckpointError(
+                f"{source}: its networks do not fit this run's (hidden_sizes {list(self.hidden_sizes)}, "
+                f"observation {self.cfg.observation}): {first}"
+            ) from None
         self.transferred = True
         verb = "initialised" if self.cfg.init_from else "transferred"
         logger.info("%s: %s %d tensors from %s", self.role.value, verb, len(copied), source)
@@ -108,7 +118,9 @@ class OffPolicyLearner:
         # Only a hit ends the learner's future: leaving the area ends the episode too, but the
         # critics bootstrap through it (like the cap), so that ending an episode early is never
         # a way out of the step penalty or of the hazard cost (docs/decisions.md).
-        self.buffer.add_batch(obs, action, step.reward, step.cost, step.final_obs, step.terminated & step.episode_success)
+        self.buffer.add_batch(
+            obs, action, step.reward, step.cost, step.final_obs, step.terminated & step.episode_success
+        )
         if ended.any():
             self.recent_costs.extend(step.episode_cost[ended].tolist())
 
@@ -122,7 +134,11 @@ class OffPolicyLearner:
         for _ in range(due):
             batch = self.buffer.sample(sac_cfg.batch_size, self.rng)
             window = sac_cfg.multiplier_window if sac_cfg.multiplier_signal == "q_c" else None
-            recent = self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng) if window and learner.uses_multiplier else None
+            recent = (
+                self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng)
+                if window and learner.uses_multiplier
+                else None
+            )
             log.stats.append(learner.update(batch, recent, self.episode_cost()))
         log.update_time += time.perf_counter() - t1
         return max(due, 0)
@@ -145,8 +161,13 @@ class OffPolicyLearner:
         return state["actor"], state
 
     def state(self) -> dict[str, Any]:
-        return {"learner": self.learner.state_dict(), "buffer": self.buffer.state_dict(), "rng": self.rng.bit_generator.state,
-                "transferred": self.transferred, "recent_costs": list(self.recent_costs)}
+        return {
+            "learner": self.learner.state_dict(),
+            "buffer": self.buffer.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "transferred": self.transferred,
+            "recent_costs": list(self.recent_costs),
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         self.learner.load_state_dict(state["learner"])
@@ -182,7 +203,9 @@ def make_batch(learner: Learner, rollout: Rollout) -> OnPolicyBatch:
     obs = torch.as_tensor(rollout.obs, dtype=torch.float32)
     actions = torch.as_tensor(rollout.actions, dtype=torch.float32)
     v_r, v_c = evaluate_values(learner.v_r, learner.v_c, obs)
-    next_v_r, next_v_c = evaluate_values(learner.v_r, learner.v_c, torch.as_tensor(rollout.final_obs, dtype=torch.float32))
+    next_v_r, next_v_c = evaluate_values(
+        learner.v_r, learner.v_c, torch.as_tensor(rollout.final_obs, dtype=torch.float32)
+    )
     terminal = torch.as_tensor(rollout.terminal)
     ended = torch.as_tensor(rollout.ended)
     rewards = torch.as_tensor(rollout.rewards, dtype=torch.float32)
@@ -190,10 +213,20 @@ def make_batch(learner: Learner, rollout: Rollout) -> OnPolicyBatch:
     adv_r, ret_r = gae(rewards, v_r, next_v_r, terminal, ended, cfg.gamma, cfg.lam)
     adv_c, ret_c = gae(costs, v_c, next_v_c, terminal, ended, cfg.gamma, cfg.lam)
     log_pi_old = torch.as_tensor(rollout.log_pi).flatten()
-    return OnPolicyBatch(obs.flatten(0, 1), actions.flatten(0, 1), log_pi_old, adv_r.flatten(), adv_c.flatten(), ret_r.flatten(), ret_c.flatten())
+    return OnPolicyBatch(
+        obs.flatten(0, 1),
+        actions.flatten(0, 1),
+        log_pi_old,
+        adv_r.flatten(),
+        adv_c.flatten(),
+        ret_r.flatten(),
+        ret_c.flatten(),
+    )
 
 
-def measured_episode_cost(finished: Iterable[tuple[float, int]], rollout_costs: np.ndarray, episode_decisions: int) -> tuple[float, float]:
+def measured_episode_cost(
+    finished: Iterable[tuple[float, int]], rollout_costs: np.ndarray, episode_decisions: int
+) -> tuple[float, float]:
     """(J_C, L): mean cost and mean length (decisions) of the given finished episodes; with none, the
     rollout's mean cost per decision times the episode cap, and L = the cap (module docstring)."""
     episodes = list(finished)
@@ -278,27 +311,44 @@ class OnPolicyLearner:
     def end_epoch(self, log: EpochLog) -> tuple[int, dict[str, float]]:
         """GAE over the rollout, then the algorithm's update with the measured cost (module docstring)."""
         t1 = time.perf_counter()
-        episode_cost, episode_length = measured_episode_cost(self.finished, self.rollout.costs, self.config.episode_steps)
+        episode_cost, episode_length = measured_episode_cost(
+            self.finished, self.rollout.costs, self.config.episode_steps
+        )
         batch = make_batch(self.learner, self.rollout)
         if isinstance(self.learner, Cpo):
             stats = self.learner.update(batch, episode_cost, episode_length)
         else:
             stats = self.learner.update(batch, episode_cost)
         update_time = time.perf_counter() - t1
-        cpo = f", cpo case {stats.cpo_case}, step fraction {stats.step_fraction:.3g}" if isinstance(self.learner, Cpo) else ""
+        cpo = (
+            f", cpo case {stats.cpo_case}, step fraction {stats.step_fraction:.3g}"
+            if isinstance(self.learner, Cpo)
+            else ""
+        )
         self._summary = f"measured J_C {episode_cost:.2f} over L {episode_length:.0f}, kl {stats.approx_kl:.4f}{cpo}"
         return stats.policy_steps, stats_columns(stats, update_time)
 
     def log_epoch(self, epoch: int, row: dict[str, Any]) -> None:
-        logger.info("%s %s epoch %d: return %.2f, cost %.2f, %s", self.role.value, self.cfg.algo, epoch, row["return"],
-                    row["cost"], self._summary)
+        logger.info(
+            "%s %s epoch %d: return %.2f, cost %.2f, %s",
+            self.role.value,
+            self.cfg.algo,
+            epoch,
+            row["return"],
+            row["cost"],
+            self._summary,
+        )
 
     def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
         return self.learner.actor.state_dict(), self.learner.state_dict()
 
     def state(self) -> dict[str, Any]:
-        return {"algo": self.config.algo.value, "learner": self.learner.state_dict(), "ep_len": self.ep_len.copy(),
-                "finished": list(self.finished)}
+        return {
+            "algo": self.config.algo.value,
+            "learner": self.learner.state_dict(),
+            "ep_len": self.ep_len.copy(),
+            "finished": list(self.finished),
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         self.learner.load_state_dict(state["learner"])

@@ -42,8 +42,17 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
     learner = make_role_learner(cfg, scenario, role, mode)  # its initial weights are the generator's first draws
     teammates = teammates_for(role, cfg, out)
     task = make_task(cfg, scenario, role, mode, teammates)
-    selector = EpochSelector(scenario, role, out, cfg.validation_episodes, cfg.seed, teammates, mode, selects_within_limit(cfg),
-                             tail=selection_of(cfg) is Selection.TAIL)
+    selector = EpochSelector(
+        scenario,
+        role,
+        out,
+        cfg.validation_episodes,
+        cfg.seed,
+        teammates,
+        mode,
+        selects_within_limit(cfg),
+        tail=selection_of(cfg) is Selection.TAIL,
+    )
     obs = task.reset()
     epoch, env_steps, updates = 0, 0, 0
     saved = read_resume_state(out, role) if resume else None
@@ -62,7 +71,9 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
 
     def write_checkpoint(path: Path) -> None:
         actor_state, learner_state = learner.checkpoint_states()
-        save_trained_role(path, cfg, scenario, role, learner.hidden_sizes, actor_state, learner_state, env_steps, updates, epoch)
+        save_trained_role(
+            path, cfg, scenario, role, learner.hidden_sizes, actor_state, learner_state, env_steps, updates, epoch
+        )
 
     iters = max(1, cfg.steps_per_epoch // cfg.envs)
     done = epoch
@@ -90,12 +101,31 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         row.update(selector.after_epoch(epoch, write_checkpoint))
         append_metrics(out / "metrics.csv", row)
         learner.log_epoch(epoch, row)
-        bar.set_postfix(role=role.value, ep=epoch, ret=f"{row['return']:.1f}", cost=f"{row['cost']:.1f}", task=f"{row['task_success']:.2f}")
+        bar.set_postfix(
+            role=role.value,
+            ep=epoch,
+            ret=f"{row['return']:.1f}",
+            cost=f"{row['cost']:.1f}",
+            task=f"{row['task_success']:.2f}",
+        )
         if reached_stop(cfg, row):
             # No resume state for this epoch: a kill before the role ships repeats it (from the same state).
             log_stop(role, epoch, row)
             break
-        write_resume_state(out, role, ResumeState(cfg.algo, epoch, env_steps, updates, task.snapshot(), obs,
-                                                  torch.get_rng_state(), selector.state_dict(), learner.state()))
+        write_resume_state(
+            out,
+            role,
+            ResumeState(
+                cfg.algo,
+                epoch,
+                env_steps,
+                updates,
+                task.snapshot(),
+                obs,
+                torch.get_rng_state(),
+                selector.state_dict(),
+                learner.state(),
+            ),
+        )
 
     ship_role(out, role, selector, write_checkpoint)

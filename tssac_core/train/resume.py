@@ -81,8 +81,10 @@ def load_state_file(path: Path) -> ResumeState:
     if "format" not in data:
         data = from_legacy(data)
     elif data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"resume format {data.get('format')!r} version {data.get('format_version')!r}, "
-                         f"this TSSAC reads {FORMAT!r} {FORMAT_VERSION}")
+        raise ValueError(
+            f"resume format {data.get('format')!r} version {data.get('format_version')!r}, "
+            f"this TSSAC reads {FORMAT!r} {FORMAT_VERSION}"
+        )
     try:
         return ResumeState(**{f.name: data[f.name] for f in dataclasses.fields(ResumeState)})
     except KeyError as exc:
@@ -105,12 +107,24 @@ def read_resume_state(out: Path, role: Role | str) -> ResumeState | None:
 def from_legacy(data: dict[str, Any]) -> dict[str, Any]:
     """A resume state written before the one format (it has no ``format`` key): the off-policy loop's (with a
     replay ``buffer``) or the on-policy loop's (with ``ep_len``), as a version-2 dict."""
-    common: dict[str, Any] = {k: data[k] for k in ("epoch", "env_steps", "updates", "task", "obs", "torch_rng", "selector") if k in data}
+    common: dict[str, Any] = {
+        k: data[k] for k in ("epoch", "env_steps", "updates", "task", "obs", "torch_rng", "selector") if k in data
+    }
     if "buffer" in data:
-        learner = {"learner": data["learner"], "buffer": data["buffer"], "rng": data["rng"],
-                   "transferred": data["transferred"], "recent_costs": data.get("recent_costs", [])}
+        learner = {
+            "learner": data["learner"],
+            "buffer": data["buffer"],
+            "rng": data["rng"],
+            "transferred": data["transferred"],
+            "recent_costs": data.get("recent_costs", []),
+        }
         return {**common, "algo": data["learner"].get("variant", ""), "learner": learner}
     if "ep_len" in data:
-        learner = {"algo": data.get("algo", ""), "learner": data["learner"], "ep_len": data["ep_len"], "finished": data["finished"]}
+        learner = {
+            "algo": data.get("algo", ""),
+            "learner": data["learner"],
+            "ep_len": data["ep_len"],
+            "finished": data["finished"],
+        }
         return {**common, "algo": data.get("algo", ""), "learner": learner}
     raise ValueError("not a resume state of this TSSAC")

@@ -18,14 +18,21 @@ from typing import Any
 
 import torch
 
+from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.cli import UsageError, write_json
 from tssac_core.deploy.numpy_actor import NumpyPolicy
-from tssac_core.deploy.policy import CheckpointInfo, checkpoint_info, learner_state, package_versions, read_checkpoint, save_role_checkpoint
+from tssac_core.deploy.policy import (
+    CheckpointInfo,
+    checkpoint_info,
+    learner_state,
+    package_versions,
+    read_checkpoint,
+    save_role_checkpoint,
+)
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario, load
-from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.train.config import TrainConfig, check_learner_settings, sac_config, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.resume import read_resume_state
@@ -34,14 +41,25 @@ logger = logging.getLogger("tssac_core.train")
 
 
 def role_checkpoint(cfg: TrainConfig, out: Path, role: Role) -> Path:
-    """Where a trained earlier role is: in this run if it trains that role (or has no ``teammates``), else in ``teammates``."""
+    """Where a trained earlier role is: in this run if it trains that role (or has no ``teammates``), else in
+    ``teammates``."""
     if cfg.teammates and role.value not in cfg.roles:
         return Path(cfg.teammates) / f"{role.value}.pt"
     return out / f"{role.value}.pt"
 
 
-def save_trained_role(path: Path, cfg: TrainConfig, scenario: Scenario, role: Role, hidden_sizes: tuple[int, ...],
-                      actor_state: dict[str, torch.Tensor], learner_state: dict[str, Any], env_steps: int, updates: int, epoch: int) -> None:
+def save_trained_role(
+    path: Path,
+    cfg: TrainConfig,
+    scenario: Scenario,
+    role: Role,
+    hidden_sizes: tuple[int, ...],
+    actor_state: dict[str, torch.Tensor],
+    learner_state: dict[str, Any],
+    env_steps: int,
+    updates: int,
+    epoch: int,
+) -> None:
     """Write a role checkpoint: the deployable actor, what it fits, and the learner's state for transfer."""
     mode = ObservationMode(cfg.observation)
     info = CheckpointInfo(
@@ -63,10 +81,29 @@ def role_position(cfg: TrainConfig, role: Role) -> int:
     return list(cfg.roles).index(role.value)
 
 
-METRIC_FIELDS = ["role", "epoch", "env_steps", "episodes", "return", "cost", "task_success", "mission_success",
-                 *[f.name for f in dataclasses.fields(UpdateStats)], "env_steps_per_s", "updates_per_s", "updates",
-                 "val_mission_success", "val_task_success", "val_cost", "best_epoch", "hazard_cost",
-                 "val_cost_high", "val_within_limit", "val_cvar95_cost", "val_max_cost"]
+METRIC_FIELDS = [
+    "role",
+    "epoch",
+    "env_steps",
+    "episodes",
+    "return",
+    "cost",
+    "task_success",
+    "mission_success",
+    *[f.name for f in dataclasses.fields(UpdateStats)],
+    "env_steps_per_s",
+    "updates_per_s",
+    "updates",
+    "val_mission_success",
+    "val_task_success",
+    "val_cost",
+    "best_epoch",
+    "hazard_cost",
+    "val_cost_high",
+    "val_within_limit",
+    "val_cvar95_cost",
+    "val_max_cost",
+]
 
 
 def append_metrics(path: Path, row: dict[str, Any]) -> None:
@@ -174,5 +211,7 @@ def check_init_from(cfg: TrainConfig, scenario: Scenario) -> None:
     have = state.get("actor", {})
     shapes = {k: tuple(v.shape) for k, v in have.items()} if isinstance(have, dict) else {}
     if shapes != {k: tuple(v.shape) for k, v in wanted.items()}:
-        raise CheckpointError(f"--init-from {cfg.init_from}: its actor's layers {sorted(set(shapes.values()))} do not fit this "
-                              f"run's (hidden_sizes {list(hidden)}, observation {cfg.observation})")
+        raise CheckpointError(
+            f"--init-from {cfg.init_from}: its actor's layers {sorted(set(shapes.values()))} do not fit this "
+            f"run's (hidden_sizes {list(hidden)}, observation {cfg.observation})"
+        )

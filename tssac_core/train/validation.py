@@ -37,9 +37,10 @@ from __future__ import annotations
 import json
 import logging
 import shutil
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -88,30 +89,62 @@ class Score:
         """The tail selection's key, the larger the better: (feasible, success if feasible, within-C fraction,
         -upper bound of the mean cost, -epoch); feasible = that upper bound is within C."""
         feasible = self.cost_high <= self.cost_limit
-        return (feasible, self.mission_success if feasible else 0.0, self.within_limit_fraction, -self.cost_high, -self.epoch)
+        return (
+            feasible,
+            self.mission_success if feasible else 0.0,
+            self.within_limit_fraction,
+            -self.cost_high,
+            -self.epoch,
+        )
 
     def columns(self) -> dict[str, float]:
         """The validation's metrics.csv columns."""
-        return {"val_mission_success": self.mission_success, "val_task_success": self.task_success,
-                "val_cost": self.mean_cost, "val_cost_high": self.cost_high,
-                "val_within_limit": self.within_limit_fraction, "val_cvar95_cost": self.cvar95_cost,
-                "val_max_cost": self.max_cost}
+        return {
+            "val_mission_success": self.mission_success,
+            "val_task_success": self.task_success,
+            "val_cost": self.mean_cost,
+            "val_cost_high": self.cost_high,
+            "val_within_limit": self.within_limit_fraction,
+            "val_cvar95_cost": self.cvar95_cost,
+            "val_max_cost": self.max_cost,
+        }
 
 
-def score_missions(epoch: int, success: np.ndarray, task_done: np.ndarray, role_cost: np.ndarray, cost_limit: float) -> Score:
+def score_missions(
+    epoch: int, success: np.ndarray, task_done: np.ndarray, role_cost: np.ndarray, cost_limit: float
+) -> Score:
     """One role's Score from its missions: success (M,), its task done (M,) and its cost (M,)."""
     high = bootstrap_mean_interval(role_cost).high
-    return Score(epoch, float(success.mean()), float(task_done.mean()), float(role_cost.mean()), cost_limit, high,
-                 within_fraction(role_cost, cost_limit), cvar(role_cost), float(role_cost.max()), int(len(role_cost)))
+    return Score(
+        epoch,
+        float(success.mean()),
+        float(task_done.mean()),
+        float(role_cost.mean()),
+        cost_limit,
+        high,
+        within_fraction(role_cost, cost_limit),
+        cvar(role_cost),
+        float(role_cost.max()),
+        int(len(role_cost)),
+    )
 
 
 class EpochSelector:
     """Validates each epoch's checkpoint of one role and keeps the best as ``resume/<role>-best.pt``
     (with ``tail``, also the TAIL_CANDIDATES best as ``resume/<role>-e<epoch>.pt``)."""
 
-    def __init__(self, scenario: Scenario, role: Role, out: Path, episodes: int, seed: int,
-                 teammates: Mapping[str, Pilot], mode: ObservationMode, within_limit: bool = True,
-                 tail: bool = False) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        role: Role,
+        out: Path,
+        episodes: int,
+        seed: int,
+        teammates: Mapping[str, Pilot],
+        mode: ObservationMode,
+        within_limit: bool = True,
+        tail: bool = False,
+    ) -> None:
         self.scenario, self.role, self.episodes, self.mode = scenario, role, episodes, mode
         self.within_limit, self.tail = within_limit, tail
         self.seed = seed
@@ -133,7 +166,9 @@ class EpochSelector:
         pilots[self.role.index] = Policy.load(checkpoint, self.role)
         results = fly_missions(self.scenario, pilots, len(layouts), 0, self.mode, layouts=layouts)
         j = self.role.index
-        return score_missions(epoch, results.success, results.task_done[:, j], results.cost[:, j], self.scenario.cost_limit)
+        return score_missions(
+            epoch, results.success, results.task_done[:, j], results.cost[:, j], self.scenario.cost_limit
+        )
 
     def _epoch_path(self, epoch: int) -> Path:
         return self.out / "resume" / f"{self.role.value}-e{epoch}.pt"
@@ -179,12 +214,23 @@ class EpochSelector:
         layouts = [sample_layout(self.scenario, rng) for _ in range(self.episodes * TAIL_FINAL_FACTOR)]
         finals = [self._fly(self._epoch_path(s.epoch), layouts, s.epoch) for s in self.top]
         best = max(finals, key=Score.tail_key)
-        record = {"role": self.role.value, "shipped_epoch": best.epoch,
-                  "candidates": [{"screening": asdict(s), "final": asdict(f)} for s, f in zip(self.top, finals)]}
+        record = {
+            "role": self.role.value,
+            "shipped_epoch": best.epoch,
+            "candidates": [{"screening": asdict(s), "final": asdict(f)} for s, f in zip(self.top, finals)],
+        }
         (self.out / f"selection-{self.role.value}.json").write_text(json.dumps(record, indent=2) + "\n")
-        logger.info("%s: tail selection ships epoch %d of %s (final missions: success %.3f, cost %.2f, upper %.2f, "
-                    "within C %.4f)", self.role.value, best.epoch, [s.epoch for s in self.top], best.mission_success,
-                    best.mean_cost, best.cost_high, best.within_limit_fraction)
+        logger.info(
+            "%s: tail selection ships epoch %d of %s (final missions: success %.3f, cost %.2f, upper %.2f, "
+            "within C %.4f)",
+            self.role.value,
+            best.epoch,
+            [s.epoch for s in self.top],
+            best.mission_success,
+            best.mean_cost,
+            best.cost_high,
+            best.within_limit_fraction,
+        )
         return best
 
     def state_dict(self) -> dict[str, Any]:

@@ -100,7 +100,9 @@ class CpoStep:
     """Dual variable of the cost constraint."""
 
 
-def cpo_step(g: torch.Tensor, b: torch.Tensor, Hinv_g: torch.Tensor, Hinv_b: torch.Tensor, c: float, max_kl: float) -> CpoStep:
+def cpo_step(
+    g: torch.Tensor, b: torch.Tensor, Hinv_g: torch.Tensor, Hinv_b: torch.Tensor, c: float, max_kl: float
+) -> CpoStep:
     """Achiam et al. 2017 eq. 12-13 (dual, Theorem 2 in the appendix) and the recovery of section 6.2:
 
         max_x g^T x   s.t.   c + b^T x <= 0,   1/2 x^T H x <= delta
@@ -168,9 +170,7 @@ def cpo_step(g: torch.Tensor, b: torch.Tensor, Hinv_g: torch.Tensor, Hinv_b: tor
     return CpoStep((Hinv_g - nu * Hinv_b) / lam, case, lam, nu)
 
 
-def line_search_accepts(
-    kl: float, surr_r_gain: float, surr_c_rise: float, c: float, max_kl: float, case: int
-) -> bool:
+def line_search_accepts(kl: float, surr_r_gain: float, surr_c_rise: float, c: float, max_kl: float, case: int) -> bool:
     """CPO's line-search test (Achiam et al. 2017 section 6.1; safety-starter-agents' conditions):
     KL <= delta, the cost surrogate rises by at most max(-c, 0), and, when the current policy is
     feasible (cases 2-4), the reward surrogate does not fall."""
@@ -204,7 +204,9 @@ def _set_flat(params: list[nn.Parameter], flat: torch.Tensor) -> None:
         offset += p.numel()
 
 
-def fisher_vector_product(actor: SquashedGaussianActor, obs: torch.Tensor, damping: float) -> Callable[[torch.Tensor], torch.Tensor]:
+def fisher_vector_product(
+    actor: SquashedGaussianActor, obs: torch.Tensor, damping: float
+) -> Callable[[torch.Tensor], torch.Tensor]:
     """v -> (H + damping I) v, H the Hessian at the current parameters of the mean KL(pi_current || pi_theta)
     over ``obs``: the Fisher information matrix of CPO's trust region (Achiam et al. 2017 section 6.1).
     One double-backward graph serves every call (conjugate gradient calls it cg_iters times)."""
@@ -251,7 +253,9 @@ class Cpo:
         cfg = self.config
         c = constraint_value(episode_cost, cfg.cost_limit, episode_length)
         obs, actions, log_pi_old = batch.observations, batch.actions, batch.log_pi_old
-        adv_r, adv_c = normalised_advantages(batch.adv_r, batch.adv_c) if cfg.normalize_advantages else (batch.adv_r, batch.adv_c)
+        adv_r, adv_c = (
+            normalised_advantages(batch.adv_r, batch.adv_c) if cfg.normalize_advantages else (batch.adv_r, batch.adv_c)
+        )
         with torch.no_grad():
             v_r_mean, v_c_mean = (v.mean().item() for v in evaluate_values(self.v_r, self.v_c, obs))
             mean_old, log_std_old = self.actor.mean_log_std(obs)
@@ -282,13 +286,22 @@ class Cpo:
                     sr, sc = surrogates()
                     mean, log_std = self.actor.mean_log_std(obs)
                     step_kl = gaussian_kl(mean_old, log_std_old, mean, log_std).mean().item()
-                if line_search_accepts(step_kl, sr.item() - surr_r_old, sc.item() - surr_c_old, c, cfg.max_kl, solution.case):
+                if line_search_accepts(
+                    step_kl, sr.item() - surr_r_old, sc.item() - surr_c_old, c, cfg.max_kl, solution.case
+                ):
                     accepted, new_kl, new_surr_r = fraction, step_kl, sr.item()
                     break
             else:
                 _set_flat(params, theta_old)
                 logger.debug("cpo: line search found no acceptable step (case %d); policy unchanged", solution.case)
-        logger.debug("cpo: case %d, c %.4g, lam %.4g, nu %.4g, step fraction %.3g", solution.case, c, solution.lam, solution.nu, accepted)
+        logger.debug(
+            "cpo: case %d, c %.4g, lam %.4g, nu %.4g, step fraction %.3g",
+            solution.case,
+            c,
+            solution.lam,
+            solution.nu,
+            accepted,
+        )
 
         v_r_loss, v_c_loss, value_steps = fit_values(self.v_r, self.v_c, self.value_optim, batch, cfg)
         return OnPolicyStats(
@@ -309,7 +322,10 @@ class Cpo:
 
     def state_dict(self) -> dict[str, Any]:
         """Networks and the value optimiser (share storage with the learner, like torch's)."""
-        return {**networks_state(self.config.algo, self.actor, self.v_r, self.v_c), "value_optim": self.value_optim.state_dict()}
+        return {
+            **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
+            "value_optim": self.value_optim.state_dict(),
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what `state_dict` returned."""

@@ -235,7 +235,9 @@ def gaussian_entropy(log_std: torch.Tensor) -> torch.Tensor:
     return (log_std + _HALF_LOG_2PI + 0.5).sum(dim=-1)
 
 
-def gaussian_kl(mean_old: torch.Tensor, log_std_old: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+def gaussian_kl(
+    mean_old: torch.Tensor, log_std_old: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor
+) -> torch.Tensor:
     """KL(N_old || N) of diagonal Gaussians, (B, d) -> (B,). tanh is a bijection, so this is also the
     KL of the squashed policies (the measure of CPO's trust region, Achiam et al. 2017 eq. 10)."""
     var_ratio = torch.exp(2.0 * (log_std_old - log_std))
@@ -243,11 +245,13 @@ def gaussian_kl(mean_old: torch.Tensor, log_std_old: torch.Tensor, mean: torch.T
     return (log_std - log_std_old + 0.5 * (var_ratio + mean_term) - 0.5).sum(dim=-1)
 
 
-def clipped_surrogate_loss(log_pi_new: torch.Tensor, log_pi_old: torch.Tensor, adv: torch.Tensor, clip: float) -> torch.Tensor:
+def clipped_surrogate_loss(
+    log_pi_new: torch.Tensor, log_pi_old: torch.Tensor, adv: torch.Tensor, clip: float
+) -> torch.Tensor:
     """PPO's clipped surrogate, Schulman et al. 2017 eq. 7, as a loss to minimise:
 
-        ratio = exp(log_pi_new - log_pi_old)
-        loss  = -E[min(ratio * adv, clamp(ratio, 1 - clip, 1 + clip) * adv)]
+    ratio = exp(log_pi_new - log_pi_old)
+    loss  = -E[min(ratio * adv, clamp(ratio, 1 - clip, 1 + clip) * adv)]
     """
     ratio = torch.exp(log_pi_new - log_pi_old)
     return -torch.min(ratio * adv, ratio.clamp(1.0 - clip, 1.0 + clip) * adv).mean()
@@ -381,7 +385,10 @@ class Ppo:
         self.uses_multiplier = config.algo is OnPolicyAlgo.PPO_LAG
         # k_d = 0: the plain Lagrange multiplier, projected onto [0, multiplier_max] after each step.
         self.multiplier = DampedLagrangeMultiplier(
-            cost_limit=config.cost_limit, k_d=0.0, beta_init=config.beta_init, lr=config.beta_lr,
+            cost_limit=config.cost_limit,
+            k_d=0.0,
+            beta_init=config.beta_init,
+            lr=config.beta_lr,
             upper=config.multiplier_max,
         )
 
@@ -408,7 +415,9 @@ class Ppo:
             v_r_mean, v_c_mean = (v.mean().item() for v in evaluate_values(self.v_r, self.v_c, batch.observations))
 
         n = batch.observations.shape[0]
-        adv_r_all, adv_c_all = normalised_advantages(batch.adv_r, batch.adv_c) if cfg.normalize_advantages else (batch.adv_r, batch.adv_c)
+        adv_r_all, adv_c_all = (
+            normalised_advantages(batch.adv_r, batch.adv_c) if cfg.normalize_advantages else (batch.adv_r, batch.adv_c)
+        )
         policy_losses: list[torch.Tensor] = []
         kl = 0.0
         stop = False
