@@ -91,3 +91,24 @@ def test_a_run_from_before_the_setting_shipped_within_the_limit():
             assert "selection: 'within_limit' in its config.json, 'success' in the grid" in difference
     with pytest.raises(UsageError, match="selection: expected one of within_limit, success, tail, got 'best'"):
         config_from_saved(saved(cfg, selection="best"))
+
+
+def test_the_tail_selection_keeps_the_three_best_epochs_checkpoints_and_resumes_with_them(tmp_path, strike_path):
+    from tssac_core.sim.observation import ObservationMode
+    from tssac_core.sim.scenario import Role, load
+    from tssac_core.train.validation import EpochSelector
+
+    selector = EpochSelector(load(strike_path), Role.DETECT, tmp_path, 0, 0, {}, ObservationMode.ROUTE, tail=True)
+    selector.candidate.parent.mkdir(parents=True)
+    scores = [tail(1, 0.5, 0.0, 1.0), tail(2, 0.9, 9.0, 0.98), tail(3, 0.8, 1.0, 1.0), tail(4, 0.7, 2.0, 0.995),
+              tail(5, 0.95, 2.5, 0.995)]
+    for s in scores:
+        selector.candidate.write_text(f"epoch {s.epoch}")  # what write_checkpoint left for this epoch
+        selector._keep_candidate(s)
+    assert [s.epoch for s in selector.top] == [5, 3, 4]  # feasible by success; 2 is over C, 1 the least successful
+    kept = sorted(p.name for p in (tmp_path / "resume").glob("detect-e*.pt"))
+    assert kept == ["detect-e3.pt", "detect-e4.pt", "detect-e5.pt"]
+    assert (tmp_path / "resume" / "detect-e5.pt").read_text() == "epoch 5"
+    again = EpochSelector(load(strike_path), Role.DETECT, tmp_path, 0, 0, {}, ObservationMode.ROUTE, tail=True)
+    again.load_state_dict(selector.state_dict())
+    assert again.top == selector.top
