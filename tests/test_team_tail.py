@@ -37,8 +37,10 @@ def test_the_shipped_team_keeps_the_budget_on_a_thousand_random_layouts(random_p
     s = load(random_path)
     summary = fly_missions(s, list(load_team(MODELS)), MISSIONS, TAIL_SEED).summary(s.cost_limit)
     worst = ", ".join(f"mission {w['mission']} {w['role']} {w['cost']:.0f}" for w in summary["worst_missions"])
-    report = (f"success {summary['success_rate']:.3f} {summary['success_interval95']}, mean cost {summary['mean_cost']:.2f} "
-              f"{summary['mean_cost_interval95']}; worst: {worst}")
+    report = (
+        f"success {summary['success_rate']:.3f} {summary['success_interval95']}, mean cost {summary['mean_cost']:.2f} "
+        f"{summary['mean_cost_interval95']}; worst: {worst}"
+    )
     assert summary["episodes"] == MISSIONS
     assert summary["success_interval95"][0] >= MIN_SUCCESS_LOW, report
     assert summary["mean_cost_interval95"][1] <= s.cost_limit, report

@@ -100,8 +100,13 @@ def test_the_tail_selection_keeps_the_three_best_epochs_checkpoints_and_resumes_
 
     selector = EpochSelector(load(strike_path), Role.DETECT, tmp_path, 0, 0, {}, ObservationMode.ROUTE, tail=True)
     selector.candidate.parent.mkdir(parents=True)
-    scores = [tail(1, 0.5, 0.0, 1.0), tail(2, 0.9, 9.0, 0.98), tail(3, 0.8, 1.0, 1.0), tail(4, 0.7, 2.0, 0.995),
-              tail(5, 0.95, 2.5, 0.995)]
+    scores = [
+        tail(1, 0.5, 0.0, 1.0),
+        tail(2, 0.9, 9.0, 0.98),
+        tail(3, 0.8, 1.0, 1.0),
+        tail(4, 0.7, 2.0, 0.995),
+        tail(5, 0.95, 2.5, 0.995),
+    ]
     for s in scores:
         selector.candidate.write_text(f"epoch {s.epoch}")  # what write_checkpoint left for this epoch
         selector._keep_candidate(s)
