@@ -12,7 +12,8 @@ from pathlib import Path
 from types import FrameType
 from typing import NoReturn
 
-from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, CompanionConfig
+from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, STRAIGHT, CompanionConfig
+from tssac_core.deploy.shield import ShieldConfig
 from mavlink_bridge.companion.machine import Companion
 from mavlink_bridge.link import LinkError
 from mavlink_bridge.signing_key import read_signing_key
@@ -47,7 +48,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="the role's trained actor: models/tssac/<role>.npz (numpy only) or <role>.pt (needs torch)",
     )
-    who.add_argument("--pilot", choices=[GUIDANCE], help="fly the rule-based guidance controller")
+    who.add_argument(
+        "--pilot",
+        choices=[GUIDANCE, STRAIGHT],
+        help="fly the rule-based guidance controller, or straight on (a test pilot that hits what lies ahead)",
+    )
+    p.add_argument(
+        "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
+    )
     p.add_argument(
         "--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies"
     )
@@ -143,6 +151,8 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         duration_s=args.duration_s,
         filter_model=FilterModel(args.filter),
         lean_telemetry=args.lean_telemetry,
+        pilot=args.pilot or "",
+        shield=ShieldConfig() if args.shield else None,
     )
 
 

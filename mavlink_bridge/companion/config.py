@@ -8,11 +8,14 @@ from pathlib import Path
 
 from mavlink_bridge.state_filter import FilterModel
 from tssac_core.cli import UsageError
+from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
 GUIDANCE = "guidance"
+STRAIGHT = "straight"
+"""A test pilot: heading and speed held (see :class:`mavlink_bridge.companion.pilots.StraightPilot`)."""
 MIN_POS_SIGMA_M = 0.1
 MIN_VEL_SIGMA_M_S = 0.01
 """Floors for the filter's measurement noise: a noise-free SITL still quantises (cm, cm/s)."""
@@ -63,6 +66,10 @@ class CompanionConfig:
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
     source_system: int = 255
+    pilot: str = ""
+    """Without a model: ``guidance`` (the default) or ``straight``."""
+    shield: Optional[ShieldConfig] = None
+    """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion_shield`); None: the pilot alone."""
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
     VFR_HUD): less work on both sides when no ground station shares the vehicle (fly's own worlds)."""

@@ -14,7 +14,9 @@ from dataclasses import asdict
 import numpy as np
 
 from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, CompanionConfig
-from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot
+from mavlink_bridge.companion.config import STRAIGHT
+from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
+from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.frames import (
     HOLD,
@@ -59,9 +61,18 @@ class Companion:
         self.role_index = config.role.index
         self.spec = s.vehicle(config.role)
         self.dt_ms = int(round(s.dt_s * 1000.0))
-        self.pilot: Pilot = PolicyPilot(config.model, config.role) if config.model is not None else GuidancePilot()
+        self.pilot: Pilot = (
+            PolicyPilot(config.model, config.role)
+            if config.model is not None
+            else StraightPilot()
+            if config.pilot == STRAIGHT
+            else GuidancePilot()
+        )
         self.world = World(s, 1)
         self.world.reset([0], [s.layout])
+        self.shield = (
+            None if config.shield is None else CompanionShield(self.world, config.role, s, config.shield, config.lockstep)
+        )
         self.pilot.action(self.world, self.role_index, 0)  # warm up: the guidance plans its route once per layout
         self.pilot.reset()
         _log.info("%s: pilot %s", config.role.value, self.pilot.name)
@@ -453,13 +464,29 @@ class Companion:
             self.pilot.reset()
             return HOLD, "non-finite action"
         self._gap_seen = False
+        if self.shield is not None:
+            action = self._shielded(action, x_m, y_m)
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec), None
+
+    def _shielded(self, proposed: np.ndarray, x_m: float, y_m: float) -> np.ndarray:
+        """The monitor's choice at the pilot's decisions (held between them); a STATUSTEXT at each hand-over."""
+        assert self.shield is not None
+        f = self.filter
+        state = (x_m, y_m, f.speed_m_s, f.heading_rad)
+        action, text = self.shield.action(self.pilot.decided, self.pilot.repeat, proposed, state, f.position_sigma_major_m)
+        if text is not None:
+            _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
+            self._say(M.MAV_SEVERITY_NOTICE, text)
+        self.shield.sent(action)
+        return action
 
     def _hold_reason(self, why: str) -> None:
         self.counters.holds += 1
         kind = why.split(" ")[0]
         if self._holding is None or self._holding.split(" ")[0] != kind:
             self.counters.hold_episodes += 1
+            if self.shield is not None:
+                self.shield.reset()  # the hold breaks the monitor's chain of predictions: it starts afresh
             _log.warning("%s: %s: sending the hold setpoint (no turn, no acceleration)", self.cfg.role.value, why)
             self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, holding")
         self._holding = why
@@ -513,4 +540,5 @@ class Companion:
             latency_ms=latency,
             flags=dict(self.flags.values),
             latency_samples_ms=[round(float(x), 4) for x in lat],
+            shield=None if self.shield is None else asdict(self.shield.counters),
         )
