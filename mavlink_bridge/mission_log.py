@@ -4,7 +4,8 @@ The format is :mod:`tssac_core.deploy.truth_log_schema` (the bundled SITL writes
 without importing the SITL): a
 ``header`` line (scenario, seed, the layout flown, ...), one ``step`` line per world step (true
 states per role: ``x_m``, ``y_m``, ``cost``, ``cost_total``, ``failsafe`` ...), ``event`` lines
-(RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END, and the vehicles' ARMED / MODE / FAILSAFE changes)
+(RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END, the vehicles' ARMED / MODE / FAILSAFE changes, and the
+STATUSTEXTs the companions sent, with their text: the runtime-assurance monitor's hand-overs)
 and a final ``summary`` line (``success``, ``end``, ``steps``, ``sim_time_s``, ``cost`` per role).
 """
 
@@ -15,7 +16,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tssac_core.deploy.truth_log_schema import EVENT, FLAGS, HEADER, ROLES_KEY, STEP, SUMMARY, VEHICLES_KEY
+from mavlink_bridge.companion_shield import ENGAGED_TEXT, RELEASED_TEXT
+from tssac_core.deploy.truth_log_schema import (
+    EVENT,
+    FLAGS,
+    HEADER,
+    ROLES_KEY,
+    STEP,
+    SUMMARY,
+    VEHICLES_KEY,
+)
 from tssac_core.sim.scenario import ROLES
 
 TASK_EVENTS = {"decoy": ("RADAR_ON", 1), "detect": ("IDENT", 1), "strike": ("HIT", 1)}
@@ -76,6 +86,28 @@ class MissionRecord:
             if e.get("event") == name and e.get("vehicle") in out and e.get("value") == 1:
                 out[str(e["vehicle"])] += 1
         return out
+
+    def backup_segments_km(self) -> dict[str, list[list[tuple[float, float]]]]:
+        """Per role, the stretches of track flown under the runtime-assurance monitor's backup: from each
+        "<role>: shield on" STATUSTEXT to the next "shield off" (or the end), as lists of (x_km, y_km)."""
+        out: dict[str, list[list[tuple[float, float]]]] = {}
+        start: dict[str, int] = {}
+        for e in self.events:
+            role, text = str(e.get("vehicle")), str(e.get("text", ""))
+            if e.get("event") != "STATUSTEXT" or role not in self.tracks_m:
+                continue
+            k = int(e.get("step", 0))
+            if text.startswith(f"{role}: {ENGAGED_TEXT}") and role not in start:
+                start[role] = k
+            elif text.startswith(f"{role}: {RELEASED_TEXT}") and role in start:
+                out.setdefault(role, []).append(self._stretch_km(role, start.pop(role), k))
+        for role, k in start.items():
+            out.setdefault(role, []).append(self._stretch_km(role, k, len(self.tracks_m[role])))
+        return out
+
+    def _stretch_km(self, role: str, first_step: int, last_step: int) -> list[tuple[float, float]]:
+        track = self.tracks_m[role]
+        return [(x / 1000.0, y / 1000.0) for x, y in track[max(first_step - 1, 0):max(last_step, first_step)]]
 
     def tracks_km(self) -> dict[str, list[tuple[float, float]]]:
         return {role: [(x / 1000.0, y / 1000.0) for x, y in pts] for role, pts in self.tracks_m.items()}

@@ -64,6 +64,7 @@ class CommandHandler:
             "MISSION_CLEAR_ALL": self._on_mission_clear_all,
             "FILE_TRANSFER_PROTOCOL": self._on_ftp,
             "TIMESYNC": self._on_timesync,
+            "STATUSTEXT": self._on_statustext,
         }
         self._commands: dict[int, Callable[[tuple[float, ...]], CommandResult]] = {
             M.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
@@ -77,6 +78,10 @@ class CommandHandler:
         }
 
     # ------------------------------------------------------------------------------ dispatch
+
+    def _on_statustext(self, msg: Msg, addr: Address) -> None:
+        text = msg.text.rstrip("\x00") if isinstance(msg.text, str) else bytes(msg.text).rstrip(b"\x00").decode("ascii", "replace")
+        self.v.relay_statustext(int(msg.severity), text, addr)
 
     def handle(self, msg: Msg, addr: Address) -> None:
         v = self.v

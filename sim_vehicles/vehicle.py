@@ -214,7 +214,7 @@ class MessageHandler(Protocol):
     def handle(self, msg: mavlink2.MAVLink_message, addr: Address) -> None: ...
 
 
-EventSink = Callable[[str, str, int], None]
+EventSink = Callable[..., None]
 """(role, event name, value) -> None: arming, mode and failsafe changes for the truth log."""
 
 
@@ -599,6 +599,15 @@ class Vehicle:
     def event(self, name: str, value: int) -> None:
         if self._on_event is not None:
             self._on_event(self.role, name, value)
+
+    def relay_statustext(self, severity: int, text: str, source: Address) -> None:
+        """A client's STATUSTEXT (a companion's note) to every other client, into the tlog as sent, and into the
+        truth log as a STATUSTEXT event with its text, as an autopilot forwards it to its ground stations."""
+        for peer in set(self.endpoint.peers) | set(self.outputs):
+            if peer != source:
+                self.statustext(severity, text, peer)
+        if self._on_event is not None:
+            self._on_event(self.role, "STATUSTEXT", severity, text)
 
     def requested(self, mid: int) -> list[mavlink2.MAVLink_message] | None:
         """MAV_CMD_REQUEST_MESSAGE: the message(s) of ``mid`` now ([] if there is nothing yet), None if unknown."""

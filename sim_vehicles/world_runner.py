@@ -483,18 +483,19 @@ class WorldRunner:
             failsafe=v.failsafe,
         )
 
-    def _vehicle_event(self, role: str, name: str, value: int) -> None:
+    def _vehicle_event(self, role: str, name: str, value: int, text: str | None = None) -> None:
         if self._truth is not None:
-            self._truth.event(
-                {
-                    "type": "event",
-                    "step": int(self.world.steps[0]),
-                    "t_s": round(self.clock.sim_s, 6),
-                    "event": name,
-                    "value": value,
-                    "vehicle": role,
-                }
-            )
+            record = {
+                "type": "event",
+                "step": int(self.world.steps[0]),
+                "t_s": round(self.clock.sim_s, 6),
+                "event": name,
+                "value": value,
+                "vehicle": role,
+            }
+            if text is not None:
+                record["text"] = text  # a client's STATUSTEXT
+            self._truth.event(record)
 
     # ------------------------------------------------------------------------------- finish
 

@@ -74,11 +74,13 @@ def plot_mission(
     events: Sequence[tuple[str, float, float]] = (),
     title: str = "",
     area_km: float = 100.0,
+    backup_km: dict[str, list[list[tuple[float, float]]]] | None = None,
 ) -> None:
     """Figure 9: one mission's trajectories over the radars, the SAM's rings and the zones, with events.
 
     ``layout_`` is a :class:`tssac_core.sim.scenario.Layout`; ``tracks_km`` maps role name to (x, y) points;
-    ``events`` are (label, x_km, y_km) markers (e.g. "radar on", "identified", "hit").
+    ``events`` are (label, x_km, y_km) markers (e.g. "radar on", "identified", "hit"); ``backup_km`` maps role name
+    to the stretches flown under the runtime-assurance monitor's backup, drawn wide and dashed over the track.
     """
     from tssac_core.sim.scenario import Layout
 
@@ -100,6 +102,13 @@ def plot_mission(
             xs, ys = zip(*pts)
             ax.plot(xs, ys, color=ROLE_COLOURS.get(role, None), lw=1.5, label=f"{role} UAV")
             ax.plot(xs[0], ys[0], "o", color=ROLE_COLOURS.get(role, None))
+    labelled = False
+    for stretches in (backup_km or {}).values():
+        for pts in stretches:
+            if len(pts) > 1:
+                xs, ys = zip(*pts)
+                ax.plot(xs, ys, color="magenta", lw=4, ls="--", alpha=0.7, label=None if labelled else "backup (monitor)")
+                labelled = True
     for _, x, y in events:
         ax.plot(x, y, "kx")
     ax.set_xlim(0, area_km)

@@ -21,6 +21,8 @@ PROG = "python -m mavlink_bridge.fly"
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MODELS = REPO / "models" / "tssac"
 GUIDANCE = "guidance"
+STRAIGHT = "straight"
+"""A test pilot: every UAV holds heading and speed (``mavlink_bridge.companion --pilot straight``)."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,10 @@ class FlyConfig:
     startup_timeout_s: float
     progress: bool
     lean_telemetry: bool = False
+    pilot: str = GUIDANCE
+    """Without models: ``guidance`` or ``straight``."""
+    shield: bool = False
+    """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
     mission: int | None = None
     """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
 
@@ -74,7 +80,16 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help=f"directory with decoy.pt, detect.pt, strike.pt (default {DEFAULT_MODELS.relative_to(REPO)})",
     )
-    who.add_argument("--pilot", choices=[GUIDANCE], help="fly every UAV with the rule-based guidance controller")
+    who.add_argument(
+        "--pilot",
+        choices=[GUIDANCE, STRAIGHT],
+        help="fly every UAV with the rule-based guidance controller, or straight on (a test pilot)",
+    )
+    p.add_argument(
+        "--shield",
+        action="store_true",
+        help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
+    )
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
     p.add_argument(
         "--seed",
@@ -209,6 +224,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         startup_timeout_s=60.0,
         progress=not a.no_progress,
         lean_telemetry=a.lean_telemetry,
+        pilot=a.pilot or GUIDANCE,
+        shield=a.shield,
     )
 
 

@@ -229,7 +229,9 @@ class MissionRunner:
                 "--status-json",
                 str(mdir / f"{name}.status.json"),
             ]
-            argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", GUIDANCE]
+            argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", cfg.pilot]
+            if cfg.shield:
+                argv += ["--shield"]
             if cfg.lockstep:
                 argv += ["--lockstep"]
             if cfg.lean_telemetry:
@@ -300,6 +302,7 @@ class MissionRunner:
                 "restarts": counters.get("restarts"),
                 "latency_p50_ms": lat.get("p50"),
                 "latency_p99_ms": lat.get("p99"),
+                "shield": data.get("shield"),
             }
         )
         return out

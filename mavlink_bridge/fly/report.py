@@ -35,6 +35,14 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
         if "latency_p50_ms" in fig:
             parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
         print("  ".join(parts))
+    sh = summary.get("shield")
+    if sh and sh.get("uav_missions"):
+        print(
+            f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission "
+            f"(max {sh['max_interventions_per_uav_mission']}), {sh['backup_time_fraction']:.2%} of control steps under the "
+            f"backup, margin up to {sh['max_margin_m']:.0f} m, {sh['uav_missions_with_cost']} UAV-missions with cost, "
+            f"{sh['uavs_left_area']} UAVs left the area"
+        )
     for w in summary["worst_missions"]:
         print(
             f"  worst: mission {w['mission']} (seed {w['seed']}) {w['role']} cost {w['cost']:.0f}: fly again with "
@@ -72,4 +80,5 @@ def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: Miss
         record.event_markers_km(),
         title=f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}",
         area_km=cfg.scenario.area_km,
+        backup_km=record.backup_segments_km(),
     )

@@ -6,10 +6,15 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge.fly.config import GUIDANCE, FlyConfig
+from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.mission_log import MissionRecord
 from tssac_core.sim.scenario import ROLES
-from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, worst_missions
+from tssac_core.stats import (
+    bootstrap_mean_interval,
+    cvar,
+    wilson_interval,
+    worst_missions,
+)
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""
@@ -26,6 +31,7 @@ def outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
         "within_cost_limit": {k: v <= cost_limit for k, v in record.cost.items()},
         "task_done": tasks,
         "failsafe_steps": record.failsafe_steps,
+        "left_area": record.event_count("FENCE"),
         "world_flight_cpu_s": record.summary.get("flight_cpu_s") if record.summary is not None else None,
     }
 
@@ -36,6 +42,28 @@ def outcome_from_companions(statuses: dict[str, dict[str, Any]]) -> dict[str, An
     end = "success" if success else next((e for e in ends if e in ("geofence", "episode_cap")), "unknown")
     times = [s["vehicle_time_s"] for s in statuses.values() if s.get("vehicle_time_s") is not None]
     return {"success": success, "end": end, "sim_time_s": max(times) if times else None, "cost": None}
+
+
+def shield_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The monitor's figures over the missions, from the companions' counts: interventions per UAV-mission, the
+    fraction of control steps under the backup, the largest margin used; and what the guarantee is about (UAV-missions
+    with any cost, UAVs that left the area)."""
+    counts = [s["shield"] for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
+    steps = sum(c["decisions"] for c in counts)
+    control = [s.get("control_steps") or 0 for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
+    costed = [r for r in rows if r.get("cost")]
+    return {
+        "uav_missions": len(counts),
+        "interventions_per_uav_mission": float(np.mean([c["interventions"] for c in counts])) if counts else None,
+        "max_interventions_per_uav_mission": max((c["interventions"] for c in counts), default=None),
+        "backup_time_fraction": sum(c["backup_steps"] for c in counts) / max(1, sum(control)) if counts else None,
+        "unprotected_time_fraction": sum(c["unprotected_steps"] for c in counts) / max(1, sum(control)) if counts else None,
+        "decisions": steps,
+        "resets": sum(c["resets"] for c in counts),
+        "max_margin_m": max((c["max_margin_m"] for c in counts), default=None),
+        "uav_missions_with_cost": int(sum(v > 0 for r in costed for v in r["cost"].values())) if costed else None,
+        "uavs_left_area": int(sum(sum(r.get("left_area", {}).values()) for r in costed)) if costed else None,
+    }
 
 
 def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
@@ -96,9 +124,11 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
             fig["latency_p50_ms"] = float(np.median(p50))
             fig["latency_p99_ms"] = float(np.max(p99))
         out["roles"][name] = fig
+    if cfg.shield:
+        out["shield"] = shield_summary(rows)
     out.update(
         {
-            "pilot": str(cfg.models) if cfg.models is not None else GUIDANCE,
+            "pilot": str(cfg.models) if cfg.models is not None else cfg.pilot,
             "scenario": str(cfg.scenario_path),
             "seed": cfg.seed,
             "clock": ("connected, lockstep" if cfg.lockstep else "connected")

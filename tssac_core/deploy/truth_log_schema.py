@@ -14,7 +14,9 @@ Line types (key ``type``):
             ``omega_cmd``, ``u_cmd`` (the action flown, in [-1, 1]), ``armed``, ``mode``
             ("MANUAL"/"GUIDED"), ``failsafe``}} — true states, no sensor noise.
 ``event``   ``step``, ``t_s``, ``event`` (RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END — see
-            ``sim_vehicles.events``), ``value``, ``vehicle`` (role or null).
+            ``sim_vehicles.events``), ``value``, ``vehicle`` (role or null); and STATUSTEXT: a client's
+            STATUSTEXT to the vehicle (e.g. the runtime-assurance monitor's hand-overs), ``value`` its
+            severity, ``text`` its text, relayed to the vehicle's other clients.
 ``summary`` (last line) ``success`` (target hit), ``end`` ("success", "geofence", "episode_cap" or
             "stopped"), ``steps``, ``sim_time_s``, ``cost`` ({role: total eq. 11 cost}),
             ``cost_limit``, ``radar_on``, ``identified``, ``hit``, ``counters`` ({role: link and

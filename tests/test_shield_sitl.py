@@ -1,0 +1,63 @@
+"""The runtime-assurance monitor over MAVLink: a pilot that flies straight into a radar, flown by the companions
+with ``--shield`` against the SITL world in lockstep, never enters it; each hand-over reaches the world's truth log
+as the companion's STATUSTEXT, relayed by the vehicle, and ``--plot`` draws the backup."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mavlink_bridge.mission_log import read_mission
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.scenario import dump, load
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+class Straight:
+    """The batched world's twin of ``--pilot straight``: heading and speed held."""
+
+    action_repeat = 10
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.zeros((len(obs), 2))
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+def test_straight_pilot_into_a_radar_is_kept_out_by_the_monitor(tmp_path: Path) -> None:
+    # The strike mission's three UAVs start heading 45 deg, straight at the radar at (38, 44) km; 150 s suffice.
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "strike.yaml"), episode_steps=1500)
+    alone = fly_missions(scenario, [Straight()] * 3, episodes=1, seed=0)
+    assert alone.cost.min() > 0  # without the monitor every UAV flies into the radar
+    path = tmp_path / "straight.yaml"
+    dump(scenario, path)
+    out, logs, plot = tmp_path / "fly.json", tmp_path / "logs", tmp_path / "mission.png"
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(path), "--pilot", "straight", "--shield", "--lockstep",
+         "--json", str(out), "--logs", str(logs), "--plot", str(plot), "--no-progress"],
+        capture_output=True, text=True, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=580,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    mission = results["missions"][0]
+    assert mission["end"] == "episode_cap"
+    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
+    assert not any(mission["left_area"].values())
+    shield = results["shield"]
+    assert shield["uav_missions"] == 3 and shield["interventions_per_uav_mission"] >= 1
+    assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0
+    assert 0 < shield["backup_time_fraction"] < 1
+    record = read_mission(next(logs.rglob("truth.jsonl")))
+    texts = [e["text"] for e in record.events if e.get("event") == "STATUSTEXT"]
+    assert any(t.startswith("decoy: shield on") for t in texts), texts
+    segments = record.backup_segments_km()
+    assert set(segments) == {"decoy", "detect", "strike"} and all(len(s) >= 1 for s in segments.values())
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
