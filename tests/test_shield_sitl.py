@@ -41,9 +41,29 @@ def test_straight_pilot_into_a_radar_is_kept_out_by_the_monitor(tmp_path: Path) 
     dump(scenario, path)
     out, logs, plot = tmp_path / "fly.json", tmp_path / "logs", tmp_path / "mission.png"
     proc = subprocess.run(
-        [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(path), "--pilot", "straight", "--shield", "--lockstep",
-         "--json", str(out), "--logs", str(logs), "--plot", str(plot), "--no-progress"],
-        capture_output=True, text=True, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=580,
+        [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.fly",
+            "--scenario",
+            str(path),
+            "--pilot",
+            "straight",
+            "--shield",
+            "--lockstep",
+            "--json",
+            str(out),
+            "--logs",
+            str(logs),
+            "--plot",
+            str(plot),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        timeout=580,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     results = json.loads(out.read_text())

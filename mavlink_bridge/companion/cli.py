@@ -13,12 +13,12 @@ from types import FrameType
 from typing import NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, STRAIGHT, CompanionConfig
-from tssac_core.deploy.shield import ShieldConfig
 from mavlink_bridge.companion.machine import Companion
 from mavlink_bridge.link import LinkError
 from mavlink_bridge.signing_key import read_signing_key
 from mavlink_bridge.state_filter import FilterModel
 from tssac_core.cli import UsageError
+from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 

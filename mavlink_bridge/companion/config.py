@@ -68,7 +68,7 @@ class CompanionConfig:
     source_system: int = 255
     pilot: str = ""
     """Without a model: ``guidance`` (the default) or ``straight``."""
-    shield: Optional[ShieldConfig] = None
+    shield: ShieldConfig | None = None
     """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion_shield`); None: the pilot alone."""
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,

@@ -13,11 +13,10 @@ from dataclasses import asdict
 
 import numpy as np
 
-from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, CompanionConfig
-from mavlink_bridge.companion.config import STRAIGHT
+from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, STRAIGHT, CompanionConfig
 from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
-from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
+from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
     HOLD,
     Measurement,

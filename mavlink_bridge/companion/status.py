@@ -64,7 +64,7 @@ class CompanionResult:
     flags: dict[str, int]
     latency_samples_ms: list[float] = field(default_factory=list)
     """Every control step's latency (for benchmarks that pool several companions)."""
-    shield: Optional[dict[str, float]] = None
+    shield: dict[str, float] | None = None
     """The runtime-assurance monitor's counts (:class:`mavlink_bridge.companion_shield.ShieldCounters`), when it flew."""
 
     @property

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge.fly.config import GUIDANCE, REPO, FlyConfig
+from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.report import plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
 from mavlink_bridge.mission_log import TruthLogError, read_mission
