@@ -22,12 +22,15 @@ from tssac_core.experiments.figures import clipped_error, penalty_entries
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
 from tssac_core.experiments.report import (
+    _tail_rate,
     pooled_cost,
+    pooled_tail,
     steps_to_threshold,
     training_wall_s,
     transfer_speedup,
     within_limit,
 )
+from tssac_core.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
 
@@ -69,6 +72,8 @@ def test_paper_grid():
         and grid.evaluation.episodes == 50
         and grid.evaluation.seed == 12345
     )
+    ev = grid.evaluation  # and 500 more layouts, off and on the monitor, on layout seeds of their own (issues 23, 24)
+    assert (ev.tail_episodes, ev.tail_seed, ev.tail_monitor) == (500, 990001, True)
     assert grid.train.validation_episodes == 50
     jobs = grid.jobs(Path("results"))
     assert len(jobs) == 27 and jobs[0].out == Path("results/runs/tssac-seed0")
@@ -162,6 +167,13 @@ def test_paper_grid():
         ),
         (("  episodes: 2", "  episodes: [2]"), "evaluation.episodes: expected an integer"),
         (("seeds: [0]", "seeds: [0"), "not valid YAML"),
+        (
+            ("  tail_seed: 990001", "  tail_seed: 12344"),
+            "evaluation.tail_seed: its layout seeds 12344-12346 overlap those of evaluation.seed (12345-12346)",
+        ),
+        (("  tail_monitor: true", "  tail_monitor: yes please"), "evaluation.tail_monitor: expected true or false"),
+        (("  tail_episodes: 3\n", ""), "evaluation.tail_seed: needs evaluation.tail_episodes"),
+        (("  tail_episodes: 3", "  tail_episodes: 0"), "evaluation.tail_episodes: must be >= 1"),
         *[
             (("evaluation:", f"transfer: {{{t}}}\nevaluation:"), message)
             for t, message in (
@@ -243,7 +255,7 @@ def test_smoke_grid_trains_every_job(smoke):
 def test_second_invocation_starts_nothing(smoke, capsys):
     logs = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/" + LOG_NAME)}
     caches = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/eval_*.json")}
-    assert len(logs) == 2 and len(caches) == 4
+    assert len(logs) == 2 and len(caches) == 8  # 50 layouts, generalisation, the tail, the tail with the monitor
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(smoke)]) == 0
     out = capsys.readouterr().out
     assert "2 jobs: 2 finished, 0 to run" in out and "started" not in out
@@ -263,9 +275,15 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert "## The mean cost against the limit" in table and re.search(
         r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M
     )
-    assert (
-        rows[4] == "| guidance controller | — | 100.0% | 0.00 | 100.0% | — | — | — |"
-    )  # it solves the fixed mission safely
+    # it solves the fixed mission safely, with the monitor too; 3 of 3 missions: the Wilson interval's lower end 43.9%
+    assert re.fullmatch(
+        r"\| guidance controller \| — \| 100.0% \| 0.00 \| 100.0% \| — \| — \| 100.0% \(43.9-100.0\) \| "
+        r"0.00 \(0.00-0.00\) \| 100.0% \| 100.0% \(43.9-100.0\) \| 0.00 \(0.00-0.00\) \| \d+\.\d% \| — \|",
+        rows[4],
+    ), rows[4]
+    assert "3 layouts: success rate (95% interval)" in rows[0] and "with monitor: time under backup" in rows[0]
+    assert "## 3 layouts per team, with intervals, and with the runtime-assurance monitor" in table
+    assert "layout seeds 990001-990003" in table and "--seed 990001 --shield" not in table
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
     data = json.loads((smoke / "experiments.json").read_text())
@@ -279,6 +297,24 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert len(cached["per_episode"]["cost"]) == 2 and len(cached["per_episode"]["return"][0]) == 3
     assert data["guidance"]["random"]["success_rate"] == 1.0 and data["guidance"]["generalization"]["episodes"] == 2
     assert set(data["transfer_speedup"]) == {"threshold", "detect", "strike"} and data["left_out"] == []
+    for label in ("tail", "tail_monitor"):  # the tail columns: pooled from the cached evaluations, with their intervals
+        flown = json.loads((smoke / "runs" / "tssac-seed0" / f"eval_{label}.json").read_text())
+        assert (
+            flown["seed"] == 990001 and flown["episodes"] == 3 and flown["cache_key"]["layouts"].startswith("mission k")
+        )
+        k = sum(flown["per_episode"]["success"])
+        mean = bootstrap_mean_interval(np.asarray(flown["per_episode"]["cost"]))
+        assert tssac[label]["missions"] == 3 and tssac[label]["flown_seeds"] == [0]
+        assert tssac[label]["success_interval95"] == list(wilson_interval(k, 3).as_dict().values())[1:]
+        assert (
+            tssac[label]["mean_cost_interval95"] == [mean.low, mean.high]
+            and tssac[label]["per_seed"]["0"]["success_rate"] == k / 3
+        )
+    assert "shield" in flown and len(flown["per_episode"]["backup_steps"]) == 3 and "return" not in flown["per_episode"]
+    assert tssac["tail_monitor"]["backup_time_fraction"] == pytest.approx(
+        np.sum(flown["per_episode"]["backup_steps"]) / np.sum(flown["per_episode"]["flown_steps"])
+    )
+    assert "backup_time_fraction" not in tssac["tail"]
     assert data["training"]["epochs_per_role"] == 1 and tssac["training_wall_s"]["mean"] >= 0
     for fig in ("fig7_training", "fig8_multiplier", "fig9_mission", "fig10_test_boxplots", "fig11_generalization"):
         assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
@@ -303,7 +339,7 @@ def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys)
     before = [p.act(obs) for p in load_team(run_dir)]
     sizes = {p: p.stat().st_size for p in run_dir.glob("*.pt")}
     caches = {p: p.read_text() for p in results.glob("runs/*/eval_*.json")}
-    assert (run_dir / "resume").is_dir() and len(caches) == 4
+    assert (run_dir / "resume").is_dir() and len(caches) == 8
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0
     assert "compacted 2 finished runs" in capsys.readouterr().out
     assert not (run_dir / "resume").exists()
@@ -669,6 +705,96 @@ def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_li
     low, high = c["ci95"]
     assert low == 0.0 < 3.0 < c["mean"] * 2 < high  # one mission in a hundred: the interval reaches 0 and spans C
     assert pooled_cost([quiet])["ci95"] == [0.0, 0.0] and pooled_cost([])["mean"] is None
+
+
+def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_path, capsys):
+    """--cached-tail reports what is cached and says which rows lack it; a plain report flies what is missing, and an
+    evaluation cached under another layout rule (before every mission had its own seed) is flown again."""
+    results = tmp_path / "results"
+    shutil.copytree(smoke, results)
+    run_dir = results / "runs" / "tssac-seed0"
+    for label in ("tail", "tail_monitor"):
+        (run_dir / f"eval_{label}.json").unlink()
+    other = results / "runs" / "sac_lag-seed0" / "eval_tail.json"
+    stale = json.loads(other.read_text())
+    del stale["cache_key"]["layouts"]
+    other.write_text(json.dumps(stale))
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only", "--cached-tail"]) == 0
+    out = capsys.readouterr().out
+    assert "tssac-seed0: not cached, left out (--cached-tail)" in out and "sac_lag-seed0: not cached" in out
+    assert not (run_dir / "eval_tail.json").exists() and json.loads(other.read_text()) == stale  # nothing flown
+    rows = [line for line in (results / "table4.md").read_text().splitlines() if line.startswith("| tssac | ")]
+    assert rows[0].count(" — | ") >= 6 and rows[1].startswith(
+        "| tssac | none | — |"
+    )  # the columns, then the tail table
+    data = json.loads((results / "experiments.json").read_text())
+    assert data["algorithms"][0]["tail"]["missions"] == 0 and data["algorithms"][1]["tail_monitor"]["missions"] == 3
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only"]) == 0
+    assert "tssac-seed0: success " in capsys.readouterr().out
+    assert "layouts" in json.loads(other.read_text())["cache_key"] and (run_dir / "eval_tail_monitor.json").is_file()
+    assert (
+        "layouts" not in json.loads((run_dir / "eval_random.json").read_text())["cache_key"]
+    )  # Table 4's: drawn in turn
+    caches = {p: p.stat().st_mtime_ns for p in results.glob("runs/*/eval_tail*.json")}
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in caches} == caches and len(
+        caches
+    ) == 4  # all cached now: nothing flown again
+
+
+def test_table4_keeps_its_layouts_and_the_tail_draws_each_mission_from_its_own_seed(random_path):
+    from tssac_core.experiments.report import layouts_in_turn
+    from tssac_core.sim.missions import mission_layout
+    from tssac_core.sim.scenario import load
+
+    s = load(random_path)
+    in_turn = layouts_in_turn(s, 3, 12345)  # the 50 layouts every earlier Table 4 flew: one generator, drawn in turn
+    again = layouts_in_turn(s, 3, 12345)
+    assert all(np.array_equal(a.sam_km, b.sam_km) for a, b in zip(in_turn, again))
+    assert np.array_equal(
+        in_turn[0].sam_km, mission_layout(s, 12345, 0).sam_km
+    )  # the first layout is the same either way,
+    assert not np.array_equal(in_turn[1].sam_km, mission_layout(s, 12345, 1).sam_km)  # the others are not
+
+
+def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_intervals():
+    # two seeds of 4 missions: 7 of 8 hit the target; one UAV 812 steps inside a radar, one at exactly C = 3
+    one = {
+        "cost_limit": 3.0,
+        "per_episode": {
+            "success": [True] * 4,
+            "cost": [[0.0, 0.0, 0.0]] * 3 + [[0.0, 3.0, 0.0]],
+            "out_of_area": [[False] * 3] * 4,
+        },
+    }
+    two = {
+        "cost_limit": 3.0,
+        "per_episode": {
+            "success": [True, True, True, False],
+            "cost": [[0.0, 0.0, 812.0]] + [[0.0] * 3] * 3,
+            "out_of_area": [[False] * 3] * 3 + [[False, False, True]],
+        },
+    }
+    t = pooled_tail([one, two])
+    assert (t["missions"], t["seeds"], t["success_rate"]) == (8, 2, 7 / 8)
+    lo, hi = t["success_interval95"]  # Wilson, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
+    z = 1.959963984540054
+    centre, half = (7 / 8 + z * z / 16) / (1 + z * z / 8), z * np.sqrt(7 / 8 / 8 / 8 + z * z / 256) / (1 + z * z / 8)
+    assert (lo, hi) == (pytest.approx(centre - half), pytest.approx(centre + half)) and lo == pytest.approx(
+        0.5291, abs=1e-4
+    )
+    assert (
+        t["mean_cost"] == pytest.approx(815 / 24)
+        and t["mean_cost_interval95"][0] == 0.0 < 3.0 < t["mean_cost_interval95"][1]
+    )
+    assert t["within_cost_limit"] == 23 / 24 and t["over_limit"] == 1 and t["largest"] == [812.0, 3.0, 0.0]
+    assert t["cvar95_cost"] == (812 + 3) / 2 and t["left_area"] == 1  # CVaR95: the mean of the worst ceil(5% of 24) = 2
+    assert "backup_time_fraction" not in t and pooled_tail([]) == {"missions": 0, "seeds": 0}
+    for e, backup in ((one, [[10, 0, 0]] * 4), (two, [[0, 0, 0]] * 4)):  # with the monitor: the time under the backup
+        e["per_episode"].update(backup_steps=backup, flown_steps=[[100, 100, 100]] * 4, interventions=[[1, 0, 0]] * 4)
+    t = pooled_tail([one, two])
+    assert t["backup_time_fraction"] == 40 / 2400 and t["interventions_per_uav_mission"] == 8 / 24
+    assert _tail_rate(t, 3) == "87.5% (52.9-97.8) [2 of 3 seeds]" and _tail_rate(t, 2) == "87.5% (52.9-97.8)"
 
 
 def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_stopped(tmp_path):

@@ -9,6 +9,7 @@ Examples::
     python -m tssac_core.experiments --grid experiments/paper.yaml --jobs 2 --only 'tssac-*' --only 'sac_lag-*'  #
     these first
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only  # report on what has finished
+    python -m tssac_core.experiments --grid experiments/paper.yaml --report-only --cached-tail  # no new tail flights
     python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
 The grid file's format is in :mod:`tssac_core.experiments.grid`. Each job is a ``python -m tssac_core.train``
@@ -28,6 +29,8 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+
+import torch
 
 from tssac_core.cli import UsageError, run
 from tssac_core.deploy.export import compact_checkpoint
@@ -90,8 +93,10 @@ def selected_jobs(grid: Grid, results: Path, only: Sequence[str] = ()) -> list[J
     return [job for job in jobs if not only or any(fnmatch.fnmatchcase(job.name, pattern) for pattern in only)]
 
 
-def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
-    """Evaluate the finished teams (cached), write table4.md, experiments.json and the figures; returns the files."""
+def make_report(grid: Grid, results: Path, report: Say = say, cached_tail: bool = False) -> list[Path]:
+    """Evaluate the finished teams (cached; with ``cached_tail`` the tail evaluations only from their caches), write
+    table4.md, experiments.json and the figures; returns the files. The evaluations fly with one torch thread."""
+    torch.set_num_threads(1)
     jobs = grid.jobs(results)
     states = [job_state(job) for job in jobs]
     for s in states:
@@ -99,7 +104,7 @@ def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
             report(f"warning: leaving out {s.job.out}: other settings than the grid ({s.detail})")
     finished = [s.job for s in states if s.status is Status.FINISHED]
     report(f"report on {len(finished)} of {len(jobs)} runs")
-    evaluations = evaluate_all(grid, finished, results, report)
+    evaluations = evaluate_all(grid, finished, results, report, cached_tail)
     transfer_runs = [job for job in grid.transfer_jobs(results) if job_state(job).status is Status.FINISHED]
     summary = summarise(grid, jobs, finished, evaluations, results, transfer_runs)
     table, data = write_report(summary, results)
@@ -107,7 +112,7 @@ def make_report(grid: Grid, results: Path, report: Say = say) -> list[Path]:
     curves = {name: runs for name, runs in curves.items() if runs}
     per_episode = {
         e.name: [evaluations[(j.name, "random")]["per_episode"] for j in finished if j.entry == e] for e in grid.algos
-    }
+    }  # 50 layouts
     per_episode = {name: runs for name, runs in per_episode.items() if runs}
     figures = plot_figures(results, summary, curves, per_episode, mission_for_fig9(grid, finished))
     for path in (table, data, *figures):
@@ -189,6 +194,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     mode.add_argument(
         "--report-only", action="store_true", help="train nothing: evaluate and report on the runs that have finished"
     )
+    p.add_argument(
+        "--cached-tail",
+        action="store_true",
+        help="fly no new tail evaluation (the grid's evaluation.tail_episodes layouts, "
+        "with and without the monitor): report those already cached, and say which seeds each row lacks",
+    )
     mode.add_argument(
         "--dry-run",
         action="store_true",
@@ -225,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     launches = (
         [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by, only=args.only)
     )
-    make_report(grid, args.results)
+    make_report(grid, args.results, cached_tail=args.cached_tail)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]
     if failed:
         print(

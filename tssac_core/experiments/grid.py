@@ -20,6 +20,9 @@ Example (``experiments/paper.yaml`` is the full one)::
       episodes: 50
       seed: 12345
       generalization_scenario: scenarios/generalization.yaml
+      tail_episodes: 500           # optional: every team again on 500 more layouts, pooled over seeds with intervals
+      tail_seed: 990001
+      tail_monitor: true           # and on those layouts through the runtime-assurance monitor (evaluate --shield)
     transfer:                      # optional: the transfer experiment (TransferExperiment)
       teammates: models/tssac
       with: tssac
@@ -114,6 +117,15 @@ class Evaluation:
     """Seed of the evaluation layouts (never a training seed)."""
     generalization_scenario: Path | None = None
     """Figure 11 (section 5.2.3); None: not evaluated."""
+    tail_episodes: int | None = None
+    """The tail evaluation (issue 23): every team again on this many layouts of ``scenario`` (e.g. 500), enough to
+    see a failure that comes once in a hundred missions, reported pooled over seeds with 95% intervals; None: not
+    flown."""
+    tail_seed: int = 990001
+    """Seed of the tail layouts (mission k flies the layout of seed ``tail_seed + k``); its layouts must not be
+    the 50 of ``seed``."""
+    tail_monitor: bool = False
+    """Fly the tail layouts a second time through the runtime-assurance monitor (``evaluate --shield``)."""
 
 
 @dataclass(frozen=True)
@@ -315,6 +327,7 @@ def load_grid(path: str | Path) -> Grid:
             if ev.get("generalization_scenario") is not None
             else None
         ),
+        **r.tail(ev),
     )
     transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
     grid = Grid(Path(path), algos, seeds, train, evaluation, transfer)
@@ -436,6 +449,29 @@ class _Reader:
                 raise self.fail("train.selection", f"expected one of {', '.join(Selection)}, got {data['selection']!r}")
             values["selection"] = data["selection"]
         return TrainArgs(**values)
+
+    def tail(self, ev: dict[str, Any]) -> dict[str, Any]:
+        """``evaluation.tail_*``: how many layouts, which seed, with the monitor or not. Mission k of a seed S flies
+        the layout of seed S + k, so the tail's layout seeds must not overlap the 50 of ``evaluation.seed``."""
+        if ev.get("tail_episodes") is None:
+            for key in ("tail_seed", "tail_monitor"):
+                if key in ev:
+                    raise self.fail(f"evaluation.{key}", "needs evaluation.tail_episodes (how many layouts)")
+            return {}
+        episodes = self.integer(ev["tail_episodes"], "evaluation.tail_episodes", minimum=1)
+        seed = self.integer(ev.get("tail_seed", Evaluation.tail_seed), "evaluation.tail_seed", minimum=0)
+        monitor = ev.get("tail_monitor", Evaluation.tail_monitor)
+        if not isinstance(monitor, bool):
+            raise self.fail("evaluation.tail_monitor", f"expected true or false, got {monitor!r}")
+        first = self.integer(ev.get("seed", Evaluation.seed), "evaluation.seed", minimum=0)
+        count = self.integer(ev.get("episodes", Evaluation.episodes), "evaluation.episodes", minimum=1)
+        if seed < first + count and first < seed + episodes:
+            raise self.fail(
+                "evaluation.tail_seed",
+                f"its layout seeds {seed}-{seed + episodes - 1} overlap those of "
+                f"evaluation.seed ({first}-{first + count - 1}): the tail must fly other layouts",
+            )
+        return {"tail_episodes": episodes, "tail_seed": seed, "tail_monitor": monitor}
 
     def transfer(self, value: Any, entries: dict[str, AlgoEntry]) -> TransferExperiment:
         """``transfer:``: the transfer experiment; its sides name entries of ``algos`` (their settings apply)."""

@@ -2,10 +2,17 @@
 
 Every finished team, and the guidance controller as a reference row, flies the evaluation scenario's
 layouts drawn from the grid's evaluation seed (the same layouts for every team), and the generalisation
-scenario's if the grid names one. Each evaluation is cached as JSON next to the team
-(``<run>/eval_random.json``, ``<run>/eval_generalization.json``; the guidance controller's under
-``<results>/guidance/``) with the per-episode figures the box plots need; a cache is reused only if it was
-made from the same checkpoints, scenario, seed and number of episodes.
+scenario's if the grid names one. With ``evaluation.tail_episodes`` (issue 23) every team also flies that many
+more layouts (e.g. 500, their own seed), reported pooled over its seeds: success with its 95% Wilson interval,
+the mean hazard cost per UAV with its 95% bootstrap interval over missions, the within-C fraction and the tail
+(:mod:`tssac_core.stats`); with ``tail_monitor`` it flies them a second time through the runtime-assurance
+monitor (issue 24, ``evaluate --shield``): success, cost and the fraction of flight time under the backup.
+
+Each evaluation is cached as JSON next to the team (``<run>/eval_random.json``, ``eval_generalization.json``,
+``eval_tail.json``, ``eval_tail_monitor.json``; the guidance controller's under ``<results>/guidance/``) with the
+per-episode figures the box plots and the pooled intervals need; a cache is reused only if it was made from the
+same checkpoints, scenario, seed, number of episodes and layout rule (and monitor settings), so an interrupted
+report flies only what is missing when it runs again.
 
 Figures per algorithm are mean ± sample standard deviation over its finished seeds. The transfer speed-up
 compares, for the detect and strike roles, the learner decisions (``env_steps`` in metrics.csv) until the
@@ -16,6 +23,8 @@ over the role's epochs (which also compares runs that never reach 90%).
 from __future__ import annotations
 
 import csv
+import dataclasses
+import enum
 import hashlib
 import json
 import math
@@ -29,10 +38,12 @@ import numpy as np
 
 from tssac_core.cli import write_json
 from tssac_core.deploy.policy import checkpoint_info, load_team, read_checkpoint
+from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
-from tssac_core.sim.scenario import ROLES, load
+from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
 from tssac_core.sim.team import GUIDANCE, Pilot
+from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, within_fraction
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {
     # Yue et al., Table 4 (section 5.2.2): success rate over 50 random layouts and average cost.
@@ -47,6 +58,25 @@ PAPER_TABLE4: dict[str, tuple[float, float]] = {
 TRANSFER_THRESHOLD = 0.9
 TRANSFER_ROLES = ("detect", "strike")
 GUIDANCE_NAME = "guidance controller"
+TAIL_LABELS = ("tail", "tail_monitor")
+
+
+class LayoutRule(enum.Enum):
+    """How an evaluation's M layouts come from its seed S."""
+
+    IN_TURN = "drawn in turn from one generator seeded S"
+    """Table 4's 50 layouts and figure 11's, as every table of this grid has flown them (the rule of
+    ``tssac_core.evaluate`` before each mission had its own seed): kept, so that the paper's protocol flies the
+    same layouts as before and its cached evaluations stand."""
+    PER_MISSION = "mission k: layout seed S + k"
+    """The tail's layouts: ``tssac_core.sim.missions.mission_layout``, as ``tssac_core.evaluate`` and
+    ``mavlink_bridge.fly`` draw them now, so that ``evaluate --seed S --mission k`` flies any one of them again."""
+
+
+def layouts_in_turn(scenario: Scenario, episodes: int, seed: int) -> list[Layout]:
+    """``episodes`` layouts drawn one after another from one generator seeded ``seed`` (LayoutRule.IN_TURN)."""
+    rng = np.random.default_rng(seed)
+    return [sample_layout(scenario, rng) for _ in range(episodes)]
 
 
 @dataclass(frozen=True)
@@ -54,10 +84,14 @@ class EvalSpec:
     """One evaluation every team flies."""
 
     label: str
-    """``random`` (Table 4, figure 10) or ``generalization`` (figure 11); names the cache file."""
+    """``random`` (Table 4, figure 10), ``generalization`` (figure 11), ``tail`` (the many-layout columns) or
+    ``tail_monitor`` (the same layouts with the monitor); names the cache file."""
     scenario: Path
     episodes: int
     seed: int
+    monitor: bool = False
+    """Fly every UAV through the runtime-assurance monitor (``evaluate --shield``, its default margins)."""
+    layouts: LayoutRule = LayoutRule.IN_TURN
 
     def cache_name(self) -> str:
         return f"eval_{self.label}.json"
@@ -68,6 +102,19 @@ def eval_specs(grid: Grid) -> list[EvalSpec]:
     specs = [EvalSpec("random", ev.scenario, ev.episodes, ev.seed)]
     if ev.generalization_scenario is not None:
         specs.append(EvalSpec("generalization", ev.generalization_scenario, ev.episodes, ev.seed))
+    if ev.tail_episodes is not None:
+        specs.append(EvalSpec("tail", ev.scenario, ev.tail_episodes, ev.tail_seed, layouts=LayoutRule.PER_MISSION))
+        if ev.tail_monitor:
+            specs.append(
+                EvalSpec(
+                    "tail_monitor",
+                    ev.scenario,
+                    ev.tail_episodes,
+                    ev.tail_seed,
+                    monitor=True,
+                    layouts=LayoutRule.PER_MISSION,
+                )
+            )
     return specs
 
 
@@ -86,41 +133,74 @@ def team_digest(team: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
-    """The summary of ``team`` (None: the guidance controller) flying ``spec``, from ``cache`` if it still fits.
-
-    The summary has the keys of ``tssac_core.evaluate --json`` plus ``per_episode``: ``success`` (M,),
-    ``return`` and ``cost`` (M, 3) per role.
-    """
-    scenario = load(spec.scenario)
-    key = {
+def cache_key(team: Path | None, spec: EvalSpec) -> dict[str, Any]:
+    """What a cached evaluation must have been made from to stand for ``team`` flying ``spec``: the pilots, the task,
+    the seed, the number of layouts, their rule (a key without ``layouts`` is LayoutRule.IN_TURN, the only rule when
+    the 50-layout caches were written) and the monitor's settings."""
+    key: dict[str, Any] = {
         "team": team_digest(team) if team is not None else GUIDANCE,
-        "scenario_digest": scenario.digest(),
+        "scenario_digest": load(spec.scenario).digest(),
         "seed": spec.seed,
         "episodes": spec.episodes,
     }
-    if cache.is_file():
-        try:
-            cached = json.loads(cache.read_text())
-        except ValueError:
-            cached = {}
-        if cached.get("cache_key") == key and "per_episode" in cached:
-            return dict(cached)
+    if spec.layouts is not LayoutRule.IN_TURN:
+        key["layouts"] = spec.layouts.value
+    if spec.monitor:
+        key["shield"] = dataclasses.asdict(ShieldConfig())
+    return key
+
+
+def cached(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any] | None:
+    """The evaluation in ``cache`` if it was made from ``team`` flying ``spec`` (:func:`cache_key`), else None."""
+    if not cache.is_file():
+        return None
+    try:
+        data = json.loads(cache.read_text())
+    except ValueError:
+        return None
+    return dict(data) if data.get("cache_key") == cache_key(team, spec) and "per_episode" in data else None
+
+
+def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
+    """The summary of ``team`` (None: the guidance controller) flying ``spec``, from ``cache`` if it still fits.
+
+    The summary has the keys of ``tssac_core.evaluate --json`` (with ``--shield``: its ``shield`` figures) plus
+    ``per_episode``: ``success`` (M,), ``cost`` (M, 3) per role, and ``return`` (M, 3) for the box plots or, for
+    the tail, ``out_of_area`` (M, 3) and with the monitor its counts per UAV-mission (``backup_steps``,
+    ``flown_steps``, ``interventions``).
+    """
+    hit = cached(team, spec, cache)
+    if hit is not None:
+        return hit
+    scenario = load(spec.scenario)
     pilots: list[Pilot] = list(load_team(team)) if team is not None else [GUIDANCE] * len(ROLES)
-    results = fly_missions(scenario, pilots, spec.episodes, spec.seed)
+    layouts = layouts_in_turn(scenario, spec.episodes, spec.seed) if spec.layouts is LayoutRule.IN_TURN else None
+    results = fly_missions(
+        scenario, pilots, spec.episodes, spec.seed, layouts=layouts, shield=ShieldConfig() if spec.monitor else None
+    )
     summary = results.summary(scenario.cost_limit)
+    per_episode: dict[str, Any] = {"success": results.success.tolist(), "cost": results.cost.tolist()}
+    if spec.label in TAIL_LABELS:
+        per_episode["out_of_area"] = results.out_of_area.tolist()
+    else:
+        per_episode["return"] = results.returns.tolist()
+    if results.monitor is not None:
+        summary["shield"]["config"] = dataclasses.asdict(ShieldConfig())
+        per_episode.update(
+            {
+                "backup_steps": results.monitor.backup_steps.tolist(),
+                "flown_steps": results.monitor.flown_steps.tolist(),
+                "interventions": results.monitor.interventions.tolist(),
+            }
+        )
     summary.update(
         {
             "controller": str(team) if team is not None else GUIDANCE,
             "scenario": str(spec.scenario),
             "seed": spec.seed,
             "cost_limit": scenario.cost_limit,
-            "cache_key": key,
-            "per_episode": {
-                "success": results.success.tolist(),
-                "return": results.returns.tolist(),
-                "cost": results.cost.tolist(),
-            },
+            "cache_key": cache_key(team, spec),
+            "per_episode": per_episode,
         }
     )
     write_json(cache, summary)
@@ -130,7 +210,9 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
 def fly_one(team: Path, spec: EvalSpec) -> MissionResults:
     """The first evaluation layout, flown by ``team`` with its trajectories recorded (figure 9)."""
     scenario = load(spec.scenario)
-    return fly_missions(scenario, list(load_team(team)), 1, spec.seed, record=True)
+    return fly_missions(
+        scenario, list(load_team(team)), 1, spec.seed, record=True, layouts=layouts_in_turn(scenario, 1, spec.seed)
+    )
 
 
 Evaluations = dict[tuple[str, str], dict[str, Any]]
@@ -143,13 +225,10 @@ def within_limit(evaluation: dict[str, Any]) -> float:
     return float(np.mean(np.asarray(evaluation["per_episode"]["cost"]) <= evaluation["cost_limit"]))
 
 
-BOOTSTRAP_RESAMPLES = 10_000
-
-
-def pooled_cost(evaluations: list[dict[str, Any]], resamples: int = BOOTSTRAP_RESAMPLES) -> dict[str, Any]:
+def pooled_cost(evaluations: list[dict[str, Any]]) -> dict[str, Any]:
     """The mean hazard cost per UAV per mission over every seed's missions pooled, with a 95% percentile
-    bootstrap interval over missions (a mission's three UAVs resampled together; fixed resampling seed),
-    the UAV-missions over the limit and the largest single costs.
+    bootstrap interval over missions (:func:`tssac_core.stats.bootstrap_mean_interval`: a mission's three UAVs
+    resampled together, fixed resampling seed), the UAV-missions over the limit and the largest single costs.
 
     A mean cost near the limit C = 3 is made of rare long stays inside a radar (one of 500-800 steps is
     a whole evaluation's mean of 3-5), so a 50-layout mean alone cannot say on which side of C a policy is;
@@ -157,28 +236,97 @@ def pooled_cost(evaluations: list[dict[str, Any]], resamples: int = BOOTSTRAP_RE
     if not evaluations:
         return {"uav_missions": 0, "mean": None, "ci95": None, "over_limit": 0, "largest": []}
     costs = np.concatenate([np.asarray(e["per_episode"]["cost"], dtype=np.float64) for e in evaluations])  # (M, 3)
-    per_mission = costs.mean(axis=1)
-    idx = np.random.default_rng(0).integers(0, len(per_mission), size=(resamples, len(per_mission)))
-    low, high = np.percentile(per_mission[idx].mean(axis=1), [2.5, 97.5])
+    mean = bootstrap_mean_interval(costs)
     limit = evaluations[0]["cost_limit"]
     return {
         "uav_missions": int(costs.size),
         "mean": float(costs.mean()),
-        "ci95": [float(low), float(high)],
+        "ci95": [mean.low, mean.high],
         "over_limit": int((costs > limit).sum()),
         "largest": sorted(costs.ravel().tolist(), reverse=True)[:3],
     }
 
 
-def evaluate_all(grid: Grid, finished: list[Job], results: Path, report: Callable[[str], None]) -> Evaluations:
-    """Every finished team and the guidance controller on every EvalSpec (cached)."""
-    out: Evaluations = {}
-    for spec in eval_specs(grid):
-        report(f"evaluating on {spec.scenario.name}: {spec.episodes} layouts, seed {spec.seed}")
-        out[(GUIDANCE, spec.label)] = evaluate(None, spec, results / "guidance" / spec.cache_name())
-        for job in finished:
-            out[(job.name, spec.label)] = evaluate(job.out, spec, job.out / spec.cache_name())
+def pooled_tail(evaluations: list[dict[str, Any]]) -> dict[str, Any]:
+    """The tail evaluations of an algorithm's seeds pooled into one sample of missions (:mod:`tssac_core.stats`):
+    success k of n with its 95% Wilson interval; the mean hazard cost per UAV with its 95% bootstrap interval over
+    missions (a mission's three UAVs resampled together); the within-C fraction of the UAV-missions, how many are
+    over C, their CVaR at 95% and the largest costs; the UAVs that left the area; and, for evaluations flown with
+    the monitor, the fraction of flight time under the backup and the interventions per UAV-mission. None of these
+    without evaluations (``missions`` 0)."""
+    if not evaluations:
+        return {"missions": 0, "seeds": 0}
+    per = [e["per_episode"] for e in evaluations]
+    success = np.concatenate([np.asarray(p["success"], dtype=bool) for p in per])
+    cost = np.concatenate([np.asarray(p["cost"], dtype=np.float64) for p in per])  # (M, 3)
+    limit = evaluations[0]["cost_limit"]
+    rate, mean = wilson_interval(int(success.sum()), int(success.size)), bootstrap_mean_interval(cost)
+    out: dict[str, Any] = {
+        "missions": int(success.size),
+        "seeds": len(evaluations),
+        "success_rate": rate.value,
+        "success_interval95": [rate.low, rate.high],
+        "mean_cost": mean.value,
+        "mean_cost_interval95": [mean.low, mean.high],
+        "within_cost_limit": within_fraction(cost, limit),
+        "over_limit": int((cost > limit).sum()),
+        "cvar95_cost": cvar(cost),
+        "largest": sorted(cost.ravel().tolist(), reverse=True)[:3],
+        "left_area": int(sum(np.asarray(p["out_of_area"], dtype=bool).sum() for p in per)),
+    }
+    if all("backup_steps" in p for p in per):
+        backup = sum(float(np.sum(p["backup_steps"])) for p in per)
+        flown = sum(float(np.sum(p["flown_steps"])) for p in per)
+        out["backup_time_fraction"] = backup / max(1.0, flown)
+        out["interventions_per_uav_mission"] = float(
+            np.concatenate([np.asarray(p["interventions"], dtype=np.float64) for p in per]).mean()
+        )
     return out
+
+
+def evaluate_all(
+    grid: Grid, finished: list[Job], results: Path, report: Callable[[str], None], cached_tail: bool = False
+) -> Evaluations:
+    """Every finished team and the guidance controller on every EvalSpec (cached). The tail evaluations are flown
+    seed-major (every algorithm's first seed before any second), each cached as soon as it is flown; with
+    ``cached_tail`` none is flown, and those not cached are left out (the table says which seeds it pools)."""
+    out: Evaluations = {}
+    order = sorted(finished, key=lambda j: (j.seed, [e.name for e in grid.algos].index(j.entry.name)))
+    for spec in eval_specs(grid):
+        tail = spec.label in TAIL_LABELS
+        report(
+            f"evaluating on {spec.scenario.name}: {spec.episodes} layouts, seed {spec.seed}"
+            + f" ({spec.layouts.value})"
+            + (", with the monitor" if spec.monitor else "")
+        )
+        for team, name, cache in [
+            (None, GUIDANCE, results / "guidance" / spec.cache_name()),
+            *[(j.out, j.name, j.out / spec.cache_name()) for j in (order if tail else finished)],
+        ]:
+            if tail and cached_tail:
+                hit = cached(team, spec, cache)
+                if hit is None:
+                    report(f"  {name}: not cached, left out (--cached-tail)")
+                    continue
+                out[(name, spec.label)] = hit
+                continue
+            out[(name, spec.label)] = evaluate(team, spec, cache)
+            if tail:
+                report(f"  {name}: {tail_line(out[(name, spec.label)])}")
+    return out
+
+
+def tail_line(evaluation: dict[str, Any]) -> str:
+    """One evaluation's success and cost with their intervals (and the time under the backup), for the progress log."""
+    lo, hi = evaluation["success_interval95"]
+    clo, chi = evaluation["mean_cost_interval95"]
+    line = (
+        f"success {100 * evaluation['success_rate']:.1f}% ({100 * lo:.1f}-{100 * hi:.1f}), "
+        f"cost {evaluation['mean_cost']:.2f} ({clo:.2f}-{chi:.2f})"
+    )
+    if "shield" in evaluation:
+        line += f", {100 * evaluation['shield']['backup_time_fraction']:.1f}% of flight time under the backup"
+    return line
 
 
 # ------------------------------------------------------------------------------------ figures
@@ -329,7 +477,8 @@ def summarise(
     transfer_runs: list[Job] = (),
 ) -> dict[str, Any]:
     """Everything ``experiments.json`` holds."""
-    labels = [spec.label for spec in eval_specs(grid)]
+    labels = [spec.label for spec in eval_specs(grid) if spec.label not in TAIL_LABELS]
+    tails = [spec.label for spec in eval_specs(grid) if spec.label in TAIL_LABELS]
     algorithms = []
     for entry in grid.algos:
         mine = [j for j in finished if j.entry == entry]
@@ -339,6 +488,16 @@ def summarise(
             "penalty": entry.penalty,
             "seeds": [j.seed for j in mine],
         }
+        for label in tails:
+            flown = [j for j in mine if (j.name, label) in evaluations]
+            row[label] = {
+                **pooled_tail([evaluations[(j.name, label)] for j in flown]),
+                "flown_seeds": [j.seed for j in flown],
+                "per_seed": {
+                    str(j.seed): {k: evaluations[(j.name, label)][k] for k in ("success_rate", "mean_cost")}
+                    for j in flown
+                },
+            }
         for label in labels:
             row[label] = {
                 key: over_seeds({j.seed: evaluations[(j.name, label)][key] for j in mine})
@@ -353,13 +512,19 @@ def summarise(
         paper = PAPER_TABLE4.get(entry.algo) if entry.algo != "sac_penalty" else None
         row["paper"] = {"success_rate": paper[0], "mean_cost": paper[1]} if paper else None
         algorithms.append(row)
-    guidance = {
+    guidance: dict[str, Any] = {
         label: {
             **{key: evaluations[(GUIDANCE, label)][key] for key in ("success_rate", "mean_cost", "episodes")},
             "within_cost_limit": within_limit(evaluations[(GUIDANCE, label)]),
         }
         for label in labels
     }
+    guidance.update(
+        {
+            label: pooled_tail([evaluations[(GUIDANCE, label)]] if (GUIDANCE, label) in evaluations else [])
+            for label in tails
+        }
+    )
     ev = grid.evaluation
     return {
         "grid": shown(grid.source),
@@ -369,6 +534,11 @@ def summarise(
             "episodes": ev.episodes,
             "seed": ev.seed,
             "generalization_scenario": shown(ev.generalization_scenario) if ev.generalization_scenario else None,
+            "tail_episodes": ev.tail_episodes,
+            "tail_seed": ev.tail_seed if ev.tail_episodes else None,
+            "tail_monitor": ev.tail_monitor if ev.tail_episodes else None,
+            "layouts": LayoutRule.IN_TURN.value,
+            "tail_layouts": LayoutRule.PER_MISSION.value if ev.tail_episodes else None,
         },
         "training": {
             "epochs_per_role": grid.train.epochs,
@@ -437,14 +607,149 @@ def _budget(training: dict[str, Any]) -> str:
     return text
 
 
+def _tail_rate(t: dict[str, Any], of_seeds: int | None = None) -> str:
+    """Pooled success with its 95% Wilson interval; with ``of_seeds``, how many of the finished seeds it pools (if
+    not all)."""
+    if not t["missions"]:
+        return "—"
+    lo, hi = t["success_interval95"]
+    text = f"{100 * t['success_rate']:.1f}% ({100 * lo:.1f}-{100 * hi:.1f})"
+    return text + (f" [{t['seeds']} of {of_seeds} seeds]" if of_seeds is not None and t["seeds"] < of_seeds else "")
+
+
+def _tail_cost(t: dict[str, Any]) -> str:
+    if not t["missions"]:
+        return "—"
+    lo, hi = t["mean_cost_interval95"]
+    return f"{t['mean_cost']:.2f} ({lo:.2f}-{hi:.2f})"
+
+
+def _tail_share(t: dict[str, Any], key: str) -> str:
+    return f"{100 * t[key]:.1f}%" if t["missions"] and key in t else "—"
+
+
+def _largest(values: list[float]) -> str:
+    return ", ".join(f"{v:,.0f}" for v in values if v > 0) or "—"
+
+
+def tail_columns(summary: dict[str, Any]) -> tuple[list[str], dict[str, list[str]]]:
+    """The main table's extra columns for the tail evaluation (and the monitor): headers, and cells per row name."""
+    ev = summary["evaluation"]
+    if not ev.get("tail_episodes"):
+        return [], {}
+    n = ev["tail_episodes"]
+    headers = [
+        f"{n} layouts: success rate (95% interval)",
+        f"{n} layouts: average cost (95% interval)",
+        f"{n} layouts: within C",
+    ]
+    if ev["tail_monitor"]:
+        headers += [
+            "with monitor: success rate (95% interval)",
+            "with monitor: average cost (95% interval)",
+            "with monitor: time under backup",
+        ]
+    rows = {}
+    for name, tails, seeds in [
+        *[(a["name"], a, len(a["seeds"])) for a in summary["algorithms"]],
+        (GUIDANCE_NAME, summary["guidance"], None),
+    ]:
+        cells = [
+            _tail_rate(tails["tail"], seeds),
+            _tail_cost(tails["tail"]),
+            _tail_share(tails["tail"], "within_cost_limit"),
+        ]
+        if ev["tail_monitor"]:
+            on = tails["tail_monitor"]
+            cells += [_tail_rate(on, seeds), _tail_cost(on), _tail_share(on, "backup_time_fraction")]
+        rows[name] = cells
+    return headers, rows
+
+
+def tail_markdown(summary: dict[str, Any]) -> list[str]:
+    """The section on the tail evaluation: what its columns are, how to fly one again, and its tail figures."""
+    ev = summary["evaluation"]
+    n, seed, monitor = ev["tail_episodes"], ev["tail_seed"], ev["tail_monitor"]
+    lines = [
+        "",
+        f"## {n} layouts per team, with intervals{', and with the runtime-assurance monitor' if monitor else ''}",
+        "",
+        f'The columns "{n} layouts": every team flies {n} more layouts of `{ev["scenario"]}`, mission k on the '
+        f"layout of seed {seed} + k, as `tssac_core.evaluate` draws them (layout seeds {seed}-{seed + n - 1}: never "
+        f"used in training, in epoch selection or in the {ev['episodes']} layouts above), the same layouts for every "
+        f"team. An algorithm's seeds are pooled into one sample ({n} missions per seed): success with its 95% Wilson "
+        "interval, the mean hazard cost per UAV with its 95% bootstrap interval over missions (a mission's three UAVs "
+        "resampled together; `tssac_core.stats`), and the share of UAV-missions within C. Where a row pools fewer "
+        "seeds than it has, the success cell says so.",
+    ]
+    if monitor:
+        lines += [
+            "",
+            'The columns "with monitor": the same layouts flown again through the runtime-assurance monitor '
+            "(`python -m tssac_core.evaluate --shield`, docs/runtime_assurance.md), which hands a UAV to its backup "
+            "manoeuvre when the path it predicts would enter a radar's disk or leave the area: success, cost, and the "
+            "share of flight time under the backup.",
+        ]
+    lines += [
+        "",
+        "Each run's evaluations are cached beside it (`runs/<run>/eval_tail.json`"
+        + (", `eval_tail_monitor.json`" if monitor else "")
+        + "; "
+        "the guidance controller's in `guidance/`), with the worst missions' layout seeds; one run again: `python -m "
+        f"tssac_core.evaluate --models runs/<run> --scenario {ev['scenario']} --episodes {n} --seed {seed}"
+        f"{' [--shield]' if monitor else ''}`, one mission of it `--seed {seed} --mission K`.",
+        "",
+        "| algorithm | seeds flown | per seed: success, cost | UAV-missions over C | CVaR95 | largest | "
+        "UAVs that left the area |"
+        + (
+            " with monitor: over C | with monitor: UAVs that left the area | "
+            "with monitor: interventions per UAV-mission |"
+            if monitor
+            else ""
+        ),
+        "| --- | --- | --- | --- | --- | --- | --- |" + (" --- | --- | --- |" if monitor else ""),
+    ]
+    for a in [*summary["algorithms"], {"name": GUIDANCE_NAME, "guidance": True, **summary["guidance"]}]:
+        t = a["tail"]
+        if not t["missions"]:
+            cells = [", ".join(map(str, t.get("flown_seeds", []))) or "none", "—", "—", "—", "—", "—"]
+        else:
+            per_seed = "; ".join(
+                f"{s}: {100 * f['success_rate']:.1f}%, {f['mean_cost']:.2f}" for s, f in t.get("per_seed", {}).items()
+            )
+            cells = [
+                "—" if a.get("guidance") else ", ".join(map(str, t["flown_seeds"])),
+                per_seed or "—",
+                f"{t['over_limit']} of {3 * t['missions']}",
+                f"{t['cvar95_cost']:.1f}",
+                _largest(t["largest"]),
+                str(t["left_area"]),
+            ]
+        if monitor:
+            on = a["tail_monitor"]
+            cells += (
+                [
+                    f"{on['over_limit']} of {3 * on['missions']}",
+                    str(on["left_area"]),
+                    f"{on['interventions_per_uav_mission']:.2f}",
+                ]
+                if on["missions"]
+                else ["—", "—", "—"]
+            )
+        lines.append(f"| {a['name']} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def table_markdown(summary: dict[str, Any]) -> str:
     """table4.md: Table 4 beside the paper's, the generalisation figures and the transfer speed-up."""
     ev = summary["evaluation"]
+    tail_headers, tail_cells = tail_columns(summary)
     lines = [
         "# Table 4: success rate and average cost",
         "",
         f"Grid `{summary['grid']}`. Every team flies the same {ev['episodes']} layouts of `{ev['scenario']}` "
-        f"(layout seed {ev['seed']}, never used in training). Ours: mean ± sample standard deviation over the "
+        f"(layout seed {ev['seed']}, never used in training; {ev['layouts']}). Ours: mean ± sample standard "
+        "deviation over the "
         "finished seeds. Success = the target was hit (all three tasks). Average cost = hazard cost per UAV "
         f"per mission (limit C = {summary['cost_limit']:g} per UAV); within C = the share of UAV-missions whose own "
         f"cost "
@@ -453,8 +758,9 @@ def table_markdown(summary: dict[str, Any]) -> str:
         _budget(summary["training"]),
         "",
         "| algorithm | seeds | success rate | average cost | within C | paper: success rate | paper: average cost | "
-        "training wall time per seed |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        + "".join(f"{h} | " for h in tail_headers)
+        + "training wall time per seed |",
+        "| --- | --- | --- | --- | --- | --- | --- | " + "--- | " * len(tail_headers) + "--- |",
     ]
     for a in summary["algorithms"]:
         paper = a["paper"]
@@ -462,13 +768,19 @@ def table_markdown(summary: dict[str, Any]) -> str:
         r = a["random"]
         lines.append(
             f"| {a['name']} | {len(a['seeds'])} | {_rate(r['success_rate'])} | {_cost(r['mean_cost'])} "
-            f"| {_rate(r['within_cost_limit'])} | {p_rate} | {p_cost} | {_minutes(a['training_wall_s'])} |"
+            f"| {_rate(r['within_cost_limit'])} | {p_rate} | {p_cost} | "
+            + "".join(f"{c} | " for c in tail_cells.get(a["name"], []))
+            + f"{_minutes(a['training_wall_s'])} |"
         )
     g = summary["guidance"]["random"]
     lines.append(
         f"| {GUIDANCE_NAME} | — | {100 * g['success_rate']:.1f}% | {g['mean_cost']:.2f} | "
-        f"{100 * g['within_cost_limit']:.1f}% | — | — | — |"
+        f"{100 * g['within_cost_limit']:.1f}% | — | — | "
+        + "".join(f"{c} | " for c in tail_cells.get(GUIDANCE_NAME, []))
+        + "— |"
     )
+    if tail_headers:
+        lines += tail_markdown(summary)
     lines += [
         "",
         "## The mean cost against the limit",
