@@ -266,6 +266,37 @@ def test_second_invocation_starts_nothing(smoke, capsys):
     assert [line.split()[0] for line in capsys.readouterr().out.splitlines()] == ["finished", "finished"]
 
 
+def test_the_smoke_grid_on_ray_gives_the_local_executors_table(smoke, tmp_path, capsys):
+    """``--executor ray`` (a Ray of 2 CPUs started inside the command, both jobs at once) trains the same teams:
+    the evaluations the local run cached are taken as they are (their key is a digest of the actors' weights),
+    and Table 4 and experiments.json are the local run's, but for the training wall times."""
+    results = tmp_path / "results"
+    for cache in [*smoke.glob("runs/*/eval_*.json"), *smoke.glob("guidance/*.json")]:
+        target = results / cache.relative_to(smoke)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(cache, target)
+    caches = {p: p.read_bytes() for p in results.glob("**/*.json")}
+    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--executor", "ray", "--cpus", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "2 jobs: 0 finished, 2 to run, as many at a time as the CPUs hold on Ray" in out
+    assert "Ray: 2 CPUs, 2 jobs at a time, 1 CPU(s) each" in out
+    assert re.search(r"^started tssac-seed0: on \S+ \(node [0-9a-f]{8}\), Ray worker pid \d+, training pid \d+$", out, re.M), out
+    assert {p: p.read_bytes() for p in caches} == caches  # every cached evaluation was still valid: the same actors
+
+    def minutes_masked(path: Path) -> str:
+        return re.sub(r"\| \d+ min( ± \d+)? \|", "| (minutes) |", path.read_text())
+
+    assert minutes_masked(results / "table4.md") == minutes_masked(smoke / "table4.md")
+    ray_data, local_data = (json.loads((r / "experiments.json").read_text()) for r in (results, smoke))
+    for data in (ray_data, local_data):
+        for algo in data["algorithms"]:
+            algo.pop("training_wall_s")
+    def anywhere(data: dict) -> str:
+        return json.dumps(data).replace(str(results), "R").replace(str(smoke), "R")
+
+    assert anywhere(ray_data) == anywhere(local_data)
+
+
 def test_report_writes_table4_json_and_figures(smoke):
     table = (smoke / "table4.md").read_text()
     rows = [line for line in table.splitlines() if line.startswith("| ")]

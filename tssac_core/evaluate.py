@@ -73,6 +73,18 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         metavar="M",
         help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})",
     )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fly the missions in N shards on Ray workers (default 1: in one batch here, without Ray); the same results",
+    )
+    p.add_argument(
+        "--address",
+        metavar="HOST:PORT",
+        help="fly the shards on this existing Ray cluster (default with --workers: a Ray started inside the command)",
+    )
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -80,6 +92,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         raise UsageError("--episodes must be positive")
     if args.mission is not None and args.mission < 0:
         raise UsageError(f"--mission must be >= 0, got {args.mission}")
+    if args.workers <= 0:
+        raise UsageError(f"--workers must be positive, got {args.workers}")
     if not args.shield_margin_m >= 0:
         raise UsageError("--shield-margin-m must be >= 0")
     return args
@@ -112,9 +126,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
-        results = fly_missions(
-            scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices, shield=shield
-        )
+        if args.workers > 1 or args.address is not None:
+            from tssac_core.mission_shards import fly_missions_sharded
+            from tssac_core.ray_cluster import RayTarget
+
+            results = fly_missions_sharded(
+                scenario, pilots, indices, args.seed, args.workers, RayTarget(args.address), bar.update, shield=shield
+            )
+        else:
+            results = fly_missions(
+                scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices, shield=shield
+            )
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {

@@ -20,11 +20,18 @@ from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
 from mavlink_bridge.fly.missions import ChildFailed, MissionRunner
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
+from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
+from tssac_core.ray_cluster import RayTarget
+from tssac_core.ray_map import TaskFailed
 from tssac_core.sim.scenario import ScenarioError
 
 EXIT_FAILED = 1
+
+
+class MissionTimedOut(Exception):
+    """A mission did not end in --mission-timeout-s: no further mission is flown; ``str()`` is one line."""
 
 
 class _Terminated(KeyboardInterrupt):
@@ -63,22 +70,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
             work = Path(tmp.name)
+        made_key: Path | None = None
         if cfg.signing_key_path is None and cfg.scenario.link.signing:
-            cfg = dataclasses.replace(cfg, signing_key_path=make_signing_key(work))
-        runner = MissionRunner(cfg, children, work)
+            made_key = make_signing_key(work)
+            cfg = dataclasses.replace(cfg, signing_key_path=made_key)
         with tqdm(
             total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr
         ) as bar:
-            for i in cfg.indices():
-                row = runner.fly(i)
+
+            def record(row: dict[str, Any]) -> None:
                 rows.append(row)
-                children.forget_finished()
                 bar.update(1)
                 bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
                 if row.get("end") == "timeout":
-                    error = f"mission {i} did not end within {cfg.mission_timeout_s:g} s"
-                    code = EXIT_FAILED
-                    break
+                    raise MissionTimedOut(f"mission {row['index']} did not end within {cfg.mission_timeout_s:g} s")
+
+            if cfg.on_ray:
+                fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
+            else:
+                runner = MissionRunner(cfg, children, work)
+                for i in cfg.indices():
+                    row = runner.fly(i)
+                    children.forget_finished()
+                    record(row)
+    except (MissionTimedOut, TaskFailed) as exc:
+        error = str(exc)
+        code = EXIT_FAILED
     except KeyboardInterrupt:
         interrupted = True
         code = EXIT_INTERRUPTED
@@ -95,6 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         children.stop_all()
         signal.signal(signal.SIGTERM, previous)
         signal.signal(signal.SIGINT, previous_int)
+        rows.sort(key=lambda r: r["index"])  # missions flown side by side end in any order
         summary = summarise(rows, cfg)
         summary["interrupted"] = interrupted
         summary["error"] = error

@@ -56,6 +56,15 @@ class FlyConfig:
         """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1."""
         return range(self.mission, self.mission + 1) if self.mission is not None else range(self.episodes)
 
+    workers: int = 1
+    """Missions at once, each a Ray task (1: one after the other, here, without Ray)."""
+    ray_address: str | None = None
+    """An existing Ray cluster for the missions (None: a Ray started inside the command when workers > 1)."""
+
+    @property
+    def on_ray(self) -> bool:
+        return self.workers > 1 or self.ray_address is not None
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
@@ -160,6 +169,20 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="wall seconds a mission may take (default 900)",
     )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fly N missions at once, each a Ray task on its own ports (default 1: one after the other, without "
+        "Ray); the same results as one after the other",
+    )
+    p.add_argument(
+        "--address",
+        metavar="HOST:PORT",
+        help="fly the missions on this existing Ray cluster (default with --workers: a Ray started inside the "
+        "command); --models, --logs, --tlog and --plot must be on a filesystem every node sees",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -168,6 +191,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     a = build_parser().parse_args(argv)
     if a.episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.workers <= 0:
+        raise UsageError(f"--workers must be positive, got {a.workers}")
     if a.mission is not None and a.mission < 0:
         raise UsageError(f"--mission must be >= 0, got {a.mission}")
     if a.mission is not None and a.episodes != 1:
@@ -192,6 +217,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
                 raise UsageError(str(exc)) from None
         if a.episodes != 1:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
+        if a.workers != 1 or a.address is not None:
+            raise UsageError("--connect flies the running vehicles from here: no --workers or --address")
         if scenario.layout is None:
             raise UsageError(
                 f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
@@ -216,7 +243,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         speedup=1.0 if a.speedup is None else float(a.speedup),
         json_path=a.json,
         tlog_dir=a.tlog.resolve() if a.tlog is not None else None,
-        plot_path=a.plot,
+        plot_path=a.plot.resolve() if a.plot is not None else None,
         signing_key_path=a.signing_key.resolve() if a.signing_key is not None else None,
         connect=connect,
         logs_dir=a.logs.resolve() if a.logs is not None else None,
@@ -226,6 +253,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         lean_telemetry=a.lean_telemetry,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
+        workers=a.workers,
+        ray_address=a.address,
     )
 
 

@@ -34,8 +34,9 @@ import torch
 
 from tssac_core.cli import UsageError, run
 from tssac_core.deploy.export import compact_checkpoint
+from tssac_core.ray_cluster import RayTarget
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
-from tssac_core.experiments.executors import LOCAL, execute
+from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
 from tssac_core.experiments.figures import plot_figures
 from tssac_core.experiments.grid import Grid, Job, load_grid
 from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
@@ -53,13 +54,16 @@ def say(line: str) -> None:
 def train(
     grid: Grid,
     results: Path,
-    parallel: int,
+    parallel: int | None,
     report: Say = say,
     finish_by: float | None = None,
     only: Sequence[str] = (),
+    executor: str = LOCAL,
+    ray_target: RayTarget | None = None,
 ) -> list[Launch]:
     """Run every job that is not finished (with ``only``, of the jobs those patterns name; with ``finish_by``,
-    a POSIX time: those expected to finish by then); refuses (UsageError) if a run directory holds other settings."""
+    a POSIX time: those expected to finish by then) with ``executor``, ``parallel`` at once (None: the
+    executor's default); refuses (UsageError) if a run directory holds other settings."""
     states = [job_state(job) for job in selected_jobs(grid, results, only)]
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
@@ -69,11 +73,13 @@ def train(
             f"move it away or choose another --results{more}"
         )
     todo = sum(s.status is not Status.FINISHED for s in states)
-    report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {parallel} at a time")
+    at_once = f"{parallel} at a time" if parallel is not None else "as many at a time as the CPUs hold"
+    on_ray = " on Ray" if executor == RAY else ""
+    report(f"{len(states)} jobs: {len(states) - todo} finished, {todo} to run, {at_once}{on_ray}")
     if finish_by is None:
-        return execute(states, LOCAL, parallel, report)
+        return execute(states, executor, parallel, report, ray_target=ray_target)
     report(f"starting only jobs expected to finish by {time.strftime('%Y-%m-%d %H:%M', time.localtime(finish_by))}")
-    return execute(states, LOCAL, parallel, report, deadline_filter(states, finish_by))
+    return execute(states, executor, parallel, report, deadline_filter(states, finish_by), ray_target=ray_target)
 
 
 def all_jobs(grid: Grid, results: Path) -> list[Job]:
@@ -174,7 +180,29 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         help="output directory (default results/): runs/, table4.md, experiments.json, figures",
     )
     p.add_argument(
-        "--jobs", type=int, default=1, help="training processes at once (default 1; each uses the grid's threads)"
+        "--jobs",
+        type=int,
+        help="training jobs at once (each uses the grid's threads); default 1, with --executor ray as many as the Ray's "
+        "CPUs hold",
+    )
+    p.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        default=LOCAL,
+        help="local (default): processes on this machine; ray: one Ray task per job, on a Ray started inside the "
+        "command or on --address (docs/ray.md)",
+    )
+    p.add_argument(
+        "--address",
+        metavar="HOST:PORT",
+        help="--executor ray: run on this existing Ray cluster ('auto': the one started on this machine with ray "
+        "start); the nodes must share the checkout and --results (docs/ray.md)",
+    )
+    p.add_argument(
+        "--cpus",
+        type=int,
+        metavar="N",
+        help="--executor ray without --address: CPUs of the Ray started here (default: the machine's)",
     )
     p.add_argument(
         "--finish-by",
@@ -212,8 +240,15 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         "and delete their resume/ states (to commit results; their evaluations stay valid)",
     )
     args = p.parse_args(argv)
-    if args.jobs < 1:
+    if args.jobs is not None and args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
+    if args.cpus is not None and args.cpus < 1:
+        raise UsageError("--cpus must be at least 1")
+    for flag, value in (("--address", args.address), ("--cpus", args.cpus)):
+        if value is not None and args.executor != RAY:
+            raise UsageError(f"{flag} is for --executor ray")
+    if args.address is not None and args.cpus is not None:
+        raise UsageError("--cpus sizes the Ray started here; with --address the cluster has its own CPUs")
     trains_nothing = "--report-only" if args.report_only else "--compact" if args.compact else None
     if trains_nothing and (args.only or args.finish_by is not None):
         chooser = "--only" if args.only else "--finish-by"
@@ -233,8 +268,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.compact:
         compact(grid, args.results)
         return 0
+    parallel = args.jobs if args.jobs is not None else (None if args.executor == RAY else 1)
+    target = RayTarget(args.address, args.cpus)
     launches = (
-        [] if args.report_only else train(grid, args.results, args.jobs, finish_by=args.finish_by, only=args.only)
+        []
+        if args.report_only
+        else train(grid, args.results, parallel, finish_by=args.finish_by, only=args.only, executor=args.executor,
+                   ray_target=target)
     )
     make_report(grid, args.results, cached_tail=args.cached_tail)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]

@@ -167,12 +167,18 @@ def child_environment() -> dict[str, str]:
     return env
 
 
-def start(job: Job, resume: bool) -> tuple[subprocess.Popen[bytes], tuple[str, ...]]:
-    """Start one job in a new session (its own process group), output appended to its train.log."""
+def start(
+    job: Job, resume: bool, where: str = "", preexec_fn: Callable[[], None] | None = None
+) -> tuple[subprocess.Popen[bytes], tuple[str, ...]]:
+    """Start one job in a new session (its own process group), output appended to its train.log; ``where``:
+    a line for the log saying where it runs (the Ray executor's worker); ``preexec_fn``: run in the child
+    before the command (the Ray executor binds the job to its worker's life)."""
     job.out.mkdir(parents=True, exist_ok=True)
     cmd = command(job, resume)
     with (job.out / LOG_NAME).open("ab") as log:
         log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: {' '.join(cmd)}\n".encode())
+        if where:
+            log.write(f"=== {where}\n".encode())
         log.flush()
         proc = subprocess.Popen(
             cmd,
@@ -181,6 +187,7 @@ def start(job: Job, resume: bool) -> tuple[subprocess.Popen[bytes], tuple[str, .
             stderr=subprocess.STDOUT,
             env=child_environment(),
             start_new_session=True,
+            preexec_fn=preexec_fn,
         )
     return proc, cmd
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,21 @@ from tssac_core.train.config import DEFAULT_SCENARIO, TrainConfig
 from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
+EXECUTORS = ("local", "ray")
+"""Where ``--seeds`` runs its jobs: tssac_core.experiments.executors.EXECUTORS (not imported: the experiments import
+this module; tests/test_ray.py holds the two equal)."""
+
+
+@dataclass(frozen=True)
+class SeedJobs:
+    """``--seeds`` and where its jobs run."""
+
+    seeds: tuple[int, ...] | None
+    """None: one run (``--seed``), or on --resume the seeds the run directory lists."""
+    executor: str = EXECUTORS[0]
+    """An executor of tssac_core.experiments.executors: local processes or Ray tasks."""
+    address: str | None = None
+    """``--executor ray``: an existing Ray cluster (None: a Ray started inside the command)."""
 
 
 def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
@@ -34,7 +50,7 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
-def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, tuple[int, ...] | None]:
+def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, SeedJobs]:
     first = argparse.ArgumentParser(add_help=False)
     first.add_argument("--preset", type=Path)
     preset_path = first.parse_known_args(argv)[0].preset
@@ -63,6 +79,14 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
         "--out/seed<N>/ (replaces --seed)",
     )
+    p.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        default=EXECUTORS[0],
+        help="--seeds: run the seeds' jobs as processes here (local, default) or as Ray tasks (ray: a Ray started "
+        "inside the command, or --address)",
+    )
+    p.add_argument("--address", metavar="HOST:PORT", help="--executor ray: an existing Ray cluster (docs/ray.md)")
     p.add_argument("--epochs", type=int, default=50, help="epochs per role (Table 3: 50)")
     p.add_argument("--steps-per-epoch", type=int, default=4000, help="learner decisions per epoch (Table 3: 4000)")
     p.add_argument("--roles", default="decoy,detect,strike", help="comma-separated, in curriculum order")
@@ -204,7 +228,10 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         stop_at_task_success=a.stop_at_task_success,
         selection=a.selection,
     )
-    return cfg, a.out, a.resume, a.no_progress, parse_seeds(a.seeds) if a.seeds is not None else None
+    if a.address is not None and a.executor != EXECUTORS[1]:
+        raise UsageError("--address is for --executor ray")
+    jobs = SeedJobs(parse_seeds(a.seeds) if a.seeds is not None else None, a.executor, a.address)
+    return cfg, a.out, a.resume, a.no_progress, jobs
 
 
 def train_argv(cfg: TrainConfig) -> tuple[str, ...]:

@@ -25,7 +25,8 @@ from tqdm import tqdm
 
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.sim.scenario import Role
-from tssac_core.train.arguments import parse_cli, train_argv
+from tssac_core.ray_cluster import RayTarget
+from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli, train_argv
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.loop import train_role
@@ -38,9 +39,11 @@ SEEDS_FILE = "seeds.json"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    cfg, out, resume, quiet, seeds = parse_cli(argv)
-    if seeds is not None or (resume and (out / SEEDS_FILE).is_file()):
-        return train_seeds(cfg, seeds, out, resume)
+    cfg, out, resume, quiet, jobs = parse_cli(argv)
+    if jobs.seeds is not None or (resume and (out / SEEDS_FILE).is_file()):
+        return train_seeds(cfg, jobs, out, resume)
+    if jobs.executor != EXECUTORS[0]:
+        raise UsageError(f"--executor {jobs.executor} runs the jobs of --seeds (one run trains here)")
     cfg, scenario = prepare_run(cfg, out, resume)
     torch.set_num_threads(cfg.threads)
     total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
@@ -77,13 +80,15 @@ def saved_config(run_dir: Path) -> TrainConfig:
     return config_from_saved(saved, path)
 
 
-def train_seeds(cfg: TrainConfig, seeds: tuple[int, ...] | None, out: Path, resume: bool) -> int:
-    """``--seeds``: one training job per seed (``out/seed<N>``, what ``--seed N --out out/seed<N>`` writes), run
-    by the experiments' job executor; on --resume the seeds of ``out/seeds.json``. Exit 0 when every seed finished."""
-    from tssac_core.experiments.executors import LOCAL, execute
+def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool) -> int:
+    """``--seeds``: one training job per seed (``out/seed<N>``, what ``--seed N --out out/seed<N>`` writes), all at
+    once on the experiments' job executor (``--executor``: local processes or Ray tasks); on --resume the seeds
+    of ``out/seeds.json``. Exit 0 when every seed finished."""
+    from tssac_core.experiments.executors import execute
     from tssac_core.experiments.grid import AlgoEntry, Job
     from tssac_core.experiments.jobs import Status, job_state
 
+    seeds = where.seeds
     seeds_path = out / SEEDS_FILE
     if resume:
         try:
@@ -108,7 +113,7 @@ def train_seeds(cfg: TrainConfig, seeds: tuple[int, ...] | None, out: Path, resu
     conflicts = [s for s in states if s.status is Status.CONFLICT]
     if conflicts:
         raise UsageError(f"{conflicts[0].job.out}: {conflicts[0].detail}")
-    launches = execute(states, LOCAL, parallel=len(seeds))
+    launches = execute(states, where.executor, parallel=len(seeds), ray_target=RayTarget(where.address))
     failed = [launch.job.name for launch in launches if launch.returncode != 0]
     if failed:
         print(f"error: {', '.join(failed)} failed: see train.log in their directories", file=sys.stderr)

@@ -1,0 +1,436 @@
+"""Ray against this machine's own ways, side by side: the grid's executor, sharded evaluation, parallel SITL
+missions, a two-node Ray on one machine, and the paper's full-budget grid on K nodes.
+
+    python benchmarks/bench_ray.py [--parts executor,evaluate,fly,two_nodes,estimate] [--json FILE]
+
+- ``executor``: the same two training jobs (a two-job grid, each job one thread), both at once, with the
+  local executor and with ``--executor ray`` (a Ray of 2 CPUs started inside the command), alternately;
+  the command's wall time each (Ray's start and stop included) and Ray's overhead as a share of it.
+- ``evaluate``: ``tssac_core.evaluate`` on ``--layouts`` layouts with the shipped models, serial and
+  ``--workers 2``, alternately: missions per second of the whole command (Ray's start included) and the
+  same with ``--address`` to a Ray already running; the JSON of both must be equal.
+- ``fly``: ``mavlink_bridge.fly`` on ``--missions`` SITL missions of scenarios/random.yaml with the
+  shipped models, serial and ``--workers 2``: missions per second, and the figures must be equal.
+- ``two_nodes``: ``ray start --head`` plus a second ``ray start --address`` on this machine (1 CPU each,
+  their own temporary directory, stopped at the end), then the two-job grid with ``--address``: each job
+  must run on its own node, and the trained teams must be those of the local executor.
+- ``estimate``: the measured wall time of every run of results/runs (by its train.log) at the grid's
+  budget, doubled for the paper's 50 epochs per role, scheduled in the grid's order on K nodes of C CPUs
+  (a job per CPU, each to the first free one): the expected wall time of the full-budget grid.
+
+Prints the figures and the machine's load average beside them, and writes them as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import heapq
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tssac_core.experiments.grid import load_grid  # noqa: E402
+from tssac_core.experiments.report import team_digest, training_wall_s  # noqa: E402
+
+PYTHON = sys.executable
+PAPER_EPOCHS = 50
+
+
+def load() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"{one:.1f} / {five:.1f} / {fifteen:.1f}"
+
+
+def timed(argv: list[str], env: dict[str, str] | None = None) -> tuple[float, subprocess.CompletedProcess[str]]:
+    t0 = time.perf_counter()
+    done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(argv)} failed ({done.returncode}): {done.stderr.strip().splitlines()[-1:]}")
+    return wall, done
+
+
+def write_grid(directory: Path, steps: int) -> Path:
+    """The smoke grid with ``steps`` learner decisions per epoch: two jobs long enough to time."""
+    text = (
+        (ROOT / "experiments" / "smoke.yaml")
+        .read_text()
+        .replace("  steps_per_epoch: 20\n", f"  steps_per_epoch: {steps}\n", 1)
+    )
+    path = directory / "bench_grid.yaml"
+    path.write_text(text)
+    return path
+
+
+def train_only(grid: Path, results: Path, *extra: str) -> float:
+    """Wall seconds of training the grid's jobs (``--only '*'``; the report is made by a later invocation)."""
+    code = (
+        "import sys, time; from tssac_core.experiments.cli import parse_args, train;"
+        "from tssac_core.experiments.grid import load_grid;"
+        "from tssac_core.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]); t = time.perf_counter();"
+        "ls = train(load_grid(a.grid), a.results, a.jobs, report=lambda l: print(l, flush=True), executor=a.executor,"
+        " ray_target=RayTarget(a.address, a.cpus)); print('WALL', time.perf_counter() - t);"
+        "sys.exit(any(x.returncode != 0 for x in ls))"
+    )
+    wall, done = timed([PYTHON, "-c", code, "--grid", str(grid), "--results", str(results), "--jobs", "2", *extra])
+    print("   ", " | ".join(line for line in done.stdout.splitlines() if line.startswith(("started", "Ray:"))))
+    return wall
+
+
+def digests(results: Path, grid: Path) -> dict[str, str]:
+    return {job.name: team_digest(job.out) for job in load_grid(grid).jobs(results)}
+
+
+def bench_executor(work: Path, steps: int, rounds: int) -> dict[str, Any]:
+    grid = write_grid(work, steps)
+    walls: dict[str, list[float]] = {"local": [], "ray": []}
+    teams = {}
+    for r in range(rounds):
+        for executor in ("local", "ray") if r % 2 == 0 else ("ray", "local"):
+            results = work / f"exec-{executor}-{r}"
+            extra = ["--executor", "ray", "--cpus", "2"] if executor == "ray" else []
+            print(f"  round {r + 1}: {executor} (load {load()})", flush=True)
+            walls[executor].append(train_only(grid, results, *extra))
+            teams[executor] = digests(results, grid)
+            print(f"    {walls[executor][-1]:.1f} s", flush=True)
+    local, ray = sum(walls["local"]) / rounds, sum(walls["ray"]) / rounds
+    return {
+        "jobs": 2,
+        "steps_per_epoch": steps,
+        "epochs_per_role": 1,
+        "threads_per_job": 1,
+        "rounds": rounds,
+        "local_wall_s": walls["local"],
+        "ray_wall_s": walls["ray"],
+        "overhead_share": (ray - local) / ray,
+        "same_teams": teams["local"] == teams["ray"],
+        "load_average_after": load(),
+    }
+
+
+def bench_evaluate(work: Path, layouts: int) -> dict[str, Any]:
+    base = [
+        PYTHON,
+        "-m",
+        "tssac_core.evaluate",
+        "--models",
+        "models/tssac",
+        "--scenario",
+        "scenarios/random.yaml",
+        "--episodes",
+        str(layouts),
+        "--seed",
+        "880001",
+        "--no-progress",
+    ]
+    out: dict[str, Any] = {"layouts": layouts}
+    runs = {"serial": [], "workers2": [], "workers2_running_ray": []}
+    head = start_head(work / "ray-eval", cpus=2)
+    try:
+        address = head[1]
+        for name, extra in (
+            ("serial", []),
+            ("workers2", ["--workers", "2"]),
+            ("workers2_running_ray", ["--workers", "2", "--address", address]),
+            ("serial", []),
+        ):
+            print(f"  {name} (load {load()})", flush=True)
+            wall, _ = timed([*base, *extra, "--json", str(work / f"eval-{name}.json")])
+            runs[name].append(wall)
+            print(f"    {wall:.1f} s, {layouts / wall:.1f} missions/s", flush=True)
+    finally:
+        stop(head[0])
+    serial = sum(runs["serial"]) / len(runs["serial"])
+    same = (
+        json.loads((work / "eval-serial.json").read_text())
+        == json.loads((work / "eval-workers2.json").read_text())
+        == json.loads((work / "eval-workers2_running_ray.json").read_text())
+    )
+    out.update(
+        {
+            "wall_s": runs,
+            "missions_per_s": {k: layouts / (sum(v) / len(v)) for k, v in runs.items()},
+            "speedup": {k: serial / (sum(v) / len(v)) for k, v in runs.items() if k != "serial"},
+            "same_json": same,
+            "load_average_after": load(),
+        }
+    )
+    return out
+
+
+def bench_fly(work: Path, missions: int) -> dict[str, Any]:
+    base = [
+        PYTHON,
+        "-m",
+        "mavlink_bridge.fly",
+        "--scenario",
+        "scenarios/random.yaml",
+        "--models",
+        "models/tssac",
+        "--episodes",
+        str(missions),
+        "--seed",
+        "880001",
+        "--no-progress",
+    ]
+    runs: dict[str, float] = {}
+    for name, extra in (("serial", []), ("workers2", ["--workers", "2"])):
+        print(f"  {name} (load {load()})", flush=True)
+        runs[name], _ = timed([*base, *extra, "--json", str(work / f"fly-{name}.json")])
+        print(f"    {runs[name]:.1f} s, {missions / runs[name]:.3f} missions/s", flush=True)
+    keys = ("success", "end", "steps", "sim_time_s", "cost", "task_done")
+    serial, parallel = (json.loads((work / f"fly-{n}.json").read_text()) for n in ("serial", "workers2"))
+    same = [{k: m.get(k) for k in keys} for m in serial["missions"]] == [
+        {k: m.get(k) for k in keys} for m in parallel["missions"]
+    ]
+    return {
+        "missions": missions,
+        "wall_s": runs,
+        "missions_per_s": {k: missions / v for k, v in runs.items()},
+        "speedup": runs["serial"] / runs["workers2"],
+        "same_missions": same,
+        "success_rate": {"serial": serial["success_rate"], "workers2": parallel["success_rate"]},
+        "load_average_after": load(),
+    }
+
+
+def start_head(temp: Path, cpus: int) -> tuple[list[subprocess.Popen[bytes]], str]:
+    """``ray start --head --block`` in its own temporary directory; returns the process and its address."""
+    temp.mkdir(parents=True, exist_ok=True)
+    port = free_port()
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    head = subprocess.Popen(
+        [
+            shutil.which("ray") or "ray",
+            "start",
+            "--head",
+            "--block",
+            f"--port={port}",
+            f"--num-cpus={cpus}",
+            "--include-dashboard=false",
+            f"--temp-dir={temp}",
+            "--object-store-memory=134217728",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+        start_new_session=True,
+    )
+    address = f"127.0.0.1:{port}"
+    wait_for_nodes(address, 1)
+    return [head], address
+
+
+def add_node(procs: list[subprocess.Popen[bytes]], address: str, temp: Path, cpus: int) -> None:
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    procs.append(
+        subprocess.Popen(
+            [
+                shutil.which("ray") or "ray",
+                "start",
+                "--block",
+                f"--address={address}",
+                f"--num-cpus={cpus}",
+                "--object-store-memory=134217728",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+            start_new_session=True,
+        )
+    )
+    wait_for_nodes(address, 2)
+
+
+def wait_for_nodes(address: str, count: int, timeout_s: float = 300.0) -> None:
+    code = (
+        f"import ray, sys; ray.init(address='{address}', logging_level='ERROR');"
+        f"sys.exit(0 if sum(n['Alive'] for n in ray.nodes()) >= {count} else 1)"
+    )
+    deadline = time.monotonic() + timeout_s
+    while (
+        subprocess.run(
+            [PYTHON, "-c", code], capture_output=True, env={**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+        ).returncode
+        != 0
+    ):
+        if time.monotonic() > deadline:
+            raise SystemExit(f"the Ray at {address} did not show {count} node(s) in {timeout_s:.0f} s")
+        time.sleep(2)
+
+
+def stop(procs: list[subprocess.Popen[bytes]]) -> None:
+    """Stop the ``ray start --block`` processes (each stops its node's Ray processes), the added node first."""
+    for proc in reversed(procs):
+        proc.terminate()
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, 9)
+            proc.wait()
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def bench_two_nodes(work: Path, steps: int) -> dict[str, Any]:
+    grid = write_grid(work, steps)
+    procs, address = start_head(work / "ray-two", cpus=1)
+    try:
+        add_node(procs, address, work / "ray-two", cpus=1)
+        results = work / "two-nodes"
+        code = (
+            "import sys; from tssac_core.experiments.cli import parse_args, train;"
+            "from tssac_core.experiments.grid import load_grid;"
+            "from tssac_core.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]);"
+            "ls = train(load_grid(a.grid), a.results, None, report=lambda l: print(l, flush=True), executor='ray',"
+            " ray_target=RayTarget(a.address)); sys.exit(any(x.returncode != 0 for x in ls))"
+        )
+        print(f"  two nodes at {address} (load {load()})", flush=True)
+        wall, done = timed(
+            [
+                PYTHON,
+                "-c",
+                code,
+                "--grid",
+                str(grid),
+                "--results",
+                str(results),
+                "--executor",
+                "ray",
+                "--address",
+                address,
+            ]
+        )
+    finally:
+        stop(procs)
+    nodes = re.findall(r"^started \S+: on \S+ \(node ([0-9a-f]+)\)", done.stdout, re.M)
+    local = work / "exec-local-0"
+    same = digests(results, grid) == digests(local, grid) if local.is_dir() else None
+    print("   ", " | ".join(line for line in done.stdout.splitlines() if line.startswith(("started", "Ray:"))))
+    return {
+        "wall_s": wall,
+        "nodes_used": sorted(set(nodes)),
+        "jobs_on_distinct_nodes": len(set(nodes)) == 2,
+        "same_teams_as_local": same,
+        "load_average_after": load(),
+    }
+
+
+def grid_estimate(nodes: tuple[int, ...], cpus_per_node: int) -> dict[str, Any]:
+    """The grid's runs (results/runs) at the full budget on K nodes: module docstring."""
+    grid = load_grid(ROOT / "experiments" / "paper.yaml")
+    results = ROOT / "results"
+    jobs = [*grid.jobs(results), *grid.transfer_jobs(results)]
+    measured = {job.name: training_wall_s(job.out) for job in jobs}
+    by_entry: dict[str, list[float]] = {}
+    for job in jobs:
+        if measured[job.name]:
+            by_entry.setdefault(f"{job.role or ''}{job.entry.name}", []).append(measured[job.name])
+    scale = PAPER_EPOCHS / grid.train.epochs
+    minutes = []
+    for job in jobs:
+        key = f"{job.role or ''}{job.entry.name}"
+        seconds = measured[job.name] or sorted(by_entry[key])[len(by_entry[key]) // 2]
+        # the transfer runs stop at 90% task success: their length does not grow with the budget
+        minutes.append(seconds / 60 * (1.0 if job.role else scale))
+    out: dict[str, Any] = {
+        "runs": len(jobs),
+        "budget_scale": scale,
+        "cpus_per_node": cpus_per_node,
+        "total_core_hours": sum(minutes) / 60,
+        "longest_run_min": max(minutes),
+        "hours_on": {},
+    }
+    for k in nodes:
+        free = [0.0] * (k * cpus_per_node)
+        heapq.heapify(free)
+        end = 0.0
+        for m in minutes:  # the grid's order, each job to the first free CPU (what the executor does)
+            start = heapq.heappop(free)
+            end = max(end, start + m)
+            heapq.heappush(free, start + m)
+        out["hours_on"][str(k)] = end / 60
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--parts", default="executor,evaluate,fly,two_nodes,estimate")
+    p.add_argument(
+        "--steps", type=int, default=600, help="learner decisions per epoch of the two timed jobs (default 600)"
+    )
+    p.add_argument("--rounds", type=int, default=2, help="alternations of local and ray (default 2)")
+    p.add_argument("--layouts", type=int, default=1000)
+    p.add_argument("--missions", type=int, default=50)
+    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "ray.json")
+    a = p.parse_args()
+    parts = a.parts.split(",")
+    out: dict[str, Any] = {
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "load_average_before": load()}
+    }
+    with tempfile.TemporaryDirectory(prefix="bench-ray-") as tmp:
+        work = Path(tmp)
+        if "executor" in parts:
+            print(
+                f"executor: two jobs of {a.steps} decisions per epoch, local against ray, {a.rounds} rounds", flush=True
+            )
+            out["executor"] = r = bench_executor(work, a.steps, a.rounds)
+            print(
+                f"  local {r['local_wall_s']} s, ray {r['ray_wall_s']} s: "
+                f"Ray's overhead {r['overhead_share']:.1%} of its wall time; "
+                f"same teams {r['same_teams']}",
+                flush=True,
+            )
+        if "two_nodes" in parts:
+            print("two nodes on this machine", flush=True)
+            out["two_nodes"] = r = bench_two_nodes(work, a.steps)
+            print(
+                f"  {r['wall_s']:.1f} s, nodes {r['nodes_used']}, same teams as local: {r['same_teams_as_local']}",
+                flush=True,
+            )
+        if "evaluate" in parts:
+            print(f"evaluate: {a.layouts} layouts, serial against --workers 2", flush=True)
+            out["evaluate"] = r = bench_evaluate(work, a.layouts)
+            print(
+                f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']}, same JSON {r['same_json']}", flush=True
+            )
+        if "fly" in parts:
+            print(f"fly: {a.missions} SITL missions, serial against --workers 2", flush=True)
+            out["fly"] = r = bench_fly(work, a.missions)
+            print(
+                f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']:.2f}, same missions {r['same_missions']}",
+                flush=True,
+            )
+    if "estimate" in parts:
+        out["estimate"] = r = grid_estimate((1, 2, 4, 8, 16), 2)
+        print(
+            f"the full-budget grid: {r['runs']} runs, {r['total_core_hours']:.0f} core-hours, "
+            f"longest run {r['longest_run_min']:.0f} min; "
+            + ", ".join(f"{k} node(s) of 2 CPUs: {h:.1f} h" for k, h in r["hours_on"].items()),
+            flush=True,
+        )
+    out["machine"]["load_average_after"] = load()
+    a.json.parent.mkdir(parents=True, exist_ok=True)
+    a.json.write_text(json.dumps(out, indent=1))
+    print(f"wrote {a.json}")
+
+
+if __name__ == "__main__":
+    main()

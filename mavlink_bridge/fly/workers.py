@@ -1,0 +1,61 @@
+"""``fly --workers N``: the SITL missions as Ray tasks, N at once, each on its own ports.
+
+Mission ``i`` is one task: it starts its world (``--base-port 0``: the OS gives each world its own ports,
+so missions side by side never meet) and its three companions exactly as the serial run does, from the
+same layout and seed (``mission_layout(scenario, seed, i)``, seed ``S + i``), and returns the same row. A
+worker that dies takes the mission's processes with it (they die with their parent) and Ray flies the
+mission again. The rows are merged in index order into the serial run's JSON. A signing key that fly made
+(a scenario with signing and no ``--signing-key``) travels with the task; ``--models``, ``--logs``,
+``--tlog`` and ``--plot`` are paths the worker opens, so on a cluster they must be on a filesystem every
+node sees (docs/ray.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from mavlink_bridge.fly.config import FlyConfig
+from mavlink_bridge.fly.missions import MissionRunner
+from mavlink_bridge.processes import ChildProcesses
+from tssac_core.ray_cluster import RayTarget
+from tssac_core.ray_map import map_on_ray
+
+
+@dataclasses.dataclass(frozen=True)
+class MissionTask:
+    """What a worker needs to fly one mission."""
+
+    cfg: FlyConfig
+    index: int
+    signing_key: Optional[bytes]
+    """The key fly made for this invocation (None: none, or the user's ``--signing-key`` file)."""
+
+
+def fly_mission(task: MissionTask, events: Any) -> dict[str, Any]:
+    """The Ray task: one mission in a fresh work directory (``--logs`` if given), its processes stopped
+    whatever happens (a cancel arrives as KeyboardInterrupt)."""
+    children = ChildProcesses()
+    with tempfile.TemporaryDirectory(prefix="tssac-fly-") as tmp:
+        cfg = task.cfg
+        if task.signing_key is not None:
+            key = Path(tmp) / "signing.key"
+            key.write_bytes(task.signing_key)
+            key.chmod(0o600)
+            cfg = dataclasses.replace(cfg, signing_key_path=key)
+        try:
+            return MissionRunner(cfg, children, cfg.logs_dir or Path(tmp)).fly(task.index)
+        finally:
+            children.stop_all()
+
+
+def fly_on_workers(
+    cfg: FlyConfig, workers: int, target: RayTarget, made_key: Optional[Path], on_row: Callable[[dict[str, Any]], None]
+) -> None:
+    """Fly the missions of ``cfg.indices()``, ``workers`` at once; ``on_row`` gets each row as its mission ends (so an
+    interruption keeps the finished ones). Raises TaskFailed for a mission whose processes failed."""
+    key = made_key.read_bytes() if made_key is not None else None
+    tasks = [MissionTask(cfg, i, key) for i in cfg.indices()]
+    map_on_ray(fly_mission, tasks, workers, target, on_result=lambda index, row: on_row(row))

@@ -1,0 +1,223 @@
+"""Ray as the engine: the grid's jobs as tasks that survive their workers' deaths and stop on Ctrl-C, and
+missions sharded over workers with the serial run's results. One local Ray of 2 CPUs serves the module
+(started once: Ray's start-up costs seconds); the commands run in this process and use it."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tssac_core.cli import run
+from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.evaluate import main as evaluate_main
+from tssac_core.experiments.cli import train
+from tssac_core.experiments.grid import load_grid
+from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
+from tssac_core.mission_shards import fly_missions_sharded, shard
+from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.scenario import load as load_scenario
+from tssac_core.sim.team import GUIDANCE
+
+ROOT = Path(__file__).resolve().parent.parent
+SMOKE = ROOT / "experiments" / "smoke.yaml"
+RAY = RayTarget()
+pytestmark = pytest.mark.timeout(900)  # the first test waits for the Ray start: seconds (minutes on a loaded machine)
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """A local Ray of 2 CPUs for the module, shut down after it."""
+    ray = import_ray()
+    ray.init(num_cpus=2, object_store_memory=OBJECT_STORE_BYTES, include_dashboard=False, logging_level="WARNING")
+    yield ray
+    ray.shutdown()
+
+
+@pytest.fixture(autouse=True)
+def at_root(monkeypatch):
+    monkeypatch.chdir(ROOT)
+
+
+def two_epoch_grid(tmp_path: Path, algos: str = "  - tssac\n  - sac_lag\n") -> Path:
+    """The smoke grid with two epochs per role (a run stopped after its first decoy epoch has work left)."""
+    text = SMOKE.read_text().replace("  - tssac\n  - sac_lag\n", algos, 1).replace("  epochs: 1\n", "  epochs: 2\n", 1)
+    path = tmp_path / "grid.yaml"
+    path.write_text(text)
+    return path
+
+
+def wait_for(condition, timeout_s: float = 600.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError("timed out")
+        time.sleep(0.05)
+
+
+def epochs(run: Path) -> list[tuple[str, str]]:
+    with (run / "metrics.csv").open() as fh:
+        return [(r["role"], r["epoch"]) for r in csv.DictReader(fh)]
+
+
+def worker_pids(run: Path) -> list[int]:
+    return [int(p) for p in re.findall(r"^=== ray worker pid (\d+)", (run / LOG_NAME).read_text(), re.M)]
+
+
+def test_shards_cover_every_index_once():
+    assert shard(range(10), 3) == [[0, 1, 2], [3, 4, 5], [6, 7, 8, 9]]
+    assert shard([7, 9], 5) == [[7], [9]]
+    assert [i for piece in shard(range(1001), 4) for i in piece] == list(range(1001))
+
+
+def test_sharded_evaluation_equals_the_serial_one(local_ray, tmp_path):
+    """The same JSON, figure for figure, from one batched world or three shards on two workers; and, mission by
+    mission, the same outcomes in the same order."""
+    args = ["--controller", "guidance", "--scenario", "scenarios/random.yaml", "--episodes", "9", "--seed", "31"]
+    assert evaluate_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
+    assert evaluate_main([*args, "--no-progress", "--workers", "3", "--json", str(tmp_path / "sharded.json")]) == 0
+    serial, sharded = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("serial", "sharded"))
+    assert sharded == serial
+
+    scenario = load_scenario(ROOT / "scenarios" / "random.yaml")
+    one = fly_missions(scenario, [GUIDANCE] * 3, 5, 31, indices=[2, 3, 5, 7, 8])
+    pieces = fly_missions_sharded(scenario, [GUIDANCE] * 3, [2, 3, 5, 7, 8], 31, 2, RAY)
+    assert pieces.indices == one.indices and pieces.seeds == one.seeds == [33, 34, 36, 38, 39]
+    for name in ("success", "cost", "returns", "task_done", "time_s", "out_of_area"):
+        assert np.array_equal(getattr(pieces, name), getattr(one, name)), name
+    assert len(set(one.returns[:, 0].tolist())) == 5  # five different missions, not one five times
+    shielded = fly_missions(scenario, [GUIDANCE] * 3, 5, 31, indices=[2, 3, 5, 7, 8], shield=ShieldConfig())
+    pieces = fly_missions_sharded(scenario, [GUIDANCE] * 3, [2, 3, 5, 7, 8], 31, 2, RAY, shield=ShieldConfig())
+    assert pieces.summary(scenario.cost_limit) == shielded.summary(scenario.cost_limit)  # the monitor's counts too
+    assert pieces.monitor is not None and np.array_equal(pieces.monitor.flown_steps, shielded.monitor.flown_steps)
+
+
+def test_a_job_whose_worker_is_killed_resumes(local_ray, tmp_path):
+    """SIGKILL to the Ray worker mid-job: its training process dies with it, Ray runs the task again, and the
+    run resumes from its last finished epoch (no epoch trained twice)."""
+    grid = load_grid(two_epoch_grid(tmp_path, algos="  - tssac\n"))
+    results = tmp_path / "results"
+    run = results / "runs" / "tssac-seed0"
+    killed: list[int] = []
+
+    def kill_the_worker() -> None:
+        wait_for(lambda: (run / "resume" / "decoy.pt").is_file() and worker_pids(run))
+        pid = worker_pids(run)[0]
+        os.kill(pid, signal.SIGKILL)
+        killed.append(pid)
+
+    killer = threading.Thread(target=kill_the_worker, daemon=True)
+    killer.start()
+    lines: list[str] = []
+    launches = train(grid, results, 1, report=lines.append, executor="ray", ray_target=RAY)
+    killer.join(timeout=1)
+    assert killed, "the job finished before its worker could be killed"
+    assert len(launches) == 1 and launches[0].returncode == 0, lines
+    assert job_state(grid.jobs(results)[0]).status is Status.FINISHED
+    assert any(line.startswith("started tssac-seed0 again after its worker died (resume)") for line in lines), lines
+    assert epochs(run) == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]
+    log = (run / LOG_NAME).read_text()
+    headers = re.findall(r"runner: (.*)", log)
+    assert len(headers) == 2 and "--resume" not in headers[0] and "--resume" in headers[1], log
+    assert worker_pids(run)[0] == killed[0] and worker_pids(run)[1] != killed[0]
+
+
+def test_ctrl_c_stops_every_job_and_leaves_each_resumable(local_ray, tmp_path):
+    """SIGINT to the driver while two jobs train: both training processes are stopped, each run's log says so,
+    and both runs are partial (the next invocation resumes them)."""
+    grid = load_grid(two_epoch_grid(tmp_path))
+    results = tmp_path / "results"
+    runs = [job.out for job in grid.jobs(results)]
+    lines: list[str] = []
+
+    def interrupt() -> None:
+        wait_for(
+            lambda: (
+                sum(line.startswith("started ") for line in lines) == 2
+                and all((r / "config.json").is_file() for r in runs)
+            )
+        )
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=interrupt, daemon=True).start()
+    with pytest.raises(KeyboardInterrupt):
+        train(grid, results, 2, report=lines.append, executor="ray", ray_target=RAY)
+    pids = [int(re.search(r"training pid (\d+)", line).group(1)) for line in lines if line.startswith("started ")]
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    for run_dir in runs:
+        assert re.search(r"runner: stopped after \d+ s", (run_dir / LOG_NAME).read_text()), run_dir
+    assert [job_state(job).status for job in grid.jobs(results)] == [Status.PARTIAL, Status.PARTIAL], lines
+    assert sorted(line.split()[1] for line in lines if line.startswith("stopping ")) == [
+        "sac_lag-seed0;",
+        "tssac-seed0;",
+    ]
+
+
+def test_train_offers_the_experiments_executors():
+    from tssac_core.experiments.executors import EXECUTORS
+    from tssac_core.train.arguments import EXECUTORS as TRAIN_EXECUTORS
+
+    assert TRAIN_EXECUTORS == EXECUTORS
+
+
+@pytest.mark.parametrize(
+    "command, argv, message",
+    [
+        ("experiments", ["--grid", "experiments/smoke.yaml", "--address", "auto"], "--address is for --executor ray"),
+        ("experiments", ["--grid", "experiments/smoke.yaml", "--cpus", "2"], "--cpus is for --executor ray"),
+        (
+            "experiments",
+            ["--grid", "experiments/smoke.yaml", "--executor", "ray", "--address", "auto", "--cpus", "2"],
+            "--cpus sizes the Ray started here",
+        ),
+        ("train", ["--seed", "0", "--out", "unused", "--executor", "ray"], "--executor ray runs the jobs of --seeds"),
+        ("train", ["--seeds", "0,1", "--out", "unused", "--address", "auto"], "--address is for --executor ray"),
+        ("evaluate", ["--workers", "0"], "--workers must be positive"),
+        (
+            "fly",
+            ["--scenario", "scenarios/strike.yaml", "--pilot", "guidance", "--workers", "0"],
+            "--workers must be positive",
+        ),
+    ],
+)
+def test_ray_flags_in_the_wrong_place_are_one_line(command, argv, message, capsys):
+    """Checked before anything starts (no Ray, no run directory): one line on stderr, exit 2."""
+    from mavlink_bridge.fly.cli import main as fly_main
+    from tssac_core.experiments.cli import main as experiments_main
+    from tssac_core.train.cli import main as train_main
+
+    if command == "fly":
+        code = fly_main(argv)
+    else:
+        code = run({"experiments": experiments_main, "train": train_main, "evaluate": evaluate_main}[command], argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err, err
+    assert not (ROOT / "unused").exists()
+
+
+def test_train_seeds_run_as_ray_tasks(local_ray, tmp_path, capsys):
+    """``train --seeds 0,1 --executor ray``: both seeds' runs, as the local executor writes them."""
+    from tssac_core.train.cli import main as train_main
+
+    tiny = ["--algo", "sac_lag", "--roles", "decoy", "--epochs", "1", "--steps-per-epoch", "40", "--start-steps", "20",
+            "--update-after", "20", "--envs", "2", "--validation-episodes", "0", "--set", "hidden_sizes=[16,16]",
+            "--set", "batch_size=16", "--threads", "1", "--no-progress"]
+    out = tmp_path / "seeds"
+    assert train_main([*tiny, "--seeds", "0,1", "--out", str(out), "--executor", "ray"]) == 0
+    assert json.loads((out / "seeds.json").read_text()) == {"seeds": [0, 1]}
+    for seed in (0, 1):
+        run_dir = out / f"seed{seed}"
+        assert (run_dir / "decoy.pt").is_file() and json.loads((run_dir / "config.json").read_text())["seed"] == seed
+        assert worker_pids(run_dir), "not run by a Ray worker"
+    assert "trained seeds 0, 1 with sac_lag" in capsys.readouterr().out

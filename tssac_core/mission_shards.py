@@ -1,0 +1,104 @@
+"""``evaluate --workers N``: the batched missions split by index into shards, one Ray task each, merged.
+
+Mission ``k`` flies the layout of its own seed (:func:`tssac_core.sim.missions.mission_layout`, seed
+``S + k``), whichever shard flies it, and the batched world steps each mission apart from the others: so a
+shard flies exactly its missions of the serial run, and concatenating the shards in index order gives the
+serial run's results, figure for figure (tests/test_ray.py checks the JSON). The pilots (actors or the guidance
+controller) and the scenario travel to the workers with the task: no shared filesystem needed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.deploy.shield_world import MonitorCounts
+from tssac_core.ray_cluster import RayTarget
+from tssac_core.ray_map import map_on_ray
+from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.scenario import Scenario
+from tssac_core.sim.team import Pilot
+
+PROGRESS_EVERY_S = 0.5
+"""How often a shard reports the missions it finished."""
+SHARDS_PER_WORKER = 1
+"""Shards per worker: one keeps each batch as large as it can be (the batched world's speed)."""
+
+
+def shard(indices: Sequence[int], shards: int) -> list[list[int]]:
+    """``indices`` cut into at most ``shards`` contiguous pieces whose sizes differ by at most one."""
+    count = len(indices)
+    shards = max(1, min(shards, count))
+    bounds = [count * k // shards for k in range(shards + 1)]
+    return [list(indices[a:b]) for a, b in zip(bounds, bounds[1:])]
+
+
+def merge(parts: Sequence[MissionResults]) -> MissionResults:
+    """Shards' results, in index order, as one MissionResults."""
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    return MissionResults(
+        success=cat("success"),
+        cost=cat("cost"),
+        returns=cat("returns"),
+        task_done=cat("task_done"),
+        time_s=cat("time_s"),
+        out_of_area=cat("out_of_area"),
+        layouts=[x for p in parts for x in p.layouts],
+        seeds=[x for p in parts for x in p.seeds],
+        indices=[x for p in parts for x in p.indices],
+        monitor=merge_counts([p.monitor for p in parts]) if all(p.monitor is not None for p in parts) else None,
+    )
+
+
+def merge_counts(parts: Sequence[MonitorCounts | None]) -> MonitorCounts:
+    """The runtime-assurance monitor's per-mission counts of the shards, in index order."""
+    return MonitorCounts(
+        **{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(MonitorCounts)}
+    )
+
+
+Shard = tuple[Scenario, Sequence[Pilot], int, list[int], ShieldConfig | None]
+"""What a shard's task gets: the scenario, the pilots, the run's seed, its mission indices, the monitor's margins."""
+
+
+def fly_shard(piece: Shard, events: Any) -> MissionResults:
+    """The Ray task: fly one shard's missions in one batched world, reporting finished missions now and then."""
+    scenario, pilots, seed, indices, shield = piece
+    pending = [0, time.monotonic()]
+
+    def progress(finished: int) -> None:
+        pending[0] += finished
+        if time.monotonic() - pending[1] >= PROGRESS_EVERY_S:
+            events.put(pending[0])
+            pending[:] = [0, time.monotonic()]
+
+    results = fly_missions(scenario, pilots, len(indices), seed, progress=progress, indices=indices, shield=shield)
+    if pending[0]:
+        events.put(pending[0])
+    return results
+
+
+def fly_missions_sharded(
+    scenario: Scenario,
+    pilots: Sequence[Pilot],
+    indices: Sequence[int],
+    seed: int,
+    workers: int,
+    target: RayTarget,
+    progress: Callable[[int], None] | None = None,
+    shield: ShieldConfig | None = None,
+) -> MissionResults:
+    """:func:`tssac_core.sim.missions.fly_missions` of missions ``indices`` (through the runtime-assurance monitor
+    with ``shield``) over ``workers`` Ray workers: the same results."""
+    shards: list[Shard] = [
+        (scenario, list(pilots), seed, piece, shield) for piece in shard(indices, workers * SHARDS_PER_WORKER)
+    ]
+    parts = map_on_ray(fly_shard, shards, workers, target, on_event=progress or (lambda n: None))
+    return merge(parts)

@@ -1,0 +1,104 @@
+"""Where Ray work runs: a Ray started inside the command (the default), or an existing cluster (``--address``).
+
+:func:`ray_session` is the one place that calls ``ray.init``. Without an address it starts a local Ray
+in the command's own process tree, with the machine's CPUs (or ``cpus``), a small object store (the
+tasks exchange run directories' names and mission results, not data sets) and no dashboard, and shuts
+it down on the way out: nothing to install or start by hand. With an address (``HOST:PORT`` of a head
+node started with ``ray start --head``, or ``auto``) it joins that cluster and leaves it running; the
+workers then import this checkout (``PYTHONPATH`` is passed to them), so every node must see it at the
+same path (docs/ray.md). If Ray is already initialised in this process (a test's module fixture, a
+notebook), that Ray is used and left as it is.
+
+Ray is imported here and in the modules that submit tasks only when they are used: the serial paths
+never pay its import.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+from tssac_core.cli import UsageError
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+"""The checkout whose tssac_core, sim_vehicles and mavlink_bridge the workers import."""
+OBJECT_STORE_BYTES = 128 * 2**20
+"""The local Ray's shared-memory object store: mission results and small arguments only."""
+RAY_ENVIRONMENT = {
+    "RAY_USAGE_STATS_ENABLED": "0",  # no usage reports sent from the user's machine
+    # A local Ray's workers run at the command's own priority, as the local executor's jobs do (Ray's default
+    # lowers them by 15: a training job on a busy machine would wait behind everything else)
+    "RAY_worker_niceness": "0",
+    "RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO": "0",  # CPU-only tasks: no accelerator variables touched, no warning about it
+    # Ray without its [default] extra has no metrics agent; its processes say so once each: not worth a line
+    "RAY_DEDUP_LOGS_SKIP_REGEX": "metrics exporter agent",
+}
+"""Set (unless the user set them) before Ray is imported."""
+
+
+@dataclass(frozen=True)
+class RayTarget:
+    """Which Ray to use."""
+
+    address: str | None = None
+    """An existing cluster (``HOST:PORT`` or ``auto``); None: start a local Ray inside the command."""
+    cpus: int | None = None
+    """CPUs of the local Ray (default: the machine's); ignored with an address (the cluster has its own)."""
+
+
+def import_ray() -> Any:
+    """``ray``, imported with :data:`RAY_ENVIRONMENT` set."""
+    for key, value in RAY_ENVIRONMENT.items():
+        os.environ.setdefault(key, value)
+    import ray
+
+    return ray
+
+
+def worker_pythonpath() -> str:
+    """``PYTHONPATH`` for workers: this checkout first, then what the driver has."""
+    return os.pathsep.join(p for p in (str(PROJECT_ROOT), os.environ.get("PYTHONPATH", "")) if p)
+
+
+@contextmanager
+def ray_session(target: RayTarget) -> Iterator[Any]:
+    """Ray initialised as ``target`` says for the length of the block (module docstring); yields ``ray``.
+
+    An unreachable address is a UsageError (one line), not a traceback."""
+    ray = import_ray()
+    if ray.is_initialized():
+        yield ray
+        return
+    try:
+        if target.address is not None:
+            # Workers on other nodes do not inherit the driver's environment: point them at this checkout.
+            ray.init(
+                address=target.address,
+                runtime_env={"env_vars": {"PYTHONPATH": worker_pythonpath()}},
+                logging_level=logging.WARNING,
+            )
+        else:
+            # A local Ray's workers are the driver's children: they inherit its environment and directory.
+            ray.init(
+                num_cpus=target.cpus or os.cpu_count() or 1,
+                object_store_memory=OBJECT_STORE_BYTES,
+                include_dashboard=False,
+                logging_level=logging.WARNING,
+            )
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        what = f"reach the Ray cluster at {target.address}" if target.address is not None else "start a local Ray"
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UsageError(f"cannot {what}: {first}") from None
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def cluster_cpus(ray: Any) -> int:
+    """The CPUs of the Ray this process is connected to (at least 1)."""
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
