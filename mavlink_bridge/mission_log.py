@@ -107,7 +107,7 @@ class MissionRecord:
 
     def _stretch_km(self, role: str, first_step: int, last_step: int) -> list[tuple[float, float]]:
         track = self.tracks_m[role]
-        return [(x / 1000.0, y / 1000.0) for x, y in track[max(first_step - 1, 0):max(last_step, first_step)]]
+        return [(x / 1000.0, y / 1000.0) for x, y in track[max(first_step - 1, 0) : max(last_step, first_step)]]
 
     def tracks_km(self) -> dict[str, list[tuple[float, float]]]:
         return {role: [(x / 1000.0, y / 1000.0) for x, y in pts] for role, pts in self.tracks_m.items()}

@@ -80,7 +80,11 @@ class CommandHandler:
     # ------------------------------------------------------------------------------ dispatch
 
     def _on_statustext(self, msg: Msg, addr: Address) -> None:
-        text = msg.text.rstrip("\x00") if isinstance(msg.text, str) else bytes(msg.text).rstrip(b"\x00").decode("ascii", "replace")
+        text = (
+            msg.text.rstrip("\x00")
+            if isinstance(msg.text, str)
+            else bytes(msg.text).rstrip(b"\x00").decode("ascii", "replace")
+        )
         self.v.relay_statustext(int(msg.severity), text, addr)
 
     def handle(self, msg: Msg, addr: Address) -> None:

@@ -276,11 +276,15 @@ def test_the_smoke_grid_on_ray_gives_the_local_executors_table(smoke, tmp_path, 
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(cache, target)
     caches = {p: p.read_bytes() for p in results.glob("**/*.json")}
-    assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--executor", "ray", "--cpus", "2"]) == 0
+    assert (
+        main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--executor", "ray", "--cpus", "2"]) == 0
+    )
     out = capsys.readouterr().out
     assert "2 jobs: 0 finished, 2 to run, as many at a time as the CPUs hold on Ray" in out
     assert "Ray: 2 CPUs, 2 jobs at a time, 1 CPU(s) each" in out
-    assert re.search(r"^started tssac-seed0: on \S+ \(node [0-9a-f]{8}\), Ray worker pid \d+, training pid \d+$", out, re.M), out
+    assert re.search(
+        r"^started tssac-seed0: on \S+ \(node [0-9a-f]{8}\), Ray worker pid \d+, training pid \d+$", out, re.M
+    ), out
     assert {p: p.read_bytes() for p in caches} == caches  # every cached evaluation was still valid: the same actors
 
     def minutes_masked(path: Path) -> str:
@@ -291,6 +295,7 @@ def test_the_smoke_grid_on_ray_gives_the_local_executors_table(smoke, tmp_path, 
     for data in (ray_data, local_data):
         for algo in data["algorithms"]:
             algo.pop("training_wall_s")
+
     def anywhere(data: dict) -> str:
         return json.dumps(data).replace(str(results), "R").replace(str(smoke), "R")
 

@@ -78,7 +78,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         type=int,
         default=1,
         metavar="N",
-        help="fly the missions in N shards on Ray workers (default 1: in one batch here, without Ray); the same results",
+        help="fly the missions in N shards on Ray workers (default 1: in one batch here, without Ray); same results",
     )
     p.add_argument(
         "--address",

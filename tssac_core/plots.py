@@ -107,7 +107,9 @@ def plot_mission(
         for pts in stretches:
             if len(pts) > 1:
                 xs, ys = zip(*pts)
-                ax.plot(xs, ys, color="magenta", lw=4, ls="--", alpha=0.7, label=None if labelled else "backup (monitor)")
+                ax.plot(
+                    xs, ys, color="magenta", lw=4, ls="--", alpha=0.7, label=None if labelled else "backup (monitor)"
+                )
                 labelled = True
     for _, x, y in events:
         ax.plot(x, y, "kx")

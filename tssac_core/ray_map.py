@@ -11,7 +11,8 @@ KeyboardInterrupt, to stop what it started) and is re-raised.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 from tssac_core.ray_cluster import RayTarget, ray_session
 

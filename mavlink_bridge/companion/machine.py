@@ -70,7 +70,9 @@ class Companion:
         self.world = World(s, 1)
         self.world.reset([0], [s.layout])
         self.shield = (
-            None if config.shield is None else CompanionShield(self.world, config.role, s, config.shield, config.lockstep)
+            None
+            if config.shield is None
+            else CompanionShield(self.world, config.role, s, config.shield, config.lockstep)
         )
         self.pilot.action(self.world, self.role_index, 0)  # warm up: the guidance plans its route once per layout
         self.pilot.reset()
@@ -472,7 +474,9 @@ class Companion:
         assert self.shield is not None
         f = self.filter
         state = (x_m, y_m, f.speed_m_s, f.heading_rad)
-        action, text = self.shield.action(self.pilot.decided, self.pilot.repeat, proposed, state, f.position_sigma_major_m)
+        action, text = self.shield.action(
+            self.pilot.decided, self.pilot.repeat, proposed, state, f.position_sigma_major_m
+        )
         if text is not None:
             _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
             self._say(M.MAV_SEVERITY_NOTICE, text)

@@ -65,7 +65,7 @@ class CompanionResult:
     latency_samples_ms: list[float] = field(default_factory=list)
     """Every control step's latency (for benchmarks that pool several companions)."""
     shield: dict[str, float] | None = None
-    """The runtime-assurance monitor's counts (:class:`mavlink_bridge.companion_shield.ShieldCounters`), when it flew."""
+    """The runtime-assurance monitor's counts (``ShieldCounters`` of the companion's shield), when it flew."""
 
     @property
     def exit_code(self) -> int:

@@ -39,7 +39,8 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
     if sh and sh.get("uav_missions"):
         print(
             f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission "
-            f"(max {sh['max_interventions_per_uav_mission']}), {sh['backup_time_fraction']:.2%} of control steps under the "
+            f"(max {sh['max_interventions_per_uav_mission']}), "
+            f"{sh['backup_time_fraction']:.2%} of control steps under the "
             f"backup, margin up to {sh['max_margin_m']:.0f} m, {sh['uav_missions_with_cost']} UAV-missions with cost, "
             f"{sh['uavs_left_area']} UAVs left the area"
         )

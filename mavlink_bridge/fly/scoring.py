@@ -57,7 +57,9 @@ def shield_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "interventions_per_uav_mission": float(np.mean([c["interventions"] for c in counts])) if counts else None,
         "max_interventions_per_uav_mission": max((c["interventions"] for c in counts), default=None),
         "backup_time_fraction": sum(c["backup_steps"] for c in counts) / max(1, sum(control)) if counts else None,
-        "unprotected_time_fraction": sum(c["unprotected_steps"] for c in counts) / max(1, sum(control)) if counts else None,
+        "unprotected_time_fraction": sum(c["unprotected_steps"] for c in counts) / max(1, sum(control))
+        if counts
+        else None,
         "decisions": steps,
         "resets": sum(c["resets"] for c in counts),
         "max_margin_m": max((c["max_margin_m"] for c in counts), default=None),

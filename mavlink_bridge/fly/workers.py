@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.missions import MissionRunner
@@ -30,7 +31,7 @@ class MissionTask:
 
     cfg: FlyConfig
     index: int
-    signing_key: Optional[bytes]
+    signing_key: bytes | None
     """The key fly made for this invocation (None: none, or the user's ``--signing-key`` file)."""
 
 
@@ -52,7 +53,7 @@ def fly_mission(task: MissionTask, events: Any) -> dict[str, Any]:
 
 
 def fly_on_workers(
-    cfg: FlyConfig, workers: int, target: RayTarget, made_key: Optional[Path], on_row: Callable[[dict[str, Any]], None]
+    cfg: FlyConfig, workers: int, target: RayTarget, made_key: Path | None, on_row: Callable[[dict[str, Any]], None]
 ) -> None:
     """Fly the missions of ``cfg.indices()``, ``workers`` at once; ``on_row`` gets each row as its mission ends (so an
     interruption keeps the finished ones). Raises TaskFailed for a mission whose processes failed."""

@@ -34,13 +34,13 @@ import torch
 
 from tssac_core.cli import UsageError, run
 from tssac_core.deploy.export import compact_checkpoint
-from tssac_core.ray_cluster import RayTarget
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
 from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
 from tssac_core.experiments.figures import plot_figures
 from tssac_core.experiments.grid import Grid, Job, load_grid
 from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
 from tssac_core.experiments.report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
+from tssac_core.ray_cluster import RayTarget
 from tssac_core.sim.missions import MissionResults
 from tssac_core.sim.scenario import Scenario, load
 
@@ -182,7 +182,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--jobs",
         type=int,
-        help="training jobs at once (each uses the grid's threads); default 1, with --executor ray as many as the Ray's "
+        help="training jobs at once (each uses the grid's threads); default 1, with --executor ray as many as "
+        "the Ray's "
         "CPUs hold",
     )
     p.add_argument(
@@ -273,8 +274,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     launches = (
         []
         if args.report_only
-        else train(grid, args.results, parallel, finish_by=args.finish_by, only=args.only, executor=args.executor,
-                   ray_target=target)
+        else train(
+            grid,
+            args.results,
+            parallel,
+            finish_by=args.finish_by,
+            only=args.only,
+            executor=args.executor,
+            ray_target=target,
+        )
     )
     make_report(grid, args.results, cached_tail=args.cached_tail)
     failed = [launch for launch in launches if launch.returncode != 0 or not is_finished(launch.job)]

@@ -10,7 +10,7 @@ executor can resume what another started.
 from __future__ import annotations
 
 import logging
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from tssac_core.experiments.grid import Job
 from tssac_core.experiments.jobs import JobState, Launch, run_jobs

@@ -23,9 +23,10 @@ import os
 import signal
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from tssac_core.experiments.grid import Job
 from tssac_core.experiments.jobs import (

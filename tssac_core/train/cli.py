@@ -24,8 +24,8 @@ import torch
 from tqdm import tqdm
 
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.sim.scenario import Role
 from tssac_core.ray_cluster import RayTarget
+from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli, train_argv
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import config_from_saved
