@@ -1,9 +1,6 @@
 """The losses of SAC-Lagrangian and TSSAC (paper eq. 12-17) as small pure functions.
 
 Shapes: per-sample tensors are (batch,); critic outputs of an ensemble are (n_members, batch).
-Every function also takes a leading seed axis (K learners at once, `tssac_core.algos.kseed`):
-per-sample tensors (K, batch), critic outputs (K, n_members, batch), alpha and the multiplier (K, 1)
-in eq. 12-13 and (K,) in eq. 14-17; a loss is then (K,), one per seed.
 Symbols follow the paper: log_pi, q_r (reward critic), q_c (cost critic), alpha, beta, xi,
 cost_limit (C, already converted to the scale of q_c, see `lagrange.qc_limit`).
 """
