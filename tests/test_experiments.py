@@ -760,7 +760,7 @@ def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_p
     assert "tssac-seed0: not cached, left out (--cached-tail)" in out and "sac_lag-seed0: not cached" in out
     assert not (run_dir / "eval_tail.json").exists() and json.loads(other.read_text()) == stale  # nothing flown
     rows = [line for line in (results / "table4.md").read_text().splitlines() if line.startswith("| tssac | ")]
-    assert rows[0].count(" — | ") >= 6 and rows[1].startswith(
+    assert [cell.strip() for cell in rows[0].split("|")].count("—") >= 6 and rows[1].startswith(
         "| tssac | none | — |"
     )  # the columns, then the tail table
     data = json.loads((results / "experiments.json").read_text())

@@ -147,7 +147,7 @@ def cache_key(team: Path | None, spec: EvalSpec) -> dict[str, Any]:
         key["layouts"] = spec.layouts.value
     if spec.monitor:
         key["shield"] = dataclasses.asdict(ShieldConfig())
-    return key
+    return json.loads(json.dumps(key))  # as a cache file holds it (tuples become lists)
 
 
 def cached(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any] | None:
