@@ -79,10 +79,17 @@ def test_pilot_file_prefers_a_fresh_export_and_never_a_stale_one(models: Path, c
 
 
 def test_compacting_a_checkpoint_refreshes_its_export(models: Path):
+    import torch
+
+    from tssac_core.deploy.policy import read_checkpoint, torch_save_atomic
+
     pt = models / "decoy.pt"
+    # A checkpoint as training writes it carries the learner's state (critics, optimiser moments): stand one in.
+    torch_save_atomic({**read_checkpoint(pt), "learner": {"q_r": torch.zeros(20_000)}}, pt)
+    export_actor(pt)
     before = NumpyPolicy.load(models / "decoy.npz").meta["source_sha256"]
     size_before, size_after = compact_checkpoint(pt)
-    assert size_after < size_before, "the shipped checkpoint should carry learner state to drop"
+    assert size_after < size_before, "the learner state should be dropped"
     assert pilot_file(models, Role.DECOY) == models / "decoy.npz", "compaction rewrote the .pt: the export must follow"
     assert NumpyPolicy.load(models / "decoy.npz").meta["source_sha256"] != before
 

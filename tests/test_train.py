@@ -169,12 +169,13 @@ def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_
 
 
 def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(tmp_path, capsys, caplog):
-    """The shipped strike UAV, flown (no update) beside the shipped team, completes its task at once: with
+    """A trained strike UAV, flown (no update) beside its team, completes its task at once: with
     --stop-at-task-success the role ends after epoch 1 of 3 and ships; a value outside [0, 1] is one line."""
     from tssac_core.cli import run
 
     caplog.set_level("INFO")
-    models = Path(__file__).resolve().parent.parent / "models" / "tssac"
+    # The tail-selection team keeps its learner state (models/tssac holds actors only: it was compacted by the grid).
+    models = Path(__file__).resolve().parent.parent / "results" / "shipped-team" / "tail-s2"
     args = [
         "--roles",
         "strike",
