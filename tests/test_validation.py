@@ -94,10 +94,12 @@ def test_a_run_from_before_the_setting_shipped_within_the_limit():
 
 
 def test_the_tail_selection_keeps_the_three_best_epochs_checkpoints_and_resumes_with_them(tmp_path, strike_path):
+    from tssac_core.deploy.policy import FORMAT, FORMAT_VERSION, read_checkpoint, torch_save_atomic
     from tssac_core.sim.observation import ObservationMode
     from tssac_core.sim.scenario import Role, load
     from tssac_core.train.validation import EpochSelector
 
+    HEADER = {"format": FORMAT, "format_version": FORMAT_VERSION}  # noqa: N806  (a checkpoint's header, no weights)
     selector = EpochSelector(load(strike_path), Role.DETECT, tmp_path, 0, 0, {}, ObservationMode.ROUTE, tail=True)
     selector.candidate.parent.mkdir(parents=True)
     scores = [
@@ -108,12 +110,12 @@ def test_the_tail_selection_keeps_the_three_best_epochs_checkpoints_and_resumes_
         tail(5, 0.95, 2.5, 0.995),
     ]
     for s in scores:
-        selector.candidate.write_text(f"epoch {s.epoch}")  # what write_checkpoint left for this epoch
+        torch_save_atomic({**HEADER, "epoch": s.epoch}, selector.candidate)  # what write_checkpoint left for this epoch
         selector._keep_candidate(s)
     assert [s.epoch for s in selector.top] == [5, 3, 4]  # feasible by success; 2 is over C, 1 the least successful
     kept = sorted(p.name for p in (tmp_path / "resume").glob("detect-e*.pt"))
     assert kept == ["detect-e3.pt", "detect-e4.pt", "detect-e5.pt"]
-    assert (tmp_path / "resume" / "detect-e5.pt").read_text() == "epoch 5"
+    assert read_checkpoint(tmp_path / "resume" / "detect-e5.pt")["epoch"] == 5
     again = EpochSelector(load(strike_path), Role.DETECT, tmp_path, 0, 0, {}, ObservationMode.ROUTE, tail=True)
     again.load_state_dict(selector.state_dict())
     assert again.top == selector.top
