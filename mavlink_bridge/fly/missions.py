@@ -136,7 +136,7 @@ class MissionRunner:
                 plot_mission_record(cfg, index, layout, record)
         else:
             row.update(outcome_from_companions(statuses))
-        flight = [s.get("flight_wall_s") for s in statuses.values() if s.get("flight_wall_s")]
+        flight = [float(f) for s in statuses.values() if (f := s.get("flight_wall_s"))]
         if flight and row.get("sim_time_s"):
             row["flight_wall_s"] = round(max(flight), 3)
             row["speed_x"] = round(row["sim_time_s"] / max(flight), 1)
@@ -144,8 +144,9 @@ class MissionRunner:
         cpus = [s.get("flight_cpu_s") for s in statuses.values()] + (
             [row.get("world_flight_cpu_s")] if sitl is not None else []
         )
-        if cpus and all(c is not None for c in cpus):
-            row["flight_cpu_s"] = round(sum(cpus), 3)
+        known = [float(c) for c in cpus if c is not None]
+        if cpus and len(known) == len(cpus):
+            row["flight_cpu_s"] = round(sum(known), 3)
         if timed_out:
             row["end"] = "timeout"
             row["success"] = False

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import torch
 import torch.nn.functional as F
@@ -118,7 +119,9 @@ class Critic(nn.Module):
         last = len(self.weights) - 1
         # The lists' own parameter dicts, in order: iterating a ParameterList indexes it item by
         # item through string keys, ~20 us per forward pass here.
-        layers = zip(self.weights._parameters.values(), self.biases._parameters.values())
+        weights = cast("dict[str, torch.Tensor]", self.weights._parameters)
+        biases = cast("dict[str, torch.Tensor]", self.biases._parameters)
+        layers = zip(weights.values(), biases.values())
         for i, (w, b) in enumerate(layers):
             h = torch.baddbmm(b, h, w)
             if i < last:

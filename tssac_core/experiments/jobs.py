@@ -141,7 +141,9 @@ def same_scenario(saved: Path, wanted: Path, run: Path | None) -> bool:
             return load_scenario(saved).digest() == digest
     except ScenarioError:
         return False
-    for role in ROLES if run is not None else ():
+    if run is None:
+        return False
+    for role in ROLES:
         checkpoint = run / f"{role.value}.pt"
         if checkpoint.is_file():
             try:

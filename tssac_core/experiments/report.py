@@ -29,7 +29,7 @@ import hashlib
 import json
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -474,7 +474,7 @@ def summarise(
     finished: list[Job],
     evaluations: Evaluations,
     results: Path,
-    transfer_runs: list[Job] = (),
+    transfer_runs: Sequence[Job] = (),
 ) -> dict[str, Any]:
     """Everything ``experiments.json`` holds."""
     labels = [spec.label for spec in eval_specs(grid) if spec.label not in TAIL_LABELS]

@@ -25,7 +25,7 @@ import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import yaml
@@ -297,7 +297,7 @@ def _build(tp: Any, value: Any, where: str, source: str) -> Any:
                 kwargs[f.name] = _build(hints[f.name], value[f.name], _join(where, f.name), source)
             elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 raise ScenarioError(source, _join(where, f.name), "missing required field")
-        build: Callable[..., Any] = tp  # a dataclass type (dataclasses.fields above), called with its fields
+        build = cast(Callable[..., Any], tp)  # a dataclass type (dataclasses.fields above), called with its fields
         return build(**kwargs)
     if origin is tuple:
         if not isinstance(value, (list, tuple)):

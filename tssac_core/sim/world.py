@@ -338,7 +338,7 @@ class World:
         self._build_constants()
 
     def reset(
-        self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, bool, bool] = (True, True, True)
+        self, index: np.ndarray | list[int], layouts: list[Layout], active: tuple[bool, ...] = (True, True, True)
     ) -> None:
         """Start worlds ``index`` afresh with the given layouts (one per index)."""
         idx = np.asarray(index, dtype=np.int64)
