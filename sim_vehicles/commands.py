@@ -14,6 +14,7 @@ import logging
 import math
 import struct
 from collections.abc import Callable
+from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -24,8 +25,8 @@ from sim_vehicles.vehicle import Vehicle
 
 _log = logging.getLogger(__name__)
 M = mavlink2
-Msg = mavlink2.MAVLink_message
-CommandResult = tuple[int, list[Msg]]
+Msg: TypeAlias = mavlink2.MAVLink_message
+CommandResult: TypeAlias = tuple[int, list[Msg]]
 
 FTP_OP_ACK, FTP_OP_NAK = 128, 129
 FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS, FTP_OPEN_FILE_RO = 1, 2, 4
@@ -129,6 +130,7 @@ class CommandHandler:
         v = self.v
         v.counters.commands += 1
         handler = self._commands.get(command)
+        replies: list[Msg]
         if handler is None:
             v.counters.commands_unsupported += 1
             result, replies = M.MAV_RESULT_UNSUPPORTED, []
