@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_training import tiny_args
 
 from tssac_core.cli import run
 from tssac_core.deploy.shield import ShieldConfig
@@ -210,31 +211,7 @@ def test_train_seeds_run_as_ray_tasks(local_ray, tmp_path, capsys):
     """``train --seeds 0,1 --executor ray``: both seeds' runs, as the local executor writes them."""
     from tssac_core.train.cli import main as train_main
 
-    tiny = [
-        "--algo",
-        "sac_lag",
-        "--roles",
-        "decoy",
-        "--epochs",
-        "1",
-        "--steps-per-epoch",
-        "40",
-        "--start-steps",
-        "20",
-        "--update-after",
-        "20",
-        "--envs",
-        "2",
-        "--validation-episodes",
-        "0",
-        "--set",
-        "hidden_sizes=[16,16]",
-        "--set",
-        "batch_size=16",
-        "--threads",
-        "1",
-        "--no-progress",
-    ]
+    tiny = tiny_args()
     out = tmp_path / "seeds"
     assert train_main([*tiny, "--seeds", "0,1", "--out", str(out), "--executor", "ray"]) == 0
     assert json.loads((out / "seeds.json").read_text()) == {"seeds": [0, 1]}

@@ -9,38 +9,13 @@ import shutil
 from pathlib import Path
 
 import pytest
+from tiny_training import tiny_args
 
 from tssac_core.cli import run
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.train.cli import main
 
-TINY = [
-    "--algo",
-    "sac_lag",
-    "--seed",
-    "2",
-    "--roles",
-    "decoy",
-    "--steps-per-epoch",
-    "40",
-    "--start-steps",
-    "20",
-    "--update-after",
-    "20",
-    "--envs",
-    "2",
-    "--action-repeat",
-    "10",
-    "--validation-episodes",
-    "2",
-    "--set",
-    "hidden_sizes=[16,16]",
-    "--set",
-    "batch_size=16",
-    "--threads",
-    "1",
-    "--no-progress",
-]
+TINY = [*tiny_args(epochs=None, validation=2), "--seed", "2", "--action-repeat", "10"]
 
 
 def epochs(out: Path) -> list[int]:

@@ -6,33 +6,11 @@ import csv
 import json
 from pathlib import Path
 
+from tiny_training import tiny_args
+
 from tssac_core.train.cli import main
 
-TINY = [
-    "--algo",
-    "sac_lag",
-    "--roles",
-    "decoy",
-    "--epochs",
-    "1",
-    "--steps-per-epoch",
-    "40",
-    "--start-steps",
-    "20",
-    "--update-after",
-    "20",
-    "--envs",
-    "2",
-    "--validation-episodes",
-    "0",
-    "--set",
-    "hidden_sizes=[16,16]",
-    "--set",
-    "batch_size=16",
-    "--threads",
-    "1",
-    "--no-progress",
-]
+TINY = tiny_args()
 TIMING = {"env_steps_per_s", "updates_per_s"}
 
 
