@@ -1,7 +1,7 @@
 """Ray against this machine's own ways, side by side: the grid's executor, sharded evaluation, parallel SITL
 missions, a two-node Ray on one machine, and the paper's full-budget grid on K nodes.
 
-    python benchmarks/bench_ray.py [--parts executor,evaluate,fly,two_nodes,estimate] [--json FILE]
+    python benchmarks/bench_ray.py [--parts executor,evaluate,evaluate_warm,fly,two_nodes,estimate] [--json FILE]
 
 - ``executor``: the same two training jobs (a two-job grid, each job one thread), both at once, with the
   local executor and with ``--executor ray`` (a Ray of 2 CPUs started inside the command), alternately;
@@ -9,6 +9,8 @@ missions, a two-node Ray on one machine, and the paper's full-budget grid on K n
 - ``evaluate``: ``tssac_core.evaluate`` on ``--layouts`` layouts with the shipped models, serial and
   ``--workers 2``, alternately: missions per second of the whole command (Ray's start included) and the
   same with ``--address`` to a Ray already running; the JSON of both must be equal.
+- ``evaluate_warm``: the flight alone (no process or Ray start-up), serial against 2 warm Ray workers, in one
+  process (:func:`bench_evaluate_warm`).
 - ``fly``: ``mavlink_bridge.fly`` on ``--missions`` SITL missions of scenarios/random.yaml with the
   shipped models, serial and ``--workers 2``: missions per second, and the figures must be equal.
 - ``two_nodes``: ``ray start --head`` plus a second ``ray start --address`` on this machine (1 CPU each,
@@ -167,6 +169,55 @@ def bench_evaluate(work: Path, layouts: int) -> dict[str, Any]:
         }
     )
     return out
+
+
+def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
+    """The flight alone, in this process: ``fly_missions`` of ``layouts`` missions against
+    ``fly_missions_sharded`` over 2 workers of a Ray started once and warmed up (its workers have imported
+    torch and flown a mission), alternately: the missions per second a long-lived driver gets (a notebook, or
+    a cluster user evaluating many teams), without the start-up every fresh command pays."""
+    import torch
+
+    from tssac_core.evaluate import load_pilots
+    from tssac_core.mission_shards import fly_missions_sharded
+    from tssac_core.ray_cluster import RayTarget, import_ray
+    from tssac_core.sim.missions import fly_missions
+    from tssac_core.sim.scenario import load as load_scenario
+
+    torch.set_num_threads(1)
+    scenario = load_scenario(ROOT / "scenarios" / "random.yaml")
+    pilots = load_pilots(ROOT / "models" / "tssac")
+    indices = list(range(layouts))
+    ray = import_ray()
+    ray.init(num_cpus=2, object_store_memory=128 * 1024 * 1024, include_dashboard=False)
+    walls: dict[str, list[float]] = {"serial": [], "workers2": []}
+    success: dict[str, Any] = {}
+    try:
+        target = RayTarget()
+        fly_missions_sharded(scenario, pilots, [0, 1], 880001, 2, target)  # warm-up: both workers import and fly
+        for r in range(rounds):
+            for name in ("serial", "workers2") if r % 2 == 0 else ("workers2", "serial"):
+                print(f"  {name} (load {load()})", flush=True)
+                t0 = time.perf_counter()
+                if name == "serial":
+                    result = fly_missions(scenario, pilots, layouts, 880001, indices=indices)
+                else:
+                    result = fly_missions_sharded(scenario, pilots, indices, 880001, 2, target)
+                walls[name].append(time.perf_counter() - t0)
+                print(f"    {walls[name][-1]:.1f} s, {layouts / walls[name][-1]:.1f} missions/s", flush=True)
+                success[name] = result.success.copy()
+    finally:
+        ray.shutdown()
+    mean = {k: sum(v) / len(v) for k, v in walls.items()}
+    return {
+        "layouts": layouts,
+        "rounds": rounds,
+        "wall_s": walls,
+        "missions_per_s": {k: layouts / v for k, v in mean.items()},
+        "speedup": mean["serial"] / mean["workers2"],
+        "same_success": bool((success["serial"] == success["workers2"]).all()),
+        "load_average_after": load(),
+    }
 
 
 def bench_fly(work: Path, missions: int) -> dict[str, Any]:
@@ -372,7 +423,7 @@ def grid_estimate(nodes: tuple[int, ...], cpus_per_node: int) -> dict[str, Any]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--parts", default="executor,evaluate,fly,two_nodes,estimate")
+    p.add_argument("--parts", default="executor,evaluate,evaluate_warm,fly,two_nodes,estimate")
     p.add_argument(
         "--steps", type=int, default=600, help="learner decisions per epoch of the two timed jobs (default 600)"
     )
@@ -410,6 +461,12 @@ def main() -> None:
             out["evaluate"] = r = bench_evaluate(work, a.layouts)
             print(
                 f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']}, same JSON {r['same_json']}", flush=True
+            )
+        if "evaluate_warm" in parts:
+            print(f"evaluate_warm: {a.layouts} layouts' flight, serial against 2 warm Ray workers", flush=True)
+            out["evaluate_warm"] = r = bench_evaluate_warm(a.layouts, a.rounds)
+            print(
+                f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']:.2f}, same {r['same_success']}", flush=True
             )
         if "fly" in parts:
             print(f"fly: {a.missions} SITL missions, serial against --workers 2", flush=True)

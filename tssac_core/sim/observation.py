@@ -68,7 +68,9 @@ ROUTE_SIZE = EXTENDED_SIZE + 2
 PAPER_SIZE = 5
 
 
-class ObservationMode(enum.Enum):
+class ObservationMode(enum.StrEnum):
+    """Which observation a policy sees (a str, so it reads and compares as its name in config files)."""
+
     PAPER = "paper"
     EXTENDED = "extended"
     ROUTE = "route"

@@ -44,7 +44,7 @@ class TrainConfig:
     """From-scratch roles act uniformly at random for this many steps first (not after transfer)."""
     update_after: int = 1000
     """No updates before the buffer holds this many transitions."""
-    observation: str = "route"
+    observation: ObservationMode = ObservationMode.ROUTE
     """paper (eq. 7), extended, or route (extended + the way around the radars; tssac_core.sim.observation)."""
     action_repeat: int = 1
     """Decision interval: the learner's action is held for this many 0.1 s world steps (1: the paper)."""
@@ -83,7 +83,7 @@ class TrainConfig:
         # Words from the command line or a config.json become their enums (ValueError for a word that is none).
         object.__setattr__(self, "algo", Algo(self.algo))
         object.__setattr__(self, "selection", Selection(self.selection) if self.selection else None)
-        ObservationMode(self.observation)
+        object.__setattr__(self, "observation", ObservationMode(self.observation))
 
 
 def has_multiplier_signal(algo: str) -> bool:
