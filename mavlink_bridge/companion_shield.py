@@ -6,12 +6,14 @@ proposed action goes through :class:`tssac_core.deploy.shield_world.VehicleMonit
 
 * the filter's estimate (x, y, v, phi) at the tick;
 * the margin :func:`tssac_core.deploy.shield.estimate_margin_m`: the base, ``sigma_k`` times the position's largest
-  standard deviation (sqrt of the largest eigenvalue of the filter's position covariance), and off
-  lockstep v_max times the timing slack;
-* the commands sent in the last round trip (``pending``): off lockstep the vehicle flies the setpoint
-  stamped for tick t about 2 x ``link.latency_ms`` after t (the SITL's link clock is simulated time at a
-  speed-up, as a real link's latency is real time in flight); under lockstep over tick t itself, so
-  nothing is pending.
+  standard deviation (sqrt of the largest eigenvalue of the filter's position covariance), and v_max times
+  the timing slack off lockstep or over a lossy link (``link.packet_loss`` > 0: a lost setpoint leaves the
+  vehicle on the previous command, in lockstep too);
+* the commands sent in the last round trip (``pending``): the vehicle flies the setpoint stamped for tick t
+  about 2 x ``link.latency_ms`` after t, off lockstep (the SITL's link clock is simulated time at a
+  speed-up, as a real link's latency is real time in flight) and in lockstep alike (there the link runs on
+  simulated time: the telemetry of tick t arrives ``latency_ms`` later, and the answer as long again).
+  Over a link without latency nothing is pending.
 
 Between decisions the chosen action is held. A hold setpoint (telemetry gap, non-finite action) breaks the
 chain of predictions the guarantee rests on, so the monitor forgets its backup then and starts afresh.
@@ -62,9 +64,9 @@ class CompanionShield:
         self.cfg = cfg
         self.role = role
         self.monitor = VehicleMonitor(world, role.index, cfg)
-        self.lockstep = lockstep
         self.dt_s = scenario.dt_s
         self.latency_s = scenario.link.latency_ms / 1000.0
+        self.slack = not lockstep or scenario.link.packet_loss > 0
         self.speed_max_m_s = scenario.vehicle(role).speed_max_m_s
         self.counters = ShieldCounters()
         self.engaged = False
@@ -82,7 +84,7 @@ class CompanionShield:
 
     def pending_ticks(self) -> int:
         """Setpoints still on their way to the vehicle or not yet flown: a round trip of the link in ticks."""
-        if self.lockstep or self.latency_s <= 0:
+        if self.latency_s <= 0:
             return 0
         return round(2.0 * self.latency_s / self.dt_s)
 
@@ -100,7 +102,7 @@ class CompanionShield:
         monitor's last choice is held."""
         text = None
         if decision:
-            margin = estimate_margin_m(self.cfg, sigma_major_m, self.speed_max_m_s, realtime=not self.lockstep)
+            margin = estimate_margin_m(self.cfg, sigma_major_m, self.speed_max_m_s, slack=self.slack)
             n = min(self.pending_ticks(), len(self._sent))
             pending = np.array(list(self._sent)[len(self._sent) - n :]) if n else None
             d = self.monitor.decide(*state, proposed=proposed, steps=steps, margin_m=margin, pending=pending)

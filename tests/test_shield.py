@@ -251,12 +251,17 @@ def test_companion_monitor_margin_and_pending(random_path):
         np.testing.assert_array_equal(action, d.action[0])
         xs, ys, vs, ps = constant_rollout(*(np.array([q]) for q in state), action[None], reference.limits, s.dt_s, 10)
         state = (xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1])
-    assert lockstep.pending_ticks() == 0
+    assert lockstep.pending_ticks() == 0 and not lockstep.slack  # a perfect link in lockstep: nothing in flight
     slow = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0))
     realtime = CompanionShield(world, Role.DECOY, slow, cfg, lockstep=False)
-    assert realtime.pending_ticks() == 4  # 2 x 0.2 s of 0.1 s ticks
-    assert estimate_margin_m(cfg, 5.0, 300.0, realtime=True) == pytest.approx(100.0 + 15.0 + 150.0)
-    assert estimate_margin_m(cfg, 5.0, 300.0, realtime=False) == pytest.approx(115.0)
+    assert realtime.pending_ticks() == 4 and realtime.slack  # 2 x 0.2 s of 0.1 s ticks
+    # Lockstep over a slow, lossy link (degraded.yaml): the link runs on simulated time, so the round trip is
+    # in ticks as well, and a lost setpoint leaves the vehicle on the previous command.
+    lossy = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0, packet_loss=0.1))
+    degraded = CompanionShield(world, Role.DECOY, lossy, cfg, lockstep=True)
+    assert degraded.pending_ticks() == 4 and degraded.slack
+    assert estimate_margin_m(cfg, 5.0, 300.0, slack=True) == pytest.approx(100.0 + 15.0 + 150.0)
+    assert estimate_margin_m(cfg, 5.0, 300.0, slack=False) == pytest.approx(115.0)
 
 
 def test_filter_major_axis_sigma():

@@ -70,8 +70,8 @@ class ShieldConfig:
     """Also the backups that brake to v_min while they turn (their 1.72 km final circle fits where the
     3.44 km one at top speed does not; False: constant-speed turns only, cheaper to check)."""
     timing_slack_s: float = 0.5
-    """Companion off lockstep: the margin grows by v_max times this (commands that arrive late or are
-    lost on the link: the vehicle flies the previous one meanwhile)."""
+    """Companion off lockstep, or in lockstep over a lossy link: the margin grows by v_max times this
+    (commands that arrive late or are lost on the link: the vehicle flies the previous one meanwhile)."""
 
     def __post_init__(self) -> None:
         for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s"):
@@ -437,11 +437,11 @@ def decide(
     )
 
 
-def estimate_margin_m(cfg: ShieldConfig, position_sigma_major_m: float, speed_max_m_s: float, realtime: bool) -> float:
+def estimate_margin_m(cfg: ShieldConfig, position_sigma_major_m: float, speed_max_m_s: float, slack: bool) -> float:
     """A companion's margin: the base, sigma_k times the estimate's largest position standard deviation
-    (sqrt of the largest eigenvalue of the Kalman filter's position covariance), and off lockstep v_max
-    times the timing slack (a command lost or late on the link)."""
+    (sqrt of the largest eigenvalue of the Kalman filter's position covariance), and with ``slack`` (off
+    lockstep, or a lossy link) v_max times the timing slack (a command lost or late on the link)."""
     margin = cfg.margin_m + cfg.sigma_k * max(0.0, position_sigma_major_m)
-    if realtime:
+    if slack:
         margin += speed_max_m_s * cfg.timing_slack_s
     return margin
