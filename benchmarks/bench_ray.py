@@ -180,7 +180,7 @@ def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
 
     from tssac_core.evaluate import load_pilots
     from tssac_core.mission_shards import fly_missions_sharded
-    from tssac_core.ray_cluster import RayTarget, import_ray
+    from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
     from tssac_core.sim.missions import fly_missions
     from tssac_core.sim.scenario import load as load_scenario
 
@@ -189,7 +189,7 @@ def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
     pilots = load_pilots(ROOT / "models" / "tssac")
     indices = list(range(layouts))
     ray = import_ray()
-    ray.init(num_cpus=2, object_store_memory=128 * 1024 * 1024, include_dashboard=False)
+    ray.init(num_cpus=2, object_store_memory=OBJECT_STORE_BYTES, include_dashboard=False)
     walls: dict[str, list[float]] = {"serial": [], "workers2": []}
     success: dict[str, Any] = {}
     try:
