@@ -49,9 +49,10 @@ def at_root(monkeypatch):
     monkeypatch.chdir(ROOT)
 
 
-def two_epoch_grid(tmp_path: Path, algos: str = "  - tssac\n  - sac_lag\n") -> Path:
+def two_epoch_grid(tmp_path: Path, algos: str = "  - tssac\n  - sac_lag\n", epochs: int = 2) -> Path:
     """The smoke grid with two epochs per role (a run stopped after its first decoy epoch has work left)."""
-    text = SMOKE.read_text().replace("  - tssac\n  - sac_lag\n", algos, 1).replace("  epochs: 1\n", "  epochs: 2\n", 1)
+    text = SMOKE.read_text().replace("  - tssac\n  - sac_lag\n", algos, 1)
+    text = text.replace("  epochs: 1\n", f"  epochs: {epochs}\n", 1)
     path = tmp_path / "grid.yaml"
     path.write_text(text)
     return path
@@ -134,8 +135,9 @@ def test_a_job_whose_worker_is_killed_resumes(local_ray, tmp_path):
 
 def test_ctrl_c_stops_every_job_and_leaves_each_resumable(local_ray, tmp_path):
     """SIGINT to the driver while two jobs train: both training processes are stopped, each run's log says so,
-    and both runs are partial (the next invocation resumes them)."""
-    grid = load_grid(two_epoch_grid(tmp_path))
+    and both runs are partial (the next invocation resumes them). The jobs have far more epochs than they get
+    to train (seconds each): the interrupt must find them running however late a loaded machine reports them."""
+    grid = load_grid(two_epoch_grid(tmp_path, epochs=200))
     results = tmp_path / "results"
     runs = [job.out for job in grid.jobs(results)]
     lines: list[str] = []
