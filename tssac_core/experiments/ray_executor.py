@@ -18,6 +18,7 @@ state: the node needs to see it, which on a cluster means a shared filesystem (d
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import signal
@@ -104,6 +105,10 @@ def run_job(job: Job, directory: str, events: Any) -> Outcome:
     if state.status is Status.CONFLICT:
         raise RuntimeError(f"{job.out}: {state.detail}")
     resume = state.status is Status.PARTIAL
+    # Ray cancels a task with SIGINT: a worker whose Ray was started from a background shell (`cmd &` in a
+    # script) inherited SIGINT ignored and would train on until the cancel's grace ran out.
+    with contextlib.suppress(ValueError):  # not the worker's main thread: leave its signals alone
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     proc, cmd = start(
         job, resume, where=f"ray worker pid {os.getpid()} on {socket.gethostname()}", preexec_fn=die_with_parent
     )
