@@ -5,7 +5,8 @@ missions, a two-node Ray on one machine, and the paper's full-budget grid on K n
 
 - ``executor``: the same two training jobs (a two-job grid, each job one thread), both at once, with the
   local executor and with ``--executor ray`` (a Ray of 2 CPUs started inside the command), alternately;
-  the command's wall time each (Ray's start and stop included) and Ray's overhead as a share of it.
+  the command's wall time each (Ray's start and stop included) and Ray's overhead as a share of it (JSON key
+  ``executor_<steps>_steps``: one entry per job length measured).
 - ``evaluate``: ``tssac_core.evaluate`` on ``--layouts`` layouts with the shipped models, serial and
   ``--workers 2``, alternately: missions per second of the whole command (Ray's start included) and the
   same with ``--address`` to a Ray already running; the JSON of both must be equal.
@@ -20,7 +21,8 @@ missions, a two-node Ray on one machine, and the paper's full-budget grid on K n
   budget, doubled for the paper's 50 epochs per role, scheduled in the grid's order on K nodes of C CPUs
   (a job per CPU, each to the first free one): the expected wall time of the full-budget grid.
 
-Prints the figures and the machine's load average beside them, and writes them as JSON.
+Prints the figures and the machine's load average beside them, and writes them as JSON (into ``--json``: the
+parts not run keep the figures the file had).
 """
 
 from __future__ import annotations
@@ -442,7 +444,7 @@ def main() -> None:
             print(
                 f"executor: two jobs of {a.steps} decisions per epoch, local against ray, {a.rounds} rounds", flush=True
             )
-            out["executor"] = r = bench_executor(work, a.steps, a.rounds)
+            out[f"executor_{a.steps}_steps"] = r = bench_executor(work, a.steps, a.rounds)
             print(
                 f"  local {r['local_wall_s']} s, ray {r['ray_wall_s']} s: "
                 f"Ray's overhead {r['overhead_share']:.1%} of its wall time; "
@@ -484,8 +486,10 @@ def main() -> None:
             flush=True,
         )
     out["machine"]["load_average_after"] = load()
+    # The parts not run this time keep their figures from the file (each part records its own load average).
+    earlier = json.loads(a.json.read_text()) if a.json.is_file() else {}
     a.json.parent.mkdir(parents=True, exist_ok=True)
-    a.json.write_text(json.dumps(out, indent=1))
+    a.json.write_text(json.dumps({**earlier, **out}, indent=1))
     print(f"wrote {a.json}")
 
 

@@ -228,23 +228,29 @@ def test_fly_speedup_signed_random_layouts(tmp_path: Path) -> None:
     assert not [pid for pid in _pids(results) if _alive(pid)]
 
 
-@pytest.mark.sitl
-@pytest.mark.timeout(240)
-def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
-    out = tmp_path / "fly.json"
-    proc = _start_fly(
+def _start_guidance_fly(tmp_path: Path, out: Path, episodes: int) -> subprocess.Popen[bytes]:
+    """``fly`` of the guidance controller over ``episodes`` short missions, JSON to ``out``, in the background."""
+    scenario = _quick_scenario(tmp_path, strike_km=25.0)
+    return _start_fly(
         [
             "--scenario",
-            str(_quick_scenario(tmp_path, strike_km=25.0)),
+            str(scenario),
             "--pilot",
             "guidance",
             "--episodes",
-            "5",
+            str(episodes),
             "--json",
             str(out),
             "--no-progress",
         ]
     )
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc = _start_guidance_fly(tmp_path, out, episodes=5)
     try:
         log, _ = _read_until(proc, r"mission 1: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 150)
         running = [
@@ -268,19 +274,7 @@ def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_pat
 @pytest.mark.timeout(240)
 def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"
-    proc = _start_fly(
-        [
-            "--scenario",
-            str(_quick_scenario(tmp_path, strike_km=25.0)),
-            "--pilot",
-            "guidance",
-            "--episodes",
-            "3",
-            "--json",
-            str(out),
-            "--no-progress",
-        ]
-    )
+    proc = _start_guidance_fly(tmp_path, out, episodes=3)
     try:
         _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
         pids = [int(p) for p in match.groups()]

@@ -100,26 +100,17 @@ def test_same_seed_same_run(trained, tmp_path):
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+def no_update_run(hidden: str, *extra: str) -> list[str]:
+    """Training flags for one epoch of 20 decisions and no update (it would start after 1,000): every network
+    stays as it was initialised or transferred."""
+    flags = "--epochs 1 --validation-episodes 0 --steps-per-epoch 20 --envs 2 --update-after 1000 --no-progress"
+    return [*flags.split(), "--threads", "1", "--set", f"hidden_sizes={hidden}", *extra]
+
+
 def test_transfer_initialises_the_next_role(tmp_path):
     """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
     out = tmp_path / "t"
-    args = [
-        "--epochs",
-        "1",
-        "--validation-episodes",
-        "0",
-        "--steps-per-epoch",
-        "20",
-        "--envs",
-        "2",
-        "--update-after",
-        "1000",
-        "--set",
-        "hidden_sizes=[16]",
-        "--no-progress",
-        "--threads",
-        "1",
-    ]
+    args = no_update_run("[16]")
     assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
     a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(out / "detect.pt", weights_only=False)["actor"]
@@ -136,25 +127,7 @@ def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_
     from tssac_core.cli import run
 
     out = tmp_path / "strike-only"
-    args = [
-        "--epochs",
-        "1",
-        "--validation-episodes",
-        "0",
-        "--steps-per-epoch",
-        "20",
-        "--envs",
-        "2",
-        "--update-after",
-        "1000",
-        "--set",
-        "hidden_sizes=[32,32]",
-        "--no-progress",
-        "--threads",
-        "1",
-        "--roles",
-        "strike",
-    ]
+    args = no_update_run("[32,32]", "--roles", "strike")
     assert main(["--algo", "tssac", "--out", str(out), "--teammates", str(trained), *args]) == 0
     assert sorted(p.name for p in out.glob("*.pt")) == ["strike.pt"]  # nothing of the teammates copied in
     a = torch.load(trained / "detect.pt", weights_only=False)["actor"]
