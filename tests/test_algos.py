@@ -661,3 +661,98 @@ def test_multiplier_upper_bound() -> None:
     assert m.effective(100.0).item() == pytest.approx(4.0)  # 4 + 10 * 99.5 unbounded
     unbounded = DampedLagrangeMultiplier(cost_limit=0.5, k_d=10.0, lr=1.0)
     assert unbounded.effective(100.0).item() == pytest.approx(995.0)
+
+
+# --- WCSAC's worst-case cost critic (SacConfig.cost_cvar_level) ------------------------------------------------
+
+
+def test_cost_variance_target_and_loss_by_hand() -> None:
+    gamma = 0.9
+    # A deterministic chain: c = 1, Q^c(s', a') = 2, V^c(s', a') = 0, so Q^c(s, a) = 1 + 0.9 * 2 and no variance.
+    q = 1.0 + gamma * 2.0
+    deterministic = losses.cost_variance_target(t(1.0), t(0.0), t(2.0), t(0.0), t(q), gamma)
+    torch.testing.assert_close(deterministic, t(0.0), atol=1e-12, rtol=0)
+    # The next state's variance comes through discounted twice: gamma^2 V^c(s', a').
+    torch.testing.assert_close(losses.cost_variance_target(t(1.0), t(0.0), t(2.0), t(3.0), t(q), gamma), t(0.81 * 3.0))
+    # Termination drops the next state: c^2 - Q^c(s, a)^2, clamped at 0.
+    torch.testing.assert_close(
+        losses.cost_variance_target(t(1.0, 0.0), t(1.0, 1.0), t(5.0, 5.0), t(9.0, 9.0), t(0.5, 0.5), gamma),
+        t(0.75, 0.0),
+    )
+    # W2's variance part: (sqrt(var) - sqrt(target))^2, zero when they agree.
+    assert float(losses.variance_loss(t(4.0, 1.0), t(1.0, 1.0))) == pytest.approx(0.5)
+
+
+def test_cvar_of_a_gaussian_by_hand() -> None:
+    assert losses.cvar_coefficient(1.0) == 0.0
+    # Phi^-1(0.1) = -1.28155, phi(-1.28155) = 0.175498: the worst 10% of N(1, 4) average 1 + 1.75498 * 2.
+    torch.testing.assert_close(losses.cost_cvar(t(1.0), t(4.0), 0.1), t(1.0 + 2 * 1.754983), atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match="cost_cvar_level"):
+        small_config(cost_cvar_level=1.0)
+
+
+def test_the_variance_critic_is_an_addition_the_default_learner_does_not_have() -> None:
+    torch.manual_seed(3)
+    mean_only = SacLagrangian(OBS_DIM, ACT_DIM, small_config())
+    torch.manual_seed(3)
+    risk = SacLagrangian(OBS_DIM, ACT_DIM, small_config(cost_cvar_level=0.1))
+    assert set(risk.networks()) - set(mean_only.networks()) == {"q_c_var", "q_c_var_target"}
+    shared = {k: v for k, v in all_tensors(risk).items() if not k.startswith("q_c_var")}
+    assert_same_tensors(shared, all_tensors(mean_only))  # the same initial weights for what both have
+    before = {k: v.clone() for k, v in all_tensors(risk).items()}
+    risk.update(random_batch(0))
+    after = all_tensors(risk)
+    assert not torch.equal(before["q_c_var.weights.0"], after["q_c_var.weights.0"])  # trained in the critics' step
+    # A checkpoint round trip keeps it; a transfer between two such learners copies it.
+    torch.manual_seed(9)
+    other = SacLagrangian(OBS_DIM, ACT_DIM, small_config(cost_cvar_level=0.1))
+    copied = transfer(other, copy.deepcopy(risk.state_dict()))
+    assert {name.split(".")[0] for name in copied} == set(risk.networks())
+    assert torch.equal(other.q_c_var.weights[0], risk.q_c_var.weights[0])  # type: ignore[union-attr]
+    # From a learner without one, the target keeps its own variance critic.
+    torch.manual_seed(9)
+    fresh = SacLagrangian(OBS_DIM, ACT_DIM, small_config(cost_cvar_level=0.1))
+    kept = fresh.q_c_var.weights[0].clone()  # type: ignore[union-attr]
+    copied = transfer(fresh, copy.deepcopy(mean_only.state_dict()))
+    assert {name.split(".")[0] for name in copied} == set(TRANSFERRED_NETWORKS)
+    assert torch.equal(fresh.q_c_var.weights[0], kept)  # type: ignore[union-attr]
+
+
+def test_a_cvar_learner_avoids_the_risky_action_that_a_mean_learner_takes() -> None:
+    """One-step task: reward 0.2 a_0, cost 0.5 +- a_0 / 2 (a fair coin): every action has mean cost 0.5, and the
+    cost's spread grows with |a_0|. With the multiplier held at 1, the mean learner sees no reason not to take
+    a_0 -> 1; the CVaR_0.1 learner pays for the spread and stays near 0."""
+    rng = np.random.default_rng(0)
+    n = 4096
+    buf = ReplayBuffer(1, 1, n)
+    actions = rng.uniform(-1, 1, size=(n, 1))
+    obs = np.zeros((n, 1))
+    coin = rng.choice([-1.0, 1.0], size=n)
+    buf.add_batch(obs, actions, 0.2 * actions[:, 0], 0.5 + coin * actions[:, 0] / 2, obs, np.ones(n))
+    final: dict[float | None, float] = {}
+    for level in (None, 0.1):
+        torch.manual_seed(0)
+        cfg = SacConfig(
+            variant=Variant.SAC_LAG,
+            hidden_sizes=(32, 32),
+            lr=3e-3,
+            beta_init=1.0,
+            beta_lr=1e-9,  # the multiplier held at 1
+            cost_limit=0.5,
+            episode_steps=1,
+            alpha_init=0.01,
+            cost_cvar_level=level,
+        )
+        agent = SacLagrangian(1, 1, cfg)
+        for _ in range(800):
+            agent.update(buf.sample(256, rng))
+        final[level] = float(agent.act(np.zeros((1, 1)), deterministic=True)[0, 0])
+        if level is not None:
+            zero, risky = torch.zeros(2, 1), torch.tensor([[0.0], [0.9]])
+            from tssac_core.algos.sac_lagrangian import cost_variance
+
+            with torch.no_grad():
+                var = cost_variance(agent.q_c_var, zero, risky)  # type: ignore[arg-type]
+            assert float(var[1]) > 4 * float(var[0])  # it learned where the spread is
+    assert final[None] > 0.8
+    assert abs(final[0.1]) < 0.3

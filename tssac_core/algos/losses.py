@@ -7,6 +7,8 @@ cost_limit (C, already converted to the scale of q_c, see `lagrange.qc_limit`).
 
 from __future__ import annotations
 
+from statistics import NormalDist
+
 import torch
 
 
@@ -55,3 +57,43 @@ def multiplier_loss(beta: torch.Tensor, qc_mean: torch.Tensor, cost_limit: float
 def damping(qc_mean: torch.Tensor, cost_limit: float, k_d: float) -> torch.Tensor:
     """Eq. 17: xi = k_d (C - E[Q^c]), with the batch mean of Q^c treated as a constant."""
     return k_d * (cost_limit - qc_mean.detach())
+
+
+# --- Worst-case cost (WCSAC, Yang et al. 2021): a Gaussian cost-to-go, N(Q^c, V^c), and its CVaR -----------------
+
+
+def cost_variance_target(
+    cost: torch.Tensor,
+    terminated: torch.Tensor,
+    next_q_c: torch.Tensor,
+    next_var_c: torch.Tensor,
+    q_c: torch.Tensor,
+    gamma: float,
+) -> torch.Tensor:
+    """WCSAC's Bellman target of the cost-to-go's variance, clamped at >= 0:
+    V^c(s, a) = c^2 + 2 gamma c Q^c(s', a') + gamma^2 V^c(s', a') + gamma^2 Q^c(s', a')^2 - Q^c(s, a)^2,
+    the next-state terms dropped on termination. A deterministic chain gets 0."""
+    g = gamma * (1.0 - terminated)
+    target = cost.square() + 2.0 * g * cost * next_q_c + g.square() * (next_var_c + next_q_c.square()) - q_c.square()
+    return target.clamp(min=0.0)
+
+
+def variance_loss(var: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The variance part of the squared 2-Wasserstein distance between N(m, var) and N(m', target), WCSAC's loss
+    of the variance critic: E[var + target - 2 sqrt(var) sqrt(target)] (target a constant; var > 0, so the
+    gradient stays finite where the target is 0)."""
+    return (var + target - 2.0 * var.sqrt() * target.detach().sqrt()).mean(dim=-1)
+
+
+def cvar_coefficient(level: float) -> float:
+    """phi(Phi^-1(level)) / level: the CVaR at risk level ``level`` of a Gaussian is its mean plus this many
+    standard deviations (the mean of its worst ``level`` share); 0 at level 1."""
+    if level >= 1.0:
+        return 0.0
+    normal = NormalDist()
+    return normal.pdf(normal.inv_cdf(level)) / level
+
+
+def cost_cvar(q_c: torch.Tensor, var_c: torch.Tensor, level: float) -> torch.Tensor:
+    """WCSAC's worst-case cost: CVaR_level of N(Q^c, V^c) = Q^c + phi(Phi^-1(level)) / level * sqrt(V^c)."""
+    return q_c + cvar_coefficient(level) * var_c.sqrt()

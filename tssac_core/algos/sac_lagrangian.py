@@ -145,6 +145,14 @@ class SacConfig:
     clamp_effective: bool = True
     """Clamp the effective multiplier beta - xi of eq. 16 at >= 0 (see DampedLagrangeMultiplier)."""
 
+    cost_cvar_level: float | None = None
+    """None: the actor's cost term is the mean cost-to-go Q^c (eq. 12 / 16). A level in (0, 1): a worst-case cost
+    critic as WCSAC's (Yang et al. 2021), layered on the same multiplier: a second network learns the variance
+    V^c of the cost-to-go (``losses.cost_variance_target``, ``losses.variance_loss``), and the actor's cost term is
+    CVaR_level of N(Q^c, V^c), the mean of the worst ``level`` share of outcomes (``losses.cost_cvar``), so a
+    state from which the cost is rare but long weighs more than its mean. Not in the paper; the multiplier's
+    signal (eq. 15, 17) is unchanged."""
+
     def __post_init__(self) -> None:
         checks = [
             (0.0 <= self.gamma < 1.0, f"gamma must be in [0, 1), got {self.gamma}"),
@@ -162,6 +170,10 @@ class SacConfig:
                 f"multiplier_signal must be one of {', '.join(MultiplierSignal)}, got {self.multiplier_signal!r}",
             ),
             (self.cost_window >= 1, f"cost_window must be >= 1, got {self.cost_window}"),
+            (
+                self.cost_cvar_level is None or 0.0 < self.cost_cvar_level < 1.0,
+                f"cost_cvar_level must be in (0, 1) or None, got {self.cost_cvar_level}",
+            ),
             (self.batch_size >= 1, f"batch_size must be >= 1, got {self.batch_size}"),
             (self.replay_size >= 1, f"replay_size must be >= 1, got {self.replay_size}"),
             (len(self.hidden_sizes) >= 1, "hidden_sizes must not be empty"),
@@ -214,7 +226,7 @@ class UpdateStats:
     q_r_loss: float
     """Eq. 13 summed over the two reward critics."""
     q_c_loss: float
-    """Eq. 13 of the cost critic."""
+    """Eq. 13 of the cost critic (with SacConfig.cost_cvar_level: plus the variance critic's loss)."""
     actor_loss: float
     """Eq. 12 / 16."""
     alpha_loss: float
@@ -266,9 +278,22 @@ class SacLagrangian:
             upper=config.multiplier_max,
         )
         self._actor_params: list[torch.Tensor] = list(self.actor.parameters())
-        self._critic_params: list[torch.Tensor] = [*self.q_r.parameters(), *self.q_c.parameters()]
-        self._targets: list[torch.Tensor] = [*self.q_r_target.parameters(), *self.q_c_target.parameters()]
-        self._onlines: list[torch.Tensor] = [*self.q_r.parameters(), *self.q_c.parameters()]
+        # WCSAC's variance critic (SacConfig.cost_cvar_level), made after everything else so that the learner
+        # without it draws the same initial weights.
+        self.q_c_var: Critic | None = None
+        self.q_c_var_target: Critic | None = None
+        if config.cost_cvar_level is not None:
+            self.q_c_var = Critic(obs_dim, act_dim, hidden, n_members=1)
+            self.q_c_var_target = copy.deepcopy(self.q_c_var).requires_grad_(False)
+        variance = [] if self.q_c_var is None else [self.q_c_var]
+        variance_target = [] if self.q_c_var_target is None else [self.q_c_var_target]
+        self._critic_params: list[torch.Tensor] = [
+            p for net in (self.q_r, self.q_c, *variance) for p in net.parameters()
+        ]
+        self._targets: list[torch.Tensor] = [
+            p for net in (self.q_r_target, self.q_c_target, *variance_target) for p in net.parameters()
+        ]
+        self._onlines: list[torch.Tensor] = list(self._critic_params)
         self.reset_optimisers()
 
     def reset_optimisers(self) -> None:
@@ -281,13 +306,16 @@ class SacLagrangian:
 
     def networks(self) -> dict[str, nn.Module]:
         """The networks by name, as they appear in `state_dict` and `transfer`."""
-        return {
+        nets: dict[str, nn.Module] = {
             "actor": self.actor,
             "q_r": self.q_r,
             "q_c": self.q_c,
             "q_r_target": self.q_r_target,
             "q_c_target": self.q_c_target,
         }
+        if self.q_c_var is not None and self.q_c_var_target is not None:
+            nets.update(q_c_var=self.q_c_var, q_c_var_target=self.q_c_var_target)
+        return nets
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
@@ -324,7 +352,13 @@ class SacLagrangian:
 
         # Eq. 13, critic losses: one backward pass and one Adam step for the three critics.
         q_r_loss = losses.critic_loss(self.q_r(obs, actions), y_r)
-        q_c_loss = losses.critic_loss(self.q_c(obs, actions), y_c)
+        q_c_sa = self.q_c(obs, actions)
+        q_c_loss = losses.critic_loss(q_c_sa, y_c)
+        if self.q_c_var is not None and self.q_c_var_target is not None:  # WCSAC's variance critic, same step
+            with torch.no_grad():
+                next_var = cost_variance(self.q_c_var_target, next_obs, next_actions)
+                y_var = losses.cost_variance_target(costs, terminated, next_v_c, next_var, q_c_sa[0], cfg.gamma)
+            q_c_loss = q_c_loss + losses.variance_loss(cost_variance(self.q_c_var, obs, actions), y_var)
         self.critic_optim.zero_grad()
         (q_r_loss + q_c_loss).backward()
         self.critic_optim.step()
@@ -337,6 +371,11 @@ class SacLagrangian:
         with torch.set_grad_enabled(self.uses_multiplier):
             q_c_pi = self.q_c(obs, pi_actions)[0]
         qc_mean = q_c_pi.detach().clamp(min=0.0).mean()
+        cost_term = q_c_pi  # what the multiplier weighs in the actor loss: Q^c, or its CVaR (cost_cvar_level)
+        if self.q_c_var is not None and cfg.cost_cvar_level is not None:
+            with torch.set_grad_enabled(self.uses_multiplier):
+                var_pi = cost_variance(self.q_c_var, obs, pi_actions)
+                cost_term = losses.cost_cvar(q_c_pi, var_pi, cfg.cost_cvar_level)
 
         # What eq. 15 and 17 compare with C, on Q^c's scale (SacConfig.multiplier_signal): the recent episodes'
         # measured cost, else the mean Q^c of the current policy on the recent transitions, else on the batch.
@@ -359,7 +398,7 @@ class SacLagrangian:
         # Eq. 12 / 16, the actor loss, and eq. 14, alpha's loss (log_pi a constant there): one backward pass for
         # both (they share no parameter: the actor loss uses a detached alpha); inputs= keeps the critics' weights
         # out of it. Alpha is projected onto >= 0 after its step (SacConfig.alpha_init).
-        actor_loss = losses.actor_loss(log_pi, q_r_pi, q_c_pi, alpha, multiplier)
+        actor_loss = losses.actor_loss(log_pi, q_r_pi, cost_term, alpha, multiplier)
         alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
         self.actor_optim.zero_grad()
         self.alpha_optim.zero_grad()
@@ -433,20 +472,31 @@ class SacLagrangian:
 
 TRANSFERRED_NETWORKS = ("actor", "q_r", "q_c", "q_r_target", "q_c_target")
 """What `transfer` copies: all network weights. Everything else is reset."""
+VARIANCE_NETWORKS = ("q_c_var", "q_c_var_target")
+"""Also copied when both learners have them (SacConfig.cost_cvar_level); else the target's stay as they are."""
+VARIANCE_FLOOR = 1e-6
+"""Added to the variance critic's softplus, so that sqrt(V^c) has a finite gradient everywhere."""
+
+
+def cost_variance(net: nn.Module, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """V^c(s, a) > 0 of WCSAC's variance critic, (batch,): the network's output through a softplus."""
+    return nn.functional.softplus(net(obs, actions)[0]) + VARIANCE_FLOOR
 
 
 def transfer(target: SacLagrangian, source_state: dict[str, Any]) -> list[str]:
     """TSSAC's parameter transfer N_k -> N_k+1 (Algorithm 1, lines 17 and 19).
 
     Copied from `source_state` (a `SacLagrangian.state_dict()`): the weights of the actor, the
-    reward critics, the cost critic and their targets (TRANSFERRED_NETWORKS).
+    reward critics, the cost critic and their targets (TRANSFERRED_NETWORKS), and the variance critic and its
+    target when both learners have one (VARIANCE_NETWORKS).
     Reset to `target.config`: the optimiser states (fresh Adam moments), alpha (alpha_init) and
     beta (beta_init, with a fresh optimiser), since the new task has its own entropy and cost
     balance. Returns the names of the copied tensors, "<network>.<parameter>".
     """
     copied: list[str] = []
     nets = target.networks()
-    for name in TRANSFERRED_NETWORKS:
+    names = [*TRANSFERRED_NETWORKS, *(n for n in VARIANCE_NETWORKS if n in nets and n in source_state)]
+    for name in names:
         nets[name].load_state_dict(source_state[name])
         copied += [f"{name}.{key}" for key in source_state[name]]
     with torch.no_grad():
