@@ -3,8 +3,9 @@
 ``local`` (the default) runs each job as a ``python -m tssac_core.train`` process on this machine, a few at
 a time (:func:`tssac_core.experiments.jobs.run_jobs`). ``ray`` runs each job as a Ray task asking for the
 job's threads as CPUs, on a Ray started inside the command or on an existing cluster
-(:mod:`tssac_core.experiments.ray_executor`, docs/ray.md). A job's run directory is its only state, so any
-executor can resume what another started.
+(:mod:`tssac_core.experiments.ray_executor`, docs/ray.md). Both are runners of one scheduling loop,
+:func:`tssac_core.experiments.jobs.schedule`. A job's run directory is its only state, so any executor can
+resume what another started.
 """
 
 from __future__ import annotations

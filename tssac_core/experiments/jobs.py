@@ -29,12 +29,12 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import Any, Protocol, cast
 
 import tssac_core
 from tssac_core.cli import UsageError
@@ -235,56 +235,115 @@ def interrupt_on_sigterm() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+class JobRunner(Protocol):
+    """Where :func:`schedule` runs jobs: local processes (:class:`LocalProcesses`) or Ray tasks
+    (:mod:`tssac_core.experiments.ray_executor`). A handle is whatever the runner knows a running job by."""
+
+    def start(self, job: Job, resume: bool) -> Hashable:
+        """Start ``job`` (``--resume`` it if ``resume``); its handle."""
+        ...
+
+    def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
+        """Wait a moment for jobs of ``running`` to end; those that did, each with its final launch (exit code
+        set, None for a task that failed), each reported."""
+        ...
+
+    def stop(self, running: dict[Hashable, Launch]) -> None:
+        """Stop every job of ``running`` so that the next run resumes it; say so for each."""
+        ...
+
+
+def schedule(
+    states: list[JobState],
+    parallel: int,
+    runner: JobRunner,
+    report: Callable[[str], None] = logger.info,
+    may_start: Callable[[Job], bool] = lambda job: True,
+) -> list[Launch]:
+    """Run every new or partial job with ``runner``, at most ``parallel`` at once; returns the launches, in start
+    order.
+
+    Finished jobs are skipped; conflicts must have been refused by the caller. A free slot goes to the first
+    pending job that ``may_start`` allows (``--finish-by``: :mod:`tssac_core.experiments.deadline`); one it
+    refuses is dropped, and reported, since time only runs on. On KeyboardInterrupt (SIGINT, or SIGTERM via
+    :func:`interrupt_on_sigterm`) every running job is stopped, then it re-raises.
+    """
+    pending = [s for s in states if s.status in (Status.NEW, Status.PARTIAL)]
+    if any(s.status is Status.CONFLICT for s in states):
+        raise ValueError("schedule was given a conflicting job")
+    launches: list[Launch] = []
+    running: dict[Hashable, int] = {}  # handle -> launch index
+
+    def running_launches() -> dict[Hashable, Launch]:
+        return {handle: launches[index] for handle, index in running.items()}
+
+    try:
+        while pending or running:
+            while pending and len(running) < parallel:
+                state = pending.pop(0)
+                if not may_start(state.job):
+                    report(f"not started {state.job.name}: it would not finish in the time given")
+                    continue
+                resume = state.status is Status.PARTIAL
+                running[runner.start(state.job, resume)] = len(launches)
+                launches.append(Launch(state.job, command(state.job, resume), resume))
+            if not running:  # every pending job refused
+                break
+            for handle, launch in runner.ended(running_launches()):
+                launches[running.pop(handle)] = launch
+    finally:
+        if running:
+            runner.stop(running_launches())
+    return launches
+
+
+def report_end(launch: Launch, report: Callable[[str], None]) -> None:
+    """Say how a job's process ended: finished, or failed with its exit code (and where its log is)."""
+    code = launch.returncode
+    ok = code == 0 and is_finished(launch.job)
+    report(
+        f"{'finished' if ok else f'FAILED (exit code {code})'} {launch.job.name}"
+        + ("" if ok else f": see {launch.job.out / LOG_NAME}")
+    )
+
+
+class LocalProcesses:
+    """The local executor's :class:`JobRunner`: each job a ``python -m tssac_core.train`` process here."""
+
+    def __init__(self, report: Callable[[str], None]) -> None:
+        self.report = report
+        self.began: dict[Hashable, float] = {}
+
+    def start(self, job: Job, resume: bool) -> Hashable:
+        proc, _ = start(job, resume)
+        self.began[proc] = time.monotonic()
+        self.report(f"started {job.name}{' (resume)' if resume else ''}: pid {proc.pid}, log {job.out / LOG_NAME}")
+        return proc
+
+    def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
+        out = []
+        for handle, launch in running.items():
+            code = cast("subprocess.Popen[bytes]", handle).poll()
+            if code is not None:
+                out.append((handle, Launch(launch.job, launch.command, launch.resumed, code)))
+                report_end(out[-1][1], self.report)
+        time.sleep(POLL_S)
+        return out
+
+    def stop(self, running: dict[Hashable, Launch]) -> None:
+        for handle, launch in running.items():
+            proc = cast("subprocess.Popen[bytes]", handle)
+            self.report(f"stopping {launch.job.name} (pid {proc.pid}); it resumes on the next run")
+            stop(proc)
+            log_stopped(launch.job, time.monotonic() - self.began[handle])
+
+
 def run_jobs(
     states: list[JobState],
     parallel: int,
     report: Callable[[str], None] = logger.info,
     may_start: Callable[[Job], bool] = lambda job: True,
 ) -> list[Launch]:
-    """Run every new or partial job, at most ``parallel`` at once; returns the launches, in start order.
-
-    Finished jobs are skipped; conflicts must have been refused by the caller. A free slot goes to the
-    first pending job that ``may_start`` allows (``--finish-by``: :mod:`tssac_core.experiments.deadline`);
-    one it refuses is dropped, and reported, since time only runs on. On KeyboardInterrupt (SIGINT, or
-    SIGTERM via :func:`interrupt_on_sigterm`) every running job is stopped, then it re-raises.
-    """
-    pending = [s for s in states if s.status in (Status.NEW, Status.PARTIAL)]
-    if any(s.status is Status.CONFLICT for s in states):
-        raise ValueError("run_jobs was given a conflicting job")
-    launches: list[Launch] = []
-    running: dict[int, tuple[subprocess.Popen[bytes], int, float]] = {}  # pid -> process, launch index, start time
+    """The local executor: :func:`schedule` with :class:`LocalProcesses`, SIGTERM handled as SIGINT."""
     with interrupt_on_sigterm():
-        try:
-            while pending or running:
-                while pending and len(running) < parallel:
-                    state = pending.pop(0)
-                    if not may_start(state.job):
-                        report(f"not started {state.job.name}: it would not finish in the time given")
-                        continue
-                    resume = state.status is Status.PARTIAL
-                    proc, cmd = start(state.job, resume)
-                    running[proc.pid] = (proc, len(launches), time.monotonic())
-                    launches.append(Launch(state.job, cmd, resume))
-                    report(
-                        f"started {state.job.name}{' (resume)' if resume else ''}: pid {proc.pid}, log "
-                        f"{state.job.out / LOG_NAME}"
-                    )
-                for pid, (proc, index, _) in list(running.items()):
-                    code = proc.poll()
-                    if code is None:
-                        continue
-                    del running[pid]
-                    launch = launches[index]
-                    launches[index] = Launch(launch.job, launch.command, launch.resumed, code)
-                    ok = code == 0 and is_finished(launch.job)
-                    report(
-                        f"{'finished' if ok else f'FAILED (exit code {code})'} {launch.job.name}"
-                        + ("" if ok else f": see {launch.job.out / LOG_NAME}")
-                    )
-                time.sleep(POLL_S)
-        finally:
-            for proc, index, started in running.values():
-                report(f"stopping {launches[index].job.name} (pid {proc.pid}); it resumes on the next run")
-                stop(proc)
-                log_stopped(launches[index].job, time.monotonic() - started)
-    return launches
+        return schedule(states, parallel, LocalProcesses(report), report, may_start)

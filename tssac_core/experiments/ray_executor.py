@@ -24,7 +24,7 @@ import os
 import signal
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,11 +36,11 @@ from tssac_core.experiments.jobs import (
     JobState,
     Launch,
     Status,
-    command,
     interrupt_on_sigterm,
-    is_finished,
     job_state,
     log_stopped,
+    report_end,
+    schedule,
     start,
     stop,
 )
@@ -134,63 +134,68 @@ def run_jobs_on_ray(
     """Run every new or partial job as a Ray task, at most ``parallel`` at once (None: as many as the
     cluster's CPUs hold); returns the launches, in start order (a failed task: returncode None).
 
-    Same contract as :func:`tssac_core.experiments.jobs.run_jobs`: finished jobs skipped, ``may_start``
-    asked before each start, every running job stopped on KeyboardInterrupt, which is re-raised."""
-    pending = [s for s in states if s.status in (Status.NEW, Status.PARTIAL)]
+    :func:`tssac_core.experiments.jobs.schedule` with :class:`RayTasks`: the local executor's contract
+    (finished jobs skipped, ``may_start`` asked before each start, every running job stopped on
+    KeyboardInterrupt, which is re-raised)."""
     if any(s.status is Status.CONFLICT for s in states):
         raise ValueError("run_jobs_on_ray was given a conflicting job")
-    launches: list[Launch] = []
+    pending = [s for s in states if s.status in (Status.NEW, Status.PARTIAL)]
     if not pending:
-        return launches
-    directory = os.getcwd()
+        return []
     with ray_session(target) as ray, interrupt_on_sigterm():
-        from ray.util.queue import Queue
-
-        events = Queue(actor_options={"num_cpus": 0})
-        task = ray.remote(max_retries=WORKER_RETRIES, retry_exceptions=False)(run_job)
         threads = {s.job.name: s.job.config().threads for s in pending}
         slots = parallel or max(1, cluster_cpus(ray) // max(threads.values()))
         report(f"Ray: {cluster_cpus(ray)} CPUs, {slots} jobs at a time, {max(threads.values())} CPU(s) each")
-        running: dict[Any, int] = {}  # task reference -> launch index
-        starts: dict[str, int] = {}
+        runner = RayTasks(ray, threads, report)
         try:
-            while pending or running:
-                while pending and len(running) < slots:
-                    state = pending.pop(0)
-                    if not may_start(state.job):
-                        report(f"not started {state.job.name}: it would not finish in the time given")
-                        continue
-                    resume = state.status is Status.PARTIAL
-                    ref = task.options(num_cpus=threads[state.job.name]).remote(state.job, directory, events)
-                    running[ref] = len(launches)
-                    launches.append(Launch(state.job, command(state.job, resume), resume))
-                if not running:
-                    break
-                done, _ = ray.wait(list(running), num_returns=len(running), timeout=POLL_S * 5)
-                report_started(events, starts, report)
-                for ref in done:
-                    index = running.pop(ref)
-                    launches[index] = finished(ray, ref, launches[index], report)
+            return schedule(pending, slots, runner, report, may_start)
         finally:
-            if running:
-                stop_all(ray, running, launches, report)
-            report_started(events, starts, report)
-    return launches
+            runner.report_started()
 
 
-def report_started(events: Any, starts: dict[str, int], report: Callable[[str], None]) -> None:
-    """Print the starts the tasks reported since the last call; a second start of a job is Ray's retry."""
+class RayTasks:
+    """The Ray executor's :class:`tssac_core.experiments.jobs.JobRunner`: each job a Ray task (:func:`run_job`)
+    asking for the job's threads as CPUs, run in the driver's working directory."""
 
-    def on_event(event: Started) -> None:
-        starts[event.name] = starts.get(event.name, 0) + 1
-        again = " again after its worker died" if starts[event.name] > 1 else ""
-        report(
-            f"started {event.name}{again}{' (resume)' if event.resumed else ''}: "
-            f"on {event.host} (node {event.node}), Ray worker pid "
-            f"{event.worker_pid}, training pid {event.train_pid}"
-        )
+    def __init__(self, ray: Any, threads: dict[str, int], report: Callable[[str], None]) -> None:
+        from ray.util.queue import Queue
 
-    drain(events, on_event)
+        self.ray = ray
+        self.threads = threads
+        self.report = report
+        self.directory = os.getcwd()
+        self.events = Queue(actor_options={"num_cpus": 0})
+        self.task = ray.remote(max_retries=WORKER_RETRIES, retry_exceptions=False)(run_job)
+        self.starts: dict[str, int] = {}
+
+    def start(self, job: Job, resume: bool) -> Hashable:
+        return self.task.options(num_cpus=self.threads[job.name]).remote(job, self.directory, self.events)
+
+    def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
+        done, _ = self.ray.wait(list(running), num_returns=len(running), timeout=POLL_S * 5)
+        self.report_started()
+        return [(ref, finished(self.ray, ref, running[ref], self.report)) for ref in done]
+
+    def stop(self, running: dict[Hashable, Launch]) -> None:
+        """Cancel every running task: each stops its training process and writes the stopped line (a task that
+        does not end in time is killed, and its training process dies with it)."""
+        for launch in running.values():
+            self.report(f"stopping {launch.job.name}; it resumes on the next run")
+        cancel(self.ray, list(running))
+
+    def report_started(self) -> None:
+        """Print the starts the tasks reported since the last call; a second start of a job is Ray's retry."""
+
+        def on_event(event: Started) -> None:
+            self.starts[event.name] = self.starts.get(event.name, 0) + 1
+            again = " again after its worker died" if self.starts[event.name] > 1 else ""
+            self.report(
+                f"started {event.name}{again}{' (resume)' if event.resumed else ''}: "
+                f"on {event.host} (node {event.node}), Ray worker pid "
+                f"{event.worker_pid}, training pid {event.train_pid}"
+            )
+
+        drain(self.events, on_event)
 
 
 def finished(ray: Any, ref: Any, launch: Launch, report: Callable[[str], None]) -> Launch:
@@ -201,17 +206,6 @@ def finished(ray: Any, ref: Any, launch: Launch, report: Callable[[str], None]) 
     except Exception as exc:  # the task raised, or its worker died more often than it is retried
         report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
         return Launch(job, launch.command, launch.resumed, None)
-    ok = outcome.returncode == 0 and is_finished(job)
-    report(
-        f"{'finished' if ok else f'FAILED (exit code {outcome.returncode})'} {job.name}"
-        + ("" if ok else f": see {job.out / LOG_NAME}")
-    )
-    return Launch(job, outcome.command or launch.command, outcome.resumed, outcome.returncode)
-
-
-def stop_all(ray: Any, running: dict[Any, int], launches: list[Launch], report: Callable[[str], None]) -> None:
-    """Cancel every running task: each stops its training process and writes the stopped line (a task that
-    does not end in time is killed, and its training process dies with it)."""
-    for index in running.values():
-        report(f"stopping {launches[index].job.name}; it resumes on the next run")
-    cancel(ray, list(running))
+    ended = Launch(job, outcome.command or launch.command, outcome.resumed, outcome.returncode)
+    report_end(ended, report)
+    return ended
