@@ -435,6 +435,7 @@ def main() -> None:
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "ray.json")
     a = p.parse_args()
     parts = a.parts.split(",")
+    started = time.strftime("%Y-%m-%d %H:%M")
     out: dict[str, Any] = {
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "load_average_before": load()}
     }
@@ -486,6 +487,9 @@ def main() -> None:
             flush=True,
         )
     out["machine"]["load_average_after"] = load()
+    for key, part in out.items():  # each part says which command measured it, and when
+        if key != "machine" and isinstance(part, dict):
+            part.update(command=" ".join(["python", "benchmarks/bench_ray.py", *sys.argv[1:]]), date=started)
     # The parts not run this time keep their figures from the file (each part records its own load average).
     earlier = json.loads(a.json.read_text()) if a.json.is_file() else {}
     a.json.parent.mkdir(parents=True, exist_ok=True)

@@ -23,6 +23,7 @@ import ctypes
 import os
 import signal
 import socket
+import subprocess
 import time
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
@@ -32,7 +33,6 @@ from typing import Any
 from tssac_core.experiments.grid import Job
 from tssac_core.experiments.jobs import (
     LOG_NAME,
-    POLL_S,
     JobState,
     Launch,
     Status,
@@ -49,6 +49,11 @@ from tssac_core.ray_map import cancel, drain, one_line
 
 WORKER_RETRIES = 3
 """Times Ray runs a job again after its worker process died (each run resumes the last)."""
+TASK_WAKE_S = 1.0
+DRIVER_WAKE_S = 2.0
+"""How often a task looks at its training process, and the driver at its tasks and their start reports: rarely,
+since on a machine whose CPUs the jobs fill, every wake-up of these (and of the Ray actor they ask) is taken
+from the training."""
 PR_SET_PDEATHSIG = 1
 
 
@@ -116,7 +121,8 @@ def run_job(job: Job, directory: str, events: Any) -> Outcome:
     events.put(Started(job.name, socket.gethostname(), node_id(), os.getpid(), proc.pid, resume))
     try:
         while proc.poll() is None:
-            time.sleep(POLL_S)
+            with contextlib.suppress(subprocess.TimeoutExpired):  # wakes once a second: Ray's cancel comes as SIGINT
+                proc.wait(timeout=TASK_WAKE_S)
     except KeyboardInterrupt:
         stop(proc)
         log_stopped(job, time.monotonic() - began)
@@ -172,7 +178,7 @@ class RayTasks:
         return self.task.options(num_cpus=self.threads[job.name]).remote(job, self.directory, self.events)
 
     def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
-        done, _ = self.ray.wait(list(running), num_returns=len(running), timeout=POLL_S * 5)
+        done, _ = self.ray.wait(list(running), num_returns=len(running), timeout=DRIVER_WAKE_S)
         self.report_started()
         return [(ref, finished(self.ray, ref, running[ref], self.report)) for ref in done]
 
