@@ -25,6 +25,7 @@ from tssac_core.algos.sac_lagrangian import (
     SacConfig,
     SacLagrangian,
     Variant,
+    cost_variance,
     transfer,
 )
 
@@ -749,8 +750,6 @@ def test_a_cvar_learner_avoids_the_risky_action_that_a_mean_learner_takes() -> N
         final[level] = float(agent.act(np.zeros((1, 1)), deterministic=True)[0, 0])
         if level is not None:
             zero, risky = torch.zeros(2, 1), torch.tensor([[0.0], [0.9]])
-            from tssac_core.algos.sac_lagrangian import cost_variance
-
             with torch.no_grad():
                 var = cost_variance(agent.q_c_var, zero, risky)  # type: ignore[arg-type]
             assert float(var[1]) > 4 * float(var[0])  # it learned where the spread is

@@ -20,10 +20,12 @@ from typing import Any
 
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.deploy.policy import load_team
+from tssac_core.sim.env import DEFAULT_SCENARIO
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, load
 
-SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+SCENARIOS = DEFAULT_SCENARIO.parent
+"""The project's scenario files (the directory of the training default)."""
 
 
 @dataclass(frozen=True)
