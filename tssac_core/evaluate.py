@@ -33,10 +33,8 @@ from tqdm import tqdm
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.sim.missions import fly_missions
-from tssac_core.sim.scenario import ROLES, Scenario, load
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot
-
-DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "random.yaml"
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:

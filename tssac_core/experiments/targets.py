@@ -20,12 +20,8 @@ from typing import Any
 
 from tssac_core.cli import UsageError, run, write_json
 from tssac_core.deploy.policy import load_team
-from tssac_core.sim.env import DEFAULT_SCENARIO
 from tssac_core.sim.missions import fly_missions
-from tssac_core.sim.scenario import ROLES, load
-
-SCENARIOS = DEFAULT_SCENARIO.parent
-"""The project's scenario files (the directory of the training default)."""
+from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 
 
 @dataclass(frozen=True)
@@ -69,7 +65,7 @@ def check_team(team: Path, seed: int, scale: float = 1.0) -> dict[str, Any]:
     rows = []
     first = seed
     for target in TARGETS:
-        scenario = load(SCENARIOS / target.scenario)
+        scenario = load(SCENARIOS_DIR / target.scenario)
         missions = max(1, round(target.missions * scale))
         summary = fly_missions(scenario, pilots, missions, first).summary(scenario.cost_limit)
         rows.append({"target": asdict(target), "seed": first, "summary": summary, "misses": misses(target, summary)})

@@ -22,11 +22,9 @@ import numpy as np
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
-from tssac_core.sim.scenario import ROLES, Role, Scenario, load, sample_layout
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load, sample_layout
 from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.sim.world import StepResult, World
-
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "random.yaml"
 
 Teammates = str | Mapping[str, Pilot] | None
 

@@ -47,6 +47,11 @@ class Role(enum.Enum):
 
 ROLES: tuple[Role, ...] = (Role.DECOY, Role.DETECT, Role.STRIKE)
 
+SCENARIOS_DIR = Path(__file__).resolve().parents[2] / "scenarios"
+"""The project's scenario files."""
+DEFAULT_SCENARIO = SCENARIOS_DIR / "random.yaml"
+"""What training and evaluation fly unless told otherwise."""
+
 
 MAX_MAGNITUDE = 1e9
 """No number in a scenario file is larger than this (in size): what the checks below do not bound, this does."""

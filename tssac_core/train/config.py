@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from tssac_core.algos.onpolicy.ppo import OnPolicyConfig
@@ -15,10 +14,8 @@ from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.routes import RouteConfig
-from tssac_core.sim.scenario import Scenario
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, Scenario
 from tssac_core.train.algorithms import Algo, Family, Selection, algorithm
-
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "random.yaml"
 
 
 @dataclass(frozen=True)
