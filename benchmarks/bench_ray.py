@@ -1,12 +1,15 @@
 """Ray against this machine's own ways, side by side: the grid's executor, sharded evaluation, parallel SITL
 missions, a two-node Ray on one machine, and the paper's full-budget grid on K nodes.
 
-    python benchmarks/bench_ray.py [--parts executor,evaluate,evaluate_warm,fly,two_nodes,estimate] [--json FILE]
+    python benchmarks/bench_ray.py [--parts executor,idle,evaluate,evaluate_warm,fly,two_nodes,estimate] [--json FILE]
 
 - ``executor``: the same two training jobs (a two-job grid, each job one thread), both at once, with the
   local executor and with ``--executor ray`` (a Ray of 2 CPUs started inside the command), alternately;
   the command's wall time each (Ray's start and stop included) and Ray's overhead as a share of it (JSON key
   ``executor_<steps>_steps``: one entry per job length measured).
+- ``idle``: the CPU seconds Ray's own processes (raylet, GCS, agents, the executor's queue actor, the waiting tasks,
+  the driver) take in 60 s while two tasks wait as the executor's tasks wait on their training processes: the part
+  of the executor's overhead that grows with the jobs' length. CPU seconds, so a busy machine changes them little.
 - ``evaluate``: ``tssac_core.evaluate`` on ``--layouts`` layouts with the shipped models, serial and
   ``--workers 2``, alternately: missions per second of the whole command (Ray's start included) and the
   same with ``--address`` to a Ray already running; the JSON of both must be equal.
@@ -119,6 +122,70 @@ def bench_executor(work: Path, steps: int, rounds: int) -> dict[str, Any]:
         "ray_wall_s": walls["ray"],
         "overhead_share": (ray - local) / ray,
         "same_teams": teams["local"] == teams["ray"],
+        "load_average_after": load(),
+    }
+
+
+def process_cpu_s() -> dict[int, tuple[str, float]]:
+    """CPU seconds (user + system) so far of this process and of every process whose command line names Ray, by
+    pid: (what it is, seconds). Linux /proc."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        words = [w.decode(errors="replace") for w in argv if w]
+        if int(entry.name) == os.getpid() or any("ray" in w for w in words):
+            what = next((Path(w).name for w in words if w.endswith(".py") or "ray::" in w or "/ray/" in w), "driver")
+            out[int(entry.name)] = (what, (int(fields[11]) + int(fields[12])) / tick)
+    return out
+
+
+def waiting_task(seconds: float, wake_s: float) -> float:
+    """A Ray task that waits as the grid's tasks wait on their training process: waking every ``wake_s``."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        time.sleep(wake_s)
+    return seconds
+
+
+def bench_idle(seconds: float) -> dict[str, Any]:
+    """Ray's own CPU while two grid tasks wait on their training (a local Ray of 2 CPUs, the executor's queue
+    actor, tasks and driver waking as the executor's do): what Ray takes from jobs that fill the machine."""
+    from ray.util.queue import Queue
+
+    from tssac_core.experiments.ray_executor import DRIVER_WAKE_S, TASK_WAKE_S
+    from tssac_core.ray_cluster import RayTarget, ray_session
+
+    with ray_session(RayTarget(cpus=2)) as ray:
+        events = Queue(actor_options={"num_cpus": 0})  # kept: an actor without a handle ends
+        task = ray.remote(waiting_task)
+        refs = [task.remote(seconds + 30.0, TASK_WAKE_S) for _ in range(2)]
+        time.sleep(10.0)  # past the start-up
+        before = process_cpu_s()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            ray.wait(refs, num_returns=len(refs), timeout=DRIVER_WAKE_S)
+        after = process_cpu_s()
+        wall = time.monotonic() - t0
+        events.shutdown()
+        for ref in refs:
+            ray.cancel(ref, force=True)
+    by_kind: dict[str, float] = {}
+    for pid, (what, cpu) in after.items():
+        by_kind[what] = by_kind.get(what, 0.0) + cpu - before.get(pid, (what, 0.0))[1]
+    total = sum(by_kind.values())
+    return {
+        "seconds": wall,
+        "cpu_s": total,
+        "share_of_one_core": total / wall,
+        "share_of_machine": total / wall / (os.cpu_count() or 1),
+        "cpu_s_by_process": dict(sorted(((k, round(v, 2)) for k, v in by_kind.items()), key=lambda kv: -kv[1])),
         "load_average_after": load(),
     }
 
@@ -425,7 +492,7 @@ def grid_estimate(nodes: tuple[int, ...], cpus_per_node: int) -> dict[str, Any]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--parts", default="executor,evaluate,evaluate_warm,fly,two_nodes,estimate")
+    p.add_argument("--parts", default="executor,idle,evaluate,evaluate_warm,fly,two_nodes,estimate")
     p.add_argument(
         "--steps", type=int, default=600, help="learner decisions per epoch of the two timed jobs (default 600)"
     )
@@ -450,6 +517,14 @@ def main() -> None:
                 f"  local {r['local_wall_s']} s, ray {r['ray_wall_s']} s: "
                 f"Ray's overhead {r['overhead_share']:.1%} of its wall time; "
                 f"same teams {r['same_teams']}",
+                flush=True,
+            )
+        if "idle" in parts:
+            print("idle: Ray's own CPU while two tasks wait on their training, 60 s", flush=True)
+            out["idle"] = r = bench_idle(60.0)
+            print(
+                f"  {r['cpu_s']:.2f} CPU s in {r['seconds']:.0f} s: {r['share_of_one_core']:.1%} of one core, "
+                f"{r['share_of_machine']:.1%} of the machine; {r['cpu_s_by_process']}",
                 flush=True,
             )
         if "two_nodes" in parts:
