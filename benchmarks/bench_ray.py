@@ -127,8 +127,8 @@ def bench_executor(work: Path, steps: int, rounds: int) -> dict[str, Any]:
 
 
 def process_cpu_s() -> dict[int, tuple[str, float]]:
-    """CPU seconds (user + system) so far of this process and of every process whose command line names Ray, by
-    pid: (what it is, seconds). Linux /proc."""
+    """CPU seconds (user + system) so far of this process and of every Ray process (a worker, ``ray::...``, or a
+    program of Ray's package), by pid: (what it is, seconds). Linux /proc."""
     tick = os.sysconf("SC_CLK_TCK")
     out = {}
     for entry in Path("/proc").iterdir():
@@ -140,8 +140,9 @@ def process_cpu_s() -> dict[int, tuple[str, float]]:
         except OSError:  # ended meanwhile
             continue
         words = [w.decode(errors="replace") for w in argv if w]
-        if int(entry.name) == os.getpid() or any("ray" in w for w in words):
-            what = next((Path(w).name for w in words if w.endswith(".py") or "ray::" in w or "/ray/" in w), "driver")
+        ray_words = [w for w in words if w.startswith("ray::") or "/ray/" in w]  # Ray's workers, its programs
+        if int(entry.name) == os.getpid() or ray_words:
+            what = Path(ray_words[0]).name if ray_words else "driver"
             out[int(entry.name)] = (what, (int(fields[11]) + int(fields[12])) / tick)
     return out
 
