@@ -25,7 +25,8 @@ a failure that comes once in a hundred missions, so the best of 25 such epochs i
 winner's curse; models/tssac/README.md). Each epoch is screened on its missions with the role's figures of
 :mod:`tssac_core.stats`: the upper end of the 95% bootstrap interval of its mean cost, the fraction of its
 UAV-missions within C, its CVaR_0.95 and worst cost. An epoch is *feasible* when that upper bound is within
-C; the key is (feasible, mission success if feasible, within-C fraction, -upper bound, -epoch). The best
+C and at least TAIL_WITHIN_FRACTION of its UAV-missions are; the key is (feasible, mission success if feasible,
+within-C fraction, -upper bound, epoch): a tie goes to the later epoch, the one trained longer. The best
 TAIL_CANDIDATES epochs by that key are kept, and when the role ends each of them flies
 TAIL_FINAL_FACTOR x as many fresh selection missions (another draw from the training seed, never an
 evaluation seed); the role ships the best of them by the same key on those missions alone, so that the
@@ -62,6 +63,9 @@ TAIL_CANDIDATES = 3
 """Tail selection: the epochs kept from the screening for the final missions."""
 TAIL_FINAL_FACTOR = 5
 """Tail selection: each candidate flies this many times the screening's number of missions at the role's end."""
+TAIL_WITHIN_FRACTION = 0.995
+"""Tail selection: the fraction of the role's UAV-missions within C that a feasible epoch keeps (issue 23's floor:
+a mean within C still allows one mission in a hundred hundreds of steps inside a radar)."""
 
 
 @dataclass(frozen=True)
@@ -87,14 +91,15 @@ class Score:
 
     def tail_key(self) -> tuple[bool, float, float, float, int]:
         """The tail selection's key, the larger the better: (feasible, success if feasible, within-C fraction,
-        -upper bound of the mean cost, -epoch); feasible = that upper bound is within C."""
-        feasible = self.cost_high <= self.cost_limit
+        -upper bound of the mean cost, epoch); feasible = that upper bound is within C and at least
+        TAIL_WITHIN_FRACTION of the UAV-missions are."""
+        feasible = self.cost_high <= self.cost_limit and self.within_limit_fraction >= TAIL_WITHIN_FRACTION
         return (
             feasible,
             self.mission_success if feasible else 0.0,
             self.within_limit_fraction,
             -self.cost_high,
-            -self.epoch,
+            self.epoch,
         )
 
     def columns(self) -> dict[str, float]:
