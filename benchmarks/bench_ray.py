@@ -7,9 +7,9 @@ missions, a two-node Ray on one machine, and the paper's full-budget grid on K n
   local executor and with ``--executor ray`` (a Ray of 2 CPUs started inside the command), alternately;
   the command's wall time each (Ray's start and stop included) and Ray's overhead as a share of it (JSON key
   ``executor_<steps>_steps``: one entry per job length measured).
-- ``idle``: the CPU seconds Ray's own processes (raylet, GCS, agents, the executor's queue actor, the waiting tasks,
-  the driver) take in 60 s while two tasks wait as the executor's tasks wait on their training processes: the part
-  of the executor's overhead that grows with the jobs' length. CPU seconds, so a busy machine changes them little.
+- ``idle``: the CPU seconds Ray's own processes (raylet, GCS, agents, the waiting generator tasks, the driver) take
+  in 60 s while two tasks wait as the executor's tasks wait on their training processes: the part of the
+  executor's overhead that grows with the jobs' length. CPU seconds, so a busy machine changes them little.
 - ``evaluate``: ``tssac_core.evaluate`` on ``--layouts`` layouts with the shipped models, serial and
   ``--workers 2``, alternately: missions per second of the whole command (Ray's start included) and the
   same with ``--address`` to a Ray already running; the JSON of both must be equal.
@@ -41,6 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -147,26 +148,27 @@ def process_cpu_s() -> dict[int, tuple[str, float]]:
     return out
 
 
-def waiting_task(seconds: float, wake_s: float) -> float:
-    """A Ray task that waits as the grid's tasks wait on their training process: waking every ``wake_s``."""
+def waiting_task(seconds: float, wake_s: float) -> Iterator[float]:
+    """A Ray generator task that reports its start and waits as the grid's tasks wait on their training process:
+    waking every ``wake_s``."""
+    yield 0.0
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         time.sleep(wake_s)
-    return seconds
+    yield seconds
 
 
 def bench_idle(seconds: float) -> dict[str, Any]:
-    """Ray's own CPU while two grid tasks wait on their training (a local Ray of 2 CPUs, the executor's queue
-    actor, tasks and driver waking as the executor's do): what Ray takes from jobs that fill the machine."""
-    from ray.util.queue import Queue
-
+    """Ray's own CPU while two grid tasks wait on their training (a local Ray of 2 CPUs, generator tasks and a driver
+    waking as the executor's do): what Ray takes from jobs that fill the machine."""
     from tssac_core.experiments.ray_executor import DRIVER_WAKE_S, TASK_WAKE_S
     from tssac_core.ray_cluster import RayTarget, ray_session
 
     with ray_session(RayTarget(cpus=2)) as ray:
-        events = Queue(actor_options={"num_cpus": 0})  # kept: an actor without a handle ends
-        task = ray.remote(waiting_task)
+        task = ray.remote(max_retries=0)(waiting_task)
         refs = [task.remote(seconds + 30.0, TASK_WAKE_S) for _ in range(2)]
+        for ref in refs:  # started
+            ray.get(next(ref))
         time.sleep(10.0)  # past the start-up
         before = process_cpu_s()
         t0 = time.monotonic()
@@ -174,7 +176,6 @@ def bench_idle(seconds: float) -> dict[str, Any]:
             ray.wait(refs, num_returns=len(refs), timeout=DRIVER_WAKE_S)
         after = process_cpu_s()
         wall = time.monotonic() - t0
-        events.shutdown()
         for ref in refs:
             ray.cancel(ref, force=True)
     by_kind: dict[str, float] = {}

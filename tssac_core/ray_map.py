@@ -82,12 +82,16 @@ def drain(events: Any, on_event: Callable[[Any], None]) -> None:
 
 
 def cancel(ray: Any, refs: list[Any]) -> None:
-    """Cancel tasks (a KeyboardInterrupt in each), wait for them to clean up, then kill those still running."""
+    """Cancel tasks (a KeyboardInterrupt in each), wait for them to clean up, then kill those still running.
+
+    ``refs``: tasks' ObjectRefs or generator tasks' ObjectRefGenerators; a generator is waited for by its
+    ``completed()`` ref, since it reads as ready as soon as it is cancelled, before its task has cleaned up."""
     for ref in refs:
         ray.cancel(ref)
-    _, late = ray.wait(refs, num_returns=len(refs), timeout=CANCEL_GRACE_S)
-    for ref in late:
-        ray.cancel(ref, force=True)
+    ends = {(r.completed() if isinstance(r, ray.ObjectRefGenerator) else r): r for r in refs}
+    _, late = ray.wait(list(ends), num_returns=len(ends), timeout=CANCEL_GRACE_S)
+    for end in late:
+        ray.cancel(ends[end], force=True)
 
 
 def one_line(exc: BaseException) -> str:

@@ -6,11 +6,13 @@ the same ``train.log``), in the driver's working directory, and decides there, f
 whether to start the run or ``--resume`` it. So the run directory and its resume state are the only
 state: the node needs to see it, which on a cluster means a shared filesystem (docs/ray.md).
 
-- A task whose worker process dies (killed, out of memory, its node lost) is retried by Ray
-  (:data:`WORKER_RETRIES` times); the training process dies with its worker (``PR_SET_PDEATHSIG``), so
-  the retry finds the run partial and resumes it from its last finished epoch.
-- Each task reports where it started through a Ray queue; the driver prints it, and each job's end,
-  as the local executor does.
+- Each task is a Ray generator: it yields where it started (:class:`Started`) as soon as its training
+  process runs, then how that process ended (:class:`Outcome`). Ray streams both to the driver, which prints
+  them as the local executor prints a job's start and end; no actor carries them and the driver polls no one.
+- A task whose worker process dies (killed, out of memory, its node lost) is submitted again by the driver
+  (:data:`WORKER_RETRIES` times), not by Ray, so that the driver knows each start is a retry; the training
+  process dies with its worker (``PR_SET_PDEATHSIG``), so the retry finds the run partial and resumes it from
+  its last finished epoch. A task that raises is not retried.
 - Ctrl-C or SIGTERM: every running task is cancelled (a KeyboardInterrupt inside it): it stops its
   training process as the local executor does (SIGTERM to its group, then SIGKILL) and writes the
   "stopped after" line; queued jobs are dropped. Each run stays resumable.
@@ -25,7 +27,7 @@ import signal
 import socket
 import subprocess
 import time
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,15 +47,14 @@ from tssac_core.experiments.jobs import (
     stop,
 )
 from tssac_core.ray_cluster import RayTarget, cluster_cpus, ray_session
-from tssac_core.ray_map import cancel, drain, one_line
+from tssac_core.ray_map import cancel, one_line
 
 WORKER_RETRIES = 3
-"""Times Ray runs a job again after its worker process died (each run resumes the last)."""
+"""Times the driver submits a job again after its worker process died (each run resumes the last)."""
 TASK_WAKE_S = 1.0
 DRIVER_WAKE_S = 2.0
-"""How often a task looks at its training process, and the driver at its tasks and their start reports: rarely,
-since on a machine whose CPUs the jobs fill, every wake-up of these (and of the Ray actor they ask) is taken
-from the training."""
+"""How often a task looks at its training process, and the driver at its tasks: rarely, since on a machine whose
+CPUs the jobs fill, every wake-up of these is taken from the training."""
 PR_SET_PDEATHSIG = 1
 
 
@@ -95,9 +96,10 @@ def node_id() -> str:
     return str(ray.get_runtime_context().get_node_id())[:8]
 
 
-def run_job(job: Job, directory: str, events: Any) -> Outcome:
+def run_job(job: Job, directory: str) -> Iterator[Started | Outcome]:
     """The Ray task: train (or resume) ``job`` in ``directory`` (the driver's working directory) until its
-    process ends; a cancel (KeyboardInterrupt) stops it and leaves it resumable."""
+    process ends, yielding its start, then its end; a cancel (KeyboardInterrupt) stops it and leaves it
+    resumable."""
     if not Path(directory).is_dir():
         raise RuntimeError(
             f"node {socket.gethostname()} does not see {directory}: running a grid on a Ray cluster needs "
@@ -106,7 +108,8 @@ def run_job(job: Job, directory: str, events: Any) -> Outcome:
     os.chdir(directory)
     state = job_state(job)
     if state.status is Status.FINISHED:  # an earlier attempt finished it before its worker died
-        return Outcome(0, (), False)
+        yield Outcome(0, (), False)
+        return
     if state.status is Status.CONFLICT:
         raise RuntimeError(f"{job.out}: {state.detail}")
     resume = state.status is Status.PARTIAL
@@ -118,8 +121,8 @@ def run_job(job: Job, directory: str, events: Any) -> Outcome:
         job, resume, where=f"ray worker pid {os.getpid()} on {socket.gethostname()}", preexec_fn=die_with_parent
     )
     began = time.monotonic()
-    events.put(Started(job.name, socket.gethostname(), node_id(), os.getpid(), proc.pid, resume))
     try:
+        yield Started(job.name, socket.gethostname(), node_id(), os.getpid(), proc.pid, resume)
         while proc.poll() is None:
             with contextlib.suppress(subprocess.TimeoutExpired):  # wakes once a second: Ray's cancel comes as SIGINT
                 proc.wait(timeout=TASK_WAKE_S)
@@ -127,7 +130,7 @@ def run_job(job: Job, directory: str, events: Any) -> Outcome:
         stop(proc)
         log_stopped(job, time.monotonic() - began)
         raise
-    return Outcome(proc.returncode, cmd, resume)
+    yield Outcome(proc.returncode, cmd, resume)
 
 
 def run_jobs_on_ray(
@@ -152,66 +155,79 @@ def run_jobs_on_ray(
         threads = {s.job.name: s.job.config().threads for s in pending}
         slots = parallel or max(1, cluster_cpus(ray) // max(threads.values()))
         report(f"Ray: {cluster_cpus(ray)} CPUs, {slots} jobs at a time, {max(threads.values())} CPU(s) each")
-        runner = RayTasks(ray, threads, report)
-        try:
-            return schedule(pending, slots, runner, report, may_start)
-        finally:
-            runner.report_started()
+        return schedule(pending, slots, RayTasks(ray, threads, report), report, may_start)
 
 
 class RayTasks:
-    """The Ray executor's :class:`tssac_core.experiments.jobs.JobRunner`: each job a Ray task (:func:`run_job`)
-    asking for the job's threads as CPUs, run in the driver's working directory."""
+    """The Ray executor's :class:`tssac_core.experiments.jobs.JobRunner`: each job a Ray generator task
+    (:func:`run_job`) asking for the job's threads as CPUs, run in the driver's working directory; a job's handle
+    is its name, which stays while the driver submits it again after its worker died."""
 
     def __init__(self, ray: Any, threads: dict[str, int], report: Callable[[str], None]) -> None:
-        from ray.util.queue import Queue
-
         self.ray = ray
         self.threads = threads
         self.report = report
         self.directory = os.getcwd()
-        self.events = Queue(actor_options={"num_cpus": 0})
-        self.task = ray.remote(max_retries=WORKER_RETRIES, retry_exceptions=False)(run_job)
-        self.starts: dict[str, int] = {}
+        self.task = ray.remote(max_retries=0)(run_job)
+        self.tasks: dict[str, Any] = {}
+        """A running job's name -> its task's ObjectRefGenerator."""
+        self.attempts: dict[str, int] = {}
 
     def start(self, job: Job, resume: bool) -> Hashable:
-        return self.task.options(num_cpus=self.threads[job.name]).remote(job, self.directory, self.events)
+        self._submit(job)
+        return job.name
+
+    def _submit(self, job: Job) -> None:
+        self.attempts[job.name] = self.attempts.get(job.name, 0) + 1
+        self.tasks[job.name] = self.task.options(num_cpus=self.threads[job.name]).remote(job, self.directory)
 
     def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
-        done, _ = self.ray.wait(list(running), num_returns=len(running), timeout=DRIVER_WAKE_S)
-        self.report_started()
-        return [(ref, finished(self.ray, ref, running[ref], self.report)) for ref in done]
+        tasks = [self.tasks[str(name)] for name in running]
+        ready, _ = self.ray.wait(tasks, num_returns=len(tasks), timeout=DRIVER_WAKE_S)
+        ended: list[tuple[Hashable, Launch]] = []
+        for task in ready:
+            name = next(n for n, t in self.tasks.items() if t is task)
+            if (launch := self._next_report(task, running[name])) is not None:
+                del self.tasks[name]
+                ended.append((name, launch))
+        return ended
+
+    def _next_report(self, task: Any, launch: Launch) -> Launch | None:
+        """Read what ``task`` yielded next: print a start (None), or the job's end (its final launch); a worker
+        that died submits the job again (None) until WORKER_RETRIES are spent."""
+        job = launch.job
+        try:
+            report: Started | Outcome = self.ray.get(next(task))
+        except StopIteration:  # ended without its Outcome (its last yield): nothing says how the training ended
+            return Launch(job, launch.command, launch.resumed, None)
+        except self.ray.exceptions.RayTaskError as exc:  # the task raised: another attempt would too
+            self.report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
+            return Launch(job, launch.command, launch.resumed, None)
+        except self.ray.exceptions.RayError as exc:  # its worker died (killed, out of memory, node lost)
+            if self.attempts[job.name] > WORKER_RETRIES:
+                self.report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
+                return Launch(job, launch.command, launch.resumed, None)
+            self._submit(job)
+            return None
+        if isinstance(report, Started):
+            self._report_start(report)
+            return None
+        ended = Launch(job, report.command or launch.command, report.resumed, report.returncode)
+        report_end(ended, self.report)
+        return ended
+
+    def _report_start(self, event: Started) -> None:
+        """A start of a job's second or later submission is a retry after its worker died."""
+        again = " again after its worker died" if self.attempts[event.name] > 1 else ""
+        self.report(
+            f"started {event.name}{again}{' (resume)' if event.resumed else ''}: "
+            f"on {event.host} (node {event.node}), Ray worker pid "
+            f"{event.worker_pid}, training pid {event.train_pid}"
+        )
 
     def stop(self, running: dict[Hashable, Launch]) -> None:
         """Cancel every running task: each stops its training process and writes the stopped line (a task that
         does not end in time is killed, and its training process dies with it)."""
         for launch in running.values():
             self.report(f"stopping {launch.job.name}; it resumes on the next run")
-        cancel(self.ray, list(running))
-
-    def report_started(self) -> None:
-        """Print the starts the tasks reported since the last call; a second start of a job is Ray's retry."""
-
-        def on_event(event: Started) -> None:
-            self.starts[event.name] = self.starts.get(event.name, 0) + 1
-            again = " again after its worker died" if self.starts[event.name] > 1 else ""
-            self.report(
-                f"started {event.name}{again}{' (resume)' if event.resumed else ''}: "
-                f"on {event.host} (node {event.node}), Ray worker pid "
-                f"{event.worker_pid}, training pid {event.train_pid}"
-            )
-
-        drain(self.events, on_event)
-
-
-def finished(ray: Any, ref: Any, launch: Launch, report: Callable[[str], None]) -> Launch:
-    """The launch as its task ended, reported as the local executor reports a job's end."""
-    job = launch.job
-    try:
-        outcome: Outcome = ray.get(ref)
-    except Exception as exc:  # the task raised, or its worker died more often than it is retried
-        report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
-        return Launch(job, launch.command, launch.resumed, None)
-    ended = Launch(job, outcome.command or launch.command, outcome.resumed, outcome.returncode)
-    report_end(ended, report)
-    return ended
+        cancel(self.ray, [self.tasks[str(name)] for name in running])
