@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
 from tssac_core.cli import run
 from tssac_core.experiments.grid import load_grid
+from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.arguments import parse_args
 from tssac_core.train.cli import main
 
@@ -67,3 +69,17 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
         .replace("  preset: configs/paper.yaml", "  preset: configs/paper.yaml\n  epochs: 3")
     )
     assert load_grid(own).train.epochs == 3
+
+
+@pytest.mark.parametrize(
+    ("preset", "seed", "recorded"),
+    [
+        ("configs/shipped.yaml", 2, "models/tssac/config.json"),
+        *[("configs/safe.yaml", s, f"results/recipe-trials/layouts4x-tail995/seed{s}/config.json") for s in (0, 1, 2)],
+    ],
+)
+def test_each_recipe_file_gives_the_configuration_of_the_runs_it_names(preset: str, seed: int, recorded: str):
+    """A preset that drifted from the runs it documents (a default changed, a key dropped) would reproduce something
+    else: the whole configuration must match what those runs recorded."""
+    cfg, *_ = parse_args(["--preset", str(ROOT / preset), "--seed", str(seed), "--out", "r"])
+    assert config_difference(json.loads((ROOT / recorded).read_text()), cfg) == ""
