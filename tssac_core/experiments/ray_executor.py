@@ -201,12 +201,10 @@ class RayTasks:
         except StopIteration:  # ended without its Outcome (its last yield): nothing says how the training ended
             return Launch(job, launch.command, launch.resumed, None)
         except self.ray.exceptions.RayTaskError as exc:  # the task raised: another attempt would too
-            self.report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
-            return Launch(job, launch.command, launch.resumed, None)
+            return self._failed(launch, exc)
         except self.ray.exceptions.RayError as exc:  # its worker died (killed, out of memory, node lost)
             if self.attempts[job.name] > WORKER_RETRIES:
-                self.report(f"FAILED {job.name}: {one_line(exc)}; see {job.out / LOG_NAME}")
-                return Launch(job, launch.command, launch.resumed, None)
+                return self._failed(launch, exc)
             self._submit(job)
             return None
         if isinstance(report, Started):
@@ -215,6 +213,11 @@ class RayTasks:
         ended = Launch(job, report.command or launch.command, report.resumed, report.returncode)
         report_end(ended, self.report)
         return ended
+
+    def _failed(self, launch: Launch, exc: Exception) -> Launch:
+        """Report a job whose task failed; its final launch (no exit code)."""
+        self.report(f"FAILED {launch.job.name}: {one_line(exc)}; see {launch.job.out / LOG_NAME}")
+        return Launch(launch.job, launch.command, launch.resumed, None)
 
     def _report_start(self, event: Started) -> None:
         """A start of a job's second or later submission is a retry after its worker died."""
