@@ -19,10 +19,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
-from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load, sample_layout
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.sim.world import StepResult, World
 
@@ -95,8 +96,11 @@ class RoleTask:
         seed: int | None = None,
         reward_config: RewardConfig = RewardConfig(),
         cost_margin_m: float = 0.0,
+        hard_layouts: HardLayouts = HardLayouts(),
     ) -> None:
         self.scenario = scenario
+        self.layouts = LayoutSource(scenario, hard_layouts)
+        """Where new episodes' layouts come from (hard ones more often, when asked: tssac_core.sim.hard_layouts)."""
         self.role = role
         self.j = role.index
         self.mode = observation
@@ -129,7 +133,7 @@ class RoleTask:
         """Reset worlds (all if ``index`` is None) and return every world's observation."""
         idx = np.arange(self.n) if index is None else np.asarray(index)
         gen = rng if rng is not None else self.rng
-        self.world.reset(idx, [sample_layout(self.scenario, gen) for _ in idx], self.active)
+        self.world.reset(idx, [self.layouts.draw(gen) for _ in idx], self.active)
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
         self._measure_detours()

@@ -126,6 +126,19 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)",
     )
     p.add_argument(
+        "--hard-layouts",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="draw this share of training episodes from hard layouts only (default 0: the scenario's own draw)",
+    )
+    p.add_argument(
+        "--hard-detour-km",
+        type=float,
+        default=20.0,
+        help="hard layout: some UAV's way around the radars is this much longer than the straight line (default 20)",
+    )
+    p.add_argument(
         "--validation-episodes",
         type=int,
         default=30,
@@ -195,6 +208,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:
         raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
+    if not (0.0 <= a.hard_layouts <= 1.0 and a.hard_detour_km >= 0):
+        raise UsageError("--hard-layouts must be a fraction in [0, 1] and --hard-detour-km >= 0")
     if not 0.0 <= a.stop_at_task_success <= 1.0:
         raise UsageError(f"--stop-at-task-success must be a fraction in [0, 1], got {a.stop_at_task_success:g}")
     overrides: dict[str, Any] = dict(preset.learner_settings(a.algo)) if preset is not None else {}
@@ -223,6 +238,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         validation_episodes=a.validation_episodes,
         route_margin_km=a.route_margin_km,
         cost_margin_km=a.cost_margin_km,
+        hard_layouts=a.hard_layouts,
+        hard_detour_km=a.hard_detour_km,
         init_from=str(a.init_from) if a.init_from else "",
         teammates=str(a.teammates) if a.teammates else "",
         stop_at_task_success=a.stop_at_task_success,
@@ -269,6 +286,10 @@ def train_argv(cfg: TrainConfig) -> tuple[str, ...]:
         repr(cfg.route_margin_km),
         "--cost-margin-km",
         repr(cfg.cost_margin_km),
+        "--hard-layouts",
+        repr(cfg.hard_layouts),
+        "--hard-detour-km",
+        repr(cfg.hard_detour_km),
         "--validation-episodes",
         str(cfg.validation_episodes),
         "--stop-at-task-success",

@@ -56,6 +56,11 @@ class TrainConfig:
     """The learner's cost counts steps within this distance of a radar, not only inside it: a tightened
     constraint, so that the policy keeps clear of the radars' edges (docs/decisions.md). Evaluation,
     validation and the hazard_cost column count eq. 11 exactly."""
+    hard_layouts: float = 0.0
+    """Share of training episodes drawn from hard layouts only (tssac_core.sim.hard_layouts; 0: the scenario's
+    own draw). Validation and evaluation keep the scenario's own draw."""
+    hard_detour_km: float = 20.0
+    """A layout is hard when some UAV's way around the radars is at least this much longer than the straight line."""
     validation_episodes: int = 30
     """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
     (tssac_core.train.validation). 0: ship the last epoch."""

@@ -18,6 +18,7 @@ from tssac_core.deploy.export import export_actor
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import RoleTask, TaskStep
+from tssac_core.sim.hard_layouts import HardLayouts
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.team import Pilot
@@ -49,6 +50,7 @@ def make_task(
         seed=cfg.seed * 1000 + role.index,
         reward_config=reward_config(cfg),
         cost_margin_m=cfg.cost_margin_km * 1000.0,
+        hard_layouts=HardLayouts(cfg.hard_layouts, cfg.hard_detour_km),
     )
 
 
