@@ -42,11 +42,14 @@ class HardLayouts:
             raise ValueError("hard layout detour must be >= 0 km and max_draws >= 1")
 
 
-def start_detours_km(scenario: Scenario, layouts: list[Layout]) -> np.ndarray:
-    """Every UAV's start detour in kilometres, (len(layouts), 3) in role order (module docstring)."""
-    world = World(scenario, len(layouts))
+def start_detours_km(
+    scenario: Scenario, layouts: list[Layout], world: World | None = None, routes: RouteMap | None = None
+) -> np.ndarray:
+    """Every UAV's start detour in kilometres, (len(layouts), 3) in role order (module docstring); ``world``
+    (of len(layouts) worlds) and ``routes`` may be given to be reused."""
+    world = world or World(scenario, len(layouts))
     world.reset(np.arange(len(layouts)), layouts, (True,) * len(ROLES))
-    return RouteMap().detour_m(world) / 1000.0
+    return (routes or RouteMap()).detour_m(world) / 1000.0
 
 
 class LayoutSource:
@@ -55,6 +58,8 @@ class LayoutSource:
     def __init__(self, scenario: Scenario, hard: HardLayouts = HardLayouts()) -> None:
         self.scenario = scenario
         self.hard = hard
+        self._probe: tuple[World, RouteMap] | None = None
+        """One world and its route map, reused to measure candidate layouts."""
 
     def draw(self, rng: np.random.Generator) -> Layout:
         """One episode's layout. With ``hard.fraction == 0`` (or a fixed layout) exactly ``sample_layout``:
@@ -66,10 +71,15 @@ class LayoutSource:
         hardest, hardest_km = None, -np.inf
         for _ in range(self.hard.max_draws):
             layout = sample_layout(self.scenario, rng)
-            detour_km = float(start_detours_km(self.scenario, [layout]).max())
+            detour_km = float(self._start_detours_km(layout).max())
             if detour_km >= self.hard.detour_km:
                 return layout
             if detour_km > hardest_km:
                 hardest, hardest_km = layout, detour_km
         assert hardest is not None
         return hardest
+
+    def _start_detours_km(self, layout: Layout) -> np.ndarray:
+        if self._probe is None:
+            self._probe = (World(self.scenario, 1), RouteMap())
+        return start_detours_km(self.scenario, [layout], *self._probe)
