@@ -184,9 +184,10 @@ class RayTasks:
     def ended(self, running: dict[Hashable, Launch]) -> list[tuple[Hashable, Launch]]:
         tasks = [self.tasks[str(name)] for name in running]
         ready, _ = self.ray.wait(tasks, num_returns=len(tasks), timeout=DRIVER_WAKE_S)
+        names = {id(task): name for name, task in self.tasks.items()}
         ended: list[tuple[Hashable, Launch]] = []
         for task in ready:
-            name = next(n for n, t in self.tasks.items() if t is task)
+            name = names[id(task)]
             if (launch := self._next_report(task, running[name])) is not None:
                 del self.tasks[name]
                 ended.append((name, launch))
@@ -199,12 +200,12 @@ class RayTasks:
         try:
             report: Started | Outcome = self.ray.get(next(task))
         except StopIteration:  # ended without its Outcome (its last yield): nothing says how the training ended
-            return Launch(job, launch.command, launch.resumed, None)
+            return self._failed(launch, "its Ray task ended without saying how the training ended")
         except self.ray.exceptions.RayTaskError as exc:  # the task raised: another attempt would too
-            return self._failed(launch, exc)
+            return self._failed(launch, one_line(exc))
         except self.ray.exceptions.RayError as exc:  # its worker died (killed, out of memory, node lost)
             if self.attempts[job.name] > WORKER_RETRIES:
-                return self._failed(launch, exc)
+                return self._failed(launch, one_line(exc))
             self._submit(job)
             return None
         if isinstance(report, Started):
@@ -214,9 +215,9 @@ class RayTasks:
         report_end(ended, self.report)
         return ended
 
-    def _failed(self, launch: Launch, exc: Exception) -> Launch:
-        """Report a job whose task failed; its final launch (no exit code)."""
-        self.report(f"FAILED {launch.job.name}: {one_line(exc)}; see {launch.job.out / LOG_NAME}")
+    def _failed(self, launch: Launch, why: str) -> Launch:
+        """Report a job whose task failed (``why``: one line); its final launch (no exit code)."""
+        self.report(f"FAILED {launch.job.name}: {why}; see {launch.job.out / LOG_NAME}")
         return Launch(launch.job, launch.command, launch.resumed, None)
 
     def _report_start(self, event: Started) -> None:
