@@ -72,14 +72,25 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    ("preset", "seed", "recorded"),
+    ("preset", "extra", "seed", "recorded"),
     [
-        ("configs/shipped.yaml", 2, "models/tssac/config.json"),
-        *[("configs/safe.yaml", s, f"results/recipe-trials/layouts4x-tail995/seed{s}/config.json") for s in (0, 1, 2)],
+        ("configs/shipped.yaml", [], 2, "models/tssac/config.json"),
+        *[("configs/safe.yaml", [], s, f"results/recipe-trials/hard50/seed{s}/config.json") for s in (0, 1, 2)],
+        *[
+            (
+                "configs/safe.yaml",
+                ["--hard-layouts", "0"],
+                s,
+                f"results/recipe-trials/layouts4x-tail995/seed{s}/config.json",
+            )
+            for s in (0, 1, 2)
+        ],
     ],
 )
-def test_each_recipe_file_gives_the_configuration_of_the_runs_it_names(preset: str, seed: int, recorded: str):
+def test_each_recipe_file_gives_the_configuration_of_the_runs_it_names(
+    preset: str, extra: list[str], seed: int, recorded: str
+):
     """A preset that drifted from the runs it documents (a default changed, a key dropped) would reproduce something
-    else: the whole configuration must match what those runs recorded."""
-    cfg, *_ = parse_args(["--preset", str(ROOT / preset), "--seed", str(seed), "--out", "r"])
+    else: the whole configuration must match what those runs recorded (the earlier trial: with its one flag)."""
+    cfg, *_ = parse_args(["--preset", str(ROOT / preset), *extra, "--seed", str(seed), "--out", "r"])
     assert config_difference(json.loads((ROOT / recorded).read_text()), cfg) == ""
