@@ -2,9 +2,9 @@
 
 The UAV-missions that cross a radar for hundreds of steps are not spread evenly over the layouts: they fall
 on layouts whose radars stand between the starts and the SAM, so that the way around them is much longer
-than the straight line (on fresh seeds, 7 of the 11 costliest UAV-missions of three trained teams had a
-start detour above the 87th percentile of random layouts, 5 above the 97th). A policy trained on the
-scenario's own draw meets such layouts rarely, and learns them last. :class:`LayoutSource` draws a
+than the straight line (of 11 of the costliest UAV-missions of three trained teams on evaluation layouts, 7 had
+a start detour above the 87th percentile of random layouts, 5 above the 97th; docs/decisions.md). A policy
+trained on the scenario's own draw meets such layouts rarely, and learns them last. :class:`LayoutSource` draws a
 share of the training episodes from those layouts only (rejection sampling on the start detour), and the
 rest from the scenario as it is. Validation, selection and evaluation keep the scenario's own draw: the
 figures a team is judged by stay those of the layouts it will meet.
