@@ -16,7 +16,9 @@ missions, a two-node Ray on one machine, and the paper's full-budget grid on K n
 - ``evaluate_warm``: the flight alone (no process or Ray start-up), serial against 2 warm Ray workers, in one
   process (:func:`bench_evaluate_warm`).
 - ``fly``: ``mavlink_bridge.fly`` on ``--missions`` SITL missions of scenarios/random.yaml with the
-  shipped models, serial and ``--workers 2``: missions per second, and the figures must be equal.
+  shipped models, serial and ``--workers 2``: missions per second, and the figures must be equal. Lockstep by
+  default (each mission as fast as the CPUs go); ``--speedup X``: the world in real time times X, each mission
+  waiting on the clock as a real SITL does (JSON key ``fly_realtime_<X>x``; the figures then vary with timing).
 - ``two_nodes``: ``ray start --head`` plus a second ``ray start --address`` on this machine (1 CPU each,
   their own temporary directory, stopped at the end), then the two-job grid with ``--address``: each job
   must run on its own node, and the trained teams must be those of the local executor.
@@ -291,7 +293,11 @@ def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
     }
 
 
-def bench_fly(work: Path, missions: int) -> dict[str, Any]:
+def bench_fly(work: Path, missions: int, speedup: float | None = None) -> dict[str, Any]:
+    """Serial against ``--workers 2``: lockstep (``speedup`` None: each mission as fast as the CPUs allow, the
+    same missions both ways) or real time times ``speedup`` (each mission paced by the clock, so its figures
+    vary with timing: compared as rates, not mission by mission)."""
+    clock = ["--speedup", f"{speedup:g}"] if speedup is not None else []
     base = [
         PYTHON,
         "-m",
@@ -305,6 +311,7 @@ def bench_fly(work: Path, missions: int) -> dict[str, Any]:
         "--seed",
         "880001",
         "--no-progress",
+        *clock,
     ]
     runs: dict[str, float] = {}
     for name, extra in (("serial", []), ("workers2", ["--workers", "2"])):
@@ -318,11 +325,14 @@ def bench_fly(work: Path, missions: int) -> dict[str, Any]:
     ]
     return {
         "missions": missions,
+        "clock": "lockstep" if speedup is None else f"real time x{speedup:g}",
         "wall_s": runs,
         "missions_per_s": {k: missions / v for k, v in runs.items()},
         "speedup": runs["serial"] / runs["workers2"],
         "same_missions": same,
         "success_rate": {"serial": serial["success_rate"], "workers2": parallel["success_rate"]},
+        "mean_cost": {"serial": serial["mean_cost"], "workers2": parallel["mean_cost"]},
+        "mean_sim_time_s": float(sum(m["sim_time_s"] for m in serial["missions"]) / missions),
         "load_average_after": load(),
     }
 
@@ -501,6 +511,12 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=2, help="alternations of local and ray (default 2)")
     p.add_argument("--layouts", type=int, default=1000)
     p.add_argument("--missions", type=int, default=50)
+    p.add_argument(
+        "--speedup",
+        type=float,
+        default=None,
+        help="fly: the SITL world in real time times X (default: lockstep); JSON key fly_realtime_<X>x",
+    )
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "ray.json")
     a = p.parse_args()
     parts = a.parts.split(",")
@@ -549,8 +565,10 @@ def main() -> None:
                 f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']:.2f}, same {r['same_success']}", flush=True
             )
         if "fly" in parts:
-            print(f"fly: {a.missions} SITL missions, serial against --workers 2", flush=True)
-            out["fly"] = r = bench_fly(work, a.missions)
+            clock = "lockstep" if a.speedup is None else f"real time x{a.speedup:g}"
+            print(f"fly: {a.missions} SITL missions ({clock}), serial against --workers 2", flush=True)
+            key = "fly" if a.speedup is None else f"fly_realtime_{a.speedup:g}x"
+            out[key] = r = bench_fly(work, a.missions, a.speedup)
             print(
                 f"  missions/s {r['missions_per_s']}, speed-up {r['speedup']:.2f}, same missions {r['same_missions']}",
                 flush=True,

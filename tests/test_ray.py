@@ -9,6 +9,7 @@ import json
 import os
 import re
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
 from tssac_core.mission_shards import fly_missions_sharded, shard
 from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+from tssac_core.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.team import GUIDANCE
@@ -101,6 +103,83 @@ def test_sharded_evaluation_equals_the_serial_one(local_ray, tmp_path):
     pieces = fly_missions_sharded(scenario, [GUIDANCE] * 3, [2, 3, 5, 7, 8], 31, 2, RAY, shield=ShieldConfig())
     assert pieces.summary(scenario.cost_limit) == shielded.summary(scenario.cost_limit)  # the monitor's counts too
     assert pieces.monitor is not None and np.array_equal(pieces.monitor.flown_steps, shielded.monitor.flown_steps)
+
+
+@pytest.mark.sitl
+def test_fly_on_workers_flies_the_serial_missions(local_ray, tmp_path):
+    """``fly --workers 2``: each SITL mission a Ray task on its own ports; the rows, in index order, those of the
+    serial run (lockstep: the same steps, end, cost), from processes of their own."""
+    from mavlink_bridge.fly.cli import main as fly_main
+
+    args = ["--scenario", "scenarios/random.yaml", "--pilot", "guidance", "--episodes", "2", "--seed", "41"]
+    assert fly_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
+    assert fly_main([*args, "--no-progress", "--workers", "2", "--json", str(tmp_path / "workers.json")]) == 0
+    serial, workers = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("serial", "workers"))
+    keys = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_done")
+    rows = [[{k: m[k] for k in keys} for m in run["missions"]] for run in (serial, workers)]
+    assert rows[0] == rows[1] and [r["seed"] for r in rows[0]] == [41, 42]
+    assert rows[0][0]["steps"] != rows[0][1]["steps"]  # two different missions, not one twice
+    assert workers["success_rate"] == serial["success_rate"] and workers["mean_cost"] == serial["mean_cost"]
+    pids = [set(m["pids"].values()) for m in workers["missions"]]
+    assert not pids[0] & pids[1] and not {p for m in serial["missions"] for p in m["pids"].values()} & pids[0]
+
+
+def counting(item: int):
+    """A map_on_ray task: yields 1..item as progress, returns item * 10; item 13 raises."""
+    if item == 13:
+        raise ValueError("item 13 is unlucky")
+    yield from range(1, item + 1)
+    return item * 10
+
+
+def dying_once(marker: str):
+    """A map_on_ray task whose first attempt reports progress three times, then its worker process dies; the next
+    attempt reports nothing and returns."""
+    if not Path(marker).exists():
+        Path(marker).touch()
+        yield from (1, 2, 3)
+        time.sleep(0.5)  # the driver reads the three yields before the worker dies
+        os._exit(1)
+    return os.getpid()
+
+
+@pytest.fixture
+def tasks_by_value():
+    """This module's task functions travel to the workers by value (the workers cannot import tests/)."""
+    from ray import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    yield
+    cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+
+
+def test_map_on_ray_streams_progress_and_keeps_the_items_order(local_ray, tasks_by_value):
+    events: list[int] = []
+    done: list[tuple[int, int]] = []
+    results = map_on_ray(
+        counting, [3, 1, 2], 2, RAY, on_result=lambda i, r: done.append((i, r)), on_event=events.append
+    )
+    assert results == [30, 10, 20]
+    assert sorted(done) == [(0, 30), (1, 10), (2, 20)]
+    assert sorted(events) == [1, 1, 1, 2, 2, 3]  # every yield of every task, once
+    assert map_on_ray(abs, [-2, 5], 2, RAY) == [2, 5]  # a plain function: its return value, no progress
+
+
+def test_map_on_ray_names_the_item_whose_task_raised(local_ray, tasks_by_value):
+    with pytest.raises(TaskFailed) as failed:
+        map_on_ray(counting, [1, 13, 2], 2, RAY)
+    assert failed.value.index == 1
+    assert "item 13 is unlucky" in str(failed.value) and "\n" not in str(failed.value)
+
+
+def test_map_on_ray_runs_an_item_again_when_its_worker_dies(local_ray, tasks_by_value, tmp_path):
+    """Submitted again by the driver: the retry's result arrives though it yields fewer times than the dead
+    attempt did (Ray's own retry would drop it as already seen)."""
+    events: list[int] = []
+    marker = tmp_path / "died"
+    [pid] = map_on_ray(dying_once, [str(marker)], 1, RAY, on_event=events.append)
+    assert marker.exists() and isinstance(pid, int) and pid != os.getpid()
+    assert events == [1, 2, 3]
 
 
 def test_a_job_whose_worker_is_killed_resumes(local_ray, tmp_path):

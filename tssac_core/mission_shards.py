@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Generator, Sequence
 
 import numpy as np
 
@@ -20,7 +19,7 @@ from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.deploy.shield_world import MonitorCounts
 from tssac_core.ray_cluster import RayTarget
 from tssac_core.ray_map import map_on_ray
-from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.missions import MissionResults, iter_missions
 from tssac_core.sim.scenario import Scenario
 from tssac_core.sim.team import Pilot
 
@@ -69,20 +68,22 @@ Shard = tuple[Scenario, Sequence[Pilot], int, list[int], ShieldConfig | None]
 """What a shard's task gets: the scenario, the pilots, the run's seed, its mission indices, the monitor's margins."""
 
 
-def fly_shard(piece: Shard, events: Any) -> MissionResults:
-    """The Ray task: fly one shard's missions in one batched world, reporting finished missions now and then."""
+def fly_shard(piece: Shard) -> Generator[int, None, MissionResults]:
+    """The Ray task: fly one shard's missions in one batched world, yielding the number of missions finished
+    since its last yield at most every PROGRESS_EVERY_S; returns the results."""
     scenario, pilots, seed, indices, shield = piece
-    pending = [0, time.monotonic()]
-
-    def progress(finished: int) -> None:
-        pending[0] += finished
-        if time.monotonic() - pending[1] >= PROGRESS_EVERY_S:
-            events.put(pending[0])
-            pending[:] = [0, time.monotonic()]
-
-    results = fly_missions(scenario, pilots, len(indices), seed, progress=progress, indices=indices, shield=shield)
-    if pending[0]:
-        events.put(pending[0])
+    missions = iter_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield)
+    pending, since = 0, time.monotonic()
+    try:
+        while True:
+            pending += next(missions)
+            if time.monotonic() - since >= PROGRESS_EVERY_S:
+                yield pending
+                pending, since = 0, time.monotonic()
+    except StopIteration as end:
+        results: MissionResults = end.value
+    if pending:
+        yield pending
     return results
 
 
@@ -101,5 +102,5 @@ def fly_missions_sharded(
     shards: list[Shard] = [
         (scenario, list(pilots), seed, piece, shield) for piece in shard(indices, workers * SHARDS_PER_WORKER)
     ]
-    parts = map_on_ray(fly_shard, shards, workers, target, on_event=progress or (lambda n: None))
+    parts: list[MissionResults] = map_on_ray(fly_shard, shards, workers, target, on_event=progress or (lambda n: None))
     return merge(parts)

@@ -1,18 +1,28 @@
-"""Apply a function to a list of items as Ray tasks, a few at a time, keeping the items' order.
+"""Apply a generator function to a list of items as Ray tasks, a few at a time, keeping the items' order.
 
 The engine under ``evaluate --workers N`` (one task per shard of missions) and ``fly --workers N`` (one
-task per SITL mission): at most ``workers`` tasks are in flight, each asking for one CPU; a task whose
-worker dies is run again by Ray; results reach the caller as they come (``on_result``) and, in the
-items' order, as the return value. A task can report progress through the queue it is given as its
-last argument (``events.put(x)``; ``on_event(x)`` in the driver). The first task that raises cancels
-the others and raises :class:`TaskFailed`; KeyboardInterrupt (Ctrl-C) cancels every task (each gets a
-KeyboardInterrupt, to stop what it started) and is re-raised.
+task per SITL mission). ``fn(item)`` returns the item's result (``on_result(index, result)`` as it comes,
+and, in the items' order, the return value), or is a generator whose return value is the result and whose
+yields are progress (``on_event(x)`` in the driver, as they come). Each task is a Ray generator task asking
+for one CPU: Ray streams its yields to the driver, which waits on the tasks themselves (no actor carries the
+progress and no one is polled).
+
+- At most ``workers`` tasks are in flight.
+- A task whose worker process dies (killed, out of memory, its node lost) is submitted again by the driver
+  (:data:`WORKER_RETRIES` times), not by Ray: Ray would drop as many of a retried generator's yields as the
+  dead one had delivered, and a retry that reports its progress less often could lose its result that way.
+  A retried task reports its progress again.
+- The first task that raises cancels the others and raises :class:`TaskFailed` (one line naming the item).
+- KeyboardInterrupt (Ctrl-C) cancels every task (each gets a KeyboardInterrupt, to stop what it started) and
+  is re-raised.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any, TypeVar
+from collections import deque
+from collections.abc import Callable, Generator, Sequence
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
 
 from tssac_core.ray_cluster import RayTarget, ray_session
 
@@ -20,65 +30,89 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 WORKER_RETRIES = 3
-"""Times Ray runs an item again after its worker process died."""
-POLL_S = 0.2
+"""Times the driver submits an item again after its worker process died."""
+DRIVER_WAKE_S = 1.0
+"""The longest the driver waits on its tasks in one call (so that Ctrl-C is seen at once)."""
 CANCEL_GRACE_S = 15.0
 """How long cancelled tasks get to clean up (stop their processes) before they are killed."""
 
 
 class TaskFailed(Exception):
-    """A task raised; ``str()`` is one line naming the item."""
+    """A task raised, or its worker died more often than it is submitted again; ``str()`` is one line."""
 
     def __init__(self, index: int, message: str) -> None:
         super().__init__(message)
         self.index = index
 
 
+@dataclass(frozen=True)
+class Finished(Generic[R]):
+    """A task's last yield: what its function returned."""
+
+    value: R
+
+
+def stream(fn: Callable[[T], R | Generator[Any, None, R]], item: T) -> Generator[Any, None, None]:
+    """The Ray task: ``fn(item)``'s yields if it is a generator, then its result as :class:`Finished`."""
+    out = fn(item)
+    result = (yield from out) if isinstance(out, Generator) else out
+    yield Finished(result)
+
+
 def map_on_ray(
-    fn: Callable[..., R],
+    fn: Callable[[T], R | Generator[Any, None, R]],
     items: Sequence[T],
     workers: int,
     target: RayTarget,
     on_result: Callable[[int, R], None] = lambda index, result: None,
     on_event: Callable[[Any], None] = lambda event: None,
 ) -> list[R]:
-    """``[fn(item, events) for item in items]`` over Ray workers, at most ``workers`` at once (module docstring)."""
+    """The return values of ``fn(item)`` for every item, run as Ray tasks, at most ``workers`` at once
+    (module docstring)."""
     results: dict[int, R] = {}
     if not items:
         return []
     with ray_session(target) as ray:
-        from ray.util.queue import Queue
+        task = ray.remote(num_cpus=1, max_retries=0)(stream)
+        todo = deque(enumerate(items))
+        running: dict[int, tuple[Any, int]] = {}
+        """id(task's ObjectRefGenerator) -> (it, its item's index)."""
+        attempts = [0] * len(items)
 
-        events = Queue(actor_options={"num_cpus": 0})
-        task = ray.remote(num_cpus=1, max_retries=WORKER_RETRIES, retry_exceptions=False)(fn)
-        todo = list(enumerate(items))
-        running: dict[Any, int] = {}
+        def submit(index: int) -> None:
+            attempts[index] += 1
+            generator = task.remote(fn, items[index])
+            running[id(generator)] = (generator, index)
+
         try:
             while todo or running:
                 while todo and len(running) < workers:
-                    index, item = todo.pop(0)
-                    running[task.remote(item, events)] = index
-                done, _ = ray.wait(list(running), num_returns=1, timeout=POLL_S)
-                drain(events, on_event)
-                for ref in done:
-                    index = running.pop(ref)
+                    submit(todo.popleft()[0])
+                ready, _ = ray.wait([g for g, _ in running.values()], num_returns=1, timeout=DRIVER_WAKE_S)
+                for generator in ready:
+                    index = running[id(generator)][1]
                     try:
-                        results[index] = ray.get(ref)
-                    except Exception as exc:  # the task raised, or its worker died more often than it is retried
+                        value = ray.get(next(generator))
+                    except StopIteration:  # cannot happen while stream() ends with Finished; said in one line if so
+                        raise TaskFailed(index, "its Ray task ended without its result") from None
+                    except ray.exceptions.RayTaskError as exc:  # fn raised: another attempt would too
                         raise TaskFailed(index, one_line(exc)) from None
-                    on_result(index, results[index])
+                    except ray.exceptions.RayError as exc:  # its worker died
+                        del running[id(generator)]
+                        if attempts[index] > WORKER_RETRIES:
+                            raise TaskFailed(index, one_line(exc)) from None
+                        submit(index)
+                        continue
+                    if isinstance(value, Finished):
+                        del running[id(generator)]
+                        results[index] = value.value
+                        on_result(index, value.value)
+                    else:
+                        on_event(value)
         finally:
             if running:
-                cancel(ray, list(running))
-            drain(events, on_event)
+                cancel(ray, [g for g, _ in running.values()])
     return [results[i] for i in range(len(items))]
-
-
-def drain(events: Any, on_event: Callable[[Any], None]) -> None:
-    """Hand the driver the events the tasks put since the last call."""
-    count = events.size()
-    for event in events.get_nowait_batch(count) if count else []:
-        on_event(event)
 
 
 def cancel(ray: Any, refs: list[Any]) -> None:

@@ -35,7 +35,7 @@ class MissionTask:
     """The key fly made for this invocation (None: none, or the user's ``--signing-key`` file)."""
 
 
-def fly_mission(task: MissionTask, events: Any) -> dict[str, Any]:
+def fly_mission(task: MissionTask) -> dict[str, Any]:
     """The Ray task: one mission in a fresh work directory (``--logs`` if given), its processes stopped
     whatever happens (a cancel arrives as KeyboardInterrupt)."""
     children = ChildProcesses()

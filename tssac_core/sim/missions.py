@@ -8,7 +8,7 @@ in either world, and a run can be split by mission index (shards) without changi
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -143,6 +143,30 @@ def fly_missions(
     number of missions that finished since the last call. ``shield``: fly every UAV through the
     runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) with these margins.
     """
+    missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield)
+    try:
+        while True:
+            finished = next(missions)
+            if progress is not None:
+                progress(finished)
+    except StopIteration as end:
+        results: MissionResults = end.value
+        return results
+
+
+def iter_missions(
+    scenario: Scenario,
+    pilots: Sequence[Pilot],
+    episodes: int,
+    seed: int,
+    mode: ObservationMode = ObservationMode.EXTENDED,
+    record: bool = False,
+    layouts: list[Layout] | None = None,
+    indices: Sequence[int] | None = None,
+    shield: ShieldConfig | None = None,
+) -> Generator[int, None, MissionResults]:
+    """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
+    returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
     seeds: list[int] = []
     index_list: list[int] = []
     if layouts is None:
@@ -175,10 +199,9 @@ def fly_missions(
         result = world.step(actions)
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area
-        if progress is not None:
-            finished = int((was_running & ~world.running).sum())
-            if finished:
-                progress(finished)
+        finished = int((was_running & ~world.running).sum())
+        if finished:
+            yield finished
     return MissionResults(
         success=world.hit.copy(),
         cost=world.cost_total.copy(),
