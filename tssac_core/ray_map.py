@@ -1,4 +1,4 @@
-"""Apply a generator function to a list of items as Ray tasks, a few at a time, keeping the items' order.
+"""Apply a function (or a generator function) to a list of items as Ray tasks, a few at a time, in the items' order.
 
 The engine under ``evaluate --workers N`` (one task per shard of missions) and ``fly --workers N`` (one
 task per SITL mission). ``fn(item)`` returns the item's result (``on_result(index, result)`` as it comes,
