@@ -45,6 +45,29 @@ class TaskFailed(Exception):
         self.index = index
 
 
+class TaskError(Exception):
+    """What :func:`next_yield` raises: ``str()`` is one line; ``worker_died``: the task's worker process died (killed,
+    out of memory, its node lost), so running it again may succeed; otherwise the task raised (it would again)."""
+
+    def __init__(self, message: str, worker_died: bool) -> None:
+        super().__init__(message)
+        self.worker_died = worker_died
+
+
+def next_yield(ray: Any, generator: Any) -> Any:
+    """The next value a Ray generator task (``generator``, its ObjectRefGenerator, ready) yielded; :class:`TaskError`
+    if it raised, if its worker died, or if it ended: every task here ends with a last report the caller reads
+    before asking again, so an end before it means the task stopped early."""
+    try:
+        return ray.get(next(generator))
+    except StopIteration:
+        raise TaskError("its Ray task ended before its last report", worker_died=False) from None
+    except ray.exceptions.RayTaskError as exc:  # RayTaskError first: it is a RayError too
+        raise TaskError(one_line(exc), worker_died=False) from None
+    except ray.exceptions.RayError as exc:
+        raise TaskError(one_line(exc), worker_died=True) from None
+
+
 @dataclass(frozen=True)
 class Finished(Generic[R]):
     """A task's last yield: what its function returned."""
@@ -92,15 +115,11 @@ def map_on_ray(
                 for generator in ready:
                     index = running[id(generator)][1]
                     try:
-                        value = ray.get(next(generator))
-                    except StopIteration:  # cannot happen while stream() ends with Finished; said in one line if so
-                        raise TaskFailed(index, "its Ray task ended without its result") from None
-                    except ray.exceptions.RayTaskError as exc:  # fn raised: another attempt would too
-                        raise TaskFailed(index, one_line(exc)) from None
-                    except ray.exceptions.RayError as exc:  # its worker died
+                        value = next_yield(ray, generator)
+                    except TaskError as exc:
+                        if not exc.worker_died or attempts[index] > WORKER_RETRIES:
+                            raise TaskFailed(index, str(exc)) from None
                         del running[id(generator)]
-                        if attempts[index] > WORKER_RETRIES:
-                            raise TaskFailed(index, one_line(exc)) from None
                         submit(index)
                         continue
                     if isinstance(value, Finished):

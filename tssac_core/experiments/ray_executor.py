@@ -47,7 +47,7 @@ from tssac_core.experiments.jobs import (
     stop,
 )
 from tssac_core.ray_cluster import RayTarget, cluster_cpus, ray_session
-from tssac_core.ray_map import cancel, one_line
+from tssac_core.ray_map import TaskError, cancel, next_yield
 
 WORKER_RETRIES = 3
 """Times the driver submits a job again after its worker process died (each run resumes the last)."""
@@ -198,14 +198,10 @@ class RayTasks:
         that died submits the job again (None) until WORKER_RETRIES are spent."""
         job = launch.job
         try:
-            report: Started | Outcome = self.ray.get(next(task))
-        except StopIteration:  # ended without its Outcome (its last yield): nothing says how the training ended
-            return self._failed(launch, "its Ray task ended without saying how the training ended")
-        except self.ray.exceptions.RayTaskError as exc:  # the task raised: another attempt would too
-            return self._failed(launch, one_line(exc))
-        except self.ray.exceptions.RayError as exc:  # its worker died (killed, out of memory, node lost)
-            if self.attempts[job.name] > WORKER_RETRIES:
-                return self._failed(launch, one_line(exc))
+            report: Started | Outcome = next_yield(self.ray, task)
+        except TaskError as exc:  # raised (another attempt would too), ended without its Outcome, or its worker died
+            if not exc.worker_died or self.attempts[job.name] > WORKER_RETRIES:
+                return self._failed(launch, str(exc))
             self._submit(job)
             return None
         if isinstance(report, Started):
