@@ -132,13 +132,16 @@ def counting(item: int):
     return item * 10
 
 
-def dying_once(marker: str):
-    """A map_on_ray task whose first attempt reports progress three times, then its worker process dies; the next
-    attempt reports nothing and returns."""
-    if not Path(marker).exists():
-        Path(marker).touch()
+def dying_once(folder: str):
+    """A map_on_ray task whose first attempt reports progress three times, waits until the driver has read them
+    (its file ``seen``), then its worker process dies; the next attempt reports nothing and returns its pid."""
+    first, seen = Path(folder) / "first", Path(folder) / "seen"
+    if not first.exists():
+        first.touch()
         yield from (1, 2, 3)
-        time.sleep(0.5)  # the driver reads the three yields before the worker dies
+        deadline = time.monotonic() + 120
+        while not seen.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
         os._exit(1)
     return os.getpid()
 
@@ -176,9 +179,14 @@ def test_map_on_ray_runs_an_item_again_when_its_worker_dies(local_ray, tasks_by_
     """Submitted again by the driver: the retry's result arrives though it yields fewer times than the dead
     attempt did (Ray's own retry would drop it as already seen)."""
     events: list[int] = []
-    marker = tmp_path / "died"
-    [pid] = map_on_ray(dying_once, [str(marker)], 1, RAY, on_event=events.append)
-    assert marker.exists() and isinstance(pid, int) and pid != os.getpid()
+
+    def on_event(event: int) -> None:
+        events.append(event)
+        if len(events) == 3:
+            (tmp_path / "seen").touch()
+
+    [pid] = map_on_ray(dying_once, [str(tmp_path)], 1, RAY, on_event=on_event)
+    assert (tmp_path / "first").exists() and isinstance(pid, int)
     assert events == [1, 2, 3]
 
 
