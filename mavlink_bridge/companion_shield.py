@@ -1,11 +1,11 @@
-"""The runtime-assurance monitor in a companion computer: the batched world's :func:`tssac_core.deploy.shield.decide`
+"""The runtime-assurance monitor in a companion computer: :func:`tssac_core.assurance.monitor.decide`
 for one vehicle, fed with the Kalman filter's estimate, its covariance and the commands still on the link.
 
 At each of the pilot's decisions (every ``action_repeat`` ticks; every tick for the guidance controller) the
-proposed action goes through :class:`tssac_core.deploy.shield_world.VehicleMonitor` with
+proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMonitor` with
 
 * the filter's estimate (x, y, v, phi) at the tick;
-* the margin :func:`tssac_core.deploy.shield.estimate_margin_m`: the base, ``sigma_k`` times the position's largest
+* the margin :func:`tssac_core.assurance.monitor.estimate_margin_m`: the base, ``sigma_k`` times the position's largest
   standard deviation (sqrt of the largest eigenvalue of the filter's position covariance), and v_max times
   the timing slack off lockstep or over a lossy link (``link.packet_loss`` > 0: a lost setpoint leaves the
   vehicle on the previous command, in lockstep too);
@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.deploy.shield import N_TURNS, ShieldConfig, estimate_margin_m
-from tssac_core.deploy.shield_world import VehicleMonitor
+from tssac_core.assurance.monitor import N_TURNS, ShieldConfig, estimate_margin_m
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import VehicleMonitor
 
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"

@@ -11,7 +11,7 @@ import pytest
 
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
-from tssac_core.deploy.shield import (
+from tssac_core.assurance.monitor import (
     Hazards,
     Limits,
     Memory,
@@ -22,11 +22,11 @@ from tssac_core.deploy.shield import (
     decide,
     estimate_margin_m,
 )
-from tssac_core.deploy.shield_world import VehicleMonitor, WorldMonitor
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.scenario import Role, load, sample_layout
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import VehicleMonitor, WorldMonitor
 
 
 class SteerIntoRadar:

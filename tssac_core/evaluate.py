@@ -14,7 +14,7 @@ keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interv
 entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
 Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.missions), so
 ``--seed S --mission k`` flies any one of them again alone. ``--shield`` flies every UAV through the
-runtime-assurance monitor (:mod:`tssac_core.deploy.shield`, ``docs/runtime_assurance.md``) and adds its counts
+runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`, ``docs/runtime_assurance.md``) and adds its counts
 under ``shield``: interventions per UAV-mission and the fraction of flight time under the backup. Off by
 default: the learned policy is measured alone.
 """
@@ -30,8 +30,8 @@ from typing import Any
 
 from tqdm import tqdm
 
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot

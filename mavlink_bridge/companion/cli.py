@@ -17,8 +17,8 @@ from mavlink_bridge.companion.machine import Companion
 from mavlink_bridge.link import LinkError
 from mavlink_bridge.signing_key import read_signing_key
 from mavlink_bridge.state_filter import FilterModel
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mavlink_bridge.state_filter import FilterModel
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15

@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import write_json
 from tssac_core.deploy.policy import checkpoint_info, load_team, read_checkpoint
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout

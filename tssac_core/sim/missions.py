@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from tssac_core.deploy.shield import ShieldConfig
-from tssac_core.deploy.shield_world import MonitorCounts, WorldMonitor
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
 from tssac_core.stats import (
     bootstrap_mean_interval,
     cvar,
@@ -141,7 +141,7 @@ def fly_missions(
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
     number of missions that finished since the last call. ``shield``: fly every UAV through the
-    runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) with these margins.
+    runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
     """
     missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield)
     try:

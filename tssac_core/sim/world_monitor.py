@@ -1,4 +1,4 @@
-"""The runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) driven over a batched :class:`World`.
+"""The runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) driven over a batched :class:`World`.
 
 Each vehicle is decided for at its pilot's decisions (every ``action_repeat`` world steps, every step for
 the guidance controller), with the world's exact state: no estimate error, no latency. Between decisions
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.deploy.shield import (
+from tssac_core.assurance.monitor import (
     Decision,
     Hazards,
     Limits,
