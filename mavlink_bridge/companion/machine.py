@@ -24,6 +24,7 @@ from mavlink_bridge.frames import (
     action_to_setpoint,
     from_global_position_int,
     from_local_position_ned,
+    setpoint_to_action,
 )
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
@@ -112,6 +113,7 @@ class Companion:
         self.fix_rx_s = 0.0
         self.local_ms: int | None = None  # newest LOCAL_POSITION_NED
         self.last_control_ms: int | None = None
+        self._next_decision_step = 0  # the monitor's next decision tick
         self.fly_start_ms: int | None = None
         self.armed = False
         self.mode: int | None = None
@@ -287,6 +289,8 @@ class Companion:
         )
         self.counters.restarts += 1
         self._reset_vehicle_state()
+        if self.shield is not None:
+            self.shield.reset()
         if self.phase in (Phase.FLY, Phase.PAUSED):
             self.phase = Phase.ENGAGE
         self._say(M.MAV_SEVERITY_WARNING, f"{role}: vehicle restart seen, re-engaging")
@@ -431,21 +435,31 @@ class Companion:
             self._hold_reason(why)
         link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2)
         self.counters.setpoints_sent += 1
+        if self.shield is not None:
+            self.shield.sent(np.array(setpoint_to_action(setpoint, self.spec)))
         if trigger_rx_s is not None:
             self.latencies_s.append(time.monotonic() - trigger_rx_s)
         if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
             raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
 
     def _decide(self, t_ms: int) -> tuple[Setpoint, str | None]:
-        """The setpoint for vehicle time t_ms, and why it is the hold (None if it is not)."""
+        """The setpoint for vehicle time t_ms, and what is amiss (None if nothing is).
+
+        Without the monitor, what is amiss is flown as the hold setpoint. With it, every tick after the first fix
+        goes through the monitor: a non-finite action, or no action at all in a telemetry gap, is a proposal that
+        never passes, so the remembered backup flies (as in the batched world)."""
         if not self.filter.initialised:
             return HOLD, "no position fix yet"
         t_s = t_ms / 1000.0
         self.filter.predict_to(t_s)
+        step = int(t_ms // self.dt_ms)
         gap_s = t_s - self.filter.last_measurement_t_s
         if gap_s > self.cfg.hold_after_s:
             self._gap_seen = True
-            return HOLD, f"telemetry gap {gap_s:.1f} s"
+            gap = f"telemetry gap {gap_s:.1f} s"
+            if self.shield is None:
+                return HOLD, gap
+            return self._shielded(np.full(2, np.nan), step), gap
         f = self.filter
         x_m, y_m = f.pos_m
         self.world.mirror(
@@ -458,40 +472,51 @@ class Companion:
             bool(self.flags.get("RADAR_ON")),
             bool(self.flags.get("IDENT")),
         )
-        step = t_ms // self.dt_ms
-        action = self.pilot.action(self.world, self.role_index, int(step))
+        action = self.pilot.action(self.world, self.role_index, step)
+        why: str | None = None
         if action.shape != (2,) or not np.all(np.isfinite(action)):
             self.counters.nonfinite_actions += 1
-            self.pilot.reset()
-            return HOLD, "non-finite action"
+            why = "non-finite action"
+            if self.shield is None:
+                self.pilot.reset()
+                return HOLD, why
+            action = np.full(2, np.nan)
         self._gap_seen = False
         if self.shield is not None:
-            action = self._shielded(action, x_m, y_m)
+            return self._shielded(action, step), why
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec), None
 
-    def _shielded(self, proposed: np.ndarray, x_m: float, y_m: float) -> np.ndarray:
-        """The monitor's choice at the pilot's decisions (held between them); a STATUSTEXT at each hand-over."""
+    def _shielded(self, proposed: np.ndarray, step: int) -> Setpoint:
+        """The monitor's choice at each decision tick (held between them); a STATUSTEXT at each hand-over.
+
+        Decision ticks are the pilot's grid, ticks 0, k, 2k, ... of the vehicle's clock (k = the pilot's
+        ``repeat``; a tick skipped by a slow companion moves the decision to the next tick seen), whether or not
+        the pilot was asked this tick."""
         assert self.shield is not None
         f = self.filter
+        decision = step >= self._next_decision_step
+        if decision:
+            self._next_decision_step = (step // self.pilot.repeat + 1) * self.pilot.repeat
+        x_m, y_m = f.pos_m
         state = (x_m, y_m, f.speed_m_s, f.heading_rad)
         action, text = self.shield.action(
-            self.pilot.decided, self.pilot.repeat, proposed, state, f.position_sigma_major_m
+            decision, self.pilot.repeat, proposed, state, (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
         )
         if text is not None:
             _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
             self._say(M.MAV_SEVERITY_NOTICE, text)
-        self.shield.sent(action)
-        return action
+        return action_to_setpoint((float(action[0]), float(action[1])), self.spec)
 
     def _hold_reason(self, why: str) -> None:
+        """Count and say (once per spell) what is amiss: the hold flies without the monitor, its backup with it."""
         self.counters.holds += 1
         kind = why.split(" ")[0]
         if self._holding is None or self._holding.split(" ")[0] != kind:
             self.counters.hold_episodes += 1
-            if self.shield is not None:
-                self.shield.reset()  # the hold breaks the monitor's chain of predictions: it starts afresh
-            _log.warning("%s: %s: sending the hold setpoint (no turn, no acceleration)", self.cfg.role.value, why)
-            self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, holding")
+            flown = "sending the hold setpoint" if self.shield is None else "the monitor's backup flies"
+            _log.warning("%s: %s: %s", self.cfg.role.value, why, flown)
+            said = "holding" if self.shield is None else "backup"
+            self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, {said}")
         self._holding = why
 
     def _check_silence(self, now: float) -> None:
@@ -506,7 +531,10 @@ class Companion:
             self._hold_reason(f"link silent {silent_s:.1f} s")
             link = self._link
             assert link is not None
-            link.send_setpoint(self.vt_ms or 0, HOLD.yaw_rate_rad_s, HOLD.accel_m_s2)
+            # With the monitor the vehicle is sent again the command the monitor chose for this tick (a new one
+            # could start nowhere the monitor checked); without it, the hold.
+            sp = HOLD if self.shield is None else action_to_setpoint(tuple(self.shield.held), self.spec)
+            link.send_setpoint(self.vt_ms or 0, sp.yaw_rate_rad_s, sp.accel_m_s2)
             self.counters.setpoints_sent += 1
 
     def _say(self, severity: int, text: str) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 
 from tssac_core.assurance.monitor import (
     Decision,
+    EstimateError,
     Hazards,
     Limits,
     Memory,
@@ -146,6 +147,7 @@ class VehicleMonitor:
         steps: int,
         margin_m: float,
         pending: np.ndarray | None = None,
+        error: EstimateError | None = None,
     ) -> Decision:
         """One decision: the action to fly for the next ``steps`` steps and whether the backup flies."""
         state = np.array([[x_m, y_m, v_m_s, phi_rad]])
@@ -161,6 +163,7 @@ class VehicleMonitor:
             margin_m,
             self.cfg,
             queue,
+            error,
         )
         self.memory = d.memory
         return d
