@@ -14,7 +14,7 @@ It guards against accidental change (a bad copy, a disk error, an editor), not a
 can change a model file can change the manifest beside it. A directory without a manifest (a run trained
 before manifests existed) is read with one warning line.
 
-Standard library only: the companion imports it, and must import neither torch nor numpy's readers for it.
+No torch: the companion imports it (through :func:`tssac_core.deploy.numpy_actor.load_actor`).
 """
 
 from __future__ import annotations
@@ -29,10 +29,10 @@ from pathlib import Path
 
 from tssac_core.errors import CheckpointError
 from tssac_core.files import replace_durably
+from tssac_core.sim.scenario import ROLES
 
 MANIFEST = "SHA256SUMS"
 CONFIG = "config.json"
-ROLE_NAMES = ("decoy", "detect", "strike")  # tssac_core.sim.scenario.ROLES, without importing the world
 MODEL_SUFFIXES = (".pt", ".npz")
 
 _LINE = re.compile(r"([0-9a-f]{64}) [ *](.+)")  # sha256sum's text (two spaces) and binary (" *") forms
@@ -48,7 +48,7 @@ def sha256_of(path: Path) -> str:
 
 def model_files(directory: Path) -> list[str]:
     """The files of ``directory`` a manifest lists: ``config.json`` and every ``<role>.pt`` / ``<role>.npz`` there."""
-    names = [CONFIG] + [role + suffix for role in ROLE_NAMES for suffix in MODEL_SUFFIXES]
+    names = [CONFIG] + [role.value + suffix for role in ROLES for suffix in MODEL_SUFFIXES]
     return sorted(name for name in names if (directory / name).is_file())
 
 
