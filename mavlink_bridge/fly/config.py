@@ -13,6 +13,7 @@ from typing import NoReturn
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.cli import UsageError
+from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import ROLES, Scenario, load
@@ -268,10 +269,15 @@ def make_signing_key(directory: Path) -> Path:
 
 
 def check_models(models: Path) -> None:
-    """The three roles' actors load (CheckpointError otherwise), with a hint when they are missing."""
+    """The directory's manifest matches its files and the three roles' actors load (UsageError otherwise, one line),
+    with a hint when they are missing."""
     hint = "fly with --pilot guidance, or train with python -m tssac_core.train --out DIR and pass --models DIR"
     if not models.is_dir():
         raise UsageError(f"{models}: models directory not found ({hint})")
+    try:
+        check_manifest(models, [])  # first: a changed file is refused before any of them is read
+    except CheckpointError as exc:
+        raise UsageError(str(exc)) from None
     try:
         for role in ROLES:
             load_actor(pilot_file(models, role), role)
