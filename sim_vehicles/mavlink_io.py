@@ -9,8 +9,9 @@ vehicle sends, one without a key that only decodes frames already checked here. 
 frame must not swallow the next datagram), a bind that fails when the port is taken (``mavudp`` sets
 SO_REUSEADDR), and socket errors counted rather than swallowed.
 
-Every datagram is split into frames here; a frame is decoded only if its CRC (with the message's
-CRC_EXTRA) matches and, with signing, its signature verifies
+Every datagram is split into frames by :func:`tssac_core.deploy.mavlink_framing.scan_frames` (the companion's
+link uses the same scanner); a frame is decoded only if its CRC (with the message's CRC_EXTRA) matches and,
+with signing, its signature verifies
 (:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
 signature first, then the stream's timestamp — pymavlink's own check records the timestamp first).
 Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned, wrongly signed and replayed
@@ -35,13 +36,13 @@ import enum
 import errno
 import logging
 import socket
-import struct
 import time
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
+from tssac_core.deploy.mavlink_framing import Dialect, message_id, scan_frames
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
 
 _log = logging.getLogger(__name__)
@@ -57,9 +58,8 @@ MAX_MONITORS = 4
 """Unsigned monitors served at once (signing on, ``unsigned_monitors`` set)."""
 MONITOR_BYTES_PER_S = 2000
 """Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
-_V1, _V2 = mavlink2.PROTOCOL_MARKER_V1, mavlink2.PROTOCOL_MARKER_V2
-_SIG_LEN = mavlink2.MAVLINK_SIGNATURE_BLOCK_LEN
-_IFLAG_SIGNED = mavlink2.MAVLINK_IFLAG_SIGNED
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, lambda b: mavlink2.x25crc(b).crc)
+"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 
 class Sender(enum.Enum):
@@ -120,17 +120,6 @@ class TxCounters:
     socket_errors: int = 0
     monitor_throttled: int = 0
     """Datagrams not sent to a monitor because its budget was spent."""
-
-
-class _Check(enum.Enum):
-    """One frame's fate in :meth:`MavEndpoint.parse`."""
-
-    RESCAN = "rescan"
-    """Not a frame after all (unknown id, bad CRC): look for one from the next byte."""
-    REJECTED = "rejected"
-    """A whole frame, refused (unsigned, wrongly signed, replayed) and counted."""
-    CLIENT = "client"
-    MONITOR = "monitor"
 
 
 @dataclass
@@ -328,72 +317,41 @@ class MavEndpoint:
         """Check and decode every frame of one datagram (clients are recorded by :meth:`admit`)."""
         self.rx.datagrams += 1
         out = Parsed()
-        i, n = 0, len(data)
-        while i < n:
-            magic = data[i]
-            if magic != _V2 and magic != _V1:
-                j = _next_magic(data, i + 1)
-                self.rx.garbage_bytes += j - i
-                i = j
-                continue
-            size = _frame_size(data, i)
-            if size is None:  # impossible header: not a frame start
-                self.rx.garbage_bytes += 1
-                i += 1
-                continue
-            if i + size > n:
-                self.rx.truncated += 1
-                i += 1  # it may be garbage that happens to hold a magic byte: rescan past it
-                continue
-            frame = data[i : i + size]
-            verdict = self._check_frame(frame)
-            if verdict is _Check.RESCAN:  # not a frame after all (unknown id, bad CRC): rescan from the next byte
-                i += 1
-                continue
-            i += size
-            if verdict is _Check.REJECTED:
+        scan = scan_frames(data, DIALECT)
+        self.rx.garbage_bytes += scan.garbage_bytes
+        self.rx.truncated += scan.truncated
+        self.rx.unknown_id += scan.unknown_id
+        self.rx.bad_crc += scan.bad_crc
+        for frame in scan.frames:
+            verdict = self._check_signing(frame)
+            if verdict is None:
                 continue
             msg = self._decode(frame)
             if msg is None:
                 continue
             out.messages.append(msg)
-            sender = Sender.CLIENT if verdict is _Check.CLIENT else Sender.MONITOR
             if out.sender is not Sender.CLIENT:
-                out.sender = sender
+                out.sender = verdict
         self.rx.messages += len(out.messages)
         return out
 
-    def _check_frame(self, frame: bytes) -> _Check:
-        """Whether a frame vouches for a client or a monitor, was refused (counted), or is no frame at all."""
-        signed = frame[0] == _V2 and bool(frame[2] & _IFLAG_SIGNED)
-        msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16) if frame[0] == _V2 else frame[5]
-        msg_type = mavlink2.mavlink_map.get(msg_id)
-        if msg_type is None:
-            # Its CRC cannot be checked, so its length cannot be trusted either: it may be garbage
-            # claiming a long frame over the next real one.
-            self.rx.unknown_id += 1
-            return _Check.RESCAN
-        end = len(frame) - (_SIG_LEN if signed else 0)
-        crc = mavlink2.x25crc(bytes(frame[1 : end - 2]))
-        crc.accumulate(bytes((msg_type.crc_extra,)))
-        if crc.crc != struct.unpack_from("<H", frame, end - 2)[0]:
-            self.rx.bad_crc += 1
-            return _Check.RESCAN
+    def _check_signing(self, frame: bytes) -> Sender | None:
+        """Whether a whole, CRC-checked frame vouches for a client or a monitor; None: refused (counted)."""
         if self.verifier is None:
-            return _Check.CLIENT
+            return Sender.CLIENT
         verdict = self.verifier.check(frame)
         if verdict is Verdict.OK:
-            return _Check.CLIENT
+            return Sender.CLIENT
         if verdict is Verdict.UNSIGNED:
-            if self.unsigned_monitors and msg_id in signing.MONITOR_IDS:
+            if self.unsigned_monitors and message_id(frame) in signing.MONITOR_IDS:
                 self.rx.monitor_frames += 1
-                return _Check.MONITOR
+                return Sender.MONITOR
             self.rx.unsigned_rejected += 1
         elif verdict is Verdict.BAD_SIGNATURE:
             self.rx.bad_signature += 1
         else:
             self.rx.replayed += 1
-        return _Check.REJECTED
+        return None
 
     def _decode(self, frame: bytes) -> mavlink2.MAVLink_message | None:
         try:
@@ -405,28 +363,3 @@ class MavEndpoint:
             self.rx.decode_errors += 1
             _log.warning("sysid %d: pymavlink failed to decode a frame: %r", self.sysid, exc)
             return None
-
-
-def _next_magic(data: bytes, start: int) -> int:
-    """Index of the next MAVLink start byte at or after ``start`` (len(data) if none)."""
-    a, b = data.find(bytes((_V2,)), start), data.find(bytes((_V1,)), start)
-    if a < 0:
-        return b if b >= 0 else len(data)
-    return a if b < 0 else min(a, b)
-
-
-def _frame_size(data: bytes, i: int) -> int | None:
-    """Total length of the frame starting at ``data[i]`` from its header, None if the header is invalid.
-
-    A header cut off by the end of the datagram reports the minimum length, so it counts as truncated.
-    """
-    if data[i] == _V2:
-        if i + 3 > len(data):
-            return mavlink2.HEADER_LEN_V2 + 2
-        length, incompat = data[i + 1], data[i + 2]
-        if incompat & ~_IFLAG_SIGNED:
-            return None
-        return mavlink2.HEADER_LEN_V2 + length + 2 + (_SIG_LEN if incompat & _IFLAG_SIGNED else 0)
-    if i + 2 > len(data):
-        return mavlink2.HEADER_LEN_V1 + 2
-    return mavlink2.HEADER_LEN_V1 + data[i + 1] + 2
