@@ -42,8 +42,17 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
-from tssac_core.deploy.mavlink_framing import Dialect, message_id, scan_frames
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
+from tssac_core.deploy.mavlink_framing import Dialect, message_id, scan_frames, source
+from tssac_core.deploy.mavlink_signing import (
+    COMPANION_LINK_BASE,
+    SIGNATURE_BLOCK_LEN,
+    SignatureVerifier,
+    StreamKey,
+    Verdict,
+    companion_link_id,
+    is_signed,
+    refresh_outgoing_timestamp,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -85,6 +94,12 @@ class RxCounters:
     bad_crc: int = 0
     unknown_id: int = 0
     """Frames of message ids the dialect does not know (their CRC cannot be checked)."""
+    from_vehicles: int = 0
+    """Frames whose header names the autopilot of one of this run's vehicles (system N, component 1: this
+    one's own telemetry reflected back, another vehicle's): a vehicle takes nothing from an autopilot. A
+    companion on the vehicle's system id with its own component id (191) is a client as any other."""
+    wrong_link: int = 0
+    """Signed frames on the link id of another vehicle's companion (``companion_link_id``)."""
     unsigned_rejected: int = 0
     bad_signature: int = 0
     replayed: int = 0
@@ -103,6 +118,8 @@ class RxCounters:
             self.truncated
             + self.bad_crc
             + self.unknown_id
+            + self.from_vehicles
+            + self.wrong_link
             + self.unsigned_rejected
             + self.bad_signature
             + self.replayed
@@ -152,8 +169,17 @@ class MavEndpoint:
         compid: int,
         signing_key: bytes | None = None,
         unsigned_monitors: bool = False,
+        run_sysids: frozenset[int] = frozenset(),
+        shared_streams: dict[StreamKey, int] | None = None,
     ) -> None:
+        """``run_sysids``: the system ids of every vehicle of the run (this one's included); ``shared_streams``:
+        one dict for all of them, the signing streams' newest accepted timestamps (see :class:`SignatureVerifier`)."""
         self.sysid = sysid
+        self.run_sysids = run_sysids | {sysid}
+        self.foreign_links = frozenset(
+            companion_link_id(s) for s in self.run_sysids - {sysid} if s <= 255 - COMPANION_LINK_BASE
+        )
+        """Link ids of the other vehicles' companions: refused here."""
         self.compid = compid
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -173,7 +199,7 @@ class MavEndpoint:
         self.verifier: SignatureVerifier | None = None
         if signing_key is not None:
             signing.enable_signing(self.mav, signing_key)
-            self.verifier = SignatureVerifier(signing_key)
+            self.verifier = SignatureVerifier(signing_key, shared_streams)
         self.signing = signing_key is not None
         self.unsigned_monitors = unsigned_monitors and self.signing
         self.peers: dict[Address, float] = {}
@@ -337,8 +363,15 @@ class MavEndpoint:
 
     def _check_signing(self, frame: bytes) -> Sender | None:
         """Whether a whole, CRC-checked frame vouches for a client or a monitor; None: refused (counted)."""
+        sysid, compid = source(frame)
+        if sysid in self.run_sysids and compid == self.compid:
+            self.rx.from_vehicles += 1
+            return None
         if self.verifier is None:
             return Sender.CLIENT
+        if is_signed(frame) and frame[-SIGNATURE_BLOCK_LEN] in self.foreign_links:
+            self.rx.wrong_link += 1
+            return None
         verdict = self.verifier.check(frame)
         if verdict is Verdict.OK:
             return Sender.CLIENT

@@ -24,11 +24,12 @@ from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, s
 from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
 from mavlink_bridge.fly.missions import child_failure
+from mavlink_bridge.link import MavLink
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
 from sim_vehicles.link import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, companion_link_id, now_10us
 from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
 
@@ -204,6 +205,71 @@ def test_client_table_is_bounded_and_the_first_client_keeps_its_service() -> Non
         finally:
             for c in crowd:
                 c.close()
+        s.stop()
+
+
+def test_verifiers_sharing_a_table_refuse_a_frame_another_one_accepted_once_its_stream_moved_on() -> None:
+    shared: dict[tuple[int, int, int], int] = {}
+    decoy, detect = SignatureVerifier(KEY, shared), SignatureVerifier(KEY, shared)
+    now = now_10us()
+    frames = [_signed(_heartbeat(), 255, 191, companion_link_id(1), KEY, now + i) for i in range(3)]
+    assert all(decoy.check(f) is Verdict.OK for f in frames)
+    assert detect.check(frames[0]) is Verdict.REPLAYED  # new at detect, but older than what decoy accepted
+    assert detect.check(frames[2]) is Verdict.OK  # the same frame at the same moment: a ground station's fan-out
+    assert SignatureVerifier(KEY).check(frames[0]) is Verdict.OK  # an unshared table knows nothing of decoy's
+
+
+def _spy_bytes(port: int, frames: list[bytes], duration_s: float = 2.0) -> int:
+    spy = _Raw(port)
+    try:
+        for frame in frames:
+            spy.send(frame)
+        return spy.received_bytes(duration_s)
+    finally:
+        spy.close()
+
+
+@pytest.mark.timeout(60)
+def test_replay_across_vehicles_gives_a_keyless_spy_nothing() -> None:
+    """Signed frames captured on their way to or from the decoy, sent to the detect UAV (or back to the decoy) a
+    few seconds later or at once: not a byte for the spy, and both companions keep their service."""
+    with sitl(speedup=5.0, signing_key=KEY) as s, UdpRelay(s.ports[0]) as relay:
+        links = [
+            MavLink(f"udpout:127.0.0.1:{relay.port}", signing_key=KEY, signing_link_id=companion_link_id(1)),
+            MavLink(f"udpout:127.0.0.1:{s.ports[1]}", signing_key=KEY, signing_link_id=companion_link_id(2)),
+        ]
+        try:
+
+            def talk(duration_s: float) -> None:
+                deadline = time.monotonic() + duration_s
+                while time.monotonic() < deadline:
+                    for link in links:
+                        link.send_heartbeat()
+                        while link.recv(0.0) is not None:
+                            pass
+                    time.sleep(0.1)
+
+            for link in links:
+                link.wait_heartbeat(5.0)
+            talk(0.5)
+            captured = [bytes(m.get_msgbuf()) for _, m in relay.to_vehicle if m.get_type() == "HEARTBEAT"]
+            talk(3.0)
+            assert _spy_bytes(s.ports[1], captured[:1]) == 0  # a few seconds later
+            links[0].send_heartbeat()
+            assert wait_until(lambda: relay.to_vehicle[-1][1].get_type() == "HEARTBEAT", 1.0)
+            newest = bytes(relay.to_vehicle[-1][1].get_msgbuf())
+            assert _spy_bytes(s.ports[1], [newest]) == 0  # at once, before the decoy's stream moves on
+            telemetry = [bytes(m.get_msgbuf()) for _, m in relay.to_companion[-20:]]
+            assert _spy_bytes(s.ports[0], telemetry) == 0  # the decoy's own frames reflected back to it
+            assert _spy_bytes(s.ports[1], telemetry) == 0  # ... or sent to another vehicle
+            for link in links:
+                assert link.arm().result == M.MAV_RESULT_ACCEPTED  # the genuine companions are not locked out
+            detect = s.vehicle(1).endpoint
+            assert detect.rx.wrong_link >= 2 and detect.rx.from_vehicles >= 1 and len(detect.peers) == 1
+            assert s.vehicle(0).endpoint.rx.from_vehicles >= 1 and len(s.vehicle(0).endpoint.peers) == 1
+        finally:
+            for link in links:
+                link.close()
         s.stop()
 
 

@@ -28,6 +28,7 @@ from mavlink_bridge.frames import (
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
+from tssac_core.deploy.mavlink_signing import companion_link_id
 from tssac_core.sim.world import World
 
 _log = logging.getLogger("mavlink_bridge.companion")
@@ -127,7 +128,12 @@ class Companion:
         cfg = self.cfg
         try:
             self._link = MavLink(
-                cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system
+                cfg.connection,
+                signing_key=cfg.signing_key,
+                # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
+                signing_link_id=companion_link_id(self.role_index + 1),
+                tlog_path=cfg.tlog,
+                source_system=cfg.source_system,
             )
         except LinkError as exc:
             raise UsageError(str(exc)) from None

@@ -110,6 +110,11 @@ def message_id(frame: bytes) -> int:
     return frame[7] | (frame[8] << 8) | (frame[9] << 16) if frame[0] == MAGIC_V2 else frame[5]
 
 
+def source(frame: bytes) -> tuple[int, int]:
+    """The sender's (system id, component id) in a frame's header."""
+    return (frame[5], frame[6]) if frame[0] == MAGIC_V2 else (frame[3], frame[4])
+
+
 def _crc_ok(frame: bytes, crc_extra: int, dialect: Dialect) -> bool:
     """The frame's checksum (header after the start byte, payload, CRC_EXTRA) matches."""
     signed = frame[0] == MAGIC_V2 and bool(frame[2] & IFLAG_SIGNED)
