@@ -4,8 +4,9 @@ missions, FTP and time sync.
 :class:`CommandHandler` reads messages and answers them; it changes the vehicle's state only through
 :class:`sim_vehicles.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
 Every COMMAND_LONG / COMMAND_INT is answered with a COMMAND_ACK to its sender. Messages addressed to
-another system or component are ignored (counted), except those that arrive from a ``--out`` ground
-station for a sibling vehicle: they are routed to it, as an autopilot routes between its links.
+another system or component are ignored (counted) and never passed on: a ground station on ``--out``
+sends each frame to every vehicle (pymavlink's ``udpin`` side writes to all the addresses it has heard),
+so each vehicle acts on the frames for its own system id (or for all) and the others drop them.
 """
 
 from __future__ import annotations
@@ -46,8 +47,6 @@ class CommandHandler:
 
     def __init__(self, vehicle: Vehicle) -> None:
         self.v = vehicle
-        self.sibling: Callable[[int], Vehicle | None] | None = None
-        """sysid -> the vehicle of that sysid in the same SITL (set by the runner, for --out routing)."""
         self._handlers: dict[str, Callable[[Msg, Address], None]] = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -92,11 +91,6 @@ class CommandHandler:
         v = self.v
         target_system = getattr(msg, "target_system", 0)
         target_component = getattr(msg, "target_component", 0)
-        if target_system not in (0, v.sysid) and addr in v.outputs and self.sibling is not None:
-            other = self.sibling(target_system)
-            if other is not None and other.handler is not None:  # a --out ground station shares one port
-                other.handler.handle(msg, addr)
-                return
         if target_system not in (0, v.sysid) or target_component not in (0, v.compid):
             v.counters.not_for_us += 1
             return

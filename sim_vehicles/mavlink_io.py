@@ -208,6 +208,8 @@ class MavEndpoint:
         """Unsigned monitors (signing on, ``unsigned_monitors``), by address."""
         self.rx = RxCounters()
         self.tx = TxCounters()
+        self._tx_seq: dict[Address, int] = {}
+        """The next sequence number of each destination's link."""
         self._closed = False
 
     # ------------------------------------------------------------------------------------ socket
@@ -238,7 +240,7 @@ class MavEndpoint:
 
     def sendto(self, data: bytes, dest: Address | None = None) -> None:
         """Send one datagram to ``dest``, or to every client and monitor if None (monitors within budget)."""
-        targets = list(self.peers) + [a for a in self.monitors if a not in self.peers] if dest is None else [dest]
+        targets = self.destinations() if dest is None else [dest]
         for addr in targets:
             monitor = self.monitors.get(addr) if addr not in self.peers else None
             if monitor is not None and not self._spend(monitor, len(data)):
@@ -321,6 +323,8 @@ class MavEndpoint:
         for addr, monitor in list(self.monitors.items()):
             if now_wall_s - monitor.last_seen_s > timeout_s:
                 del self.monitors[addr]
+        for addr in [a for a in self._tx_seq if a not in self.peers and a not in self.monitors]:
+            del self._tx_seq[addr]
 
     def close(self) -> None:
         if not self._closed:
@@ -329,15 +333,25 @@ class MavEndpoint:
 
     # ---------------------------------------------------------------------------------- encoding
 
-    def encode(self, msg: mavlink2.MAVLink_message) -> bytes:
-        """Pack (and sign, if signing is on) one message from this system."""
+    def encode(self, msg: mavlink2.MAVLink_message, dest: Address) -> bytes:
+        """Pack (and sign, if signing is on) one message from this system for ``dest``.
+
+        Every destination is a link with its own sequence numbers, one after the other in the order its frames
+        are packed (ArduPilot numbers per channel): a client that gets only its own replies and the telemetry
+        sees no gap for the replies that went to another client, so a lossless link shows no loss."""
         if self.signing:
             refresh_outgoing_timestamp(self.mav.signing)
+        seq = self._tx_seq.get(dest, 0)
+        self.mav.seq = seq
         buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+        self._tx_seq[dest] = (seq + 1) % 256
         self.mav.total_packets_sent += 1
         self.mav.total_bytes_sent += len(buf)
         return buf
+
+    def destinations(self) -> list[Address]:
+        """Everyone telemetry goes to: the clients, then the monitors that are not clients."""
+        return list(self.peers) + [a for a in self.monitors if a not in self.peers]
 
     def parse(self, data: bytes, addr: Address) -> Parsed:
         """Check and decode every frame of one datagram (clients are recorded by :meth:`admit`)."""

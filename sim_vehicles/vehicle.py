@@ -239,7 +239,7 @@ class Vehicle:
         self.endpoint = endpoint
         self.clock = clock
         self.flags = flags
-        self.tx: LinkChannel[tuple[bytes, Address | None, int]] = LinkChannel(setup.link, rngs.tx)
+        self.tx: LinkChannel[tuple[bytes, Address, int]] = LinkChannel(setup.link, rngs.tx)
         """Frames out: (frame, destination or None for every client, the tick's time_boot_ms or -1)."""
         self.rx: LinkChannel[tuple[Parsed, Address]] = LinkChannel(setup.link, rngs.rx)
         """Datagrams in, already checked and decoded at the socket (see :meth:`poll_socket`)."""
@@ -397,7 +397,7 @@ class Vehicle:
         COALESCE_BYTES), as a flight controller's UDP output does: one system call per destination and
         step instead of one per message. Loss, duplication and latency still act on every frame.
         """
-        batches: dict[Address | None, list[bytes]] = {}
+        batches: dict[Address, list[bytes]] = {}
         for data, dest, tick_ms in self.tx.pop_due(self.clock.link_s):
             self.tick_seen_ms = max(self.tick_seen_ms, tick_ms)
             frames = batches.setdefault(dest, [])
@@ -415,12 +415,13 @@ class Vehicle:
         return min(times) if times else None
 
     def send(self, msg: mavlink2.MAVLink_message, dest: Address | None = None) -> None:
-        """Queue one message for ``dest`` (None: every peer) on the outgoing link."""
-        if dest is None and not self.endpoint.has_clients:
+        """Queue one message for ``dest`` (None: every client and monitor) on the outgoing link.
+
+        Each destination is a link of its own with its own sequence numbers (:meth:`MavEndpoint.encode`), taken
+        in the order the frames are queued: a client never sees a gap for a frame that went to another one."""
+        dests = [dest] if dest is not None else self.endpoint.destinations()
+        if not dests:
             return
-        buf = self.endpoint.encode(msg)
-        if self._tlog is not None:
-            self._write_tlog(buf)
         # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
         mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
         tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
@@ -428,7 +429,11 @@ class Vehicle:
             self._sent_step_ms, self._sent_in_step = now_ms, {}
         n = self._sent_in_step[mid] = self._sent_in_step.get(mid, 0) + 1
         lossless = self.clock.lockstep and tick_ms >= 0
-        self.tx.push(self.clock.link_s, (buf, dest, tick_ms), hash((mid, now_ms, n)), lossless)
+        for i, to in enumerate(dests):
+            buf = self.endpoint.encode(msg, to)
+            if i == 0 and self._tlog is not None:
+                self._write_tlog(buf)  # one copy per message, as the vehicle sent it
+            self.tx.push(self.clock.link_s, (buf, to, tick_ms), hash((mid, now_ms, n)), lossless)
 
     def _write_tlog(self, frame: bytes) -> None:
         assert self._tlog is not None

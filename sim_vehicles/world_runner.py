@@ -226,7 +226,6 @@ class WorldRunner:
             )
             vehicle.add_outputs(config.outputs)
             handler = CommandHandler(vehicle)
-            handler.sibling = self._vehicle_by_sysid
             vehicle.handler = handler
             vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
             self.vehicles.append(vehicle)
@@ -247,9 +246,6 @@ class WorldRunner:
                 self._truth = TruthLog(Path(config.truth_log), header)
             except OSError as exc:
                 raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
-
-    def _vehicle_by_sysid(self, sysid: int) -> Vehicle | None:
-        return next((v for v in self.vehicles if v.sysid == sysid), None)
 
     @property
     def endpoints(self) -> list[Endpoint]:

@@ -255,6 +255,69 @@ def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
 # ------------------------------------------------------------------------------ commands
 
 
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.timeout(30)
+def test_a_listening_ground_station_on_out_gets_each_command_done_once_by_its_vehicle() -> None:
+    """pymavlink's udpin side (MAVProxy's ``--master=udpin:``) writes every frame to all three vehicles: only the
+    addressed one acts, and nothing is passed between vehicles (one ACK, one set of parameters)."""
+    port = _free_port()
+    gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190)
+    try:
+        with sitl(speedup=5.0, outputs=(("127.0.0.1", port),)) as s:
+            heard: set[int] = set()
+            deadline = time.monotonic() + 10.0
+            while (len(heard) < 3 or len(gcs.clients) < 3) and time.monotonic() < deadline:
+                m = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+                if m is not None:
+                    heard.add(m.get_srcSystem())
+            assert heard == {1, 2, 3} and len(gcs.clients) == 3
+            gcs.mav.command_long_send(2, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            gcs.mav.param_request_list_send(2, 1)
+            acks, values = [], []
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline:
+                m = gcs.recv_match(type=["COMMAND_ACK", "PARAM_VALUE"], blocking=True, timeout=0.1)
+                if m is not None:
+                    (acks if m.get_type() == "COMMAND_ACK" else values).append(m.get_srcSystem())
+            assert acks == [2] and values == [2] * len(s.vehicle(1).params)
+            assert s.vehicle(1).armed and not s.vehicle(0).armed and not s.vehicle(2).armed
+            assert s.vehicle(1).counters.commands == 1
+            assert s.vehicle(0).counters.not_for_us >= 2 and s.vehicle(2).counters.not_for_us >= 2
+            s.stop()
+    finally:
+        gcs.close()
+
+
+@pytest.mark.timeout(30)
+def test_each_client_sees_consecutive_sequence_numbers_on_a_lossless_link() -> None:
+    """Replies go to their requester only: with one sequence per destination, neither the requester nor the other
+    client sees a gap (MAVProxy counts gaps as loss), and frames leave in the order of their numbers."""
+    with sitl(speedup=5.0) as s, Client(s.ports[0]) as asking, Client(s.ports[0]) as watching:
+        asking.connect()
+        watching.connect()
+        for client in (asking, watching):
+            client.collect(0.3)
+        seqs: dict[str, list[int]] = {"asking": [], "watching": []}
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            asking.mav.command_long_send(
+                1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+            )
+            asking.mav.param_request_read_send(1, 1, b"SIM_DT", -1)
+            for name, client in (("asking", asking), ("watching", watching)):
+                seqs[name] += [m.get_seq() for m in client.collect(0.05) if m.get_srcSystem() == 1]
+        assert any(m.get_type() == "COMMAND_ACK" for m in asking.log)
+        for name, got in seqs.items():
+            gaps = [(a, b) for a, b in zip(got, got[1:]) if b != (a + 1) % 256]
+            assert len(got) > 100 and not gaps, (name, gaps[:5])
+        s.stop()
+
+
 @pytest.mark.timeout(30)
 def test_every_command_long_is_acknowledged() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[2]) as c:
