@@ -55,6 +55,8 @@ FORCE_MAGIC = 21196
 
 _EPS_S = 1e-6
 COALESCE_BYTES = 1200
+GOTO_UNDO_S = 5.0
+"""A goto refused within this many wall seconds of the switch to GUIDED made for it undoes the switch."""
 """Largest datagram :meth:`Vehicle.flush` builds from several frames (below any path MTU on a LAN)."""
 M = mavlink2  # message ids and enums
 
@@ -263,6 +265,8 @@ class Vehicle:
         self.failsafe = False
         self.fence_breached = False
         self.setpoint: Setpoint | None = None
+        self._guided_from: tuple[FlightMode, float] | None = None
+        """(the mode before GUIDED, wall time of the switch) while in GUIDED: a refused goto undoes the switch."""
         self.last_setpoint_s = 0.0
         self.loop_since_wall_s = 0.0
         """Wall time the vehicle last came under companion control (for the lockstep barrier)."""
@@ -648,6 +652,7 @@ class Vehicle:
         if mode is self.mode:
             return
         was_in_loop = self.in_loop
+        self._guided_from = (self.mode, self.clock.wall_s) if mode is FlightMode.GUIDED else None
         self.mode = mode
         self.setpoint = None
         self.failsafe = False
@@ -656,6 +661,17 @@ class Vehicle:
         self._enter_loop_if(was_in_loop)
         _log.info("%s: mode %s%s", self.role, mode.name, f" ({reason})" if reason else "")
         self.event("MODE", int(mode))
+
+    def undo_guided_switch(self, reason: str) -> bool:
+        """Go back to the mode before GUIDED if GUIDED was entered less than GOTO_UNDO_S wall seconds ago and no
+        setpoint has come since (a refused goto's mode change, see CommandHandler); True if it did."""
+        if self.mode is not FlightMode.GUIDED or self.setpoint is not None or self._guided_from is None:
+            return False
+        previous, since_wall_s = self._guided_from
+        if self.clock.wall_s - since_wall_s > GOTO_UNDO_S:
+            return False
+        self.set_mode(previous, reason)
+        return True
 
     def _orbit_for(self, mode: FlightMode) -> Orbit | None:
         t, su = self.truth, self.setup

@@ -433,6 +433,60 @@ def test_parameter_protocol() -> None:
         s.stop()
 
 
+@pytest.mark.timeout(30)
+def test_a_refused_param_set_is_answered_at_once_as_ardupilot_does() -> None:
+    """PARAM_ERROR first (MAVSDK ends its set with it), then the reason, complete, then the unchanged value."""
+    with sitl(speedup=5.0) as s, Client(s.ports[0]) as c:
+        c.connect()
+        replies = ("PARAM_ERROR", "STATUSTEXT", "PARAM_VALUE")
+        for name, value, error, text in (
+            ("FS_LONG_TIMEOUT", 1000.5, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "FS_LONG_TIMEOUT: 1000.5 not in 1..300"),
+            ("WP_LOITER_RAD", -3e38, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "WP_LOITER_RAD: -3e+38 not in 1..32767"),
+            ("SIM_DT", 0.2, M.MAV_PARAM_ERROR_PERMISSION_DENIED, "SIM_DT is read-only"),
+        ):
+            c.mav.param_set_send(1, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32)
+            got = []
+            while len(got) < 3 and (m := c.wait(lambda m: m.get_type() in replies, 1.0)) is not None:
+                got.append(m)
+            assert [m.get_type() for m in got] == list(replies), name
+            assert got[0].error == error and got[0].param_id == name and got[1].text == text
+            assert got[2].param_id == name and got[2].param_value == pytest.approx(s.vehicle(0).param(name))
+        c.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, M.MAV_PARAM_TYPE_REAL32)
+        err = c.wait_type("PARAM_ERROR", 1.0)
+        assert err is not None and err.error == M.MAV_PARAM_ERROR_DOES_NOT_EXIST and err.param_id == "NO_SUCH_PARAM"
+        s.stop()
+
+
+def test_every_refusal_text_is_complete_and_fits_one_statustext() -> None:
+    """Every text a refusal can make, over extreme values: at most 50 characters, so never cut."""
+    from sim_vehicles.commands import GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL
+    from sim_vehicles.modes import refusal
+    from sim_vehicles.params import vehicle_params
+    from sim_vehicles.setpoints import GLOBAL_REFUSAL, Refusal, parse_attitude_target, parse_position_target
+
+    texts = [GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL, GLOBAL_REFUSAL.text]
+    names = [p.name for p in vehicle_params(1, 1.0, 0.1, 5.0, 2.0, 200.0, 300.0)]
+    for name in names:
+        for value in (1000.5, -3.4028235e38, 3.4028235e38, math.nan, math.inf, -0.000123456789, 123456789.0, 0.1):
+            refused = vehicle_params(1, 1.0, 0.1, 5.0, 2.0, 200.0, 300.0).set(name, value)
+            texts += [refused.text] if refused is not None else []
+    texts += [refusal(m) for m in [*range(-1, 300), 2**31 - 1, 2**32 - 1]]
+    mav = mavlink2.MAVLink(None)
+    big = 3.4028235e38
+    for frame in range(256):
+        for mask in (0, 1087, 1479, 2503, 65535, 512 | 1087):
+            for v in (0.0, big, math.nan):
+                msg = mav.set_position_target_local_ned_encode(0, 1, 1, frame, mask, v, v, v, v, v, v, v, v, v, v, v)
+                texts += [r.text for r in [parse_position_target(msg)] if isinstance(r, Refusal)]
+    for mask in range(256):
+        for v in (2.0, math.nan, -1.0):
+            msg = mav.set_attitude_target_encode(0, 1, 1, mask, [1, 0, 0, 0], v, v, v, v)
+            texts += [r.text for r in [parse_attitude_target(msg)] if isinstance(r, Refusal)]
+    too_long = sorted({t for t in texts if len(t) > 50})
+    assert not too_long and len(set(texts)) > 50, too_long
+    assert "FS_LONG_TIMEOUT: 1000.5 not in 1..300" in texts and "FS_LONG_TIMEOUT: nan not in 1..300" in texts
+
+
 # --------------------------------------------------------------------------------- setpoints
 
 
