@@ -326,6 +326,10 @@ class Vehicle:
 
     @property
     def system_status(self) -> int:
+        """HEARTBEAT.system_status: POWEROFF once the mission has ended (the SITL exits after its linger: what a
+        companion checks a mission end against), CRITICAL in a failsafe, else ACTIVE armed / STANDBY disarmed."""
+        if self.flags.end is not None:
+            return M.MAV_STATE_POWEROFF
         if self.failsafe or self.datalink.lost:
             return M.MAV_STATE_CRITICAL
         return M.MAV_STATE_ACTIVE if self.armed else M.MAV_STATE_STANDBY

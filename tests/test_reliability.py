@@ -416,6 +416,37 @@ def test_companion_hears_only_its_vehicle_a_forged_mission_end_changes_nothing(t
 
 
 @pytest.mark.timeout(180)
+def test_unsigned_companion_flies_on_through_a_mission_end_spoofed_from_the_vehicles_address(tmp_path: Path) -> None:
+    """Signing off, the forger sends from the vehicle's own address (the relay's port) with the vehicle's ids:
+    HIT, MSN_END and both texts, and even a POWEROFF heartbeat. The vehicle keeps reporting ACTIVE, so the
+    companion keeps flying it to its own end; and a genuine end (the vehicle's POWEROFF, then silence) ends it."""
+    scen_file = _scenario_file(tmp_path)
+    with sitl(load(scen_file), setpoint_timeout_s=5.0, **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
+        v = s.vehicle(0)
+        with CompanionProcess(tmp_path, relay.port, scen_file, "--lockstep", "--duration-s", "8") as comp:
+            _flying(v)
+            assert relay.companion is not None
+            forger = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+            forged = [
+                forger.named_value_int_encode(10_000_000, b"HIT", 1),
+                forger.named_value_int_encode(10_000_000, b"MSN_END", 1),
+                forger.statustext_encode(M.MAV_SEVERITY_NOTICE, b"Target hit"),
+                forger.statustext_encode(M.MAV_SEVERITY_NOTICE, b"Mission end: success"),
+                forger.heartbeat_encode(
+                    M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, M.MAV_STATE_POWEROFF
+                ),
+            ]
+            for msg in forged:
+                relay.down.sendto(bytes(msg.pack(forger)), relay.companion)
+            code, out = comp.wait(120)
+            assert code == 0 and "status=duration" in out, comp.log()
+            status = comp.status()
+        assert v.counters.failsafes == 0  # controlled throughout: no setpoint gap
+        s.stop()
+    assert status["counters"]["ends_refuted"] == 1 and status["vehicle_time_s"] >= 8.0
+
+
+@pytest.mark.timeout(180)
 def test_signed_companion_refuses_forgeries_on_the_vehicles_own_address_and_stream(tmp_path: Path) -> None:
     scen_file = _scenario_file(tmp_path)
     key_file = tmp_path / "key.bin"
