@@ -20,6 +20,13 @@ MIN_POS_SIGMA_M = 0.1
 MIN_VEL_SIGMA_M_S = 0.01
 """Floors for the filter's measurement noise: a noise-free SITL still quantises (cm, cm/s)."""
 
+END_GRACE_S = 0.5
+"""Wall seconds after a mission end is announced during which the vehicle's earlier heartbeats may still arrive."""
+END_SILENCE_S = 0.5
+"""A mission end is believed once the vehicle has then been silent this long (wall s): the SITL exits after it."""
+END_CONFIRM_S = 2.0
+"""... or once it has reported nothing but POWEROFF heartbeats for this long since the announcement (wall s)."""
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3

@@ -9,11 +9,20 @@ import enum
 import logging
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, STRAIGHT, CompanionConfig
+from mavlink_bridge.companion.config import (
+    END_CONFIRM_S,
+    END_GRACE_S,
+    END_SILENCE_S,
+    GUIDED_MODE,
+    MIN_POS_SIGMA_M,
+    MIN_VEL_SIGMA_M_S,
+    STRAIGHT,
+    CompanionConfig,
+)
 from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
@@ -29,6 +38,7 @@ from mavlink_bridge.frames import (
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
+from tssac_core.deploy.mavlink_signing import companion_link_id
 from tssac_core.sim.world import World
 
 _log = logging.getLogger("mavlink_bridge.companion")
@@ -49,6 +59,18 @@ class Phase(enum.Enum):
 
 class _Stop(Exception):
     """Internal: leave the loop."""
+
+
+@dataclass
+class _ClaimedEnd:
+    """A mission end heard from the vehicle's address, not yet confirmed by the vehicle's own heartbeats."""
+
+    status: str
+    message: str
+    since_s: float
+    """Wall time (time.monotonic()) it was heard."""
+    poweroff_since_s: float | None = None
+    """When the first POWEROFF heartbeat came after it."""
 
 
 class Companion:
@@ -94,6 +116,7 @@ class Companion:
         self.phase = Phase.CONNECT
         self._stop_requested = False
         self._link: MavLink | None = None
+        self._claimed_end: _ClaimedEnd | None = None
         self._reset_vehicle_state()
         self._status: tuple[str, str] | None = None
 
@@ -129,7 +152,12 @@ class Companion:
         cfg = self.cfg
         try:
             self._link = MavLink(
-                cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system
+                cfg.connection,
+                signing_key=cfg.signing_key,
+                # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
+                signing_link_id=companion_link_id(self.role_index + 1),
+                tlog_path=cfg.tlog,
+                source_system=cfg.source_system,
             )
         except LinkError as exc:
             raise UsageError(str(exc)) from None
@@ -180,6 +208,7 @@ class Companion:
                 msg = link.recv(0.0)
             now = time.monotonic()
             self._maybe_control(now)
+            self._check_end(now)
             self._check_silence(now)
             if now >= self._next_heartbeat_s:
                 link.send_heartbeat()
@@ -296,7 +325,10 @@ class Companion:
         self._say(M.MAV_SEVERITY_WARNING, f"{role}: vehicle restart seen, re-engaging")
 
     def _on_heartbeat(self, msg: Message, rx_s: float) -> None:
-        if not self._link or not self._link.is_vehicle_heartbeat(msg) or rx_s < self._state_valid_after_s:
+        if not self._link or not self._link.is_vehicle_heartbeat(msg):
+            return
+        self._check_claimed_end(int(msg.system_status), rx_s)
+        if rx_s < self._state_valid_after_s:
             return
         self.armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         self.mode = int(msg.custom_mode)
@@ -349,9 +381,9 @@ class Companion:
         if self.flags.set(name, value, stamp_ms):
             _log.info("%s: %s = %d at %.1f s", self.cfg.role.value, name, value, stamp_ms / 1000.0)
         if name == "HIT" and value == 1:
-            raise _Stop("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
+            self._claim_end("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
         if name == "MSN_END" and value in END_STATUS:
-            raise _Stop(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
+            self._claim_end(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
 
     def _on_statustext(self, text: str) -> None:
         _log.info("%s: vehicle says: %s", self.cfg.role.value, text)
@@ -364,13 +396,54 @@ class Companion:
         elif text == "Target identified":
             self.flags.set("IDENT", 1, stamp)
         elif text == "Target hit":
-            raise _Stop("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
+            self._claim_end("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
         elif text.startswith("Mission end: "):
             what = text[len("Mission end: ") :]
             status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(
                 what, what.replace(" ", "_")
             )
-            raise _Stop(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
+            self._claim_end(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
+
+    # ----------------------------------------------------------------------- mission end
+
+    def _claim_end(self, status: str, message: str) -> None:
+        """A mission end from the vehicle's address: flown on until the vehicle's own telemetry confirms it.
+
+        Without signing anyone who can spoof the vehicle's address can send HIT or MSN_END. The vehicle itself,
+        once its mission has ended, reports POWEROFF in every HEARTBEAT and falls silent when it exits; while it
+        still reports any other state, the end is not its own and the companion keeps its vehicle under control.
+        """
+        if self._claimed_end is None:
+            _log.info("%s: %s: waiting for the vehicle to confirm it", self.cfg.role.value, message)
+            self._claimed_end = _ClaimedEnd(status, message, time.monotonic())
+
+    def _check_claimed_end(self, system_status: int, rx_s: float) -> None:
+        """A vehicle heartbeat read at ``rx_s`` confirms a claimed end (POWEROFF) or, after the grace, refutes it."""
+        claim = self._claimed_end
+        if claim is None or rx_s < claim.since_s:
+            return
+        if system_status == M.MAV_STATE_POWEROFF:
+            if claim.poweroff_since_s is None:
+                claim.poweroff_since_s = rx_s
+        elif rx_s - claim.since_s > END_GRACE_S:
+            _log.warning(
+                "%s: ignoring '%s': the vehicle still reports state %d, not a mission end",
+                self.cfg.role.value,
+                claim.message,
+                system_status,
+            )
+            self.counters.ends_refuted += 1
+            self._claimed_end = None
+
+    def _check_end(self, now: float) -> None:
+        """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it."""
+        claim = self._claimed_end
+        if claim is None:
+            return
+        silent = now - max(self.last_rx_s, claim.since_s) >= END_SILENCE_S
+        powered_off = claim.poweroff_since_s is not None and now - claim.since_s >= END_CONFIRM_S
+        if silent or powered_off:
+            raise _Stop(claim.status, claim.message)
 
     # --------------------------------------------------------------------------- control
 

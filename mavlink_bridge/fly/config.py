@@ -40,6 +40,7 @@ class FlyConfig:
     tlog_dir: Path | None
     plot_path: Path | None
     signing_key_path: Path | None
+    """The key file of the run (the user's ``--signing-key``, or the one fly makes); None: unsigned."""
     connect: tuple[str, str, str] | None
     logs_dir: Path | None
     mission_timeout_s: float
@@ -52,6 +53,14 @@ class FlyConfig:
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
     mission: int | None = None
     """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
+    signing: bool = True
+    """Sign every frame: with a key fly makes for the run when ``--signing-key`` gives none and fly starts the world
+    (``--no-signing`` turns it off; with ``--connect`` only ``--signing-key`` signs)."""
+
+    @property
+    def makes_key(self) -> bool:
+        """fly makes a fresh key for this run: signing on, no key given, a world of its own."""
+        return self.signing and self.signing_key_path is None and self.connect is None
 
     def indices(self) -> range:
         """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1."""
@@ -144,6 +153,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions",
     )
     p.add_argument(
+        "--no-signing",
+        action="store_true",
+        help="fly unsigned (default: every frame signed with a key made for the run, or --signing-key's)",
+    )
+    p.add_argument(
         "--connect",
         nargs=3,
         metavar=("DECOY", "DETECT", "STRIKE"),
@@ -209,6 +223,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         check_models(models)
     if a.signing_key is not None:
         read_signing_key(a.signing_key)
+        if a.no_signing:
+            raise UsageError("--no-signing and --signing-key contradict each other: give one")
+    if a.no_signing and scenario.link.signing:
+        raise UsageError(f"{a.scenario}: the scenario asks for signing (link.signing: true): leave out --no-signing")
     connect: tuple[str, str, str] | None = None
     if a.connect is not None:
         for text in a.connect:
@@ -254,6 +272,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         lean_telemetry=a.lean_telemetry,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
+        signing=not a.no_signing,
         workers=a.workers,
         ray_address=a.address,
     )

@@ -179,7 +179,7 @@ def completed_epochs(out: Path, role: str) -> int:
     """Epochs of ``role`` that a resume can skip: all if it shipped (`shipped`), else the resume state's."""
     if shipped(out, role):
         return -1
-    state = read_resume_state(out, role)
+    state = read_resume_state(out, role, warn=False)  # the training loop warns once when it reads it
     return state.epoch if state is not None else 0
 
 
