@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +37,7 @@ CORNER_LAYOUTS = 20
 on one core); benchmarks/bench_adversaries.py flies thousands."""
 
 
-def one_uav(x_km: float, y_km: float, heading_deg: float, radars: list[tuple[float, float, float]]) -> Situation:
+def one_uav(x_km: float, y_km: float, heading_deg: float, radars: Sequence[tuple[float, float, float]]) -> Situation:
     """A situation of one UAV (shape (1,)) in a 100 km area with these radars (x, y, radius in km)."""
     r = np.array(radars, dtype=np.float64).reshape(-1, 3) * 1000.0
     return Situation(
