@@ -33,7 +33,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from tqdm import tqdm
 
@@ -77,8 +77,13 @@ class BenchConfig:
         return self.episodes < DEFAULT_EPISODES or (0 < self.sitl_missions < DEFAULT_SITL_MISSIONS)
 
 
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{message} (see --help)")
+
+
 def parse_args(argv: Sequence[str] | None) -> BenchConfig:
-    p = argparse.ArgumentParser(prog="python benchmarks/bench_adversaries.py", description=__doc__.split("\n")[0])
+    p = _Parser(prog="python benchmarks/bench_adversaries.py", description=__doc__.split("\n")[0])
     p.add_argument("--adversaries", default=",".join(ADVERSARY_NAMES), help="comma-separated (default: all)")
     p.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="batched missions per adversary/scenario")
     p.add_argument("--sitl-missions", type=int, default=DEFAULT_SITL_MISSIONS, help="SITL missions per ... (0: none)")
@@ -164,7 +169,8 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     path, out = work / f"{name}.yaml", work / f"{adversary.value}-{name}.json"
     dump(scenario_of(name, cfg), path)
     argv = ["--scenario", str(path), "--pilot", adversary.value, "--shield", "--episodes", str(cfg.sitl_missions)]
-    argv += ["--seed", str(seed), "--json", str(out), "--workers", str(cfg.workers), "--no-progress"]
+    workers = min(cfg.workers, cfg.sitl_missions)  # one mission: flown here, without starting Ray
+    argv += ["--seed", str(seed), "--json", str(out), "--workers", str(workers), "--no-progress"]
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv],

@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mavlink_bridge.companion.cli import build_companion
+from mavlink_bridge.companion.config import PILOT_NAMES, CompanionConfig
 from mavlink_bridge.companion.pilots import AdversarialPilot
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.adversaries import (
@@ -23,7 +25,7 @@ from tssac_core.sim.adversaries import (
     layout_keys,
 )
 from tssac_core.sim.missions import MissionResults, fly_missions, mission_layout
-from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, load
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, load
 from tssac_core.sim.world import World
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -161,6 +163,14 @@ def test_the_companion_pilot_decides_as_the_batched_pilot():
                 # The mirror wraps the heading its own way: the same to the last bits or so.
                 np.testing.assert_allclose(action, held[0, j], atol=1e-12, err_msg=f"{adversary} step {step} UAV {j}")
             batched.step(np.nan_to_num(held) + rng.uniform(-0.2, 0.2, held.shape))  # somewhere else each step
+
+
+def test_the_companion_flies_the_pilot_it_is_given():
+    strike = load(SCENARIOS / "strike.yaml")
+    for name in PILOT_NAMES:
+        companion = build_companion(CompanionConfig("udpout:127.0.0.1:9", Role.STRIKE, strike, pilot=name))
+        assert companion.pilot.name == name
+        assert isinstance(companion.pilot, AdversarialPilot) == (name in {a.value for a in Adversary})
 
 
 # ---------------------------------------------------------------------------------------------- batched world
