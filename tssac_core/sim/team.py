@@ -32,7 +32,8 @@ def check_pilot(pilot: Pilot, role_name: str) -> None:
     if pilot is None or callable(pilot) or isinstance(pilot, AdversaryPilot) or pilot == GUIDANCE:
         return
     raise ValueError(
-        f"pilot for {role_name} must be 'guidance', None, an AdversaryPilot or a callable obs -> action, got {pilot!r}"
+        f"pilot for {role_name} must be 'guidance', None or a callable obs -> action (or an AdversaryPilot), "
+        f"got {pilot!r}"
     )
 
 
