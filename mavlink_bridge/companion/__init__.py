@@ -41,6 +41,7 @@ Exit statuses (one ``end ...`` line on stdout, ``--status-json`` for the details
 ``lost`` / ``no_vehicle`` / ``refused`` exit 3; bad input exits 2 with one line.
 
 Modules: ``config`` (CompanionConfig and the constants) · ``pilots`` (a trained policy, the
-guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) · ``status`` (counters, mission flags, the result) · ``machine`` (the state
-machine and its vehicle-clock pacing) · ``cli`` (``python -m mavlink_bridge.companion``).
+guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) ·
+``status`` (counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock
+pacing) · ``cli`` (``python -m mavlink_bridge.companion``).
 """
