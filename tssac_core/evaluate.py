@@ -6,6 +6,7 @@ Examples::
     python -m tssac_core.evaluate --models models/tssac --scenario scenarios/random.yaml --episodes 50 --json out.json
     python -m tssac_core.evaluate --models models/tssac --seed 770001 --mission 417     # one mission again, alone
     python -m tssac_core.evaluate --models models/tssac --episodes 1000 --seed 9 --shield --json shielded.json
+    python -m tssac_core.evaluate --controller at_radar --episodes 200 --seed 2100001 --shield  # an adversary
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
@@ -32,6 +33,7 @@ from tqdm import tqdm
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError, run, write_json
+from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot
@@ -42,8 +44,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--controller",
-        choices=[GUIDANCE],
-        help="fly every UAV with the rule-based guidance controller (default without --models)",
+        choices=[GUIDANCE, *ADVERSARY_NAMES],
+        help="fly every UAV with the rule-based guidance controller (default without --models), or with an "
+        "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     who.add_argument(
         "--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)"
@@ -97,8 +100,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return args
 
 
-def load_pilots(models: Path | None) -> list[Pilot]:
+def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[Pilot]:
+    """The team's pilots: the actors in ``models``, else the ``controller`` (guidance or an adversary) for every UAV."""
     if models is None:
+        if controller in ADVERSARY_NAMES:
+            return [AdversaryPilot(Adversary(controller))] * len(ROLES)
         return [GUIDANCE] * len(ROLES)
     from tssac_core.deploy.policy import load_team
 
@@ -120,7 +126,8 @@ def compare_shield(
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load(args.scenario)
-    pilots = load_pilots(args.models)
+    controller = args.controller or GUIDANCE
+    pilots = load_pilots(args.models, controller)
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
@@ -138,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {
-            "controller": str(args.models) if args.models else GUIDANCE,
+            "controller": str(args.models) if args.models else controller,
             "scenario": str(args.scenario),
             "seed": args.seed,
             "cost_limit": scenario.cost_limit,

@@ -12,8 +12,9 @@ from pathlib import Path
 from types import FrameType
 from typing import NoReturn
 
-from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, STRAIGHT, CompanionConfig
+from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
 from mavlink_bridge.companion.machine import Companion
+from mavlink_bridge.companion.pilots import make_pilot
 from mavlink_bridge.link import LinkError
 from mavlink_bridge.signing_key import read_signing_key
 from mavlink_bridge.state_filter import FilterModel
@@ -50,8 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     who.add_argument(
         "--pilot",
-        choices=[GUIDANCE, STRAIGHT],
-        help="fly the rule-based guidance controller, or straight on (a test pilot that hits what lies ahead)",
+        choices=PILOT_NAMES,
+        help="fly the rule-based guidance controller, straight on (a test pilot that hits what lies ahead), or an "
+        "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     p.add_argument(
         "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
@@ -156,6 +158,18 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     )
 
 
+def build_companion(config: CompanionConfig) -> Companion:
+    """The companion with the pilot ``config`` names."""
+    companion = Companion(config)
+    if config.model is None and config.pilot not in ("", companion.pilot.name):
+        # Companion builds the guidance, straight and policy pilots itself; an adversary takes the place of the
+        # guidance controller it built, until Companion takes every pilot from pilots.make_pilot.
+        companion.pilot = make_pilot(config)
+        companion.pilot.reset()
+        _log.info("%s: pilot %s", config.role.value, companion.pilot.name)
+    return companion
+
+
 BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)
 """Exceptions that mean bad input: one line and exit code 2."""
 
@@ -166,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         logging.basicConfig(
             level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
         )
-        companion = Companion(config_from_args(args))
+        companion = build_companion(config_from_args(args))
     except BAD_INPUT_ERRORS as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

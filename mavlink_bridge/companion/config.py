@@ -9,6 +9,7 @@ from pathlib import Path
 from mavlink_bridge.state_filter import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
+from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15
@@ -16,6 +17,8 @@ GUIDED_MODE = 15
 GUIDANCE = "guidance"
 STRAIGHT = "straight"
 """A test pilot: heading and speed held (see :class:`mavlink_bridge.companion.pilots.StraightPilot`)."""
+PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
+"""``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 MIN_POS_SIGMA_M = 0.1
 MIN_VEL_SIGMA_M_S = 0.01
 """Floors for the filter's measurement noise: a noise-free SITL still quantises (cm, cm/s)."""
@@ -74,7 +77,7 @@ class CompanionConfig:
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
     source_system: int = 255
     pilot: str = ""
-    """Without a model: ``guidance`` (the default) or ``straight``."""
+    """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
     """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion_shield`); None: the pilot alone."""
     lean_telemetry: bool = False
@@ -105,3 +108,5 @@ class CompanionConfig:
             raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
         if self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
+        if self.pilot and self.pilot not in PILOT_NAMES:
+            raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")

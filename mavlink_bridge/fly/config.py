@@ -16,6 +16,7 @@ from tssac_core.cli import UsageError
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.errors import CheckpointError
+from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
 PROG = "python -m mavlink_bridge.fly"
@@ -24,6 +25,8 @@ DEFAULT_MODELS = REPO / "models" / "tssac"
 GUIDANCE = "guidance"
 STRAIGHT = "straight"
 """A test pilot: every UAV holds heading and speed (``mavlink_bridge.companion --pilot straight``)."""
+PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
+"""``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,7 @@ class FlyConfig:
     progress: bool
     lean_telemetry: bool = False
     pilot: str = GUIDANCE
-    """Without models: ``guidance`` or ``straight``."""
+    """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
     mission: int | None = None
@@ -101,8 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     who.add_argument(
         "--pilot",
-        choices=[GUIDANCE, STRAIGHT],
-        help="fly every UAV with the rule-based guidance controller, or straight on (a test pilot)",
+        choices=PILOT_NAMES,
+        help="fly every UAV with the rule-based guidance controller, straight on (a test pilot), or an adversary "
+        "built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     p.add_argument(
         "--shield",

@@ -124,6 +124,15 @@ def monitor_summary(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.nda
     }
 
 
+def hold_nonfinite(actions: np.ndarray) -> np.ndarray:
+    """The actions (N, 3, 2) with every UAV whose action is not finite given the hold [0, 0] (no turn, no
+    acceleration), as a companion computer's failsafe does (``mavlink_bridge.companion``). Without it a NaN
+    action (a policy with NaN weights, the ``nan`` adversary) would make the UAV's state NaN, which no radar
+    and no edge ever counts. With the monitor on, the monitor has already put its backup there."""
+    finite = np.isfinite(actions).all(axis=-1, keepdims=True)
+    return actions if finite.all() else np.where(finite, actions, 0.0)
+
+
 def fly_missions(
     scenario: Scenario,
     pilots: Sequence[Pilot],
@@ -196,6 +205,7 @@ def iter_missions(
             actions = monitor.actions(world, actions)
             if record:
                 backup_track.append(monitor.engaged & moving)
+        actions = hold_nonfinite(actions)
         result = world.step(actions)
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area
