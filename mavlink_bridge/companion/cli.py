@@ -14,7 +14,6 @@ from typing import NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
 from mavlink_bridge.companion.machine import Companion
-from mavlink_bridge.companion.pilots import make_pilot
 from mavlink_bridge.link import LinkError
 from mavlink_bridge.signing_key import read_signing_key
 from mavlink_bridge.state_filter import FilterModel
@@ -160,14 +159,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
 
 def build_companion(config: CompanionConfig) -> Companion:
     """The companion with the pilot ``config`` names."""
-    companion = Companion(config)
-    if config.model is None and config.pilot not in ("", companion.pilot.name):
-        # Companion builds the guidance, straight and policy pilots itself; an adversary takes the place of the
-        # guidance controller it built, until Companion takes every pilot from pilots.make_pilot.
-        companion.pilot = make_pilot(config)
-        companion.pilot.reset()
-        _log.info("%s: pilot %s", config.role.value, companion.pilot.name)
-    return companion
+    return Companion(config)
 
 
 BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)

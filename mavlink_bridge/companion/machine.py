@@ -20,10 +20,9 @@ from mavlink_bridge.companion.config import (
     GUIDED_MODE,
     MIN_POS_SIGMA_M,
     MIN_VEL_SIGMA_M_S,
-    STRAIGHT,
     CompanionConfig,
 )
-from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
+from mavlink_bridge.companion.pilots import Pilot, make_pilot
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
@@ -83,13 +82,7 @@ class Companion:
         self.role_index = config.role.index
         self.spec = s.vehicle(config.role)
         self.dt_ms = int(round(s.dt_s * 1000.0))
-        self.pilot: Pilot = (
-            PolicyPilot(config.model, config.role)
-            if config.model is not None
-            else StraightPilot()
-            if config.pilot == STRAIGHT
-            else GuidancePilot()
-        )
+        self.pilot: Pilot = make_pilot(config)
         self.world = World(s, 1)
         self.world.reset([0], [s.layout])
         self.shield = (
