@@ -74,7 +74,8 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
 @pytest.mark.parametrize(
     ("preset", "extra", "seed", "recorded"),
     [
-        ("configs/shipped.yaml", [], 2, "models/tssac/config.json"),
+        ("configs/grid-tssac-seed2.yaml", [], 2, "results/runs/tssac-seed2/config.json"),
+        ("configs/safe.yaml", [], 1, "models/tssac/config.json"),
         *[("configs/safe.yaml", [], s, f"results/recipe-trials/hard50/seed{s}/config.json") for s in (0, 1, 2)],
         *[
             (

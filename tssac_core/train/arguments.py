@@ -60,7 +60,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         "--preset",
         type=Path,
         metavar="FILE",
-        help="a recipe file (configs/paper.yaml, configs/shipped.yaml): its "
+        help="a recipe file (configs/paper.yaml, configs/safe.yaml): its "
         "settings are the defaults, the flags given here override them (tssac_core.train.preset)",
     )
     p.add_argument(
