@@ -13,10 +13,8 @@ from types import FrameType
 from typing import NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, STRAIGHT, CompanionConfig
-from mavlink_bridge.companion.machine import Companion
-from mavlink_bridge.link import LinkError
+from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
-from mavlink_bridge.state_filter import FilterModel
 from tssac_core.cli import UsageError
 from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.errors import CheckpointError
@@ -156,18 +154,28 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     )
 
 
-BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)
-"""Exceptions that mean bad input: one line and exit code 2."""
+def bad_input_errors() -> tuple[type[Exception], ...]:
+    """Exceptions that mean bad input: one line and exit code 2."""
+    from mavlink_bridge.link import LinkError
+
+    return (UsageError, ScenarioError, LinkError, CheckpointError)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
+    except UsageError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    # The machine (pymavlink, the filter: filterpy and scipy) after the arguments: --help answers at once.
+    from mavlink_bridge.companion.machine import Companion
+
+    try:
         logging.basicConfig(
             level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
         )
         companion = Companion(config_from_args(args))
-    except BAD_INPUT_ERRORS as exc:
+    except bad_input_errors() as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
