@@ -1,22 +1,21 @@
-"""The runtime-assurance monitor in a companion computer: the batched world's :func:`tssac_core.deploy.shield.decide`
-for one vehicle, fed with the Kalman filter's estimate, its covariance and the commands still on the link.
+"""The runtime-assurance monitor in a companion computer: :func:`tssac_core.assurance.monitor.decide` for one
+vehicle, fed with the Kalman filter's estimate, its covariance and the commands still on the link.
 
-At each of the pilot's decisions (every ``action_repeat`` ticks; every tick for the guidance controller) the
-proposed action goes through :class:`tssac_core.deploy.shield_world.VehicleMonitor` with
+At each decision (every ``action_repeat`` ticks of the vehicle's clock; every tick for the guidance controller)
+the proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMonitor` with
 
 * the filter's estimate (x, y, v, phi) at the tick;
-* the margin :func:`tssac_core.deploy.shield.estimate_margin_m`: the base, ``sigma_k`` times the position's largest
-  standard deviation (sqrt of the largest eigenvalue of the filter's position covariance), and v_max times
-  the timing slack off lockstep or over a lossy link (``link.packet_loss`` > 0: a lost setpoint leaves the
-  vehicle on the previous command, in lockstep too);
+* the margin (:func:`~tssac_core.assurance.monitor.companion_margin_m`): the base, and off lockstep v_max times
+  the timing slack;
+* the error bound (:func:`~tssac_core.assurance.monitor.companion_error`): ``sigma_k`` standard deviations of the
+  filter's position (major axis), heading and speed, and over a lossy link or off lockstep one setpoint lost or
+  late at a command change; the monitor takes it off each backup's clearance by that backup's lever arms;
 * the commands sent in the last round trip (``pending``): the vehicle flies the setpoint stamped for tick t
-  about 2 x ``link.latency_ms`` after t, off lockstep (the SITL's link clock is simulated time at a
-  speed-up, as a real link's latency is real time in flight) and in lockstep alike (there the link runs on
-  simulated time: the telemetry of tick t arrives ``latency_ms`` later, and the answer as long again).
-  Over a link without latency nothing is pending.
+  about 2 x ``link.latency_ms`` after t, off lockstep and in lockstep alike (there the link runs on simulated
+  time). Before the first command reached the vehicle it flew the hold (straight on): the queue starts with it.
 
-Between decisions the chosen action is held. A hold setpoint (telemetry gap, non-finite action) breaks the
-chain of predictions the guarantee rests on, so the monitor forgets its backup then and starts afresh.
+Every tick's command comes from here: a non-finite action and a telemetry gap are proposals that never pass (the
+remembered backup flies, as in the batched world), and between decisions the monitor's last choice is held.
 Each hand-over is said to the vehicle in a STATUSTEXT (``"<role>: shield on, backup <turn>"`` /
 ``"<role>: shield off, policy flies"``), which the SITL vehicle relays to its other clients and logs.
 """
@@ -28,10 +27,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.deploy.shield import N_TURNS, ShieldConfig, estimate_margin_m
-from tssac_core.deploy.shield_world import VehicleMonitor
+from tssac_core.assurance.monitor import (
+    N_TURNS,
+    ShieldConfig,
+    companion_error,
+    companion_margin_m,
+    largest_backup_error_m,
+)
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import VehicleMonitor
 
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
@@ -52,9 +57,11 @@ class ShieldCounters:
     unprotected_steps: int = 0
     """Control steps with no passing action and no clear backup."""
     resets: int = 0
-    """Times a hold setpoint made the monitor start afresh."""
+    """Times the monitor started afresh (a vehicle restart)."""
     max_margin_m: float = 0.0
-    """The largest margin used (base + covariance + timing)."""
+    """The most clearance a backup had to keep: the margin and the largest error bound over the backups."""
+    nonfinite_proposals: int = 0
+    """Decisions whose proposal was not finite (a non-finite action, or none in a telemetry gap): the backup flew."""
 
 
 class CompanionShield:
@@ -66,7 +73,8 @@ class CompanionShield:
         self.monitor = VehicleMonitor(world, role.index, cfg)
         self.dt_s = scenario.dt_s
         self.latency_s = scenario.link.latency_ms / 1000.0
-        self.slack = not lockstep or scenario.link.packet_loss > 0
+        self.off_lockstep = not lockstep
+        self.lossy = not lockstep or scenario.link.packet_loss > 0
         self.speed_max_m_s = scenario.vehicle(role).speed_max_m_s
         self.counters = ShieldCounters()
         self.engaged = False
@@ -75,7 +83,7 @@ class CompanionShield:
         self._sent: deque[np.ndarray] = deque(maxlen=2000)
 
     def reset(self) -> None:
-        """Forget the backup and the queue (after a hold, a restart)."""
+        """Forget the backup and the queue (a vehicle restart: a new flight)."""
         self.monitor.reset()
         self.engaged = False
         self._unprotected = False
@@ -88,27 +96,46 @@ class CompanionShield:
             return 0
         return round(2.0 * self.latency_s / self.dt_s)
 
+    @property
+    def held(self) -> np.ndarray:
+        """The command the monitor chose last (what the vehicle flies until the next tick's)."""
+        return self._held.copy()
+
+    def _pending(self) -> np.ndarray | None:
+        """The commands of the last round trip, oldest first; hold commands before the first one sent."""
+        n = self.pending_ticks()
+        if n == 0:
+            return None
+        sent = list(self._sent)[-n:]
+        return np.array([np.zeros(2)] * (n - len(sent)) + sent)
+
     def action(
         self,
         decision: bool,
         steps: int,
         proposed: np.ndarray,
         state: tuple[float, float, float, float],
-        sigma_major_m: float,
+        sigmas: tuple[float, float, float],
     ) -> tuple[np.ndarray, str | None]:
         """The action to send this tick and a STATUSTEXT to say (a hand-over), or None.
 
-        ``decision``: the pilot decided this tick (its action holds for ``steps`` ticks); otherwise the
-        monitor's last choice is held."""
+        ``decision``: a decision tick (the choice holds for ``steps`` ticks); otherwise the monitor's last choice
+        is held. ``proposed``: the pilot's action, non-finite when there is none (it never passes).
+        ``sigmas``: the filter's standard deviations of position (major axis, m), heading (rad) and speed (m/s)."""
         text = None
         if decision:
-            margin = estimate_margin_m(self.cfg, sigma_major_m, self.speed_max_m_s, slack=self.slack)
-            n = min(self.pending_ticks(), len(self._sent))
-            pending = np.array(list(self._sent)[len(self._sent) - n :]) if n else None
-            d = self.monitor.decide(*state, proposed=proposed, steps=steps, margin_m=margin, pending=pending)
+            margin = companion_margin_m(self.cfg, self.speed_max_m_s, self.off_lockstep)
+            lim = self.monitor.limits
+            error = companion_error(self.cfg, lim, self.dt_s, *sigmas, lossy=self.lossy)
+            if not np.all(np.isfinite(proposed)):
+                self.counters.nonfinite_proposals += 1
+            d = self.monitor.decide(
+                *state, proposed=proposed, steps=steps, margin_m=margin, pending=self._pending(), error=error
+            )
             self._held = d.action[0].copy()
             self.counters.decisions += 1
-            self.counters.max_margin_m = max(self.counters.max_margin_m, margin)
+            need = margin + largest_backup_error_m(error, lim, self.dt_s, steps, self.cfg)
+            self.counters.max_margin_m = max(self.counters.max_margin_m, need)
             if d.engaged_now[0]:
                 self.counters.interventions += 1
                 turn = _TURN_NAMES[int(d.memory.backup[0]) % N_TURNS]
@@ -125,5 +152,5 @@ class CompanionShield:
         return self._held, text
 
     def sent(self, action: np.ndarray) -> None:
-        """Record the command sent this tick (the queue that ``pending`` is taken from)."""
+        """Record the command sent this tick, whatever sent it (the queue that ``pending`` is taken from)."""
         self._sent.append(np.asarray(action, dtype=np.float64).copy())

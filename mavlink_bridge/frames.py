@@ -68,3 +68,12 @@ def action_to_setpoint(action: tuple[float, float], spec: VehicleSpec) -> Setpoi
     u_n = min(1.0, max(-1.0, float(action[1])))
     omega_rad_s = omega_n * math.radians(spec.turn_rate_max_deg_s)
     return Setpoint(yaw_rate_rad_s=-omega_rad_s, accel_m_s2=u_n * spec.accel_max_m_s2)
+
+
+def setpoint_to_action(setpoint: Setpoint, spec: VehicleSpec) -> tuple[float, float]:
+    """The inverse of :func:`action_to_setpoint`: the [omega, u] a setpoint commands (the monitor's record of
+    what the vehicle was sent)."""
+    return (
+        -setpoint.yaw_rate_rad_s / math.radians(spec.turn_rate_max_deg_s),
+        setpoint.accel_m_s2 / spec.accel_max_m_s2,
+    )

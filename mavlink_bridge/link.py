@@ -13,8 +13,10 @@ Connection strings follow pymavlink / MAVProxy:
   while waiting for it (:meth:`MavLink.wait_heartbeat`).
 * ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer the vehicle (below).
 
-Receiving keeps UDP's datagram boundaries: every datagram is parsed on its own, so a truncated frame
-never swallows the start of the next datagram. Only the vehicle is heard: with ``udpout`` a datagram
+Receiving keeps UDP's datagram boundaries: every datagram is split into frames on its own, by the scanner
+the SITL vehicles use (:mod:`tssac_core.deploy.mavlink_framing`), so a truncated frame never swallows the
+start of the next datagram, a valid frame behind a garbage header is still found, and frames of message ids
+the dialect does not know are dropped. Only the vehicle is heard: with ``udpout`` a datagram
 from any address but the vehicle's is dropped unread (counted in ``foreign_rx``); with ``udpin`` the
 first sender of an accepted message is the vehicle (with signing, the sender of the latest correctly
 signed one). With signing, every frame is verified by
@@ -49,6 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from tssac_core.deploy.mavlink_framing import Dialect, scan_frames
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -69,6 +72,8 @@ M = mavlink2
 
 MAX_DATAGRAM = 65535
 _TLOG_FLUSH_S = 1.0
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, lambda b: M.x25crc(b).crc)
+"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 SETPOINT_TYPE_MASK = (
     M.POSITION_TARGET_TYPEMASK_X_IGNORE
@@ -135,7 +140,9 @@ class LinkCounters:
     datagrams_rx: int = 0
     messages_rx: int = 0
     bad_data_rx: int = 0
-    """Frames pymavlink could not decode (bad CRC, garbage, unknown id)."""
+    """Candidate frames dropped: bad CRC, unknown message id, or not decodable."""
+    garbage_bytes_rx: int = 0
+    """Bytes outside any frame."""
     signature_rejected: int = 0
     """Unsigned, wrongly signed or replayed messages (signing on): the sum of the next three."""
     unsigned_rx: int = 0
@@ -144,7 +151,7 @@ class LinkCounters:
     foreign_rx: int = 0
     """Datagrams from an address other than the vehicle's, dropped unread."""
     truncated_rx: int = 0
-    """Datagrams that ended inside a frame."""
+    """Candidate frames cut off by the end of their datagram."""
     socket_errors_rx: int = 0
     messages_tx: int = 0
     bytes_tx: int = 0
@@ -203,8 +210,7 @@ class MavLink:
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         """Packs (and signs) what we send."""
         self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Frames and decodes what we receive; it has no key, so pymavlink never checks a signature."""
-        self._rx.robust_parsing = True
+        """Decodes the frames we accept; it has no key, so pymavlink never checks a signature."""
         self._verifier: SignatureVerifier | None = None
         if signing_key is not None:
             self.setup_signing(signing_key, signing_link_id)
@@ -313,25 +319,25 @@ class MavLink:
                 self._backlog.append((msg, now))
 
     def _parse_datagram(self, data: bytes) -> list[Message]:
-        """The accepted messages of one datagram (with signing: correctly signed and fresh)."""
-        try:
-            msgs = self._rx.parse_buffer(data) or []
-        except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
-            self.counters.bad_data_rx += 1
-            _log.debug("pymavlink failed on a datagram: %r", exc)
-            msgs = []
-        if self._rx.buf_len() > 0:
-            # The datagram ended inside a frame: drop the partial frame (UDP keeps datagram boundaries).
-            self.counters.truncated_rx += 1
-            self._rx.buf = bytearray()
-            self._rx.buf_index = 0
-            self._rx.expected_length = mavlink2.HEADER_LEN_V1 + 2
+        """The accepted messages of one datagram (with signing: correctly signed and fresh).
+
+        Framed by the SITL's scanner (:func:`tssac_core.deploy.mavlink_framing.scan_frames`): a valid frame
+        behind a garbage header is found, frames of unknown message ids are dropped (never handed on as
+        pymavlink's ``UNKNOWN_*``), a frame cut off by the end of the datagram is dropped.
+        """
+        scan = scan_frames(data, DIALECT)
+        self.counters.garbage_bytes_rx += scan.garbage_bytes
+        self.counters.truncated_rx += scan.truncated
+        self.counters.bad_data_rx += scan.bad_crc + scan.unknown_id
         accepted: list[Message] = []
-        for msg in msgs:
-            if msg.get_type() == "BAD_DATA":
-                self.counters.bad_data_rx += 1
+        for frame in scan.frames:
+            if self._verifier is not None and not self._signature_accepted(frame):
                 continue
-            if self._verifier is not None and not self._signature_accepted(bytes(msg.get_msgbuf())):
+            try:
+                msg = self._rx.decode(bytearray(frame))
+            except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
+                self.counters.bad_data_rx += 1
+                _log.debug("pymavlink failed on a frame: %r", exc)
                 continue
             accepted.append(msg)
         return accepted

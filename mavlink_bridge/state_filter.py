@@ -209,6 +209,7 @@ class _Backend(Protocol):
     def pos_vel(self) -> tuple[float, float, float, float]: ...
     def turn_rate_rad_s(self) -> float | None: ...
     def pos_cov(self) -> FloatArray: ...
+    def speed_heading_sigma(self) -> tuple[float, float]: ...
 
 
 class _ConstantVelocity:
@@ -254,6 +255,13 @@ class _ConstantVelocity:
 
     def pos_cov(self) -> FloatArray:
         return np.asarray(self._kf.P[:2, :2], dtype=np.float64)
+
+    def speed_heading_sigma(self) -> tuple[float, float]:
+        # The velocity's worst-direction sigma bounds the speed's (along the track) and, over the speed, the
+        # heading's (across it).
+        sigma = math.sqrt(max(0.0, float(np.linalg.eigvalsh(self._kf.P[2:4, 2:4])[-1])))
+        speed = math.hypot(float(self._kf.x[2]), float(self._kf.x[3]))
+        return sigma, sigma / max(speed, 1.0)
 
 
 # Constant-turn state layout (named, never bare indices elsewhere).
@@ -452,6 +460,10 @@ class _ConstantTurn:
     def pos_cov(self) -> FloatArray:
         return np.asarray(self._kf.P[:2, :2], dtype=np.float64)
 
+    def speed_heading_sigma(self) -> tuple[float, float]:
+        p = self._kf.P
+        return math.sqrt(max(0.0, float(p[_V, _V]))), math.sqrt(max(0.0, float(p[_PHI, _PHI])))
+
 
 class VehicleStateFilter:
     """Horizontal state of one vehicle from time-stamped position/velocity measurements.
@@ -627,6 +639,14 @@ class VehicleStateFilter:
         2x2 position covariance (m; what the runtime-assurance monitor widens its margin by)."""
         self._require_initialised()
         return math.sqrt(max(0.0, float(np.linalg.eigvalsh(self._backend.pos_cov())[-1])))
+
+    @property
+    def speed_heading_sigma(self) -> tuple[float, float]:
+        """Standard deviations of the speed (m/s) and the heading (rad): the constant-turn models' own variances;
+        for constant velocity, bounds from the velocity covariance's largest eigenvalue (over the speed, for the
+        heading). What the runtime-assurance monitor's error bound takes them from."""
+        self._require_initialised()
+        return self._backend.speed_heading_sigma()
 
     # -- internals ------------------------------------------------------------------------------
 

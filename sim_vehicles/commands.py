@@ -4,8 +4,9 @@ missions, FTP and time sync.
 :class:`CommandHandler` reads messages and answers them; it changes the vehicle's state only through
 :class:`sim_vehicles.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
 Every COMMAND_LONG / COMMAND_INT is answered with a COMMAND_ACK to its sender. Messages addressed to
-another system or component are ignored (counted), except those that arrive from a ``--out`` ground
-station for a sibling vehicle: they are routed to it, as an autopilot routes between its links.
+another system or component are ignored (counted) and never passed on: a ground station on ``--out``
+sends each frame to every vehicle (pymavlink's ``udpin`` side writes to all the addresses it has heard),
+so each vehicle acts on the frames for its own system id (or for all) and the others drop them.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ also answered through the parameter protocol at once (every PARAM_VALUE, as for 
 MAVProxy, which asks for it on connect and otherwise retries only on its next 1 Hz check, lists the
 parameters as soon as they arrive."""
 MISSION_UPLOAD_REFUSAL = "Mission upload refused: no AUTO mode here"
+GOTO_REFUSAL = "Goto refused: fly GUIDED setpoints"
 
 
 class CommandHandler:
@@ -46,8 +48,8 @@ class CommandHandler:
 
     def __init__(self, vehicle: Vehicle) -> None:
         self.v = vehicle
-        self.sibling: Callable[[int], Vehicle | None] | None = None
-        """sysid -> the vehicle of that sysid in the same SITL (set by the runner, for --out routing)."""
+        self._home_upload_from: Address | None = None
+        """The client uploading a one-item (home slot only) mission, until its item 0 arrives."""
         self._handlers: dict[str, Callable[[Msg, Address], None]] = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -62,6 +64,8 @@ class CommandHandler:
             "MISSION_REQUEST_INT": self._on_mission_request_item,
             "MISSION_REQUEST": self._on_mission_request_item,
             "MISSION_COUNT": self._on_mission_upload,
+            "MISSION_ITEM_INT": self._on_mission_item,
+            "MISSION_ITEM": self._on_mission_item,
             "MISSION_CLEAR_ALL": self._on_mission_clear_all,
             "FILE_TRANSFER_PROTOCOL": self._on_ftp,
             "TIMESYNC": self._on_timesync,
@@ -76,6 +80,7 @@ class CommandHandler:
             M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_capabilities,
             M.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
             M.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
+            M.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
         }
 
     # ------------------------------------------------------------------------------ dispatch
@@ -92,11 +97,6 @@ class CommandHandler:
         v = self.v
         target_system = getattr(msg, "target_system", 0)
         target_component = getattr(msg, "target_component", 0)
-        if target_system not in (0, v.sysid) and addr in v.outputs and self.sibling is not None:
-            other = self.sibling(target_system)
-            if other is not None and other.handler is not None:  # a --out ground station shares one port
-                other.handler.handle(msg, addr)
-                return
         if target_system not in (0, v.sysid) or target_component not in (0, v.compid):
             v.counters.not_for_us += 1
             return
@@ -161,6 +161,14 @@ class CommandHandler:
     def _cmd_loiter_unlimited(self, p: tuple[float, ...]) -> CommandResult:
         self.v.set_mode(FlightMode.LOITER, "MAV_CMD_NAV_LOITER_UNLIM")
         return M.MAV_RESULT_ACCEPTED, []
+
+    def _cmd_reposition(self, p: tuple[float, ...]) -> CommandResult:
+        """A goto (MAVSDK's goto_location: GUIDED, then MAV_CMD_DO_REPOSITION) is not flown here: refused, and the
+        switch to GUIDED made for it is undone, so the vehicle does not sit in GUIDED without a setpoint."""
+        v = self.v
+        v.statustext(M.MAV_SEVERITY_WARNING, GOTO_REFUSAL)
+        v.undo_guided_switch("goto refused")
+        return M.MAV_RESULT_UNSUPPORTED, []
 
     def _on_set_mode(self, msg: Msg, addr: Address) -> None:
         # ArduPilot answers the SET_MODE message with a COMMAND_ACK whose command is the message id (11).
@@ -234,21 +242,32 @@ class CommandHandler:
         index = msg.param_index if msg.param_index >= 0 else params.index(msg.param_id)
         if index is None or params.at(index) is None:
             _log.info("%s: PARAM_REQUEST_READ of unknown parameter %r / %d", self.v.role, msg.param_id, msg.param_index)
+            self._param_error(msg, addr, M.MAV_PARAM_ERROR_DOES_NOT_EXIST)
             return
         self.v.send(self._param_value(index), addr)
 
     def _on_param_set(self, msg: Msg, addr: Address) -> None:
         v = self.v
         index = v.params.index(msg.param_id)
+        refused = v.params.set(msg.param_id, float(msg.param_value))
+        if refused is None:
+            assert index is not None
+            v.send(self._param_value(index))  # a changed value goes to every client
+            return
+        # As ArduPilot 4.6: PARAM_ERROR first (MAVSDK ends the set with its code), then why, then the old value.
+        self._param_error(msg, addr, refused.error)
         if index is None:
             _log.info("%s: PARAM_SET of unknown parameter %r", v.role, msg.param_id)
             return
-        refused = v.params.set(msg.param_id, float(msg.param_value))
-        if refused is not None:
-            v.statustext(M.MAV_SEVERITY_WARNING, f"Param refused: {refused}", addr)
-            v.send(self._param_value(index), addr)
-            return
-        v.send(self._param_value(index))  # a changed value goes to every client
+        v.statustext(M.MAV_SEVERITY_WARNING, refused.text, addr)
+        v.send(self._param_value(index), addr)
+
+    def _param_error(self, msg: Msg, addr: Address, error: int) -> None:
+        param_id = msg.param_id.encode("ascii", "replace") if isinstance(msg.param_id, str) else bytes(msg.param_id)
+        index = getattr(msg, "param_index", -1)
+        self.v.send(
+            self.v.mav.param_error_encode(msg.get_srcSystem(), msg.get_srcComponent(), param_id, index, error), addr
+        )
 
     # ---------------------------------------------------------------- missions, FTP, time
 
@@ -266,21 +285,33 @@ class CommandHandler:
         self.v.send(ack, addr)
 
     def _on_mission_upload(self, msg: Msg, addr: Address) -> None:
-        self.v.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
-        self.v.send(
-            self.v.mav.mission_ack_encode(
-                msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_UNSUPPORTED, msg.mission_type
-            ),
-            addr,
-        )
+        """MISSION_COUNT: an empty upload clears (0 items, or the home slot alone: MAVSDK's clear_mission() for
+        ArduPilot uploads one empty item), as ArduPilot answers it; a mission with waypoints is refused."""
+        if msg.count == 0:
+            self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
+        elif msg.count == 1 and msg.mission_type == M.MAV_MISSION_TYPE_MISSION:
+            self._home_upload_from = addr
+            self.v.send(
+                self.v.mav.mission_request_int_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type),
+                addr,
+            )
+        else:
+            self.v.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
+            self._mission_ack(msg, addr, M.MAV_MISSION_UNSUPPORTED)
+
+    def _on_mission_item(self, msg: Msg, addr: Address) -> None:
+        """Item 0 of a one-item upload (the home slot): accepted, and there is still no mission to fly."""
+        if addr != self._home_upload_from or msg.seq != 0 or msg.mission_type != M.MAV_MISSION_TYPE_MISSION:
+            return
+        self._home_upload_from = None
+        self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
+
+    def _mission_ack(self, msg: Msg, addr: Address, result: int) -> None:
+        ack = self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result, msg.mission_type)
+        self.v.send(ack, addr)
 
     def _on_mission_clear_all(self, msg: Msg, addr: Address) -> None:
-        self.v.send(
-            self.v.mav.mission_ack_encode(
-                msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_ACCEPTED, msg.mission_type
-            ),
-            addr,
-        )
+        self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
 
     def _on_ftp(self, msg: Msg, addr: Address) -> None:
         payload = bytes(msg.payload)

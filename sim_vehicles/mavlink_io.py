@@ -9,8 +9,9 @@ vehicle sends, one without a key that only decodes frames already checked here. 
 frame must not swallow the next datagram), a bind that fails when the port is taken (``mavudp`` sets
 SO_REUSEADDR), and socket errors counted rather than swallowed.
 
-Every datagram is split into frames here; a frame is decoded only if its CRC (with the message's
-CRC_EXTRA) matches and, with signing, its signature verifies
+Every datagram is split into frames by :func:`tssac_core.deploy.mavlink_framing.scan_frames` (the companion's
+link uses the same scanner); a frame is decoded only if its CRC (with the message's CRC_EXTRA) matches and,
+with signing, its signature verifies
 (:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
 signature first, then the stream's timestamp — pymavlink's own check records the timestamp first).
 Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned, wrongly signed and replayed
@@ -35,14 +36,23 @@ import enum
 import errno
 import logging
 import socket
-import struct
 import time
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, refresh_outgoing_timestamp
+from tssac_core.deploy.mavlink_framing import Dialect, message_id, scan_frames, source
+from tssac_core.deploy.mavlink_signing import (
+    COMPANION_LINK_BASE,
+    SIGNATURE_BLOCK_LEN,
+    SignatureVerifier,
+    StreamKey,
+    Verdict,
+    companion_link_id,
+    is_signed,
+    refresh_outgoing_timestamp,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -57,9 +67,8 @@ MAX_MONITORS = 4
 """Unsigned monitors served at once (signing on, ``unsigned_monitors`` set)."""
 MONITOR_BYTES_PER_S = 2000
 """Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
-_V1, _V2 = mavlink2.PROTOCOL_MARKER_V1, mavlink2.PROTOCOL_MARKER_V2
-_SIG_LEN = mavlink2.MAVLINK_SIGNATURE_BLOCK_LEN
-_IFLAG_SIGNED = mavlink2.MAVLINK_IFLAG_SIGNED
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, lambda b: mavlink2.x25crc(b).crc)
+"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 
 class Sender(enum.Enum):
@@ -85,6 +94,12 @@ class RxCounters:
     bad_crc: int = 0
     unknown_id: int = 0
     """Frames of message ids the dialect does not know (their CRC cannot be checked)."""
+    from_vehicles: int = 0
+    """Frames whose header names the autopilot of one of this run's vehicles (system N, component 1: this
+    one's own telemetry reflected back, another vehicle's): a vehicle takes nothing from an autopilot. A
+    companion on the vehicle's system id with its own component id (191) is a client as any other."""
+    wrong_link: int = 0
+    """Signed frames on the link id of another vehicle's companion (``companion_link_id``)."""
     unsigned_rejected: int = 0
     bad_signature: int = 0
     replayed: int = 0
@@ -103,6 +118,8 @@ class RxCounters:
             self.truncated
             + self.bad_crc
             + self.unknown_id
+            + self.from_vehicles
+            + self.wrong_link
             + self.unsigned_rejected
             + self.bad_signature
             + self.replayed
@@ -120,17 +137,6 @@ class TxCounters:
     socket_errors: int = 0
     monitor_throttled: int = 0
     """Datagrams not sent to a monitor because its budget was spent."""
-
-
-class _Check(enum.Enum):
-    """One frame's fate in :meth:`MavEndpoint.parse`."""
-
-    RESCAN = "rescan"
-    """Not a frame after all (unknown id, bad CRC): look for one from the next byte."""
-    REJECTED = "rejected"
-    """A whole frame, refused (unsigned, wrongly signed, replayed) and counted."""
-    CLIENT = "client"
-    MONITOR = "monitor"
 
 
 @dataclass
@@ -163,8 +169,17 @@ class MavEndpoint:
         compid: int,
         signing_key: bytes | None = None,
         unsigned_monitors: bool = False,
+        run_sysids: frozenset[int] = frozenset(),
+        shared_streams: dict[StreamKey, int] | None = None,
     ) -> None:
+        """``run_sysids``: the system ids of every vehicle of the run (this one's included); ``shared_streams``:
+        one dict for all of them, the signing streams' newest accepted timestamps (see :class:`SignatureVerifier`)."""
         self.sysid = sysid
+        self.run_sysids = run_sysids | {sysid}
+        self.foreign_links = frozenset(
+            companion_link_id(s) for s in self.run_sysids - {sysid} if s <= 255 - COMPANION_LINK_BASE
+        )
+        """Link ids of the other vehicles' companions: refused here."""
         self.compid = compid
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -184,7 +199,7 @@ class MavEndpoint:
         self.verifier: SignatureVerifier | None = None
         if signing_key is not None:
             signing.enable_signing(self.mav, signing_key)
-            self.verifier = SignatureVerifier(signing_key)
+            self.verifier = SignatureVerifier(signing_key, shared_streams)
         self.signing = signing_key is not None
         self.unsigned_monitors = unsigned_monitors and self.signing
         self.peers: dict[Address, float] = {}
@@ -193,6 +208,8 @@ class MavEndpoint:
         """Unsigned monitors (signing on, ``unsigned_monitors``), by address."""
         self.rx = RxCounters()
         self.tx = TxCounters()
+        self._tx_seq: dict[Address, int] = {}
+        """The next sequence number of each destination's link."""
         self._closed = False
 
     # ------------------------------------------------------------------------------------ socket
@@ -223,7 +240,7 @@ class MavEndpoint:
 
     def sendto(self, data: bytes, dest: Address | None = None) -> None:
         """Send one datagram to ``dest``, or to every client and monitor if None (monitors within budget)."""
-        targets = list(self.peers) + [a for a in self.monitors if a not in self.peers] if dest is None else [dest]
+        targets = self.destinations() if dest is None else [dest]
         for addr in targets:
             monitor = self.monitors.get(addr) if addr not in self.peers else None
             if monitor is not None and not self._spend(monitor, len(data)):
@@ -306,6 +323,8 @@ class MavEndpoint:
         for addr, monitor in list(self.monitors.items()):
             if now_wall_s - monitor.last_seen_s > timeout_s:
                 del self.monitors[addr]
+        for addr in [a for a in self._tx_seq if a not in self.peers and a not in self.monitors]:
+            del self._tx_seq[addr]
 
     def close(self) -> None:
         if not self._closed:
@@ -314,86 +333,72 @@ class MavEndpoint:
 
     # ---------------------------------------------------------------------------------- encoding
 
-    def encode(self, msg: mavlink2.MAVLink_message) -> bytes:
-        """Pack (and sign, if signing is on) one message from this system."""
+    def encode(self, msg: mavlink2.MAVLink_message, dest: Address) -> bytes:
+        """Pack (and sign, if signing is on) one message from this system for ``dest``.
+
+        Every destination is a link with its own sequence numbers, one after the other in the order its frames
+        are packed (ArduPilot numbers per channel): a client that gets only its own replies and the telemetry
+        sees no gap for the replies that went to another client, so a lossless link shows no loss."""
         if self.signing:
             refresh_outgoing_timestamp(self.mav.signing)
+        seq = self._tx_seq.get(dest, 0)
+        self.mav.seq = seq
         buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+        self._tx_seq[dest] = (seq + 1) % 256
         self.mav.total_packets_sent += 1
         self.mav.total_bytes_sent += len(buf)
         return buf
+
+    def destinations(self) -> list[Address]:
+        """Everyone telemetry goes to: the clients, then the monitors that are not clients."""
+        return list(self.peers) + [a for a in self.monitors if a not in self.peers]
 
     def parse(self, data: bytes, addr: Address) -> Parsed:
         """Check and decode every frame of one datagram (clients are recorded by :meth:`admit`)."""
         self.rx.datagrams += 1
         out = Parsed()
-        i, n = 0, len(data)
-        while i < n:
-            magic = data[i]
-            if magic != _V2 and magic != _V1:
-                j = _next_magic(data, i + 1)
-                self.rx.garbage_bytes += j - i
-                i = j
-                continue
-            size = _frame_size(data, i)
-            if size is None:  # impossible header: not a frame start
-                self.rx.garbage_bytes += 1
-                i += 1
-                continue
-            if i + size > n:
-                self.rx.truncated += 1
-                i += 1  # it may be garbage that happens to hold a magic byte: rescan past it
-                continue
-            frame = data[i : i + size]
-            verdict = self._check_frame(frame)
-            if verdict is _Check.RESCAN:  # not a frame after all (unknown id, bad CRC): rescan from the next byte
-                i += 1
-                continue
-            i += size
-            if verdict is _Check.REJECTED:
+        scan = scan_frames(data, DIALECT)
+        self.rx.garbage_bytes += scan.garbage_bytes
+        self.rx.truncated += scan.truncated
+        self.rx.unknown_id += scan.unknown_id
+        self.rx.bad_crc += scan.bad_crc
+        for frame in scan.frames:
+            verdict = self._check_signing(frame)
+            if verdict is None:
                 continue
             msg = self._decode(frame)
             if msg is None:
                 continue
             out.messages.append(msg)
-            sender = Sender.CLIENT if verdict is _Check.CLIENT else Sender.MONITOR
             if out.sender is not Sender.CLIENT:
-                out.sender = sender
+                out.sender = verdict
         self.rx.messages += len(out.messages)
         return out
 
-    def _check_frame(self, frame: bytes) -> _Check:
-        """Whether a frame vouches for a client or a monitor, was refused (counted), or is no frame at all."""
-        signed = frame[0] == _V2 and bool(frame[2] & _IFLAG_SIGNED)
-        msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16) if frame[0] == _V2 else frame[5]
-        msg_type = mavlink2.mavlink_map.get(msg_id)
-        if msg_type is None:
-            # Its CRC cannot be checked, so its length cannot be trusted either: it may be garbage
-            # claiming a long frame over the next real one.
-            self.rx.unknown_id += 1
-            return _Check.RESCAN
-        end = len(frame) - (_SIG_LEN if signed else 0)
-        crc = mavlink2.x25crc(bytes(frame[1 : end - 2]))
-        crc.accumulate(bytes((msg_type.crc_extra,)))
-        if crc.crc != struct.unpack_from("<H", frame, end - 2)[0]:
-            self.rx.bad_crc += 1
-            return _Check.RESCAN
+    def _check_signing(self, frame: bytes) -> Sender | None:
+        """Whether a whole, CRC-checked frame vouches for a client or a monitor; None: refused (counted)."""
+        sysid, compid = source(frame)
+        if sysid in self.run_sysids and compid == self.compid:
+            self.rx.from_vehicles += 1
+            return None
         if self.verifier is None:
-            return _Check.CLIENT
+            return Sender.CLIENT
+        if is_signed(frame) and frame[-SIGNATURE_BLOCK_LEN] in self.foreign_links:
+            self.rx.wrong_link += 1
+            return None
         verdict = self.verifier.check(frame)
         if verdict is Verdict.OK:
-            return _Check.CLIENT
+            return Sender.CLIENT
         if verdict is Verdict.UNSIGNED:
-            if self.unsigned_monitors and msg_id in signing.MONITOR_IDS:
+            if self.unsigned_monitors and message_id(frame) in signing.MONITOR_IDS:
                 self.rx.monitor_frames += 1
-                return _Check.MONITOR
+                return Sender.MONITOR
             self.rx.unsigned_rejected += 1
         elif verdict is Verdict.BAD_SIGNATURE:
             self.rx.bad_signature += 1
         else:
             self.rx.replayed += 1
-        return _Check.REJECTED
+        return None
 
     def _decode(self, frame: bytes) -> mavlink2.MAVLink_message | None:
         try:
@@ -405,28 +410,3 @@ class MavEndpoint:
             self.rx.decode_errors += 1
             _log.warning("sysid %d: pymavlink failed to decode a frame: %r", self.sysid, exc)
             return None
-
-
-def _next_magic(data: bytes, start: int) -> int:
-    """Index of the next MAVLink start byte at or after ``start`` (len(data) if none)."""
-    a, b = data.find(bytes((_V2,)), start), data.find(bytes((_V1,)), start)
-    if a < 0:
-        return b if b >= 0 else len(data)
-    return a if b < 0 else min(a, b)
-
-
-def _frame_size(data: bytes, i: int) -> int | None:
-    """Total length of the frame starting at ``data[i]`` from its header, None if the header is invalid.
-
-    A header cut off by the end of the datagram reports the minimum length, so it counts as truncated.
-    """
-    if data[i] == _V2:
-        if i + 3 > len(data):
-            return mavlink2.HEADER_LEN_V2 + 2
-        length, incompat = data[i + 1], data[i + 2]
-        if incompat & ~_IFLAG_SIGNED:
-            return None
-        return mavlink2.HEADER_LEN_V2 + length + 2 + (_SIG_LEN if incompat & _IFLAG_SIGNED else 0)
-    if i + 2 > len(data):
-        return mavlink2.HEADER_LEN_V1 + 2
-    return mavlink2.HEADER_LEN_V1 + data[i + 1] + 2

@@ -21,9 +21,10 @@ name               type    access     meaning
 The limits are read-only because they are the world's physics (the scenario's ``vehicles:``
 section, which the policies were trained on). Values travel as floats; INT32 values are the
 integer cast to float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST, as ArduPilot does). A PARAM_SET
-that is refused (read-only, out of range, not finite) is answered with a PARAM_VALUE holding the
-unchanged value and a STATUSTEXT saying why; a PARAM_SET or PARAM_REQUEST_READ of an unknown name
-is not answered (clients time out, as with ArduPilot).
+that is refused (read-only, out of range, not finite) is answered as ArduPilot 4.6 does: a PARAM_ERROR
+(PERMISSION_DENIED, VALUE_OUT_OF_RANGE: MAVSDK returns that error at once), a STATUSTEXT saying why (one
+chunk, at most 50 characters) and a PARAM_VALUE holding the unchanged value; a PARAM_SET or
+PARAM_REQUEST_READ of an unknown name gets PARAM_ERROR DOES_NOT_EXIST.
 """
 
 from __future__ import annotations
@@ -33,6 +34,14 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+
+@dataclass(frozen=True)
+class ParamRefusal:
+    """Why a PARAM_SET was refused: the MAV_PARAM_ERROR code and one STATUSTEXT (at most 50 characters)."""
+
+    error: int
+    text: str
 
 
 @dataclass
@@ -68,15 +77,20 @@ class ParamTable:
         i = self._by_name.get(name)
         return None if i is None else self._params[i]
 
-    def set(self, name: str, value: float) -> str | None:
-        """Set a parameter; returns None on success, else why it was refused."""
+    def set(self, name: str, value: float) -> ParamRefusal | None:
+        """Set a parameter; returns None on success, else why it was refused.
+
+        The text fits one STATUSTEXT whatever the value: a name has at most 16 characters, a value at most 11
+        (5 significant digits), a range at most 10 ("0.1..32767")."""
         p = self.get(name)
         if p is None:
-            return f"{name}: unknown parameter"
+            return ParamRefusal(mavlink2.MAV_PARAM_ERROR_DOES_NOT_EXIST, f"{name[:16]}: no such parameter")
         if not p.writable:
-            return f"{name} is read-only"
+            return ParamRefusal(mavlink2.MAV_PARAM_ERROR_PERMISSION_DENIED, f"{name} is read-only")
         if not math.isfinite(value) or not (p.low <= value <= p.high):
-            return f"{name}: {value:g} not in {p.low:g}..{p.high:g}"
+            return ParamRefusal(
+                mavlink2.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, f"{name}: {value:.5g} not in {p.low:g}..{p.high:g}"
+            )
         p.value = float(round(value)) if p.param_type == mavlink2.MAV_PARAM_TYPE_INT32 else float(value)
         return None
 

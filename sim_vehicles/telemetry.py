@@ -12,6 +12,7 @@ The LOCAL_POSITION_NED origin is the scenario's origin (the area's SW corner) at
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import TypeAlias
@@ -21,6 +22,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sim_vehicles.link import GpsFix
 from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from tssac_core.sim.scenario import Origin
+
+_log = logging.getLogger(__name__)
 
 GRAVITY_M_S2 = 9.80665
 UINT16_MAX = 65535
@@ -173,15 +176,33 @@ SENSORS_PRESENT = (
 pre-arm check (GPS fix). MAVSDK's ``health_all_ok`` needs the first three and the GPS healthy, and a HOME_POSITION."""
 
 
+BATTERY_MV = 12_600
+"""The battery is not modelled: reported full and constant, at ArduPilot SITL's default SIM_BATT_VOLTAGE (12.6 V).
+UINT16_MAX ("not sent", the spec's unknown) is shown as 65.5 V by MAVSDK 4 and MAVProxy 1.8, which do not check it."""
+BATTERY_REMAINING_PCT = 100
+
+
 def sys_status(mav: MAV, gps_ok: bool, fence_ok: bool, errors_comm: int) -> Msg:
-    """SYS_STATUS with the sensors we simulate; battery unknown (UINT16_MAX / -1)."""
+    """SYS_STATUS with the sensors we simulate; a full battery (:data:`BATTERY_MV`), its current not measured (-1)."""
     health = mavlink2.MAV_SYS_STATUS_AHRS | INERTIAL_SENSORS
     if gps_ok:
         health |= mavlink2.MAV_SYS_STATUS_SENSOR_GPS | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
     if fence_ok:
         health |= mavlink2.MAV_SYS_STATUS_GEOFENCE
     return mav.sys_status_encode(
-        SENSORS_PRESENT, SENSORS_PRESENT, health, 0, UINT16_MAX, -1, -1, 0, min(UINT16_MAX, errors_comm), 0, 0, 0, 0
+        SENSORS_PRESENT,
+        SENSORS_PRESENT,
+        health,
+        0,
+        BATTERY_MV,
+        -1,
+        BATTERY_REMAINING_PCT,
+        0,
+        min(UINT16_MAX, errors_comm),
+        0,
+        0,
+        0,
+        0,
     )
 
 
@@ -240,9 +261,15 @@ def autopilot_version(mav: MAV, sysid: int) -> Msg:
     return mav.autopilot_version_encode(CAPABILITIES, SW_VERSION, 0, 0, 0, custom, [0] * 8, [0] * 8, 0, 0, sysid)
 
 
+STATUSTEXT_MAX = 50
+"""Characters of one STATUSTEXT chunk: every text the vehicle makes fits (tests/test_sim_vehicles.py checks them)."""
+
+
 def statustext(mav: MAV, severity: int, text: str) -> Msg:
-    """STATUSTEXT (text cut to the 50 characters of one chunk)."""
-    return mav.statustext_encode(severity, text[:50].encode("ascii", "replace"))
+    """STATUSTEXT: one chunk. A longer text (a client's, relayed) is cut, and the cut logged."""
+    if len(text) > STATUSTEXT_MAX:
+        _log.warning("STATUSTEXT cut to %d characters: %r", STATUSTEXT_MAX, text)
+    return mav.statustext_encode(severity, text[:STATUSTEXT_MAX].encode("ascii", "replace"))
 
 
 def named_value_int(mav: MAV, time_boot_ms: int, name: str, value: int) -> Msg:

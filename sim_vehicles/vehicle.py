@@ -55,6 +55,8 @@ FORCE_MAGIC = 21196
 
 _EPS_S = 1e-6
 COALESCE_BYTES = 1200
+GOTO_UNDO_S = 5.0
+"""A goto refused within this many wall seconds of the switch to GUIDED made for it undoes the switch."""
 """Largest datagram :meth:`Vehicle.flush` builds from several frames (below any path MTU on a LAN)."""
 M = mavlink2  # message ids and enums
 
@@ -239,7 +241,7 @@ class Vehicle:
         self.endpoint = endpoint
         self.clock = clock
         self.flags = flags
-        self.tx: LinkChannel[tuple[bytes, Address | None, int]] = LinkChannel(setup.link, rngs.tx)
+        self.tx: LinkChannel[tuple[bytes, Address, int]] = LinkChannel(setup.link, rngs.tx)
         """Frames out: (frame, destination or None for every client, the tick's time_boot_ms or -1)."""
         self.rx: LinkChannel[tuple[Parsed, Address]] = LinkChannel(setup.link, rngs.rx)
         """Datagrams in, already checked and decoded at the socket (see :meth:`poll_socket`)."""
@@ -263,6 +265,8 @@ class Vehicle:
         self.failsafe = False
         self.fence_breached = False
         self.setpoint: Setpoint | None = None
+        self._guided_from: tuple[FlightMode, float] | None = None
+        """(the mode before GUIDED, wall time of the switch) while in GUIDED: a refused goto undoes the switch."""
         self.last_setpoint_s = 0.0
         self.loop_since_wall_s = 0.0
         """Wall time the vehicle last came under companion control (for the lockstep barrier)."""
@@ -322,6 +326,10 @@ class Vehicle:
 
     @property
     def system_status(self) -> int:
+        """HEARTBEAT.system_status: POWEROFF once the mission has ended (the SITL exits after its linger: what a
+        companion checks a mission end against), CRITICAL in a failsafe, else ACTIVE armed / STANDBY disarmed."""
+        if self.flags.end is not None:
+            return M.MAV_STATE_POWEROFF
         if self.failsafe or self.datalink.lost:
             return M.MAV_STATE_CRITICAL
         return M.MAV_STATE_ACTIVE if self.armed else M.MAV_STATE_STANDBY
@@ -397,7 +405,7 @@ class Vehicle:
         COALESCE_BYTES), as a flight controller's UDP output does: one system call per destination and
         step instead of one per message. Loss, duplication and latency still act on every frame.
         """
-        batches: dict[Address | None, list[bytes]] = {}
+        batches: dict[Address, list[bytes]] = {}
         for data, dest, tick_ms in self.tx.pop_due(self.clock.link_s):
             self.tick_seen_ms = max(self.tick_seen_ms, tick_ms)
             frames = batches.setdefault(dest, [])
@@ -415,12 +423,13 @@ class Vehicle:
         return min(times) if times else None
 
     def send(self, msg: mavlink2.MAVLink_message, dest: Address | None = None) -> None:
-        """Queue one message for ``dest`` (None: every peer) on the outgoing link."""
-        if dest is None and not self.endpoint.has_clients:
+        """Queue one message for ``dest`` (None: every client and monitor) on the outgoing link.
+
+        Each destination is a link of its own with its own sequence numbers (:meth:`MavEndpoint.encode`), taken
+        in the order the frames are queued: a client never sees a gap for a frame that went to another one."""
+        dests = [dest] if dest is not None else self.endpoint.destinations()
+        if not dests:
             return
-        buf = self.endpoint.encode(msg)
-        if self._tlog is not None:
-            self._write_tlog(buf)
         # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
         mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
         tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
@@ -428,7 +437,11 @@ class Vehicle:
             self._sent_step_ms, self._sent_in_step = now_ms, {}
         n = self._sent_in_step[mid] = self._sent_in_step.get(mid, 0) + 1
         lossless = self.clock.lockstep and tick_ms >= 0
-        self.tx.push(self.clock.link_s, (buf, dest, tick_ms), hash((mid, now_ms, n)), lossless)
+        for i, to in enumerate(dests):
+            buf = self.endpoint.encode(msg, to)
+            if i == 0 and self._tlog is not None:
+                self._write_tlog(buf)  # one copy per message, as the vehicle sent it
+            self.tx.push(self.clock.link_s, (buf, to, tick_ms), hash((mid, now_ms, n)), lossless)
 
     def _write_tlog(self, frame: bytes) -> None:
         assert self._tlog is not None
@@ -643,6 +656,7 @@ class Vehicle:
         if mode is self.mode:
             return
         was_in_loop = self.in_loop
+        self._guided_from = (self.mode, self.clock.wall_s) if mode is FlightMode.GUIDED else None
         self.mode = mode
         self.setpoint = None
         self.failsafe = False
@@ -651,6 +665,17 @@ class Vehicle:
         self._enter_loop_if(was_in_loop)
         _log.info("%s: mode %s%s", self.role, mode.name, f" ({reason})" if reason else "")
         self.event("MODE", int(mode))
+
+    def undo_guided_switch(self, reason: str) -> bool:
+        """Go back to the mode before GUIDED if GUIDED was entered less than GOTO_UNDO_S wall seconds ago and no
+        setpoint has come since (a refused goto's mode change, see CommandHandler); True if it did."""
+        if self.mode is not FlightMode.GUIDED or self.setpoint is not None or self._guided_from is None:
+            return False
+        previous, since_wall_s = self._guided_from
+        if self.clock.wall_s - since_wall_s > GOTO_UNDO_S:
+            return False
+        self.set_mode(previous, reason)
+        return True
 
     def _orbit_for(self, mode: FlightMode) -> Orbit | None:
         t, su = self.truth, self.setup

@@ -69,6 +69,7 @@ from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
+from tssac_core.deploy.mavlink_signing import StreamKey
 from tssac_core.deploy.truth_log_schema import VehicleRow
 from tssac_core.sim.scenario import ROLES, Layout, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
@@ -176,10 +177,21 @@ class WorldRunner:
                 raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         c = self.world.c
+        # One key, one table of accepted signing streams for the three vehicles: a frame accepted by one is
+        # a replay at another once its stream has moved on (docs/mavlink.md, Security).
+        run_sysids = frozenset(range(1, len(ROLES) + 1))
+        shared_streams: dict[StreamKey, int] = {}
         for i, role in enumerate(ROLES):
             try:
                 endpoint = MavEndpoint(
-                    config.host, config.port_for(i), i + 1, 1, config.signing_key, config.unsigned_monitors
+                    config.host,
+                    config.port_for(i),
+                    i + 1,
+                    1,
+                    config.signing_key,
+                    config.unsigned_monitors,
+                    run_sysids,
+                    shared_streams,
                 )
             except EndpointError as exc:
                 raise SitlError(str(exc.strerror)) from None
@@ -214,7 +226,6 @@ class WorldRunner:
             )
             vehicle.add_outputs(config.outputs)
             handler = CommandHandler(vehicle)
-            handler.sibling = self._vehicle_by_sysid
             vehicle.handler = handler
             vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
             self.vehicles.append(vehicle)
@@ -235,9 +246,6 @@ class WorldRunner:
                 self._truth = TruthLog(Path(config.truth_log), header)
             except OSError as exc:
                 raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
-
-    def _vehicle_by_sysid(self, sysid: int) -> Vehicle | None:
-        return next((v for v in self.vehicles if v.sysid == sysid), None)
 
     @property
     def endpoints(self) -> list[Endpoint]:

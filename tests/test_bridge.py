@@ -284,6 +284,59 @@ def test_link_signing_right_key_flies_wrong_or_no_key_is_refused() -> None:
         s.stop()
 
 
+def _hostile_datagrams(vehicle: mavlink2.MAVLink) -> list[bytes]:
+    """Real frames from system 1 behind garbage: an unknown-id header covering the next frame, a bad-CRC frame,
+    a well-formed frame of an unknown message id, and a frame cut off at the end of its datagram."""
+    hb = bytes(vehicle.heartbeat_encode(M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0).pack(vehicle))
+    st = bytes(vehicle.system_time_encode(1_700_000_000_000_000, 1234).pack(vehicle))
+    unknown_header = bytes([0xFD, len(hb) - 2, 0, 0, 0, 1, 1, 0xEE, 0xEE, 0xEE])
+    bad_crc = st[:-2] + bytes([st[-2] ^ 0xFF, st[-1]])
+    body = bytes([0xFD, 4, 0, 0, 7, 1, 1, 0x39, 0x30, 0x00, 1, 2, 3, 4])  # message id 12345: not in the dialect
+    unknown_frame = body + bytes(2)
+    return [
+        unknown_header + hb,
+        bad_crc + b"\x00junk" + st,
+        unknown_frame + hb,
+        hb[:-5],  # cut off: dropped, and it must not swallow the next datagram
+        st,
+    ]
+
+
+@pytest.mark.timeout(30)
+def test_link_finds_a_frame_behind_garbage_and_drops_unknown_ids_as_the_sitl_does() -> None:
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    packer = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    datagrams = _hostile_datagrams(packer)
+    expected = ["HEARTBEAT", "SYSTEM_TIME", "HEARTBEAT", "SYSTEM_TIME"]
+    try:
+        with MavLink(f"udpout:127.0.0.1:{vehicle.getsockname()[1]}", target_system=1) as link:
+            link.send_heartbeat()
+            _, companion = vehicle.recvfrom(4096)
+            for datagram in datagrams:
+                vehicle.sendto(datagram, companion)
+            got = []
+            deadline = time.monotonic() + 5.0
+            while len(got) < len(expected) and time.monotonic() < deadline:
+                msg = link.recv(0.2)
+                if msg is not None:
+                    got.append(msg.get_type())
+            assert link.recv(0.3) is None  # nothing else, no UNKNOWN_* message
+            assert got == expected
+            assert link.counters.truncated_rx == 1 and link.counters.bad_data_rx >= 3
+    finally:
+        vehicle.close()
+    # The SITL's endpoint splits the same bytes into the same messages.
+    from sim_vehicles.mavlink_io import MavEndpoint
+
+    endpoint = MavEndpoint("127.0.0.1", 0, 2, 1)
+    try:
+        sitl_got = [m.get_type() for d in datagrams for m in endpoint.parse(d, ("127.0.0.1", 9)).messages]
+    finally:
+        endpoint.close()
+    assert sitl_got == expected
+
+
 # ------------------------------------------------------------------------------- companion
 
 

@@ -141,7 +141,7 @@ def test_fly_guidance_strike_mission_in_lockstep(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-2000:]
     results = json.loads(out.read_text())
     assert JSON_KEYS <= set(results) and results["episodes"] == 1 and results["error"] is None
-    assert results["success_rate"] == 1.0
+    assert results["success_rate"] == 1.0 and results["signing"] is True  # a key made for the run, by default
     mission = results["missions"][0]
     assert mission["success"] and mission["end"] == "success" and all(mission["task_done"].values())
     # The same mission in the batched world takes 2,670 steps with no hazard cost.
@@ -316,6 +316,17 @@ def test_a_killed_fly_leaves_no_orphans(tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- bad input
 
 
+def test_fly_signs_by_default_with_a_key_of_its_own_and_no_signing_turns_it_off() -> None:
+    from mavlink_bridge.fly.config import config_from_args
+
+    base = ["--scenario", str(STRIKE), "--pilot", "guidance"]
+    assert config_from_args(base).makes_key
+    assert not config_from_args([*base, "--no-signing"]).makes_key
+    assert not config_from_args([*base, "--no-signing"]).signing
+    connect = ["--connect", "udpout:127.0.0.1:1", "udpout:127.0.0.1:2", "udpout:127.0.0.1:3"]
+    assert not config_from_args([*base, *connect]).makes_key  # running vehicles: only --signing-key signs
+
+
 def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: strike\nvehicles: {decoy: {speed_min_m_s: fast}}\n")
@@ -351,6 +362,8 @@ def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.Capture
         ),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--signing-key", str(bad)], "signing key"),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--speedup", "2", "--lockstep"], "not allowed"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--no-signing", "--signing-key", str(STRIKE)], "signing"),
+        (["--scenario", str(REPO / "scenarios" / "signed.yaml"), "--pilot", "guidance", "--no-signing"], "signing"),
     ]
     empty = tmp_path / "models"
     empty.mkdir()

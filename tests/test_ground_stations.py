@@ -6,11 +6,14 @@ bounded; each test stops its clients and the SITL by itself.
 from __future__ import annotations
 
 import fcntl
+import importlib.util
+import math
 import os
 import select
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -21,9 +24,10 @@ from sim_vehicles.modes import FlightMode
 
 mavsdk = pytest.importorskip("mavsdk", minversion="4.0")
 from mavsdk import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.plugins.action import Action  # noqa: E402
-from mavsdk.plugins.mission_raw import MissionRaw  # noqa: E402
+from mavsdk.plugins.action import Action, ActionError  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionRaw, MissionRawResult  # noqa: E402
 from mavsdk.plugins.offboard import Offboard, VelocityBodyYawspeed  # noqa: E402
+from mavsdk.plugins.param import Param, ParamError, ParamResult  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode as SdkFlightMode  # noqa: E402
 from mavsdk.plugins.telemetry import Telemetry  # noqa: E402
 
@@ -168,6 +172,81 @@ def test_mavsdk_health_mission_offboard_yaw_rate_and_stop() -> None:
         f"simulated"
     )
     assert healthy_s < 5.0 and rate == pytest.approx(5.0, rel=0.05)
+
+
+def _example(name: str):
+    spec = importlib.util.spec_from_file_location(name, REPO / "examples" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.timeout(90)
+def test_the_readme_offboard_example_keeps_turning_past_mavsdks_3_s() -> None:
+    """examples/mavsdk_offboard_turn.py (the README's): 9 wall seconds at 5x, three times MAVSDK's 3 s stream;
+    the vehicle turns at 5 deg/s from start to end and never falls back to its setpoint-timeout hold."""
+    example = _example("mavsdk_offboard_turn")
+    with sitl(speedup=5.0) as s:
+        v = s.vehicle(2)
+        errors: list[BaseException] = []
+
+        def fly() -> None:
+            try:
+                example.turn(f"udpout://127.0.0.1:{s.ports[2]}", 9.0)
+            except BaseException as exc:
+                errors.append(exc)
+
+        thread = threading.Thread(target=fly, daemon=True)
+        thread.start()
+        samples: list[tuple[float, float, float]] = []  # (wall, simulated time, heading phi)
+        while thread.is_alive() and len(samples) < 2000:
+            if v.mode is FlightMode.GUIDED:
+                samples.append((time.monotonic(), s.runner.clock.sim_s, v.truth.phi_rad))
+            time.sleep(0.05)
+        thread.join(30.0)
+        assert not errors, errors
+        assert v.counters.failsafes == 0 and v.mode is FlightMode.LOITER
+        s.stop()
+    t_wall0 = samples[0][0]
+    late = [(t, phi) for w, t, phi in samples if w - t_wall0 > 4.0]  # after MAVSDK's own stream has ended
+    assert late[-1][0] - late[0][0] > 15.0, "too little simulated time after 4 wall seconds"
+    turned = sum(((a[1] - b[1] + math.pi) % (2 * math.pi)) - math.pi for a, b in zip(late, late[1:]))
+    rate_deg_s = math.degrees(turned) / (late[-1][0] - late[0][0])  # phi is CCW: a right turn lowers it
+    print(f"README example: {rate_deg_s:.3f} deg/s over {late[-1][0] - late[0][0]:.1f} s simulated after 4 s wall")
+    assert rate_deg_s == pytest.approx(5.0, rel=0.05)
+
+
+@pytest.mark.timeout(60)
+def test_mavsdk_clears_missions_hears_refusals_at_once_and_a_refused_goto_leaves_the_mode() -> None:
+    with sitl(speedup=5.0) as s:
+        sdk = _mavsdk_connect(f"udpout://127.0.0.1:{s.ports[0]}")
+        try:
+            system = sdk.first_autopilot(5.0)
+            assert system is not None
+            telemetry = Telemetry(system)
+            assert MissionRaw(system).clear_mission() == MissionRawResult.SUCCESS  # raised MissionRawError before
+            param = Param(system)
+            for name, value, code in (
+                ("FS_LONG_TIMEOUT", 1000.5, ParamResult.VALUE_OUT_OF_RANGE),
+                ("SIM_DT", 0.2, ParamResult.PERMISSION_DENIED),
+            ):
+                t0 = time.monotonic()
+                with pytest.raises(ParamError) as refused:
+                    param.set_param_float(name, value)
+                assert refused.value.result == code and time.monotonic() - t0 < 0.5
+            assert s.vehicle(0).param("FS_LONG_TIMEOUT") == 5.0
+            assert _wait(lambda: telemetry.battery().voltage_v > 0, 3.0), telemetry.battery()
+            battery = telemetry.battery()
+            assert battery.voltage_v == pytest.approx(12.6) and battery.remaining_percent == pytest.approx(100.0)
+            home = telemetry.home()
+            with pytest.raises(ActionError):
+                Action(system).goto_location(home.latitude_deg, home.longitude_deg, 1000.0, 0.0)
+            assert _wait(lambda: s.vehicle(0).mode is FlightMode.MANUAL, 2.0)  # GUIDED for the goto was undone
+            assert s.vehicle(0).counters.failsafes == 0
+        finally:
+            sdk.destroy()
+        s.stop()
 
 
 def _free_udp_port() -> int:

@@ -24,11 +24,12 @@ from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, s
 from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
 from mavlink_bridge.fly.missions import child_failure
+from mavlink_bridge.link import MavLink
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
 from sim_vehicles.link import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us
+from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, companion_link_id, now_10us
 from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
 
@@ -207,6 +208,71 @@ def test_client_table_is_bounded_and_the_first_client_keeps_its_service() -> Non
         s.stop()
 
 
+def test_verifiers_sharing_a_table_refuse_a_frame_another_one_accepted_once_its_stream_moved_on() -> None:
+    shared: dict[tuple[int, int, int], int] = {}
+    decoy, detect = SignatureVerifier(KEY, shared), SignatureVerifier(KEY, shared)
+    now = now_10us()
+    frames = [_signed(_heartbeat(), 255, 191, companion_link_id(1), KEY, now + i) for i in range(3)]
+    assert all(decoy.check(f) is Verdict.OK for f in frames)
+    assert detect.check(frames[0]) is Verdict.REPLAYED  # new at detect, but older than what decoy accepted
+    assert detect.check(frames[2]) is Verdict.OK  # the same frame at the same moment: a ground station's fan-out
+    assert SignatureVerifier(KEY).check(frames[0]) is Verdict.OK  # an unshared table knows nothing of decoy's
+
+
+def _spy_bytes(port: int, frames: list[bytes], duration_s: float = 2.0) -> int:
+    spy = _Raw(port)
+    try:
+        for frame in frames:
+            spy.send(frame)
+        return spy.received_bytes(duration_s)
+    finally:
+        spy.close()
+
+
+@pytest.mark.timeout(60)
+def test_replay_across_vehicles_gives_a_keyless_spy_nothing() -> None:
+    """Signed frames captured on their way to or from the decoy, sent to the detect UAV (or back to the decoy) a
+    few seconds later or at once: not a byte for the spy, and both companions keep their service."""
+    with sitl(speedup=5.0, signing_key=KEY) as s, UdpRelay(s.ports[0]) as relay:
+        links = [
+            MavLink(f"udpout:127.0.0.1:{relay.port}", signing_key=KEY, signing_link_id=companion_link_id(1)),
+            MavLink(f"udpout:127.0.0.1:{s.ports[1]}", signing_key=KEY, signing_link_id=companion_link_id(2)),
+        ]
+        try:
+
+            def talk(duration_s: float) -> None:
+                deadline = time.monotonic() + duration_s
+                while time.monotonic() < deadline:
+                    for link in links:
+                        link.send_heartbeat()
+                        while link.recv(0.0) is not None:
+                            pass
+                    time.sleep(0.1)
+
+            for link in links:
+                link.wait_heartbeat(5.0)
+            talk(0.5)
+            captured = [bytes(m.get_msgbuf()) for _, m in relay.to_vehicle if m.get_type() == "HEARTBEAT"]
+            talk(3.0)
+            assert _spy_bytes(s.ports[1], captured[:1]) == 0  # a few seconds later
+            links[0].send_heartbeat()
+            assert wait_until(lambda: relay.to_vehicle[-1][1].get_type() == "HEARTBEAT", 1.0)
+            newest = bytes(relay.to_vehicle[-1][1].get_msgbuf())
+            assert _spy_bytes(s.ports[1], [newest]) == 0  # at once, before the decoy's stream moves on
+            telemetry = [bytes(m.get_msgbuf()) for _, m in relay.to_companion[-20:]]
+            assert _spy_bytes(s.ports[0], telemetry) == 0  # the decoy's own frames reflected back to it
+            assert _spy_bytes(s.ports[1], telemetry) == 0  # ... or sent to another vehicle
+            for link in links:
+                assert link.arm().result == M.MAV_RESULT_ACCEPTED  # the genuine companions are not locked out
+            detect = s.vehicle(1).endpoint
+            assert detect.rx.wrong_link >= 2 and detect.rx.from_vehicles >= 1 and len(detect.peers) == 1
+            assert s.vehicle(0).endpoint.rx.from_vehicles >= 1 and len(s.vehicle(0).endpoint.peers) == 1
+        finally:
+            for link in links:
+                link.close()
+        s.stop()
+
+
 # ---------------------------------------------------------------------------- smaller faults
 
 
@@ -347,6 +413,38 @@ def test_companion_hears_only_its_vehicle_a_forged_mission_end_changes_nothing(t
             status = comp.status()
         s.stop()
     assert status["link"]["foreign_rx"] == 3
+
+
+@pytest.mark.timeout(180)
+def test_unsigned_companion_flies_on_through_a_mission_end_spoofed_from_the_vehicles_address(tmp_path: Path) -> None:
+    """Signing off, the forger sends from the vehicle's own address (the relay's port) with the vehicle's ids:
+    HIT, MSN_END and both texts, and even a POWEROFF heartbeat. The vehicle keeps reporting ACTIVE, so the
+    companion keeps flying it to its own end; and a genuine end (the vehicle's POWEROFF, then silence) ends it."""
+    scen_file = _scenario_file(tmp_path)
+    # Real time at 5x: 20 s of flight last 4 wall seconds, longer than the companion's 2 s POWEROFF confirmation.
+    with sitl(load(scen_file), setpoint_timeout_s=5.0, speedup=5.0) as s, UdpRelay(s.ports[0]) as relay:
+        v = s.vehicle(0)
+        with CompanionProcess(tmp_path, relay.port, scen_file, "--duration-s", "20") as comp:
+            _flying(v)
+            assert relay.companion is not None
+            forger = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+            forged = [
+                forger.named_value_int_encode(10_000_000, b"HIT", 1),
+                forger.named_value_int_encode(10_000_000, b"MSN_END", 1),
+                forger.statustext_encode(M.MAV_SEVERITY_NOTICE, b"Target hit"),
+                forger.statustext_encode(M.MAV_SEVERITY_NOTICE, b"Mission end: success"),
+                forger.heartbeat_encode(
+                    M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, M.MAV_STATE_POWEROFF
+                ),
+            ]
+            for msg in forged:
+                relay.down.sendto(bytes(msg.pack(forger)), relay.companion)
+            code, out = comp.wait(120)
+            assert code == 0 and "status=duration" in out, comp.log()
+            status = comp.status()
+        assert v.counters.failsafes == 0  # controlled throughout: no setpoint gap
+        s.stop()
+    assert status["counters"]["ends_refuted"] == 1 and status["vehicle_time_s"] >= 20.0
 
 
 @pytest.mark.timeout(180)

@@ -50,9 +50,26 @@ def test_a_truncated_resume_state_falls_back_one_epoch(two_epochs: Path, tmp_pat
     out = unfinished_copy(two_epochs, tmp_path / "cut", epochs=3)
     truncate(out / "resume" / "decoy.pt")
     assert run(main, ["--out", str(out), "--resume", "--no-progress"]) == 0
-    assert "decoy.pt: not readable" in caplog.text  # one line says what was passed over
+    passed_over = [r.getMessage() for r in caplog.records if "not readable" in r.getMessage()]
+    assert len(passed_over) == 1 and "decoy.pt: not readable" in passed_over[0]  # one line, once
     assert epochs(out) == [1, 2, 3]  # epoch 2 was trained again from epoch 1's state: one epoch lost
     Policy.load(out / "decoy.pt", "decoy")
+
+
+def test_both_resume_states_damaged_stop_with_one_line_and_exit_2(two_epochs: Path, tmp_path: Path, capsys):
+    """Never a silent restart from epoch 0: the run is left as it was, the user told what to remove."""
+    out = unfinished_copy(two_epochs, tmp_path / "both", epochs=3)
+    truncate(out / "resume" / "decoy.pt")
+    (out / "resume" / "decoy.prev.pt").write_bytes(b"garbage")
+    metrics = (out / "metrics.csv").read_text()
+    capsys.readouterr()
+    assert run(main, ["--out", str(out), "--resume", "--no-progress"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1, err
+    assert "no resume state of decoy loads (decoy.pt not readable" in err[0] and "decoy.prev.pt not readable" in err[0]
+    assert "to train decoy again from epoch 0" in err[0]
+    assert (out / "metrics.csv").read_text() == metrics and epochs(out) == [1, 2]
+    assert not (out / "decoy.pt").exists()
 
 
 def test_a_truncated_best_checkpoint_never_ships(two_epochs: Path, tmp_path: Path, caplog):

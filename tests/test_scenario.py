@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -196,3 +197,56 @@ def test_to_dict_is_plain_data(strike_path):
     data = to_dict(load(strike_path))
     yaml.safe_dump(data)  # raises on anything but plain data
     assert data["layout"]["radars"][0]["radius_km"] == 12.0
+
+
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16", "utf-16-le", "utf-16-be", "utf-32"])
+def test_a_scenario_saved_in_any_yaml_encoding_loads_the_same(strike_path, tmp_path, encoding):
+    text = Path(strike_path).read_text()
+    # utf-16 / utf-32 write their byte order mark; the -le / -be codecs do not, so give them one.
+    path = tmp_path / f"{encoding}.yaml"
+    path.write_bytes(("\ufeff" if encoding.endswith(("-le", "-be")) else "").encode(encoding) + text.encode(encoding))
+    assert load(path) == load(strike_path)
+
+
+def test_a_file_in_another_encoding_or_too_large_is_one_error_at_once(strike_path, tmp_path):
+    latin = tmp_path / "latin1.yaml"
+    latin.write_bytes(b"# caf\xe9\n" + Path(strike_path).read_bytes())
+    with pytest.raises(ScenarioError, match=r"latin1.yaml: not UTF-8 text \(byte 5\); save it as UTF-8"):
+        load(latin)
+    huge = tmp_path / "huge.yaml"
+    with huge.open("wb") as fh:  # 50 MB of one YAML scalar: PyYAML alone took more than 90 s over it
+        fh.write(b"a" * (50 << 20))
+    t0 = time.monotonic()
+    with pytest.raises(ScenarioError, match="file larger than 1024 KiB"):
+        load(huge)
+    assert time.monotonic() - t0 < 2.0
+
+
+def _hostile_files(strike_path: Path, tmp_path: Path) -> list[Path]:
+    latin = tmp_path / "latin1.yaml"
+    latin.write_bytes(b"# caf\xe9\n" + strike_path.read_bytes())
+    huge = tmp_path / "huge.yaml"
+    huge.write_bytes(b"a" * (2 << 20))
+    return [latin, huge]
+
+
+def test_every_command_reports_a_hostile_scenario_file_in_one_line_and_exits_2(strike_path, tmp_path, capsys):
+    from mavlink_bridge.fly.cli import main as fly
+    from tssac_core.cli import run
+    from tssac_core.evaluate import main as evaluate
+    from tssac_core.train.cli import main as train
+
+    for path in _hostile_files(Path(strike_path), tmp_path):
+        commands = {
+            "evaluate": lambda: run(evaluate, ["--scenario", str(path), "--episodes", "1"]),
+            "fly": lambda: fly(["--scenario", str(path), "--pilot", "guidance", "--no-progress"]),
+            "train": lambda: run(
+                train, ["--algo", "sac", "--seed", "0", "--out", str(tmp_path / "run"), "--scenario", str(path)]
+            ),
+        }
+        for name, command in commands.items():
+            capsys.readouterr()
+            assert command() == 2, name
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and path.name in err[0] and "Traceback" not in err[0], (name, err)
+        assert not (tmp_path / "run").exists()

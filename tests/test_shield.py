@@ -11,22 +11,23 @@ import pytest
 
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
-from tssac_core.deploy.shield import (
+from tssac_core.assurance.monitor import (
     Hazards,
     Limits,
     Memory,
     ShieldConfig,
     backup_clearance,
     circle_clearance,
+    companion_error,
+    companion_margin_m,
     constant_rollout,
     decide,
-    estimate_margin_m,
 )
-from tssac_core.deploy.shield_world import VehicleMonitor, WorldMonitor
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.scenario import Role, load, sample_layout
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import VehicleMonitor, WorldMonitor
 
 
 class SteerIntoRadar:
@@ -234,7 +235,8 @@ def test_head_on_at_a_radar_turns_in_time():
 
 def test_companion_monitor_margin_and_pending(random_path):
     """The companion's monitor: the same decisions as the batched world's under lockstep with an exact estimate;
-    off lockstep it flies the round trip's commands first and widens the margin by 3 sigma and the slack."""
+    off lockstep it flies the round trip's commands first (the hold before the first one was sent), and its
+    margin grows by the timing slack; its error bound by 3 sigma and, over a lossy link, a lost setpoint."""
     s = load(random_path)
     lay = sample_layout(s, np.random.default_rng(35))
     world = World(s, 1)
@@ -245,23 +247,34 @@ def test_companion_monitor_margin_and_pending(random_path):
     state = (world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0])
     for k in range(30):
         proposed = np.array([1.0 if k % 7 < 3 else -0.5, 0.3])
-        action, _ = lockstep.action(True, 10, proposed, state, 0.0)
+        action, _ = lockstep.action(True, 10, proposed, state, (0.0, 0.0, 0.0))
         lockstep.sent(action)
         d = reference.decide(*state, proposed, 10, cfg.margin_m)
         np.testing.assert_array_equal(action, d.action[0])
         xs, ys, vs, ps = constant_rollout(*(np.array([q]) for q in state), action[None], reference.limits, s.dt_s, 10)
         state = (xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1])
-    assert lockstep.pending_ticks() == 0 and not lockstep.slack  # a perfect link in lockstep: nothing in flight
+    assert lockstep.pending_ticks() == 0 and not lockstep.lossy  # a perfect link in lockstep: nothing in flight
     slow = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0))
     realtime = CompanionShield(world, Role.DECOY, slow, cfg, lockstep=False)
-    assert realtime.pending_ticks() == 4 and realtime.slack  # 2 x 0.2 s of 0.1 s ticks
+    assert realtime.pending_ticks() == 4 and realtime.lossy and realtime.off_lockstep  # 2 x 0.2 s of 0.1 s ticks
+    realtime.sent(np.array([1.0, 1.0]))
+    pending = realtime._pending()
+    assert pending is not None  # the hold flew before the first command: three holds, then the command sent
+    np.testing.assert_array_equal(pending, [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
     # Lockstep over a slow, lossy link (degraded.yaml): the link runs on simulated time, so the round trip is
     # in ticks as well, and a lost setpoint leaves the vehicle on the previous command.
     lossy = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0, packet_loss=0.1))
     degraded = CompanionShield(world, Role.DECOY, lossy, cfg, lockstep=True)
-    assert degraded.pending_ticks() == 4 and degraded.slack
-    assert estimate_margin_m(cfg, 5.0, 300.0, slack=True) == pytest.approx(100.0 + 15.0 + 150.0)
-    assert estimate_margin_m(cfg, 5.0, 300.0, slack=False) == pytest.approx(115.0)
+    assert degraded.pending_ticks() == 4 and degraded.lossy and not degraded.off_lockstep
+    assert companion_margin_m(cfg, 300.0, off_lockstep=True) == pytest.approx(100.0 + 150.0)
+    assert companion_margin_m(cfg, 300.0, off_lockstep=False) == pytest.approx(100.0)
+    lim = reference.limits
+    exact = companion_error(cfg, lim, 0.1, 5.0, 0.002, 0.5, lossy=False)
+    assert (exact.position_m[0], exact.heading_rad[0], exact.speed_m_s[0]) == pytest.approx((15.0, 0.006, 1.5))
+    with_loss = companion_error(cfg, lim, 0.1, 5.0, 0.002, 0.5, lossy=True)
+    w = math.radians(5.0)
+    assert with_loss.heading_rad[0] == pytest.approx(0.006 + 2 * w * 0.1)  # one tick of the opposite full turn
+    assert with_loss.speed_m_s[0] == pytest.approx(1.5 + 2 * 10.0 * 0.1)
 
 
 def test_filter_major_axis_sigma():

@@ -81,3 +81,63 @@ def test_straight_pilot_into_a_radar_is_kept_out_by_the_monitor(tmp_path: Path) 
     segments = record.backup_segments_km()
     assert set(segments) == {"decoy", "detect", "strike"} and all(len(s) >= 1 for s in segments.values())
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def nan_team(out: Path) -> Path:
+    """Actors with finite weights whose every action is NaN: the first layer saturates float32 (3e38), the second
+    overflows to inf, and the last adds +inf to -inf (the loader refuses non-finite weights, not such ones)."""
+    out.mkdir()
+    for role in ("decoy", "detect", "strike"):
+        with np.load(REPO / "models" / "tssac" / f"{role}.npz") as arrays:
+            poisoned = dict(arrays)
+        poisoned["w0"] = np.zeros_like(poisoned["w0"])
+        poisoned["b0"] = np.full_like(poisoned["b0"], 3e38)
+        poisoned["w1"] = np.full_like(poisoned["w1"], 10.0)
+        poisoned["b1"] = np.zeros_like(poisoned["b1"])
+        poisoned["w2"] = np.tile(np.array([1.0, -1.0], dtype=np.float32), poisoned["w2"].shape[1] // 2)[None].repeat(
+            poisoned["w2"].shape[0], axis=0
+        )
+        poisoned["b2"] = np.zeros_like(poisoned["b2"])
+        np.savez(out / f"{role}.npz", **poisoned)
+    return out
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+def test_a_nan_policy_is_flown_by_the_backup_over_sitl(tmp_path: Path) -> None:
+    """Every action of a NaN policy is a proposal that fails: the companion's monitor flies its backup (no hold
+    around it), on the strike mission whose straight line runs into a radar: no radar step, no UAV out."""
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "strike.yaml"), episode_steps=1500)
+    path = tmp_path / "strike.yaml"
+    dump(scenario, path)
+    out = tmp_path / "fly.json"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mavlink_bridge.fly",
+            "--scenario",
+            str(path),
+            "--models",
+            str(nan_team(tmp_path / "nan")),
+            "--shield",
+            "--lockstep",
+            "--json",
+            str(out),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        timeout=580,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    mission = results["missions"][0]
+    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
+    assert not any(mission["left_area"].values())
+    shield = results["shield"]
+    assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0
+    assert shield["backup_time_fraction"] > 0.99  # the policy never flies: the backup does, from the first decision
+    assert shield["interventions_per_uav_mission"] >= 1

@@ -255,6 +255,69 @@ def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
 # ------------------------------------------------------------------------------ commands
 
 
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.timeout(30)
+def test_a_listening_ground_station_on_out_gets_each_command_done_once_by_its_vehicle() -> None:
+    """pymavlink's udpin side (MAVProxy's ``--master=udpin:``) writes every frame to all three vehicles: only the
+    addressed one acts, and nothing is passed between vehicles (one ACK, one set of parameters)."""
+    port = _free_port()
+    gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190)
+    try:
+        with sitl(speedup=5.0, outputs=(("127.0.0.1", port),)) as s:
+            heard: set[int] = set()
+            deadline = time.monotonic() + 10.0
+            while (len(heard) < 3 or len(gcs.clients) < 3) and time.monotonic() < deadline:
+                m = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+                if m is not None:
+                    heard.add(m.get_srcSystem())
+            assert heard == {1, 2, 3} and len(gcs.clients) == 3
+            gcs.mav.command_long_send(2, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            gcs.mav.param_request_list_send(2, 1)
+            acks, values = [], []
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline:
+                m = gcs.recv_match(type=["COMMAND_ACK", "PARAM_VALUE"], blocking=True, timeout=0.1)
+                if m is not None:
+                    (acks if m.get_type() == "COMMAND_ACK" else values).append(m.get_srcSystem())
+            assert acks == [2] and values == [2] * len(s.vehicle(1).params)
+            assert s.vehicle(1).armed and not s.vehicle(0).armed and not s.vehicle(2).armed
+            assert s.vehicle(1).counters.commands == 1
+            assert s.vehicle(0).counters.not_for_us >= 2 and s.vehicle(2).counters.not_for_us >= 2
+            s.stop()
+    finally:
+        gcs.close()
+
+
+@pytest.mark.timeout(30)
+def test_each_client_sees_consecutive_sequence_numbers_on_a_lossless_link() -> None:
+    """Replies go to their requester only: with one sequence per destination, neither the requester nor the other
+    client sees a gap (MAVProxy counts gaps as loss), and frames leave in the order of their numbers."""
+    with sitl(speedup=5.0) as s, Client(s.ports[0]) as asking, Client(s.ports[0]) as watching:
+        asking.connect()
+        watching.connect()
+        for client in (asking, watching):
+            client.collect(0.3)
+        seqs: dict[str, list[int]] = {"asking": [], "watching": []}
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            asking.mav.command_long_send(
+                1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+            )
+            asking.mav.param_request_read_send(1, 1, b"SIM_DT", -1)
+            for name, client in (("asking", asking), ("watching", watching)):
+                seqs[name] += [m.get_seq() for m in client.collect(0.05) if m.get_srcSystem() == 1]
+        assert any(m.get_type() == "COMMAND_ACK" for m in asking.log)
+        for name, got in seqs.items():
+            gaps = [(a, b) for a, b in zip(got, got[1:]) if b != (a + 1) % 256]
+            assert len(got) > 100 and not gaps, (name, gaps[:5])
+        s.stop()
+
+
 @pytest.mark.timeout(30)
 def test_every_command_long_is_acknowledged() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[2]) as c:
@@ -368,6 +431,60 @@ def test_parameter_protocol() -> None:
             m.get_type() == "STATUSTEXT" and "read-only" in m.text for m in c.log
         )
         s.stop()
+
+
+@pytest.mark.timeout(30)
+def test_a_refused_param_set_is_answered_at_once_as_ardupilot_does() -> None:
+    """PARAM_ERROR first (MAVSDK ends its set with it), then the reason, complete, then the unchanged value."""
+    with sitl(speedup=5.0) as s, Client(s.ports[0]) as c:
+        c.connect()
+        replies = ("PARAM_ERROR", "STATUSTEXT", "PARAM_VALUE")
+        for name, value, error, text in (
+            ("FS_LONG_TIMEOUT", 1000.5, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "FS_LONG_TIMEOUT: 1000.5 not in 1..300"),
+            ("WP_LOITER_RAD", -3e38, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "WP_LOITER_RAD: -3e+38 not in 1..32767"),
+            ("SIM_DT", 0.2, M.MAV_PARAM_ERROR_PERMISSION_DENIED, "SIM_DT is read-only"),
+        ):
+            c.mav.param_set_send(1, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32)
+            got = []
+            while len(got) < 3 and (m := c.wait(lambda m: m.get_type() in replies, 1.0)) is not None:
+                got.append(m)
+            assert [m.get_type() for m in got] == list(replies), name
+            assert got[0].error == error and got[0].param_id == name and got[1].text == text
+            assert got[2].param_id == name and got[2].param_value == pytest.approx(s.vehicle(0).param(name))
+        c.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, M.MAV_PARAM_TYPE_REAL32)
+        err = c.wait_type("PARAM_ERROR", 1.0)
+        assert err is not None and err.error == M.MAV_PARAM_ERROR_DOES_NOT_EXIST and err.param_id == "NO_SUCH_PARAM"
+        s.stop()
+
+
+def test_every_refusal_text_is_complete_and_fits_one_statustext() -> None:
+    """Every text a refusal can make, over extreme values: at most 50 characters, so never cut."""
+    from sim_vehicles.commands import GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL
+    from sim_vehicles.modes import refusal
+    from sim_vehicles.params import vehicle_params
+    from sim_vehicles.setpoints import GLOBAL_REFUSAL, Refusal, parse_attitude_target, parse_position_target
+
+    texts = [GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL, GLOBAL_REFUSAL.text]
+    names = [p.name for p in vehicle_params(1, 1.0, 0.1, 5.0, 2.0, 200.0, 300.0)]
+    for name in names:
+        for value in (1000.5, -3.4028235e38, 3.4028235e38, math.nan, math.inf, -0.000123456789, 123456789.0, 0.1):
+            refused = vehicle_params(1, 1.0, 0.1, 5.0, 2.0, 200.0, 300.0).set(name, value)
+            texts += [refused.text] if refused is not None else []
+    texts += [refusal(m) for m in [*range(-1, 300), 2**31 - 1, 2**32 - 1]]
+    mav = mavlink2.MAVLink(None)
+    big = 3.4028235e38
+    for frame in range(256):
+        for mask in (0, 1087, 1479, 2503, 65535, 512 | 1087):
+            for v in (0.0, big, math.nan):
+                msg = mav.set_position_target_local_ned_encode(0, 1, 1, frame, mask, v, v, v, v, v, v, v, v, v, v, v)
+                texts += [r.text for r in [parse_position_target(msg)] if isinstance(r, Refusal)]
+    for mask in range(256):
+        for v in (2.0, math.nan, -1.0):
+            msg = mav.set_attitude_target_encode(0, 1, 1, mask, [1, 0, 0, 0], v, v, v, v)
+            texts += [r.text for r in [parse_attitude_target(msg)] if isinstance(r, Refusal)]
+    too_long = sorted({t for t in texts if len(t) > 50})
+    assert not too_long and len(set(texts)) > 50, too_long
+    assert "FS_LONG_TIMEOUT: 1000.5 not in 1..300" in texts and "FS_LONG_TIMEOUT: nan not in 1..300" in texts
 
 
 # --------------------------------------------------------------------------------- setpoints

@@ -6,6 +6,7 @@ Examples::
     python -m tssac_core.evaluate --models models/tssac --scenario scenarios/random.yaml --episodes 50 --json out.json
     python -m tssac_core.evaluate --models models/tssac --seed 770001 --mission 417     # one mission again, alone
     python -m tssac_core.evaluate --models models/tssac --episodes 1000 --seed 9 --shield --json shielded.json
+    python -m tssac_core.evaluate --controller at_radar --episodes 200 --seed 2100001 --shield  # an adversary
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
@@ -14,7 +15,7 @@ keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interv
 entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
 Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.missions), so
 ``--seed S --mission k`` flies any one of them again alone. ``--shield`` flies every UAV through the
-runtime-assurance monitor (:mod:`tssac_core.deploy.shield`, ``docs/runtime_assurance.md``) and adds its counts
+runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`, ``docs/runtime_assurance.md``) and adds its counts
 under ``shield``: interventions per UAV-mission and the fraction of flight time under the backup. Off by
 default: the learned policy is measured alone.
 """
@@ -28,9 +29,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.progress import MissionBar
+from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
 from tssac_core.sim.team import GUIDANCE, Pilot
@@ -41,8 +43,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--controller",
-        choices=[GUIDANCE],
-        help="fly every UAV with the rule-based guidance controller (default without --models)",
+        choices=[GUIDANCE, *ADVERSARY_NAMES],
+        help="fly every UAV with the rule-based guidance controller (default without --models), or with an "
+        "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     who.add_argument(
         "--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)"
@@ -96,8 +99,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return args
 
 
-def load_pilots(models: Path | None) -> list[Pilot]:
+def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[Pilot]:
+    """The team's pilots: the actors in ``models``, else the ``controller`` (guidance or an adversary) for every UAV."""
     if models is None:
+        if controller in ADVERSARY_NAMES:
+            return [AdversaryPilot(Adversary(controller))] * len(ROLES)
         return [GUIDANCE] * len(ROLES)
     from tssac_core.deploy.policy import load_team
 
@@ -119,7 +125,8 @@ def compare_shield(
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load(args.scenario)
-    pilots = load_pilots(args.models)
+    controller = args.controller or GUIDANCE
+    pilots = load_pilots(args.models, controller)
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     if args.workers > 1 or args.address is not None:
@@ -148,7 +155,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary = results.summary(scenario.cost_limit)
     summary.update(
         {
-            "controller": str(args.models) if args.models else GUIDANCE,
+            "controller": str(args.models) if args.models else controller,
             "scenario": str(args.scenario),
             "seed": args.seed,
             "cost_limit": scenario.cost_limit,

@@ -15,13 +15,13 @@ from collections.abc import Callable, Generator, Sequence
 
 import numpy as np
 
-from tssac_core.deploy.shield import ShieldConfig
-from tssac_core.deploy.shield_world import MonitorCounts
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.ray_cluster import RayTarget
 from tssac_core.ray_map import map_on_ray
 from tssac_core.sim.missions import MissionResults, iter_missions
 from tssac_core.sim.scenario import Scenario
 from tssac_core.sim.team import Pilot
+from tssac_core.sim.world_monitor import MonitorCounts
 
 PROGRESS_EVERY_S = 0.5
 """How often a shard reports the missions it finished."""

@@ -40,7 +40,8 @@ Exit statuses (one ``end ...`` line on stdout, ``--status-json`` for the details
 (``--duration-s`` of vehicle time flown), ``stopped`` (SIGINT / SIGTERM), all with exit code 0;
 ``lost`` / ``no_vehicle`` / ``refused`` exit 3; bad input exits 2 with one line.
 
-Modules: ``config`` (CompanionConfig and the constants) · ``pilots`` (a trained policy or the
-guidance controller) · ``status`` (counters, mission flags, the result) · ``machine`` (the state
-machine and its vehicle-clock pacing) · ``cli`` (``python -m mavlink_bridge.companion``).
+Modules: ``config`` (CompanionConfig and the constants) · ``pilots`` (a trained policy, the
+guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) ·
+``status`` (counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock
+pacing) · ``cli`` (``python -m mavlink_bridge.companion``).
 """

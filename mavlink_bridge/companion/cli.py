@@ -10,15 +10,18 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
-from mavlink_bridge.companion.config import EXIT_BAD_INPUT, GUIDANCE, STRAIGHT, CompanionConfig
+from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
 from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
-from tssac_core.deploy.shield import ShieldConfig
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
+
+if TYPE_CHECKING:
+    from mavlink_bridge.companion.machine import Companion
 
 _log = logging.getLogger("mavlink_bridge.companion")
 
@@ -48,8 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     who.add_argument(
         "--pilot",
-        choices=[GUIDANCE, STRAIGHT],
-        help="fly the rule-based guidance controller, or straight on (a test pilot that hits what lies ahead)",
+        choices=PILOT_NAMES,
+        help="fly the rule-based guidance controller, straight on (a test pilot that hits what lies ahead), or an "
+        "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     p.add_argument(
         "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
@@ -154,6 +158,14 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     )
 
 
+def build_companion(config: CompanionConfig) -> Companion:
+    """The companion with the pilot ``config`` names (the machine, pymavlink and the filter load here, after the
+    arguments are parsed: --help answers at once)."""
+    from mavlink_bridge.companion.machine import Companion
+
+    return Companion(config)
+
+
 def bad_input_errors() -> tuple[type[Exception], ...]:
     """Exceptions that mean bad input: one line and exit code 2."""
     from mavlink_bridge.link import LinkError
@@ -167,14 +179,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    # The machine (pymavlink, the filter: filterpy and scipy) after the arguments: --help answers at once.
-    from mavlink_bridge.companion.machine import Companion
-
     try:
         logging.basicConfig(
             level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
         )
-        companion = Companion(config_from_args(args))
+        companion = build_companion(config_from_args(args))
     except bad_input_errors() as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -7,8 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mavlink_bridge.filter_model import FilterModel
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
-from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15
@@ -16,9 +17,18 @@ GUIDED_MODE = 15
 GUIDANCE = "guidance"
 STRAIGHT = "straight"
 """A test pilot: heading and speed held (see :class:`mavlink_bridge.companion.pilots.StraightPilot`)."""
+PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
+"""``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 MIN_POS_SIGMA_M = 0.1
 MIN_VEL_SIGMA_M_S = 0.01
 """Floors for the filter's measurement noise: a noise-free SITL still quantises (cm, cm/s)."""
+
+END_GRACE_S = 0.5
+"""Wall seconds after a mission end is announced during which the vehicle's earlier heartbeats may still arrive."""
+END_SILENCE_S = 0.5
+"""A mission end is believed once the vehicle has then been silent this long (wall s): the SITL exits after it."""
+END_CONFIRM_S = 2.0
+"""... or once it has reported nothing but POWEROFF heartbeats for this long since the announcement (wall s)."""
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -67,7 +77,7 @@ class CompanionConfig:
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
     source_system: int = 255
     pilot: str = ""
-    """Without a model: ``guidance`` (the default) or ``straight``."""
+    """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
     """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion_shield`); None: the pilot alone."""
     lean_telemetry: bool = False
@@ -98,3 +108,5 @@ class CompanionConfig:
             raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
         if self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
+        if self.pilot and self.pilot not in PILOT_NAMES:
+            raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")

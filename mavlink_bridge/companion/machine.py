@@ -9,12 +9,20 @@ import enum
 import logging
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from mavlink_bridge.companion.config import GUIDED_MODE, MIN_POS_SIGMA_M, MIN_VEL_SIGMA_M_S, STRAIGHT, CompanionConfig
-from mavlink_bridge.companion.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
+from mavlink_bridge.companion.config import (
+    END_CONFIRM_S,
+    END_GRACE_S,
+    END_SILENCE_S,
+    GUIDED_MODE,
+    MIN_POS_SIGMA_M,
+    MIN_VEL_SIGMA_M_S,
+    CompanionConfig,
+)
+from mavlink_bridge.companion.pilots import Pilot, make_pilot
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
@@ -24,10 +32,12 @@ from mavlink_bridge.frames import (
     action_to_setpoint,
     from_global_position_int,
     from_local_position_ned,
+    setpoint_to_action,
 )
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
+from tssac_core.deploy.mavlink_signing import companion_link_id
 from tssac_core.sim.world import World
 
 _log = logging.getLogger("mavlink_bridge.companion")
@@ -50,6 +60,18 @@ class _Stop(Exception):
     """Internal: leave the loop."""
 
 
+@dataclass
+class _ClaimedEnd:
+    """A mission end heard from the vehicle's address, not yet confirmed by the vehicle's own heartbeats."""
+
+    status: str
+    message: str
+    since_s: float
+    """Wall time (time.monotonic()) it was heard."""
+    poweroff_since_s: float | None = None
+    """When the first POWEROFF heartbeat came after it."""
+
+
 class Companion:
     """One UAV's companion process (see the module docstring)."""
 
@@ -60,13 +82,7 @@ class Companion:
         self.role_index = config.role.index
         self.spec = s.vehicle(config.role)
         self.dt_ms = int(round(s.dt_s * 1000.0))
-        self.pilot: Pilot = (
-            PolicyPilot(config.model, config.role)
-            if config.model is not None
-            else StraightPilot()
-            if config.pilot == STRAIGHT
-            else GuidancePilot()
-        )
+        self.pilot: Pilot = make_pilot(config)
         self.world = World(s, 1)
         self.world.reset([0], [s.layout])
         self.shield = (
@@ -93,6 +109,7 @@ class Companion:
         self.phase = Phase.CONNECT
         self._stop_requested = False
         self._link: MavLink | None = None
+        self._claimed_end: _ClaimedEnd | None = None
         self._reset_vehicle_state()
         self._status: tuple[str, str] | None = None
 
@@ -112,6 +129,7 @@ class Companion:
         self.fix_rx_s = 0.0
         self.local_ms: int | None = None  # newest LOCAL_POSITION_NED
         self.last_control_ms: int | None = None
+        self._next_decision_step = 0  # the monitor's next decision tick
         self.fly_start_ms: int | None = None
         self.armed = False
         self.mode: int | None = None
@@ -127,7 +145,12 @@ class Companion:
         cfg = self.cfg
         try:
             self._link = MavLink(
-                cfg.connection, signing_key=cfg.signing_key, tlog_path=cfg.tlog, source_system=cfg.source_system
+                cfg.connection,
+                signing_key=cfg.signing_key,
+                # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
+                signing_link_id=companion_link_id(self.role_index + 1),
+                tlog_path=cfg.tlog,
+                source_system=cfg.source_system,
             )
         except LinkError as exc:
             raise UsageError(str(exc)) from None
@@ -178,6 +201,7 @@ class Companion:
                 msg = link.recv(0.0)
             now = time.monotonic()
             self._maybe_control(now)
+            self._check_end(now)
             self._check_silence(now)
             if now >= self._next_heartbeat_s:
                 link.send_heartbeat()
@@ -287,12 +311,17 @@ class Companion:
         )
         self.counters.restarts += 1
         self._reset_vehicle_state()
+        if self.shield is not None:
+            self.shield.reset()
         if self.phase in (Phase.FLY, Phase.PAUSED):
             self.phase = Phase.ENGAGE
         self._say(M.MAV_SEVERITY_WARNING, f"{role}: vehicle restart seen, re-engaging")
 
     def _on_heartbeat(self, msg: Message, rx_s: float) -> None:
-        if not self._link or not self._link.is_vehicle_heartbeat(msg) or rx_s < self._state_valid_after_s:
+        if not self._link or not self._link.is_vehicle_heartbeat(msg):
+            return
+        self._check_claimed_end(int(msg.system_status), rx_s)
+        if rx_s < self._state_valid_after_s:
             return
         self.armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         self.mode = int(msg.custom_mode)
@@ -345,9 +374,9 @@ class Companion:
         if self.flags.set(name, value, stamp_ms):
             _log.info("%s: %s = %d at %.1f s", self.cfg.role.value, name, value, stamp_ms / 1000.0)
         if name == "HIT" and value == 1:
-            raise _Stop("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
+            self._claim_end("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
         if name == "MSN_END" and value in END_STATUS:
-            raise _Stop(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
+            self._claim_end(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
 
     def _on_statustext(self, text: str) -> None:
         _log.info("%s: vehicle says: %s", self.cfg.role.value, text)
@@ -360,13 +389,54 @@ class Companion:
         elif text == "Target identified":
             self.flags.set("IDENT", 1, stamp)
         elif text == "Target hit":
-            raise _Stop("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
+            self._claim_end("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
         elif text.startswith("Mission end: "):
             what = text[len("Mission end: ") :]
             status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(
                 what, what.replace(" ", "_")
             )
-            raise _Stop(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
+            self._claim_end(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
+
+    # ----------------------------------------------------------------------- mission end
+
+    def _claim_end(self, status: str, message: str) -> None:
+        """A mission end from the vehicle's address: flown on until the vehicle's own telemetry confirms it.
+
+        Without signing anyone who can spoof the vehicle's address can send HIT or MSN_END. The vehicle itself,
+        once its mission has ended, reports POWEROFF in every HEARTBEAT and falls silent when it exits; while it
+        still reports any other state, the end is not its own and the companion keeps its vehicle under control.
+        """
+        if self._claimed_end is None:
+            _log.info("%s: %s: waiting for the vehicle to confirm it", self.cfg.role.value, message)
+            self._claimed_end = _ClaimedEnd(status, message, time.monotonic())
+
+    def _check_claimed_end(self, system_status: int, rx_s: float) -> None:
+        """A vehicle heartbeat read at ``rx_s`` confirms a claimed end (POWEROFF) or, after the grace, refutes it."""
+        claim = self._claimed_end
+        if claim is None or rx_s < claim.since_s:
+            return
+        if system_status == M.MAV_STATE_POWEROFF:
+            if claim.poweroff_since_s is None:
+                claim.poweroff_since_s = rx_s
+        elif rx_s - claim.since_s > END_GRACE_S:
+            _log.warning(
+                "%s: ignoring '%s': the vehicle still reports state %d, not a mission end",
+                self.cfg.role.value,
+                claim.message,
+                system_status,
+            )
+            self.counters.ends_refuted += 1
+            self._claimed_end = None
+
+    def _check_end(self, now: float) -> None:
+        """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it."""
+        claim = self._claimed_end
+        if claim is None:
+            return
+        silent = now - max(self.last_rx_s, claim.since_s) >= END_SILENCE_S
+        powered_off = claim.poweroff_since_s is not None and now - claim.since_s >= END_CONFIRM_S
+        if silent or powered_off:
+            raise _Stop(claim.status, claim.message)
 
     # --------------------------------------------------------------------------- control
 
@@ -431,21 +501,31 @@ class Companion:
             self._hold_reason(why)
         link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2)
         self.counters.setpoints_sent += 1
+        if self.shield is not None:
+            self.shield.sent(np.array(setpoint_to_action(setpoint, self.spec)))
         if trigger_rx_s is not None:
             self.latencies_s.append(time.monotonic() - trigger_rx_s)
         if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
             raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
 
     def _decide(self, t_ms: int) -> tuple[Setpoint, str | None]:
-        """The setpoint for vehicle time t_ms, and why it is the hold (None if it is not)."""
+        """The setpoint for vehicle time t_ms, and what is amiss (None if nothing is).
+
+        Without the monitor, what is amiss is flown as the hold setpoint. With it, every tick after the first fix
+        goes through the monitor: a non-finite action, or no action at all in a telemetry gap, is a proposal that
+        never passes, so the remembered backup flies (as in the batched world)."""
         if not self.filter.initialised:
             return HOLD, "no position fix yet"
         t_s = t_ms / 1000.0
         self.filter.predict_to(t_s)
+        step = int(t_ms // self.dt_ms)
         gap_s = t_s - self.filter.last_measurement_t_s
         if gap_s > self.cfg.hold_after_s:
             self._gap_seen = True
-            return HOLD, f"telemetry gap {gap_s:.1f} s"
+            gap = f"telemetry gap {gap_s:.1f} s"
+            if self.shield is None:
+                return HOLD, gap
+            return self._shielded(np.full(2, np.nan), step), gap
         f = self.filter
         x_m, y_m = f.pos_m
         self.world.mirror(
@@ -458,40 +538,51 @@ class Companion:
             bool(self.flags.get("RADAR_ON")),
             bool(self.flags.get("IDENT")),
         )
-        step = t_ms // self.dt_ms
-        action = self.pilot.action(self.world, self.role_index, int(step))
+        action = self.pilot.action(self.world, self.role_index, step)
+        why: str | None = None
         if action.shape != (2,) or not np.all(np.isfinite(action)):
             self.counters.nonfinite_actions += 1
-            self.pilot.reset()
-            return HOLD, "non-finite action"
+            why = "non-finite action"
+            if self.shield is None:
+                self.pilot.reset()
+                return HOLD, why
+            action = np.full(2, np.nan)
         self._gap_seen = False
         if self.shield is not None:
-            action = self._shielded(action, x_m, y_m)
+            return self._shielded(action, step), why
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec), None
 
-    def _shielded(self, proposed: np.ndarray, x_m: float, y_m: float) -> np.ndarray:
-        """The monitor's choice at the pilot's decisions (held between them); a STATUSTEXT at each hand-over."""
+    def _shielded(self, proposed: np.ndarray, step: int) -> Setpoint:
+        """The monitor's choice at each decision tick (held between them); a STATUSTEXT at each hand-over.
+
+        Decision ticks are the pilot's grid, ticks 0, k, 2k, ... of the vehicle's clock (k = the pilot's
+        ``repeat``; a tick skipped by a slow companion moves the decision to the next tick seen), whether or not
+        the pilot was asked this tick."""
         assert self.shield is not None
         f = self.filter
+        decision = step >= self._next_decision_step
+        if decision:
+            self._next_decision_step = (step // self.pilot.repeat + 1) * self.pilot.repeat
+        x_m, y_m = f.pos_m
         state = (x_m, y_m, f.speed_m_s, f.heading_rad)
         action, text = self.shield.action(
-            self.pilot.decided, self.pilot.repeat, proposed, state, f.position_sigma_major_m
+            decision, self.pilot.repeat, proposed, state, (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
         )
         if text is not None:
             _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
             self._say(M.MAV_SEVERITY_NOTICE, text)
-        self.shield.sent(action)
-        return action
+        return action_to_setpoint((float(action[0]), float(action[1])), self.spec)
 
     def _hold_reason(self, why: str) -> None:
+        """Count and say (once per spell) what is amiss: the hold flies without the monitor, its backup with it."""
         self.counters.holds += 1
         kind = why.split(" ")[0]
         if self._holding is None or self._holding.split(" ")[0] != kind:
             self.counters.hold_episodes += 1
-            if self.shield is not None:
-                self.shield.reset()  # the hold breaks the monitor's chain of predictions: it starts afresh
-            _log.warning("%s: %s: sending the hold setpoint (no turn, no acceleration)", self.cfg.role.value, why)
-            self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, holding")
+            flown = "sending the hold setpoint" if self.shield is None else "the monitor's backup flies"
+            _log.warning("%s: %s: %s", self.cfg.role.value, why, flown)
+            said = "holding" if self.shield is None else "backup"
+            self._say(M.MAV_SEVERITY_WARNING, f"{self.cfg.role.value}: {why}, {said}")
         self._holding = why
 
     def _check_silence(self, now: float) -> None:
@@ -506,7 +597,10 @@ class Companion:
             self._hold_reason(f"link silent {silent_s:.1f} s")
             link = self._link
             assert link is not None
-            link.send_setpoint(self.vt_ms or 0, HOLD.yaw_rate_rad_s, HOLD.accel_m_s2)
+            # With the monitor the vehicle is sent again the command the monitor chose for this tick (a new one
+            # could start nowhere the monitor checked); without it, the hold.
+            sp = HOLD if self.shield is None else action_to_setpoint(tuple(self.shield.held), self.spec)
+            link.send_setpoint(self.vt_ms or 0, sp.yaw_rate_rad_s, sp.accel_m_s2)
             self.counters.setpoints_sent += 1
 
     def _say(self, severity: int, text: str) -> None:

@@ -1,5 +1,7 @@
-"""Who flies the UAV: a trained role policy (`PolicyPilot`), the guidance controller (`GuidancePilot`), or
-`StraightPilot` (holds heading and speed: a test pilot that flies into whatever lies ahead).
+"""Who flies the UAV: a trained role policy (`PolicyPilot`), the guidance controller (`GuidancePilot`),
+`StraightPilot` (holds heading and speed: a test pilot that flies into whatever lies ahead), or an
+`AdversarialPilot` (:mod:`tssac_core.sim.adversaries`: a test pilot built to break the runtime-assurance
+monitor, the very function the batched world flies). `make_pilot` picks one from a `CompanionConfig`.
 
 Every pilot says how many ticks its actions hold (``repeat``) and whether its last action was a new
 decision (``decided``): the runtime-assurance monitor decides at the pilot's decisions."""
@@ -11,8 +13,9 @@ from typing import Protocol
 
 import numpy as np
 
-from mavlink_bridge.companion.config import GUIDANCE, STRAIGHT
+from mavlink_bridge.companion.config import GUIDANCE, STRAIGHT, CompanionConfig
 from tssac_core.deploy.numpy_actor import load_actor
+from tssac_core.sim.adversaries import ADVERSARY_NAMES, DECISION_STEPS, Adversary, adversary_actions, situation
 from tssac_core.sim.guidance import Guidance
 from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.routes import RouteMap
@@ -67,6 +70,34 @@ class StraightPilot:
         return np.zeros(2)
 
 
+class AdversarialPilot:
+    """An adversary (:func:`tssac_core.sim.adversaries.adversary_actions`) on the companion's one-world mirror of
+    its vehicle; it decides at ticks 0, 10, 20, ... of the vehicle's clock, as in the batched world, and holds
+    its action in between. The ``nan`` adversary's action is NaN: the companion's failsafe decides what flies."""
+
+    repeat = DECISION_STEPS
+
+    def __init__(self, adversary: Adversary) -> None:
+        self.adversary = adversary
+        self.name = adversary.value
+        self.decided = True
+        self._held: np.ndarray | None = None
+        self._next_decision = 0
+
+    def reset(self) -> None:
+        self._held = None
+        self._next_decision = 0
+
+    def action(self, world: World, role_index: int, step: int) -> np.ndarray:
+        self.decided = self._held is None or step >= self._next_decision
+        if self.decided:
+            actions = adversary_actions(self.adversary, situation(world, steps=step))
+            self._held = np.asarray(actions[0, role_index], dtype=np.float64)
+            self._next_decision = (step // self.repeat + 1) * self.repeat
+        assert self._held is not None
+        return self._held
+
+
 class PolicyPilot:
     """A trained role policy; each action is held for ``action_repeat`` ticks, as in training."""
 
@@ -94,3 +125,14 @@ class PolicyPilot:
             self._next_decision = (step // self.repeat + 1) * self.repeat
         assert self._held is not None
         return self._held
+
+
+def make_pilot(config: CompanionConfig) -> Pilot:
+    """The pilot a configuration names: its model, else ``--pilot`` (guidance by default)."""
+    if config.model is not None:
+        return PolicyPilot(config.model, config.role)
+    if config.pilot == STRAIGHT:
+        return StraightPilot()
+    if config.pilot in ADVERSARY_NAMES:
+        return AdversarialPilot(Adversary(config.pilot))
+    return GuidancePilot()

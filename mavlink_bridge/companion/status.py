@@ -25,6 +25,8 @@ class CompanionCounters:
     pauses: int = 0
     skipped_ticks: int = 0
     """Vehicle ticks that passed without a control step (the companion fell behind)."""
+    ends_refuted: int = 0
+    """Mission ends (HIT, MSN_END, their texts) that the vehicle's own heartbeats contradicted: ignored."""
 
 
 @dataclass

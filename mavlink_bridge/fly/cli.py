@@ -71,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
             work = Path(tmp.name)
         made_key: Path | None = None
-        if cfg.signing_key_path is None and cfg.scenario.link.signing:
+        if cfg.makes_key:
             made_key = make_signing_key(work)
             cfg = dataclasses.replace(cfg, signing_key_path=made_key)
         with tqdm(

@@ -13,9 +13,11 @@ from typing import NoReturn
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.cli import UsageError
+from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.errors import CheckpointError
 from tssac_core.mission_animation import AnimationFormatError, check_target
+from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
 PROG = "python -m mavlink_bridge.fly"
@@ -24,6 +26,8 @@ DEFAULT_MODELS = REPO / "models" / "tssac"
 GUIDANCE = "guidance"
 STRAIGHT = "straight"
 """A test pilot: every UAV holds heading and speed (``mavlink_bridge.companion --pilot straight``)."""
+PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
+"""``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,7 @@ class FlyConfig:
     tlog_dir: Path | None
     plot_path: Path | None
     signing_key_path: Path | None
+    """The key file of the run (the user's ``--signing-key``, or the one fly makes); None: unsigned."""
     connect: tuple[str, str, str] | None
     logs_dir: Path | None
     mission_timeout_s: float
@@ -47,11 +52,19 @@ class FlyConfig:
     progress: bool
     lean_telemetry: bool = False
     pilot: str = GUIDANCE
-    """Without models: ``guidance`` or ``straight``."""
+    """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
     mission: int | None = None
     """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
+    signing: bool = True
+    """Sign every frame: with a key fly makes for the run when ``--signing-key`` gives none and fly starts the world
+    (``--no-signing`` turns it off; with ``--connect`` only ``--signing-key`` signs)."""
+
+    @property
+    def makes_key(self) -> bool:
+        """fly makes a fresh key for this run: signing on, no key given, a world of its own."""
+        return self.signing and self.signing_key_path is None and self.connect is None
 
     def indices(self) -> range:
         """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1."""
@@ -94,8 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     who.add_argument(
         "--pilot",
-        choices=[GUIDANCE, STRAIGHT],
-        help="fly every UAV with the rule-based guidance controller, or straight on (a test pilot)",
+        choices=PILOT_NAMES,
+        help="fly every UAV with the rule-based guidance controller, straight on (a test pilot), or an adversary "
+        "built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     p.add_argument(
         "--shield",
@@ -151,6 +165,11 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         metavar="FILE",
         help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions",
+    )
+    p.add_argument(
+        "--no-signing",
+        action="store_true",
+        help="fly unsigned (default: every frame signed with a key made for the run, or --signing-key's)",
     )
     p.add_argument(
         "--connect",
@@ -223,6 +242,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         check_models(models)
     if a.signing_key is not None:
         read_signing_key(a.signing_key)
+        if a.no_signing:
+            raise UsageError("--no-signing and --signing-key contradict each other: give one")
+    if a.no_signing and scenario.link.signing:
+        raise UsageError(f"{a.scenario}: the scenario asks for signing (link.signing: true): leave out --no-signing")
     connect: tuple[str, str, str] | None = None
     if a.connect is not None:
         for text in a.connect:
@@ -269,6 +292,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         lean_telemetry=a.lean_telemetry,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
+        signing=not a.no_signing,
         workers=a.workers,
         ray_address=a.address,
     )
@@ -284,10 +308,15 @@ def make_signing_key(directory: Path) -> Path:
 
 
 def check_models(models: Path) -> None:
-    """The three roles' actors load (CheckpointError otherwise), with a hint when they are missing."""
+    """The directory's manifest matches its files and the three roles' actors load (UsageError otherwise, one line),
+    with a hint when they are missing."""
     hint = "fly with --pilot guidance, or train with python -m tssac_core.train --out DIR and pass --models DIR"
     if not models.is_dir():
         raise UsageError(f"{models}: models directory not found ({hint})")
+    try:
+        check_manifest(models, [])  # first: a changed file is refused before any of them is read
+    except CheckpointError as exc:
+        raise UsageError(str(exc)) from None
     try:
         for role in ROLES:
             load_actor(pilot_file(models, role), role)

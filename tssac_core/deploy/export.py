@@ -2,9 +2,10 @@
 
 ``python -m tssac_core.deploy.export DIR_OR_PT [...]`` writes the actor of every role checkpoint named
 (a models directory: every ``<role>.pt`` in it) as ``<role>.npz`` beside it (the format:
-:mod:`tssac_core.deploy.numpy_actor`). Training does this itself; the command is for directories trained
-before the export existed. torch is imported by the functions that read checkpoints, not by the module, so
-``--help`` answers without it.
+:mod:`tssac_core.deploy.numpy_actor`), and records both files in the directory's ``SHA256SUMS``
+(:mod:`tssac_core.deploy.manifest`; checked first: a changed file is refused, not exported). Training does this
+itself; the command is for directories trained before the export existed. torch is imported by the functions that
+read checkpoints, not by the module, so ``--help`` answers without it.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.deploy.manifest import check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import FORMAT, FORMAT_VERSION, NumpyPolicy, sha256_file
 from tssac_core.errors import CheckpointError
 from tssac_core.files import replace_durably
@@ -57,12 +59,15 @@ def compact_checkpoint(path: str | Path) -> tuple[int, int]:
 
     p = Path(path)
     before = p.stat().st_size if p.is_file() else 0
+    check_models(p.parent, [p.name], every_entry=False)  # never rewrite (and so re-record) a changed file
     data = read_checkpoint(p)
     checkpoint_info(data, p)  # refuse to rewrite a checkpoint whose metadata is damaged
     if data.get("learner") is not None:
         torch_save_atomic({**data, "learner": None}, p)
-        if p.with_suffix(".npz").is_file():  # same actor, new file: the export records the file's digest
+        npz = p.with_suffix(".npz")
+        if npz.is_file():  # same actor, new file: the export records the file's digest
             export_actor(p)
+        record(p.parent, [p.name] + ([npz.name] if npz.is_file() else []))
     return before, p.stat().st_size
 
 
@@ -91,8 +96,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "targets", nargs="+", metavar="DIR_OR_PT", help="a models directory (every <role>.pt in it) or .pt files"
     )
     args = p.parse_args(argv)
-    for pt in export_paths(args.targets):
+    pts = export_paths(args.targets)
+    # The checkpoints it reads, before anything is written: a changed one is refused, not exported and recorded.
+    unchecked = [check_models(pt.parent, [pt.name], every_entry=False) for pt in pts]
+    for pt, note in zip(pts, unchecked):
         out = export_actor(pt)
+        warn_once(note)
+        record(pt.parent, [pt.name, out.name])
         policy = NumpyPolicy.load(out)
         shape = "->".join(str(n) for n in [policy.obs_dim, *policy.meta["hidden_sizes"], 2 * policy.act_dim])
         print(f"wrote {out} ({policy.role.value}, actor {shape}, {out.stat().st_size / 1024:.0f} KB)")

@@ -18,6 +18,13 @@ constant). This module uses the wall clock for that (``time.time()``), and the s
 outgoing timestamps at or above the wall clock (:func:`refresh_outgoing_timestamp`), so a stream that
 has been sending for hours is still "new-stream fresh" for a client that joins late.
 
+Receivers that share a key and a process (the three vehicles of one SITL) share one table of the newest
+timestamp accepted per stream by any of them (``shared``): a stream new to one receiver is fresh only if it
+is not older than what another receiver has already accepted on it, so a frame captured on its way to one
+vehicle and sent to another after the stream has moved on is a replay. A frame replayed to the second
+vehicle *before* the stream moves on would still pass that check; what binds a companion's frames to its
+vehicle is its link id (:func:`companion_link_id`), which the other vehicles refuse.
+
 Pure standard library (hashlib, hmac, struct): tssac_core imports no pymavlink, and both sides, which
 never import each other, share this one implementation.
 """
@@ -33,12 +40,15 @@ from dataclasses import dataclass
 from typing import Protocol
 
 __all__ = [
+    "COMPANION_LINK_BASE",
     "KEY_LEN",
     "NEW_STREAM_MAX_AGE_10US",
     "SIGNATURE_BLOCK_LEN",
     "SignatureVerifier",
     "SigningCounters",
+    "StreamKey",
     "Verdict",
+    "companion_link_id",
     "is_signed",
     "now_10us",
     "refresh_outgoing_timestamp",
@@ -51,6 +61,8 @@ SIGNATURE_BLOCK_LEN = 13
 NEW_STREAM_MAX_AGE_10US = 6000 * 1000
 """A stream's first frame may be this far behind our clock: one minute (MAVLink's rule)."""
 EPOCH_2015_UNIX_S = 1420070400
+COMPANION_LINK_BASE = 200
+"""Link ids from here on name a companion's vehicle: the companion of system N signs on link id 200 + N."""
 _MAGIC_V2 = 0xFD
 _IFLAG_SIGNED = 0x01
 _HEADER_LEN_V2 = 10
@@ -89,6 +101,13 @@ class _SigningState(Protocol):
     timestamp: int
 
 
+def companion_link_id(vehicle_sysid: int) -> int:
+    """The link id the companion of vehicle ``vehicle_sysid`` (1..55) signs on; every other vehicle refuses it."""
+    if not 1 <= vehicle_sysid <= 255 - COMPANION_LINK_BASE:
+        raise ValueError(f"companion link ids exist for vehicle system ids 1..{255 - COMPANION_LINK_BASE}")
+    return COMPANION_LINK_BASE + vehicle_sysid
+
+
 def refresh_outgoing_timestamp(signing: _SigningState) -> None:
     """Keep a pymavlink ``MAVLinkSigning.timestamp`` at or above the wall clock before packing a frame.
 
@@ -118,12 +137,14 @@ class SignatureVerifier:
     (at most 256 link ids x 255 x 255 ids, each an int: no bound is needed against outsiders).
     """
 
-    def __init__(self, key: bytes) -> None:
+    def __init__(self, key: bytes, shared: dict[StreamKey, int] | None = None) -> None:
         if len(key) != KEY_LEN:
             raise ValueError(f"signing key must be {KEY_LEN} bytes, got {len(key)}")
         self._key = bytes(key)
         self.streams: dict[StreamKey, int] = {}
         """Newest verified timestamp per stream."""
+        self.shared = shared
+        """Newest timestamp per stream accepted by any verifier given the same dict (module docstring)."""
         self.counters = SigningCounters()
 
     def signature_ok(self, frame: bytes | bytearray) -> bool:
@@ -143,11 +164,21 @@ class SignatureVerifier:
             return Verdict.BAD_SIGNATURE
         # Only now, with the signature verified, is the timestamp worth anything.
         stream, stamp = signature_stream(frame)
-        last = self.streams.get(stream)
-        fresh = stamp > last if last is not None else stamp + NEW_STREAM_MAX_AGE_10US >= now_10us(now_unix_s)
-        if not fresh:
+        if not self._fresh(stream, stamp, now_unix_s):
             self.counters.replayed += 1
             return Verdict.REPLAYED
         self.streams[stream] = stamp
+        if self.shared is not None:
+            self.shared[stream] = max(self.shared.get(stream, 0), stamp)
         self.counters.ok += 1
         return Verdict.OK
+
+    def _fresh(self, stream: StreamKey, stamp: int, now_unix_s: float | None) -> bool:
+        """Newer than the stream's last frame here; for a stream new here, at most a minute old and not older
+        than the newest frame of the stream that a verifier sharing the table has accepted."""
+        last = self.streams.get(stream)
+        if last is not None:
+            return stamp > last
+        if self.shared is not None and stamp < self.shared.get(stream, 0):
+            return False
+        return stamp + NEW_STREAM_MAX_AGE_10US >= now_10us(now_unix_s)

@@ -33,6 +33,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import Role
@@ -169,12 +170,17 @@ def pilot_file(models: str | Path, role: Role) -> Path:
 
 
 def load_actor(path: str | Path, role: Role | str | None = None) -> Actor:
-    """A deterministic role policy from ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch)."""
+    """A deterministic role policy from ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch), after the
+    manifest of its directory is checked (tssac_core.deploy.manifest: CheckpointError for a changed file)."""
+    unchecked = check_model_file(Path(path))
     if Path(path).suffix == ".npz":
-        return NumpyPolicy.load(path, role)
-    from tssac_core.deploy.policy import Policy
+        actor: Actor = NumpyPolicy.load(path, role)
+    else:
+        from tssac_core.deploy.policy import Policy
 
-    return Policy.load(path, role)
+        actor = Policy.load(path, role)
+    warn_once(unchecked)
+    return actor
 
 
 def load_policy(path: str | Path, role: Role | str | None = None) -> Actor:

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
+from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.errors import CheckpointError
 from tssac_core.files import replace_durably
 from tssac_core.sim.observation import ObservationMode
@@ -198,9 +199,12 @@ class Policy:
 
 
 def load_team(models: str | Path, deterministic: bool = True) -> tuple[Policy, Policy, Policy]:
-    """The three role policies from a directory holding decoy.pt, detect.pt and strike.pt."""
+    """The three role policies from a directory holding decoy.pt, detect.pt and strike.pt, after its manifest is
+    checked (tssac_core.deploy.manifest: CheckpointError for a changed or missing file)."""
     d = Path(models)
     if not d.is_dir():
         raise CheckpointError(f"{d}: models directory not found")
+    unchecked = check_models(d, [f"{role.value}.pt" for role in ROLES])
     decoy, detect, strike = (Policy.load(d / f"{role.value}.pt", role, deterministic) for role in ROLES)
+    warn_once(unchecked)
     return decoy, detect, strike

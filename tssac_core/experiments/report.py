@@ -36,8 +36,9 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import write_json
-from tssac_core.deploy.shield import ShieldConfig
+from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
@@ -120,6 +121,8 @@ def eval_specs(grid: Grid) -> list[EvalSpec]:
 def team_digest(team: Path) -> str:
     """A hash of what the three role checkpoints fly with (actor weights, observation mode, decision
     interval): a cached evaluation belongs to exactly these pilots, also after ``--compact``."""
+    # A cached evaluation is never of a changed file.
+    warn_once(check_models(team, [f"{role.value}.pt" for role in ROLES]))
     h = hashlib.sha256()
     for role in ROLES:
         path = team / f"{role.value}.pt"

@@ -62,15 +62,16 @@ class LayoutSource:
         """One world and its route map, reused to measure candidate layouts."""
 
     def draw(self, rng: np.random.Generator) -> Layout:
-        """One episode's layout. With ``hard.fraction == 0`` (or a fixed layout) exactly ``sample_layout``:
-        the same draws from ``rng``, so runs without hard layouts are unchanged."""
+        """One episode's layout. With ``hard.fraction == 0`` (or a fixed layout) exactly ``sample_layout``'s
+        training draw (unprotected starts kept): the same draws from ``rng``, so runs without hard layouts are
+        unchanged."""
         if self.hard.fraction == 0.0 or self.scenario.random is None:
-            return sample_layout(self.scenario, rng)
+            return sample_layout(self.scenario, rng, protected_starts=False)
         if rng.random() >= self.hard.fraction:
-            return sample_layout(self.scenario, rng)
+            return sample_layout(self.scenario, rng, protected_starts=False)
         hardest, hardest_km = None, -np.inf
         for _ in range(self.hard.max_draws):
-            layout = sample_layout(self.scenario, rng)
+            layout = sample_layout(self.scenario, rng, protected_starts=False)
             detour_km = float(self._start_detours_km(layout).max())
             if detour_km >= self.hard.detour_km:
                 return layout

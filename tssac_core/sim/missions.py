@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from tssac_core.deploy.shield import ShieldConfig
-from tssac_core.deploy.shield_world import MonitorCounts, WorldMonitor
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
+from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
 from tssac_core.stats import (
     bootstrap_mean_interval,
     cvar,
@@ -124,6 +124,15 @@ def monitor_summary(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.nda
     }
 
 
+def hold_nonfinite(actions: np.ndarray) -> np.ndarray:
+    """The actions (N, 3, 2) with every UAV whose action is not finite given the hold [0, 0] (no turn, no
+    acceleration), as a companion computer's failsafe does (``mavlink_bridge.companion``). Without it a NaN
+    action (a policy with NaN weights, the ``nan`` adversary) would make the UAV's state NaN, which no radar
+    and no edge ever counts. With the monitor on, the monitor has already put its backup there."""
+    finite = np.isfinite(actions).all(axis=-1, keepdims=True)
+    return actions if finite.all() else np.where(finite, actions, 0.0)
+
+
 def fly_missions(
     scenario: Scenario,
     pilots: Sequence[Pilot],
@@ -142,8 +151,8 @@ def fly_missions(
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
     number of missions that finished since the last call, ``on_step`` after every step of the batch with the
-    missions that flew it and those still flying (:class:`tssac_core.progress.WorkBound`). ``shield``: fly every
-    UAV through the runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) with these margins.
+    missions that flew it and those still flying (:class:`tssac_core.progress.TimeLeft`). ``shield``: fly every
+    UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
     """
     missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step)
     try:
@@ -199,6 +208,7 @@ def iter_missions(
             actions = monitor.actions(world, actions)
             if record:
                 backup_track.append(monitor.engaged & moving)
+        actions = hold_nonfinite(actions)
         result = world.step(actions)
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area

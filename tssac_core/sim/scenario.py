@@ -30,6 +30,7 @@ from typing import Any, cast
 import numpy as np
 import yaml
 
+from tssac_core.assurance.monitor import EstimateError, Hazards, Limits, ShieldConfig, handover_error, start_excess_m
 from tssac_core.sim.yaml_file import read_yaml
 
 
@@ -544,11 +545,14 @@ def _validate_random(s: Scenario, rnd: RandomLayout, source: str) -> None:
 GRID_KM = 1.0
 
 
-def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, str] | None:
+def infeasibility(
+    s: Scenario, lay: Layout, clearance_km: float, protected_starts: bool = True
+) -> tuple[str, str] | None:
     """Why a layout is unusable, as (field, problem), or None if it is feasible.
 
-    Checks: no start inside a radar (plus ``clearance_km``), and every role's zone reachable from its
-    start through radar-free cells of the area (radars inflated by ``clearance_km``).
+    Checks: no start inside a radar (plus ``clearance_km``), every start one the runtime-assurance monitor
+    protects (:func:`unprotected_start`), and every role's zone reachable from its start through radar-free
+    cells of the area (radars inflated by ``clearance_km``).
     """
     r = s.ranges
     for name, start in lay.starts.items():
@@ -559,6 +563,9 @@ def infeasibility(s: Scenario, lay: Layout, clearance_km: float) -> tuple[str, s
                     f"layout.starts.{name}",
                     f"starts inside (or within {clearance_km} km of) radar {i} ({d:.1f} km from its centre)",
                 )
+    unprotected = unprotected_start(s, lay) if protected_starts else None
+    if unprotected is not None:
+        return unprotected
     n = int(round(s.area_km / GRID_KM))
     centres = (np.arange(n) + 0.5) * GRID_KM
     gx, gy = np.meshgrid(centres, centres, indexing="ij")
@@ -624,8 +631,81 @@ def _fill_runs(reach: np.ndarray, run_ids: np.ndarray, passable: np.ndarray) -> 
     return touched[run_ids] & passable
 
 
-def sample_layout(s: Scenario, rng: np.random.Generator, max_tries: int = 1000) -> Layout:
-    """Draw one feasible layout from ``s.random`` (the fixed layout if the scenario has one)."""
+SENSOR_SIGMA_FLOOR = (0.1, 0.01)
+"""The least position (m) and velocity (m/s) sigma a companion's Kalman filter assumes, whatever the scenario says."""
+START_DECISION_STEPS = 10
+"""The decision interval the start check assumes (the backups' leads are whole seconds: the same for every pilot)."""
+
+
+def start_error(s: Scenario, speed_m_s: np.ndarray) -> EstimateError:
+    """The monitor's error bound at a companion's first decision, from the scenario's sensors: ``sigma_k`` times
+    the GPS's position sigma, its velocity sigma (speed) and that over the speed (heading), the Kalman filter's
+    covariance when it starts from one fix; and over a lossy link one setpoint lost at the first command."""
+    cfg = ShieldConfig()
+    pos = max(s.link.gps_position_sigma_m, SENSOR_SIGMA_FLOOR[0])
+    vel = max(s.link.gps_velocity_sigma_m_s, SENSOR_SIGMA_FLOOR[1])
+    k = cfg.sigma_k
+    sensors = EstimateError(np.full(3, k * pos), k * vel / np.maximum(speed_m_s, 1.0), np.full(3, k * vel))
+    return sensors + handover_error(_limits(s), s.dt_s, cfg.handover_ticks if s.link.packet_loss > 0 else 0)
+
+
+def _limits(s: Scenario) -> Limits:
+    specs = [s.vehicle(role) for role in ROLES]
+    return Limits(
+        np.array([v.speed_min_m_s for v in specs]),
+        np.array([v.speed_max_m_s for v in specs]),
+        np.radians([v.turn_rate_max_deg_s for v in specs]),
+        np.array([v.accel_max_m_s2 for v in specs]),
+    )
+
+
+def unprotected_start(s: Scenario, lay: Layout) -> tuple[str, str] | None:
+    """The first UAV whose start the runtime-assurance monitor cannot protect, as (field, problem), or None.
+
+    The monitor's guarantee (docs/runtime_assurance.md) covers every state from which one of its backups keeps the
+    margin for ever; the start is the one state it does not choose, so a layout is admitted only if every start is
+    such a state, in both places the monitor runs: the batched world (the true state, margin
+    :attr:`ShieldConfig.margin_m`) and a companion in lockstep (the same margin less the error bound of
+    :func:`start_error`, after the link's round trip of the hold). The default :class:`ShieldConfig` is assumed."""
+    cfg = ShieldConfig()
+    specs = [s.vehicle(role) for role in ROLES]
+    state = np.array(
+        [
+            [*(c * 1000.0 for c in lay.starts[role.value].position_km), spec.speed_init_m_s, 0.0]
+            for role, spec in zip(ROLES, specs, strict=True)
+        ]
+    )
+    state[:, 3] = np.radians([lay.starts[role.value].heading_deg for role in ROLES])
+    k = len(lay.radars)
+    centres = np.array([r.position_km for r in lay.radars], dtype=np.float64).reshape(1, k, 2) * 1000.0
+    radii = np.array([r.radius_km for r in lay.radars], dtype=np.float64).reshape(1, k) * 1000.0
+    hz = Hazards(np.repeat(centres, 3, axis=0), np.repeat(radii, 3, axis=0), s.area_km * 1000.0)
+    lim = _limits(s)
+    batched = start_excess_m(state, hz, lim, s.dt_s, START_DECISION_STEPS, cfg, cfg.margin_m)
+    hold = round(2.0 * s.link.latency_ms / 1000.0 / s.dt_s)
+    error = start_error(s, state[:, 2])
+    companion = start_excess_m(
+        state, hz, lim, s.dt_s, START_DECISION_STEPS, cfg, cfg.margin_m, hold_steps=hold, error=error
+    )
+    for role, excess in zip(ROLES, np.minimum(batched, companion), strict=True):
+        if excess < 0:
+            return (
+                f"layout.starts.{role.value}",
+                f"the runtime-assurance monitor cannot protect this start: its best backup lacks {-excess:.0f} m "
+                "of clearance from the radars and the area's edges",
+            )
+    return None
+
+
+def sample_layout(
+    s: Scenario, rng: np.random.Generator, max_tries: int = 1000, protected_starts: bool = True
+) -> Layout:
+    """Draw one feasible layout from ``s.random`` (the fixed layout if the scenario has one).
+
+    A draw with a start the runtime-assurance monitor cannot protect (:func:`unprotected_start`) is drawn again,
+    so every mission flown or evaluated starts where the monitor's guarantee holds. ``protected_starts=False``
+    (training and its validation, where no monitor flies) keeps the draws a recipe has always had, so that a run
+    trains again bit for bit; such a start is about one layout in 4,000 of ``scenarios/random.yaml``."""
     if s.random is None:
         assert s.layout is not None
         return s.layout
@@ -653,6 +733,6 @@ def sample_layout(s: Scenario, rng: np.random.Generator, max_tries: int = 1000) 
             starts[role.value] = Start(p, rng.uniform(*rnd.start_heading_deg))
         layout = Layout(sam, target, tuple(radars), starts)
         inside = all(0 <= c <= s.area_km for c in (*sam, *target))
-        if inside and infeasibility(s, layout, rnd.clearance_km) is None:
+        if inside and infeasibility(s, layout, rnd.clearance_km, protected_starts) is None:
             return layout
     raise RuntimeError(f"no feasible layout in {max_tries} draws: the random ranges leave no way to the zones")

@@ -6,6 +6,8 @@ A *pilot* is one of:
   ``observation_mode`` (an :class:`ObservationMode`, as trained policies do), it gets observations in
   that mode, else in the mode of whoever asks; if it has ``action_repeat`` = k > 1, each of its
   actions is held for k world steps (the decision interval it was trained with);
+- an :class:`~tssac_core.sim.adversaries.AdversaryPilot`: a test pilot built to break the runtime-assurance
+  monitor, which reads the world's state itself and decides every ``action_repeat`` steps;
 - ``None``: the UAV is parked (inactive): it does not move and no task or cost of it counts.
 """
 
@@ -15,6 +17,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from tssac_core.sim.adversaries import AdversaryPilot
 from tssac_core.sim.guidance import Guidance
 from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.routes import RouteMap
@@ -22,18 +25,23 @@ from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import World
 
 GUIDANCE = "guidance"
-Pilot = str | Callable[[np.ndarray], np.ndarray] | None
+Pilot = str | Callable[[np.ndarray], np.ndarray] | AdversaryPilot | None
 
 
 def check_pilot(pilot: Pilot, role_name: str) -> None:
-    if pilot is None or callable(pilot) or pilot == GUIDANCE:
+    if pilot is None or callable(pilot) or isinstance(pilot, AdversaryPilot) or pilot == GUIDANCE:
         return
-    raise ValueError(f"pilot for {role_name} must be 'guidance', None or a callable obs -> action, got {pilot!r}")
+    raise ValueError(
+        f"pilot for {role_name} must be 'guidance', None or a callable obs -> action (or an AdversaryPilot), "
+        f"got {pilot!r}"
+    )
 
 
 def decision_interval(pilot: Pilot) -> int:
     """World steps between a pilot's decisions: its ``action_repeat`` (1 for the guidance controller)."""
-    return max(1, int(getattr(pilot, "action_repeat", 1))) if callable(pilot) else 1
+    if callable(pilot) or isinstance(pilot, AdversaryPilot):
+        return max(1, int(getattr(pilot, "action_repeat", 1)))
+    return 1
 
 
 class Team:
@@ -62,6 +70,11 @@ class Team:
                 if guided is None:
                     guided = self.guidance.actions(world)
                 actions[:, j] = guided[:, j]
+            elif isinstance(pilot, AdversaryPilot):
+                due = world.steps % pilot.action_repeat == 0
+                if due.any():
+                    self._held[:, j] = np.where(due[:, None], pilot.actions(world, j), self._held[:, j])
+                actions[:, j] = self._held[:, j]
             elif callable(pilot):
                 mode = getattr(pilot, "observation_mode", self.default_mode)
                 repeat = decision_interval(pilot)

@@ -15,6 +15,7 @@ import numpy as np
 
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.deploy.export import export_actor
+from tssac_core.deploy.manifest import record
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import RoleTask, TaskStep
@@ -115,7 +116,8 @@ def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
 
 def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: Callable[[Path], None]) -> None:
     """Write ``<role>.pt``: the best validated epoch's checkpoint (without validation, the last epoch's),
-    and its actor as ``<role>.npz`` (tssac_core.deploy.numpy_actor)."""
+    and its actor as ``<role>.npz`` (tssac_core.deploy.numpy_actor), then record both in the run's ``SHA256SUMS``
+    (tssac_core.deploy.manifest)."""
     final = out / f"{role.value}.pt"
     try:
         best = selector.finish(final, write_checkpoint)
@@ -124,7 +126,8 @@ def ship_role(out: Path, role: Role, selector: EpochSelector, write_checkpoint: 
         write_checkpoint(final)
         best = None
     read_checkpoint(final)  # what ships loads (CheckpointError otherwise: one line, and the role is not finished)
-    export_actor(final)  # <role>.npz: what the companion flies, without torch
+    npz = export_actor(final)  # <role>.npz: what the companion flies, without torch
+    record(out, [final.name, npz.name])  # last: until the manifest lists them, a resume ships the role again
     if best is not None:
         logger.info(
             "%s: shipping epoch %d (validation: mission success %.2f, cost %.2f)",

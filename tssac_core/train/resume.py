@@ -8,7 +8,9 @@ unfinished episodes' lengths and the recent episodes' costs of the on-policy one
 Written atomically and durably: to a temporary file, fsynced, the previous state kept as
 ``resume/<role>.prev.pt``, renamed into place, the directory fsynced. Read with a check: a state that does
 not load (truncated by a crash or a full disk) is passed over, with one line, for the previous one, so a
-resume loses at most one more epoch and never stops with a traceback. Files written by earlier versions
+resume loses at most one more epoch and never stops with a traceback. When a role has resume states and
+none of them loads, the resume stops with one line (:class:`ResumeStateError`, exit 2): it never trains
+the role again from epoch 0 behind the user's back. Files written by earlier versions
 (one format per learner family, no ``format`` key) are read too (`from_legacy`).
 """
 
@@ -25,6 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from tssac_core.cli import UsageError
 from tssac_core.deploy.policy import torch_save_atomic
 from tssac_core.sim.scenario import Role
 
@@ -33,6 +36,10 @@ logger = logging.getLogger("tssac_core.train")
 FORMAT = "tssac-resume"
 FORMAT_VERSION = 2
 """Version 1 is the two formats of before (off-policy and on-policy), read by `from_legacy`."""
+
+
+class ResumeStateError(UsageError):
+    """A role has resume states but none loads; ``str()`` is one line."""
 
 
 @dataclass(frozen=True)
@@ -91,16 +98,29 @@ def load_state_file(path: Path) -> ResumeState:
         raise ValueError(f"no {exc.args[0]!r} in it") from None
 
 
-def read_resume_state(out: Path, role: Role | str) -> ResumeState | None:
-    """The newest resume state of ``role`` that loads: ``<role>.pt``, else (one line) ``<role>.prev.pt``; None if
-    neither does (the role starts over)."""
+def read_resume_state(out: Path, role: Role | str, warn: bool = True) -> ResumeState | None:
+    """The newest resume state of ``role`` that loads: ``<role>.pt``, else (one line, if ``warn``)
+    ``<role>.prev.pt``; None if the role has neither (it starts from epoch 0). Raises ResumeStateError when
+    there are states and none loads."""
+    damaged: list[tuple[Path, str]] = []
     for path in (state_path(out, role), previous_path(out, role)):
         if not path.is_file():
             continue
         try:
-            return load_state_file(path)
+            state = load_state_file(path)
         except ValueError as exc:
-            logger.warning("%s: %s; passing over it", path, exc)
+            damaged.append((path, str(exc)))
+            continue
+        for bad, reason in damaged if warn else []:
+            logger.warning("%s: %s; resuming from %s", bad, reason, path.name)
+        return state
+    if damaged:
+        name = Role(role).value
+        reasons = "; ".join(f"{path.name} {reason}" for path, reason in damaged)
+        raise ResumeStateError(
+            f"--resume: no resume state of {name} loads ({reasons}): remove {state_path(out, role).parent}/{name}*.pt "
+            f"to train {name} again from epoch 0"
+        )
     return None
 
 

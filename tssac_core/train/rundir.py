@@ -1,7 +1,8 @@
 """A run directory: ``config.json``, ``metrics.csv``, the role checkpoints, the plots, and ``resume/``.
 
 Output in ``--out``: ``config.json``, ``metrics.csv`` (one row per role and epoch), one checkpoint per role
-(``decoy.pt``, ``detect.pt``, ``strike.pt``) and its exported actor (``<role>.npz``),
+(``decoy.pt``, ``detect.pt``, ``strike.pt``) and its exported actor (``<role>.npz``), ``SHA256SUMS`` (the
+SHA-256 of config.json and each finished role's two files, updated as each role ships: tssac_core.deploy.manifest),
 ``fig7_return_cost.png`` and ``fig8_multiplier.png``, and ``resume/`` (the last completed epoch: learner,
 replay buffer, worlds and random states), from which ``--resume`` continues, losing at most the epoch that
 was running.
@@ -21,6 +22,7 @@ import torch
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.cli import UsageError, write_json
+from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
 from tssac_core.deploy.numpy_actor import NumpyPolicy
 from tssac_core.deploy.policy import (
     CheckpointInfo,
@@ -133,9 +135,10 @@ def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:
 
 
 def shipped(out: Path, role: Role | str) -> bool:
-    """``role`` is finished: its ``<role>.pt`` loads as a role checkpoint, and its ``<role>.npz`` export too if there
-    is one. A file that exists but does not load is reported (one line) and the role is trained again (from its
-    resume state)."""
+    """``role`` is finished: its ``<role>.pt`` loads as a role checkpoint, its ``<role>.npz`` export too if there
+    is one, and the run's manifest (if it has one) lists both as they are. A file that exists but does not load or
+    match is reported (one line) and the role is trained again (from its resume state): a kill between writing the
+    files and recording them lands here."""
     name = Role(role).value
     pt, npz = out / f"{name}.pt", out / f"{name}.npz"
     if not pt.is_file():
@@ -144,17 +147,39 @@ def shipped(out: Path, role: Role | str) -> bool:
         checkpoint_info(read_checkpoint(pt), pt)
         if npz.is_file():
             NumpyPolicy.load(npz)
+        check_recorded(out, [p.name for p in (pt, npz) if p.is_file()])
     except CheckpointError as exc:
         logger.warning("%s; training %s again from its resume state", exc, name)
         return False
     return True
 
 
+def record_run(cfg: TrainConfig, out: Path) -> None:
+    """Record ``config.json`` in the run's manifest (the file this run goes by); a run begun before manifests
+    existed also gets its finished roles' files, so that its manifest lists everything its loaders read."""
+    names = [CONFIG]
+    if read_manifest(out) is None:
+        finished = [role for role in cfg.roles if shipped(out, role)]
+        names += [name for role in finished for name in (f"{role}.pt", f"{role}.npz") if (out / name).is_file()]
+    record(out, names)
+
+
+def check_inputs(cfg: TrainConfig, out: Path) -> None:
+    """The model files this run reads from elsewhere (``teammates``, ``init_from``) match their manifests
+    (CheckpointError, one line, before any work otherwise)."""
+    paths = {role_checkpoint(cfg, out, earlier) for role in map(Role, cfg.roles) for earlier in ROLES[: role.index]}
+    paths = {p for p in paths if p.parent != out and p.is_file()}
+    if cfg.init_from:
+        paths.add(Path(cfg.init_from))
+    for path in sorted(paths):
+        warn_once(check_model_file(path))
+
+
 def completed_epochs(out: Path, role: str) -> int:
     """Epochs of ``role`` that a resume can skip: all if it shipped (`shipped`), else the resume state's."""
     if shipped(out, role):
         return -1
-    state = read_resume_state(out, role)
+    state = read_resume_state(out, role, warn=False)  # the training loop warns once when it reads it
     return state.epoch if state is not None else 0
 
 
@@ -184,9 +209,11 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
             path = role_checkpoint(cfg, out, earlier)
             if earlier.value not in cfg.roles and not path.is_file():
                 raise UsageError(f"training {role.value} needs {path} (train {earlier.value} first)")
+    check_inputs(cfg, out)
     out.mkdir(parents=True, exist_ok=True)
     if not resume:
         write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+    record_run(cfg, out)
     keep = set()
     for role_name in cfg.roles:
         done = completed_epochs(out, role_name)

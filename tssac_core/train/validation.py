@@ -154,7 +154,7 @@ class EpochSelector:
         self.within_limit, self.tail = within_limit, tail
         self.seed = seed
         rng = np.random.default_rng([seed, role.index, SEED_TAG])
-        self.layouts = [sample_layout(scenario, rng) for _ in range(episodes)]
+        self.layouts = [sample_layout(scenario, rng, protected_starts=False) for _ in range(episodes)]
         self.pilots: list[Pilot] = [teammates.get(r.value) if r.index < role.index else GUIDANCE for r in ROLES]
         self.out = out
         self.candidate = out / "resume" / f"{role.value}-last.pt"
@@ -216,7 +216,9 @@ class EpochSelector:
         """Fly every candidate on the final selection missions; the best by the tail key on those. Writes
         ``selection-<role>.json`` with both figures of every candidate."""
         rng = np.random.default_rng([self.seed, self.role.index, SEED_TAG, FINAL_TAG])
-        layouts = [sample_layout(self.scenario, rng) for _ in range(self.episodes * TAIL_FINAL_FACTOR)]
+        layouts = [
+            sample_layout(self.scenario, rng, protected_starts=False) for _ in range(self.episodes * TAIL_FINAL_FACTOR)
+        ]
         finals = [self._fly(self._epoch_path(s.epoch), layouts, s.epoch) for s in self.top]
         best = max(finals, key=Score.tail_key)
         record = {

@@ -1,4 +1,4 @@
-"""The runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) driven over a batched :class:`World`.
+"""The runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) driven over a batched :class:`World`.
 
 Each vehicle is decided for at its pilot's decisions (every ``action_repeat`` world steps, every step for
 the guidance controller), with the world's exact state: no estimate error, no latency. Between decisions
@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.deploy.shield import (
+from tssac_core.assurance.monitor import (
     Decision,
+    EstimateError,
     Hazards,
     Limits,
     Memory,
@@ -146,6 +147,7 @@ class VehicleMonitor:
         steps: int,
         margin_m: float,
         pending: np.ndarray | None = None,
+        error: EstimateError | None = None,
     ) -> Decision:
         """One decision: the action to fly for the next ``steps`` steps and whether the backup flies."""
         state = np.array([[x_m, y_m, v_m_s, phi_rad]])
@@ -161,6 +163,7 @@ class VehicleMonitor:
             margin_m,
             self.cfg,
             queue,
+            error,
         )
         self.memory = d.memory
         return d

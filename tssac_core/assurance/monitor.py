@@ -54,8 +54,8 @@ class ShieldConfig:
     """The monitor's margins and hysteresis."""
 
     margin_m: float = 100.0
-    """Clearance every accepted path and backup keeps from a radar's disk and from the area's edges (what
-    covers the estimate's error comes on top of it, see :func:`estimate_margin_m`)."""
+    """Clearance every accepted path and backup keeps from a radar's disk and from the area's edges (the bound
+    on the estimate's error comes on top of it, per backup: :class:`EstimateError`)."""
     release_margin_m: float = 1000.0
     """Extra clearance the policy's action needs, while the backup flies, to get control back."""
     release_decisions: int = 3
@@ -70,8 +70,12 @@ class ShieldConfig:
     """Also the backups that brake to v_min while they turn (their 1.72 km final circle fits where the
     3.44 km one at top speed does not; False: constant-speed turns only, cheaper to check)."""
     timing_slack_s: float = 0.5
-    """Companion off lockstep, or in lockstep over a lossy link: the margin grows by v_max times this
-    (commands that arrive late or are lost on the link: the vehicle flies the previous one meanwhile)."""
+    """Companion off lockstep: the margin grows by v_max times this (a companion that falls behind the
+    vehicle's clock on a loaded machine: the vehicle flies the previous command meanwhile)."""
+    handover_ticks: int = 1
+    """Companion over a lossy link or off lockstep: setpoints in a row that may be lost or late when the command
+    changes (the vehicle flies the previous one that long); the error bound covers this many (see
+    :func:`handover_error`)."""
 
     def __post_init__(self) -> None:
         for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s"):
@@ -82,6 +86,8 @@ class ShieldConfig:
             raise ValueError(f"ShieldConfig.straight_leads_s must be times >= 0, got {self.straight_leads_s}")
         if self.release_decisions < 1:
             raise ValueError(f"ShieldConfig.release_decisions must be >= 1, got {self.release_decisions}")
+        if self.handover_ticks < 0:
+            raise ValueError(f"ShieldConfig.handover_ticks must be >= 0, got {self.handover_ticks}")
 
 
 @dataclass(frozen=True)
@@ -146,6 +152,37 @@ class Memory:
         out.engaged[idx], out.protected[idx], out.backup[idx] = part.engaged, part.protected, part.backup
         out.lead_left[idx], out.passes[idx] = part.lead_left, part.passes
         return out
+
+
+@dataclass(frozen=True)
+class EstimateError:
+    """Bounds on how far the state the monitor decides from may be off the vehicle's true state, (M,) arrays.
+
+    The batched world decides from the true state (all zero). A companion decides from its Kalman filter's
+    estimate: ``sigma_k`` standard deviations of position (the covariance's major axis), heading and speed
+    (:func:`companion_error`), plus what a setpoint lost or late at a hand-over does (:func:`handover_error`).
+    :func:`backup_error_m` turns them into metres of clearance, per backup.
+    """
+
+    position_m: np.ndarray
+    heading_rad: np.ndarray
+    speed_m_s: np.ndarray
+
+    @staticmethod
+    def zero(m: int) -> EstimateError:
+        return EstimateError(np.zeros(m), np.zeros(m), np.zeros(m))
+
+    def __add__(self, other: EstimateError) -> EstimateError:
+        return EstimateError(
+            self.position_m + other.position_m, self.heading_rad + other.heading_rad, self.speed_m_s + other.speed_m_s
+        )
+
+    def after(self, seconds: float, lim: Limits) -> EstimateError:
+        """The same bounds after flying ``seconds`` of known commands from the estimate: a heading error turns the
+        path (at most v_max d_phi metres per second), a speed error stretches it (d_v per second); the heading and
+        speed errors stay (the commands are rates and accelerations, the same on both paths)."""
+        drift = (self.heading_rad * lim.speed_max_m_s + self.speed_m_s) * seconds
+        return EstimateError(self.position_m + drift, self.heading_rad, self.speed_m_s)
 
 
 @dataclass(frozen=True)
@@ -337,15 +374,49 @@ def backup_clearance(
     return out.reshape(m, n_leads * N_TURNS)
 
 
-def choose_backup(clearance: np.ndarray, margin_m: np.ndarray) -> np.ndarray:
-    """Which backup to remember, (M,): among those clear of the margin the shortest lead, at constant speed
-    before braking, then the clearest; when none is clear, the clearest of all."""
-    n_cand = clearance.shape[1]
+def choose_backup(excess: np.ndarray) -> np.ndarray:
+    """Which backup to remember, (M,), from each backup's excess over what it must keep (clearance less the
+    margin and the error bound, (M, C)): among those with excess >= 0 the shortest lead, at constant speed
+    before braking, then the clearest; when none has, the clearest of all."""
+    n_cand = excess.shape[1]
     lead_i, turn_j = np.divmod(np.arange(n_cand), N_TURNS)
     rank = lead_i * 2 + (TURNS[turn_j, 1] != 0)  # lower is preferred
-    clear = clearance >= margin_m[:, None]
-    key = np.where(clear, rank * 1e7 - np.minimum(clearance, 1e6), np.inf)
-    return np.where(clear.any(axis=1), np.argmin(key, axis=1), np.argmax(clearance, axis=1))
+    clear = excess >= 0
+    key = np.where(clear, rank * 1e7 - np.minimum(excess, 1e6), np.inf)
+    return np.where(clear.any(axis=1), np.argmin(key, axis=1), np.argmax(excess, axis=1))
+
+
+def backup_error_m(err: EstimateError, lim: Limits, dt_s: float, leads: np.ndarray) -> np.ndarray:
+    """How much of each backup's clearance the state's error can take away, (M, L * N_TURNS), in metres.
+
+    A backup is open loop (a fixed sequence of commands in time), so flown from a state off by (d_p, d_phi, d_v)
+    its whole path is the predicted one moved by d_p, turned about its start by d_phi, and flown at a speed off
+    by at most d_v until the speed reaches a bound. With T the lead's time, w = omega_max, a = a_max:
+
+    * constant speed (a lead of v T, then the circle of radius r = v / w, r <= v_max / w): the lead's segment moves
+      by at most d_p + v_max T d_phi + T d_v; the circle's centre (at most v T + r from the start) by
+      d_p + (v_max T + v_max / w) d_phi + (T + 1 / w) d_v, and its radius by d_v / w;
+    * braking (the speed falls at a from v to v_min within t_b = (v_max - v_min) / a, while turning; then the
+      circle of radius v_min / w): every point lies within v_max (T + t_b) + v_min / w of the start, and two speeds
+      d_v apart fly at most d_v (T + t_b) apart before both reach v_min.
+
+    The clearance of a moved path is at least the clearance of the predicted one less the largest move, which
+    is what this returns per backup (candidate lead * N_TURNS + turn, as :func:`backup_clearance`).
+    """
+    t = leads.astype(np.float64) * dt_s  # (L,)
+    w, vmax = lim.turn_rate_max_rad_s[:, None], lim.speed_max_m_s[:, None]
+    t_brake = ((lim.speed_max_m_s - lim.speed_min_m_s) / lim.accel_max_m_s2)[:, None]
+    r_min = (lim.speed_min_m_s / lim.turn_rate_max_rad_s)[:, None]
+    lever_const = vmax * t[None, :] + vmax / w  # (M, L) metres of path per radian of heading error
+    time_const = t[None, :] + 2.0 / w  # metres per m/s of speed error (centre and radius)
+    lever_brake = vmax * (t[None, :] + t_brake) + r_min
+    time_brake = t[None, :] + t_brake
+    out = np.empty((len(err.position_m), len(leads), N_TURNS))
+    for j in range(N_TURNS):
+        braking = TURNS[j, 1] != 0
+        lever, secs = (lever_brake, time_brake) if braking else (lever_const, time_const)
+        out[:, :, j] = err.position_m[:, None] + err.heading_rad[:, None] * lever + err.speed_m_s[:, None] * secs
+    return out.reshape(len(err.position_m), len(leads) * N_TURNS)
 
 
 def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
@@ -368,33 +439,48 @@ def decide(
     margin_m: np.ndarray | float,
     cfg: ShieldConfig,
     pending: np.ndarray | None = None,
+    error: EstimateError | None = None,
 ) -> Decision:
     """One decision of the monitor for M vehicles.
 
     ``state`` (M, 4): the estimate x, y, v, phi now; ``proposed`` (M, 2) the policy's action, to be held for
-    ``steps`` world steps of ``dt_s``; ``pending`` (M, L, 2) the commands already sent that the vehicle will
-    fly first (the link's latency; None or L = 0 in the batched world); ``margin_m`` scalar or (M,) the
-    clearance to keep (:attr:`ShieldConfig.margin_m`, plus :func:`estimate_margin_m` in a companion).
+    ``steps`` world steps of ``dt_s`` (a row that is not finite never passes: the backup flies); ``pending``
+    (M, L, 2) the commands already sent that the vehicle will fly first (the link's latency; None or L = 0 in the
+    batched world); ``margin_m`` scalar or (M,) the clearance to keep (:attr:`ShieldConfig.margin_m`, plus the
+    timing slack off lockstep); ``error`` the bounds on the estimate's error (None: the true state, as in the
+    batched world), taken off every path's and backup's clearance as :func:`backup_error_m` says.
     """
     m = len(state)
     margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
+    err_now = EstimateError.zero(m) if error is None else error
     x, y, v, phi = (np.asarray(state[:, i], dtype=np.float64) for i in range(4))
-    if pending is not None and pending.shape[1]:
+    n_pending = 0 if pending is None else pending.shape[1]
+    if n_pending:
+        assert pending is not None
         x, y, v, phi = step_actions(x, y, v, phi, pending, lim, dt_s)
-    proposed = np.clip(np.asarray(proposed, dtype=np.float64), -1.0, 1.0)
+    err_here = err_now.after(n_pending * dt_s, lim)  # at the state the next command starts from
+    err_end = err_now.after((n_pending + steps) * dt_s, lim)  # at the end of the proposed action's interval
+    raw = np.asarray(proposed, dtype=np.float64)
+    finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
+    proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
     leads = lead_steps(cfg, dt_s, steps)
     xs, ys, vs, ps = constant_rollout(x, y, v, phi, proposed, lim, dt_s, steps)
-    path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2  # (a)
+    # (a) the path's excess over the margin; err_end bounds the path's error over the whole interval.
+    path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2 - margin - err_end.position_m
+    path = np.where(finite, path, -np.inf)
     ex, ey, ev, ep = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
-    # (b) The braking backups (a 150-step spiral each) only where no constant-speed one clears the release margin.
-    ends = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=np.zeros(m, bool))
-    need_brake = (ends.max(axis=1) < margin + cfg.release_margin_m) & (path >= margin) & cfg.braking_backups
+    # (b) each backup's excess from the end state. The braking backups (a 150-step spiral each) only where no
+    # constant-speed one clears the release margin.
+    end_error = backup_error_m(err_end, lim, dt_s, leads)
+    ends = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=np.zeros(m, bool)) - margin[:, None] - end_error
+    need_brake = (ends.max(axis=1) < cfg.release_margin_m) & (path >= 0) & cfg.braking_backups
     if need_brake.any():
-        ends = np.maximum(ends, backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=need_brake))
-    best_end = choose_backup(ends, margin)
-    clearance = np.minimum(path, ends.max(axis=1))
-    passes = clearance >= margin
-    passes_release = clearance >= margin + cfg.release_margin_m
+        braking = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=need_brake)
+        ends = np.maximum(ends, braking - margin[:, None] - end_error)
+    best_end = choose_backup(ends)
+    excess = np.minimum(path, ends.max(axis=1))
+    passes = excess >= 0
+    passes_release = excess >= cfg.release_margin_m
 
     engaged, protected = memory.engaged, memory.protected
     backup, lead_left = memory.backup.copy(), memory.lead_left.copy()
@@ -407,15 +493,11 @@ def decide(
     lost = ~fly_proposed & ~protected
     protected = protected.copy()
     if lost.any():
-        lx, ly, lv, lp = x[lost], y[lost], v[lost], phi[lost]
-        sub_hz, sub_lim = hz.select(lost), lim.select(lost)
-        here = backup_clearance(
-            lx, ly, lv, lp, sub_hz, sub_lim, dt_s, leads, brake=np.full(len(lx), cfg.braking_backups)
-        )
-        pick = choose_backup(here, margin[lost])
+        here = _backup_excess_here(x, y, v, phi, lost, hz, lim, dt_s, leads, margin, err_here, cfg)
+        pick = choose_backup(here)
         backup[lost] = pick
         lead_left[lost] = leads[pick // N_TURNS]
-        protected[lost] = here[np.arange(len(here)), pick] >= margin[lost]
+        protected[lost] = here[np.arange(len(here)), pick] >= 0
     now_engaged = ~fly_proposed
     action = np.where(now_engaged[:, None], backup_action(backup, lead_left), proposed)
     lead_left = np.where(now_engaged, np.maximum(lead_left - steps, 0), leads[best_end // N_TURNS])
@@ -433,15 +515,128 @@ def decide(
         engaged_now=engage,
         released_now=release,
         unprotected=now_engaged & ~new_memory.protected,
-        clearance_m=clearance,
+        clearance_m=excess + margin,
     )
 
 
-def estimate_margin_m(cfg: ShieldConfig, position_sigma_major_m: float, speed_max_m_s: float, slack: bool) -> float:
-    """A companion's margin: the base, sigma_k times the estimate's largest position standard deviation
-    (sqrt of the largest eigenvalue of the Kalman filter's position covariance), and with ``slack`` (off
-    lockstep, or a lossy link) v_max times the timing slack (a command lost or late on the link)."""
-    margin = cfg.margin_m + cfg.sigma_k * max(0.0, position_sigma_major_m)
-    if slack:
-        margin += speed_max_m_s * cfg.timing_slack_s
-    return margin
+def _backup_excess_here(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    rows: np.ndarray,
+    hz: Hazards,
+    lim: Limits,
+    dt_s: float,
+    leads: np.ndarray,
+    margin: np.ndarray,
+    err: EstimateError,
+    cfg: ShieldConfig,
+) -> np.ndarray:
+    """Every backup's excess over the margin and the error bound, flown from the states ``rows`` (a bool mask)
+    themselves, (R, L * N_TURNS): a vehicle with no remembered backup, and the start check."""
+    sub_hz, sub_lim = hz.select(rows), lim.select(rows)
+    sub_err = EstimateError(err.position_m[rows], err.heading_rad[rows], err.speed_m_s[rows])
+    clearance = backup_clearance(
+        x[rows],
+        y[rows],
+        v[rows],
+        phi[rows],
+        sub_hz,
+        sub_lim,
+        dt_s,
+        leads,
+        brake=np.full(int(rows.sum()), cfg.braking_backups),
+    )
+    return clearance - margin[rows, None] - backup_error_m(sub_err, sub_lim, dt_s, leads)
+
+
+def start_excess_m(
+    state: np.ndarray,
+    hz: Hazards,
+    lim: Limits,
+    dt_s: float,
+    steps: int,
+    cfg: ShieldConfig,
+    margin_m: np.ndarray | float,
+    hold_steps: int = 0,
+    error: EstimateError | None = None,
+) -> np.ndarray:
+    """How far each start (M, 4: x, y, v, phi) is inside what the monitor admits, (M,) metres; >= 0: admitted.
+
+    The monitor's induction covers every state from which some backup is clear; the first state is the one it
+    cannot choose. A start is admitted if, after ``hold_steps`` steps of the hold command (straight on at
+    constant speed: what the vehicle flies before the first command reaches it, a round trip of the link), the
+    hold's path keeps the margin and some backup from its end keeps it for ever, both after the error bound:
+    exactly what the first decision finds when the proposed action fails (the remembered backup is then the
+    clearest of those). From an admitted start, the monitor keeps the UAV out of every radar and inside the area
+    whatever the policy proposes.
+    """
+    m = len(state)
+    margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
+    err0 = EstimateError.zero(m) if error is None else error
+    x, y, v, phi = (np.asarray(state[:, i], dtype=np.float64) for i in range(4))
+    hold_path = np.full(m, np.inf)
+    if hold_steps:
+        xs, ys, vs, ps = constant_rollout(x, y, v, phi, np.zeros((m, 2)), lim, dt_s, hold_steps)
+        here_err = err0.after(hold_steps * dt_s, lim)
+        hold_path = (
+            point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2 - margin - here_err.position_m
+        )
+        x, y, v, phi = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
+    else:
+        here_err = err0
+    leads = lead_steps(cfg, dt_s, steps)
+    # The constant-speed backups first (circles: cheap); the braking ones (spirals) only where none of those do.
+    best = (
+        backup_clearance(x, y, v, phi, hz, lim, dt_s, leads, brake=np.zeros(m, bool))
+        - margin[:, None]
+        - backup_error_m(here_err, lim, dt_s, leads)
+    ).max(axis=1)
+    short = best < 0
+    if short.any() and cfg.braking_backups:
+        best[short] = _backup_excess_here(x, y, v, phi, short, hz, lim, dt_s, leads, margin, here_err, cfg).max(axis=1)
+    return np.minimum(hold_path, best)
+
+
+def handover_error(lim: Limits, dt_s: float, ticks: int) -> EstimateError:
+    """The error bound a command change can add when its first ``ticks`` setpoints are lost or late: the vehicle
+    flies the previous command (any [omega, u]) that long instead. Two commands differ by at most 2 omega_max and
+    2 a_max, so after t = ticks dt the heading differs by at most 2 omega_max t, the speed by 2 a_max t, and the
+    position by at most (a_max + v_max omega_max) t^2; and a backup's turn that starts t late is its circle moved
+    v_max t along the lead."""
+    t = ticks * dt_s
+    w, a, vmax = lim.turn_rate_max_rad_s, lim.accel_max_m_s2, lim.speed_max_m_s
+    return EstimateError((a + vmax * w) * t * t + vmax * t, 2.0 * w * t, 2.0 * a * t)
+
+
+def companion_margin_m(cfg: ShieldConfig, speed_max_m_s: float, off_lockstep: bool) -> float:
+    """A companion's margin: the base, and off lockstep v_max times the timing slack (a companion that falls
+    behind the vehicle's clock). The estimate's error is not in it but in :func:`companion_error`, per backup."""
+    return cfg.margin_m + (speed_max_m_s * cfg.timing_slack_s if off_lockstep else 0.0)
+
+
+def companion_error(
+    cfg: ShieldConfig,
+    lim: Limits,
+    dt_s: float,
+    position_sigma_major_m: float,
+    heading_sigma_rad: float,
+    speed_sigma_m_s: float,
+    lossy: bool,
+) -> EstimateError:
+    """A companion's error bound for one vehicle: ``sigma_k`` standard deviations of the Kalman filter's position
+    (its covariance's major axis), heading and speed, and with ``lossy`` (a link that loses packets, or a
+    companion off lockstep) :attr:`ShieldConfig.handover_ticks` setpoints lost or late at a command change."""
+    k = cfg.sigma_k
+    est = EstimateError(
+        np.array([k * max(0.0, position_sigma_major_m)]),
+        np.array([k * max(0.0, heading_sigma_rad)]),
+        np.array([k * max(0.0, speed_sigma_m_s)]),
+    )
+    return est + handover_error(lim, dt_s, cfg.handover_ticks if lossy else 0)
+
+
+def largest_backup_error_m(err: EstimateError, lim: Limits, dt_s: float, steps: int, cfg: ShieldConfig) -> float:
+    """The most clearance the error bound takes from any backup at the end of a decision interval (a report)."""
+    return float(backup_error_m(err.after(steps * dt_s, lim), lim, dt_s, lead_steps(cfg, dt_s, steps)).max())

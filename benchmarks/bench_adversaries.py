@@ -1,0 +1,276 @@
+"""Every adversarial pilot (tssac_core/sim/adversaries.py) against the runtime-assurance monitor, at scale.
+
+For each adversary: ``--episodes`` batched missions per batched scenario with the monitor off and on
+(``tssac_core.sim.missions.fly_missions``, over ``--workers`` Ray workers), and ``--sitl-missions`` SITL missions
+per SITL scenario with the monitor on in every companion (``python -m mavlink_bridge.fly --pilot NAME --shield
+--workers N``, lockstep). Prints one row per (adversary, where, monitor): missions, the hazard cost summed over
+UAV-missions, UAVs out of the area, the most steps one UAV spent inside a radar, the monitor's interventions and
+the success rate; writes them as JSON.
+
+    python benchmarks/bench_adversaries.py                     # the full size: 2,000 batched, 50 SITL each
+    python benchmarks/bench_adversaries.py --episodes 200 --sitl-missions 2 --json benchmarks/results/adversaries.json
+
+Seeds: the adversaries' own range, used for nothing else. Mission k of a batched scenario flies seed
+``--seed + offset + k`` (random.yaml offset 10,000, corner.yaml 20,000; SITL random.yaml 30,000, degraded.yaml
+40,000), so each adversary flies the same layouts as the others, and any row's mission can be flown again alone
+(``evaluate --controller NAME --seed S --mission K``, ``fly --pilot NAME --seed S --mission K``). The tests use
+``--seed`` + 0..59.
+
+A run below the default size is marked ``"smoke": true`` in the JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+from tqdm import tqdm
+
+import tssac_core
+from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.cli import UsageError, run, write_json
+from tssac_core.mission_shards import fly_missions_sharded
+from tssac_core.ray_cluster import RayTarget, ray_session
+from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
+from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.scenario import Scenario, dump, load
+
+ROOT = Path(tssac_core.__file__).resolve().parents[1]
+DEFAULT_EPISODES = 2000
+DEFAULT_SITL_MISSIONS = 50
+SEED = 2_100_001
+BATCHED = ("random", "corner")
+SITL = ("random", "degraded")
+SEED_OFFSETS = {("batched", "random"): 10_000, ("batched", "corner"): 20_000}
+SEED_OFFSETS |= {("sitl", "random"): 30_000, ("sitl", "degraded"): 40_000}
+SMOKE_NOTE = (
+    "a smoke run, below the default size (2,000 batched and 50 SITL missions per adversary and scenario): "
+    "it shows that the benchmark works, not the issue's targets"
+)
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    adversaries: tuple[Adversary, ...]
+    episodes: int
+    """Batched missions per adversary and batched scenario."""
+    sitl_missions: int
+    """SITL missions per adversary and SITL scenario (0: none)."""
+    workers: int
+    seed: int
+    episode_steps: int | None
+    """Cap every mission at this many steps (None: the scenario's own, 4,000)."""
+    batched: tuple[str, ...]
+    sitl: tuple[str, ...]
+    json_path: Path | None
+    progress: bool
+
+    @property
+    def smoke(self) -> bool:
+        return self.episodes < DEFAULT_EPISODES or (0 < self.sitl_missions < DEFAULT_SITL_MISSIONS)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{message} (see --help)")
+
+
+def parse_args(argv: Sequence[str] | None) -> BenchConfig:
+    p = _Parser(prog="python benchmarks/bench_adversaries.py", description=__doc__.split("\n")[0])
+    p.add_argument("--adversaries", default=",".join(ADVERSARY_NAMES), help="comma-separated (default: all)")
+    p.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="batched missions per adversary/scenario")
+    p.add_argument("--sitl-missions", type=int, default=DEFAULT_SITL_MISSIONS, help="SITL missions per ... (0: none)")
+    p.add_argument("--workers", type=int, default=2, help="Ray workers for the batched and the SITL missions")
+    p.add_argument("--seed", type=int, default=SEED, help=f"start of the seed range (default {SEED:,})")
+    p.add_argument("--episode-steps", type=int, help="cap every mission at N steps (default: the scenario's)")
+    p.add_argument("--batched", nargs="+", default=list(BATCHED), help="batched scenarios (default random corner)")
+    p.add_argument("--sitl", nargs="+", default=list(SITL), help="SITL scenarios (default random degraded)")
+    p.add_argument("--json", type=Path, help="write the rows here")
+    p.add_argument("--no-progress", action="store_true")
+    a = p.parse_args(argv)
+    names = [n.strip() for n in a.adversaries.split(",") if n.strip()]
+    unknown = [n for n in names if n not in ADVERSARY_NAMES]
+    if unknown or not names:
+        raise UsageError(f"--adversaries: unknown {unknown or 'none given'} (known: {', '.join(ADVERSARY_NAMES)})")
+    if a.episodes <= 0 or a.sitl_missions < 0 or a.workers <= 0:
+        raise UsageError("--episodes and --workers must be positive, --sitl-missions >= 0")
+    if a.episode_steps is not None and a.episode_steps <= 0:
+        raise UsageError(f"--episode-steps must be positive, got {a.episode_steps}")
+    for name in (*a.batched, *a.sitl):
+        if not (ROOT / "scenarios" / f"{name}.yaml").is_file():
+            raise UsageError(f"scenario '{name}': no scenarios/{name}.yaml")
+    return BenchConfig(
+        adversaries=tuple(Adversary(n) for n in names),
+        episodes=a.episodes,
+        sitl_missions=a.sitl_missions,
+        workers=a.workers,
+        seed=a.seed,
+        episode_steps=a.episode_steps,
+        batched=tuple(a.batched),
+        sitl=tuple(a.sitl),
+        json_path=a.json,
+        progress=not a.no_progress,
+    )
+
+
+def scenario_of(name: str, cfg: BenchConfig) -> Scenario:
+    scenario = load(ROOT / "scenarios" / f"{name}.yaml")
+    return scenario if cfg.episode_steps is None else dataclasses.replace(scenario, episode_steps=cfg.episode_steps)
+
+
+def seed_of(kind: str, name: str, cfg: BenchConfig) -> int:
+    return cfg.seed + SEED_OFFSETS.get((kind, name), 50_000)
+
+
+def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig, bar: tqdm) -> dict[str, Any]:
+    scenario, seed = scenario_of(name, cfg), seed_of("batched", name, cfg)
+    pilots = [AdversaryPilot(adversary)] * 3
+    monitor = ShieldConfig() if shield else None
+    t0 = time.monotonic()
+    results: MissionResults
+    if cfg.workers > 1:
+        indices = list(range(cfg.episodes))
+        target = RayTarget(None)
+        results = fly_missions_sharded(scenario, pilots, indices, seed, cfg.workers, target, bar.update, monitor)
+    else:
+        results = fly_missions(scenario, pilots, cfg.episodes, seed, progress=bar.update, shield=monitor)
+    counts = results.monitor
+    return {
+        "adversary": adversary.value,
+        "where": f"batched {name}",
+        "monitor": shield,
+        "seed": seed,
+        "missions": len(results.success),
+        "cost_total": float(results.cost.sum()),
+        "uav_missions_with_cost": int((results.cost > 0).sum()),
+        "uavs_out_of_area": int(results.out_of_area.sum()),
+        "max_steps_inside": float(results.cost.max()),
+        "interventions": None if counts is None else int(counts.interventions.sum()),
+        "interventions_per_uav_mission": None if counts is None else float(counts.interventions.mean()),
+        "backup_time_fraction": None
+        if counts is None
+        else float(counts.backup_steps.sum() / max(1, counts.flown_steps.sum())),
+        "unprotected_steps": None if counts is None else int(counts.unprotected_steps.sum()),
+        "success_rate": float(results.success.mean()),
+        "unsafe_missions": [int(k) for k in ((results.cost > 0) | results.out_of_area).any(axis=1).nonzero()[0]][:20],
+        "wall_time_s": round(time.monotonic() - t0, 1),
+    }
+
+
+def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar: tqdm) -> dict[str, Any]:
+    seed = seed_of("sitl", name, cfg)
+    path, out = work / f"{name}.yaml", work / f"{adversary.value}-{name}.json"
+    dump(scenario_of(name, cfg), path)
+    argv = ["--scenario", str(path), "--pilot", adversary.value, "--shield", "--episodes", str(cfg.sitl_missions)]
+    workers = min(cfg.workers, cfg.sitl_missions)  # one mission: flown here, without starting Ray
+    argv += ["--seed", str(seed), "--json", str(out), "--workers", str(workers), "--no-progress"]
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", *argv],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    bar.update(cfg.sitl_missions)
+    if not out.is_file():
+        raise RuntimeError(f"fly {' '.join(argv)} wrote no JSON (exit {proc.returncode}): {proc.stderr[-500:]}")
+    summary = json.loads(out.read_text())
+    missions = summary["missions"]
+    costs = [c for m in missions for c in (m.get("cost") or {}).values()]
+    shield = summary.get("shield") or {}
+    uav_missions = shield.get("uav_missions") or 0
+    per_uav = shield.get("interventions_per_uav_mission")
+    return {
+        "adversary": adversary.value,
+        "where": f"SITL {name}",
+        "monitor": True,
+        "seed": seed,
+        "missions": len(missions),
+        "cost_total": float(sum(costs)),
+        "uav_missions_with_cost": int(sum(c > 0 for c in costs)),
+        "uavs_out_of_area": int(sum(bool(v) for m in missions for v in (m.get("left_area") or {}).values())),
+        "max_steps_inside": float(max(costs, default=0.0)),
+        "interventions": None if per_uav is None else round(per_uav * uav_missions),
+        "interventions_per_uav_mission": per_uav,
+        "backup_time_fraction": shield.get("backup_time_fraction"),
+        "unprotected_steps": None,
+        "success_rate": summary.get("success_rate"),
+        "unsafe_missions": [
+            int(m["index"])
+            for m in missions
+            if any(c > 0 for c in (m.get("cost") or {}).values()) or any((m.get("left_area") or {}).values())
+        ][:20],
+        "fly_exit_code": proc.returncode,
+        "fly_error": summary.get("error"),
+        "wall_time_s": round(time.monotonic() - t0, 1),
+    }
+
+
+def print_table(rows: list[dict[str, Any]]) -> None:
+    head = f"{'adversary':11s} {'where':17s} {'monitor':7s} {'missions':>8s} {'cost total':>10s} {'UAVs out':>8s} "
+    print(head + f"{'max steps in':>12s} {'interventions':>13s} {'success':>7s}")
+    for r in rows:
+        interventions = "-" if r["interventions"] is None else f"{r['interventions']:,}"
+        print(
+            f"{r['adversary']:11s} {r['where']:17s} {'on' if r['monitor'] else 'off':7s} {r['missions']:8,d} "
+            f"{r['cost_total']:10,.0f} {r['uavs_out_of_area']:8d} {r['max_steps_inside']:12,.0f} {interventions:>13s} "
+            f"{r['success_rate']:7.1%}"
+        )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    cfg = parse_args(argv)
+    started = time.monotonic()
+    rows: list[dict[str, Any]] = []
+    batched_total = len(cfg.adversaries) * len(cfg.batched) * 2 * cfg.episodes
+    with (
+        ray_session(RayTarget(None)) if cfg.workers > 1 else contextlib.nullcontext(),  # one Ray for every row
+        tqdm(total=batched_total, desc="batched missions", disable=not cfg.progress, file=sys.stderr) as bar,
+    ):
+        for adversary in cfg.adversaries:
+            for name in cfg.batched:
+                for shield in (False, True):
+                    rows.append(batched_row(adversary, name, shield, cfg, bar))
+    if cfg.sitl_missions:
+        sitl_total = len(cfg.adversaries) * len(cfg.sitl) * cfg.sitl_missions
+        with (
+            tempfile.TemporaryDirectory(prefix="bench-adversaries-") as tmp,
+            tqdm(total=sitl_total, desc="SITL missions", disable=not cfg.progress, file=sys.stderr) as bar,
+        ):
+            for adversary in cfg.adversaries:
+                for name in cfg.sitl:
+                    rows.append(sitl_row(adversary, name, cfg, Path(tmp), bar))
+    print_table(rows)
+    if cfg.json_path is not None:
+        write_json(
+            cfg.json_path,
+            {
+                "smoke": cfg.smoke,
+                "note": SMOKE_NOTE if cfg.smoke else "",
+                "size": f"{cfg.episodes} batched missions per adversary and scenario (off and on), "
+                f"{cfg.sitl_missions} SITL missions per adversary and scenario (on)",
+                "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
+                "episode_steps": cfg.episode_steps,
+                "shield": dataclasses.asdict(ShieldConfig()),
+                "rows": rows,
+                "wall_time_s": round(time.monotonic() - started, 1),
+            },
+        )
+        print(f"wrote {cfg.json_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))
