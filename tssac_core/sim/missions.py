@@ -142,7 +142,7 @@ def fly_missions(
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
     number of missions that finished since the last call, ``on_step`` after every step of the batch with the
-    missions that flew it and those still flying (:class:`tssac_core.progress.WorkBound`). ``shield``: fly every
+    missions that flew it and those still flying (:class:`tssac_core.progress.TimeLeft`). ``shield``: fly every
     UAV through the runtime-assurance monitor (:mod:`tssac_core.deploy.shield`) with these margins.
     """
     missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step)
