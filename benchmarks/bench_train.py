@@ -188,7 +188,7 @@ def sb3_block() -> Callable[[], int] | None:
         from stable_baselines3 import SAC
     except ImportError:
         return None
-    env = gym.make("tssac/Decoy-v0", teammates="none")
+    env = gym.make("tssac/Decoy-v0", teammates="none", observation="extended", action_repeat=1)
     model = SAC(
         "MlpPolicy",
         env,

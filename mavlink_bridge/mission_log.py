@@ -90,7 +90,14 @@ class MissionRecord:
     def backup_segments_km(self) -> dict[str, list[list[tuple[float, float]]]]:
         """Per role, the stretches of track flown under the runtime-assurance monitor's backup: from each
         "<role>: shield on" STATUSTEXT to the next "shield off" (or the end), as lists of (x_km, y_km)."""
-        out: dict[str, list[list[tuple[float, float]]]] = {}
+        return {
+            role: [self._stretch_km(role, first, last) for first, last in ranges]
+            for role, ranges in self.backup_step_ranges().items()
+        }
+
+    def backup_step_ranges(self) -> dict[str, list[tuple[int, int]]]:
+        """Per role, (first_step, last_step) of each stretch under the backup (``backup_segments_km``'s steps)."""
+        out: dict[str, list[tuple[int, int]]] = {}
         start: dict[str, int] = {}
         for e in self.events:
             role, text = str(e.get("vehicle")), str(e.get("text", ""))
@@ -100,9 +107,9 @@ class MissionRecord:
             if text.startswith(f"{role}: {ENGAGED_TEXT}") and role not in start:
                 start[role] = k
             elif text.startswith(f"{role}: {RELEASED_TEXT}") and role in start:
-                out.setdefault(role, []).append(self._stretch_km(role, start.pop(role), k))
+                out.setdefault(role, []).append((start.pop(role), k))
         for role, k in start.items():
-            out.setdefault(role, []).append(self._stretch_km(role, k, len(self.tracks_m[role])))
+            out.setdefault(role, []).append((k, len(self.tracks_m[role])))
         return out
 
     def _stretch_km(self, role: str, first_step: int, last_step: int) -> list[tuple[float, float]]:
@@ -114,6 +121,10 @@ class MissionRecord:
 
     def event_markers_km(self) -> list[tuple[str, float, float]]:
         """(label, x_km, y_km) of the mission events, at the position of the vehicle concerned."""
+        return [(label, x, y) for _, label, x, y in self.timed_event_markers_km()]
+
+    def timed_event_markers_km(self) -> list[tuple[int, str, float, float]]:
+        """(track index, label, x_km, y_km) of the mission events: ``event_markers_km`` with when they happened."""
         out = []
         for e in self.events:
             name = e.get("event")
@@ -126,7 +137,7 @@ class MissionRecord:
             k = min(max(int(e.get("step", 0)) - 1, 0), len(track) - 1)
             x, y = track[k]
             label = EVENT_LABELS[str(name)] + (f" ({role})" if name in ("HAZARD", "FENCE") else "")
-            out.append((label, x / 1000.0, y / 1000.0))
+            out.append((k, label, x / 1000.0, y / 1000.0))
         return out
 
 

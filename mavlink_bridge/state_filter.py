@@ -68,7 +68,6 @@ selectable.
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from dataclasses import dataclass
@@ -77,6 +76,8 @@ from typing import Protocol
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import NDArray
+
+from mavlink_bridge.filter_model import FilterModel
 
 __all__ = ["FilterModel", "FilterNoise", "VehicleStateFilter"]
 
@@ -110,17 +111,6 @@ def _finite_time(t_s: float) -> float:
     if not math.isfinite(t):
         raise ValueError(f"timestamp must be finite, got {t_s!r}")
     return t
-
-
-class FilterModel(enum.Enum):
-    """Motion model of :class:`VehicleStateFilter`."""
-
-    CONSTANT_TURN = "constant_turn"
-    """Eq. 5 with constant speed and turn rate, unscented filter; estimates the turn rate."""
-    CONSTANT_TURN_EKF = "constant_turn_ekf"
-    """The same model, extended filter (analytic Jacobians): the same figures at a fraction of the cost."""
-    CONSTANT_VELOCITY = "constant_velocity"
-    """Straight-line motion, linear filter; cheaper, no turn rate, lags in turns."""
 
 
 @dataclass(frozen=True)

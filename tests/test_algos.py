@@ -11,7 +11,8 @@ import pytest
 import torch
 
 from tssac_core.algos import losses
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier, qc_limit
+from tssac_core.algos.budget import qc_limit
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier
 from tssac_core.algos.networks import (
     LOG_STD_MAX,
     LOG_STD_MIN,

@@ -270,7 +270,10 @@ TASK_RECORDING = dict(
 
 
 def test_gym_rollout_matches_the_recording(random_path):
-    env = gym.make("tssac/Strike-v0", scenario=str(random_path), teammates="none")
+    # The recording's settings: one world step per env step, the extended observation (the env's defaults were those).
+    env = gym.make(
+        "tssac/Strike-v0", scenario=str(random_path), teammates="none", observation="extended", action_repeat=1
+    )
     obs, _ = env.reset(seed=3)
     rng = np.random.default_rng(11)
     ret = cost = 0.0

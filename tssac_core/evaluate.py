@@ -29,10 +29,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError, run, write_json
+from tssac_core.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
@@ -130,17 +129,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     pilots = load_pilots(args.models, controller)
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
-    with tqdm(total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr) as bar:
-        if args.workers > 1 or args.address is not None:
-            from tssac_core.mission_shards import fly_missions_sharded
-            from tssac_core.ray_cluster import RayTarget
+    if args.workers > 1 or args.address is not None:
+        from tqdm import tqdm
 
+        from tssac_core.mission_shards import fly_missions_sharded
+        from tssac_core.ray_cluster import RayTarget
+
+        with tqdm(
+            total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr
+        ) as bar:
             results = fly_missions_sharded(
                 scenario, pilots, indices, args.seed, args.workers, RayTarget(args.address), bar.update, shield=shield
             )
-        else:
+    else:
+        with MissionBar(len(indices), scenario.episode_steps, disable=args.no_progress) as bar:
             results = fly_missions(
-                scenario, pilots, len(indices), args.seed, progress=bar.update, indices=indices, shield=shield
+                scenario,
+                pilots,
+                len(indices),
+                args.seed,
+                indices=indices,
+                shield=shield,
+                on_step=bar.step,
             )
     summary = results.summary(scenario.cost_limit)
     summary.update(

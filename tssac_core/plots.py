@@ -66,6 +66,52 @@ def plot_training(metrics: Path, out: Path, cost_limit: float) -> None:
 ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
 
 
+LEGEND_BESIDE: dict[str, Any] = {
+    "fontsize": 7,
+    "loc": "upper left",
+    "bbox_to_anchor": (1.02, 1.0),
+    "borderaxespad": 0.0,
+}
+"""The mission figures' legend: beside the map, where it hides no track."""
+
+
+def ring_labels(ranges_km: tuple[float, float, float, float]) -> tuple[str, str, str, str]:
+    """The legend's words for the paper's R1-R4 (Table 1), innermost first."""
+    r1, r2, r3, r4 = ranges_km
+    return (
+        f"strike UAV can launch within ({r1:g} km)",
+        f"detect UAV identifies the target within ({r2:g} km)",
+        f"SAM can fire within ({r3:g} km)",
+        f"SAM radar sees within ({r4:g} km)",
+    )
+
+
+def draw_layout(ax: Any, layout_: object, ranges_km: tuple[float, float, float, float], area_km: float) -> None:
+    """What does not move in a mission: the radar sites and their coverage (the hazards), the SAM site with its
+    rings, the target, the area; every kind once in the legend, in plain words."""
+    from tssac_core.sim.scenario import Layout
+
+    assert isinstance(layout_, Layout)
+    lay = layout_
+    r1, r2, r3, r4 = ranges_km
+    w1, w2, w3, w4 = ring_labels(ranges_km)
+    for k, radar in enumerate(lay.radars):
+        coverage = f"radar coverage, a hazard ({radar.radius_km:g} km)" if k == 0 else None
+        ax.add_patch(plt.Circle(radar.position_km, radar.radius_km, color="red", alpha=0.25, lw=0, label=coverage))
+        ax.plot(*radar.position_km, "r^", label="radar site" if k == 0 else None)
+    ax.add_patch(plt.Circle(lay.sam_km, r4, fill=False, color="tab:orange", ls="--", label=w4))
+    ax.add_patch(plt.Circle(lay.sam_km, r3, fill=False, color="tab:orange", ls="-", label=w3))
+    ax.add_patch(plt.Circle(lay.sam_km, r2, fill=False, color="tab:green", ls=":", label=w2))
+    ax.add_patch(plt.Circle(lay.sam_km, r1, fill=False, color="black", ls=":", label=w1))
+    ax.plot(*lay.sam_km, "s", color="tab:orange", label="SAM site")
+    ax.plot(*lay.target_km, "*", color="darkred", ms=12, label="target")
+    ax.set_xlim(0, area_km)
+    ax.set_ylim(0, area_km)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east (km)")
+    ax.set_ylabel("north (km)")
+
+
 def plot_mission(
     path: Path,
     layout_: object,
@@ -82,21 +128,8 @@ def plot_mission(
     ``events`` are (label, x_km, y_km) markers (e.g. "radar on", "identified", "hit"); ``backup_km`` maps role name
     to the stretches flown under the runtime-assurance monitor's backup, drawn wide and dashed over the track.
     """
-    from tssac_core.sim.scenario import Layout
-
-    assert isinstance(layout_, Layout)
-    lay = layout_
-    r1, r2, r3, r4 = ranges_km
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    for radar in lay.radars:
-        ax.add_patch(plt.Circle(radar.position_km, radar.radius_km, color="red", alpha=0.25, lw=0))
-        ax.plot(*radar.position_km, "r^")
-    ax.add_patch(plt.Circle(lay.sam_km, r4, fill=False, color="tab:orange", ls="--", label="SAM detection R4"))
-    ax.add_patch(plt.Circle(lay.sam_km, r3, fill=False, color="tab:orange", ls="-", label="SAM launch R3"))
-    ax.add_patch(plt.Circle(lay.sam_km, r2, fill=False, color="tab:green", ls=":", label="detect range R2"))
-    ax.add_patch(plt.Circle(lay.sam_km, r1, fill=False, color="black", ls=":", label="strike range R1"))
-    ax.plot(*lay.sam_km, "s", color="tab:orange", label="SAM")
-    ax.plot(*lay.target_km, "*", color="darkred", ms=12, label="target")
+    fig, ax = plt.subplots(figsize=(9.8, 6.5))
+    draw_layout(ax, layout_, ranges_km, area_km)
     for role, pts in tracks_km.items():
         if len(pts):
             xs, ys = zip(*pts)
@@ -111,15 +144,10 @@ def plot_mission(
                     xs, ys, color="magenta", lw=4, ls="--", alpha=0.7, label=None if labelled else "backup (monitor)"
                 )
                 labelled = True
-    for _, x, y in events:
-        ax.plot(x, y, "kx")
-    ax.set_xlim(0, area_km)
-    ax.set_ylim(0, area_km)
-    ax.set_aspect("equal")
-    ax.set_xlabel("east (km)")
-    ax.set_ylabel("north (km)")
+    for k, (_, x, y) in enumerate(events):
+        ax.plot(x, y, "kx", label="mission event" if k == 0 else None)
     ax.set_title(title)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(**LEGEND_BESIDE)
     fig.tight_layout()
     place_labels(ax, events)  # after the layout: the labels are placed in the figure's final pixels
     fig.savefig(path, dpi=100)

@@ -10,17 +10,18 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
-from mavlink_bridge.companion.machine import Companion
-from mavlink_bridge.link import LinkError
+from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
-from mavlink_bridge.state_filter import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
+
+if TYPE_CHECKING:
+    from mavlink_bridge.companion.machine import Companion
 
 _log = logging.getLogger("mavlink_bridge.companion")
 
@@ -158,22 +159,32 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
 
 
 def build_companion(config: CompanionConfig) -> Companion:
-    """The companion with the pilot ``config`` names."""
+    """The companion with the pilot ``config`` names (the machine, pymavlink and the filter load here, after the
+    arguments are parsed: --help answers at once)."""
+    from mavlink_bridge.companion.machine import Companion
+
     return Companion(config)
 
 
-BAD_INPUT_ERRORS = (UsageError, ScenarioError, LinkError, CheckpointError)
-"""Exceptions that mean bad input: one line and exit code 2."""
+def bad_input_errors() -> tuple[type[Exception], ...]:
+    """Exceptions that mean bad input: one line and exit code 2."""
+    from mavlink_bridge.link import LinkError
+
+    return (UsageError, ScenarioError, LinkError, CheckpointError)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
+    except UsageError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
         logging.basicConfig(
             level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
         )
         companion = build_companion(config_from_args(args))
-    except BAD_INPUT_ERRORS as exc:
+    except bad_input_errors() as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

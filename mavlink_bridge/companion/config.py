@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from mavlink_bridge.state_filter import FilterModel
+from mavlink_bridge.filter_model import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES

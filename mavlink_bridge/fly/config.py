@@ -16,6 +16,7 @@ from tssac_core.cli import UsageError
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.errors import CheckpointError
+from tssac_core.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
@@ -73,6 +74,8 @@ class FlyConfig:
     """Missions at once, each a Ray task (1: one after the other, here, without Ray)."""
     ray_address: str | None = None
     """An existing Ray cluster for the missions (None: a Ray started inside the command when workers > 1)."""
+    animate_path: Path | None = None
+    """``--animate``: each mission as a .gif or .mp4 film (tssac_core.mission_animation)."""
 
     @property
     def on_ray(self) -> bool:
@@ -151,6 +154,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)",
     )
     p.add_argument(
+        "--animate",
+        type=Path,
+        metavar="FILE",
+        help="film each mission: trajectories, radar rings, events, backup stretches (FILE.gif with Pillow, or "
+        "FILE.mp4 with ffmpeg; FILE-NNN.ext per mission when there are several)",
+    )
+    p.add_argument(
         "--signing-key",
         type=Path,
         metavar="FILE",
@@ -220,6 +230,11 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
         raise UsageError("--mission-timeout-s must be positive")
+    if a.animate is not None:
+        try:
+            check_target(a.animate)
+        except AnimationFormatError as exc:
+            raise UsageError(str(exc)) from None
     scenario = load(a.scenario)
     models: Path | None = None
     if a.pilot is None:
@@ -247,10 +262,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
                 f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
                 "(python -m sim_vehicles --layout-out FILE writes it)"
             )
-        if a.plot is not None:
+        if a.plot is not None or a.animate is not None:
             raise UsageError(
-                "--plot draws from the world's truth log, which fly has only for the worlds it starts (not with "
-                "--connect)"
+                "--plot and --animate draw from the world's truth log, which fly has only for the worlds it starts "
+                "(not with --connect)"
             )
         connect = (a.connect[0], a.connect[1], a.connect[2])
     return FlyConfig(
@@ -267,6 +282,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         json_path=a.json,
         tlog_dir=a.tlog.resolve() if a.tlog is not None else None,
         plot_path=a.plot.resolve() if a.plot is not None else None,
+        animate_path=a.animate.resolve() if a.animate is not None else None,
         signing_key_path=a.signing_key.resolve() if a.signing_key is not None else None,
         connect=connect,
         logs_dir=a.logs.resolve() if a.logs is not None else None,

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from mavlink_bridge.fly.config import REPO, FlyConfig
-from mavlink_bridge.fly.report import plot_mission_record
+from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
 from mavlink_bridge.mission_log import TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
@@ -133,7 +133,9 @@ class MissionRunner:
                 raise ChildFailed(f"mission {index}: {exc}") from None
             row.update(outcome(record, cfg.scenario.cost_limit))
             if cfg.plot_path is not None:
-                plot_mission_record(cfg, index, layout, record)
+                row["plot"] = str(plot_mission_record(cfg, index, layout, record))
+            if cfg.animate_path is not None:
+                row["animation"] = str(animate_mission_record(cfg, index, layout, record))
         else:
             row.update(outcome_from_companions(statuses))
         flight = [float(f) for s in statuses.values() if (f := s.get("flight_wall_s"))]

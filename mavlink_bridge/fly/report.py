@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
@@ -57,29 +58,65 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
             f"{r.get('sim_time_s') or 0:.1f} s simulated, "
             f"{r['wall_time_s']:.1f} s wall{speed}"
         )
+    for r in summary["missions"]:
+        for key, what in (("plot", "plot"), ("animation", "animation")):
+            if r.get(key):
+                print(f"wrote {what} of mission {r['index']}: {r[key]}")
     if cfg.json_path is not None:
         print(f"wrote {cfg.json_path}")
 
 
-def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> None:
-    """Draw one mission's trajectories and events (``--plot``: FILE, or FILE-NNN.ext when there are several)."""
+def mission_file(cfg: FlyConfig, path: Path, index: int, default_suffix: str) -> Path:
+    """FILE for one mission, FILE-NNN.ext per mission when there are several."""
+    if cfg.episodes > 1:
+        path = path.with_name(f"{path.stem}-{index:03d}{path.suffix or default_suffix}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def mission_title(cfg: FlyConfig, index: int, record: MissionRecord) -> str:
+    verdict = "success" if record.success else record.end
+    cost = ", ".join(f"{k} {v:g}" for k, v in record.cost.items())
+    return f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}"
+
+
+def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> Path:
+    """Draw one mission's trajectories and events (``--plot``: FILE, or FILE-NNN.ext when there are several);
+    returns the file written."""
     from tssac_core.plots import plot_mission  # matplotlib only when a plot is asked for
 
     assert cfg.plot_path is not None
-    path = cfg.plot_path
-    if cfg.episodes > 1:
-        path = path.with_name(f"{path.stem}-{index:03d}{path.suffix or '.png'}")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = mission_file(cfg, cfg.plot_path, index, ".png")
     r = cfg.scenario.ranges
-    verdict = "success" if record.success else record.end
-    cost = ", ".join(f"{k} {v:g}" for k, v in record.cost.items())
     plot_mission(
         path,
         layout,
         record.tracks_km(),
         (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
         record.event_markers_km(),
-        title=f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}",
+        title=mission_title(cfg, index, record),
         area_km=cfg.scenario.area_km,
         backup_km=record.backup_segments_km(),
     )
+    return path
+
+
+def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> Path:
+    """``--animate``: one mission as a GIF or MP4 (:mod:`tssac_core.mission_animation`); returns the file written."""
+    from tssac_core.mission_animation import MissionFilm, write_film  # matplotlib only when asked for
+
+    assert cfg.animate_path is not None
+    r = cfg.scenario.ranges
+    film = MissionFilm(
+        layout=layout,
+        tracks_km=record.tracks_km(),
+        ranges_km=(r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
+        dt_s=cfg.scenario.dt_s,
+        area_km=cfg.scenario.area_km,
+        events=record.timed_event_markers_km(),
+        backup_steps={
+            role: [(max(a - 1, 0), b) for a, b in spans] for role, spans in record.backup_step_ranges().items()
+        },
+        title=mission_title(cfg, index, record),
+    )
+    return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix))

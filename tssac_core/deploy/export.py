@@ -4,7 +4,8 @@
 (a models directory: every ``<role>.pt`` in it) as ``<role>.npz`` beside it (the format:
 :mod:`tssac_core.deploy.numpy_actor`), and records both files in the directory's ``SHA256SUMS``
 (:mod:`tssac_core.deploy.manifest`; checked first: a changed file is refused, not exported). Training does this
-itself; the command is for directories trained before the export existed.
+itself; the command is for directories trained before the export existed. torch is imported by the functions that
+read checkpoints, not by the module, so ``--help`` answers without it.
 """
 
 from __future__ import annotations
@@ -16,11 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from torch import nn
 
 from tssac_core.deploy.manifest import check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import FORMAT, FORMAT_VERSION, NumpyPolicy, sha256_file
-from tssac_core.deploy.policy import Policy, checkpoint_info, read_checkpoint, torch_save_atomic
 from tssac_core.errors import CheckpointError
 from tssac_core.files import replace_durably
 from tssac_core.sim.scenario import ROLES
@@ -28,6 +27,10 @@ from tssac_core.sim.scenario import ROLES
 
 def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
     """Write the deterministic actor of a role checkpoint as ``<role>.npz`` beside it (or to ``out``), atomically."""
+    from torch import nn
+
+    from tssac_core.deploy.policy import Policy
+
     src = Path(checkpoint)
     policy = Policy.load(src)
     linears = [m for m in policy.actor.net if isinstance(m, nn.Linear)]
@@ -52,6 +55,8 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
 def compact_checkpoint(path: str | Path) -> tuple[int, int]:
     """Drop the learner state (critics, targets, optimiser moments) from a role checkpoint, keeping the
     deployable actor and its metadata; rewritten atomically. Returns the file's size before and after."""
+    from tssac_core.deploy.policy import checkpoint_info, read_checkpoint, torch_save_atomic
+
     p = Path(path)
     before = p.stat().st_size if p.is_file() else 0
     check_models(p.parent, [p.name], every_entry=False)  # never rewrite (and so re-record) a changed file

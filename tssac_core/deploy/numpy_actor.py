@@ -27,6 +27,7 @@ import hashlib
 import json
 import logging
 import zipfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -50,6 +51,10 @@ class Actor(Protocol):
     action_repeat: int
 
     def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+    def predict(self, obs: np.ndarray) -> np.ndarray: ...
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray: ...
 
 
 def sha256_file(path: Path) -> str:
@@ -93,6 +98,8 @@ class NumpyPolicy:
         return out[0] if single else out
 
     __call__ = act
+    predict = act
+    """The action for ``obs`` (one (d,) or a batch (n, d)): what a gymnasium user calls."""
 
 
 def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
@@ -174,3 +181,22 @@ def load_actor(path: str | Path, role: Role | str | None = None) -> Actor:
         actor = Policy.load(path, role)
     warn_once(unchecked)
     return actor
+
+
+def load_policy(path: str | Path, role: Role | str | None = None) -> Actor:
+    """A shipped or trained actor to fly in ``gym.make("tssac/<Role>-v0")``: ``load_policy(path).predict(obs)``
+    is the action for an observation. ``path``: a ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch),
+    or a models directory with ``role`` (the file :func:`pilot_file` picks). Its ``observation_mode`` and
+    ``action_repeat`` say which env settings it was trained with (the env's defaults are the shipped team's)."""
+    p = Path(path)
+    if p.is_dir():
+        if role is None:
+            raise CheckpointError(f"{p}: a models directory: say which role's actor to load")
+        p = pilot_file(p, Role(role))
+    return load_actor(p, role)
+
+
+def team_pilots(models: str | Path, roles: Sequence[Role | str]) -> Mapping[str, Actor]:
+    """Teammates for the gymnasium env or the OmniSafe adapter: ``roles`` flown by their actors in ``models``
+    (e.g. ``team_pilots("models/tssac", ["decoy"])`` beside a learning detect UAV, as training flies it)."""
+    return {Role(r).value: load_policy(models, r) for r in roles}

@@ -195,6 +195,7 @@ class Policy:
         return out[0] if single else out
 
     __call__ = act
+    predict = act
 
 
 def load_team(models: str | Path, deterministic: bool = True) -> tuple[Policy, Policy, Policy]:

@@ -30,13 +30,9 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import torch
-
 from tssac_core.cli import UsageError, run
-from tssac_core.deploy.export import compact_checkpoint
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
 from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
-from tssac_core.experiments.figures import plot_figures
 from tssac_core.experiments.grid import Grid, Job, load_grid
 from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
 from tssac_core.experiments.report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
@@ -102,6 +98,10 @@ def selected_jobs(grid: Grid, results: Path, only: Sequence[str] = ()) -> list[J
 def make_report(grid: Grid, results: Path, report: Say = say, cached_tail: bool = False) -> list[Path]:
     """Evaluate the finished teams (cached; with ``cached_tail`` the tail evaluations only from their caches), write
     table4.md, experiments.json and the figures; returns the files. The evaluations fly with one torch thread."""
+    import torch  # torch and matplotlib here, not above: --help and --dry-run answer without them
+
+    from tssac_core.experiments.figures import plot_figures
+
     torch.set_num_threads(1)
     jobs = grid.jobs(results)
     states = [job_state(job) for job in jobs]
@@ -157,6 +157,8 @@ def compact(grid: Grid, results: Path, report: Say = say) -> None:
     """Finished runs keep what evaluation and the figures need (actors, metrics, logs, plots): each role
     checkpoint loses its learner state (critics, targets, optimiser moments) and the run its resume/
     directory. Partial and conflicting runs are left alone."""
+    from tssac_core.deploy.export import compact_checkpoint  # torch: only when compacting
+
     before = after = 0
     finished = [s.job for s in map(job_state, all_jobs(grid, results)) if s.status is Status.FINISHED]
     for job in finished:

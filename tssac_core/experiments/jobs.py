@@ -38,7 +38,7 @@ from typing import Any, Protocol, cast
 
 import tssac_core
 from tssac_core.cli import UsageError
-from tssac_core.deploy.policy import CheckpointError, read_checkpoint
+from tssac_core.errors import CheckpointError
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
@@ -147,6 +147,8 @@ def same_scenario(saved: Path, wanted: Path, run: Path | None) -> bool:
         checkpoint = run / f"{role.value}.pt"
         if checkpoint.is_file():
             try:
+                from tssac_core.deploy.policy import read_checkpoint  # torch: not for --help or --dry-run
+
                 return read_checkpoint(checkpoint).get("scenario_digest") == digest
             except CheckpointError:
                 return False

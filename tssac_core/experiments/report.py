@@ -39,7 +39,6 @@ import numpy as np
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import write_json
 from tssac_core.deploy.manifest import check_models, warn_once
-from tssac_core.deploy.policy import checkpoint_info, load_team, read_checkpoint
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
@@ -127,6 +126,8 @@ def team_digest(team: Path) -> str:
     h = hashlib.sha256()
     for role in ROLES:
         path = team / f"{role.value}.pt"
+        from tssac_core.deploy.policy import checkpoint_info, read_checkpoint  # torch, when a team is read
+
         data = read_checkpoint(path)
         info = checkpoint_info(data, path)
         h.update(f"{info.role.value} {info.observation_mode.value} {info.action_repeat} {info.hidden_sizes}".encode())
@@ -176,7 +177,7 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
     if hit is not None:
         return hit
     scenario = load(spec.scenario)
-    pilots: list[Pilot] = list(load_team(team)) if team is not None else [GUIDANCE] * len(ROLES)
+    pilots: list[Pilot] = team_pilots(team) if team is not None else [GUIDANCE] * len(ROLES)
     layouts = layouts_in_turn(scenario, spec.episodes, spec.seed) if spec.layouts is LayoutRule.IN_TURN else None
     results = fly_missions(
         scenario, pilots, spec.episodes, spec.seed, layouts=layouts, shield=ShieldConfig() if spec.monitor else None
@@ -210,11 +211,18 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> dict[str, Any]:
     return summary
 
 
+def team_pilots(team: Path) -> list[Pilot]:
+    """The three role policies of a models directory (torch is imported here, when a team is first flown)."""
+    from tssac_core.deploy.policy import load_team
+
+    return list(load_team(team))
+
+
 def fly_one(team: Path, spec: EvalSpec) -> MissionResults:
     """The first evaluation layout, flown by ``team`` with its trajectories recorded (figure 9)."""
     scenario = load(spec.scenario)
     return fly_missions(
-        scenario, list(load_team(team)), 1, spec.seed, record=True, layouts=layouts_in_turn(scenario, 1, spec.seed)
+        scenario, team_pilots(team), 1, spec.seed, record=True, layouts=layouts_in_turn(scenario, 1, spec.seed)
     )
 
 

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.deploy.policy import load_team
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 
@@ -61,6 +60,8 @@ def misses(target: Target, summary: dict[str, Any]) -> list[str]:
 
 def check_team(team: Path, seed: int, scale: float = 1.0) -> dict[str, Any]:
     """Fly ``team`` on every target's missions (``scale`` times as many, at least 1); its summaries and misses."""
+    from tssac_core.deploy.policy import load_team  # torch: after the arguments are parsed
+
     pilots = list(load_team(team))
     rows = []
     first = seed

@@ -1,223 +1,89 @@
-"""The constrained MDP of one UAV role: a batched task for training, and a ``gymnasium.Env`` over it.
+"""The gymnasium face of one UAV role's constrained MDP: :class:`UavRoleEnv`, and the registered ids.
 
-:class:`RoleTask` runs N worlds for one learning role (decoy, detect or strike) with its teammates
-flown by given pilots (:mod:`tssac_core.sim.team`), resetting finished worlds itself; the training loop
-uses it directly. :class:`UavRoleEnv` is the same task with N = 1 behind the gymnasium API, registered
-as ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0`` when this module is imported
-(``gym.make("tssac_core.sim.env:tssac/Detect-v0", ...)`` imports it; keyword arguments: ``scenario=``,
-``observation=``, ``teammates=``).
+Importing this module registers ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0``
+(``gym.make("tssac_core.sim.env:tssac/Detect-v0", ...)`` imports it). Keyword arguments: ``scenario=``,
+``observation=`` (default ``route``), ``action_repeat=`` (default 10: one decision per simulated second),
+``teammates=``. The defaults are what the shipped team (``models/tssac/config.json``) was trained with, so a
+shipped actor flies here as it was trained. ``gym.make_vec(id, num_envs=N)`` builds the batched
+:class:`tssac_core.sim.vector_env.RoleVectorEnv` (one world array for all N) rather than N copies of this env.
+The batched task itself is :class:`tssac_core.sim.role_task.RoleTask` (re-exported here).
 """
 
 from __future__ import annotations
 
-import pickle
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
-from tssac_core.sim.reward import RewardConfig, reward
-from tssac_core.sim.routes import RouteConfig, RouteMap
+from tssac_core.sim.reward import RewardConfig
+from tssac_core.sim.role_task import RoleTask, TaskStep, Teammates, resolve_pilots
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
-from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
-from tssac_core.sim.world import StepResult, World
+from tssac_core.sim.team import GUIDANCE
 
-Teammates = str | Mapping[str, Pilot] | None
+__all__ = ["DEFAULT_ACTION_REPEAT", "RoleTask", "TaskStep", "Teammates", "UavRoleEnv", "resolve_pilots"]
 
-
-def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
-    """Pilots for the three vehicles; the learner's own slot is ``"learner"``.
-
-    ``teammates`` is ``"guidance"`` (all teammates flown by the guidance controller), ``"none"`` or
-    None (the learner flies alone, as the decoy is trained), or a mapping role name -> pilot; roles
-    missing from the mapping are parked.
-    """
-    if teammates == GUIDANCE:
-        table: Mapping[str, Pilot] = {r.value: GUIDANCE for r in ROLES}
-    elif teammates is None or teammates == "none":
-        table = {}
-    elif isinstance(teammates, Mapping):
-        table = teammates
-        for name in table:
-            if name not in [r.value for r in ROLES]:
-                raise ValueError(f"teammates: unknown role {name!r}")
-    else:
-        raise ValueError(f"teammates must be 'guidance', 'none' or a mapping role -> pilot, got {teammates!r}")
-    pilots: list[Pilot] = []
-    for r in ROLES:
-        if r is role:
-            pilots.append("learner")
-        else:
-            pilot = table.get(r.value)
-            check_pilot(pilot, r.value)
-            pilots.append(pilot)
-    return pilots
+DEFAULT_OBSERVATION = ObservationMode.ROUTE
+"""The shipped team's observation (models/tssac/config.json)."""
+DEFAULT_ACTION_REPEAT = 10
+"""The shipped team's decision interval in 0.1 s world steps (models/tssac/config.json)."""
 
 
-@dataclass
-class TaskStep:
-    """One step of a RoleTask, every array (N, ...)."""
-
-    obs: np.ndarray
-    """Observation after the step; for worlds that ended, the first one of the new episode."""
-    final_obs: np.ndarray
-    """Observation after the step before any reset (what the replay buffer stores as s')."""
-    reward: np.ndarray
-    cost: np.ndarray
-    terminated: np.ndarray
-    truncated: np.ndarray
-    episode_return: np.ndarray
-    """For worlds that ended this step: the episode's return (else 0)."""
-    episode_cost: np.ndarray
-    """For worlds that ended: the episode's sum of the learner's cost (with the task's cost margin)."""
-    episode_hazard_cost: np.ndarray
-    """For worlds that ended: the learner's eq. 11 hazard cost (steps inside a radar), margin or not."""
-    episode_success: np.ndarray
-    """For worlds that ended: the mission succeeded (target hit)."""
-    episode_task: np.ndarray
-    """For worlds that ended: the learning role's task was completed (eq. 9)."""
+def check_action_repeat(action_repeat: int) -> int:
+    if isinstance(action_repeat, bool) or not isinstance(action_repeat, int | np.integer) or action_repeat < 1:
+        raise ValueError(f"action_repeat must be a positive integer (world steps per decision), got {action_repeat!r}")
+    return int(action_repeat)
 
 
-class RoleTask:
-    """N worlds in which one role learns; finished worlds are reset with a new layout."""
-
-    def __init__(
-        self,
-        scenario: Scenario,
-        role: Role,
-        n: int = 1,
-        observation: ObservationMode = ObservationMode.EXTENDED,
-        teammates: Teammates = GUIDANCE,
-        seed: int | None = None,
-        reward_config: RewardConfig = RewardConfig(),
-        cost_margin_m: float = 0.0,
-        hard_layouts: HardLayouts = HardLayouts(),
-    ) -> None:
-        self.scenario = scenario
-        self.layouts = LayoutSource(scenario, hard_layouts)
-        """Where new episodes' layouts come from (hard ones more often, when asked: tssac_core.sim.hard_layouts)."""
-        self.role = role
-        self.j = role.index
-        self.mode = observation
-        self.pilots = resolve_pilots(role, teammates)
-        self.active = tuple(p is not None for p in self.pilots)
-        self.reward_config = reward_config
-        self.cost_margin_m = cost_margin_m
-        """The learner's cost counts steps within this distance of a radar's disk (0: eq. 11 exactly); the
-        mission's own figures (``world.cost_total``, ``episode_hazard_cost``) stay eq. 11."""
-        self.routes = RouteMap(reward_config.route)
-        """Route fields of the reward's approach term (the observation's own, in route mode, have the default
-        margins)."""
-        self.obs_routes = self.routes if reward_config.route == RouteConfig() else RouteMap()
-        self.world = World(scenario, n)
-        self.team = Team(self.pilots, observation)
-        self.rng = np.random.default_rng(seed)
-        self.ep_return = np.zeros(n)
-        self.ep_cost = np.zeros(n)
-        self.detour_m = np.zeros(n)
-        """The learner's detour now, (N,) (reward term r_approach), kept current by reset and advance; the
-        teammates' detours are not measured (their rewards are nobody's concern here)."""
-
-    @property
-    def n(self) -> int:
-        return self.world.n
-
-    def reset(
-        self, index: Sequence[int] | np.ndarray | None = None, rng: np.random.Generator | None = None
-    ) -> np.ndarray:
-        """Reset worlds (all if ``index`` is None) and return every world's observation."""
-        idx = np.arange(self.n) if index is None else np.asarray(index)
-        gen = rng if rng is not None else self.rng
-        self.world.reset(idx, [self.layouts.draw(gen) for _ in idx], self.active)
-        self.ep_return[idx] = 0.0
-        self.ep_cost[idx] = 0.0
-        self._measure_detours()
-        return observe(self.world, self.j, self.mode, self.obs_routes)
-
-    def snapshot(self) -> bytes:
-        """The task's state (worlds, layout generator, running episode sums) for a resume file."""
-        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost))
-
-    def restore(self, snapshot: bytes) -> None:
-        """Continue from a :meth:`snapshot` (the pilots stay those this task was built with)."""
-        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(snapshot)
-        self._measure_detours()
-
-    def _measure_detours(self) -> None:
-        if self.reward_config.around_radars:
-            self.detour_m = self.routes.detour_m(self.world, self.j)
-
-    def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
-        """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
-        actions = self.team.actions(self.world, skip=self.j)
-        actions[:, self.j] = action
-        detour_prev = self.detour_m
-        result = self.world.step(actions)
-        moving = result.moving
-        self._measure_detours()
-        r = reward(result, moving, self.reward_config, detour_prev, self.detour_m, vehicle=self.j)
-        cost = result.cost[:, self.j]
-        if self.cost_margin_m > 0:
-            cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
-        # Afresh, not in place: an in-place update of a one-element array (N = 1) takes numpy's slow path.
-        self.ep_return = self.ep_return + r
-        self.ep_cost = self.ep_cost + cost
-        return result, r, cost
-
-    def step(self, action: np.ndarray, rng: np.random.Generator | None = None, repeat: int = 1) -> TaskStep:
-        """Step all worlds with the learner's ``action`` (N, 2) held for ``repeat`` world steps; reset those that end.
-
-        Rewards and costs are summed over the held steps (a world that ends part-way adds nothing more).
-        """
-        result, r, cost = self.advance(action)
-        terminated, truncated = result.terminated.copy(), result.truncated.copy()
-        for _ in range(repeat - 1):
-            result, r_k, cost_k = self.advance(action)
-            r, cost = r + r_k, cost + cost_k
-            terminated |= result.terminated
-            truncated |= result.truncated
-        final_obs = observe(self.world, self.j, self.mode, self.obs_routes)
-        ended = terminated | truncated
-        ep_return = np.where(ended, self.ep_return, 0.0)
-        ep_cost = np.where(ended, self.ep_cost, 0.0)
-        ep_hazard = np.where(ended, self.world.cost_total[:, self.j], 0.0)
-        success = ended & self.world.hit
-        task = ended & self.world.task_done[:, self.j]
-        obs = final_obs
-        if ended.any():
-            obs = self.reset(np.flatnonzero(ended), rng)
-        return TaskStep(obs, final_obs, r, cost, terminated, truncated, ep_return, ep_cost, ep_hazard, success, task)
+def role_info(task: RoleTask, i: int) -> dict[str, Any]:
+    """The info of world ``i`` of ``task`` for its learning role (mission flags; ``cost`` 0 until a step sets it)."""
+    w = task.world
+    return {
+        "cost": 0.0,
+        "radar_on": bool(w.radar_on[i]),
+        "identified": bool(w.identified[i]),
+        "hit": bool(w.hit[i]),
+        "task_done": bool(w.task_done[i, task.j]),
+        "in_hazard": bool(w.in_hazard[i, task.j]),
+    }
 
 
 class UavRoleEnv(gym.Env):
     """One UAV of the air-to-surface mission as a constrained MDP (paper section 3.3).
 
     **Action** (eq. 8), ``Box(-1, 1, (2,))``: [omega, u], scaled to the vehicle's turn-rate and
-    acceleration limits (scenario file), e.g. +-5 deg/s and +-10 m/s^2.
+    acceleration limits (scenario file), e.g. +-5 deg/s and +-10 m/s^2; held for ``action_repeat`` world steps of
+    0.1 s (default 10: one decision per second, as the shipped team decides).
 
-    **Observation**: ``observation="extended"`` (default, 22 values), ``"route"`` (24: extended plus the
-    direction of the way around the radars; what training uses by default) or ``"paper"`` (eq. 7, 5 values);
-    the table is in :mod:`tssac_core.sim.observation`.
+    **Observation**: ``observation="route"`` (default, 24 values: extended plus the direction of the way around the
+    radars; what the shipped team and training use), ``"extended"`` (22) or ``"paper"`` (eq. 7, 5 values); the table
+    is in :mod:`tssac_core.sim.observation`.
 
     **Reward** (eq. 10, Table 2, plus a zone-holding term and a leaving penalty): see
     :mod:`tssac_core.sim.reward`.
 
-    **Cost** (eq. 11): ``info["cost"]`` is 1 for a step inside any radar's disk, else 0; the budget is
-    the scenario's ``cost_limit`` (C = 3) per episode.
+    **Reward and cost of a step** are summed over its ``action_repeat`` world steps (a step that ends the episode
+    part-way stops there).
+
+    **Cost** (eq. 11): ``info["cost"]`` counts the world steps inside any radar's disk (0 or 1 per world step);
+    the budget is the scenario's ``cost_limit`` (C = 3) per episode. :meth:`safe_step` returns it in the tuple,
+    Safety-Gymnasium's way: ``obs, reward, cost, terminated, truncated, info``.
 
     **Start**: a layout from the scenario (fixed, or drawn from its ``random:`` ranges with
     ``self.np_random``); speeds at their initial values.
 
     **Termination**: the target is hit (mission success), or any flying UAV leaves the area.
-    **Truncation**: the scenario's episode cap (4,000 steps of 0.1 s).
+    **Truncation**: the scenario's episode cap (4,000 world steps of 0.1 s, 400 steps at ``action_repeat`` 10).
 
     ``teammates``: ``"guidance"`` (default), ``"none"``, or a mapping role name -> pilot
-    (``"guidance"``, a callable obs -> action, or None to park that UAV).
+    (``"guidance"``, a callable obs -> action such as a shipped actor,
+    ``tssac_core.deploy.numpy_actor.load_policy(path)``, or None to park that UAV); roles missing from a mapping
+    are parked.
+
+    **Seeding**: ``reset(seed=S)`` flies the layout of ``evaluate --seed S``'s mission 0 (mission k of seed S is
+    ``reset(seed=S + k)``), so an episode here and a mission there can be compared layout for layout.
     """
 
     metadata = {"render_modes": []}
@@ -226,14 +92,16 @@ class UavRoleEnv(gym.Env):
         self,
         role: str | Role = Role.DECOY,
         scenario: str | Path | Scenario = DEFAULT_SCENARIO,
-        observation: str | ObservationMode = ObservationMode.EXTENDED,
+        observation: str | ObservationMode = DEFAULT_OBSERVATION,
         teammates: Teammates = GUIDANCE,
         reward_config: RewardConfig = RewardConfig(),
+        action_repeat: int = DEFAULT_ACTION_REPEAT,
     ) -> None:
         super().__init__()
         self.scenario = scenario if isinstance(scenario, Scenario) else load(scenario)
         self.role = Role(role)
         self.mode = ObservationMode(observation)
+        self.action_repeat = check_action_repeat(action_repeat)
         self.task = RoleTask(self.scenario, self.role, 1, self.mode, teammates, reward_config=reward_config)
         low, high = observation_bounds(self.mode)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
@@ -252,32 +120,46 @@ class UavRoleEnv(gym.Env):
         if self._needs_reset:
             raise RuntimeError("call reset() before step() (the episode has ended)")
         # Not cast here: the assignment into the world's float64 actions makes the same floats in fewer calls.
-        result, r, cost = self.task.advance(np.asarray(action).reshape(1, 2))
-        terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
+        held = np.asarray(action).reshape(1, 2)
+        total_r = total_c = 0.0
+        for _ in range(self.action_repeat):
+            result, r, cost = self.task.advance(held)
+            total_r += float(r[0])
+            total_c += float(cost[0])
+            terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
+            if terminated or truncated:
+                break
         self._needs_reset = terminated or truncated
         info = self._info()
-        info["cost"] = float(cost[0])
+        info["cost"] = total_c
         return (
             observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[0],
-            float(r[0]),
+            total_r,
             terminated,
             truncated,
             info,
         )
 
+    def safe_step(self, action: np.ndarray) -> tuple[np.ndarray, float, float, bool, bool, dict[str, Any]]:
+        """Safety-Gymnasium's step: ``obs, reward, cost, terminated, truncated, info`` (the cost also stays in
+        ``info["cost"]``)."""
+        obs, r, terminated, truncated, info = self.step(action)
+        return obs, r, float(info["cost"]), terminated, truncated, info
+
     def _info(self) -> dict[str, Any]:
-        w = self.task.world
-        return {
-            "cost": 0.0,
-            "radar_on": bool(w.radar_on[0]),
-            "identified": bool(w.identified[0]),
-            "hit": bool(w.hit[0]),
-            "task_done": bool(w.task_done[0, self.task.j]),
-            "in_hazard": bool(w.in_hazard[0, self.task.j]),
-        }
+        return role_info(self.task, 0)
+
+
+def env_id(role: Role | str) -> str:
+    """The registered id of a role's env: ``tssac/Decoy-v0``, ``tssac/Detect-v0``, ``tssac/Strike-v0``."""
+    return f"tssac/{Role(role).value.capitalize()}-v0"
 
 
 for _role in ROLES:
-    _id = f"tssac/{_role.value.capitalize()}-v0"
-    if _id not in gym.envs.registry:
-        gym.register(id=_id, entry_point="tssac_core.sim.env:UavRoleEnv", kwargs={"role": _role.value})
+    if env_id(_role) not in gym.envs.registry:
+        gym.register(
+            id=env_id(_role),
+            entry_point="tssac_core.sim.env:UavRoleEnv",
+            vector_entry_point="tssac_core.sim.vector_env:RoleVectorEnv",
+            kwargs={"role": _role.value},
+        )

@@ -144,15 +144,17 @@ def fly_missions(
     layouts: list[Layout] | None = None,
     indices: Sequence[int] | None = None,
     shield: ShieldConfig | None = None,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
-    number of missions that finished since the last call. ``shield``: fly every UAV through the
-    runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
+    number of missions that finished since the last call, ``on_step`` after every step of the batch with the
+    missions that flew it and those still flying (:class:`tssac_core.progress.TimeLeft`). ``shield``: fly every
+    UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
     """
-    missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield)
+    missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step)
     try:
         while True:
             finished = next(missions)
@@ -173,6 +175,7 @@ def iter_missions(
     layouts: list[Layout] | None = None,
     indices: Sequence[int] | None = None,
     shield: ShieldConfig | None = None,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> Generator[int, None, MissionResults]:
     """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
     returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
@@ -210,6 +213,9 @@ def iter_missions(
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
         out |= result.out_of_area
         finished = int((was_running & ~world.running).sum())
+        if on_step is not None:
+            flying = int(was_running.sum())
+            on_step(flying, flying - finished)
         if finished:
             yield finished
     return MissionResults(

@@ -18,8 +18,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from tssac_core.algos.onpolicy.ppo import OnPolicyAlgo
-from tssac_core.algos.sac_lagrangian import Variant
+from tssac_core.algos.onpolicy.config import OnPolicyAlgo
+from tssac_core.algos.sac_config import Variant
 
 
 class Family(enum.Enum):

@@ -36,7 +36,7 @@ class SeedJobs:
 
 def parse_args(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool]:
     """The run's TrainConfig, --out, --resume and --no-progress (see `parse_cli` for --seeds)."""
-    cfg, out, resume, quiet, _ = parse_cli(argv)
+    cfg, out, resume, quiet, _, _ = parse_cli(argv)
     return cfg, out, resume, quiet
 
 
@@ -50,7 +50,8 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
-def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, SeedJobs]:
+def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, SeedJobs, Path | None]:
+    """The run's TrainConfig, --out, --resume, --no-progress, --seeds (and where they run), and --tensorboard."""
     first = argparse.ArgumentParser(add_help=False)
     first.add_argument("--preset", type=Path)
     preset_path = first.parse_known_args(argv)[0].preset
@@ -195,6 +196,13 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     )
     p.add_argument("--resume", action="store_true", help="continue the run in --out (its config.json wins)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--tensorboard",
+        type=Path,
+        metavar="DIR",
+        help="also write every epoch's scalars (return, cost, multiplier, losses, validation) as TensorBoard events "
+        "in DIR (the tensorboard extra: pip install -e '.[tensorboard]'); with --seeds, DIR/seed<N>",
+    )
     if preset is not None:
         p.set_defaults(**preset.argparse_defaults())
     a = p.parse_args(argv)
@@ -248,7 +256,17 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     if a.address is not None and a.executor != EXECUTORS[1]:
         raise UsageError("--address is for --executor ray")
     jobs = SeedJobs(parse_seeds(a.seeds) if a.seeds is not None else None, a.executor, a.address)
-    return cfg, a.out, a.resume, a.no_progress, jobs
+    if a.tensorboard is not None:
+        require_tensorboard()
+    return cfg, a.out, a.resume, a.no_progress, jobs, a.tensorboard
+
+
+def require_tensorboard() -> None:
+    """UsageError (one line) when ``--tensorboard`` is asked for but its optional package is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("tensorboard") is None:
+        raise UsageError("--tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
 
 
 def train_argv(cfg: TrainConfig) -> tuple[str, ...]:

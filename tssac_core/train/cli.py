@@ -6,31 +6,32 @@ Examples::
     python -m tssac_core.train --algo sac_lag --seed 1 --epochs 20 --out runs/sac_lag-1
     python -m tssac_core.train --out runs/tssac-0 --resume        # after a crash or kill -9
     python -m tssac_core.train --algo tssac --seeds 0,1,2 --out runs/tssac   # one job per seed: runs/tssac/seed<N>/
+    python -m tssac_core.train --preset configs/shipped.yaml --out runs/t --tensorboard runs/tb   # live curves
 
-The run directory's contents: :mod:`tssac_core.train.rundir`.
+The run directory's contents: :mod:`tssac_core.train.rundir`. ``--tensorboard DIR`` also writes every epoch's
+scalars as TensorBoard events (:mod:`tssac_core.train.tensorboard`; the ``tensorboard`` extra). Ctrl-C stops the
+run and prints the command that continues it. torch and the training loop are imported after the arguments are
+parsed, so ``--help`` and bad input answer at once.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
+import shlex
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
-from tqdm import tqdm
-
-from tssac_core.cli import UsageError, run, write_json
+from tssac_core.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.ray_cluster import RayTarget
 from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli, train_argv
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import config_from_saved
-from tssac_core.train.loop import train_role
-from tssac_core.train.rundir import prepare_run, shipped, write_plots
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -39,24 +40,52 @@ SEEDS_FILE = "seeds.json"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    cfg, out, resume, quiet, jobs = parse_cli(argv)
-    if jobs.seeds is not None or (resume and (out / SEEDS_FILE).is_file()):
-        return train_seeds(cfg, jobs, out, resume)
-    if jobs.executor != EXECUTORS[0]:
-        raise UsageError(f"--executor {jobs.executor} runs the jobs of --seeds (one run trains here)")
+    cfg, out, resume, quiet, jobs, tensorboard = parse_cli(argv)
+    try:
+        if jobs.seeds is not None or (resume and (out / SEEDS_FILE).is_file()):
+            return train_seeds(cfg, jobs, out, resume, tensorboard)
+        if jobs.executor != EXECUTORS[0]:
+            raise UsageError(f"--executor {jobs.executor} runs the jobs of --seeds (one run trains here)")
+        return train_one(cfg, out, resume, quiet, tensorboard)
+    except KeyboardInterrupt:
+        print(resume_hint(out), file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def resume_hint(out: Path) -> str:
+    """What Ctrl-C prints: the exact command that continues the run in ``out`` (its config.json, or seeds.json,
+    holds every other setting), or, when nothing was saved yet, that the same command starts it again."""
+    if (out / "config.json").is_file() or (out / SEEDS_FILE).is_file():
+        return f"interrupted; continue with: python -m tssac_core.train --out {shlex.quote(str(out))} --resume"
+    return "interrupted before anything was saved; run the same command again to start"
+
+
+def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboard: Path | None) -> int:
+    """One run (``--seed``): every role of the curriculum in turn, into ``out``."""
+    import torch  # here, not above: --help and bad input answer without loading torch
+    from tqdm import tqdm
+
+    from tssac_core.train.loop import train_role
+    from tssac_core.train.rundir import prepare_run, shipped, write_plots
+    from tssac_core.train.tensorboard import EpochSink, open_sink
+
     cfg, scenario = prepare_run(cfg, out, resume)
     torch.set_num_threads(cfg.threads)
     total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
     start = time.perf_counter()
-    with tqdm(
-        total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05
-    ) as bar:
+    sink: EpochSink | None = open_sink(tensorboard) if tensorboard is not None else None
+    with (
+        tqdm(
+            total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05
+        ) as bar,
+        contextlib.closing(sink) if sink is not None else contextlib.nullcontext(),
+    ):
         for role_name in cfg.roles:
             role = Role(role_name)
             if shipped(out, role):
                 logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
                 continue
-            train_role(cfg, scenario, role, out, resume, bar)
+            train_role(cfg, scenario, role, out, resume, bar, on_epoch=sink.write if sink is not None else None)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
     print(
@@ -70,6 +99,11 @@ def seed_dir(out: Path, seed: int) -> Path:
     return out / f"seed{seed}"
 
 
+def board(tensorboard: Path | None, seed: int) -> tuple[str, ...]:
+    """A seed job's ``--tensorboard`` argument: its own subdirectory of the command's (none without one)."""
+    return () if tensorboard is None else ("--tensorboard", str(seed_dir(tensorboard, seed)))
+
+
 def saved_config(run_dir: Path) -> TrainConfig:
     """The TrainConfig in ``run_dir/config.json`` (UsageError naming the file if it cannot be read)."""
     path = run_dir / "config.json"
@@ -80,10 +114,11 @@ def saved_config(run_dir: Path) -> TrainConfig:
     return config_from_saved(saved, path)
 
 
-def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool) -> int:
+def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool, tensorboard: Path | None = None) -> int:
     """``--seeds``: one training job per seed (``out/seed<N>``, what ``--seed N --out out/seed<N>`` writes), all at
     once on the experiments' job executor (``--executor``: local processes or Ray tasks); on --resume the seeds
-    of ``out/seeds.json``. Exit 0 when every seed finished."""
+    of ``out/seeds.json``. With ``tensorboard``, seed N writes its events to ``tensorboard/seed<N>``. Exit 0 when
+    every seed finished."""
     from tssac_core.experiments.executors import execute
     from tssac_core.experiments.grid import AlgoEntry, Job
     from tssac_core.experiments.jobs import Status, job_state
@@ -102,11 +137,17 @@ def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool) -> i
     entry = AlgoEntry(cfg.algo, cfg.algo)
     if resume:
         # Each seed's config.json wins, as for a single run: it is resumed as it was started.
-        jobs = [Job(entry, s, seed_dir(out, s), train_argv(saved_config(seed_dir(out, s)))) for s in seeds]
+        jobs = [
+            Job(entry, s, seed_dir(out, s), train_argv(saved_config(seed_dir(out, s))) + board(tensorboard, s))
+            for s in seeds
+        ]
     else:
         if seeds_path.is_file() or any((seed_dir(out, s) / "config.json").is_file() for s in seeds):
             raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
-        jobs = [Job(entry, s, seed_dir(out, s), train_argv(dataclasses.replace(cfg, seed=s))) for s in seeds]
+        jobs = [
+            Job(entry, s, seed_dir(out, s), train_argv(dataclasses.replace(cfg, seed=s)) + board(tensorboard, s))
+            for s in seeds
+        ]
         out.mkdir(parents=True, exist_ok=True)
         write_json(seeds_path, {"seeds": list(seeds)})
     states = [job_state(job) for job in jobs]

@@ -8,8 +8,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from tssac_core.algos.onpolicy.ppo import OnPolicyConfig
-from tssac_core.algos.sac_lagrangian import SacConfig
+from tssac_core.algos.onpolicy.config import OnPolicyConfig
+from tssac_core.algos.sac_config import SacConfig
 from tssac_core.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import torch
 from tqdm import tqdm
@@ -35,8 +37,17 @@ from tssac_core.train.validation import EpochSelector
 logger = logging.getLogger("tssac_core.train")
 
 
-def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resume: bool, bar: tqdm) -> None:
-    """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``."""
+def train_role(
+    cfg: TrainConfig,
+    scenario: Scenario,
+    role: Role,
+    out: Path,
+    resume: bool,
+    bar: tqdm,
+    on_epoch: Callable[[dict[str, Any]], None] | None = None,
+) -> None:
+    """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``. ``on_epoch`` is
+    given every epoch's metrics row (what ``metrics.csv`` gets) once it is written."""
     mode = ObservationMode(cfg.observation)
     torch.manual_seed(cfg.seed * 1000 + role.index)
     learner = make_role_learner(cfg, scenario, role, mode)  # its initial weights are the generator's first draws
@@ -100,6 +111,8 @@ def train_role(cfg: TrainConfig, scenario: Scenario, role: Role, out: Path, resu
         row.update(columns)
         row.update(selector.after_epoch(epoch, write_checkpoint))
         append_metrics(out / "metrics.csv", row)
+        if on_epoch is not None:
+            on_epoch(row)
         learner.log_epoch(epoch, row)
         bar.set_postfix(
             role=role.value,

@@ -1,0 +1,63 @@
+"""Seconds of every command's ``--help`` (issue 42's target: < 1 s): wall time and the process's CPU time (user +
+system), the best of a few fresh processes each. CPU time is the figure a busy machine does not inflate; the
+wall time is printed beside it with the load average. tests/test_help_imports.py holds the cause (no torch,
+gymnasium, Ray, matplotlib or filterpy before argparse) without a clock. Writes benchmarks/results/help.json.
+
+    python benchmarks/bench_help.py [--runs 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+COMMANDS = (
+    "tssac_core.train",
+    "tssac_core.evaluate",
+    "tssac_core.experiments",
+    "tssac_core.experiments.targets",
+    "tssac_core.deploy.export",
+    "mavlink_bridge.fly",
+    "mavlink_bridge.companion",
+    "sim_vehicles",
+)
+
+
+def one_run(module: str) -> tuple[float, float]:
+    """(wall s, CPU s) of ``python -m module --help`` in a fresh process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", module, "--help"], check=True, capture_output=True, cwd=ROOT)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--runs", type=int, default=3)
+    args = p.parse_args()
+    rows = {}
+    print(f"--help, best of {args.runs} fresh processes (1-minute load average {os.getloadavg()[0]:.1f}):")
+    for module in COMMANDS:
+        runs = [one_run(module) for _ in range(args.runs)]
+        wall, cpu = min(r[0] for r in runs), min(r[1] for r in runs)
+        rows[module] = {"wall_s": round(wall, 3), "cpu_s": round(cpu, 3)}
+        print(f"  python -m {module:32s} wall {wall:5.2f} s   CPU {cpu:5.2f} s")
+    out = ROOT / "benchmarks" / "results" / "help.json"
+    out.write_text(
+        json.dumps({"runs": args.runs, "load_avg_1m": os.getloadavg()[0], "commands": rows}, indent=2) + "\n"
+    )
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

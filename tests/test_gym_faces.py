@@ -1,0 +1,108 @@
+"""The gymnasium faces of a role (issue 42): gym.make with the shipped team's settings, a shipped actor flown in it,
+the Safety-Gymnasium step, and gym.make_vec on the batched world, step for step equal to SyncVectorEnv."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env, data_equivalence
+from gymnasium.vector import AutoresetMode
+
+import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
+from tssac_core.deploy.numpy_actor import load_policy, team_pilots
+from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.scenario import ROLES, load
+from tssac_core.sim.vector_env import RoleVectorEnv
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ROOT / "models" / "tssac"
+
+
+def test_defaults_are_the_shipped_teams():
+    shipped = json.loads((MODELS / "config.json").read_text())
+    env = gym.make("tssac/Decoy-v0")
+    assert env.unwrapped.mode.value == shipped["observation"]
+    assert env.unwrapped.action_repeat == shipped["action_repeat"]
+    assert env.observation_space.shape == (load_policy(MODELS / "decoy.npz").obs_dim,)
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_a_step_holds_the_action_for_action_repeat_world_steps():
+    held = gym.make("tssac/Detect-v0", action_repeat=5)
+    fine = gym.make("tssac/Detect-v0", action_repeat=1)
+    held.reset(seed=3)
+    fine.reset(seed=3)
+    action = np.array([0.3, -0.2], dtype=np.float32)
+    for _ in range(4):
+        obs, r, term, trunc, info = held.step(action)
+        parts = [fine.step(action) for _ in range(5)]
+        assert np.array_equal(obs, parts[-1][0])
+        assert r == pytest.approx(sum(p[1] for p in parts))
+        assert info["cost"] == sum(p[4]["cost"] for p in parts)
+    with pytest.raises(ValueError, match="action_repeat"):
+        gym.make("tssac/Detect-v0", action_repeat=0)
+
+
+def test_safe_step_returns_the_cost_in_the_tuple():
+    env = gym.make("tssac/Strike-v0", scenario=str(ROOT / "scenarios" / "strike.yaml")).unwrapped
+    env.reset(seed=0)
+    obs, reward, cost, terminated, truncated, info = env.safe_step(np.zeros(2, dtype=np.float32))
+    assert cost == info["cost"] and isinstance(cost, float) and obs.shape == env.observation_space.shape
+
+
+def test_the_shipped_decoy_flies_in_gym_make_as_in_evaluate():
+    """reset(seed=S + k) is mission k of seed S; the decoy's task comes out the same, mission for mission."""
+    seed, missions = 800001, 6
+    pilots = [load_policy(MODELS, role) for role in ROLES]
+    evaluated = fly_missions(load(ROOT / "scenarios" / "random.yaml"), pilots, missions, seed)
+    policy = load_policy(MODELS / "decoy.npz")
+    env = gym.make("tssac/Decoy-v0", teammates=team_pilots(MODELS, ["detect", "strike"]))
+    flown = []
+    for k in range(missions):
+        obs, info = env.reset(seed=seed + k)
+        terminated = truncated = False
+        while not (terminated or truncated):
+            obs, reward, terminated, truncated, info = env.step(policy.predict(obs))
+        flown.append(info["task_done"])
+    assert flown == evaluated.task_done[:, 0].tolist()
+    assert any(flown)
+
+
+def test_load_policy_needs_a_role_for_a_directory():
+    from tssac_core.errors import CheckpointError
+
+    with pytest.raises(CheckpointError, match="which role"):
+        load_policy(MODELS)
+    assert load_policy(MODELS, "strike").role.value == "strike"
+
+
+def test_make_vec_is_the_batched_world_and_equals_sync_vector_env():
+    n = 4
+    # Guidance teammates: missions end (the target is hit), so autoreset is compared too.
+    vec = gym.make_vec("tssac/Decoy-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    assert isinstance(vec, RoleVectorEnv) and vec.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    sync = gym.make_vec(
+        "tssac/Decoy-v0",
+        num_envs=n,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
+    )
+    assert vec.observation_space == sync.observation_space and vec.action_space == sync.action_space
+    assert data_equivalence(vec.reset(seed=11), sync.reset(seed=11))
+    rng = np.random.default_rng(0)
+    ended = 0
+    for _ in range(450):
+        actions = rng.uniform(-1, 1, (n, 2)).astype(np.float32)
+        a, b = vec.step(actions), sync.step(actions)
+        assert data_equivalence(a, b), "the vector env left SyncVectorEnv"
+        ended += int((a[2] | a[3]).sum())
+    assert ended >= 1  # autoreset was compared too
+
+
+def test_make_vec_bad_num_envs():
+    with pytest.raises(ValueError, match="num_envs"):
+        RoleVectorEnv(num_envs=0)

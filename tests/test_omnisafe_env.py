@@ -1,0 +1,66 @@
+"""The OmniSafe adapter (tssac_core.omnisafe_env), opt-in: skipped unless omnisafe is importable, which it is only in
+OmniSafe's own environment (gymnasium 0.28.1; README, "OmniSafe"):
+
+    /work/omnisafe-venv/bin/python -m pytest -q tests/test_omnisafe_env.py -p no:cacheprovider
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+omnisafe = pytest.importorskip("omnisafe")
+torch = pytest.importorskip("torch")
+
+from omnisafe.envs.core import make, support_envs  # noqa: E402
+
+from tssac_core.omnisafe_env import TssacRoleEnv  # noqa: E402
+from tssac_core.sim.observation import ObservationMode  # noqa: E402
+from tssac_core.sim.scenario import Role  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_registered_in_omnisafes_registry():
+    assert {"TssacDecoy-v0", "TssacDetect-v0", "TssacStrike-v0"} <= set(support_envs())
+    env = make("TssacDetect-v0", num_envs=3, teammates=str(ROOT / "models" / "tssac"))
+    assert isinstance(env, TssacRoleEnv) and env.role is Role.DETECT
+    assert type(env.task.pilots[0]).__name__ == "NumpyPolicy"  # the shipped decoy flies
+    assert env.task.pilots[2] is None  # strike parked, as the curriculum trains detect
+    assert env.observation_space.shape == (ObservationMode.ROUTE.size,) and env.max_episode_steps == 400
+
+
+def test_step_sums_action_repeat_and_resets_finished_worlds():
+    env = make("TssacDecoy-v0", num_envs=4, action_repeat=10)
+    env.set_seed(7)
+    obs, _ = env.reset()
+    assert obs.shape == (4, ObservationMode.ROUTE.size) and obs.dtype == torch.float32
+    ended = 0
+    for _ in range(450):
+        obs, reward, cost, terminated, truncated, info = env.step(torch.rand(4, 2) * 2 - 1)
+        assert reward.shape == cost.shape == terminated.shape == (4,) and terminated.dtype == torch.bool
+        assert torch.all(cost >= 0) and torch.all(cost <= 10)
+        done = terminated | truncated
+        if done.any():
+            ended += int(done.sum())
+            assert info["final_observation"].shape == obs.shape
+    assert ended >= 1
+
+
+def test_same_seed_same_layouts_and_one_world_is_unbatched():
+    a, b = make("TssacStrike-v0", num_envs=1), make("TssacStrike-v0", num_envs=1)
+    a.set_seed(3)
+    b.set_seed(3)
+    oa, _ = a.reset()
+    ob, _ = b.reset()
+    assert oa.shape == (ObservationMode.ROUTE.size,) and torch.equal(oa, ob)
+    sa, sb = a.step(torch.zeros(2)), b.step(torch.zeros(2))
+    assert all(torch.equal(x, y) for x, y in zip(sa[:5], sb[:5]))
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="unknown env_cfgs"):
+        make("TssacDecoy-v0", num_envs=1, colour="red")
+    with pytest.raises(ValueError, match="learning role"):
+        make("TssacDetect-v0", num_envs=1, teammates=str(ROOT / "models" / "tssac"), teammate_roles=["detect"])

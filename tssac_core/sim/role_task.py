@@ -1,0 +1,202 @@
+"""The constrained MDP of one UAV role over N worlds at once: :class:`RoleTask` (numpy only, no gymnasium).
+
+:class:`RoleTask` runs N worlds for one learning role (decoy, detect or strike) with its teammates flown by
+given pilots (:mod:`tssac_core.sim.team`), resetting finished worlds itself. The training loop uses it directly;
+the gymnasium env and vector env (:mod:`tssac_core.sim.env`, :mod:`tssac_core.sim.vector_env`) and the OmniSafe
+adapter (:mod:`tssac_core.omnisafe_env`) are faces over it.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
+from tssac_core.sim.observation import ObservationMode, observe
+from tssac_core.sim.reward import RewardConfig, reward
+from tssac_core.sim.routes import RouteConfig, RouteMap
+from tssac_core.sim.scenario import ROLES, Role, Scenario
+from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
+from tssac_core.sim.world import StepResult, World
+
+Teammates = str | Mapping[str, Pilot] | None
+
+
+def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
+    """Pilots for the three vehicles; the learner's own slot is ``"learner"``.
+
+    ``teammates`` is ``"guidance"`` (all teammates flown by the guidance controller), ``"none"`` or
+    None (the learner flies alone, as the decoy is trained), or a mapping role name -> pilot; roles
+    missing from the mapping are parked.
+    """
+    if teammates == GUIDANCE:
+        table: Mapping[str, Pilot] = {r.value: GUIDANCE for r in ROLES}
+    elif teammates is None or teammates == "none":
+        table = {}
+    elif isinstance(teammates, Mapping):
+        table = teammates
+        for name in table:
+            if name not in [r.value for r in ROLES]:
+                raise ValueError(f"teammates: unknown role {name!r}")
+    else:
+        raise ValueError(f"teammates must be 'guidance', 'none' or a mapping role -> pilot, got {teammates!r}")
+    pilots: list[Pilot] = []
+    for r in ROLES:
+        if r is role:
+            pilots.append("learner")
+        else:
+            pilot = table.get(r.value)
+            check_pilot(pilot, r.value)
+            pilots.append(pilot)
+    return pilots
+
+
+@dataclass
+class TaskStep:
+    """One step of a RoleTask, every array (N, ...)."""
+
+    obs: np.ndarray
+    """Observation after the step; for worlds that ended, the first one of the new episode."""
+    final_obs: np.ndarray
+    """Observation after the step before any reset (what the replay buffer stores as s')."""
+    reward: np.ndarray
+    cost: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episode_return: np.ndarray
+    """For worlds that ended this step: the episode's return (else 0)."""
+    episode_cost: np.ndarray
+    """For worlds that ended: the episode's sum of the learner's cost (with the task's cost margin)."""
+    episode_hazard_cost: np.ndarray
+    """For worlds that ended: the learner's eq. 11 hazard cost (steps inside a radar), margin or not."""
+    episode_success: np.ndarray
+    """For worlds that ended: the mission succeeded (target hit)."""
+    episode_task: np.ndarray
+    """For worlds that ended: the learning role's task was completed (eq. 9)."""
+
+
+class RoleTask:
+    """N worlds in which one role learns; finished worlds are reset with a new layout."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        role: Role,
+        n: int = 1,
+        observation: ObservationMode = ObservationMode.EXTENDED,
+        teammates: Teammates = GUIDANCE,
+        seed: int | None = None,
+        reward_config: RewardConfig = RewardConfig(),
+        cost_margin_m: float = 0.0,
+        hard_layouts: HardLayouts = HardLayouts(),
+    ) -> None:
+        self.scenario = scenario
+        self.layouts = LayoutSource(scenario, hard_layouts)
+        """Where new episodes' layouts come from (hard ones more often, when asked: tssac_core.sim.hard_layouts)."""
+        self.role = role
+        self.j = role.index
+        self.mode = observation
+        self.pilots = resolve_pilots(role, teammates)
+        self.active = tuple(p is not None for p in self.pilots)
+        self.reward_config = reward_config
+        self.cost_margin_m = cost_margin_m
+        """The learner's cost counts steps within this distance of a radar's disk (0: eq. 11 exactly); the
+        mission's own figures (``world.cost_total``, ``episode_hazard_cost``) stay eq. 11."""
+        self.routes = RouteMap(reward_config.route)
+        """Route fields of the reward's approach term (the observation's own, in route mode, have the default
+        margins)."""
+        self.obs_routes = self.routes if reward_config.route == RouteConfig() else RouteMap()
+        self.world = World(scenario, n)
+        self.team = Team(self.pilots, observation)
+        self.rng = np.random.default_rng(seed)
+        self.ep_return = np.zeros(n)
+        self.ep_cost = np.zeros(n)
+        self.detour_m = np.zeros(n)
+        """The learner's detour now, (N,) (reward term r_approach), kept current by reset and advance; the
+        teammates' detours are not measured (their rewards are nobody's concern here)."""
+
+    @property
+    def n(self) -> int:
+        return self.world.n
+
+    def reset(
+        self,
+        index: Sequence[int] | np.ndarray | None = None,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+    ) -> np.ndarray:
+        """Reset worlds (all if ``index`` is None) and return every world's observation. ``rng``: where the new
+        layouts come from (default the task's own generator); a sequence gives world ``i`` its own, ``rng[i]``
+        (what the gymnasium vector env does, so that each world draws as a single env seeded alike would)."""
+        idx = np.arange(self.n) if index is None else np.asarray(index)
+        if rng is None or isinstance(rng, np.random.Generator):
+            gen = rng if rng is not None else self.rng
+            layouts = [self.layouts.draw(gen) for _ in idx]
+        else:
+            layouts = [self.layouts.draw(rng[int(i)]) for i in idx]
+        self.world.reset(idx, layouts, self.active)
+        self.ep_return[idx] = 0.0
+        self.ep_cost[idx] = 0.0
+        self._measure_detours()
+        return observe(self.world, self.j, self.mode, self.obs_routes)
+
+    def snapshot(self) -> bytes:
+        """The task's state (worlds, layout generator, running episode sums) for a resume file."""
+        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost))
+
+    def restore(self, snapshot: bytes) -> None:
+        """Continue from a :meth:`snapshot` (the pilots stay those this task was built with)."""
+        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(snapshot)
+        self._measure_detours()
+
+    def _measure_detours(self) -> None:
+        if self.reward_config.around_radars:
+            self.detour_m = self.routes.detour_m(self.world, self.j)
+
+    def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
+        """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
+        actions = self.team.actions(self.world, skip=self.j)
+        actions[:, self.j] = action
+        detour_prev = self.detour_m
+        result = self.world.step(actions)
+        moving = result.moving
+        self._measure_detours()
+        r = reward(result, moving, self.reward_config, detour_prev, self.detour_m, vehicle=self.j)
+        cost = result.cost[:, self.j]
+        if self.cost_margin_m > 0:
+            cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
+        # Afresh, not in place: an in-place update of a one-element array (N = 1) takes numpy's slow path.
+        self.ep_return = self.ep_return + r
+        self.ep_cost = self.ep_cost + cost
+        return result, r, cost
+
+    def step(
+        self,
+        action: np.ndarray,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+        repeat: int = 1,
+    ) -> TaskStep:
+        """Step all worlds with the learner's ``action`` (N, 2) held for ``repeat`` world steps; reset those that end.
+
+        Rewards and costs are summed over the held steps (a world that ends part-way adds nothing more).
+        """
+        result, r, cost = self.advance(action)
+        terminated, truncated = result.terminated.copy(), result.truncated.copy()
+        for _ in range(repeat - 1):
+            result, r_k, cost_k = self.advance(action)
+            r, cost = r + r_k, cost + cost_k
+            terminated |= result.terminated
+            truncated |= result.truncated
+        final_obs = observe(self.world, self.j, self.mode, self.obs_routes)
+        ended = terminated | truncated
+        ep_return = np.where(ended, self.ep_return, 0.0)
+        ep_cost = np.where(ended, self.ep_cost, 0.0)
+        ep_hazard = np.where(ended, self.world.cost_total[:, self.j], 0.0)
+        success = ended & self.world.hit
+        task = ended & self.world.task_done[:, self.j]
+        obs = final_obs
+        if ended.any():
+            obs = self.reset(np.flatnonzero(ended), rng)
+        return TaskStep(obs, final_obs, r, cost, terminated, truncated, ep_return, ep_cost, ep_hazard, success, task)

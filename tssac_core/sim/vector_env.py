@@ -1,0 +1,148 @@
+"""``gym.make_vec("tssac/<Role>-v0", num_envs=N)``: N worlds of one role as a gymnasium ``VectorEnv`` on the batched
+world (:class:`tssac_core.sim.role_task.RoleTask`), one array step for all N instead of N Python envs.
+
+It is N copies of :class:`tssac_core.sim.env.UavRoleEnv` put side by side, to the bit: the same keyword arguments
+(``scenario``, ``observation``, ``action_repeat``, ``teammates``, ``reward_config``), world ``i`` seeded as a single
+env reset with ``seed + i`` (gymnasium's rule for vector seeds), and finished worlds reset in the same step
+(``autoreset_mode`` SAME_STEP): ``obs`` holds the new episode's first observation, ``info["final_obs"]`` and
+``info["final_info"]`` (masked by ``info["_final_obs"]``) the last of the old one. Each info key comes with its
+``_key`` mask, as ``SyncVectorEnv`` builds them. tests/test_vector_env.py holds it equal to
+``SyncVectorEnv(..., autoreset_mode=SAME_STEP)`` of the single env, step for step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from tssac_core.sim.env import DEFAULT_ACTION_REPEAT, DEFAULT_OBSERVATION, check_action_repeat
+from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
+from tssac_core.sim.reward import RewardConfig
+from tssac_core.sim.role_task import RoleTask, Teammates
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, Role, Scenario, load
+from tssac_core.sim.team import GUIDANCE
+
+INFO_KEYS = ("cost", "radar_on", "identified", "hit", "task_done", "in_hazard")
+"""The per-world info of :class:`tssac_core.sim.env.UavRoleEnv`, in its order."""
+
+
+class RoleVectorEnv(gym.vector.VectorEnv):
+    """N worlds of one role (module docstring); ``step`` takes actions (N, 2) in [-1, 1]."""
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        role: str | Role = Role.DECOY,
+        scenario: str | Path | Scenario = DEFAULT_SCENARIO,
+        observation: str | ObservationMode = DEFAULT_OBSERVATION,
+        teammates: Teammates = GUIDANCE,
+        reward_config: RewardConfig = RewardConfig(),
+        action_repeat: int = DEFAULT_ACTION_REPEAT,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        self.scenario = scenario if isinstance(scenario, Scenario) else load(scenario)
+        self.role = Role(role)
+        self.mode = ObservationMode(observation)
+        self.action_repeat = check_action_repeat(action_repeat)
+        self.num_envs = num_envs
+        self.task = RoleTask(self.scenario, self.role, num_envs, self.mode, teammates, reward_config=reward_config)
+        low, high = observation_bounds(self.mode)
+        self.single_observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(num_envs)]
+        self._needs_reset = True
+
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every world; ``seed`` S seeds world i with S + i (or a list gives each its own), as SyncVectorEnv."""
+        if seed is None:
+            seeds: Sequence[int | None] = [None] * self.num_envs
+        elif isinstance(seed, int | np.integer):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"reset: {len(seeds)} seeds for {self.num_envs} envs")
+        self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        obs = self.task.reset(rng=self._rngs)
+        self._needs_reset = False
+        return obs.astype(np.float32), self._infos(np.ones(self.num_envs, dtype=bool))
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if self._needs_reset:
+            raise RuntimeError("call reset() before step()")
+        held = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
+        reward = np.zeros(self.num_envs)
+        cost = np.zeros(self.num_envs)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        final_flags: dict[str, np.ndarray] = {}
+        for _ in range(self.action_repeat):
+            result, r, c = self.task.advance(held)
+            reward += r  # a world that ended part-way flies no more: World.step leaves it, its reward and cost are 0
+            cost += c
+            newly = (result.terminated | result.truncated) & ~(terminated | truncated)
+            terminated |= result.terminated
+            truncated |= result.truncated
+            if newly.any():  # its last observation and flags now: the world's mission flags still change after it
+                self._keep_final(np.flatnonzero(newly), final_obs, final_flags)
+            if (terminated | truncated).all():
+                break
+        ended = terminated | truncated
+        infos: dict[str, Any] = {}
+        if ended.any():
+            final = self._infos(ended, cost, final_flags)
+            infos = {"final_obs": final_obs, "_final_obs": ended.copy(), "final_info": final, "_final_info": ended}
+            obs = self.task.reset(np.flatnonzero(ended), self._rngs)
+        else:
+            obs = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)
+        infos.update(self._infos(np.ones(self.num_envs, dtype=bool), np.where(ended, 0.0, cost)))
+        return obs.astype(np.float32), reward, terminated, truncated, infos
+
+    def _flags(self) -> dict[str, np.ndarray]:
+        """The mission flags of every world now, for the learning role: (N,) bool each."""
+        w, j = self.task.world, self.task.j
+        return {
+            "radar_on": w.radar_on.copy(),
+            "identified": w.identified.copy(),
+            "hit": w.hit.copy(),
+            "task_done": w.task_done[:, j].copy(),
+            "in_hazard": w.in_hazard[:, j].copy(),
+        }
+
+    def _keep_final(self, idx: np.ndarray, final_obs: np.ndarray, final_flags: dict[str, np.ndarray]) -> None:
+        """Record the last observation and flags of worlds ``idx``, which ended at this world step."""
+        obs = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes).astype(np.float32)
+        flags = self._flags()
+        for i in idx:
+            final_obs[i] = obs[i]
+        for key, value in flags.items():
+            kept = final_flags.setdefault(key, np.zeros(self.num_envs, dtype=bool))
+            kept[idx] = value[idx]
+
+    def _infos(
+        self, mask: np.ndarray, cost: np.ndarray | None = None, flags: dict[str, np.ndarray] | None = None
+    ) -> dict[str, Any]:
+        """Each info key as an (N,) array with its ``_key`` mask (worlds outside ``mask`` hold zeros); ``flags``
+        instead of the worlds' flags now."""
+        values = {"cost": np.zeros(self.num_envs) if cost is None else cost.astype(np.float64)}
+        values.update(flags if flags is not None else self._flags())
+        infos: dict[str, Any] = {}
+        for key in INFO_KEYS:
+            value = np.where(mask, values[key], np.zeros((), dtype=values[key].dtype))
+            infos[key], infos[f"_{key}"] = value, mask.copy()
+        return infos
