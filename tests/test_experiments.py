@@ -82,15 +82,15 @@ def test_paper_grid():
     ]  # seed-major: a cut-short grid fills every row
     by_name = {j.name: j for j in jobs}
     tssac, ppo, pen = (
-        by_name["tssac-seed1"].config(),
-        by_name["ppo-seed1"].config(),
-        by_name["sac_pen50-seed2"].config(),
+        by_name["tssac-seed1"].config,
+        by_name["ppo-seed1"].config,
+        by_name["sac_pen50-seed2"].config,
     )
     assert tssac.learner == {"hidden_sizes": [128, 128], "alpha_init": 0.2, "beta_lr": 0.001, "gamma": 0.995}
     assert ppo.learner == {"hidden_sizes": [128, 128], "gamma": 0.995}  # on-policy learners get no SacConfig fields
     assert (pen.algo, pen.penalty, pen.seed) == ("sac_penalty", -50.0, 2)
     # each ships its epoch by its own rule: within C where the learner is given C (docs/decisions.md)
-    assert [selects_within_limit(by_name[f"{n}-seed0"].config()) for n in names] == [
+    assert [selects_within_limit(by_name[f"{n}-seed0"].config) for n in names] == [
         True,
         True,
         False,
@@ -122,7 +122,7 @@ def test_paper_grid():
         "transfer-strike-sac_lag-seed0",
     ] and len(transfer) == 12
     strike = transfer[3]
-    cfg = strike.config()
+    cfg = strike.config
     assert strike.out == Path("results/runs/transfer-strike-sac_lag-seed0") and strike.roles == ("strike",)
     assert (cfg.algo, cfg.roles, cfg.teammates, cfg.stop_at_task_success, cfg.epochs, cfg.validation_episodes) == (
         "sac_lag",
@@ -701,7 +701,7 @@ def test_transfer_experiment_figures_and_table(tmp_path):
     )
     grid = load_grid(write_grid(tmp_path / "g.yaml", text))
     jobs = {j.name: j for j in grid.transfer_jobs(tmp_path)}
-    assert len(jobs) == 8 and jobs["transfer-detect-tssac-seed1"].config().epochs == 3
+    assert len(jobs) == 8 and jobs["transfer-detect-tssac-seed1"].config.epochs == 3
     write_metrics(jobs["transfer-detect-tssac-seed0"].out, [("detect", 1, 20, 0.95)])  # stopped at its first epoch
     write_metrics(jobs["transfer-detect-tssac-seed1"].out, [("detect", 1, 20, 0.5), ("detect", 2, 40, 1.0)])
     write_metrics(

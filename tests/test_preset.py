@@ -57,9 +57,9 @@ def test_the_grid_reads_the_same_preset(tmp_path: Path, monkeypatch):
     grid = load_grid(ROOT / "experiments" / "paper.yaml")
     job = next(j for j in grid.jobs(tmp_path) if j.entry.name == "sac_lag" and j.seed == 1)
     single, _, _, _ = parse_args(["--preset", "configs/paper.yaml", "--algo", "sac_lag", "--seed", "1", "--out", "x"])
-    assert job.config() == single
+    assert job.config == single
     ppo = next(j for j in grid.jobs(tmp_path) if j.entry.algo == "ppo")
-    assert ppo.config().learner == {"hidden_sizes": [128, 128], "gamma": 0.995}
+    assert ppo.config.learner == {"hidden_sizes": [128, 128], "gamma": 0.995}
     text = (ROOT / "experiments" / "smoke.yaml").read_text()
     assert "preset" not in text  # a grid may still carry its whole recipe inline
     own = tmp_path / "g.yaml"
@@ -95,3 +95,67 @@ def test_each_recipe_file_gives_the_configuration_of_the_runs_it_names(
     else: the whole configuration must match what those runs recorded (the earlier trial: with its one flag)."""
     cfg, *_ = parse_args(["--preset", str(ROOT / preset), *extra, "--seed", str(seed), "--out", "r"])
     assert config_difference(json.loads((ROOT / recorded).read_text()), cfg) == ""
+
+
+RECIPE_ROWS = [
+    # (row of algos, its seed, the CLI's flags, a run that recorded this configuration)
+    ("{preset: configs/paper.yaml, algo: sac_lag, name: r}", 1, ["--algo", "sac_lag"], "results/runs/sac_lag-seed1"),
+    ("{preset: configs/paper.yaml, algo: ppo, name: r}", 0, ["--algo", "ppo"], "results/runs/ppo-seed0"),
+    ("{preset: configs/safe.yaml, name: r}", 1, [], "models/tssac"),
+    ("{preset: configs/safe.yaml, name: r, hard_layouts: 0}", 2, ["--hard-layouts", "0"], None),
+    ("{preset: configs/grid-tssac-seed2.yaml, name: r}", 2, [], "results/runs/tssac-seed2"),
+]
+
+
+@pytest.mark.parametrize(("row", "seed", "flags", "recorded"), RECIPE_ROWS)
+def test_any_preset_is_a_grid_row_whose_job_is_the_single_runs_config(
+    tmp_path: Path, monkeypatch, row: str, seed: int, flags: list[str], recorded: str | None
+):
+    """A row naming a preset trains exactly ``train --preset P --seed N`` (the grid's ``train:`` does not leak
+    in), which is what the committed runs of that recipe recorded; and the file the runner hands the job holds
+    that configuration, read back as the run will."""
+    from tssac_core.experiments.jobs import JOB_CONFIG, command
+    from tssac_core.train.arguments import parse_cli
+    from tssac_core.train.config import config_record, with_recorded_defaults
+
+    monkeypatch.chdir(ROOT)
+    text = (ROOT / "experiments" / "smoke.yaml").read_text().replace("  - sac_lag\n", f"  - {row}\n")
+    grid = load_grid(write(tmp_path / "g.yaml", text.replace("seeds: [0]", f"seeds: [{seed}]")))
+    job = next(j for j in grid.jobs(tmp_path) if j.entry.name == "r")
+    cli, *_ = parse_args(
+        ["--preset", row.split("preset: ")[1].split(",")[0], *flags, "--seed", str(seed), "--out", "x"]
+    )
+    assert job.config == cli
+    if recorded is not None:
+        assert config_difference(json.loads((ROOT / recorded / "config.json").read_text()), job.config) == ""
+    cmd = command(job, resume=False)
+    assert cmd[3:] == ("--config", str(job.out / JOB_CONFIG), "--out", str(job.out), "--no-progress")
+    job.out.mkdir(parents=True)
+    (job.out / JOB_CONFIG).write_text(json.dumps(config_record(job.config)))
+    child, out, resume, *_ = parse_cli(list(cmd[3:]))
+    assert child == with_recorded_defaults(cli) and out == job.out and not resume
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        ("{preset: configs/nowhere.yaml}", "algos[1].preset: configs/nowhere.yaml: cannot read file"),
+        ("{preset: configs/safe.yaml, seed: 3}", "algos[1].seed: a row's seeds are the grid's"),
+        ("{preset: configs/safe.yaml, epochs: 0}", "algos[1].epochs: must be >= 1, got 0"),
+        ("{algo: tssac, name: t2, hard_layouts: 2}", "algos[1].hard_layouts: expected a fraction in [0, 1], got 2"),
+    ],
+)
+def test_a_bad_preset_row_is_one_line(tmp_path: Path, monkeypatch, capsys, row: str, message: str):
+    from tssac_core.experiments.cli import main as grid_main
+
+    monkeypatch.chdir(ROOT)
+    text = (ROOT / "experiments" / "smoke.yaml").read_text().replace("  - sac_lag\n", f"  - {row}\n")
+    grid = write(tmp_path / "g.yaml", text)
+    assert run(grid_main, ["--grid", str(grid), "--results", str(tmp_path / "r"), "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith(f"error: {grid}: ") and message in err, err

@@ -12,10 +12,11 @@ Examples::
     python -m tssac_core.experiments --grid experiments/paper.yaml --report-only --cached-tail  # no new tail flights
     python -m tssac_core.experiments --grid experiments/paper.yaml --compact      # slim finished runs to commit them
 
-The grid file's format is in :mod:`tssac_core.experiments.grid`. Each job is a ``python -m tssac_core.train``
-process writing ``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is
-not run again and an interrupted one is continued with ``--resume``, so running the command again after a
-crash, Ctrl-C or reboot picks up where it stopped (:mod:`tssac_core.experiments.jobs`). Then every finished
+The grid file's format is in :mod:`tssac_core.experiments.grid`. Each job is a
+``python -m tssac_core.train --config`` process, handed the job's `TrainConfig` as JSON, writing
+``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is not run again and an
+interrupted one is continued with ``--resume``, so running the command again after a crash, Ctrl-C or reboot
+picks up where it stopped (:mod:`tssac_core.experiments.jobs`). Then every finished
 team is evaluated (:mod:`tssac_core.experiments.report`) and ``<results>/table4.md``,
 ``<results>/experiments.json`` and the figures (:mod:`tssac_core.experiments.figures`) are written.
 """

@@ -52,7 +52,7 @@ def expected_run_s(states: list[JobState]) -> dict[tuple[str, str | None], float
 
 def share_left(job: Job) -> float:
     """The share of the job's epochs not yet in its metrics.csv (1 for a new job)."""
-    total = len(job.roles) * job.config().epochs
+    total = len(job.roles) * job.config.epochs
     done = sum(1 for row in read_metrics(job.out) if row.get("role") in job.roles)
     return max(0.0, 1.0 - done / total)
 

@@ -9,6 +9,7 @@ Example (``experiments/paper.yaml`` is the full one)::
       - sac_lag
       - {algo: sac_penalty, penalty: -10, name: sac_pen10}
       - {algo: ppo, set: {lr: 1.0e-4}}
+      - {preset: configs/safe.yaml, name: tssac_safe}   # a named recipe as a row
     train:
       scenario: scenarios/random.yaml
       epochs: 30
@@ -31,36 +32,34 @@ Example (``experiments/paper.yaml`` is the full one)::
       epochs: 25
       task_success: 0.9
 
-Every key of ``train`` is an argument of ``python -m tssac_core.train`` (``steps_per_epoch`` is
-``--steps-per-epoch``) and is passed to every job alike; a key left out is the command's default.
-``preset: FILE`` reads a preset (:mod:`tssac_core.train.preset`, e.g. ``configs/paper.yaml``) whose values the
-keys of ``train`` override. ``sac_set`` holds the ``--set`` overrides of the SAC family (tssac, sac_lag, sac,
-sac_penalty),
-``onpolicy_set`` those of ppo, ppo_lag and cpo (the two learners have different settings), and an
-entry's own ``set`` is applied on top for that entry only. Paths are relative to the directory the
-command runs in, as on every other command line. A bad file raises :class:`GridError`, one line:
-``file: field: problem``.
+``train:`` is a preset written inline (:mod:`tssac_core.train.preset`: any `TrainConfig` field, e.g.
+``steps_per_epoch``, and the learner settings under ``set``, ``sac_set`` for the SAC family and
+``onpolicy_set`` for ppo, ppo_lag and cpo), read by the preset reader; ``preset: FILE`` lays it over a preset
+file (``configs/paper.yaml``), the section's own keys winning. A row of ``algos`` is a name, an algorithm, or a
+mapping that is a preset too (``name``, ``preset: FILE`` and any preset key but ``seed``): laid over ``train:``,
+or, with its own ``preset:``, over that file alone, so that ``{preset: configs/safe.yaml, name: safe}`` is
+exactly ``python -m tssac_core.train --preset configs/safe.yaml --seed N``. Each job is that row's
+`TrainConfig` with a seed of ``seeds`` (`Job.config`); nothing goes through command-line strings. Paths are
+relative to the directory the command runs in, as on every other command line. A bad file raises
+:class:`GridError`, one line: ``file: field: problem``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import re
 from collections.abc import Collection
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from tssac_core.cli import UsageError
-from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.yaml_file import read_yaml
-from tssac_core.train.algorithms import ALGORITHMS, Selection, algorithm
-from tssac_core.train.arguments import parse_args as parse_train_args
+from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, check_learner_settings
-from tssac_core.train.preset import load_preset
+from tssac_core.train.preset import Preset, load_preset, preset_config, read_settings
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -74,36 +73,21 @@ class GridError(UsageError):
 
 @dataclass(frozen=True)
 class AlgoEntry:
-    """One row of the tables: an algorithm with its own settings."""
+    """One row of the tables: a name and the training configuration of its runs (every seed's but for the seed)."""
 
     name: str
     """Label in tables and figures, and the prefix of its run directories (default: the algorithm)."""
-    algo: str
-    """An algorithm of ``tssac_core.train --algo``."""
-    penalty: float = 0.0
-    """sac_penalty only: reward r + penalty * c."""
-    overrides: dict[str, Any] = field(default_factory=dict)
-    """This entry's learner settings (``--set``): the family's shared ones, then the entry's own."""
+    config: TrainConfig
+    """The row's runs' configuration (its seed: the preset's, replaced by each job's)."""
 
+    @property
+    def algo(self) -> str:
+        return self.config.algo
 
-@dataclass(frozen=True)
-class TrainArgs:
-    """The training arguments every job shares (defaults: those of ``tssac_core.train``)."""
-
-    scenario: Path
-    epochs: int = TrainConfig.epochs
-    steps_per_epoch: int = TrainConfig.steps_per_epoch
-    envs: int = TrainConfig.envs
-    action_repeat: int = TrainConfig.action_repeat
-    update_every: int = TrainConfig.update_every
-    start_steps: int = TrainConfig.start_steps
-    update_after: int = TrainConfig.update_after
-    threads: int = TrainConfig.threads
-    """torch threads of each job (``--jobs`` jobs run at once)."""
-    validation_episodes: int = TrainConfig.validation_episodes
-    observation: str = TrainConfig.observation
-    selection: str = ""
-    """"" (default): each algorithm's own epoch selection; a word pins one for every job (TrainConfig.selection)."""
+    @property
+    def penalty(self) -> float:
+        """sac_penalty only: reward r + penalty * c."""
+        return self.config.penalty
 
 
 @dataclass(frozen=True)
@@ -154,12 +138,17 @@ class Job:
     """One training run of the grid: a whole team, or one role of the transfer experiment."""
 
     entry: AlgoEntry
-    seed: int
+    config: TrainConfig
+    """What the run trains (its config.json: `tssac_core.train.config.config_record`); the seed is the job's."""
     out: Path
-    train_args: tuple[str, ...]
-    """Arguments of ``python -m tssac_core.train`` for a new run (without --out)."""
     role: str | None = None
     """The transfer experiment's role (the run trains that role only); None: the whole curriculum."""
+    tensorboard: Path | None = None
+    """Where the run also writes TensorBoard events (``train --seeds --tensorboard``); None: nowhere."""
+
+    @property
+    def seed(self) -> int:
+        return self.config.seed
 
     @property
     def name(self) -> str:
@@ -172,12 +161,7 @@ class Job:
     @property
     def roles(self) -> tuple[str, ...]:
         """The roles this run trains (and whose checkpoints mark it finished)."""
-        return self.config().roles if self.role is None else (self.role,)
-
-    def config(self) -> TrainConfig:
-        """The TrainConfig this job's run writes to its config.json."""
-        cfg, _, _, _ = parse_train_args([*self.train_args, "--out", str(self.out)])
-        return cfg
+        return self.config.roles if self.role is None else (self.role,)
 
 
 @dataclass(frozen=True)
@@ -185,7 +169,8 @@ class Grid:
     source: Path
     algos: tuple[AlgoEntry, ...]
     seeds: tuple[int, ...]
-    train: TrainArgs
+    train: TrainConfig
+    """The ``train:`` section's configuration (its algorithm: the default), as the rows without a preset start."""
     evaluation: Evaluation
     transfer: TransferExperiment | None = None
 
@@ -193,7 +178,7 @@ class Grid:
         """Every (entry, seed) run, seed-major: each entry's first seed before any entry's second, so a grid
         stopped part-way (it runs across sessions) has every row of Table 4; directories under ``results/runs``."""
         return [
-            Job(e, s, results / "runs" / f"{e.name}-seed{s}", train_argv(self.train, e, s))
+            Job(e, dataclasses.replace(e.config, seed=s), results / "runs" / f"{e.name}-seed{s}")
             for s in self.seeds
             for e in self.algos
         ]
@@ -203,21 +188,20 @@ class Grid:
         t = self.transfer
         if t is None:
             return []
-        args = dataclasses.replace(self.train, epochs=t.epochs, validation_episodes=t.validation_episodes)
         jobs = []
         for s in self.seeds:
             for role in t.roles:
                 for e in (t.with_transfer, t.without_transfer):
-                    argv = (
-                        *train_argv(args, e, s),
-                        "--roles",
-                        role,
-                        "--teammates",
-                        str(t.teammates),
-                        "--stop-at-task-success",
-                        repr(t.task_success),
+                    cfg = dataclasses.replace(
+                        e.config,
+                        seed=s,
+                        epochs=t.epochs,
+                        validation_episodes=t.validation_episodes,
+                        roles=(role,),
+                        teammates=str(t.teammates),
+                        stop_at_task_success=t.task_success,
                     )
-                    jobs.append(Job(e, s, Path("unused"), argv, role))
+                    jobs.append(Job(e, cfg, Path("unused"), role))
         return [dataclasses.replace(j, out=results / "runs" / j.name) for j in jobs]
 
     def entry(self, name: str) -> AlgoEntry:
@@ -228,45 +212,6 @@ def learner_family(algo: str) -> str:
     """``sac`` or ``onpolicy``: the learner an algorithm trains with (its ``--set`` family, ``sac_set`` or
     ``onpolicy_set``)."""
     return algorithm(algo).family.value
-
-
-def train_argv(args: TrainArgs, entry: AlgoEntry, seed: int) -> tuple[str, ...]:
-    """The ``tssac_core.train`` arguments of one run."""
-    argv = [
-        "--algo",
-        entry.algo,
-        "--seed",
-        str(seed),
-        "--scenario",
-        str(args.scenario),
-        "--epochs",
-        str(args.epochs),
-        "--steps-per-epoch",
-        str(args.steps_per_epoch),
-        "--envs",
-        str(args.envs),
-        "--action-repeat",
-        str(args.action_repeat),
-        "--update-every",
-        str(args.update_every),
-        "--start-steps",
-        str(args.start_steps),
-        "--update-after",
-        str(args.update_after),
-        "--threads",
-        str(args.threads),
-        "--validation-episodes",
-        str(args.validation_episodes),
-        "--observation",
-        args.observation,
-    ]
-    if args.selection:
-        argv += ["--selection", args.selection]
-    if entry.algo == "sac_penalty":
-        argv += ["--penalty", repr(entry.penalty)]
-    for key, value in entry.overrides.items():
-        argv += ["--set", f"{key}={json.dumps(value, separators=(',', ':'))}"]
-    return tuple(argv)
 
 
 # ------------------------------------------------------------------------------------- loading
@@ -284,33 +229,10 @@ def load_grid(path: str | Path) -> Grid:
         required={"seeds", "algos", "train", "evaluation"},
     )
     seeds = r.seeds(top["seeds"], "seeds")
-    train_fields = {f.name for f in dataclasses.fields(TrainArgs)}
-    train_data = r.mapping(top["train"], "train", allowed=train_fields | {"sac_set", "onpolicy_set", "preset"})
-    preset = load_preset(r.string(train_data["preset"], "train.preset")) if "preset" in train_data else None
-    family_sets = {
-        "sac": r.overrides(train_data.get("sac_set", {}), "train.sac_set"),
-        "onpolicy": r.overrides(train_data.get("onpolicy_set", {}), "train.onpolicy_set"),
-    }
-    if preset is not None:  # the preset's values first, the grid file's own on top
-        outside = sorted(set(preset.values) - train_fields)
-        if outside:
-            raise GridError(
-                source,
-                "train.preset",
-                f"{preset.source}: {', '.join(outside)}: not a grid training argument "
-                f"(the grid's are {', '.join(sorted(train_fields))})",
-            )
-        train_data = {**preset.values, **{k: v for k, v in train_data.items() if k != "preset"}}
-        family_sets = {
-            family: {**preset.learner_settings(example), **family_sets[family]}
-            for family, example in (("sac", "tssac"), ("onpolicy", "ppo"))
-        }
-    if "scenario" not in train_data:
-        raise GridError(source, "train.scenario", "missing required field (in the grid file or its preset)")
-    train = r.train_args(train_data)
+    train_layers = r.train_layers(top["train"])
     if not isinstance(top["algos"], list) or not top["algos"]:
         raise GridError(source, "algos", "expected a non-empty list of algorithms")
-    algos = tuple(r.algo_entry(item, f"algos[{i}]", family_sets) for i, item in enumerate(top["algos"]))
+    algos = tuple(r.algo_entry(item, f"algos[{i}]", train_layers) for i, item in enumerate(top["algos"]))
     names = [e.name for e in algos]
     for i, name in enumerate(names):
         if name in names[:i]:
@@ -330,22 +252,20 @@ def load_grid(path: str | Path) -> Grid:
         **r.tail(ev),
     )
     transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
-    grid = Grid(Path(path), algos, seeds, train, evaluation, transfer)
+    grid = Grid(Path(path), algos, seeds, preset_config(train_layers), evaluation, transfer)
     check_jobs(grid)
     return grid
 
 
 def check_jobs(grid: Grid) -> None:
-    """Load the scenarios, parse every entry's training command and build its learner config, as the job
-    itself will: a mistake fails now, not after hours of training."""
+    """Load the scenarios and build every entry's learner config, as the job itself will: a mistake fails now,
+    not after hours of training."""
     for path in (grid.evaluation.scenario, grid.evaluation.generalization_scenario):
         if path is not None:
             load_scenario(path)
-    scenario = load_scenario(grid.train.scenario)
     for i, entry in enumerate(grid.algos):
-        job = Job(entry, grid.seeds[0], Path("unused"), train_argv(grid.train, entry, grid.seeds[0]))
         try:
-            check_learner_settings(job.config(), scenario)
+            check_learner_settings(entry.config, load_scenario(entry.config.scenario))
         except UsageError as exc:
             raise GridError(str(grid.source), f"algos[{i}] ({entry.name})", str(exc)) from None
 
@@ -407,48 +327,33 @@ class _Reader:
             raise self.fail(where, f"a seed is listed twice: {list(seeds)}")
         return seeds
 
-    def overrides(self, value: Any, where: str) -> dict[str, Any]:
-        """Learner settings: names to numbers, booleans, words or lists of numbers (what ``--set`` takes)."""
-        if not isinstance(value, dict):
-            raise self.fail(where, f"expected a mapping of learner settings, got {type(value).__name__}")
-        for key, v in value.items():
-            ok = (
-                isinstance(v, (int, float, bool, str))
-                or v is None
-                or (isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
-            )
-            if not isinstance(key, str) or not ok:
-                raise self.fail(
-                    f"{where}.{key}", f"expected a number, boolean, word, null or list of numbers, got {v!r}"
-                )
-        return dict(value)
+    def settings(self, data: Any, where: str, own: Collection[str]) -> Preset:
+        """A section or row that is a preset (``own``: its keys that are not), read by the preset reader."""
+        if not isinstance(data, dict):
+            raise self.fail(where, f"expected a mapping, got {type(data).__name__}")
+        rest = {k: v for k, v in data.items() if k not in own}
+        return read_settings(rest, self.source, where, GridError, also=own)
 
-    def train_args(self, data: dict[str, Any]) -> TrainArgs:
-        """``train:`` without the learner settings; counts as ``tssac_core.train`` accepts them."""
-        values: dict[str, Any] = {"scenario": self.scenario(data["scenario"], "train.scenario")}
-        for key, minimum in (
-            ("epochs", 1),
-            ("steps_per_epoch", 1),
-            ("envs", 1),
-            ("action_repeat", 1),
-            ("update_every", 1),
-            ("threads", 1),
-            ("start_steps", 0),
-            ("update_after", 0),
-            ("validation_episodes", 0),
-        ):
-            if key in data:
-                values[key] = self.integer(data[key], f"train.{key}", minimum)
-        if "observation" in data:
-            modes = [m.value for m in ObservationMode]
-            if data["observation"] not in modes:
-                raise self.fail("train.observation", f"expected one of {', '.join(modes)}, got {data['observation']!r}")
-            values["observation"] = data["observation"]
-        if "selection" in data:
-            if data["selection"] not in list(Selection):
-                raise self.fail("train.selection", f"expected one of {', '.join(Selection)}, got {data['selection']!r}")
-            values["selection"] = data["selection"]
-        return TrainArgs(**values)
+    def preset_file(self, data: dict[str, Any], where: str) -> list[Preset]:
+        """``preset: FILE`` of a section or row: that file (its error named after this field), or nothing."""
+        if "preset" not in data:
+            return []
+        path = self.string(data["preset"], f"{where}.preset")
+        try:
+            return [load_preset(path)]
+        except UsageError as exc:
+            raise self.fail(f"{where}.preset", str(exc)) from None
+
+    def train_layers(self, data: Any) -> list[Preset]:
+        """``train:``: its preset file (if any), then its own settings; the scenario must be given and exist."""
+        own = self.settings(data, "train", own=("preset",))
+        layers = [*self.preset_file(data, "train"), own]
+        scenario = preset_config(layers).scenario if any("scenario" in p.values for p in layers) else None
+        if scenario is None:
+            raise self.fail("train.scenario", "missing required field (in the grid file or its preset)")
+        where = "train.scenario" if "scenario" in own.values else "train.preset"
+        self.scenario(scenario, where)
+        return layers
 
     def tail(self, ev: dict[str, Any]) -> dict[str, Any]:
         """``evaluation.tail_*``: how many layouts, which seed, with the monitor or not. Mission k of a seed S flies
@@ -530,24 +435,23 @@ class _Reader:
             ),
         )
 
-    def algo_entry(self, item: Any, where: str, family_sets: dict[str, dict[str, Any]]) -> AlgoEntry:
-        """``tssac`` or ``{algo: sac_penalty, penalty: -10, name: sac_pen10, set: {...}}``."""
-        data = (
-            {"algo": item}
-            if isinstance(item, str)
-            else self.mapping(item, where, allowed={"algo", "name", "penalty", "set"}, required={"algo"})
-        )
-        algo = self.string(data["algo"], f"{where}.algo")
-        if algo not in ALGORITHMS:
-            raise self.fail(f"{where}.algo", f"unknown algorithm {algo!r} (choose from {', '.join(ALGORITHMS)})")
-        name = self.string(data.get("name", algo), f"{where}.name")
+    def algo_entry(self, item: Any, where: str, train: list[Preset]) -> AlgoEntry:
+        """``tssac``, ``{algo: sac_penalty, penalty: -10, name: sac_pen10, set: {...}}`` or
+        ``{preset: configs/safe.yaml, name: safe}``: a preset laid over ``train`` (over its own file alone if it
+        names one)."""
+        data = {"algo": item} if isinstance(item, str) else item
+        row = self.settings(data, where, own=("name", "preset"))
+        if "seed" in row.values:
+            raise self.fail(f"{where}.seed", "a row's seeds are the grid's (seeds:)")
+        layers = [*(self.preset_file(data, where) or train), row]
+        config = preset_config(layers, seed=0)
+        if "algo" not in data and "preset" not in data:
+            raise self.fail(f"{where}.algo", "missing required field")
+        name = self.string(data.get("name", str(config.algo)), f"{where}.name")
         if not NAME_PATTERN.match(name):
             raise self.fail(
                 f"{where}.name", f"{name!r} may hold only letters, digits, '_', '-' and '.' (it names directories)"
             )
-        penalty = self.number(data.get("penalty", 0.0), f"{where}.penalty")
-        if penalty != 0.0 and algo != "sac_penalty":
-            raise self.fail(f"{where}.penalty", f"only sac_penalty takes a penalty, not {algo}")
-        family = family_sets[learner_family(algo)]
-        overrides = {**family, **self.overrides(data.get("set", {}), f"{where}.set")}
-        return AlgoEntry(name=name, algo=algo, penalty=penalty, overrides=overrides)
+        if config.penalty != 0.0 and config.algo != "sac_penalty":
+            raise self.fail(f"{where}.penalty", f"only sac_penalty takes a penalty, not {config.algo}")
+        return AlgoEntry(name=name, config=config)

@@ -37,17 +37,20 @@ from types import FrameType
 from typing import Any, Protocol, cast
 
 import tssac_core
-from tssac_core.cli import UsageError
+from tssac_core.cli import UsageError, write_json
 from tssac_core.errors import CheckpointError
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
-from tssac_core.train.config import TrainConfig, with_recorded_defaults
+from tssac_core.train.config import TrainConfig, config_record, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
 
 logger = logging.getLogger(__name__)
 
 LOG_NAME = "train.log"
+JOB_CONFIG = "job_config.json"
+"""In a job's run directory: the TrainConfig the runner starts a new run with, as config.json records it
+(``python -m tssac_core.train --config``); the run's own config.json is written from it."""
 GRACE_S = 10.0
 """How long a stopped job gets to exit after SIGTERM before SIGKILL."""
 POLL_S = 0.1
@@ -101,7 +104,7 @@ def job_state(job: Job) -> JobState:
     except (OSError, ValueError) as exc:
         return JobState(job, Status.CONFLICT, f"its config.json is not readable ({exc})")
     try:
-        difference = config_difference(saved, job.config(), job.out)
+        difference = config_difference(saved, job.config, job.out)
     except UsageError as exc:
         return JobState(job, Status.CONFLICT, str(exc))
     if difference:
@@ -156,11 +159,13 @@ def same_scenario(saved: Path, wanted: Path, run: Path | None) -> bool:
 
 
 def command(job: Job, resume: bool) -> tuple[str, ...]:
-    """The job's process: a new run, or ``--resume`` of the run in its directory (its config.json wins)."""
+    """The job's process: a new run of the TrainConfig in its :data:`JOB_CONFIG` file (:func:`start` writes it),
+    or ``--resume`` of the run in its directory (its config.json wins)."""
     head = (sys.executable, "-m", "tssac_core.train")
+    board = () if job.tensorboard is None else ("--tensorboard", str(job.tensorboard))
     if resume:
-        return (*head, "--out", str(job.out), "--resume", "--no-progress")
-    return (*head, *job.train_args, "--out", str(job.out), "--no-progress")
+        return (*head, "--out", str(job.out), "--resume", "--no-progress", *board)
+    return (*head, "--config", str(job.out / JOB_CONFIG), "--out", str(job.out), "--no-progress", *board)
 
 
 def child_environment() -> dict[str, str]:
@@ -178,6 +183,8 @@ def start(
     a line for the log saying where it runs (the Ray executor's worker); ``preexec_fn``: run in the child
     before the command (the Ray executor binds the job to its worker's life)."""
     job.out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        write_json(job.out / JOB_CONFIG, config_record(job.config))
     cmd = command(job, resume)
     with (job.out / LOG_NAME).open("ab") as log:
         log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: {' '.join(cmd)}\n".encode())

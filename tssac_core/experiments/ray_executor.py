@@ -152,7 +152,7 @@ def run_jobs_on_ray(
     if not pending:
         return []
     with ray_session(target) as ray, interrupt_on_sigterm():
-        threads = {s.job.name: s.job.config().threads for s in pending}
+        threads = {s.job.name: s.job.config.threads for s in pending}
         slots = parallel or max(1, cluster_cpus(ray) // max(threads.values()))
         report(f"Ray: {cluster_cpus(ray)} CPUs, {slots} jobs at a time, {max(threads.values())} CPU(s) each")
         return schedule(pending, slots, RayTasks(ray, threads, report), report, may_start)

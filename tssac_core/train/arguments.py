@@ -1,4 +1,6 @@
-"""The training command's arguments: argv -> `TrainConfig`, and a `TrainConfig` back to argv."""
+"""The training command's arguments: argv -> `TrainConfig` (flags over a preset), or ``--config FILE``: a
+`TrainConfig` as JSON, the way the experiment grid's jobs and ``--seeds`` start a run (nothing turns a
+`TrainConfig` back into flags)."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection
 from tssac_core.train.config import DEFAULT_SCENARIO, TrainConfig
+from tssac_core.train.legacy import read_config
 from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
@@ -54,7 +57,11 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     """The run's TrainConfig, --out, --resume, --no-progress, --seeds (and where they run), and --tensorboard."""
     first = argparse.ArgumentParser(add_help=False)
     first.add_argument("--preset", type=Path)
-    preset_path = first.parse_known_args(argv)[0].preset
+    first.add_argument("--config", type=Path)
+    known = first.parse_known_args(argv)[0]
+    if known.config is not None:
+        return parse_job(argv)
+    preset_path = known.preset
     preset = load_preset(preset_path) if preset_path is not None else None
     p = argparse.ArgumentParser(prog="python -m tssac_core.train", description=DESCRIPTION)
     p.add_argument(
@@ -63,6 +70,13 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         metavar="FILE",
         help="a recipe file (configs/paper.yaml, configs/safe.yaml): its "
         "settings are the defaults, the flags given here override them (tssac_core.train.preset)",
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="a whole TrainConfig as JSON (what a run's config.json holds): train exactly that, into --out; "
+        "only --out, --no-progress and --tensorboard go with it (the experiment grid starts its jobs so)",
     )
     p.add_argument(
         "--algo",
@@ -261,64 +275,23 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     return cfg, a.out, a.resume, a.no_progress, jobs, a.tensorboard
 
 
+def parse_job(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool, SeedJobs, Path | None]:
+    """``--config FILE --out DIR [--no-progress] [--tensorboard DIR]``: the run of a TrainConfig written as JSON
+    (`tssac_core.train.config.config_record`); any other flag is refused."""
+    p = argparse.ArgumentParser(prog="python -m tssac_core.train --config FILE", description=DESCRIPTION)
+    p.add_argument("--config", type=Path, required=True, metavar="FILE", help="a TrainConfig as JSON")
+    p.add_argument("--out", type=Path, required=True, help="run directory")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--tensorboard", type=Path, metavar="DIR", help="also write TensorBoard events in DIR")
+    a = p.parse_args(argv)
+    if a.tensorboard is not None:
+        require_tensorboard()
+    return read_config(a.config, "--config"), a.out, False, a.no_progress, SeedJobs(None), a.tensorboard
+
+
 def require_tensorboard() -> None:
     """UsageError (one line) when ``--tensorboard`` is asked for but its optional package is not installed."""
     import importlib.util
 
     if importlib.util.find_spec("tensorboard") is None:
         raise UsageError("--tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
-
-
-def train_argv(cfg: TrainConfig) -> tuple[str, ...]:
-    """The arguments (without --out) that `parse_args` turns back into ``cfg``."""
-    argv = [
-        "--algo",
-        cfg.algo,
-        "--scenario",
-        cfg.scenario,
-        "--seed",
-        str(cfg.seed),
-        "--epochs",
-        str(cfg.epochs),
-        "--steps-per-epoch",
-        str(cfg.steps_per_epoch),
-        "--roles",
-        ",".join(cfg.roles),
-        "--envs",
-        str(cfg.envs),
-        "--update-every",
-        str(cfg.update_every),
-        "--start-steps",
-        str(cfg.start_steps),
-        "--update-after",
-        str(cfg.update_after),
-        "--action-repeat",
-        str(cfg.action_repeat),
-        "--observation",
-        cfg.observation,
-        "--penalty",
-        repr(cfg.penalty),
-        "--threads",
-        str(cfg.threads),
-        "--route-margin-km",
-        repr(cfg.route_margin_km),
-        "--cost-margin-km",
-        repr(cfg.cost_margin_km),
-        "--hard-layouts",
-        repr(cfg.hard_layouts),
-        "--hard-detour-km",
-        repr(cfg.hard_detour_km),
-        "--validation-episodes",
-        str(cfg.validation_episodes),
-        "--stop-at-task-success",
-        repr(cfg.stop_at_task_success),
-    ]
-    if cfg.selection:
-        argv += ["--selection", cfg.selection]
-    if cfg.init_from:
-        argv += ["--init-from", cfg.init_from]
-    if cfg.teammates:
-        argv += ["--teammates", cfg.teammates]
-    for key, value in cfg.learner.items():
-        argv += ["--set", f"{key}={json.dumps(value, separators=(',', ':'))}"]
-    return tuple(argv)

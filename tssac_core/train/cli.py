@@ -29,9 +29,9 @@ from pathlib import Path
 from tssac_core.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.ray_cluster import RayTarget
 from tssac_core.sim.scenario import Role
-from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli, train_argv
+from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli
 from tssac_core.train.config import TrainConfig
-from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.legacy import read_config
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -99,19 +99,14 @@ def seed_dir(out: Path, seed: int) -> Path:
     return out / f"seed{seed}"
 
 
-def board(tensorboard: Path | None, seed: int) -> tuple[str, ...]:
-    """A seed job's ``--tensorboard`` argument: its own subdirectory of the command's (none without one)."""
-    return () if tensorboard is None else ("--tensorboard", str(seed_dir(tensorboard, seed)))
+def board(tensorboard: Path | None, seed: int) -> Path | None:
+    """A seed job's TensorBoard directory: its own subdirectory of the command's (none without one)."""
+    return None if tensorboard is None else seed_dir(tensorboard, seed)
 
 
 def saved_config(run_dir: Path) -> TrainConfig:
     """The TrainConfig in ``run_dir/config.json`` (UsageError naming the file if it cannot be read)."""
-    path = run_dir / "config.json"
-    try:
-        saved = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"--resume: {path} is not readable ({exc})") from None
-    return config_from_saved(saved, path)
+    return read_config(run_dir / "config.json", "--resume")
 
 
 def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool, tensorboard: Path | None = None) -> int:
@@ -134,18 +129,18 @@ def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool, tens
             raise UsageError(f"--seeds {','.join(map(str, seeds))}: {out} holds seeds {','.join(map(str, saved))}")
         seeds = tuple(int(s) for s in saved)
     assert seeds is not None
-    entry = AlgoEntry(cfg.algo, cfg.algo)
+    entry = AlgoEntry(cfg.algo, cfg)
     if resume:
         # Each seed's config.json wins, as for a single run: it is resumed as it was started.
         jobs = [
-            Job(entry, s, seed_dir(out, s), train_argv(saved_config(seed_dir(out, s))) + board(tensorboard, s))
+            Job(entry, saved_config(seed_dir(out, s)), seed_dir(out, s), tensorboard=board(tensorboard, s))
             for s in seeds
         ]
     else:
         if seeds_path.is_file() or any((seed_dir(out, s) / "config.json").is_file() for s in seeds):
             raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
         jobs = [
-            Job(entry, s, seed_dir(out, s), train_argv(dataclasses.replace(cfg, seed=s)) + board(tensorboard, s))
+            Job(entry, dataclasses.replace(cfg, seed=s), seed_dir(out, s), tensorboard=board(tensorboard, s))
             for s in seeds
         ]
         out.mkdir(parents=True, exist_ok=True)

@@ -120,6 +120,14 @@ def with_recorded_defaults(cfg: TrainConfig) -> TrainConfig:
     return cfg
 
 
+def config_record(cfg: TrainConfig) -> dict[str, Any]:
+    """What a run's config.json holds for ``cfg``: every field, the changed defaults written out
+    (`with_recorded_defaults`), as JSON values (roles a list). `tssac_core.train.legacy.config_from_saved` reads it
+    back into the same TrainConfig."""
+    recorded = with_recorded_defaults(cfg)
+    return {**dataclasses.asdict(recorded), "roles": list(recorded.roles)}
+
+
 def reward_config(cfg: TrainConfig) -> RewardConfig:
     return RewardConfig(route=RouteConfig(margin_m=cfg.route_margin_km * 1000.0))
 

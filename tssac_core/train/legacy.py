@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -51,3 +52,13 @@ def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainCo
     if full["selection"] not in [None, "", *Selection]:
         raise UsageError(f"{source}: selection: expected one of {', '.join(Selection)}, got {full['selection']!r}")
     return TrainConfig(**{**full, "roles": tuple(full["roles"])})
+
+
+def read_config(path: Path, what: str) -> TrainConfig:
+    """The TrainConfig in the JSON file ``path`` (a run's config.json, or a grid job's); UsageError, one line
+    starting with ``what`` (the flag that named it), if it cannot be read."""
+    try:
+        saved = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{what}: {path} is not readable ({exc})") from None
+    return config_from_saved(saved, path)

@@ -1,8 +1,8 @@
 """Presets: a training recipe in one YAML file, read by ``python -m tssac_core.train --preset FILE`` and by the
-experiment grid (``train: {preset: FILE}``), so that a recipe exists once.
+experiment grid (its ``train:`` section, and any row ``{preset: FILE}``), so that a recipe exists once.
 
-A preset maps the training command's flags, by their `TrainConfig` names (``steps_per_epoch`` is
-``--steps-per-epoch``), to values, and holds the learner settings (``--set``) under ``set:`` (every
+A preset maps `TrainConfig` fields (the training command's flags: ``steps_per_epoch`` is
+``--steps-per-epoch``) to values, and holds the learner settings (``--set``) under ``set:`` (every
 algorithm), ``sac_set:`` (the SAC family only) and ``onpolicy_set:`` (ppo, ppo_lag, cpo only)::
 
     # configs/paper.yaml
@@ -13,25 +13,52 @@ algorithm), ``sac_set:`` (the SAC family only) and ``onpolicy_set:`` (ppo, ppo_l
     onpolicy_set: {hidden_sizes: [128, 128], gamma: 0.995}
 
 Flags given on the command line win over the preset; ``--set KEY=VALUE`` wins over the preset's value of
-KEY. Paths are relative to the directory the command runs in. A bad file is one line: ``file: field: problem``.
+KEY. Paths are relative to the directory the command runs in. `read_settings` is the one reader of such a
+mapping (a preset file, the grid's ``train:``, a grid row): names, kinds and ranges of the values; a bad one is
+one line: ``file: field: problem``. `preset_config` turns presets, layered, into the `TrainConfig` of a run.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tssac_core.cli import UsageError
-from tssac_core.sim.yaml_file import read_yaml
-from tssac_core.train.algorithms import Family, family_of
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.yaml_file import FileError, read_yaml
+from tssac_core.train.algorithms import ALGORITHMS, Family, Selection, family_of
 from tssac_core.train.config import TrainConfig
 
 SET_KEYS = ("set", "sac_set", "onpolicy_set")
 NOT_IN_PRESET = ("learner",)
-PATH_FIELDS = ("scenario", "init_from", "teammates")
 """TrainConfig fields a preset does not set directly (its learner settings go under SET_KEYS)."""
+PATH_FIELDS = ("scenario", "init_from", "teammates")
+MINIMUM = {
+    "epochs": 1,
+    "steps_per_epoch": 1,
+    "envs": 1,
+    "update_every": 1,
+    "action_repeat": 1,
+    "threads": 1,
+    "start_steps": 0,
+    "update_after": 0,
+    "validation_episodes": 0,
+    "seed": 0,
+    "route_margin_km": 0,
+    "cost_margin_km": 0,
+    "hard_detour_km": 0,
+}
+"""The least value of a count or distance (what the training command accepts)."""
+FRACTIONS = ("hard_layouts", "stop_at_task_success")
+CHOICES: dict[str, tuple[str, ...]] = {
+    "algo": tuple(ALGORITHMS),  # unknown: named "unknown algorithm", as the grid always said
+    "observation": tuple(m.value for m in ObservationMode),
+    "selection": tuple(Selection),
+}
+FIELD_NAMES = tuple(f.name for f in dataclasses.fields(TrainConfig))
 
 
 class PresetError(UsageError):
@@ -43,7 +70,7 @@ class PresetError(UsageError):
 
 @dataclass(frozen=True)
 class Preset:
-    """A preset file's content: TrainConfig field values and the learner settings by family."""
+    """A preset's content: TrainConfig field values and the learner settings by family."""
 
     source: str
     values: dict[str, Any] = field(default_factory=dict)
@@ -66,44 +93,95 @@ class Preset:
         return {**self.sets.get("set", {}), **self.sets.get(family, {})}
 
 
-FIELD_TYPES = {f.name: f.type for f in dataclasses.fields(TrainConfig)}
+def preset_config(layers: Sequence[Preset], **fields: Any) -> TrainConfig:
+    """The TrainConfig of presets laid one over the other (a later layer's values and learner settings win),
+    then ``fields`` (TrainConfig names, as flags on the command line): what ``train --preset FILE`` gives for
+    one layer. Each layer's learner settings are those of the algorithm the whole ends with."""
+    values: dict[str, Any] = {}
+    for layer in layers:
+        values.update(layer.values)
+    values.update(fields)
+    algo = str(values.get("algo", TrainConfig.algo))
+    learner: dict[str, Any] = {}
+    for layer in layers:
+        learner.update(layer.learner_settings(algo))
+    return TrainConfig(**{**values, "learner": learner})
 
 
 def load_preset(path: str | Path) -> Preset:
-    """Read and check a preset file (names and value kinds; the values' ranges are checked by the command)."""
-    source = str(path)
-    data = read_yaml(path, PresetError)
+    """Read and check a preset file (names, value kinds and ranges)."""
+    return read_settings(read_yaml(path, PresetError), str(path))
+
+
+def read_settings(
+    data: Any, source: str, where: str = "", error: FileError = PresetError, also: Collection[str] = ()
+) -> Preset:
+    """A mapping of training settings (a preset file's, or the part of a grid section that is one) as a
+    Preset; the first bad key or value raises ``error(source, field path, problem)``. ``where``: the
+    mapping's own path in the file (e.g. ``train``); ``also``: the caller's own keys, named among the allowed
+    ones when a key is unknown (the caller removed them from ``data``)."""
     if not isinstance(data, dict):
-        raise PresetError(source, "", "expected a mapping of training settings")
-    allowed = (set(FIELD_TYPES) - set(NOT_IN_PRESET)) | set(SET_KEYS)
+        raise error(source, where, "expected a mapping of training settings")
+    allowed = (set(FIELD_NAMES) - set(NOT_IN_PRESET)) | set(SET_KEYS)
     values: dict[str, Any] = {}
     sets: dict[str, dict[str, Any]] = {}
     for key, value in data.items():
+        at = f"{where}.{key}" if where else str(key)
         if key not in allowed:
-            raise PresetError(source, str(key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
-        if key in SET_KEYS:
-            if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
-                raise PresetError(source, key, "expected a mapping of learner settings")
-            sets[key] = dict(value)
-            continue
-        values[key] = check_value(source, key, value)
+            raise error(source, at, f"unknown key (allowed: {', '.join(sorted(allowed | set(also)))})")
+        try:
+            if key in SET_KEYS:
+                sets[key] = learner_settings(value)
+            else:
+                values[key] = check_value(key, value)
+        except ValueError as exc:
+            raise error(source, at, str(exc)) from None
     return Preset(source, values, sets)
 
 
-def check_value(source: str, key: str, value: Any) -> Any:
+def learner_settings(value: Any) -> dict[str, Any]:
+    """``set``-like: names to numbers, booleans, words, null or lists of numbers (what ``--set`` takes)."""
+    if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
+        raise ValueError("expected a mapping of learner settings")
+    for key, v in value.items():
+        numbers = isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        if not (isinstance(v, (int, float, bool, str)) or v is None or numbers):
+            raise ValueError(f"{key}: expected a number, boolean, word, null or list of numbers, got {v!r}")
+    return dict(value)
+
+
+def check_value(key: str, value: Any) -> Any:
+    """One TrainConfig field's value as the training command would take it (ValueError: the problem)."""
     default = getattr(TrainConfig, key, None)
     if key == "roles":
         if isinstance(value, str):
             value = [r.strip() for r in value.split(",") if r.strip()]
         if not isinstance(value, list) or not all(isinstance(r, str) for r in value):
-            raise PresetError(source, key, f"expected a list of roles, got {value!r}")
+            raise ValueError(f"expected a list of roles, got {value!r}")
         return tuple(value)
+    if key == "algo" and value not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {value!r} (choose from {', '.join(ALGORITHMS)})")
+    if key in CHOICES:
+        if value not in CHOICES[key]:
+            raise ValueError(f"expected one of {', '.join(CHOICES[key])}, got {value!r}")
+        return value
     if isinstance(default, bool) or isinstance(value, bool):
-        raise PresetError(source, key, f"expected a {type(default).__name__}, got {value!r}")
+        raise ValueError(f"expected a {type(default).__name__}, got {value!r}")
     if isinstance(default, int) and not isinstance(value, int):
-        raise PresetError(source, key, f"expected an integer, got {value!r}")
+        raise ValueError(f"expected an integer, got {value!r}")
     if isinstance(default, float) and not isinstance(value, (int, float)):
-        raise PresetError(source, key, f"expected a number, got {value!r}")
+        raise ValueError(f"expected a number, got {value!r}")
     if isinstance(default, str) and not isinstance(value, str):
-        raise PresetError(source, key, f"expected a word or path, got {value!r}")
-    return float(value) if isinstance(default, float) else value
+        raise ValueError(f"expected a word or path, got {value!r}")
+    return checked_range(key, float(value) if isinstance(default, float) else value)
+
+
+def checked_range(key: str, value: Any) -> Any:
+    """``value`` if it is in the range of ``key`` (MINIMUM, FRACTIONS); paths written as the command writes them."""
+    if key in MINIMUM and value < MINIMUM[key]:
+        raise ValueError(f"must be >= {MINIMUM[key]}, got {value}")
+    if key in FRACTIONS and not 0.0 <= value <= 1.0:
+        raise ValueError(f"expected a fraction in [0, 1], got {value:g}")
+    if key in PATH_FIELDS:
+        return str(Path(value)) if value else value
+    return value

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -35,8 +34,14 @@ from tssac_core.deploy.policy import (
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario, load
-from tssac_core.train.config import TrainConfig, check_learner_settings, sac_config, with_recorded_defaults
-from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.config import (
+    TrainConfig,
+    check_learner_settings,
+    config_record,
+    sac_config,
+    with_recorded_defaults,
+)
+from tssac_core.train.legacy import read_config
 from tssac_core.train.resume import read_resume_state
 
 logger = logging.getLogger("tssac_core.train")
@@ -190,11 +195,7 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
     if resume:
         if not config_path.is_file():
             raise UsageError(f"--resume: {config_path} not found (nothing to resume)")
-        try:
-            saved = json.loads(config_path.read_text())
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"--resume: {config_path} is not readable ({exc})") from None
-        cfg = config_from_saved(saved, config_path)
+        cfg = read_config(config_path, "--resume")
     elif config_path.is_file():
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     else:
@@ -212,7 +213,7 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
     check_inputs(cfg, out)
     out.mkdir(parents=True, exist_ok=True)
     if not resume:
-        write_json(config_path, {**dataclasses.asdict(cfg), "roles": list(cfg.roles)})
+        write_json(config_path, config_record(cfg))
     record_run(cfg, out)
     keep = set()
     for role_name in cfg.roles:
