@@ -30,6 +30,18 @@ class Straight:
         return np.zeros((len(obs), 2))
 
 
+def fly(args: list[str]) -> subprocess.CompletedProcess[str]:
+    """``python -m mavlink_bridge.fly ARGS --shield --lockstep --no-progress`` from the repository."""
+    return subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", *args, "--shield", "--lockstep", "--no-progress"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        timeout=580,
+    )
+
+
 @pytest.mark.sitl
 @pytest.mark.timeout(600)
 def test_straight_pilot_into_a_radar_is_kept_out_by_the_monitor(tmp_path: Path) -> None:
@@ -40,30 +52,19 @@ def test_straight_pilot_into_a_radar_is_kept_out_by_the_monitor(tmp_path: Path) 
     path = tmp_path / "straight.yaml"
     dump(scenario, path)
     out, logs, plot = tmp_path / "fly.json", tmp_path / "logs", tmp_path / "mission.png"
-    proc = subprocess.run(
+    proc = fly(
         [
-            sys.executable,
-            "-m",
-            "mavlink_bridge.fly",
             "--scenario",
             str(path),
             "--pilot",
             "straight",
-            "--shield",
-            "--lockstep",
             "--json",
             str(out),
             "--logs",
             str(logs),
             "--plot",
             str(plot),
-            "--no-progress",
-        ],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        timeout=580,
+        ]
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     results = json.loads(out.read_text())
@@ -111,27 +112,7 @@ def test_a_nan_policy_is_flown_by_the_backup_over_sitl(tmp_path: Path) -> None:
     path = tmp_path / "strike.yaml"
     dump(scenario, path)
     out = tmp_path / "fly.json"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "mavlink_bridge.fly",
-            "--scenario",
-            str(path),
-            "--models",
-            str(nan_team(tmp_path / "nan")),
-            "--shield",
-            "--lockstep",
-            "--json",
-            str(out),
-            "--no-progress",
-        ],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        timeout=580,
-    )
+    proc = fly(["--scenario", str(path), "--models", str(nan_team(tmp_path / "nan")), "--json", str(out)])
     assert proc.returncode == 0, proc.stderr[-2000:]
     results = json.loads(out.read_text())
     mission = results["missions"][0]

@@ -22,7 +22,7 @@ from mavlink_bridge.companion.config import (
     MIN_VEL_SIGMA_M_S,
     CompanionConfig,
 )
-from mavlink_bridge.companion.pilots import Pilot, make_pilot
+from mavlink_bridge.companion.pilots import DecisionClock, Pilot, make_pilot
 from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
@@ -129,7 +129,7 @@ class Companion:
         self.fix_rx_s = 0.0
         self.local_ms: int | None = None  # newest LOCAL_POSITION_NED
         self.last_control_ms: int | None = None
-        self._next_decision_step = 0  # the monitor's next decision tick
+        self._decisions = DecisionClock(self.pilot.repeat)  # the monitor's decision ticks
         self.fly_start_ms: int | None = None
         self.armed = False
         self.mode: int | None = None
@@ -560,9 +560,7 @@ class Companion:
         the pilot was asked this tick."""
         assert self.shield is not None
         f = self.filter
-        decision = step >= self._next_decision_step
-        if decision:
-            self._next_decision_step = (step // self.pilot.repeat + 1) * self.pilot.repeat
+        decision = self._decisions.due(step)
         x_m, y_m = f.pos_m
         state = (x_m, y_m, f.speed_m_s, f.heading_rad)
         action, text = self.shield.action(

@@ -23,6 +23,26 @@ from tssac_core.sim.scenario import Role
 from tssac_core.sim.world import World
 
 
+class DecisionClock:
+    """Decision ticks 0, k, 2k, ... of the vehicle's clock (k = ``every``); a tick skipped by a slow companion
+    moves the decision to the next tick seen. The pilots hold their actions on it, and the runtime-assurance
+    monitor decides on it (Team holds actions the same way in the batched world)."""
+
+    def __init__(self, every: int) -> None:
+        self.every = max(1, every)
+        self._next = 0
+
+    def reset(self) -> None:
+        self._next = 0
+
+    def due(self, step: int, force: bool = False) -> bool:
+        """Whether ``step`` is a decision tick (``force``: it is, whatever the grid says); moves the grid on."""
+        if force or step >= self._next:
+            self._next = (step // self.every + 1) * self.every
+            return True
+        return False
+
+
 class Pilot(Protocol):
     name: str
     repeat: int
@@ -58,15 +78,13 @@ class StraightPilot:
 
     def __init__(self) -> None:
         self.decided = True
-        self._next_decision = 0
+        self._clock = DecisionClock(self.repeat)
 
     def reset(self) -> None:
-        self._next_decision = 0
+        self._clock.reset()
 
     def action(self, world: World, role_index: int, step: int) -> np.ndarray:
-        self.decided = step >= self._next_decision
-        if self.decided:
-            self._next_decision = (step // self.repeat + 1) * self.repeat
+        self.decided = self._clock.due(step)
         return np.zeros(2)
 
 
@@ -82,18 +100,17 @@ class AdversarialPilot:
         self.name = adversary.value
         self.decided = True
         self._held: np.ndarray | None = None
-        self._next_decision = 0
+        self._clock = DecisionClock(self.repeat)
 
     def reset(self) -> None:
         self._held = None
-        self._next_decision = 0
+        self._clock.reset()
 
     def action(self, world: World, role_index: int, step: int) -> np.ndarray:
-        self.decided = self._held is None or step >= self._next_decision
+        self.decided = self._clock.due(step, force=self._held is None)
         if self.decided:
             actions = adversary_actions(self.adversary, situation(world, steps=step))
             self._held = np.asarray(actions[0, role_index], dtype=np.float64)
-            self._next_decision = (step // self.repeat + 1) * self.repeat
         assert self._held is not None
         return self._held
 
@@ -108,21 +125,18 @@ class PolicyPilot:
         self.mode: ObservationMode = self.policy.observation_mode
         self.routes = RouteMap()
         self._held: np.ndarray | None = None
-        self._next_decision = 0
+        self._clock = DecisionClock(self.repeat)
         self.decided = False
 
     def reset(self) -> None:
         self._held = None
-        self._next_decision = 0
+        self._clock.reset()
 
     def action(self, world: World, role_index: int, step: int) -> np.ndarray:
-        # Decisions at ticks 0, k, 2k, ... of the vehicle's clock (Team holds actions the same way);
-        # a tick skipped by a slow companion moves the decision to the next tick seen.
-        self.decided = self._held is None or step >= self._next_decision
+        self.decided = self._clock.due(step, force=self._held is None)
         if self.decided:
             obs = observe(world, role_index, self.mode, self.routes)[0]
             self._held = np.asarray(self.policy.act(obs), dtype=np.float64).reshape(2)
-            self._next_decision = (step // self.repeat + 1) * self.repeat
         assert self._held is not None
         return self._held
 
