@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tssac_core.deploy.policy import Policy
-from tssac_core.sim.scenario import ROLES
+from tssac_core.deploy.policy import CheckpointInfo, Policy
+from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.scenario import ROLES, Role
+from tssac_core.train.algorithms import Algo
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "models" / "tssac"
@@ -47,3 +49,10 @@ def test_the_grid_runs_checkpoints_name_no_module_of_the_package():
         pytest.skip("no grid runs here")
     offenders = [str(p) for p in runs if any(n.startswith("tssac_core") for n in pickled_globals(p))]
     assert not offenders
+
+
+def test_a_checkpoint_stores_the_algorithm_as_a_plain_string():
+    """``--algo`` is an enum; a checkpoint that pickled it would name ``tssac_core.train.algorithms`` (as the
+    first runs of the hard-layouts recipe did, fixed in the shipped files by writing the name)."""
+    info = CheckpointInfo(Role.DECOY, Algo.TSSAC, ObservationMode.ROUTE, 24, 2, (128, 128), "d", {}, {}, 10)
+    assert type(info.fields()["algo"]) is str and info.fields()["algo"] == "tssac"

@@ -45,7 +45,8 @@ def test_exported_actor_acts_like_the_torch_policy(models: Path, role: Role):
     obs = np.random.default_rng(1).uniform(-1.5, 1.5, (500, numpy_policy.obs_dim)).astype(np.float32)
     batch = numpy_policy.act(obs)
     assert batch.shape == (500, 2) and batch.dtype == np.float64
-    np.testing.assert_allclose(batch, torch_policy.act(obs), atol=1e-5)
+    # float32 sums over 128-wide layers in another order: up to ~1e-5 apart (the shipped detect 1.006e-5 once in 1,000)
+    np.testing.assert_allclose(batch, torch_policy.act(obs), atol=5e-5)
     np.testing.assert_allclose(numpy_policy.act(obs[7]), torch_policy.act(obs[7]), atol=1e-5)
     assert np.abs(batch).max() > 0.5, "the actions should not all be near zero (is tanh applied to the right half?)"
     with pytest.raises(ValueError, match="takes"):

@@ -49,7 +49,7 @@ class CheckpointInfo:
         """As plain JSON values: what a checkpoint (and an exported actor) stores beside the weights."""
         return {
             "role": self.role.value,
-            "algo": self.algo,
+            "algo": str(self.algo),  # a plain string: a pickled enum would name a module of the package
             "observation_mode": self.observation_mode.value,
             "obs_dim": self.obs_dim,
             "act_dim": self.act_dim,
