@@ -187,6 +187,7 @@ class MavLink:
         self.counters = LinkCounters()
         self.target_system = target_system
         self.target_component = target_component
+        self._targets = (target_system, target_component)
         self._backlog: collections.deque[tuple[Message, float]] = collections.deque()
         self.last_rx_s = 0.0
         """When the datagram of the message :meth:`recv` returned last was read (time.monotonic())."""
@@ -244,6 +245,33 @@ class MavLink:
     @property
     def signing(self) -> bool:
         return self.mav.signing.secret_key is not None
+
+    def new_mission(self, tlog_path: Path | None) -> None:
+        """Start afresh on the same socket after a mission reset (:mod:`tssac_core.deploy.mission_reset`): drop
+        what is queued or waiting in the socket (all of it from the previous mission: a reset vehicle is silent
+        until it hears from us), learn the vehicle again from its next heartbeat, count from 0, and write the
+        mission's own tlog. The signing state is kept: our timestamps only grow."""
+        self._backlog.clear()
+        while True:
+            try:
+                self._sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                continue
+        self.target_system, self.target_component = self._targets
+        self.counters = LinkCounters()
+        self._close_tlog()
+        if tlog_path is not None:
+            try:
+                Path(tlog_path).parent.mkdir(parents=True, exist_ok=True)
+                self._tlog = open(tlog_path, "wb")
+            except OSError as exc:
+                raise LinkError(f"cannot write tlog {tlog_path}: {exc.strerror or exc}") from None
+
+    def close_tlog(self) -> None:
+        """Close the tlog, keeping the socket (the end of a mission of a persistent companion)."""
+        self._close_tlog()
 
     def fileno(self) -> int:
         return self._sock.fileno()

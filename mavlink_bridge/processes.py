@@ -71,10 +71,12 @@ class ChildProcesses:
         *,
         log_path: Path | None = None,
         stdout_pipe: bool = False,
+        stdin_pipe: bool = False,
         cwd: Path | None = None,
         env: dict[str, str] | None = None,
     ) -> Child:
-        """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``."""
+        """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``; stdin is piped
+        (``stdin_pipe``) or empty."""
         log: IO[bytes] | None = None
         if log_path is not None:
             log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -82,7 +84,7 @@ class ChildProcesses:
         try:
             proc = subprocess.Popen(
                 list(argv),
-                stdin=subprocess.DEVNULL,
+                stdin=subprocess.PIPE if stdin_pipe else subprocess.DEVNULL,
                 stdout=subprocess.PIPE if stdout_pipe else (log if log is not None else subprocess.DEVNULL),
                 stderr=log if log is not None else subprocess.DEVNULL,
                 cwd=cwd,
@@ -127,8 +129,12 @@ class ChildProcesses:
             except subprocess.TimeoutExpired:
                 _log.error("%s (pid %d) survived SIGKILL", c.name, c.pid)
         for c in children:
-            if c.process.stdout is not None and not c.process.stdout.closed:
-                c.process.stdout.close()
+            for pipe in (c.process.stdout, c.process.stdin):
+                if pipe is not None and not pipe.closed:
+                    try:
+                        pipe.close()
+                    except OSError:  # stdin of a child that died: the unwritten bytes are lost with it
+                        pass
 
     def stop_all(self, grace_s: float | None = None) -> None:
         """Stop every child ever started (idempotent)."""

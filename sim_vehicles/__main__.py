@@ -8,6 +8,9 @@ Prints one line per vehicle with the connection string a client uses, then a rea
     ready scenario=strike seed=0 clock=realtime speedup=1
 
 and, when the run ends, one ``end ...`` line (reason, success, steps, simulated time, cost per role).
+With ``--serve`` the process then reads the next mission from standard input and flies it on the same ports
+(the mission-reset protocol, :mod:`tssac_core.deploy.mission_reset`): a ``ready mission=N ...`` line, the
+mission, its ``end ...`` line, and so on until ``{"quit": true}`` or the end of the input.
 Exit status: 0 when the mission ended or the run was stopped (SIGINT / SIGTERM); 2 on bad input
 (scenario, key file, port in use, options), with one line on stderr; 1 on an unexpected failure.
 See docs/mavlink.md for the protocol.
@@ -28,7 +31,8 @@ from typing import NoReturn
 
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.signing import SigningKeyError, load_key
-from sim_vehicles.world_runner import SitlError, WorldRunner
+from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
+from tssac_core.deploy.mission_reset import MissionInput, ResetError, redirect_stderr
 from tssac_core.sim.scenario import ScenarioError, load
 
 PROG = "python -m sim_vehicles"
@@ -112,6 +116,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulated seconds to keep serving after the mission ends (default 1.0)",
     )
     p.add_argument(
+        "--serve",
+        action="store_true",
+        help=(
+            "after the mission, read the next one from standard input (one JSON line: index, scenario, seed, "
+            'truth_log, tlog_dir, log) and fly it on the same ports, until {"quit": true} or the end of the input'
+        ),
+    )
+    p.add_argument(
         "--log-level",
         choices=["debug", "info", "warning", "error"],
         default="warning",
@@ -181,18 +193,35 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{ep.role} sysid={ep.sysid} {ep.connection_string}")
         speed = "lockstep" if config.clock is ClockMode.LOCKSTEP else f"realtime speedup={config.speedup:g}"
         print(f"ready scenario={config.scenario.name} seed={config.seed} clock={speed}", flush=True)
-        result = runner.run()
+        _print_end(runner.run_mission())
+        missions = MissionInput(0)  # standard input, read only by a serving world
+        while args.serve and not runner.stop_requested:
+            try:
+                mission = missions.next(lambda: runner.stop_requested)
+                if mission is None:
+                    break
+                if mission.log is not None:
+                    redirect_stderr(mission.log)
+                runner.next_mission(load(mission.scenario), mission.seed, mission.truth_log, mission.tlog_dir)
+            except (ResetError, ScenarioError, SitlError, OSError) as exc:
+                print(f"{PROG}: error: {exc}", file=sys.stderr)
+                return 2
+            print(f"ready mission={mission.index} scenario={runner.scenario.name} seed={mission.seed}", flush=True)
+            _print_end(runner.run_mission())
     finally:
         runner.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    return 0
+
+
+def _print_end(result: RunResult) -> None:
     costs = " ".join(f"cost_{role}={c:g}" for role, c in result.cost.items())
     print(
         f"end reason={result.end} success={str(result.success).lower()} steps={result.steps} "
         f"sim_time_s={result.sim_time_s:.1f} {costs}",
         flush=True,
     )
-    return 0
 
 
 if __name__ == "__main__":

@@ -326,6 +326,18 @@ class MavEndpoint:
         for addr in [a for a in self._tx_seq if a not in self.peers and a not in self.monitors]:
             del self._tx_seq[addr]
 
+    def new_session(self) -> None:
+        """After a mission reset (a reboot): drop what the socket holds, forget every client and monitor, number
+        each link from 0 again and count from 0. The signing streams' timestamps are kept, so that nothing signed
+        before the reset can be replayed after it."""
+        while self.receive():
+            pass
+        self.peers.clear()
+        self.monitors.clear()
+        self._tx_seq.clear()
+        self.rx = RxCounters()
+        self.tx = TxCounters()
+
     def close(self) -> None:
         if not self._closed:
             self._closed = True

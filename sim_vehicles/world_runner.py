@@ -71,7 +71,7 @@ from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
 from tssac_core.deploy.mavlink_signing import StreamKey
 from tssac_core.deploy.truth_log_schema import VehicleRow
-from tssac_core.sim.scenario import ROLES, Layout, dump, sample_layout, to_dict
+from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 
 _log = logging.getLogger(__name__)
@@ -132,6 +132,60 @@ class WorldRunner:
     """Owns the world, the vehicles and the loop (see the module docstring)."""
 
     def __init__(self, config: SitlConfig) -> None:
+        self._stop = threading.Event()
+        self._closed = False
+        self._endpoints: list[MavEndpoint] = []
+        self._truth: TruthLog | None = None
+        self._tlogs: list[BinaryIO] = []
+        self.vehicles: list[Vehicle] = []
+        try:
+            self._open_endpoints(config)
+            self._begin(config)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------------------- set-up
+
+    def _open_endpoints(self, config: SitlConfig) -> None:
+        """The vehicles' UDP endpoints: bound once, kept across the missions of a persistent world."""
+        # One key, one table of accepted signing streams for the three vehicles: a frame accepted by one is
+        # a replay at another once its stream has moved on (docs/mavlink.md, Security).
+        run_sysids = frozenset(range(1, len(ROLES) + 1))
+        shared_streams: dict[StreamKey, int] = {}
+        for i in range(len(ROLES)):
+            try:
+                self._endpoints.append(
+                    MavEndpoint(
+                        config.host,
+                        config.port_for(i),
+                        i + 1,
+                        1,
+                        config.signing_key,
+                        config.unsigned_monitors,
+                        run_sysids,
+                        shared_streams,
+                    )
+                )
+            except EndpointError as exc:
+                raise SitlError(str(exc.strerror)) from None
+
+    def next_mission(self, scenario: Scenario, seed: int, truth_log: Path | None, tlog_dir: Path | None) -> None:
+        """Reset for another mission, as an autopilot reboots: a new layout, world, clock and vehicles on the same
+        sockets, which forget their clients (see :mod:`tssac_core.deploy.mission_reset`). The last mission must have
+        ended (:meth:`run_mission` returned)."""
+        if self._closed:
+            raise SitlError("the world is closed")
+        self._close_mission_files()
+        for endpoint in self._endpoints:
+            endpoint.new_session()
+        config = dataclasses.replace(
+            self.config, scenario=scenario, seed=seed, truth_log=truth_log, tlog_dir=tlog_dir, layout_out=None
+        )
+        self._begin(config)
+
+    def _begin(self, config: SitlConfig) -> None:
+        """Everything of one mission: the layout, the world, the clock, the vehicles and the mission's files."""
         self.config = config
         s = config.scenario
         self.scenario = s
@@ -142,7 +196,6 @@ class WorldRunner:
         self.world.reset([0], [self.layout])
         self.flags = MissionFlags()
         self.clock = Clock(unix_start_s=time.time(), lockstep=self.lockstep)
-        self._stop = threading.Event()
         self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
         self._paced = not self.lockstep
         """Lockstep with nobody in the loop: the world runs at real time x speedup."""
@@ -150,21 +203,8 @@ class WorldRunner:
         self._first_step_cpu_s: float | None = None
         """This process's CPU clock at the first world step (the summary reports the flight's CPU)."""
         self._linger_steps = 0
-        self._truth: TruthLog | None = None
-        self._tlogs: list[BinaryIO] = []
-        self.vehicles: list[Vehicle] = []
+        self.vehicles = []
         self.result: RunResult | None = None
-        self._closed = False
-        try:
-            self._open(config)
-        except BaseException:
-            self.close()
-            raise
-
-    # ------------------------------------------------------------------------------- set-up
-
-    def _open(self, config: SitlConfig) -> None:
-        s = self.scenario
         if config.layout_out is not None:
             try:
                 dump(dataclasses.replace(s, layout=self.layout, random=None), config.layout_out)
@@ -177,24 +217,8 @@ class WorldRunner:
                 raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         c = self.world.c
-        # One key, one table of accepted signing streams for the three vehicles: a frame accepted by one is
-        # a replay at another once its stream has moved on (docs/mavlink.md, Security).
-        run_sysids = frozenset(range(1, len(ROLES) + 1))
-        shared_streams: dict[StreamKey, int] = {}
         for i, role in enumerate(ROLES):
-            try:
-                endpoint = MavEndpoint(
-                    config.host,
-                    config.port_for(i),
-                    i + 1,
-                    1,
-                    config.signing_key,
-                    config.unsigned_monitors,
-                    run_sysids,
-                    shared_streams,
-                )
-            except EndpointError as exc:
-                raise SitlError(str(exc.strerror)) from None
+            endpoint = self._endpoints[i]
             start = self.layout.starts[role.value]
             setup = VehicleSetup(
                 index=i,
@@ -218,7 +242,6 @@ class WorldRunner:
                 try:
                     tlog = open(path, "wb")
                 except OSError as exc:
-                    endpoint.close()
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)
             vehicle = Vehicle(
@@ -260,11 +283,23 @@ class WorldRunner:
     def run(self) -> RunResult:
         """Serve until the mission has ended and lingered, or a stop is requested; then close."""
         try:
+            return self.run_mission()
+        finally:
+            self.close()
+
+    def run_mission(self) -> RunResult:
+        """Serve until the mission has ended and lingered, or a stop is requested; the sockets stay open for
+        :meth:`next_mission`."""
+        try:
             self._loop()
         finally:
             self._finish()
         assert self.result is not None
         return self.result
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop.is_set()
 
     def _loop(self) -> None:
         self._wall0 = time.monotonic()
@@ -539,7 +574,7 @@ class WorldRunner:
                     else round(time.process_time() - self._first_step_cpu_s, 4),
                 }
             )
-        self.close()
+        self._close_mission_files()
 
     @staticmethod
     def counters_of(v: Vehicle) -> dict[str, Any]:
@@ -555,20 +590,26 @@ class WorldRunner:
             "monitors": len(v.endpoint.monitors),
         }
 
-    def close(self) -> None:
-        """Close sockets and logs (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        for v in self.vehicles:
-            v.endpoint.close()
+    def _close_mission_files(self) -> None:
+        """Close the mission's tlogs and truth log (idempotent)."""
         for f in self._tlogs:
             try:
                 f.close()
             except OSError as exc:
                 _log.error("closing a tlog failed: %s", exc)
+        self._tlogs = []
         if self._truth is not None:
             try:
                 self._truth.close()
             except OSError as exc:
                 _log.error("closing the truth log failed: %s", exc)
+            self._truth = None
+
+    def close(self) -> None:
+        """Close sockets and logs (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for endpoint in self._endpoints:
+            endpoint.close()
+        self._close_mission_files()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import signal
@@ -13,10 +14,12 @@ from types import FrameType
 from typing import TYPE_CHECKING, NoReturn
 
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
+from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
+from tssac_core.deploy.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
 from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 
@@ -116,6 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="Kalman filter model (default constant_turn_ekf)",
     )
     p.add_argument(
+        "--serve",
+        action="store_true",
+        help=(
+            "after the mission, read the next one from standard input (one JSON line: index, scenario, status_json, "
+            'tlog, log) and fly it over the same link, until {"quit": true} or the end of the input'
+        ),
+    )
+    p.add_argument(
         "--log-level",
         choices=["debug", "info", "warning", "error"],
         default="info",
@@ -170,7 +181,7 @@ def bad_input_errors() -> tuple[type[Exception], ...]:
     """Exceptions that mean bad input: one line and exit code 2."""
     from mavlink_bridge.link import LinkError
 
-    return (UsageError, ScenarioError, LinkError, CheckpointError)
+    return (UsageError, ScenarioError, LinkError, CheckpointError, ResetError)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -183,25 +194,61 @@ def main(argv: Sequence[str] | None = None) -> int:
         logging.basicConfig(
             level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
         )
-        companion = build_companion(config_from_args(args))
+        config = config_from_args(args)
+        companion = build_companion(config)
     except bad_input_errors() as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    stopped = False
 
     def stop(signum: int, _frame: FrameType | None) -> None:
+        nonlocal stopped
         _log.info("signal %d: stopping", signum)
+        stopped = True
         companion.request_stop()
 
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    link = None
     try:
         try:
-            result = companion.run()
-        except UsageError as exc:
+            if args.serve:
+                from mavlink_bridge.companion.machine import open_link
+
+                link = open_link(config)
+            result = companion.run(link)
+            _print_end(result)
+            # --serve: mission after mission over the same link (tssac_core.deploy.mission_reset).
+            missions = MissionInput(0)  # standard input, read only by a serving companion
+            while link is not None and result.exit_code == 0 and not stopped:
+                mission = missions.next(lambda: stopped)
+                if mission is None:
+                    break
+                if mission.log is not None:
+                    redirect_stderr(mission.log)
+                config = next_mission_config(config, mission)
+                companion = build_companion(config)
+                result = companion.run(link)
+                _print_end(result)
+        except bad_input_errors() as exc:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT
     finally:
+        if link is not None:
+            link.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    return result.exit_code
+
+
+def next_mission_config(config: CompanionConfig, mission: NextMission) -> CompanionConfig:
+    """The configuration of a served mission: its scenario (fixed layout), status file and tlog."""
+    scenario = load(mission.scenario)
+    if scenario.layout is None:
+        raise UsageError(f"{mission.scenario}: mission {mission.index} needs a scenario with a fixed layout")
+    return dataclasses.replace(config, scenario=scenario, status_json=mission.status_json, tlog=mission.tlog)
+
+
+def _print_end(result: CompanionResult) -> None:
     lat = result.latency_ms
     lat_text = f" latency_p50_ms={lat['p50']:.3f} latency_p99_ms={lat['p99']:.3f}" if lat else ""
     vt = "-" if result.vehicle_time_s is None else f"{result.vehicle_time_s:.1f}"
@@ -211,7 +258,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"message={json.dumps(result.message)}",
         flush=True,
     )
-    return result.exit_code
 
 
 if __name__ == "__main__":

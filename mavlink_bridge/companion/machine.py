@@ -72,6 +72,21 @@ class _ClaimedEnd:
     """When the first POWEROFF heartbeat came after it."""
 
 
+def open_link(cfg: CompanionConfig) -> MavLink:
+    """The companion's link to its vehicle; a link that cannot open is bad input (UsageError, one line)."""
+    try:
+        return MavLink(
+            cfg.connection,
+            signing_key=cfg.signing_key,
+            # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
+            signing_link_id=companion_link_id(cfg.role.index + 1),
+            tlog_path=cfg.tlog,
+            source_system=cfg.source_system,
+        )
+    except LinkError as exc:
+        raise UsageError(str(exc)) from None
+
+
 class Companion:
     """One UAV's companion process (see the module docstring)."""
 
@@ -140,21 +155,21 @@ class Companion:
         self._gap_seen = False  # a gap happened since the last fix: re-engage a disarmed vehicle
         self.pilot.reset()
 
-    def run(self) -> CompanionResult:
-        """Connect, engage, fly until the mission ends, the vehicle is lost or a stop is requested."""
+    def run(self, link: MavLink | None = None) -> CompanionResult:
+        """Connect, engage, fly until the mission ends, the vehicle is lost or a stop is requested.
+
+        ``link``: the link of a companion that flies mission after mission (``--serve``); it is reset for this
+        mission (:meth:`MavLink.new_mission`) and left open. Without one, the run opens its own and closes it."""
         cfg = self.cfg
-        try:
-            self._link = MavLink(
-                cfg.connection,
-                signing_key=cfg.signing_key,
-                # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
-                signing_link_id=companion_link_id(self.role_index + 1),
-                tlog_path=cfg.tlog,
-                source_system=cfg.source_system,
-            )
-        except LinkError as exc:
-            raise UsageError(str(exc)) from None
-        link = self._link
+        own_link = link is None
+        if link is None:
+            link = open_link(cfg)
+        else:
+            try:
+                link.new_mission(cfg.tlog)
+            except LinkError as exc:
+                raise UsageError(str(exc)) from None
+        self._link = link
         self.last_rx_s = time.monotonic()
         self._next_heartbeat_s = 0.0
         self._last_silence_hold_s = -math.inf
@@ -180,7 +195,10 @@ class Companion:
             self._status = (stop.args[0], stop.args[1])
         finally:
             result = self._result()
-            link.close()
+            if own_link:
+                link.close()
+            else:
+                link.close_tlog()
             if cfg.status_json is not None:
                 write_json(cfg.status_json, result.as_dict())
         return result

@@ -89,10 +89,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
             else:
                 runner = MissionRunner(cfg, children, work)
-                for i in cfg.indices():
-                    row = runner.fly(i)
-                    children.forget_finished()
-                    record(row)
+                try:
+                    for i in cfg.indices():
+                        row = runner.fly(i)
+                        children.forget_finished()
+                        record(row)
+                finally:
+                    runner.close()
     except (MissionTimedOut, TaskFailed) as exc:
         error = str(exc)
         code = EXIT_FAILED

@@ -76,6 +76,9 @@ class FlyConfig:
     """An existing Ray cluster for the missions (None: a Ray started inside the command when workers > 1)."""
     animate_path: Path | None = None
     """``--animate``: each mission as a .gif or .mp4 film (tssac_core.mission_animation)."""
+    persistent: bool = True
+    """One world and three companions fly every mission of the run (of each worker), reset between missions
+    (tssac_core.deploy.mission_reset); False (``--fresh-processes``): four new processes per mission."""
 
     @property
     def on_ray(self) -> bool:
@@ -212,6 +215,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly the missions on this existing Ray cluster (default with --workers: a Ray started inside the "
         "command); --models, --logs, --tlog and --plot must be on a filesystem every node sees",
     )
+    p.add_argument(
+        "--fresh-processes",
+        action="store_true",
+        help="start a new world and new companions for every mission instead of resetting the running ones "
+        "(slower; the same results)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -295,6 +304,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         signing=not a.no_signing,
         workers=a.workers,
         ray_address=a.address,
+        persistent=not a.fresh_processes,
     )
 
 

@@ -8,8 +8,8 @@ import logging
 import os
 import re
 import resource
-import select
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -18,10 +18,12 @@ from typing import Any
 import numpy as np
 
 from mavlink_bridge.fly.config import REPO, FlyConfig
+from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
 from mavlink_bridge.mission_log import TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
+from tssac_core.deploy.mission_reset import NextMission
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
 
@@ -93,6 +95,23 @@ class MissionRunner:
         self.children = children
         self.work_dir = work_dir
         self.env = _child_env()
+        self.crew: Crew | None = None
+        """The processes kept alive across missions (``cfg.persistent``), None until the first or after a failure."""
+
+    def close(self) -> None:
+        """Let the crew's processes quit (they exit on their own; the caller's stop_all reaps what does not)."""
+        crew, self.crew = self.crew, None
+        if crew is None:
+            return
+        for reader in crew.readers:
+            try:
+                crew.tell(reader, None)
+            except CrewError:
+                pass
+        deadline = time.monotonic() + 2.0
+        while any(c.poll() is None for c in crew.children) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        self.children.stop(crew.children)
 
     def fly(self, index: int) -> dict[str, Any]:
         cfg = self.cfg
@@ -103,19 +122,27 @@ class MissionRunner:
         scenario_file = mdir / "scenario.yaml"
         dump(dataclasses.replace(cfg.scenario, layout=layout, random=None), scenario_file)
         truth = mdir / "truth.jsonl"
-        cpu0 = _children_cpu_s()
         t0 = time.monotonic()
         pids: dict[str, int] = {}
         sitl: Child | None = None
-        if cfg.connect is None:
-            sitl, endpoints = self._start_world(mdir, scenario_file, truth, seed)
-            pids["sitl"] = sitl.pid
+        cpu_s: float | None
+        if cfg.connect is None and cfg.persistent:
+            crew, timed_out, cpu_s = self._fly_with_crew(index, mdir, scenario_file, truth, seed, t0)
+            sitl, companions = crew.world.child, [r.child for r in crew.companions]
+            pids = {c.name: c.pid for c in crew.children}
         else:
-            endpoints = dict(zip([r.value for r in ROLES], cfg.connect))
-        companions = self._start_companions(index, mdir, scenario_file, endpoints)
-        pids.update({c.name: c.pid for c in companions})
-        _log.info("mission %d: started %s", index, " ".join(f"{k}={v}" for k, v in pids.items()))
-        timed_out = self._watch(index, sitl, companions, t0)
+            cpu0 = _children_cpu_s()
+            if cfg.connect is None:
+                world, endpoints = self._start_world(mdir, scenario_file, truth, seed)
+                sitl = world.child
+                pids["sitl"] = sitl.pid
+            else:
+                endpoints = dict(zip([r.value for r in ROLES], cfg.connect))
+            companions = self._start_companions(index, mdir, scenario_file, endpoints)
+            pids.update({c.name: c.pid for c in companions})
+            _log.info("mission %d: started %s", index, " ".join(f"{k}={v}" for k, v in pids.items()))
+            timed_out = self._watch(index, sitl, companions, t0)
+            cpu_s = _children_cpu_s() - cpu0
         wall_s = time.monotonic() - t0
         statuses = {c.name: self._companion_status(c, mdir) for c in companions}
         row: dict[str, Any] = {
@@ -123,7 +150,7 @@ class MissionRunner:
             "seed": seed,
             "pids": pids,
             "wall_time_s": round(wall_s, 3),
-            "cpu_s": round(_children_cpu_s() - cpu0, 3),
+            "cpu_s": None if cpu_s is None else round(cpu_s, 3),
             "companions": statuses,
         }
         if sitl is not None:
@@ -154,7 +181,10 @@ class MissionRunner:
             row["success"] = False
         return row
 
-    def _start_world(self, mdir: Path, scenario_file: Path, truth: Path, seed: int) -> tuple[Child, dict[str, str]]:
+    def _start_world(
+        self, mdir: Path, scenario_file: Path, truth: Path, seed: int, serve: bool = False
+    ) -> tuple[LineReader, dict[str, str]]:
+        """The world (the reader of its output) and its vehicles' connection strings."""
         cfg = self.cfg
         argv = [
             sys.executable,
@@ -177,44 +207,45 @@ class MissionRunner:
             argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
         if cfg.signing_key_path is not None:
             argv += ["--signing-key", str(cfg.signing_key_path)]
+        if serve:
+            argv += ["--serve"]
         log = mdir / "sitl.log"
-        sitl = self.children.start("sitl", argv, log_path=log, stdout_pipe=True, env=self.env)
-        endpoints = self._read_endpoints(sitl, log)
-        return sitl, endpoints
+        sitl = self.children.start("sitl", argv, log_path=log, stdout_pipe=True, stdin_pipe=serve, env=self.env)
+        reader = LineReader(sitl)
+        return reader, self._read_endpoints(reader, log)
 
-    def _read_endpoints(self, sitl: Child, log: Path) -> dict[str, str]:
+    def _read_endpoints(self, reader: LineReader, log: Path) -> dict[str, str]:
         """The ``<role> sysid=N udpout:HOST:PORT`` lines the SITL prints before ``ready``."""
-        out = sitl.process.stdout
-        assert out is not None
+        sitl = reader.child
         deadline = time.monotonic() + self.cfg.startup_timeout_s
-        buf = b""
-        while b"\nready" not in b"\n" + buf:
-            if sitl.poll() is not None:
-                buf += out.read() or b""
-                if b"\nready" in b"\n" + buf:
-                    break
-                printed = "" if last_meaningful_line(log) else f"; it printed {buf.decode(errors='replace').strip()!r}"
-                raise ChildFailed(
-                    child_failure("the SITL world", sitl, sitl.poll() or 0, "before it was ready") + printed
-                )
+        seen: list[str] = []
+        while not (seen and seen[-1].startswith("ready")):
+            if reader.lines:
+                seen.append(reader.lines.popleft())
+                continue
+            if reader.eof:  # it closed its output: it is exiting
+                try:
+                    rc = sitl.process.wait(5.0)
+                except subprocess.TimeoutExpired:
+                    rc = 0
+                printed = "" if last_meaningful_line(log) else f"; it printed {' | '.join(seen)!r}"
+                raise ChildFailed(child_failure("the SITL world", sitl, rc, "before it was ready") + printed)
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise ChildFailed(f"the SITL world was not ready within {self.cfg.startup_timeout_s:g} s")
-            if select.select([out], [], [], min(remaining, 0.2))[0]:
-                chunk = os.read(out.fileno(), 4096)
-                buf += chunk
+            wait_readable([reader], min(remaining, 0.2))
         endpoints: dict[str, str] = {}
-        for line in buf.decode(errors="replace").splitlines():
+        for line in seen:
             parts = line.split()
             if len(parts) == 3 and parts[0] in {r.value for r in ROLES} and parts[1].startswith("sysid="):
                 endpoints[parts[0]] = parts[2]
         if set(endpoints) != {r.value for r in ROLES}:
-            raise ChildFailed(
-                f"the SITL world did not print its three endpoints: {buf.decode(errors='replace').strip()!r}"
-            )
+            raise ChildFailed(f"the SITL world did not print its three endpoints: {' | '.join(seen)!r}")
         return endpoints
 
-    def _start_companions(self, index: int, mdir: Path, scenario_file: Path, endpoints: dict[str, str]) -> list[Child]:
+    def _start_companions(
+        self, index: int, mdir: Path, scenario_file: Path, endpoints: dict[str, str], serve: bool = False
+    ) -> list[Child]:
         cfg = self.cfg
         out = []
         for role in ROLES:
@@ -243,8 +274,117 @@ class MissionRunner:
                 argv += ["--tlog", str(cfg.tlog_dir / f"mission-{index:03d}" / f"{name}.tlog")]
             if cfg.signing_key_path is not None:
                 argv += ["--signing-key", str(cfg.signing_key_path)]
-            out.append(self.children.start(name, argv, log_path=mdir / f"{name}.log", env=self.env))
+            if serve:
+                argv += ["--serve"]
+            out.append(
+                self.children.start(
+                    name, argv, log_path=mdir / f"{name}.log", stdout_pipe=serve, stdin_pipe=serve, env=self.env
+                )
+            )
         return out
+
+    # ------------------------------------------------------------------------- persistent processes
+
+    def _fly_with_crew(
+        self, index: int, mdir: Path, scenario_file: Path, truth: Path, seed: int, t0: float
+    ) -> tuple[Crew, bool, float | None]:
+        """Fly one mission with the crew (started for it when there is none): the crew, whether the mission timed
+        out, and the CPU seconds its processes used for it. Raises ChildFailed; a failed or timed-out mission's
+        crew is stopped, and the next mission starts a new one."""
+        try:
+            crew, cpu0 = self._crew_for(index, mdir, scenario_file, truth, seed)
+            timed_out = self._watch_crew(index, crew, t0)
+        except (ChildFailed, CrewError) as exc:
+            self._drop_crew()
+            if isinstance(exc, CrewError):
+                raise ChildFailed(f"mission {index}: {exc}") from None
+            raise
+        cpu1 = crew.cpu_s()
+        if timed_out:
+            self._drop_crew()
+        return crew, timed_out, None if cpu0 is None or cpu1 is None else cpu1 - cpu0
+
+    def _crew_for(
+        self, index: int, mdir: Path, scenario_file: Path, truth: Path, seed: int
+    ) -> tuple[Crew, float | None]:
+        """The crew, told mission ``index`` (or started with it), and its CPU seconds before the mission."""
+        if self.crew is not None and any(c.poll() is not None for c in self.crew.children):
+            _log.warning("mission %d: a process of the last mission's crew has exited: starting a new crew", index)
+            self._drop_crew()
+        if self.crew is None:
+            world, endpoints = self._start_world(mdir, scenario_file, truth, seed, serve=True)
+            companions = self._start_companions(index, mdir, scenario_file, endpoints, serve=True)
+            self.crew = Crew(world, [LineReader(c) for c in companions])
+            _log.info("mission %d: started %s", index, " ".join(f"{c.name}={c.pid}" for c in self.crew.children))
+            return self.crew, 0.0
+        crew = self.crew
+        cpu0 = crew.cpu_s()
+        _log.info("mission %d: reset %s", index, " ".join(f"{c.name}={c.pid}" for c in crew.children))
+        crew.missions += 1
+        crew.ended.clear()
+        crew.tell(crew.world, NextMission(index, scenario_file, seed=seed, truth_log=truth, log=mdir / "sitl.log"))
+        # The world has reset (forgotten its clients, drained its sockets) when it says ready: only then may the
+        # companions start the mission, or a late datagram of theirs could reach the new mission.
+        deadline = time.monotonic() + self.cfg.startup_timeout_s
+        while crew.world.take("ready") is None:
+            self._check_crew_alive(index, crew)
+            if time.monotonic() > deadline:
+                raise ChildFailed(
+                    f"mission {index}: the SITL world did not reset within {self.cfg.startup_timeout_s:g} s"
+                )
+            wait_readable([crew.world], 0.2)
+        for reader in crew.companions:
+            name = reader.child.name
+            tlog = None if self.cfg.tlog_dir is None else self.cfg.tlog_dir / f"mission-{index:03d}" / f"{name}.tlog"
+            crew.tell(
+                reader,
+                NextMission(
+                    index, scenario_file, status_json=mdir / f"{name}.status.json", tlog=tlog, log=mdir / f"{name}.log"
+                ),
+            )
+        return crew, cpu0
+
+    def _watch_crew(self, index: int, crew: Crew, t0: float) -> bool:
+        """Wait until the world and every companion printed the mission's ``end`` line; True if it timed out."""
+        deadline = t0 + self.cfg.mission_timeout_s
+        grace_end: float | None = None
+        while True:
+            for reader in crew.readers:
+                if reader.child.name not in crew.ended and reader.take("end ") is not None:
+                    crew.ended.add(reader.child.name)
+            self._check_crew_alive(index, crew)
+            if len(crew.ended) == len(crew.readers):
+                return False
+            now = time.monotonic()
+            if crew.world.child.name in crew.ended:
+                # The world has ended: the companions heard it (HIT / MSN_END) and are confirming it.
+                grace_end = grace_end or now + 5.0
+                if now > grace_end:
+                    late = [r.child.name for r in crew.companions if r.child.name not in crew.ended]
+                    _log.warning("mission %d: %s still flying after the world ended: stopping", index, ", ".join(late))
+                    self._drop_crew()
+                    return False
+            if now > deadline:
+                _log.error("mission %d: not over after %.0f s: stopping it", index, self.cfg.mission_timeout_s)
+                return True
+            wait_readable(crew.readers, 0.05)
+
+    def _check_crew_alive(self, index: int, crew: Crew) -> None:
+        """ChildFailed for a process of the crew that exited with an error, or exited at all before its end line."""
+        for child in crew.children:
+            rc = child.poll()
+            if rc is None:
+                continue
+            what = "the SITL world" if child is crew.world.child else f"companion {child.name}"
+            if rc != 0:
+                raise ChildFailed(f"mission {index}: " + child_failure(what, child, rc))
+            if child.name not in crew.ended:
+                raise ChildFailed(f"mission {index}: " + child_failure(what, child, rc, "before the mission ended"))
+
+    def _drop_crew(self) -> None:
+        crew, self.crew = self.crew, None
+        if crew is not None:
+            self.children.stop(crew.children)
 
     def _watch(self, index: int, sitl: Child | None, companions: list[Child], t0: float) -> bool:
         """Wait for the mission to end; True if it timed out. Raises ChildFailed when a child crashes."""
@@ -296,6 +436,8 @@ class MissionRunner:
         lat = data.get("latency_ms", {})
         out.update(
             {
+                # A process kept for the next mission has not exited: its status file has the mission's exit code.
+                "exit_code": data.get("exit_code", out["exit_code"]),
                 "status": data.get("status"),
                 "vehicle_time_s": data.get("vehicle_time_s"),
                 "flight_wall_s": data.get("flight_wall_s"),

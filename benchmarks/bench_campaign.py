@@ -1,0 +1,154 @@
+"""SITL campaigns side by side: the same lockstep missions flown by ``fly`` from two (or more) checkouts.
+
+Each checkout (``--tree NAME=DIR``, e.g. today's main in a ``git worktree`` and this tree) flies the same
+missions (``--scenario``, ``--models``, ``--seed``, ``--missions``) with ``--workers`` 1 and 2; the runs of the
+trees alternate, so that a machine's noise hits them alike. Per run it reports:
+
+* missions per hour: missions / the whole command's wall time (start-up, Ray and the missions' ends included);
+* CPU seconds per simulated second: the CPU of every mission's processes over its simulated time;
+* x real time in flight: simulated time / the companions' flight wall time (median over missions);
+* per-step latency p50 / p99: a companion's fix-in to setpoint-out time (median of p50, max of p99);
+* success and mean cost, which must agree across trees;
+
+and, with ``--compare-truth``, whether every mission's truth log has the same step rows in every tree.
+
+    git worktree add --detach /tmp/main-tree main
+    python benchmarks/bench_campaign.py --tree main=/tmp/main-tree --tree new=. --missions 20 \\
+        --json benchmarks/results/campaign.json
+
+Ratios are quoted against the first tree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def fly(tree: Path, args: argparse.Namespace, workers: int, out: Path) -> dict[str, Any]:
+    """One campaign from ``tree``; the fly JSON plus the command's wall time."""
+    argv = [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(args.scenario.resolve())]
+    argv += ["--models", str(args.models.resolve()), "--episodes", str(args.missions), "--seed", str(args.seed)]
+    argv += ["--lockstep", "--workers", str(workers), "--json", str(out / "fly.json"), "--logs", str(out / "logs")]
+    argv += ["--no-progress", *args.fly_arg]
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    t0 = time.monotonic()
+    proc = subprocess.run(argv, cwd=tree, env=env, capture_output=True, text=True, timeout=args.timeout_s)
+    wall = time.monotonic() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"bench_campaign: fly from {tree} failed (exit {proc.returncode}): {proc.stderr[-1500:]}")
+    result = json.loads((out / "fly.json").read_text())
+    result["command_wall_s"] = wall
+    return result
+
+
+def figures(result: dict[str, Any]) -> dict[str, Any]:
+    missions = result["missions"]
+    sim = sum(m["sim_time_s"] for m in missions)
+    cpu = [m.get("cpu_s") for m in missions]
+    companions = [c for m in missions for c in m["companions"].values()]
+    p50 = [c["latency_p50_ms"] for c in companions if c.get("latency_p50_ms") is not None]
+    p99 = [c["latency_p99_ms"] for c in companions if c.get("latency_p99_ms") is not None]
+    speed = [m["speed_x"] for m in missions if m.get("speed_x")]
+    return {
+        "missions": len(missions),
+        "command_wall_s": round(result["command_wall_s"], 2),
+        "missions_per_hour": round(len(missions) / result["command_wall_s"] * 3600.0, 1),
+        "mission_wall_s_mean": round(float(np.mean([m["wall_time_s"] for m in missions])), 3),
+        "cpu_s_per_sim_s": None if None in cpu else round(sum(cpu) / sim, 5),
+        "speed_x_in_flight_median": round(float(np.median(speed)), 1) if speed else None,
+        "latency_p50_ms": round(float(np.median(p50)), 3) if p50 else None,
+        "latency_p99_ms": round(float(np.max(p99)), 3) if p99 else None,
+        "success_rate": result["success_rate"],
+        "mean_cost": result["mean_cost"],
+        "steps": [m.get("steps") for m in missions],
+    }
+
+
+def truth_steps(logs: Path) -> dict[str, list[str]]:
+    """Every mission's step rows (as written), by mission directory."""
+    out = {}
+    for mission in sorted(logs.glob("mission-*")):
+        lines = (mission / "truth.jsonl").read_text().splitlines()
+        out[mission.name] = [line for line in lines if '"type": "step"' in line or '"type":"step"' in line]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--tree", action="append", required=True, metavar="NAME=DIR", help="a checkout to fly from")
+    p.add_argument("--missions", type=int, default=20, help="missions per run (default 20)")
+    p.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
+    p.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "random.yaml")
+    p.add_argument("--models", type=Path, default=ROOT / "models" / "tssac")
+    p.add_argument("--seed", type=int, default=5000)
+    p.add_argument("--fly-arg", action="append", default=[], help="one more fly argument for every tree")
+    p.add_argument("--compare-truth", action="store_true", help="check the truth logs' step rows across trees")
+    p.add_argument("--timeout-s", type=float, default=7200.0)
+    p.add_argument("--json", type=Path, help="write the figures here")
+    args = p.parse_args(argv)
+    trees = {}
+    for spec in args.tree:
+        name, sep, path = spec.partition("=")
+        if not sep or not Path(path).is_dir():
+            p.error(f"--tree {spec!r}: expected NAME=DIR with an existing DIR")
+        trees[name] = Path(path).resolve()
+    report: dict[str, Any] = {
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+        "missions": args.missions,
+        "scenario": str(args.scenario),
+        "seed": args.seed,
+        "runs": {},
+    }
+    with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
+        for workers in [int(w) for w in args.workers.split(",")]:
+            runs = {}
+            steps = {}
+            for name, tree in trees.items():
+                out = Path(tmp) / f"{name}-w{workers}"
+                out.mkdir()
+                runs[name] = figures(fly(tree, args, workers, out))
+                if args.compare_truth:
+                    steps[name] = truth_steps(out / "logs")
+                print(f"workers={workers} {name}: {json.dumps({k: v for k, v in runs[name].items() if k != 'steps'})}")
+            first = next(iter(trees))
+            for name in trees:
+                runs[name]["missions_per_hour_ratio"] = round(
+                    runs[name]["missions_per_hour"] / runs[first]["missions_per_hour"], 2
+                )
+                if args.compare_truth:
+                    runs[name]["truth_steps_equal_to_" + first] = steps[name] == steps[first]
+            report["runs"][f"workers={workers}"] = runs
+    print()
+    print(
+        "| workers | tree | missions/h | x first | mission wall s | CPU s per sim s | x real time | p50 ms | p99 ms |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for key, runs in report["runs"].items():
+        for name, f in runs.items():
+            print(
+                f"| {key.split('=')[1]} | {name} | {f['missions_per_hour']} | {f['missions_per_hour_ratio']} | "
+                f"{f['mission_wall_s_mean']} | {f['cpu_s_per_sim_s']} | {f['speed_x_in_flight_median']} | "
+                f"{f['latency_p50_ms']} | {f['latency_p99_ms']} |"
+            )
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
