@@ -447,10 +447,13 @@ class Companion:
             self._claimed_end = None
 
     def _check_end(self, now: float) -> None:
-        """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it."""
+        """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it. With signing
+        the claim came in a frame signed with the run's key, from the vehicle itself: it is confirmed at once."""
         claim = self._claimed_end
         if claim is None:
             return
+        if self._link is not None and self._link.signing:
+            raise _Stop(claim.status, claim.message)
         silent = now - max(self.last_rx_s, claim.since_s) >= END_SILENCE_S
         powered_off = claim.poweroff_since_s is not None and now - claim.since_s >= END_CONFIRM_S
         if silent or powered_off:
