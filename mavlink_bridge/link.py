@@ -51,7 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.mavlink_framing import Dialect, scan_frames
+from tssac_core.deploy.mavlink_framing import Dialect, FramePacker, crc16_mcrf4xx, scan_frames
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -72,7 +72,7 @@ M = mavlink2
 
 MAX_DATAGRAM = 65535
 _TLOG_FLUSH_S = 1.0
-DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, lambda b: M.x25crc(b).crc)
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, crc16_mcrf4xx)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 SETPOINT_TYPE_MASK = (
@@ -208,7 +208,9 @@ class MavLink:
         self._sock.setblocking(False)
         self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Packs (and signs) what we send."""
+        """Builds what we send and holds our identity, sequence and signing state."""
+        self._packer = FramePacker(DIALECT.crc16)
+        """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
         self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         """Decodes the frames we accept; it has no key, so pymavlink never checks a signature."""
         self._verifier: SignatureVerifier | None = None
@@ -362,10 +364,11 @@ class MavLink:
         """Pack (and sign) one message and send it; False if the socket refused it (counted, logged)."""
         if self._closed:
             return False
+        mav = self.mav
         if self._verifier is not None:
-            refresh_outgoing_timestamp(self.mav.signing)
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+            refresh_outgoing_timestamp(mav.signing)
+        buf = self._packer.pack(msg, mav.seq, mav.srcSystem, mav.srcComponent, mav.signing)
+        mav.seq = (mav.seq + 1) % 256
         self._log_frame(buf)
         if self._peer is None:  # udpin before anyone has spoken to us
             return False
