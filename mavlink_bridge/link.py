@@ -51,7 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.mavlink_framing import Dialect, FramePacker, crc16_mcrf4xx, scan_frames
+from tssac_core.deploy.mavlink_framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -211,8 +211,8 @@ class MavLink:
         """Builds what we send and holds our identity, sequence and signing state."""
         self._packer = FramePacker(DIALECT.crc16)
         """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
-        self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Decodes the frames we accept; it has no key, so pymavlink never checks a signature."""
+        self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+        """Decodes the frames we accept (already checked): pymavlink's objects, without a second CRC."""
         self._verifier: SignatureVerifier | None = None
         if signing_key is not None:
             self.setup_signing(signing_key, signing_link_id)
@@ -336,7 +336,7 @@ class MavLink:
             if self._verifier is not None and not self._signature_accepted(frame):
                 continue
             try:
-                msg = self._rx.decode(bytearray(frame))
+                msg = self._rx.decode(frame)
             except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
                 self.counters.bad_data_rx += 1
                 _log.debug("pymavlink failed on a frame: %r", exc)

@@ -42,7 +42,15 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
-from tssac_core.deploy.mavlink_framing import Dialect, FramePacker, crc16_mcrf4xx, message_id, scan_frames, source
+from tssac_core.deploy.mavlink_framing import (
+    Dialect,
+    FrameDecoder,
+    FramePacker,
+    crc16_mcrf4xx,
+    message_id,
+    scan_frames,
+    source,
+)
 from tssac_core.deploy.mavlink_signing import (
     COMPANION_LINK_BASE,
     SIGNATURE_BLOCK_LEN,
@@ -197,8 +205,8 @@ class MavEndpoint:
         decodes."""
         self._packer = FramePacker(DIALECT.crc16)
         """Packs (and signs) what this system sends: pymavlink's bytes (tests/test_bridge.py), fewer objects."""
-        self._decoder = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        """Decodes frames this endpoint has already checked (no key: pymavlink's signature check never runs)."""
+        self._decoder = FrameDecoder(mavlink2.mavlink_map, mavlink2.MAVLink_header)
+        """Decodes frames this endpoint has already checked: pymavlink's objects (tests/test_bridge.py)."""
         self.verifier: SignatureVerifier | None = None
         if signing_key is not None:
             signing.enable_signing(self.mav, signing_key)
@@ -406,7 +414,7 @@ class MavEndpoint:
 
     def _decode(self, frame: bytes) -> mavlink2.MAVLink_message | None:
         try:
-            return self._decoder.decode(bytearray(frame))
+            return self._decoder.decode(frame)
         except mavlink2.MAVError:
             self.rx.decode_errors += 1
             return None

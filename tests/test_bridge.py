@@ -703,3 +703,27 @@ def test_crc16_is_mavlinks_x25_checksum_with_or_without_fastcrc() -> None:
         data = rng.integers(0, 256, size=n).astype(np.uint8).tobytes()
         assert crc16_mcrf4xx(data) == crc16_mcrf4xx_python(data) == M._x25crc_slow(data).crc
     assert crc16_mcrf4xx_python(b"123456789") == 0x6F91  # CRC-16/MCRF4XX's check value
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect(signed: bool) -> None:
+    from mavlink_bridge.link import DIALECT
+    from tssac_core.deploy.mavlink_framing import FrameDecoder, scan_frames
+
+    rng = np.random.default_rng(5)
+    decoder = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+    sender = M.MAVLink(None, srcSystem=2, srcComponent=1)
+    if signed:
+        sender.signing.secret_key, sender.signing.sign_outgoing, sender.signing.link_id = bytes(32), True, 7
+        sender.signing.timestamp = now_10us()
+    for _ in range(3):
+        for cls in M.mavlink_map.values():
+            sender.seq = int(rng.integers(0, 256))
+            frame = bytes(cls(*_random_fields(cls, rng)).pack(sender))
+            assert scan_frames(frame, DIALECT).frames == [frame]
+            expected = M.MAVLink(None, srcSystem=255, srcComponent=191).decode(bytearray(frame))
+            got = decoder.decode(frame)
+            assert type(got) is type(expected)
+            header = vars(got).pop("_header")
+            assert vars(header) == vars(vars(expected).pop("_header"))
+            assert vars(got) == vars(expected), cls.msgname

@@ -10,10 +10,12 @@ unknown message id is dropped (its CRC cannot be checked, so neither can its len
 claiming a long frame over the next real one). UDP keeps datagram boundaries: a frame cut off by the end of
 its datagram is dropped, never joined to the next datagram.
 
-Sending, both ends pack their frames with :class:`FramePacker`: the bytes pymavlink's ``MAVLink_message.pack``
-makes (MAVLink 2, trailing zeros of the payload cut, CRC with CRC_EXTRA, signed with the fields of pymavlink's
-``MAVLinkSigning``), without the header object, the frame buffer and the CRC object pymavlink builds for every frame:
-on the lockstep's critical path each of them is paid once per frame and step.
+Checked frames become message objects through :class:`FrameDecoder`: the objects pymavlink's ``MAVLink.decode``
+makes of them, without checking the CRC a second time. Sending, both ends pack their frames with
+:class:`FramePacker`: the bytes pymavlink's ``MAVLink_message.pack`` makes (MAVLink 2, trailing zeros of the payload
+cut, CRC with CRC_EXTRA, signed with the fields of pymavlink's ``MAVLinkSigning``), without the header object, the
+frame buffer and the CRC object pymavlink builds for every frame: on the lockstep's critical path each of them is
+paid once per frame and step.
 
 Pure standard library: the caller passes the dialect (its CRC_EXTRA table and the CRC-16/MCRF4XX function),
 so tssac_core imports no pymavlink.
@@ -28,7 +30,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-__all__ = ["Dialect", "FramePacker", "Scan", "SigningState", "crc16_mcrf4xx", "scan_frames"]
+__all__ = ["Dialect", "FrameDecoder", "FramePacker", "Scan", "SigningState", "crc16_mcrf4xx", "scan_frames"]
 
 MAGIC_V1, MAGIC_V2 = 0xFE, 0xFD
 HEADER_LEN_V1, HEADER_LEN_V2 = 6, 10
@@ -254,3 +256,70 @@ def _field_getter(cls: Any) -> Callable[[Any], Any]:
         return out
 
     return items
+
+
+class FrameDecoder:
+    """Turns frames :func:`scan_frames` has checked into a pymavlink dialect's message objects, attribute for attribute
+    what pymavlink's ``MAVLink.decode`` returns for them from a protocol object without a key (our receivers verify
+    signatures themselves, before decoding).
+
+    ``message_map`` is the dialect's ``mavlink_map`` (message id -> class) and ``header`` its ``MAVLink_header``. The
+    CRC is not computed again and no signing counters are kept; the rest is pymavlink's decoding: the payload padded
+    with the zeros MAVLink 2 cut off, unpacked in wire order, put back in the constructor's order (arrays as lists),
+    strings stripped of trailing NULs, and the frame's buffer, payload, CRC and header set on the object. A frame of an
+    id the map lacks raises KeyError.
+    """
+
+    def __init__(self, message_map: Mapping[int, Any], header: Callable[..., Any]) -> None:
+        self._map = message_map
+        self._header = header
+        self._arguments: dict[type, Callable[[tuple[Any, ...]], list[Any]]] = {}
+
+    def decode(self, frame: bytes) -> Any:
+        if frame[0] == MAGIC_V2:
+            header_len, incompat, compat = HEADER_LEN_V2, frame[2], frame[3]
+            seq, sysid, compid = frame[4], frame[5], frame[6]
+            msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
+        else:
+            header_len, incompat, compat = HEADER_LEN_V1, 0, 0
+            seq, sysid, compid, msg_id = frame[2], frame[3], frame[4], frame[5]
+        cls = self._map[msg_id]
+        end = len(frame) - 2 - (SIGNATURE_LEN if incompat & IFLAG_SIGNED else 0)
+        payload = bytes(frame[header_len:end])
+        size = cls.unpacker.size
+        if len(payload) < size:
+            payload += bytes(size - len(payload))
+        arguments = self._arguments.get(cls)
+        if arguments is None:
+            arguments = self._arguments[cls] = _constructor_arguments(cls)
+        msg = cls(*arguments(cls.unpacker.unpack(payload[:size])))
+        buf = bytearray(frame)
+        msg._msgbuf = buf
+        msg._payload = buf[6:end]  # pymavlink's offset, for MAVLink 1 and 2 alike
+        msg._crc = frame[end] | (frame[end + 1] << 8)
+        msg._header = self._header(msg_id, incompat, compat, frame[1], seq, sysid, compid)
+        return msg
+
+
+def _constructor_arguments(cls: Any) -> Callable[[tuple[Any, ...]], list[Any]]:
+    """Unpacked payload (wire order) -> constructor arguments: ``orders`` maps each argument to its wire field, numeric
+    arrays become lists, strings lose their trailing NULs."""
+    orders, lengths = list(cls.orders), list(cls.lengths)
+    strings = [i for i, t in enumerate(cls.fieldtypes) if t == "char"]
+    if sum(lengths) == len(lengths):  # no arrays: one wire item per field
+        picks = [(o, 1) for o in orders]
+    else:
+        starts = [sum(lengths[:k]) for k in range(len(lengths))]
+        picks = [(starts[o], lengths[o]) for o in orders]
+
+    def arguments(items: tuple[Any, ...]) -> list[Any]:
+        out: list[Any] = []
+        for start, n in picks:
+            first = items[start]
+            out.append(first if n == 1 or isinstance(first, bytes) else list(items[start : start + n]))
+        for i in strings:
+            if isinstance(out[i], bytes):
+                out[i] = out[i].rstrip(b"\x00")
+        return out
+
+    return arguments
