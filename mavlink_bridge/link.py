@@ -317,7 +317,8 @@ class MavLink:
                 self._peer = sender
             for msg in msgs:
                 self.counters.messages_rx += 1
-                self._log_frame(bytes(msg.get_msgbuf()))
+                if self._tlog is not None:
+                    self._log_frame(bytes(msg.get_msgbuf()))
                 self._backlog.append((msg, now))
 
     def _parse_datagram(self, data: bytes) -> list[Message]:
