@@ -15,7 +15,7 @@ lockstep) with the guidance pilot, and with the trained policies if ``--models``
   CPUs) is what the same work could reach with every CPU to itself (an upper bound).
 
     python benchmarks/bench_bridge.py [--episodes 3] [--scenario scenarios/strike.yaml] \
-        [--models models/tssac] [--lean-telemetry] [--json benchmarks/results/bridge.json]
+        [--models models/tssac] [--full-telemetry] [--json benchmarks/results/bridge.json]
 """
 
 from __future__ import annotations
@@ -149,14 +149,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     p.add_argument("--json", type=Path, default=REPO / "benchmarks" / "results" / "bridge.json")
     p.add_argument(
-        "--lean-telemetry",
+        "--full-telemetry",
         action="store_true",
-        help="also fly with fly --lean-telemetry (streams the companions do not use off)",
+        help="also fly with fly --full-telemetry (every stream on; fly's lockstep default streams only what the "
+        "companions read)",
     )
     args = p.parse_args(argv)
     pilots: list[tuple[str, Path | None, tuple[str, ...]]] = [("guidance", None, ())]
-    if args.lean_telemetry:
-        pilots.append(("guidance, lean telemetry", None, ("--lean-telemetry",)))
+    if args.full_telemetry:
+        pilots.append(("guidance, full telemetry", None, ("--full-telemetry",)))
     if all((args.models / f"{r}.pt").is_file() for r in ("decoy", "detect", "strike")):
         pilots.append((str(args.models), args.models, ()))
     else:

@@ -51,7 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.mavlink_framing import Dialect, scan_frames
+from tssac_core.deploy.mavlink_framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -72,7 +72,7 @@ M = mavlink2
 
 MAX_DATAGRAM = 65535
 _TLOG_FLUSH_S = 1.0
-DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, lambda b: M.x25crc(b).crc)
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, crc16_mcrf4xx)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 SETPOINT_TYPE_MASK = (
@@ -209,9 +209,11 @@ class MavLink:
         self._sock.setblocking(False)
         self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Packs (and signs) what we send."""
-        self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Decodes the frames we accept; it has no key, so pymavlink never checks a signature."""
+        """Builds what we send and holds our identity, sequence and signing state."""
+        self._packer = FramePacker(DIALECT.crc16)
+        """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
+        self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+        """Decodes the frames we accept (already checked): pymavlink's objects, without a second CRC."""
         self._verifier: SignatureVerifier | None = None
         if signing_key is not None:
             self.setup_signing(signing_key, signing_link_id)
@@ -343,7 +345,8 @@ class MavLink:
                 self._peer = sender
             for msg in msgs:
                 self.counters.messages_rx += 1
-                self._log_frame(bytes(msg.get_msgbuf()))
+                if self._tlog is not None:
+                    self._log_frame(bytes(msg.get_msgbuf()))
                 self._backlog.append((msg, now))
 
     def _parse_datagram(self, data: bytes) -> list[Message]:
@@ -362,7 +365,7 @@ class MavLink:
             if self._verifier is not None and not self._signature_accepted(frame):
                 continue
             try:
-                msg = self._rx.decode(bytearray(frame))
+                msg = self._rx.decode(frame)
             except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
                 self.counters.bad_data_rx += 1
                 _log.debug("pymavlink failed on a frame: %r", exc)
@@ -390,10 +393,11 @@ class MavLink:
         """Pack (and sign) one message and send it; False if the socket refused it (counted, logged)."""
         if self._closed:
             return False
+        mav = self.mav
         if self._verifier is not None:
-            refresh_outgoing_timestamp(self.mav.signing)
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+            refresh_outgoing_timestamp(mav.signing)
+        buf = self._packer.pack(msg, mav.seq, mav.srcSystem, mav.srcComponent, mav.signing)
+        mav.seq = (mav.seq + 1) % 256
         self._log_frame(buf)
         if self._peer is None:  # udpin before anyone has spoken to us
             return False

@@ -68,6 +68,7 @@ selectable.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -313,11 +314,9 @@ def _ct_q(noise: FilterNoise, state: FloatArray, dt_s: float) -> FloatArray:
     v, phi = float(state[_V]), float(state[_PHI])
     ax, ay = math.cos(phi), math.sin(phi)  # along track
     cx, cy = -math.sin(phi), math.cos(phi)  # across track
-    qa = _integrator_q(noise.accel_sigma_m_s2**2, dt_s, 2)
-    qw = _integrator_q(noise.turn_accel_sigma_rad_s2**2, dt_s, 3)
-    a00, a01, a11 = float(qa[0, 0]), float(qa[0, 1]), float(qa[1, 1])
-    w_pos = v * v * float(qw[0, 0])
-    w_phi, w_omega = v * float(qw[0, 1]), v * float(qw[0, 2])
+    a00, a01, a11, qw = _ct_q_terms(noise.accel_sigma_m_s2, noise.turn_accel_sigma_rad_s2, dt_s)
+    w_pos = v * v * qw[0][0]
+    w_phi, w_omega = v * qw[0][1], v * qw[0][2]
     xx = a00 * (ax * ax) + w_pos * (cx * cx)
     xy = a00 * (ax * ay) + w_pos * (cx * cy)
     yy = a00 * (ay * ay) + w_pos * (cy * cy)
@@ -326,10 +325,21 @@ def _ct_q(noise: FilterNoise, state: FloatArray, dt_s: float) -> FloatArray:
             [xx, xy, a01 * ax, w_phi * cx, w_omega * cx],
             [xy, yy, a01 * ay, w_phi * cy, w_omega * cy],
             [a01 * ax, a01 * ay, a11, 0.0, 0.0],
-            [w_phi * cx, w_phi * cy, 0.0, float(qw[1, 1]), float(qw[1, 2])],
-            [w_omega * cx, w_omega * cy, 0.0, float(qw[2, 1]), float(qw[2, 2])],
+            [w_phi * cx, w_phi * cy, 0.0, qw[1][1], qw[1][2]],
+            [w_omega * cx, w_omega * cy, 0.0, qw[2][1], qw[2][2]],
         ]
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _ct_q_terms(
+    accel_sigma_m_s2: float, turn_accel_sigma_rad_s2: float, dt_s: float
+) -> tuple[float, float, float, tuple[tuple[float, ...], ...]]:
+    """The integrator covariances :func:`_ct_q` rotates, for one step length (a lockstep companion predicts over the
+    same 0.1 s every step): along track (a00, a01, a11), across track the 3 x 3 block as floats."""
+    qa = _integrator_q(accel_sigma_m_s2**2, dt_s, 2)
+    qw = _integrator_q(turn_accel_sigma_rad_s2**2, dt_s, 3)
+    return float(qa[0, 0]), float(qa[0, 1]), float(qa[1, 1]), tuple(tuple(float(x) for x in row) for row in qw)
 
 
 def _ct_jacobian(state: FloatArray, dt: float) -> FloatArray:

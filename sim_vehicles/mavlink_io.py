@@ -42,7 +42,15 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
-from tssac_core.deploy.mavlink_framing import Dialect, message_id, scan_frames, source
+from tssac_core.deploy.mavlink_framing import (
+    Dialect,
+    FrameDecoder,
+    FramePacker,
+    crc16_mcrf4xx,
+    message_id,
+    scan_frames,
+    source,
+)
 from tssac_core.deploy.mavlink_signing import (
     COMPANION_LINK_BASE,
     SIGNATURE_BLOCK_LEN,
@@ -67,7 +75,7 @@ MAX_MONITORS = 4
 """Unsigned monitors served at once (signing on, ``unsigned_monitors`` set)."""
 MONITOR_BYTES_PER_S = 2000
 """Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
-DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, lambda b: mavlink2.x25crc(b).crc)
+DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, crc16_mcrf4xx)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
 
 
@@ -193,9 +201,12 @@ class MavEndpoint:
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
         self.host, self.port = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        """Packs (and signs) what this system sends; never decodes."""
-        self._decoder = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        """Decodes frames this endpoint has already checked (no key: pymavlink's signature check never runs)."""
+        """Holds the sending side's identity, sequence and signing state (what pymavlink's ``pack`` reads); never
+        decodes."""
+        self._packer = FramePacker(DIALECT.crc16)
+        """Packs (and signs) what this system sends: pymavlink's bytes (tests/test_bridge.py), fewer objects."""
+        self._decoder = FrameDecoder(mavlink2.mavlink_map, mavlink2.MAVLink_header)
+        """Decodes frames this endpoint has already checked: pymavlink's objects (tests/test_bridge.py)."""
         self.verifier: SignatureVerifier | None = None
         if signing_key is not None:
             signing.enable_signing(self.mav, signing_key)
@@ -351,11 +362,12 @@ class MavEndpoint:
         Every destination is a link with its own sequence numbers, one after the other in the order its frames
         are packed (ArduPilot numbers per channel): a client that gets only its own replies and the telemetry
         sees no gap for the replies that went to another client, so a lossless link shows no loss."""
+        mav = self.mav
         if self.signing:
-            refresh_outgoing_timestamp(self.mav.signing)
+            refresh_outgoing_timestamp(mav.signing)
         seq = self._tx_seq.get(dest, 0)
-        self.mav.seq = seq
-        buf = msg.pack(self.mav)
+        mav.seq = seq
+        buf = self._packer.pack(msg, seq, mav.srcSystem, mav.srcComponent, mav.signing)
         self._tx_seq[dest] = (seq + 1) % 256
         self.mav.total_packets_sent += 1
         self.mav.total_bytes_sent += len(buf)
@@ -414,7 +426,7 @@ class MavEndpoint:
 
     def _decode(self, frame: bytes) -> mavlink2.MAVLink_message | None:
         try:
-            return self._decoder.decode(bytearray(frame))
+            return self._decoder.decode(frame)
         except mavlink2.MAVError:
             self.rx.decode_errors += 1
             return None

@@ -9,7 +9,7 @@ import logging
 from pathlib import Path
 from typing import IO, Any
 
-from tssac_core.deploy.truth_log_schema import HEADER, STEP, SUMMARY, VEHICLES_KEY, VehicleRow, encode
+from tssac_core.deploy.truth_log_schema import HEADER, SUMMARY, VehicleRow, encode, encode_step
 
 _log = logging.getLogger(__name__)
 
@@ -23,15 +23,8 @@ class TruthLog:
         self._write({"type": HEADER, **header})
 
     def step(self, step: int, time_s: float, flags: dict[str, bool], rows: list[VehicleRow]) -> None:
-        self._write(
-            {
-                "type": STEP,
-                "step": step,
-                "t_s": round(time_s, 6),
-                **flags,
-                VEHICLES_KEY: {r.role: r.as_dict() for r in rows},
-            }
-        )
+        if self._file is not None:
+            self._file.write(encode_step(step, time_s, flags, rows))
 
     def event(self, record: dict[str, Any]) -> None:
         self._write(record)

@@ -87,6 +87,11 @@ MAX_SELECT_S = 0.05
 _EPS = 1e-9
 
 
+def _clip_unit(x: float) -> float:
+    """``np.clip(x, -1, 1)`` for one float (NaN stays NaN), without numpy's per-call overhead."""
+    return -1.0 if x < -1.0 else 1.0 if x > 1.0 else x
+
+
 class SitlError(Exception):
     """The SITL cannot start (port in use, unwritable log, ...); ``str()`` is one line."""
 
@@ -505,7 +510,7 @@ class WorldRunner:
             north_m=float(w.y_m[0, i]),
             speed_m_s=float(w.v_m_s[0, i]),
             phi_rad=float(w.phi_rad[0, i]),
-            turn_rate_rad_s=float(np.clip(action[0], -1.0, 1.0) * c.turn_rate_max_rad_s[i]) if moving else 0.0,
+            turn_rate_rad_s=_clip_unit(float(action[0])) * float(c.turn_rate_max_rad_s[i]) if moving else 0.0,
             accel_m_s2=(float(w.v_m_s[0, i]) - v_before) / self.dt_s,
         )
 

@@ -31,6 +31,7 @@ from mavlink_bridge.companion import cli as companion_cli
 from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
 from tssac_core.deploy.geodetic import deg_e7, local_to_geodetic
+from tssac_core.deploy.mavlink_signing import now_10us
 from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
@@ -642,3 +643,87 @@ def test_companion_without_a_vehicle_gives_up_with_exit_3(tmp_path: Path, capsys
     assert code == 3
     assert "status=no_vehicle" in capsys.readouterr().out
     assert json.loads((tmp_path / "s.json").read_text())["status"] == "no_vehicle"
+
+
+def _random_fields(cls: type, rng: np.random.Generator) -> list[object]:
+    """Constructor arguments of a pymavlink message class: random values in each field's range, zeros among them
+    (so payloads end in zero bytes the packer must cut), strings shorter than their field."""
+    args: list[object] = []
+    for name, ftype in zip(cls.fieldnames, cls.fieldtypes, strict=True):
+        n = cls.array_lengths[cls.ordered_fieldnames.index(name)]
+
+        def one() -> object:
+            if rng.random() < 0.3:
+                return 0
+            if ftype in ("float", "double"):
+                return float(rng.normal(0.0, 1e3))
+            info = np.iinfo(np.dtype(ftype.removesuffix("_t")))
+            return int(rng.integers(int(info.min), int(info.max), endpoint=True, dtype=info.dtype))
+
+        if ftype == "char":
+            args.append(bytes(rng.integers(65, 91, size=int(rng.integers(0, max(n, 1) + 1))).astype(np.uint8)))
+        elif n:
+            args.append([one() for _ in range(n)])
+        else:
+            args.append(one())
+    return args
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(signed: bool) -> None:
+    from mavlink_bridge.link import DIALECT
+    from tssac_core.deploy.mavlink_framing import FramePacker, scan_frames
+
+    rng = np.random.default_rng(7)
+    packer = FramePacker(DIALECT.crc16)
+    ours = M.MAVLink(None, srcSystem=3, srcComponent=1)
+    theirs = M.MAVLink(None, srcSystem=3, srcComponent=1)
+    if signed:
+        stamp = now_10us()
+        for mav in (ours, theirs):
+            mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = bytes(range(32)), True, 203
+            mav.signing.timestamp = stamp
+    for _ in range(3):
+        for cls in M.mavlink_map.values():
+            msg = cls(*_random_fields(cls, rng))
+            seq = int(rng.integers(0, 256))
+            theirs.seq = seq
+            expected = bytes(msg.pack(theirs))
+            frame = packer.pack(msg, seq, 3, 1, ours.signing)
+            assert frame == expected, cls.msgname
+            assert ours.signing.timestamp == theirs.signing.timestamp
+            assert scan_frames(frame, DIALECT).frames == [frame]  # and the scanner takes it
+
+
+def test_crc16_is_mavlinks_x25_checksum_with_or_without_fastcrc() -> None:
+    from tssac_core.deploy.mavlink_framing import crc16_mcrf4xx, crc16_mcrf4xx_python
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 9, 63, 280):
+        data = rng.integers(0, 256, size=n).astype(np.uint8).tobytes()
+        assert crc16_mcrf4xx(data) == crc16_mcrf4xx_python(data) == M._x25crc_slow(data).crc
+    assert crc16_mcrf4xx_python(b"123456789") == 0x6F91  # CRC-16/MCRF4XX's check value
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect(signed: bool) -> None:
+    from mavlink_bridge.link import DIALECT
+    from tssac_core.deploy.mavlink_framing import FrameDecoder, scan_frames
+
+    rng = np.random.default_rng(5)
+    decoder = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+    sender = M.MAVLink(None, srcSystem=2, srcComponent=1)
+    if signed:
+        sender.signing.secret_key, sender.signing.sign_outgoing, sender.signing.link_id = bytes(32), True, 7
+        sender.signing.timestamp = now_10us()
+    for _ in range(3):
+        for cls in M.mavlink_map.values():
+            sender.seq = int(rng.integers(0, 256))
+            frame = bytes(cls(*_random_fields(cls, rng)).pack(sender))
+            assert scan_frames(frame, DIALECT).frames == [frame]
+            expected = M.MAVLink(None, srcSystem=255, srcComponent=191).decode(bytearray(frame))
+            got = decoder.decode(frame)
+            assert type(got) is type(expected)
+            header = vars(got).pop("_header")
+            assert vars(header) == vars(vars(expected).pop("_header"))
+            assert vars(got) == vars(expected), cls.msgname

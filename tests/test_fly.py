@@ -25,6 +25,7 @@ import pytest
 from mavlink_bridge.fly import cli as fly
 from mavlink_bridge.fly.config import DEFAULT_MODELS
 from mavlink_bridge.fly.missions import mission_layout
+from tssac_core.cli import UsageError
 from tssac_core.sim.scenario import Layout, Radar, Start, dump, load, sample_layout
 
 REPO = Path(__file__).resolve().parents[1]
@@ -322,6 +323,22 @@ def test_fly_signs_by_default_with_a_key_of_its_own_and_no_signing_turns_it_off(
     assert not config_from_args([*base, "--no-signing"]).signing
     connect = ["--connect", "udpout:127.0.0.1:1", "udpout:127.0.0.1:2", "udpout:127.0.0.1:3"]
     assert not config_from_args([*base, *connect]).makes_key  # running vehicles: only --signing-key signs
+
+
+def test_fly_lean_telemetry_is_the_default_in_its_own_lockstep_worlds_and_full_telemetry_keeps_every_stream() -> None:
+    from mavlink_bridge.fly.config import config_from_args
+
+    base = ["--scenario", str(STRIKE), "--pilot", "guidance"]
+    connect = ["--connect", "udpout:127.0.0.1:1", "udpout:127.0.0.1:2", "udpout:127.0.0.1:3"]
+    assert config_from_args(base).lean_telemetry and config_from_args([*base, "--lockstep"]).lean_telemetry
+    assert not config_from_args([*base, "--full-telemetry"]).lean_telemetry
+    # Real time and running vehicles (a ground station may share their streams): full unless asked.
+    assert not config_from_args([*base, "--speedup", "5"]).lean_telemetry
+    assert config_from_args([*base, "--speedup", "5", "--lean-telemetry"]).lean_telemetry
+    assert not config_from_args([*base, *connect, "--lockstep"]).lean_telemetry
+    assert config_from_args([*base, *connect, "--lean-telemetry"]).lean_telemetry
+    with pytest.raises(UsageError, match="not allowed with"):
+        config_from_args([*base, "--lean-telemetry", "--full-telemetry"])
 
 
 def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

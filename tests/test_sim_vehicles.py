@@ -1045,3 +1045,37 @@ def test_cli_sigterm_stops_cleanly(tmp_path: Path) -> None:
         probe.bind(("127.0.0.1", port))
     finally:
         probe.close()
+
+
+def test_truth_log_step_lines_are_the_bytes_json_dumps_writes() -> None:
+    from tssac_core.deploy.truth_log_schema import STEP, VEHICLES_KEY, VehicleRow, encode, encode_step
+
+    rng = np.random.default_rng(11)
+    odd = [0.0, -0.0, 1e-9, 123456789.123456789, math.nan, math.inf, -math.inf, 5e-324, 1e300]
+
+    def number() -> float:
+        return float(rng.choice(odd)) if rng.random() < 0.2 else float(rng.normal(0.0, 10.0 ** rng.integers(-8, 8)))
+
+    for step in range(300):
+        rows = [
+            VehicleRow(
+                role=role,
+                x_m=number(),
+                y_m=number(),
+                v_m_s=number(),
+                phi_rad=number(),
+                cost=float(rng.integers(0, 2)),
+                cost_total=number(),
+                omega_cmd=number(),
+                u_cmd=number(),
+                armed=bool(rng.integers(0, 2)),
+                mode=str(rng.choice(["MANUAL", "GUIDED", "RTL"])),
+                failsafe=bool(rng.integers(0, 2)),
+            )
+            for role in ("decoy", "detect", "strike")
+        ]
+        flags = {"radar_on": bool(rng.integers(0, 2)), "identified": bool(rng.integers(0, 2)), "hit": False}
+        t_s = step * 0.1 if step % 7 else number()
+        record = {"type": STEP, "step": step, "t_s": round(t_s, 6), **flags}
+        record[VEHICLES_KEY] = {r.role: r.as_dict() for r in rows}
+        assert encode_step(step, t_s, flags, rows) == encode(record)

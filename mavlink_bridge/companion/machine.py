@@ -561,7 +561,7 @@ class Companion:
         )
         action = self.pilot.action(self.world, self.role_index, step)
         why: str | None = None
-        if action.shape != (2,) or not np.all(np.isfinite(action)):
+        if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             self.counters.nonfinite_actions += 1
             why = "non-finite action"
             if self.shield is None:

@@ -51,6 +51,7 @@ class FlyConfig:
     startup_timeout_s: float
     progress: bool
     lean_telemetry: bool = False
+    """The companions stop the streams they do not read (:func:`lean_telemetry`)."""
     pilot: str = GUIDANCE
     """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
@@ -186,13 +187,20 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)",
     )
-    p.add_argument(
+    streams = p.add_mutually_exclusive_group()
+    streams.add_argument(
         "--lean-telemetry",
         action="store_true",
         help=(
             "companions stop the vehicle streams they do not use (GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD): faster, "
-            "leaner tlogs"
+            "leaner tlogs (the default in lockstep worlds fly starts; this flag also asks for it with --speedup or "
+            "--connect)"
         ),
+    )
+    streams.add_argument(
+        "--full-telemetry",
+        action="store_true",
+        help="keep every vehicle stream on at its default rate (the default with --speedup and --connect)",
     )
     p.add_argument(
         "--mission-timeout-s",
@@ -277,6 +285,9 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
                 "(not with --connect)"
             )
         connect = (a.connect[0], a.connect[1], a.connect[2])
+    # A world fly starts runs in lockstep unless --speedup; vehicles it did not start are taken to run in
+    # real time unless --lockstep says otherwise (a companion must not extrapolate a lockstep clock).
+    lockstep = a.lockstep or (a.speedup is None and connect is None)
     return FlyConfig(
         scenario_path=a.scenario.resolve(),
         scenario=scenario,
@@ -284,9 +295,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         episodes=a.episodes,
         seed=a.seed,
         mission=a.mission,
-        # A world fly starts runs in lockstep unless --speedup; vehicles it did not start are taken to run in
-        # real time unless --lockstep says otherwise (a companion must not extrapolate a lockstep clock).
-        lockstep=a.lockstep or (a.speedup is None and connect is None),
+        lockstep=lockstep,
         speedup=1.0 if a.speedup is None else float(a.speedup),
         json_path=a.json,
         tlog_dir=a.tlog.resolve() if a.tlog is not None else None,
@@ -298,7 +307,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         mission_timeout_s=a.mission_timeout_s,
         startup_timeout_s=60.0,
         progress=not a.no_progress,
-        lean_telemetry=a.lean_telemetry,
+        lean_telemetry=lean_telemetry(a.lean_telemetry, a.full_telemetry, lockstep, connect is None),
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
         signing=not a.no_signing,
@@ -306,6 +315,15 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         ray_address=a.address,
         persistent=not a.fresh_processes,
     )
+
+
+def lean_telemetry(lean: bool, full: bool, lockstep: bool, own_world: bool) -> bool:
+    """Whether the companions stop the streams they do not read: ``--lean-telemetry``, else by default in a lockstep
+    world fly starts (nobody else reads its streams, and every frame not sent is CPU off the lockstep's critical
+    path), unless ``--full-telemetry``. A world fly did not start may serve ground stations: full unless asked."""
+    if lean or full:
+        return lean
+    return lockstep and own_world
 
 
 def make_signing_key(directory: Path) -> Path:

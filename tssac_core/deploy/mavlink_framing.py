@@ -10,17 +10,27 @@ unknown message id is dropped (its CRC cannot be checked, so neither can its len
 claiming a long frame over the next real one). UDP keeps datagram boundaries: a frame cut off by the end of
 its datagram is dropped, never joined to the next datagram.
 
+Checked frames become message objects through :class:`FrameDecoder`: the objects pymavlink's ``MAVLink.decode``
+makes of them, without checking the CRC a second time. Sending, both ends pack their frames with
+:class:`FramePacker`: the bytes pymavlink's ``MAVLink_message.pack`` makes (MAVLink 2, trailing zeros of the payload
+cut, CRC with CRC_EXTRA, signed with the fields of pymavlink's ``MAVLinkSigning``), without the header object, the
+frame buffer and the CRC object pymavlink builds for every frame: on the lockstep's critical path each of them is
+paid once per frame and step.
+
 Pure standard library: the caller passes the dialect (its CRC_EXTRA table and the CRC-16/MCRF4XX function),
 so tssac_core imports no pymavlink.
 """
 
 from __future__ import annotations
 
+import hashlib
+import operator
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
-__all__ = ["Dialect", "Scan", "scan_frames"]
+__all__ = ["Dialect", "FrameDecoder", "FramePacker", "Scan", "SigningState", "crc16_mcrf4xx", "scan_frames"]
 
 MAGIC_V1, MAGIC_V2 = 0xFE, 0xFD
 HEADER_LEN_V1, HEADER_LEN_V2 = 6, 10
@@ -28,6 +38,38 @@ HEADER_LEN_V1, HEADER_LEN_V2 = 6, 10
 SIGNATURE_LEN = 13
 IFLAG_SIGNED = 0x01
 _START_BYTES = (bytes((MAGIC_V2,)), bytes((MAGIC_V1,)))
+
+
+def _crc16_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC16_TABLE = _crc16_table()
+
+
+def crc16_mcrf4xx_python(data: bytes) -> int:
+    """CRC-16/MCRF4XX (MAVLink's X.25 checksum: reflected 0x1021, initial 0xFFFF), one table look-up per byte."""
+    crc = 0xFFFF
+    for b in data:
+        crc = (crc >> 8) ^ _CRC16_TABLE[(crc ^ b) & 0xFF]
+    return crc
+
+
+try:  # the C implementation pymavlink itself uses when it is installed (fastcrc, optional)
+    from fastcrc import crc16 as _fastcrc16
+
+    def crc16_mcrf4xx(data: bytes) -> int:
+        """CRC-16/MCRF4XX of ``data`` (fastcrc's C code; :func:`crc16_mcrf4xx_python` without it)."""
+        return int(_fastcrc16.mcrf4xx(data, 0xFFFF))
+
+except ImportError:  # pragma: no cover - depends on the environment
+    crc16_mcrf4xx = crc16_mcrf4xx_python
 
 
 @dataclass(frozen=True)
@@ -126,3 +168,158 @@ def _next_start(data: bytes, start: int) -> int:
     """Index of the next MAVLink start byte at or after ``start`` (len(data) if none)."""
     found = [k for k in (data.find(b, start) for b in _START_BYTES) if k >= 0]
     return min(found) if found else len(data)
+
+
+_HEADER_V2 = struct.Struct("<BBBBBBBHB")
+_CRC = struct.Struct("<H")
+_SIGNATURE_HEAD = struct.Struct("<BQ")
+
+
+class SigningState(Protocol):
+    """The outgoing fields of pymavlink's ``MAVLinkSigning`` (the packer advances ``timestamp`` as pymavlink does)."""
+
+    secret_key: bytes | None
+    link_id: int
+    timestamp: int
+    sign_outgoing: bool
+
+
+class FramePacker:
+    """Packs message objects of a pymavlink dialect into MAVLink 2 frames, byte for byte as pymavlink does.
+
+    Reads per message class what pymavlink's generated ``pack`` reads: ``unpacker`` (the payload's struct, fields in
+    wire order), ``ordered_fieldnames`` with their ``lengths`` (numeric arrays are spread, one struct item per element;
+    strings are packed from their raw bytes), ``crc_extra`` and ``id``. The payload's trailing zero bytes are cut (at
+    least one byte stays), the checksum covers the header after its start byte, the payload and CRC_EXTRA, and a signed
+    frame ends in link id, 6-byte timestamp and ``SHA-256(key + frame so far)[:6]``, after which the timestamp advances
+    by one (``MAVLinkSigning.sign_packet``).
+    """
+
+    def __init__(self, crc16: Callable[[bytes], int]) -> None:
+        self._crc16 = crc16
+        self._getters: dict[type, Callable[[Any], Any]] = {}
+        self._key: bytes | None = None
+        self._keyed: Any = None
+        """SHA-256 with the key already absorbed (copied for every frame)."""
+
+    def pack(self, msg: Any, seq: int, sysid: int, compid: int, signing: SigningState | None = None) -> bytes:
+        """One frame of ``msg`` from (``sysid``, ``compid``) with sequence number ``seq``; signed if ``signing`` says
+        ``sign_outgoing``."""
+        cls = type(msg)
+        getter = self._getters.get(cls)
+        if getter is None:
+            getter = self._getters[cls] = _field_getter(cls)
+        payload = cls.unpacker.pack(*getter(msg))
+        payload = payload.rstrip(b"\x00") or payload[:1]
+        signed = signing is not None and signing.sign_outgoing
+        msg_id = cls.id
+        frame = _HEADER_V2.pack(
+            MAGIC_V2, len(payload), IFLAG_SIGNED if signed else 0, 0, seq, sysid, compid, msg_id & 0xFFFF, msg_id >> 16
+        )
+        frame += payload
+        frame += _CRC.pack(self._crc16(frame[1:] + bytes((cls.crc_extra,))))
+        if not signed:
+            return frame
+        assert signing is not None and signing.secret_key is not None
+        frame += _SIGNATURE_HEAD.pack(signing.link_id, signing.timestamp)[:7]
+        signing.timestamp += 1
+        return frame + self._digest(signing.secret_key, frame)[:6]
+
+    def _digest(self, key: bytes, data: bytes) -> bytes:
+        if key != self._key:
+            self._key, self._keyed = key, hashlib.sha256(key)
+        h = self._keyed.copy()
+        h.update(data)
+        return h.digest()
+
+
+def _field_getter(cls: Any) -> Callable[[Any], Any]:
+    """The struct items of a message in wire order: scalars as they are, strings as their raw bytes (pymavlink keeps
+    them in ``_<name>_raw``), numeric arrays spread."""
+    types = dict(zip(cls.fieldnames, cls.fieldtypes, strict=True))
+    spec = [
+        (f"_{name}_raw" if types[name] == "char" else name, n)
+        for name, n in zip(cls.ordered_fieldnames, cls.lengths, strict=True)
+    ]
+    if all(n == 1 for _, n in spec):
+        get = operator.attrgetter(*(name for name, _ in spec))
+        return get if len(spec) > 1 else lambda msg: (get(msg),)
+
+    def items(msg: Any) -> list[Any]:
+        out: list[Any] = []
+        for name, n in spec:
+            value = getattr(msg, name)
+            if n == 1:
+                out.append(value)
+            else:
+                out.extend(value[k] for k in range(n))
+        return out
+
+    return items
+
+
+class FrameDecoder:
+    """Turns frames :func:`scan_frames` has checked into a pymavlink dialect's message objects, attribute for attribute
+    what pymavlink's ``MAVLink.decode`` returns for them from a protocol object without a key (our receivers verify
+    signatures themselves, before decoding).
+
+    ``message_map`` is the dialect's ``mavlink_map`` (message id -> class) and ``header`` its ``MAVLink_header``. The
+    CRC is not computed again and no signing counters are kept; the rest is pymavlink's decoding: the payload padded
+    with the zeros MAVLink 2 cut off, unpacked in wire order, put back in the constructor's order (arrays as lists),
+    strings stripped of trailing NULs, and the frame's buffer, payload, CRC and header set on the object. A frame of an
+    id the map lacks raises KeyError.
+    """
+
+    def __init__(self, message_map: Mapping[int, Any], header: Callable[..., Any]) -> None:
+        self._map = message_map
+        self._header = header
+        self._arguments: dict[type, Callable[[tuple[Any, ...]], list[Any]]] = {}
+
+    def decode(self, frame: bytes) -> Any:
+        if frame[0] == MAGIC_V2:
+            header_len, incompat, compat = HEADER_LEN_V2, frame[2], frame[3]
+            seq, sysid, compid = frame[4], frame[5], frame[6]
+            msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
+        else:
+            header_len, incompat, compat = HEADER_LEN_V1, 0, 0
+            seq, sysid, compid, msg_id = frame[2], frame[3], frame[4], frame[5]
+        cls = self._map[msg_id]
+        end = len(frame) - 2 - (SIGNATURE_LEN if incompat & IFLAG_SIGNED else 0)
+        payload = bytes(frame[header_len:end])
+        size = cls.unpacker.size
+        if len(payload) < size:
+            payload += bytes(size - len(payload))
+        arguments = self._arguments.get(cls)
+        if arguments is None:
+            arguments = self._arguments[cls] = _constructor_arguments(cls)
+        msg = cls(*arguments(cls.unpacker.unpack(payload[:size])))
+        buf = bytearray(frame)
+        msg._msgbuf = buf
+        msg._payload = buf[6:end]  # pymavlink's offset, for MAVLink 1 and 2 alike
+        msg._crc = frame[end] | (frame[end + 1] << 8)
+        msg._header = self._header(msg_id, incompat, compat, frame[1], seq, sysid, compid)
+        return msg
+
+
+def _constructor_arguments(cls: Any) -> Callable[[tuple[Any, ...]], list[Any]]:
+    """Unpacked payload (wire order) -> constructor arguments: ``orders`` maps each argument to its wire field, numeric
+    arrays become lists, strings lose their trailing NULs."""
+    orders, lengths = list(cls.orders), list(cls.lengths)
+    strings = [i for i, t in enumerate(cls.fieldtypes) if t == "char"]
+    if sum(lengths) == len(lengths):  # no arrays: one wire item per field
+        picks = [(o, 1) for o in orders]
+    else:
+        starts = [sum(lengths[:k]) for k in range(len(lengths))]
+        picks = [(starts[o], lengths[o]) for o in orders]
+
+    def arguments(items: tuple[Any, ...]) -> list[Any]:
+        out: list[Any] = []
+        for start, n in picks:
+            first = items[start]
+            out.append(first if n == 1 or isinstance(first, bytes) else list(items[start : start + n]))
+        for i in strings:
+            if isinstance(out[i], bytes):
+                out[i] = out[i].rstrip(b"\x00")
+        return out
+
+    return arguments

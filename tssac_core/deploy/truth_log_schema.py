@@ -26,6 +26,7 @@ Line types (key ``type``):
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,50 @@ class VehicleRow:
 def encode(record: dict[str, Any]) -> str:
     """One line of the log (compact JSON, with its newline)."""
     return json.dumps(record, separators=(",", ":")) + "\n"
+
+
+def encode_step(step: int, t_s: float, flags: dict[str, bool], rows: list[VehicleRow]) -> str:
+    """A ``step`` line: the bytes :func:`encode` makes of ``{"type": "step", "step", "t_s", **flags, "vehicles":
+    {role: row.as_dict()}}``, written without building the dicts (one line per world step, on the lockstep's
+    critical path)."""
+    head = f'{{"type":"{STEP}","step":{_scalar(step)},"t_s":{_scalar(round(t_s, 6))}'
+    flag_items = "".join(f",{_quoted(k)}:{_scalar(v)}" for k, v in flags.items())
+    vehicles = ",".join(f"{_quoted(r.role)}:{_row_json(r)}" for r in rows)
+    return f'{head}{flag_items},"{VEHICLES_KEY}":{{{vehicles}}}}}\n'
+
+
+def _row_json(r: VehicleRow) -> str:
+    """``json.dumps(r.as_dict(), separators=(",", ":"))``, key for key."""
+    return (
+        f'{{"x_m":{_scalar(round(r.x_m, 4))},"y_m":{_scalar(round(r.y_m, 4))},"v_m_s":{_scalar(round(r.v_m_s, 5))},'
+        f'"phi_rad":{_scalar(round(r.phi_rad, 7))},"cost":{_scalar(r.cost)},"cost_total":{_scalar(r.cost_total)},'
+        f'"omega_cmd":{_scalar(round(r.omega_cmd, 7))},"u_cmd":{_scalar(round(r.u_cmd, 7))},'
+        f'"armed":{_scalar(r.armed)},"mode":{_quoted(r.mode)},"failsafe":{_scalar(r.failsafe)}}}'
+    )
+
+
+def _scalar(value: object) -> str:
+    """What json.dumps writes for one number or bool (finite floats by float.__repr__, as json does)."""
+    if value is True:
+        return "true"
+    if value is False:
+        return "false"
+    if type(value) is float and math.isfinite(value):
+        return float.__repr__(value)
+    if type(value) is int:
+        return int.__repr__(value)
+    return json.dumps(value)  # NaN, infinities, numpy scalars: json's own spelling
+
+
+_QUOTED: dict[str, str] = {}
+
+
+def _quoted(text: str) -> str:
+    """json.dumps of a key or name (roles, modes, flags: a handful of strings, each quoted once)."""
+    quoted = _QUOTED.get(text)
+    if quoted is None:
+        quoted = _QUOTED[text] = json.dumps(text)
+    return quoted
 
 
 def read_truth_log(path: str | Path) -> list[dict[str, Any]]:
