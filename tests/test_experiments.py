@@ -26,13 +26,20 @@ from tssac_core.experiments.report import (
     pooled_cost,
     pooled_tail,
     steps_to_threshold,
-    training_wall_s,
     transfer_speedup,
     within_limit,
 )
 from tssac_core.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
+from tssac_core.train.wall_time import (
+    WALL_TIME_FILE,
+    Ended,
+    Invocation,
+    read_invocations,
+    record_invocation,
+    training_wall_s,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -307,7 +314,10 @@ def test_report_writes_table4_json_and_figures(smoke):
     rows = [line for line in table.splitlines() if line.startswith("| ")]
     assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
     assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
-    assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
+    assert rows[2].endswith(" min |")  # the training wall time, from the run's wall_time.json
+    (finished,) = read_invocations(smoke / "runs" / "tssac-seed0")  # one invocation, recorded by the training
+    log = (smoke / "runs" / "tssac-seed0" / LOG_NAME).read_text()
+    assert finished == Invocation(int(re.search(r"trained .* in (\d+) s", log).group(1)), Ended.FINISHED)
     assert "## The mean cost against the limit" in table and re.search(
         r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M
     )
@@ -553,9 +563,11 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     assert epochs == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]  # nothing run twice
     log = (run_dir / LOG_NAME).read_text()
     assert log.count("runner: ") == 3 and len(re.findall(r"runner: stopped after \d+ s", log)) == 1, log
-    assert training_wall_s(run_dir) > int(
-        re.search(r"trained .* in (\d+) s", log).group(1)
-    )  # the stopped invocation counts
+    stopped, finished = read_invocations(run_dir)  # the runner recorded the first, the training the second
+    assert (stopped.ended, finished.ended) == (Ended.STOPPED, Ended.FINISHED)
+    assert stopped.seconds == int(re.search(r"runner: stopped after (\d+) s", log).group(1))
+    assert finished.seconds == int(re.search(r"trained .* in (\d+) s", log).group(1))
+    assert training_wall_s(run_dir) == stopped.seconds + finished.seconds  # the stopped invocation counts
 
 
 # ------------------------------------------------------------------------------------ --finish-by
@@ -575,6 +587,12 @@ def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
             parse_finish_by(text, now)
 
 
+def took_600_s(run: Path) -> None:
+    """Make the run's recorded wall time 600 s, in one invocation."""
+    (run / WALL_TIME_FILE).unlink()
+    record_invocation(run, 600.0, Ended.FINISHED)
+
+
 def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_time(smoke, tmp_path):
     """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag, with no
     finished run of its own, goes by its family's (tssac's); a PPO run, with none in its family, is started."""
@@ -588,9 +606,7 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     )
     results = tmp_path / "results"
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
-        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
-    )
+    took_600_s(results / "runs" / "tssac-seed0")
     partial = results / "runs" / "tssac-seed2"
     write_metrics(partial, [("decoy", 1, 20, 0.0)])  # the decoy's epoch, one of the three roles' one each
     (partial / "config.json").write_text(
@@ -622,9 +638,7 @@ def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke,
     may_start = deadline_filter(states, 1500.0, lambda: 1000.0)
     assert may_start(jobs["sac_lag-seed0"])  # nothing to go by yet
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
-        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
-    )
+    took_600_s(results / "runs" / "tssac-seed0")
     assert not may_start(jobs["sac_lag-seed0"])  # 600 s from 1000 ends after 1500
 
 
@@ -834,15 +848,16 @@ def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_interval
 
 
 def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_stopped(tmp_path):
-    assert training_wall_s(tmp_path) is None  # no train.log
-    (tmp_path / "train.log").write_text(
-        "=== 2026-11-22 15:41:04 runner: python -m tssac_core.train ...\n"
-        "trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r/runs/tssac-seed0\n"
-        "=== 2026-11-22 16:00:00 runner: python -m tssac_core.train --resume ...\n"  # killed otherwise: no line
-        "=== 2026-11-22 16:05:00 runner: python -m tssac_core.train --resume ...\n"
-        "INFO tssac_core.train: decoy epoch 3: ... stopped after 9 s\n"  # not the runner's line
-        "=== 2026-11-22 16:06:40 runner: stopped after 100 s; the next run resumes it\n"
-        "=== 2026-11-22 16:10:00 runner: python -m tssac_core.train --resume ...\n"
-        "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n"
-    )
+    assert training_wall_s(tmp_path) is None  # nothing recorded
+    (tmp_path / "train.log").write_text("trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r\n")
+    assert training_wall_s(tmp_path) is None  # a log is not read
+    record_invocation(tmp_path, 99.5, Ended.STOPPED)  # whole seconds, as train.log prints them (99.5 -> 100)
+    record_invocation(tmp_path, 412.4, Ended.FINISHED)
+    record_invocation(tmp_path, 87.6, Ended.FINISHED)
+    assert read_invocations(tmp_path) == [
+        Invocation(100, Ended.STOPPED),
+        Invocation(412, Ended.FINISHED),
+        Invocation(88, Ended.FINISHED),
+    ]
     assert training_wall_s(tmp_path) == 600.0
+    assert json.loads((tmp_path / WALL_TIME_FILE).read_text())["invocations"][0] == {"seconds": 100, "ended": "stopped"}

@@ -28,7 +28,6 @@ import enum
 import hashlib
 import json
 import math
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +43,7 @@ from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
 from tssac_core.sim.team import GUIDANCE, Pilot
 from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, within_fraction
+from tssac_core.train.wall_time import training_wall_s
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {
     # Yue et al., Table 4 (section 5.2.2): success rate over 50 random layouts and average cost.
@@ -353,22 +353,8 @@ def over_seeds(per_seed: dict[int, float]) -> dict[str, Any]:
     }
 
 
-INVOCATION_LINE = re.compile(r"^trained .* in (\d+) s; results in |^=== .* runner: stopped after (\d+) s", re.MULTILINE)
-"""The line ``tssac_core.train`` prints when it finishes, and the one the grid runner writes when it stops a job."""
 PAPER_EPOCHS = 50
 """Table 3: epochs per role."""
-
-
-def training_wall_s(run: Path) -> float | None:
-    """Wall seconds of a run by its train.log: summed over its invocations, those that finished (the "trained
-    ... in N s" line of ``tssac_core.train``) and those the grid runner stopped ("stopped after N s", the
-    epoch they were in included: it was spent, though it is trained again). An invocation killed some other
-    way leaves no line, and its time is not counted."""
-    log = run / "train.log"
-    if not log.is_file():
-        return None
-    seconds = [int(done or stopped) for done, stopped in INVOCATION_LINE.findall(log.read_text(errors="replace"))]
-    return float(sum(seconds)) if seconds else None
 
 
 def read_metrics(run: Path) -> list[dict[str, str]]:
