@@ -51,8 +51,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tssac_core.experiments.evaluations import team_digest  # noqa: E402
 from tssac_core.experiments.grid import load_grid  # noqa: E402
-from tssac_core.experiments.report import team_digest  # noqa: E402
 from tssac_core.train.wall_time import training_wall_s  # noqa: E402
 
 PYTHON = sys.executable

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from tssac_core.cli import UsageError
 from tssac_core.experiments.grid import Job, learner_family
 from tssac_core.experiments.jobs import JobState, Status, job_state
-from tssac_core.experiments.report import read_metrics
+from tssac_core.experiments.learning_curves import read_metrics
 from tssac_core.train.wall_time import training_wall_s
 
 
