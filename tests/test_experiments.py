@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
+from tssac_core.common.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.experiments.cli import main, train
 from tssac_core.experiments.evaluations import PerEpisode, TeamEvaluation
 from tssac_core.experiments.figures import clipped_error, penalty_entries
@@ -36,7 +37,6 @@ from tssac_core.experiments.summary import (
     within_limit,
 )
 from tssac_core.experiments.table import _tail_rate
-from tssac_core.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
 from tssac_core.train.wall_time import (

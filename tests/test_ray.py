@@ -24,9 +24,9 @@ from tssac_core.evaluate import main as evaluate_main
 from tssac_core.experiments.cli import train
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
-from tssac_core.mission_shards import fly_missions_sharded, shard
-from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
-from tssac_core.ray_map import TaskFailed, map_on_ray
+from tssac_core.parallel.mission_shards import fly_missions_sharded, shard
+from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+from tssac_core.parallel.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.team import GUIDANCE

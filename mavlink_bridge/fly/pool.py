@@ -19,8 +19,8 @@ from typing import Any, NoReturn
 import numpy as np
 
 from tssac_core.cli import write_json
+from tssac_core.common.stats import mission_statistics
 from tssac_core.sim.scenario import ROLES
-from tssac_core.stats import mission_statistics
 
 SAME = ("pilot", "cost_limit", "clock")
 """What every pooled campaign must agree on (the scenario is compared by its file name)."""

@@ -8,13 +8,13 @@ import numpy as np
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.mission_log import MissionRecord
-from tssac_core.sim.scenario import ROLES
-from tssac_core.stats import (
+from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
     wilson_interval,
     worst_missions,
 )
+from tssac_core.sim.scenario import ROLES
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""

@@ -41,7 +41,7 @@ from tssac_core.experiments.jobs import Launch, Status, command, is_finished, jo
 from tssac_core.experiments.learning_curves import read_metrics
 from tssac_core.experiments.summary import summarise
 from tssac_core.experiments.table import write_report
-from tssac_core.ray_cluster import RayTarget
+from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.sim.missions import MissionResults
 from tssac_core.sim.scenario import Scenario, load
 

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from tssac_core.experiments.evaluations import PerEpisode  # noqa: E402
 from tssac_core.experiments.learning_curves import Rows  # noqa: E402
 from tssac_core.experiments.summary import AlgorithmSummary, OverSeeds, Summary  # noqa: E402
-from tssac_core.plots import plot_mission  # noqa: E402
+from tssac_core.reporting.plots import plot_mission  # noqa: E402
 from tssac_core.sim.missions import MissionResults  # noqa: E402
 from tssac_core.sim.scenario import ROLES, Scenario  # noqa: E402
 from tssac_core.train.algorithms import algorithm  # noqa: E402
@@ -132,7 +132,7 @@ def fig8_multiplier(path: Path, curves: Curves) -> None:
 
 
 def fig9_mission(path: Path, results: MissionResults, scenario: Scenario, title: str) -> None:
-    """Trajectories of the first recorded mission, drawn by tssac_core.plots.plot_mission."""
+    """Trajectories of the first recorded mission, drawn by tssac_core.reporting.plots.plot_mission."""
     assert results.trajectories is not None, "fly the mission with record=True"
     tracks: dict[str, list[tuple[float, float]]] = {}
     for j, role in enumerate(ROLES):

@@ -38,7 +38,7 @@ from typing import Any, Protocol, cast
 
 import tssac_core
 from tssac_core.cli import UsageError, write_json
-from tssac_core.errors import CheckpointError
+from tssac_core.common.errors import CheckpointError
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario

@@ -46,8 +46,8 @@ from tssac_core.experiments.jobs import (
     start,
     stop,
 )
-from tssac_core.ray_cluster import RayTarget, cluster_cpus, ray_session
-from tssac_core.ray_map import TaskError, cancel, next_yield
+from tssac_core.parallel.ray_cluster import RayTarget, cluster_cpus, ray_session
+from tssac_core.parallel.ray_map import TaskError, cancel, next_yield
 
 WORKER_RETRIES = 3
 """Times the driver submits a job again after its worker process died (each run resumes the last)."""

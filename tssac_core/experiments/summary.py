@@ -3,9 +3,9 @@ guidance controller's, and the transfer figures; :meth:`Summary.to_json` writes 
 
 Figures per algorithm are mean ± sample standard deviation over its finished seeds (:class:`OverSeeds`). The tail
 evaluations (``evaluation.tail_episodes``) are pooled over an algorithm's seeds into one sample of missions
-(:func:`pooled_tail`, :mod:`tssac_core.stats`): success with its 95% Wilson interval, the mean hazard cost per UAV
-with its 95% bootstrap interval over missions, the within-C fraction and the tail; with the monitor, the fraction
-of flight time under the backup. The transfer speed-up compares, for the detect and strike roles, the learner
+(:func:`pooled_tail`, :mod:`tssac_core.common.stats`): success with its 95% Wilson interval, the mean hazard cost
+per UAV with its 95% bootstrap interval over missions, the within-C fraction and the tail; with the monitor, the
+fraction of flight time under the backup. The transfer speed-up compares, for the detect and strike roles, the learner
 decisions (``env_steps`` in metrics.csv) until the first epoch whose task success reaches 90%, TSSAC against
 SAC-Lagrangian, and the task success averaged over the role's epochs (which also compares runs that never reach
 90%).
@@ -21,12 +21,12 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.common.stats import bootstrap_mean_interval, cvar, wilson_interval, within_fraction
 from tssac_core.experiments.evaluations import EvalLabel, Evaluations, LayoutRule, TeamEvaluation, eval_specs
 from tssac_core.experiments.grid import AlgoEntry, Grid, Job
 from tssac_core.experiments.learning_curves import mean_task_success, read_metrics, steps_to_threshold
 from tssac_core.sim.scenario import load
 from tssac_core.sim.team import GUIDANCE
-from tssac_core.stats import bootstrap_mean_interval, cvar, wilson_interval, within_fraction
 from tssac_core.train.wall_time import training_wall_s
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {
@@ -102,7 +102,7 @@ class CostPool:
 
 def pooled_cost(evaluations: list[TeamEvaluation]) -> CostPool:
     """The mean hazard cost per UAV per mission over every seed's missions pooled, with a 95% percentile
-    bootstrap interval over missions (:func:`tssac_core.stats.bootstrap_mean_interval`: a mission's three UAVs
+    bootstrap interval over missions (:func:`tssac_core.common.stats.bootstrap_mean_interval`: a mission's three UAVs
     resampled together, fixed resampling seed), the UAV-missions over the limit and the largest single costs.
 
     A mean cost near the limit C = 3 is made of rare long stays inside a radar (one of 500-800 steps is
@@ -176,7 +176,7 @@ class TailPool:
 
 
 def pooled_tail(evaluations: list[TeamEvaluation]) -> TailPool:
-    """The tail evaluations of an algorithm's seeds pooled into one sample of missions (:mod:`tssac_core.stats`):
+    """The tail evaluations of an algorithm's seeds pooled into one sample of missions (:mod:`tssac_core.common.stats`):
     success k of n with its 95% Wilson interval; the mean hazard cost per UAV with its 95% bootstrap interval over
     missions (a mission's three UAVs resampled together); the within-C fraction of the UAV-missions, how many are
     over C, their CVaR at 95% and the largest costs; the UAVs that left the area; and, for evaluations flown with

@@ -157,8 +157,8 @@ def tail_markdown(summary: Summary) -> list[str]:
         f"used in training, in epoch selection or in the {ev.episodes} layouts above), the same layouts for every "
         f"team. An algorithm's seeds are pooled into one sample ({n} missions per seed): success with its 95% Wilson "
         "interval, the mean hazard cost per UAV with its 95% bootstrap interval over missions (a mission's three UAVs "
-        "resampled together; `tssac_core.stats`), and the share of UAV-missions within C. Where a row pools fewer "
-        "seeds than it has, the success cell says so.",
+        "resampled together; `tssac_core.common.stats`), and the share of UAV-missions within C. Where a row pools "
+        "fewer seeds than it has, the success cell says so.",
     ]
     if monitor:
         lines += [

@@ -52,8 +52,8 @@ from tssac_core.algos.onpolicy.ppo import (
 )
 from tssac_core.algos.replay import ReplayBuffer
 from tssac_core.algos.sac_lagrangian import SacLagrangian, transfer
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import TaskStep
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario

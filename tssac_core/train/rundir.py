@@ -22,6 +22,7 @@ import torch
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.cli import UsageError, write_json
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
 from tssac_core.deploy.numpy_actor import NumpyPolicy
 from tssac_core.deploy.policy import (
@@ -32,7 +33,6 @@ from tssac_core.deploy.policy import (
     read_checkpoint,
     save_role_checkpoint,
 )
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario, load
 from tssac_core.train.config import (
@@ -225,7 +225,7 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
 
 
 def write_plots(out: Path, cost_limit: float) -> None:
-    from tssac_core.plots import plot_training
+    from tssac_core.reporting.plots import plot_training
 
     plot_training(out / "metrics.csv", out, cost_limit)
 
