@@ -51,8 +51,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tssac_core.experiments.evaluations import team_digest  # noqa: E402
 from tssac_core.experiments.grid import load_grid  # noqa: E402
-from tssac_core.experiments.report import team_digest, training_wall_s  # noqa: E402
+from tssac_core.train.wall_time import training_wall_s  # noqa: E402
 
 PYTHON = sys.executable
 PAPER_EPOCHS = 50
@@ -89,7 +90,7 @@ def train_only(grid: Path, results: Path, *extra: str) -> float:
     code = (
         "import sys, time; from tssac_core.experiments.cli import parse_args, train;"
         "from tssac_core.experiments.grid import load_grid;"
-        "from tssac_core.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]); t = time.perf_counter();"
+        "from tssac_core.parallel.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]); t = time.perf_counter();"
         "ls = train(load_grid(a.grid), a.results, a.jobs, report=lambda l: print(l, flush=True), executor=a.executor,"
         " ray_target=RayTarget(a.address, a.cpus)); print('WALL', time.perf_counter() - t);"
         "sys.exit(any(x.returncode != 0 for x in ls))"
@@ -165,7 +166,7 @@ def bench_idle(seconds: float) -> dict[str, Any]:
     """Ray's own CPU while two grid tasks wait on their training (a local Ray of 2 CPUs, generator tasks and a driver
     waking as the executor's do): what Ray takes from jobs that fill the machine."""
     from tssac_core.experiments.ray_executor import DRIVER_WAKE_S, TASK_WAKE_S
-    from tssac_core.ray_cluster import RayTarget, ray_session
+    from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 
     with ray_session(RayTarget(cpus=2)) as ray:
         task = ray.remote(max_retries=0)(waiting_task)
@@ -253,8 +254,8 @@ def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
     import torch
 
     from tssac_core.evaluate import load_pilots
-    from tssac_core.mission_shards import fly_missions_sharded
-    from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+    from tssac_core.parallel.mission_shards import fly_missions_sharded
+    from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
     from tssac_core.sim.missions import fly_missions
     from tssac_core.sim.scenario import load as load_scenario
 
@@ -431,7 +432,7 @@ def bench_two_nodes(work: Path, steps: int) -> dict[str, Any]:
         code = (
             "import sys; from tssac_core.experiments.cli import parse_args, train;"
             "from tssac_core.experiments.grid import load_grid;"
-            "from tssac_core.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]);"
+            "from tssac_core.parallel.ray_cluster import RayTarget; a = parse_args(sys.argv[1:]);"
             "ls = train(load_grid(a.grid), a.results, None, report=lambda l: print(l, flush=True), executor='ray',"
             " ray_target=RayTarget(a.address)); sys.exit(any(x.returncode != 0 for x in ls))"
         )

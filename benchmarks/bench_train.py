@@ -120,12 +120,12 @@ def our_update_block(variant: Variant, buffer: ReplayBuffer) -> Callable[[], int
     config = SacConfig(variant=variant, hidden_sizes=HIDDEN, batch_size=BATCH, lr=LR)
     learner = SacLagrangian(OBS_DIM, ACT_DIM, config)
     rng = np.random.default_rng(0)
-    window = config.multiplier_window if learner.uses_multiplier else None
+    window = learner.signal.recent_window  # recent transitions only for a signal measured on them
 
     def block() -> int:
         batch = buffer.sample(BATCH, rng)
-        recent = buffer.sample_recent(BATCH, window, rng) if window else None
-        learner.update(batch, recent)
+        recent = buffer.sample_recent(BATCH, window, rng) if window is not None else None
+        learner.update(batch, recent, episode_cost=0.0)
         return 1
 
     return block
@@ -165,8 +165,9 @@ def loop_rate(threads: int, seconds: float) -> dict[str, float]:
         t1 = time.perf_counter()
         for _ in range(steps // defaults.update_every - updates):
             batch = buffer.sample(BATCH, rng)
-            recent = buffer.sample_recent(BATCH, config.multiplier_window or BATCH, rng)
-            learner.update(batch, recent)
+            window = learner.signal.recent_window
+            recent = buffer.sample_recent(BATCH, window, rng) if window is not None else None
+            learner.update(batch, recent, episode_cost=0.0)
             updates += 1
         env_time += t1 - t0
         update_time += time.perf_counter() - t1

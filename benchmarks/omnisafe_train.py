@@ -1,5 +1,5 @@
-"""OmniSafe trains one TSSAC role for a few epochs through the adapter (tssac_core.omnisafe_env): the README's snippet,
-run in OmniSafe's own environment (it pins gymnasium 0.28.1), not in the project's.
+"""OmniSafe trains one TSSAC role for a few epochs through the adapter (tssac_core.train.omnisafe_env): the
+README's snippet, run in OmniSafe's own environment (it pins gymnasium 0.28.1), not in the project's.
 
     bash ../shared/tools/omnisafe_venv.sh /work/omnisafe-venv && /work/omnisafe-venv/bin/pip install --no-deps -e .
     /work/omnisafe-venv/bin/python benchmarks/omnisafe_train.py [--algo PPOLag] [--role Detect] [--epochs 3]
@@ -34,7 +34,7 @@ def main() -> None:
 
     import omnisafe  # OmniSafe's own environment only
 
-    import tssac_core.omnisafe_env  # noqa: F401  (registers TssacDecoy-v0, TssacDetect-v0, TssacStrike-v0)
+    import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDecoy-v0, TssacDetect-v0, TssacStrike-v0)
 
     env_cfgs: dict[str, object] = {"scenario": str(ROOT / "scenarios" / "random.yaml"), "teammates": args.teammates}
     if args.teammates not in ("guidance", "none") and args.role != "Decoy":

@@ -12,7 +12,7 @@ import torch
 
 from tssac_core.algos import losses
 from tssac_core.algos.budget import qc_limit
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier
+from tssac_core.algos.lagrange import CostSignal, DampedLagrangeMultiplier, SignalRule, choose_signal
 from tssac_core.algos.networks import (
     LOG_STD_MAX,
     LOG_STD_MIN,
@@ -20,7 +20,9 @@ from tssac_core.algos.networks import (
     SquashedGaussianActor,
     tanh_log_abs_det_jacobian,
 )
+from tssac_core.algos.onpolicy.ppo import OnPolicyAlgo, OnPolicyConfig, Ppo
 from tssac_core.algos.replay import ReplayBuffer, ReplaySamples
+from tssac_core.algos.sac_config import MultiplierSignal
 from tssac_core.algos.sac_lagrangian import (
     TRANSFERRED_NETWORKS,
     SacConfig,
@@ -41,7 +43,10 @@ def t(*values: float) -> torch.Tensor:
 
 
 def small_config(**overrides: object) -> SacConfig:
-    fields: dict[str, object] = dict(hidden_sizes=SMALL, episode_steps=100)
+    """A small learner whose multiplier measures Q^c on the update's batch (what ``update(batch)`` can measure)."""
+    fields: dict[str, object] = dict(
+        hidden_sizes=SMALL, episode_steps=100, multiplier_signal=MultiplierSignal.Q_C, multiplier_window=None
+    )
     fields.update(overrides)
     return SacConfig(**fields)  # type: ignore[arg-type]
 
@@ -331,7 +336,7 @@ def test_variants_multiplier_terms() -> None:
     assert lag.beta == pytest.approx(0.5) and lag.xi == 0.0
     assert lag.beta_minus_xi == pytest.approx(0.5)
     ts = stats[Variant.TSSAC]
-    assert ts.cost_signal == ts.qc_mean  # no episode cost, no recent batch: Q^c on the batch
+    assert ts.cost_signal == ts.qc_mean  # multiplier_signal q_c without a window: Q^c on the batch
     assert ts.xi == pytest.approx(10.0 * (c - ts.qc_mean), rel=1e-5)
     assert ts.beta_minus_xi == pytest.approx(max(0.0, 0.5 - ts.xi), rel=1e-5, abs=1e-7)
 
@@ -516,6 +521,8 @@ def test_learns_a_constrained_bandit() -> None:
             cost_limit=0.25,
             episode_steps=1,
             alpha_init=0.05,
+            multiplier_signal=MultiplierSignal.Q_C,  # eq. 15 literally: Q^c on the update's batch
+            multiplier_window=None,
         )
         agent = SacLagrangian(1, 1, cfg)
         qc = [agent.update(buf.sample(128, rng)).qc_mean for _ in range(600)]
@@ -617,7 +624,13 @@ def test_sample_recent_draws_only_the_newest_rows() -> None:
 def test_multiplier_measured_on_recent_batch() -> None:
     """With a recent batch, beta's step follows Q^c on that batch, not on the training batch."""
     torch.manual_seed(0)
-    cfg = SacConfig(variant=Variant.SAC_LAG, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100)
+    cfg = SacConfig(
+        variant=Variant.SAC_LAG,
+        hidden_sizes=(8,),
+        cost_limit=3.0,
+        episode_steps=100,
+        multiplier_signal=MultiplierSignal.Q_C,
+    )
     learner = SacLagrangian(2, 1, cfg)
     obs = torch.zeros(4, 2)
     batch = ReplaySamples(obs, torch.zeros(4, 1), torch.zeros(4), torch.zeros(4), obs, torch.zeros(4))
@@ -640,7 +653,9 @@ def test_episode_cost_drives_the_multiplier_whatever_q_c_says() -> None:
         variant=Variant.TSSAC, hidden_sizes=(8,), cost_limit=3.0, episode_steps=100, gamma=0.99, beta_init=1.0
     )
     per_cost = qc_limit(1.0, 0.99, 100)
-    assert float(cfg.cost_on_qc_scale(3.0)) == pytest.approx(cfg.qc_limit)  # C maps onto the Q^c limit
+    signal = SacLagrangian(2, 1, cfg).signal
+    assert signal == SignalRule(CostSignal.EPISODE_COST, episode_scale=per_cost)
+    assert float(signal.measured(3.0)) == pytest.approx(cfg.qc_limit)  # C maps onto the Q^c limit
     obs = torch.zeros(4, 2)
     batch = ReplaySamples(obs, torch.zeros(4, 1), torch.zeros(4), torch.zeros(4), obs, torch.zeros(4))
     for q_c, measured, rises in ((100.0, 0.0, False), (0.0, 12.0, True)):
@@ -652,6 +667,58 @@ def test_episode_cost_drives_the_multiplier_whatever_q_c_says() -> None:
         assert stats.qc_mean == pytest.approx(q_c, rel=1e-3)  # still reported
         assert stats.xi == pytest.approx(10.0 * (cfg.qc_limit - measured * per_cost), rel=1e-5)  # eq. 17
         assert (learner.multiplier.beta.item() > 1.0) is rises  # eq. 15: up above C, down below
+
+
+def test_the_multiplier_module_chooses_every_learners_signal() -> None:
+    """lagrange.choose_signal is the one choice: the SAC family's from its configuration, PPO-Lag's the episode cost
+    on C's own scale, and Q^c on the batch (only reported) for a learner without a multiplier."""
+    episode, q_c = MultiplierSignal.EPISODE_COST, MultiplierSignal.Q_C
+    assert choose_signal(episode, True, 4000, 0.5) == SignalRule(CostSignal.EPISODE_COST, episode_scale=0.5)
+    assert choose_signal(q_c, True, 4000, 0.5) == SignalRule(CostSignal.Q_C_RECENT, recent_window=4000)
+    assert choose_signal(q_c, True, None, 0.5) == SignalRule(CostSignal.Q_C_BATCH)
+    assert (
+        choose_signal(episode, False, 4000, 0.5) == choose_signal(q_c, False, 4000) == SignalRule(CostSignal.Q_C_BATCH)
+    )
+    per_cost = qc_limit(1.0, 0.99, 100)
+    for variant, setting, window, expected in (
+        (Variant.TSSAC, episode, 4000, SignalRule(CostSignal.EPISODE_COST, episode_scale=per_cost)),
+        (Variant.SAC_LAG, q_c, 4000, SignalRule(CostSignal.Q_C_RECENT, recent_window=4000)),
+        (Variant.SAC, episode, 4000, SignalRule(CostSignal.Q_C_BATCH)),
+        (Variant.SAC_PENALTY, q_c, 4000, SignalRule(CostSignal.Q_C_BATCH)),
+    ):
+        cfg = SacConfig(
+            variant=variant,
+            hidden_sizes=(8,),
+            episode_steps=100,
+            multiplier_signal=setting,
+            multiplier_window=window,
+            penalty=-1.0 if variant is Variant.SAC_PENALTY else 0.0,
+        )
+        assert SacLagrangian(2, 1, cfg).signal == expected, variant
+    lag = Ppo(4, 2, OnPolicyConfig(algo=OnPolicyAlgo.PPO_LAG, hidden_sizes=(8,)))
+    assert lag.signal == SignalRule(CostSignal.EPISODE_COST, episode_scale=1.0)
+    assert Ppo(4, 2, OnPolicyConfig(hidden_sizes=(8,))).signal.signal is CostSignal.Q_C_BATCH
+
+
+def test_a_signal_reads_only_its_own_measurement() -> None:
+    """The Q^c of the recent transitions is computed (its actor sample drawn) only when it is the signal; a signal
+    whose measurement is missing is an error, not a silent switch to another."""
+
+    def never() -> torch.Tensor:
+        raise AssertionError("computed although not the signal")
+
+    episode = SignalRule(CostSignal.EPISODE_COST, episode_scale=0.25)
+    assert float(episode.measured(8.0, never, torch.tensor(99.0))) == 2.0
+    assert float(SignalRule(CostSignal.Q_C_BATCH).measured(8.0, never, torch.tensor(99.0))) == 99.0
+    recent = SignalRule(CostSignal.Q_C_RECENT, recent_window=10)
+    assert float(recent.measured(8.0, lambda: torch.tensor(7.0), torch.tensor(99.0))) == 7.0
+    with pytest.raises(ValueError, match="episode cost"):
+        episode.measured(None, never, torch.tensor(99.0))
+    with pytest.raises(ValueError, match="recent"):
+        recent.measured(8.0, None, torch.tensor(99.0))
+    learner = SacLagrangian(OBS_DIM, ACT_DIM, small_config(multiplier_signal=MultiplierSignal.EPISODE_COST))
+    with pytest.raises(ValueError, match="episode cost"):
+        learner.update(random_batch(0))
 
 
 def test_multiplier_upper_bound() -> None:
@@ -744,6 +811,8 @@ def test_a_cvar_learner_avoids_the_risky_action_that_a_mean_learner_takes() -> N
             episode_steps=1,
             alpha_init=0.01,
             cost_cvar_level=level,
+            multiplier_signal=MultiplierSignal.Q_C,  # Q^c on the update's batch (the multiplier is held anyway)
+            multiplier_window=None,
         )
         agent = SacLagrangian(1, 1, cfg)
         for _ in range(800):

@@ -4,6 +4,7 @@ companion and ``import tssac_core`` pull in (each in a fresh interpreter)."""
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -137,3 +138,66 @@ def test_the_monitor_sits_below_every_room():
         if m.split(".")[0] in PACKAGES
     )
     assert not offenders, offenders
+
+
+ROOMS = (
+    ("tssac_core.common", "tssac_core.assurance"),
+    ("tssac_core.sim",),
+    ("tssac_core.algos",),
+    ("tssac_core.cli",),
+    ("tssac_core.deploy", "tssac_core.parallel", "tssac_core.reporting"),
+    ("tssac_core.train", "tssac_core.experiments"),
+    ("tssac_core.evaluate",),
+)
+"""tssac_core's rooms (its subpackages, and its two top-level modules), lowest first: a room imports only rooms of lower
+layers. The one pair that imports each other: ``train --seeds`` runs its seeds on the grid's executors, and the grid
+runs ``train``."""
+MUTUAL = {("tssac_core.train", "tssac_core.experiments"), ("tssac_core.experiments", "tssac_core.train")}
+
+
+def room_of(module: str) -> str:
+    return ".".join(module.split(".")[:2])
+
+
+def test_every_module_has_a_room():
+    """At tssac_core's top level only the package face and the two modules every command goes through: the rest
+    lives in a subpackage that names what it is."""
+    loose = sorted(p.name for p in (ROOT / "tssac_core").glob("*.py"))
+    assert loose == ["__init__.py", "cli.py", "evaluate.py"], loose
+    layered = {room for layer in ROOMS for room in layer}
+    rooms = {room_of(m) for m in project_graph() if m.startswith("tssac_core.")}
+    assert rooms == layered, rooms ^ layered  # a new room is given its layer here
+
+
+def test_rooms_import_downward_only():
+    layer = {room: k for k, rooms in enumerate(ROOMS) for room in rooms}
+    offenders = sorted(
+        f"{a} imports {b}"
+        for a, targets in project_graph().items()
+        if a.startswith("tssac_core.")
+        for b in targets
+        if b.startswith("tssac_core.")
+        and room_of(a) != room_of(b)
+        and layer[room_of(b)] >= layer[room_of(a)]
+        and (room_of(a), room_of(b)) not in MUTUAL
+    )
+    assert not offenders, offenders
+
+
+def test_the_common_room_imports_nothing_of_the_project():
+    offenders = sorted(
+        f"{module_name(p)} imports {m}"
+        for p in (ROOT / "tssac_core" / "common").rglob("*.py")
+        for m in imports_of(p)
+        if m.split(".")[0] in PACKAGES
+    )
+    assert not offenders, offenders
+
+
+def test_ray_workers_import_this_checkout():
+    """The Ray workers' PYTHONPATH starts with the directory that holds tssac_core (the checkout), wherever the module
+    that computes it sits."""
+    from tssac_core.parallel.ray_cluster import PROJECT_ROOT, worker_pythonpath
+
+    assert PROJECT_ROOT == ROOT and (PROJECT_ROOT / "tssac_core" / "__init__.py").is_file()
+    assert worker_pythonpath().split(os.pathsep)[0] == str(ROOT)

@@ -7,11 +7,11 @@ import json
 import numpy as np
 
 from tssac_core.cli import run
+from tssac_core.common.stats import wilson_interval
 from tssac_core.evaluate import main
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import load
 from tssac_core.sim.team import GUIDANCE
-from tssac_core.stats import wilson_interval
 
 
 def test_guidance_solves_random_layouts(random_path):

@@ -17,22 +17,36 @@ import numpy as np
 import pytest
 
 from tssac_core.cli import run
+from tssac_core.common.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.experiments.cli import main, train
+from tssac_core.experiments.evaluations import PerEpisode, TeamEvaluation
 from tssac_core.experiments.figures import clipped_error, penalty_entries
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
-from tssac_core.experiments.report import (
-    _tail_rate,
+from tssac_core.experiments.learning_curves import steps_to_threshold
+from tssac_core.experiments.summary import (
+    AlgorithmSummary,
+    CostPool,
+    EvalRow,
+    OverSeeds,
+    TailPool,
+    TailRow,
     pooled_cost,
     pooled_tail,
-    steps_to_threshold,
-    training_wall_s,
     transfer_speedup,
     within_limit,
 )
-from tssac_core.stats import bootstrap_mean_interval, wilson_interval
+from tssac_core.experiments.table import _tail_rate
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
+from tssac_core.train.wall_time import (
+    WALL_TIME_FILE,
+    Ended,
+    Invocation,
+    read_invocations,
+    record_invocation,
+    training_wall_s,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -307,7 +321,10 @@ def test_report_writes_table4_json_and_figures(smoke):
     rows = [line for line in table.splitlines() if line.startswith("| ")]
     assert rows[2].startswith("| tssac | 1 | ") and "| 96% | 3.0 | " in rows[2]  # the paper's Table 4 beside ours
     assert rows[3].startswith("| sac_lag | 1 | ") and "| 96% | 3.0 | " in rows[3]
-    assert rows[2].endswith(" min |")  # the training wall time, from the run's train.log
+    assert rows[2].endswith(" min |")  # the training wall time, from the run's wall_time.json
+    (finished,) = read_invocations(smoke / "runs" / "tssac-seed0")  # one invocation, recorded by the training
+    log = (smoke / "runs" / "tssac-seed0" / LOG_NAME).read_text()
+    assert finished == Invocation(int(re.search(r"trained .* in (\d+) s", log).group(1)), Ended.FINISHED)
     assert "## The mean cost against the limit" in table and re.search(
         r"^\| tssac \| 6 \| \d+\.\d\d \| \d+\.\d\d-\d+\.\d\d \| \d \| ", table, re.M
     )
@@ -553,9 +570,11 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     assert epochs == [(role, e) for role in ("decoy", "detect", "strike") for e in ("1", "2")]  # nothing run twice
     log = (run_dir / LOG_NAME).read_text()
     assert log.count("runner: ") == 3 and len(re.findall(r"runner: stopped after \d+ s", log)) == 1, log
-    assert training_wall_s(run_dir) > int(
-        re.search(r"trained .* in (\d+) s", log).group(1)
-    )  # the stopped invocation counts
+    stopped, finished = read_invocations(run_dir)  # the runner recorded the first, the training the second
+    assert (stopped.ended, finished.ended) == (Ended.STOPPED, Ended.FINISHED)
+    assert stopped.seconds == int(re.search(r"runner: stopped after (\d+) s", log).group(1))
+    assert finished.seconds == int(re.search(r"trained .* in (\d+) s", log).group(1))
+    assert training_wall_s(run_dir) == stopped.seconds + finished.seconds  # the stopped invocation counts
 
 
 # ------------------------------------------------------------------------------------ --finish-by
@@ -575,6 +594,12 @@ def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
             parse_finish_by(text, now)
 
 
+def took_600_s(run: Path) -> None:
+    """Make the run's recorded wall time 600 s, in one invocation."""
+    (run / WALL_TIME_FILE).unlink()
+    record_invocation(run, 600.0, Ended.FINISHED)
+
+
 def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_time(smoke, tmp_path):
     """tssac-seed0 took 600 s: seed 1 (new) needs 600 s, seed 2 (a third of its epochs done) 400 s; sac_lag, with no
     finished run of its own, goes by its family's (tssac's); a PPO run, with none in its family, is started."""
@@ -588,9 +613,7 @@ def test_finish_by_starts_a_job_only_if_the_entrys_finished_runs_say_it_ends_in_
     )
     results = tmp_path / "results"
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
-        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
-    )
+    took_600_s(results / "runs" / "tssac-seed0")
     partial = results / "runs" / "tssac-seed2"
     write_metrics(partial, [("decoy", 1, 20, 0.0)])  # the decoy's epoch, one of the three roles' one each
     (partial / "config.json").write_text(
@@ -622,9 +645,7 @@ def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke,
     may_start = deadline_filter(states, 1500.0, lambda: 1000.0)
     assert may_start(jobs["sac_lag-seed0"])  # nothing to go by yet
     shutil.copytree(smoke / "runs" / "tssac-seed0", results / "runs" / "tssac-seed0")
-    (results / "runs" / "tssac-seed0" / LOG_NAME).write_text(
-        "trained decoy, detect, strike with tssac (seed 0) in 600 s; results in x\n"
-    )
+    took_600_s(results / "runs" / "tssac-seed0")
     assert not may_start(jobs["sac_lag-seed0"])  # 600 s from 1000 ends after 1500
 
 
@@ -659,14 +680,23 @@ def test_transfer_speedup(tmp_path):
     write_metrics(jobs["tssac-seed1"].out, detect([0.9, 1.0, 1.0]))  # at 100
     write_metrics(jobs["sac_lag-seed0"].out, detect([0.1, 0.3, 0.92]))  # at 300
     write_metrics(jobs["sac_lag-seed1"].out, detect([0.1, 0.3, 0.5]))  # never: counts 300, a lower bound
-    assert steps_to_threshold([], "detect") == (None, 0)
-    result = transfer_speedup(grid, list(jobs.values()))["detect"]
-    assert result["tssac"]["per_seed"] == {"0": 200, "1": 100} and result["tssac"]["mean_steps"] == 150
-    assert result["sac_lag"]["per_seed"] == {"0": 300, "1": None} and result["sac_lag"]["reached"] == 1
-    assert result["sac_lag"]["mean_steps"] == 300 and result["sac_lag"]["mean_is_lower_bound"]
-    assert result["speedup"] == pytest.approx(2.0) and result["speedup_is_lower_bound"]
-    assert result["tssac"]["mean_task_success"]["per_seed"] == {"0": pytest.approx(0.55), "1": pytest.approx(29 / 30)}
-    assert result["sac_lag"]["mean_task_success"]["mean"] == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
+    assert steps_to_threshold([], "detect", 0.9) == (None, 0)
+    speedup = transfer_speedup(grid, list(jobs.values()))
+    result, tssac, sac_lag = (
+        speedup.roles["detect"],
+        speedup.roles["detect"].with_transfer,
+        speedup.roles["detect"].without_transfer,
+    )
+    assert tssac.entry == "tssac" and tssac.per_seed == {0: 200, 1: 100} and tssac.mean_steps == 150
+    assert sac_lag.per_seed == {0: 300, 1: None} and sac_lag.reached == 1 and sac_lag.counted == {0: 300, 1: 300}
+    assert sac_lag.mean_steps == 300 and sac_lag.mean_is_lower_bound
+    assert result.speedup == pytest.approx(2.0) and result.speedup_is_lower_bound
+    assert tssac.mean_task_success.per_seed == {0: pytest.approx(0.55), 1: pytest.approx(29 / 30)}
+    assert sac_lag.mean_task_success.mean == pytest.approx((1.32 / 3 + 0.9 / 3) / 2)
+    data = speedup.to_json()  # experiments.json: the sides by algorithm, the seeds as strings
+    assert list(data) == ["threshold", "detect", "strike"] and data["threshold"] == 0.9
+    assert list(data["detect"]) == ["tssac", "sac_lag", "speedup", "speedup_is_lower_bound"]
+    assert data["detect"]["sac_lag"]["per_seed"] == {"0": 300, "1": None}
 
 
 def test_error_bars_stop_where_the_quantity_does():
@@ -677,8 +707,22 @@ def test_error_bars_stop_where_the_quantity_does():
     )
 
 
+def algorithm_row(
+    name: str,
+    algo: str,
+    penalty: float = 0.0,
+    generalization: EvalRow | None = None,
+    tail: TailRow | None = None,
+    tail_monitor: TailRow | None = None,
+) -> AlgorithmSummary:
+    """A row of experiments.json with no seeds (figures None), and the evaluations given."""
+    nothing = OverSeeds(None, None, {})
+    row = EvalRow(nothing, nothing, nothing, CostPool(0, None, None, 0, []))
+    return AlgorithmSummary(name, algo, penalty, [], row, nothing, None, generalization, tail, tail_monitor)
+
+
 def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
-    entry = lambda name, algo, penalty=0.0: {"name": name, "algo": algo, "penalty": penalty}  # noqa: E731
+    entry = algorithm_row
     done = [
         entry("tssac", "tssac"),
         entry("sac", "sac"),
@@ -687,13 +731,51 @@ def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
         entry("p10", "sac_penalty", -10.0),
     ]
     bars = penalty_entries(done)
-    assert [(a["name"], a["penalty"]) for a in bars] == [("sac", 0.0), ("p10", -10.0), ("p50", -50.0), ("tssac", 0.0)]
+    assert [(a.name, a.penalty) for a in bars] == [("sac", 0.0), ("p10", -10.0), ("p50", -50.0), ("tssac", 0.0)]
     bars = penalty_entries([*done, entry("p0", "sac_penalty", 0.0)])
-    assert [a["name"] for a in bars] == ["p0", "p10", "p50", "tssac"]
+    assert [a.name for a in bars] == ["p0", "p10", "p50", "tssac"]
+
+
+def test_an_algorithm_row_holds_only_the_evaluations_the_grid_flies():
+    """experiments.json's row: the tail columns first, then the 50-layout evaluations, those the grid does not fly
+    left out (not null); the paper's figures null where the paper has none."""
+    assert list(algorithm_row("sac_pen10", "sac_penalty", -10.0).to_json()) == [
+        "name",
+        "algo",
+        "penalty",
+        "seeds",
+        "random",
+        "training_wall_s",
+        "paper",
+    ]
+    nothing = OverSeeds(None, None, {})
+    tail = TailRow(TailPool(0, 0, None, None), [], {})
+    row = algorithm_row(
+        "tssac",
+        "tssac",
+        generalization=EvalRow(nothing, nothing, nothing, CostPool(0, None, None, 0, [])),
+        tail=tail,
+        tail_monitor=tail,
+    ).to_json()
+    assert list(row) == [
+        "name",
+        "algo",
+        "penalty",
+        "seeds",
+        "tail",
+        "tail_monitor",
+        "random",
+        "generalization",
+        "training_wall_s",
+        "paper",
+    ]
+    assert row["tail"] == {"missions": 0, "seeds": 0, "flown_seeds": [], "per_seed": {}} and row["paper"] is None
+    assert OverSeeds(1.0, None, {2: 1.0}).to_json() == {"mean": 1.0, "std": None, "per_seed": {"2": 1.0}}
 
 
 def test_transfer_experiment_figures_and_table(tmp_path):
-    from tssac_core.experiments.report import transfer_experiment, transfer_experiment_markdown
+    from tssac_core.experiments.summary import transfer_experiment
+    from tssac_core.experiments.table import transfer_experiment_markdown
 
     text = smoke_text(
         ("seeds: [0]", "seeds: [0, 1]"),
@@ -710,37 +792,93 @@ def test_transfer_experiment_figures_and_table(tmp_path):
     write_metrics(jobs["transfer-detect-sac_lag-seed1"].out, [("detect", 1, 20, 0.0), ("detect", 2, 40, 0.9)])
     runs = [jobs[n] for n in jobs if "detect" in n]
     x = transfer_experiment(grid, runs)
-    detect = x["detect"]
+    assert x is not None
+    detect = x.per_role["detect"]
     assert (
-        detect["with"]["per_seed"] == {"0": 20, "1": 40}
-        and detect["with"]["mean_steps"] == 30
-        and not detect["with"]["mean_is_lower_bound"]
+        detect.with_transfer.per_seed == {0: 20, 1: 40}
+        and detect.with_transfer.mean_steps == 30
+        and not detect.with_transfer.mean_is_lower_bound
     )
-    assert detect["without"]["per_seed"] == {"0": None, "1": 40} and detect["without"]["mean_steps"] == 50
-    assert detect["speedup"] == pytest.approx(50 / 30) and detect["speedup_is_lower_bound"]
-    assert x["strike"]["with"]["seeds"] == 0 and x["strike"]["speedup"] is None  # nothing finished yet: no figure
+    assert detect.without_transfer.per_seed == {0: None, 1: 40} and detect.without_transfer.mean_steps == 50
+    assert detect.speedup == pytest.approx(50 / 30) and detect.speedup_is_lower_bound
+    strike = x.per_role["strike"]
+    assert strike.with_transfer.seeds == 0 and strike.speedup is None  # nothing finished yet: no figure
+    assert strike.with_transfer.entry is None  # nothing to name it by
+    data = x.to_json()
+    assert list(data) == ["threshold", "teammates", "epochs", "steps_per_epoch", "roles", "detect", "strike"]
+    assert list(data["detect"]) == ["with", "without", "speedup", "speedup_is_lower_bound"]
     lines = transfer_experiment_markdown(x)
     assert "| detect | 20, 40 | 30 | not in 60, 40 | >= 50 | >= 1.7x |" in lines
     assert "| strike | — | — | — | — | — |" in lines
     assert transfer_experiment(load_grid(SMOKE), []) is None
 
 
+def evaluation(cost_limit: float, **per_episode: list) -> TeamEvaluation:
+    """A cached evaluation's figures: ``per_episode`` as a cache file holds it (success all True if not given)."""
+    per_episode.setdefault("success", [True] * len(per_episode["cost"]))
+    return TeamEvaluation(
+        success_rate=float(np.mean(per_episode["success"])),
+        mean_cost=float(np.mean(per_episode["cost"])),
+        episodes=len(per_episode["cost"]),
+        cost_limit=cost_limit,
+        backup_time_fraction=None,
+        per_episode=PerEpisode.from_record(per_episode),
+        success_interval95=None,
+        mean_cost_interval95=None,
+    )
+
+
 def test_within_limit_counts_uav_missions_at_or_under_the_limit():
     # 2 missions x 3 UAVs: one long stay inside a radar (812 steps) and one cost exactly at the limit
-    evaluation = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 3.0, 812.0], [0.0, 0.0, 4.0]]}}
-    assert within_limit(evaluation) == 4 / 6
+    assert within_limit(evaluation(3.0, cost=[[0.0, 3.0, 812.0], [0.0, 0.0, 4.0]])) == 4 / 6
+
+
+def test_a_cached_evaluation_is_read_with_what_it_has():
+    """A 50-layout cache from before evaluations had intervals reads without them; a tail cache flown with the monitor
+    gives the time under the backup and the monitor's counts per UAV-mission."""
+    old = {
+        "success_rate": 0.5,
+        "mean_cost": 1.5,
+        "episodes": 2,
+        "cost_limit": 3.0,
+        "per_episode": {"success": [True, False], "cost": [[0, 3, 0], [0, 0, 6]], "return": [[1, 2, 3]] * 2},
+    }
+    e = TeamEvaluation.from_record(old)
+    assert e.success_interval95 is None and e.backup_time_fraction is None and e.per_episode.monitor is None
+    assert e.per_episode.cost.dtype == np.float64 and e.per_episode.returns.shape == (2, 3)
+    assert e.per_episode.success.tolist() == [True, False] and e.per_episode.out_of_area is None
+    tail = {
+        **old,
+        "success_interval95": [0.1, 0.9],
+        "mean_cost_interval95": [0.0, 3.0],
+        "shield": {"backup_time_fraction": 0.25},
+    }
+    tail["per_episode"] = {
+        **old["per_episode"],
+        "out_of_area": [[False] * 3] * 2,
+        "backup_steps": [[1, 0, 0]] * 2,
+        "flown_steps": [[4, 4, 4]] * 2,
+        "interventions": [[1, 0, 0]] * 2,
+    }
+    del tail["per_episode"]["return"]
+    t = TeamEvaluation.from_record(tail)
+    assert t.success_interval95 == (0.1, 0.9) and t.mean_cost_interval95 == (0.0, 3.0)
+    assert t.backup_time_fraction == 0.25 and t.per_episode.returns is None
+    assert t.per_episode.monitor is not None and t.per_episode.monitor.flown_steps.sum() == 24
 
 
 def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_limit():
     # two seeds of 50 missions: all at 0 but one UAV 812 steps inside a radar, and one at exactly the limit
-    quiet = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 0.0, 0.0]] * 50}}
-    tail = {"cost_limit": 3.0, "per_episode": {"cost": [[0.0, 0.0, 812.0], [0.0, 3.0, 0.0]] + [[0.0, 0.0, 0.0]] * 48}}
+    quiet = evaluation(3.0, cost=[[0.0, 0.0, 0.0]] * 50)
+    tail = evaluation(3.0, cost=[[0.0, 0.0, 812.0], [0.0, 3.0, 0.0]] + [[0.0, 0.0, 0.0]] * 48)
     c = pooled_cost([quiet, tail])
-    assert c["uav_missions"] == 300 and c["mean"] == pytest.approx(815 / 300)
-    assert c["over_limit"] == 1 and c["largest"] == [812.0, 3.0, 0.0]
-    low, high = c["ci95"]
-    assert low == 0.0 < 3.0 < c["mean"] * 2 < high  # one mission in a hundred: the interval reaches 0 and spans C
-    assert pooled_cost([quiet])["ci95"] == [0.0, 0.0] and pooled_cost([])["mean"] is None
+    assert c.uav_missions == 300 and c.mean == pytest.approx(815 / 300)
+    assert c.over_limit == 1 and c.largest == [812.0, 3.0, 0.0]
+    assert c.ci95 is not None
+    low, high = c.ci95
+    assert low == 0.0 < 3.0 < c.mean * 2 < high  # one mission in a hundred: the interval reaches 0 and spans C
+    assert pooled_cost([quiet]).ci95 == (0.0, 0.0) and pooled_cost([]).mean is None
+    assert pooled_cost([]).to_json() == {"uav_missions": 0, "mean": None, "ci95": None, "over_limit": 0, "largest": []}
 
 
 def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_path, capsys):
@@ -779,7 +917,7 @@ def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_p
 
 
 def test_table4_keeps_its_layouts_and_the_tail_draws_each_mission_from_its_own_seed(random_path):
-    from tssac_core.experiments.report import layouts_in_turn
+    from tssac_core.experiments.evaluations import layouts_in_turn
     from tssac_core.sim.missions import mission_layout
     from tssac_core.sim.scenario import load
 
@@ -795,23 +933,18 @@ def test_table4_keeps_its_layouts_and_the_tail_draws_each_mission_from_its_own_s
 
 def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_intervals():
     # two seeds of 4 missions: 7 of 8 hit the target; one UAV 812 steps inside a radar, one at exactly C = 3
-    one = {
-        "cost_limit": 3.0,
-        "per_episode": {
-            "success": [True] * 4,
-            "cost": [[0.0, 0.0, 0.0]] * 3 + [[0.0, 3.0, 0.0]],
-            "out_of_area": [[False] * 3] * 4,
-        },
-    }
-    two = {
-        "cost_limit": 3.0,
-        "per_episode": {
-            "success": [True, True, True, False],
-            "cost": [[0.0, 0.0, 812.0]] + [[0.0] * 3] * 3,
-            "out_of_area": [[False] * 3] * 3 + [[False, False, True]],
-        },
-    }
-    t = pooled_tail([one, two])
+    one = dict(
+        success=[True] * 4,
+        cost=[[0.0, 0.0, 0.0]] * 3 + [[0.0, 3.0, 0.0]],
+        out_of_area=[[False] * 3] * 4,
+    )
+    two = dict(
+        success=[True, True, True, False],
+        cost=[[0.0, 0.0, 812.0]] + [[0.0] * 3] * 3,
+        out_of_area=[[False] * 3] * 3 + [[False, False, True]],
+    )
+    pool = pooled_tail([evaluation(3.0, **one), evaluation(3.0, **two)])
+    t = pool.to_json()
     assert (t["missions"], t["seeds"], t["success_rate"]) == (8, 2, 7 / 8)
     lo, hi = t["success_interval95"]  # Wilson, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
     z = 1.959963984540054
@@ -825,24 +958,28 @@ def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_interval
     )
     assert t["within_cost_limit"] == 23 / 24 and t["over_limit"] == 1 and t["largest"] == [812.0, 3.0, 0.0]
     assert t["cvar95_cost"] == (812 + 3) / 2 and t["left_area"] == 1  # CVaR95: the mean of the worst ceil(5% of 24) = 2
-    assert "backup_time_fraction" not in t and pooled_tail([]) == {"missions": 0, "seeds": 0}
+    assert "backup_time_fraction" not in t and pool.monitor is None
+    assert pooled_tail([]).to_json() == {"missions": 0, "seeds": 0} and _tail_rate(pooled_tail([]), 3) == "—"
     for e, backup in ((one, [[10, 0, 0]] * 4), (two, [[0, 0, 0]] * 4)):  # with the monitor: the time under the backup
-        e["per_episode"].update(backup_steps=backup, flown_steps=[[100, 100, 100]] * 4, interventions=[[1, 0, 0]] * 4)
-    t = pooled_tail([one, two])
+        e.update(backup_steps=backup, flown_steps=[[100, 100, 100]] * 4, interventions=[[1, 0, 0]] * 4)
+    pool = pooled_tail([evaluation(3.0, **one), evaluation(3.0, **two)])
+    t = pool.to_json()
     assert t["backup_time_fraction"] == 40 / 2400 and t["interventions_per_uav_mission"] == 8 / 24
-    assert _tail_rate(t, 3) == "87.5% (52.9-97.8) [2 of 3 seeds]" and _tail_rate(t, 2) == "87.5% (52.9-97.8)"
+    assert list(t)[-2:] == ["backup_time_fraction", "interventions_per_uav_mission"]
+    assert _tail_rate(pool, 3) == "87.5% (52.9-97.8) [2 of 3 seeds]" and _tail_rate(pool, 2) == "87.5% (52.9-97.8)"
 
 
 def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_stopped(tmp_path):
-    assert training_wall_s(tmp_path) is None  # no train.log
-    (tmp_path / "train.log").write_text(
-        "=== 2026-11-22 15:41:04 runner: python -m tssac_core.train ...\n"
-        "trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r/runs/tssac-seed0\n"
-        "=== 2026-11-22 16:00:00 runner: python -m tssac_core.train --resume ...\n"  # killed otherwise: no line
-        "=== 2026-11-22 16:05:00 runner: python -m tssac_core.train --resume ...\n"
-        "INFO tssac_core.train: decoy epoch 3: ... stopped after 9 s\n"  # not the runner's line
-        "=== 2026-11-22 16:06:40 runner: stopped after 100 s; the next run resumes it\n"
-        "=== 2026-11-22 16:10:00 runner: python -m tssac_core.train --resume ...\n"
-        "trained decoy, detect, strike with tssac (seed 0) in 88 s; results in r/runs/tssac-seed0\n"
-    )
+    assert training_wall_s(tmp_path) is None  # nothing recorded
+    (tmp_path / "train.log").write_text("trained decoy, detect, strike with tssac (seed 0) in 412 s; results in r\n")
+    assert training_wall_s(tmp_path) is None  # a log is not read
+    record_invocation(tmp_path, 99.5, Ended.STOPPED)  # whole seconds, as train.log prints them (99.5 -> 100)
+    record_invocation(tmp_path, 412.4, Ended.FINISHED)
+    record_invocation(tmp_path, 87.6, Ended.FINISHED)
+    assert read_invocations(tmp_path) == [
+        Invocation(100, Ended.STOPPED),
+        Invocation(412, Ended.FINISHED),
+        Invocation(88, Ended.FINISHED),
+    ]
     assert training_wall_s(tmp_path) == 600.0
+    assert json.loads((tmp_path / WALL_TIME_FILE).read_text())["invocations"][0] == {"seconds": 100, "ended": "stopped"}

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from mavlink_bridge.fly.pool import main
-from tssac_core.stats import wilson_interval
+from tssac_core.common.stats import wilson_interval
 
 HARD50 = Path(__file__).resolve().parents[1] / "results" / "recipe-trials" / "hard50"
 A = HARD50 / "sitl_random_200_1900001_seed1.json"

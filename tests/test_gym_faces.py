@@ -73,7 +73,7 @@ def test_the_shipped_decoy_flies_in_gym_make_as_in_evaluate():
 
 
 def test_load_policy_needs_a_role_for_a_directory():
-    from tssac_core.errors import CheckpointError
+    from tssac_core.common.errors import CheckpointError
 
     with pytest.raises(CheckpointError, match="which role"):
         load_policy(MODELS)

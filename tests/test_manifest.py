@@ -15,12 +15,12 @@ from tiny_training import tiny_args
 from mavlink_bridge.companion.cli import main as companion_main
 from mavlink_bridge.fly.cli import main as fly_main
 from tssac_core.cli import run
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import main as export_main
 from tssac_core.deploy.manifest import MANIFEST, model_files, problems, read_manifest, record, write_manifest
 from tssac_core.deploy.manifest import main as manifest_main
 from tssac_core.deploy.numpy_actor import load_actor
 from tssac_core.deploy.policy import load_team
-from tssac_core.errors import CheckpointError
 from tssac_core.evaluate import main as evaluate_main
 from tssac_core.train.cli import main as train_main
 from tssac_core.train.rundir import shipped

@@ -12,8 +12,14 @@ from PIL import Image  # noqa: E402
 
 from mavlink_bridge.fly.config import config_from_args  # noqa: E402
 from tssac_core.cli import UsageError  # noqa: E402
-from tssac_core.mission_animation import AnimationFormatError, MissionFilm, check_target, frame_steps, write_film  # noqa: E402
-from tssac_core.plots import plot_mission, ring_labels  # noqa: E402
+from tssac_core.reporting.mission_animation import (  # noqa: E402
+    AnimationFormatError,
+    MissionFilm,
+    check_target,
+    frame_steps,
+    write_film,
+)
+from tssac_core.reporting.plots import plot_mission, ring_labels  # noqa: E402
 from tssac_core.sim.scenario import load  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

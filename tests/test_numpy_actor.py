@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import compact_checkpoint, export_actor
 from tssac_core.deploy.numpy_actor import NumpyPolicy, load_actor, pilot_file
 from tssac_core.deploy.policy import Policy
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import ROLES, Role
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,5 +1,5 @@
-"""The OmniSafe adapter (tssac_core.omnisafe_env), opt-in: skipped unless omnisafe is importable, which it is only in
-OmniSafe's own environment (gymnasium 0.28.1; README, "OmniSafe"):
+"""The OmniSafe adapter (tssac_core.train.omnisafe_env), opt-in: skipped unless omnisafe is importable, which it is
+only in OmniSafe's own environment (gymnasium 0.28.1; README, "OmniSafe"):
 
     /work/omnisafe-venv/bin/python -m pytest -q tests/test_omnisafe_env.py -p no:cacheprovider
 """
@@ -15,9 +15,9 @@ torch = pytest.importorskip("torch")
 
 from omnisafe.envs.core import make, support_envs  # noqa: E402
 
-from tssac_core.omnisafe_env import TssacRoleEnv  # noqa: E402
 from tssac_core.sim.observation import ObservationMode  # noqa: E402
 from tssac_core.sim.scenario import Role  # noqa: E402
+from tssac_core.train.omnisafe_env import TssacRoleEnv  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,4 +1,5 @@
-"""Figure 9's event labels: never on top of each other, never outside the axes (tssac_core.plots.place_labels)."""
+"""Figure 9's event labels: never on top of each other, never outside the axes
+(tssac_core.reporting.plots.place_labels)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from tssac_core.plots import place_labels  # noqa: E402
+from tssac_core.reporting.plots import place_labels  # noqa: E402
 
 
 def test_clustered_event_labels_do_not_overlap():

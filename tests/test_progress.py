@@ -1,11 +1,11 @@
-"""evaluate's time left (tssac_core.progress): a bound from a fitted step cost, not from the rate of finished
+"""evaluate's time left (tssac_core.reporting.progress): a bound from a fitted step cost, not from the rate of finished
 missions."""
 
 from __future__ import annotations
 
 import pytest
 
-from tssac_core.progress import StepCostModel, TimeLeft, format_seconds
+from tssac_core.reporting.progress import StepCostModel, TimeLeft, format_seconds
 
 
 def schedule(missions: int, cap: int, ends: list[int]) -> list[tuple[int, int]]:

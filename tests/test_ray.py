@@ -24,12 +24,13 @@ from tssac_core.evaluate import main as evaluate_main
 from tssac_core.experiments.cli import train
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
-from tssac_core.mission_shards import fly_missions_sharded, shard
-from tssac_core.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
-from tssac_core.ray_map import TaskFailed, map_on_ray
+from tssac_core.parallel.mission_shards import fly_missions_sharded, shard
+from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+from tssac_core.parallel.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.team import GUIDANCE
+from tssac_core.train.wall_time import Ended, read_invocations
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
@@ -253,6 +254,7 @@ def test_ctrl_c_stops_every_job_and_leaves_each_resumable(local_ray, tmp_path):
             os.kill(pid, 0)
     for run_dir in runs:
         assert re.search(r"runner: stopped after \d+ s", (run_dir / LOG_NAME).read_text()), run_dir
+        assert [i.ended for i in read_invocations(run_dir)] == [Ended.STOPPED], run_dir  # its wall time counts
     assert [job_state(job).status for job in grid.jobs(results)] == [Status.PARTIAL, Status.PARTIAL], lines
     assert sorted(line.split()[1] for line in lines if line.startswith("stopping ")) == [
         "sac_lag-seed0;",

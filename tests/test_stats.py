@@ -1,11 +1,11 @@
-"""Evaluation statistics (tssac_core.stats) against hand-computed values."""
+"""Evaluation statistics (tssac_core.common.stats) against hand-computed values."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tssac_core.stats import (
+from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
     mission_statistics,

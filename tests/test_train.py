@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import torch
 
+from tssac_core.algos.lagrange import CostSignal, SignalRule
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.deploy.policy import CheckpointError, Policy, load_team
 from tssac_core.sim.scenario import Role
@@ -342,8 +343,9 @@ def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content
 
 
 def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(tmp_path):
-    """OffPolicyLearner.episode_cost: the mean learner cost of the last cost_window episodes; a resume state
-    carries them, so a resumed run's multiplier sees what the uninterrupted one saw."""
+    """OffPolicyLearner.episode_cost: the mean learner cost of the last cost_window episodes, measured whatever the
+    multiplier's signal (lagrange.choose_signal picks it); a resume state carries them, so a resumed run's multiplier
+    sees what the uninterrupted one saw."""
     import dataclasses
 
     from tssac_core.sim.observation import ObservationMode
@@ -381,9 +383,12 @@ def test_the_multiplier_measures_the_last_episodes_costs_and_resumes_with_them(t
             break
     assert len(log.costs) >= 5 and len(set(log.costs)) > 1, log.costs  # the window's choice matters
     assert learner.episode_cost() == pytest.approx(np.mean(log.costs[-3:]))
-    assert OffPolicyLearner(dataclasses.replace(cfg, algo="sac"), scenario, Role.DECOY, mode).episode_cost() is None
+    assert learner.learner.signal.signal is CostSignal.EPISODE_COST
+    assert OffPolicyLearner(dataclasses.replace(cfg, algo="sac"), scenario, Role.DECOY, mode).learner.signal == (
+        SignalRule(CostSignal.Q_C_BATCH)
+    )
     q_c = OffPolicyLearner(dataclasses.replace(cfg, learner={"multiplier_signal": "q_c"}), scenario, Role.DECOY, mode)
-    assert q_c.episode_cost() is None
+    assert q_c.learner.signal == SignalRule(CostSignal.Q_C_RECENT, recent_window=4000)
     resumed = OffPolicyLearner(cfg, scenario, Role.DECOY, mode)
     resumed.restore(learner.state())
     assert list(resumed.recent_costs) == log.costs[-3:] and resumed.recent_costs.maxlen == 3

@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from tssac_core.files import replace_durably
+from tssac_core.common.files import replace_durably
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
@@ -21,7 +21,7 @@ class UsageError(Exception):
 
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
     """Run a command's ``main``: known errors become one line on stderr and exit code 2."""
-    from tssac_core.errors import CheckpointError
+    from tssac_core.common.errors import CheckpointError
     from tssac_core.sim.scenario import ScenarioError
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")

@@ -31,7 +31,7 @@ from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError, run, write_json
-from tssac_core.progress import MissionBar
+from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
@@ -132,8 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.workers > 1 or args.address is not None:
         from tqdm import tqdm
 
-        from tssac_core.mission_shards import fly_missions_sharded
-        from tssac_core.ray_cluster import RayTarget
+        from tssac_core.parallel.mission_shards import fly_missions_sharded
+        from tssac_core.parallel.ray_cluster import RayTarget
 
         with tqdm(
             total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr

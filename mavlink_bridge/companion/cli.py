@@ -19,8 +19,8 @@ from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 
 if TYPE_CHECKING:

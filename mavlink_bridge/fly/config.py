@@ -13,10 +13,10 @@ from typing import NoReturn
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.cli import UsageError
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
-from tssac_core.errors import CheckpointError
-from tssac_core.mission_animation import AnimationFormatError, check_target
+from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
@@ -76,7 +76,7 @@ class FlyConfig:
     ray_address: str | None = None
     """An existing Ray cluster for the missions (None: a Ray started inside the command when workers > 1)."""
     animate_path: Path | None = None
-    """``--animate``: each mission as a .gif or .mp4 film (tssac_core.mission_animation)."""
+    """``--animate``: each mission as a .gif or .mp4 film (tssac_core.reporting.mission_animation)."""
     persistent: bool = True
     """One world and three companions fly every mission of the run (of each worker), reset between missions
     (tssac_core.deploy.mission_reset); False (``--fresh-processes``): four new processes per mission."""

@@ -3,7 +3,7 @@ of one team on one scenario as one campaign (a campaign that spanned sittings, o
 
 Every mission is one layout of its own seed, so campaigns on disjoint layout seeds pool exactly: success with its
 Wilson interval, the mean cost per UAV with the bootstrap interval over missions, and the tail per role, the same
-figures (``tssac_core.stats.mission_statistics``) as one ``fly`` run of all the missions would give. Campaigns of
+figures (``tssac_core.common.stats.mission_statistics``) as one ``fly`` run of all the missions would give. Campaigns of
 different teams, scenarios, cost limits or clocks, or that share a layout seed, are refused in one line.
 """
 
@@ -19,8 +19,8 @@ from typing import Any, NoReturn
 import numpy as np
 
 from tssac_core.cli import write_json
+from tssac_core.common.stats import mission_statistics
 from tssac_core.sim.scenario import ROLES
-from tssac_core.stats import mission_statistics
 
 SAME = ("pilot", "cost_limit", "clock")
 """What every pooled campaign must agree on (the scenario is compared by its file name)."""

@@ -83,7 +83,7 @@ def mission_title(cfg: FlyConfig, index: int, record: MissionRecord) -> str:
 def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> Path:
     """Draw one mission's trajectories and events (``--plot``: FILE, or FILE-NNN.ext when there are several);
     returns the file written."""
-    from tssac_core.plots import plot_mission  # matplotlib only when a plot is asked for
+    from tssac_core.reporting.plots import plot_mission  # matplotlib only when a plot is asked for
 
     assert cfg.plot_path is not None
     path = mission_file(cfg, cfg.plot_path, index, ".png")
@@ -102,8 +102,9 @@ def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: Miss
 
 
 def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> Path:
-    """``--animate``: one mission as a GIF or MP4 (:mod:`tssac_core.mission_animation`); returns the file written."""
-    from tssac_core.mission_animation import MissionFilm, write_film  # matplotlib only when asked for
+    """``--animate``: one mission as a GIF or MP4 (:mod:`tssac_core.reporting.mission_animation`); returns the file
+    written."""
+    from tssac_core.reporting.mission_animation import MissionFilm, write_film  # matplotlib only when asked for
 
     assert cfg.animate_path is not None
     r = cfg.scenario.ranges

@@ -8,13 +8,13 @@ import numpy as np
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.mission_log import MissionRecord
-from tssac_core.sim.scenario import ROLES
-from tssac_core.stats import (
+from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
     wilson_interval,
     worst_missions,
 )
+from tssac_core.sim.scenario import ROLES
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""
@@ -71,7 +71,7 @@ def shield_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
     """The results JSON: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
     tail (within C, worst, CVaR_0.95), the costliest UAV-missions and the missions: the keys of
-    ``tssac_core.evaluate``'s JSON (tssac_core.stats), with the cost figures None when the cost is unknown."""
+    ``tssac_core.evaluate``'s JSON (tssac_core.common.stats), with the cost figures None when the cost is unknown."""
     n = len(rows)
     wins = int(sum(bool(r.get("success")) for r in rows))
     out: dict[str, Any] = {

@@ -1,21 +1,98 @@
-"""The cost multiplier of SAC-Lagrangian (eq. 15) and its damped form used by TSSAC (eq. 16-17)."""
+"""The cost multiplier of SAC-Lagrangian (eq. 15) and its damped form used by TSSAC (eq. 16-17), and what it
+compares with the cost limit C: the one place that chooses that signal (:func:`choose_signal`)."""
 
 from __future__ import annotations
 
 import copy
+import enum
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import torch
 
 from tssac_core.algos import losses
+from tssac_core.algos.sac_config import MultiplierSignal
+
+
+class CostSignal(enum.Enum):
+    """What the multiplier compares with C in an update (eq. 15 and 17), on the multiplier's scale."""
+
+    EPISODE_COST = "episode_cost"
+    """The mean measured cost of the recent finished training episodes, converted to the multiplier's scale
+    (:attr:`SignalRule.episode_scale`), as PID-Lagrangian (Stooke et al. 2020), OmniSafe's SAC-Lag and PPO-Lag
+    measure the constraint."""
+    Q_C_RECENT = "q_c_recent"
+    """The mean Q^c of the current policy on the most recent transitions (:attr:`SignalRule.recent_window`): eq.
+    15's E[Q^c] over the current policy's state distribution."""
+    Q_C_BATCH = "q_c_batch"
+    """The mean Q^c of the current policy on the update's batch from the whole buffer (WCSAC's); also the figure a
+    learner without a multiplier reports."""
+
+
+@dataclass(frozen=True)
+class SignalRule:
+    """A learner's cost signal (:func:`choose_signal`) and how to measure it."""
+
+    signal: CostSignal
+    episode_scale: float = 1.0
+    """EPISODE_COST: the measured cost per episode times this is the signal (1: the multiplier's limit is C itself;
+    the SAC family's is C on Q^c's scale, ``budget.qc_limit``, so its scale is ``qc_limit(1, gamma, T)``: the
+    conversion is linear, and comparing the result with that limit is comparing the episode cost with C)."""
+    recent_window: int | None = None
+    """Q_C_RECENT: the recent transitions are drawn from the last this many added to the replay buffer; None for
+    the other signals (the learner then draws none)."""
+
+    def measured(
+        self,
+        episode_cost: float | None = None,
+        q_c_recent: Callable[[], torch.Tensor] | None = None,
+        q_c_batch: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """The signal's value, a 0-d tensor, from the learner's measurements: ``episode_cost`` (the recent
+        episodes' mean cost, the scale of C), ``q_c_recent`` (computes the mean Q^c on the recent transitions, called
+        only if that is the signal) and ``q_c_batch`` (the mean Q^c on the batch). ValueError if the signal's own
+        measurement is missing."""
+        if self.signal is CostSignal.EPISODE_COST:
+            if episode_cost is None:
+                raise ValueError("the multiplier's signal is the episode cost: pass episode_cost")
+            return torch.as_tensor(episode_cost, dtype=torch.float32) * self.episode_scale
+        if self.signal is CostSignal.Q_C_RECENT:
+            if q_c_recent is None:
+                raise ValueError("the multiplier's signal is Q^c on the recent transitions: pass them")
+            return q_c_recent()
+        if q_c_batch is None:
+            raise ValueError("the multiplier's signal is Q^c on the batch: pass it")
+        return q_c_batch
+
+
+def choose_signal(
+    setting: MultiplierSignal, learns_multiplier: bool, recent_window: int | None = None, episode_scale: float = 1.0
+) -> SignalRule:
+    """The signal a learner's multiplier compares with C, from its configuration: ``setting``
+    (``SacConfig.multiplier_signal``; PPO-Lag: always the episode cost), ``recent_window``
+    (``SacConfig.multiplier_window``) and ``episode_scale`` (:attr:`SignalRule.episode_scale`).
+
+    - a learner without a multiplier (SAC, SAC with a penalty, PPO): Q_C_BATCH, which it only reports;
+    - "episode_cost": EPISODE_COST;
+    - "q_c": Q_C_RECENT on the last ``recent_window`` transitions, or Q_C_BATCH without a window.
+    """
+    if not learns_multiplier:
+        return SignalRule(CostSignal.Q_C_BATCH)
+    if setting is MultiplierSignal.EPISODE_COST:
+        return SignalRule(CostSignal.EPISODE_COST, episode_scale=episode_scale)
+    if recent_window:
+        return SignalRule(CostSignal.Q_C_RECENT, recent_window=recent_window)
+    return SignalRule(CostSignal.Q_C_BATCH)
 
 
 class DampedLagrangeMultiplier:
     """beta >= 0 learned by projected Adam on eq. 15, plus the damping term xi of eq. 17.
 
-    One call of `update(qc_mean)`, where qc_mean is the batch mean of Q^c measured by the caller
-    (a constant here) and C = cost_limit on the scale of Q^c (see `budget.qc_limit`):
+    One call of `update(qc_mean)`, where qc_mean is the signal the caller measured (`SignalRule.measured`: a
+    mean Q^c, or the recent episodes' cost on its scale; a constant here) and C = cost_limit on the same scale
+    (the SAC family: C on the scale of Q^c, `budget.qc_limit`):
 
         J(beta) = beta * (C - qc_mean)                 eq. 15, `losses.multiplier_loss`
         beta    <- Adam step on J(beta)                gradient dJ/dbeta = C - qc_mean

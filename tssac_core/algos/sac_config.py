@@ -4,14 +4,9 @@ hyperparameters. Free of torch, so that a command reads its configuration (and a
 from __future__ import annotations
 
 import enum
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from tssac_core.algos.budget import qc_limit
-
-if TYPE_CHECKING:
-    import torch
 
 
 class Variant(enum.Enum):
@@ -93,11 +88,11 @@ class SacConfig:
     -50). Must be 0 for the other variants."""
 
     multiplier_signal: MultiplierSignal = MultiplierSignal.EPISODE_COST
-    """What eq. 15 and 17 compare with C; read by the training loop, which passes the measurement to
-    `update`. "episode_cost": the mean measured cost of the last `cost_window` training episodes,
-    converted to Q^c's scale (`cost_on_qc_scale`), as PID-Lagrangian (Stooke et al. 2020) and
-    OmniSafe's SAC-Lag measure the constraint, and as our PPO-Lag and CPO do. "q_c": the mean Q^c of
-    the current policy on recent transitions (`multiplier_window`), eq. 15's E[Q^c] literally.
+    """What eq. 15 and 17 compare with C (``lagrange.choose_signal`` turns it into the learner's signal; the
+    training loop passes the measurements). "episode_cost": the mean measured cost of the last `cost_window`
+    training episodes, converted to Q^c's scale (``lagrange.SignalRule.episode_scale``), as PID-Lagrangian
+    (Stooke et al. 2020) and OmniSafe's SAC-Lag measure the constraint, and as our PPO-Lag and CPO do. "q_c":
+    the mean Q^c of the current policy on recent transitions (`multiplier_window`), eq. 15's E[Q^c] literally.
     Deviation from the paper (docs/decisions.md; the side-by-side run: results/multiplier-signal/): a
     mean cost critic barely registers the rare long stays inside a radar that make up the tail of the
     episode cost (its mean over an epoch stayed under the limit in epochs whose training episodes
@@ -170,10 +165,3 @@ class SacConfig:
     def qc_limit(self) -> float:
         """The cost limit C on the scale of Q^c (see `budget.qc_limit`)."""
         return qc_limit(self.cost_limit, self.gamma, self.episode_steps)
-
-    def cost_on_qc_scale(self, episode_cost: torch.Tensor | float | Sequence[float]) -> torch.Tensor:
-        """A measured cost per episode on Q^c's scale, by the conversion that gives `qc_limit` from C
-        (linear: comparing the result with qc_limit is comparing episode_cost with C)."""
-        import torch  # here, not above: the configuration (and every --help) is read without torch
-
-        return torch.as_tensor(episode_cost, dtype=torch.float32) * qc_limit(1.0, self.gamma, self.episode_steps)

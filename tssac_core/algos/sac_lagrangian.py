@@ -28,7 +28,8 @@ import torch
 from torch import nn
 
 from tssac_core.algos import losses
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier
+from tssac_core.algos.budget import qc_limit
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, SignalRule, choose_signal
 from tssac_core.algos.networks import Critic, SquashedGaussianActor
 from tssac_core.algos.replay import ReplaySamples
 from tssac_core.algos.sac_config import MULTIPLIER_VARIANTS, SacConfig, Variant
@@ -114,6 +115,13 @@ class SacLagrangian:
             clamp_effective=config.clamp_effective,
             upper=config.multiplier_max,
         )
+        self.signal: SignalRule = choose_signal(
+            config.multiplier_signal,
+            self.uses_multiplier,
+            config.multiplier_window,
+            episode_scale=qc_limit(1.0, config.gamma, config.episode_steps),
+        )
+        """What the multiplier compares with C (``lagrange.choose_signal``); the caller passes its measurement."""
         self._actor_params: list[torch.Tensor] = list(self.actor.parameters())
         # WCSAC's variance critic (SacConfig.cost_cvar_level), made after everything else so that the learner
         # without it draws the same initial weights.
@@ -166,9 +174,10 @@ class SacLagrangian:
     ) -> UpdateStats:
         """One gradient step of every part (Algorithm 1, line 13).
 
-        What the multiplier (eq. 15, 17) compares with C (see SacConfig.multiplier_signal):
-        ``episode_cost``, the mean measured cost per recent episode, if given; else the mean Q^c of
-        the current policy on ``recent`` (SacConfig.multiplier_window), or on ``batch`` without it.
+        The measurements of the multiplier's signal (eq. 15, 17; ``self.signal``, chosen from the configuration by
+        ``lagrange.choose_signal``): ``episode_cost``, the mean measured cost per recent episode, and ``recent``,
+        transitions drawn from the last ``self.signal.recent_window`` added to the buffer; the signal's own one must
+        be given (ValueError), the other is not read.
         """
         cfg = self.config
         obs, actions, rewards, costs, next_obs, terminated = batch
@@ -214,15 +223,13 @@ class SacLagrangian:
                 var_pi = cost_variance(self.q_c_var, obs, pi_actions)
                 cost_term = losses.cost_cvar(q_c_pi, var_pi, cfg.cost_cvar_level)
 
-        # What eq. 15 and 17 compare with C, on Q^c's scale (SacConfig.multiplier_signal): the recent episodes'
-        # measured cost, else the mean Q^c of the current policy on the recent transitions, else on the batch.
-        if episode_cost is not None:
-            measured = cfg.cost_on_qc_scale(episode_cost)
-        elif recent is not None:
+        # What eq. 15 and 17 compare with C, on Q^c's scale: the signal lagrange.choose_signal chose.
+        def q_c_recent() -> torch.Tensor:
+            assert recent is not None
             with torch.no_grad():
-                measured = self.q_c(recent.observations, self.actor(recent.observations)[0])[0].clamp(min=0.0).mean()
-        else:
-            measured = qc_mean
+                return self.q_c(recent.observations, self.actor(recent.observations)[0])[0].clamp(min=0.0).mean()
+
+        measured = self.signal.measured(episode_cost, q_c_recent if recent is not None else None, qc_mean)
 
         # Eq. 17, the damping xi = k_d (C - measured), and the multiplier of Q^c in the actor loss: beta - xi
         # (eq. 16; k_d = 0 for SAC_LAG: beta, eq. 12), 0 without a multiplier.

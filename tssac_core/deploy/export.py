@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.common.errors import CheckpointError
+from tssac_core.common.files import replace_durably
 from tssac_core.deploy.manifest import check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import FORMAT, FORMAT_VERSION, NumpyPolicy, sha256_file
-from tssac_core.errors import CheckpointError
-from tssac_core.files import replace_durably
 from tssac_core.sim.scenario import ROLES
 
 

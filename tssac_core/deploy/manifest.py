@@ -27,8 +27,8 @@ import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-from tssac_core.errors import CheckpointError
-from tssac_core.files import replace_durably
+from tssac_core.common.errors import CheckpointError
+from tssac_core.common.files import replace_durably
 from tssac_core.sim.scenario import ROLES
 
 MANIFEST = "SHA256SUMS"

@@ -33,8 +33,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_model_file, warn_once
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import Role
 

@@ -19,9 +19,9 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
+from tssac_core.common.errors import CheckpointError
+from tssac_core.common.files import replace_durably
 from tssac_core.deploy.manifest import check_models, warn_once
-from tssac_core.errors import CheckpointError
-from tssac_core.files import replace_durably
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 
@@ -93,8 +93,8 @@ def save_role_checkpoint(
 
 
 def torch_save_atomic(obj: Any, path: str | Path) -> None:
-    """torch.save to a temporary file, then rename durably (tssac_core.files): a crash never leaves a half-written
-    file."""
+    """torch.save to a temporary file, then rename durably (tssac_core.common.files): a crash never leaves a
+    half-written file."""
     target = Path(path)
     tmp = target.with_name(target.name + ".tmp")
     torch.save(obj, tmp)

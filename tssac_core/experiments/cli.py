@@ -17,7 +17,8 @@ The grid file's format is in :mod:`tssac_core.experiments.grid`. Each job is a
 ``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is not run again and an
 interrupted one is continued with ``--resume``, so running the command again after a crash, Ctrl-C or reboot
 picks up where it stopped (:mod:`tssac_core.experiments.jobs`). Then every finished
-team is evaluated (:mod:`tssac_core.experiments.report`) and ``<results>/table4.md``,
+team is evaluated (:mod:`tssac_core.experiments.evaluations`, cached beside it), summarised
+(:mod:`tssac_core.experiments.summary`), and ``<results>/table4.md`` (:mod:`tssac_core.experiments.table`),
 ``<results>/experiments.json`` and the figures (:mod:`tssac_core.experiments.figures`) are written.
 """
 
@@ -33,11 +34,14 @@ from pathlib import Path
 
 from tssac_core.cli import UsageError, run
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
+from tssac_core.experiments.evaluations import EvalLabel, eval_specs, evaluate_all, fly_one
 from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
 from tssac_core.experiments.grid import Grid, Job, load_grid
 from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
-from tssac_core.experiments.report import eval_specs, evaluate_all, fly_one, read_metrics, summarise, write_report
-from tssac_core.ray_cluster import RayTarget
+from tssac_core.experiments.learning_curves import read_metrics
+from tssac_core.experiments.summary import summarise
+from tssac_core.experiments.table import write_report
+from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.sim.missions import MissionResults
 from tssac_core.sim.scenario import Scenario, load
 
@@ -118,7 +122,8 @@ def make_report(grid: Grid, results: Path, report: Say = say, cached_tail: bool 
     curves = {e.name: [read_metrics(j.out) for j in finished if j.entry == e] for e in grid.algos}
     curves = {name: runs for name, runs in curves.items() if runs}
     per_episode = {
-        e.name: [evaluations[(j.name, "random")]["per_episode"] for j in finished if j.entry == e] for e in grid.algos
+        e.name: [evaluations[(j.name, EvalLabel.RANDOM)].per_episode for j in finished if j.entry == e]
+        for e in grid.algos
     }  # 50 layouts
     per_episode = {name: runs for name, runs in per_episode.items() if runs}
     figures = plot_figures(results, summary, curves, per_episode, mission_for_fig9(grid, finished))

@@ -4,8 +4,8 @@ A grid takes longer than the machine is there for (a shared machine's slot, a se
 still training when the machine goes is lost unless its directory outlives it, so starting a 65-minute
 run 20 minutes before the end only wastes the 20 minutes that a shorter job could have used. The
 runner asks :func:`deadline_filter` before each start; a job is expected to take what the finished runs
-of the same grid entry (and the same transfer role) took on average, by their train.log, or if there are
-none, those of the same learner family (the SAC family's variants cost about the same per update, as do
+of the same grid entry (and the same transfer role) took on average, by their recorded wall time, or if there
+are none, those of the same learner family (the SAC family's variants cost about the same per update, as do
 PPO, PPO-Lagrangian and CPO per epoch), times the share of its epochs still to train (a partial run
 resumes at its last finished epoch). A job with no finished run to go by is started: nothing says it
 would not fit.
@@ -20,7 +20,8 @@ from collections.abc import Callable
 from tssac_core.cli import UsageError
 from tssac_core.experiments.grid import Job, learner_family
 from tssac_core.experiments.jobs import JobState, Status, job_state
-from tssac_core.experiments.report import read_metrics, training_wall_s
+from tssac_core.experiments.learning_curves import read_metrics
+from tssac_core.train.wall_time import training_wall_s
 
 
 def parse_finish_by(text: str, now: dt.datetime | None = None) -> float:

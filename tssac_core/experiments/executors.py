@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 
 from tssac_core.experiments.grid import Job
 from tssac_core.experiments.jobs import JobState, Launch, run_jobs
-from tssac_core.ray_cluster import RayTarget
+from tssac_core.parallel.ray_cluster import RayTarget
 
 logger = logging.getLogger(__name__)
 

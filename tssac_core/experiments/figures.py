@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,12 +24,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tssac_core.plots import plot_mission  # noqa: E402
+from tssac_core.experiments.evaluations import PerEpisode  # noqa: E402
+from tssac_core.experiments.learning_curves import Rows  # noqa: E402
+from tssac_core.experiments.summary import AlgorithmSummary, OverSeeds, Summary  # noqa: E402
+from tssac_core.reporting.plots import plot_mission  # noqa: E402
 from tssac_core.sim.missions import MissionResults  # noqa: E402
 from tssac_core.sim.scenario import ROLES, Scenario  # noqa: E402
 from tssac_core.train.algorithms import algorithm  # noqa: E402
 
-Rows = list[dict[str, str]]
 Curves = dict[str, list[Rows]]
 """Entry name -> the metrics.csv rows of each of its finished seeds."""
 
@@ -129,7 +132,7 @@ def fig8_multiplier(path: Path, curves: Curves) -> None:
 
 
 def fig9_mission(path: Path, results: MissionResults, scenario: Scenario, title: str) -> None:
-    """Trajectories of the first recorded mission, drawn by tssac_core.plots.plot_mission."""
+    """Trajectories of the first recorded mission, drawn by tssac_core.reporting.plots.plot_mission."""
     assert results.trajectories is not None, "fly the mission with record=True"
     tracks: dict[str, list[tuple[float, float]]] = {}
     for j, role in enumerate(ROLES):
@@ -149,18 +152,20 @@ def fig9_mission(path: Path, results: MissionResults, scenario: Scenario, title:
     )
 
 
-def fig10_boxplots(path: Path, per_episode: dict[str, list[dict[str, Any]]], cost_limit: float) -> None:
-    """``per_episode`` maps an entry name to the ``per_episode`` dicts of its seeds' evaluations."""
+def per_role(e: PerEpisode, key: str) -> np.ndarray:
+    """An evaluation's per-mission ``return`` or ``cost``, (M, 3)."""
+    values = e.returns if key == "return" else e.cost
+    assert values is not None, "the 50-layout evaluations record the returns"
+    return values.reshape(-1, len(ROLES))
+
+
+def fig10_boxplots(path: Path, per_episode: dict[str, list[PerEpisode]], cost_limit: float) -> None:
+    """``per_episode`` maps an entry name to the per-mission figures of its seeds' evaluations."""
     names = list(per_episode)
     fig, axes = plt.subplots(2, len(ROLES), figsize=(5 * len(ROLES), 7), squeeze=False)
     for col, role in enumerate(ROLES):
         for row, key in enumerate(("return", "cost")):
-            data = [
-                np.concatenate(
-                    [np.asarray(e[key], dtype=float).reshape(-1, len(ROLES))[:, col] for e in per_episode[n]]
-                )
-                for n in names
-            ]
+            data = [np.concatenate([per_role(e, key)[:, col] for e in per_episode[n]]) for n in names]
             ax = axes[row][col]
             ax.boxplot(data, tick_labels=names)
             ax.tick_params(axis="x", labelrotation=45, labelsize=7)
@@ -185,17 +190,17 @@ def bar_panel(
     path: Path,
     title: str,
     names: Sequence[str],
-    rates: Sequence[dict[str, Any]],
-    costs: Sequence[dict[str, Any]],
+    rates: Sequence[OverSeeds],
+    costs: Sequence[OverSeeds],
     cost_limit: float,
     reference: tuple[str, float, float] | None = None,
 ) -> None:
     """Success rate and cost bars (mean ± std over seeds) per entry; ``reference`` = (label, success, cost)."""
     labels = list(names)
-    rate_mean = [100 * (s["mean"] if s["mean"] is not None else math.nan) for s in rates]
-    rate_std = [100 * (s["std"] or 0.0) for s in rates]
-    cost_mean = [c["mean"] if c["mean"] is not None else math.nan for c in costs]
-    cost_std = [c["std"] or 0.0 for c in costs]
+    rate_mean = [100 * (s.mean if s.mean is not None else math.nan) for s in rates]
+    rate_std = [100 * (s.std or 0.0) for s in rates]
+    cost_mean = [c.mean if c.mean is not None else math.nan for c in costs]
+    cost_std = [c.std or 0.0 for c in costs]
     if reference is not None:
         labels.append(reference[0])
         rate_mean.append(100 * reference[1])
@@ -233,24 +238,24 @@ FIGURES = (
 
 def plot_figures(
     results: Path,
-    summary: dict[str, Any],
+    summary: Summary,
     curves: Curves,
-    per_episode: dict[str, list[dict[str, Any]]],
+    per_episode: dict[str, list[PerEpisode]],
     mission: tuple[MissionResults, Scenario, str] | None,
 ) -> list[Path]:
     """Write every figure the data allows under ``results`` and delete those it no longer allows (a figure
     of runs that have since been moved away); returns the paths written."""
     written: list[Path] = []
-    cost_limit = float(summary["cost_limit"])
-    done = [a for a in summary["algorithms"] if a["seeds"]]
-    paper = {a["name"]: curves[a["name"]] for a in done if a["name"] in curves and algorithm(a["algo"]).in_figure7}
+    cost_limit = float(summary.cost_limit)
+    done = [a for a in summary.algorithms.values() if a.seeds]
+    paper = {a.name: curves[a.name] for a in done if a.name in curves and algorithm(a.algo).in_figure7}
     if paper:
         written.append(results / "fig7_training.png")
         fig7_training(written[-1], paper, cost_limit)
     damping = {
-        f"{a['name']} ({'damped' if a['algo'] == 'tssac' else 'no damping'})": curves[a["name"]]
+        f"{a.name} ({'damped' if a.algo == 'tssac' else 'no damping'})": curves[a.name]
         for a in done
-        if a["algo"] in ("tssac", "sac_lag") and a["name"] in curves
+        if a.algo in ("tssac", "sac_lag") and a.name in curves
     }
     if damping:
         written.append(results / "fig8_multiplier.png")
@@ -261,28 +266,29 @@ def plot_figures(
     if per_episode:
         written.append(results / "fig10_test_boxplots.png")
         fig10_boxplots(written[-1], per_episode, cost_limit)
-    guidance = summary["guidance"]
-    if done and "generalization" in guidance:
-        g = guidance["generalization"]
+    g = summary.guidance.generalization
+    scenario = summary.evaluation.generalization_scenario
+    generalization = [a.generalization for a in done if a.generalization is not None]
+    if done and g is not None and scenario is not None and len(generalization) == len(done):
         written.append(results / "fig11_generalization.png")
         bar_panel(
             written[-1],
-            f"Generalisation: {Path(summary['evaluation']['generalization_scenario']).name}",
-            [a["name"] for a in done],
-            [a["generalization"]["success_rate"] for a in done],
-            [a["generalization"]["mean_cost"] for a in done],
+            f"Generalisation: {Path(scenario).name}",
+            [a.name for a in done],
+            [r.success_rate for r in generalization],
+            [r.mean_cost for r in generalization],
             cost_limit,
-            ("guidance", g["success_rate"], g["mean_cost"]),
+            ("guidance", g.success_rate, g.mean_cost),
         )
     penalty = penalty_entries(done)
-    if any(a["algo"] == "sac_penalty" for a in penalty):
+    if any(a.algo == "sac_penalty" for a in penalty):
         written.append(results / "fig12_penalty.png")
         bar_panel(
             written[-1],
             "SAC with a hazard penalty vs TSSAC",
-            [a["name"] if a["algo"] == "tssac" else f"{a['name']} (penalty {a['penalty']:g})" for a in penalty],
-            [a["random"]["success_rate"] for a in penalty],
-            [a["random"]["mean_cost"] for a in penalty],
+            [a.name if a.algo == "tssac" else f"{a.name} (penalty {a.penalty:g})" for a in penalty],
+            [a.random.success_rate for a in penalty],
+            [a.random.mean_cost for a in penalty],
             cost_limit,
         )
     for name in FIGURES:
@@ -291,10 +297,10 @@ def plot_figures(
     return written
 
 
-def penalty_entries(done: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def penalty_entries(done: Sequence[AlgorithmSummary]) -> list[AlgorithmSummary]:
     """Figure 12's bars: SAC with penalties 0, -10, -15, -50 ... then TSSAC. Penalty 0 is plain SAC (the same
     learner, the same run), so the ``sac`` entry stands for it unless the grid trains a penalty-0 entry too."""
-    sac = [a for a in done if a["algo"] == "sac_penalty"]
-    if not any(a["penalty"] == 0 for a in sac):
-        sac += [dict(a, penalty=0.0) for a in done if a["algo"] == "sac"]
-    return sorted(sac, key=lambda a: -a["penalty"]) + [a for a in done if a["algo"] == "tssac"]
+    sac = [a for a in done if a.algo == "sac_penalty"]
+    if not any(a.penalty == 0 for a in sac):
+        sac += [dataclasses.replace(a, penalty=0.0) for a in done if a.algo == "sac"]
+    return sorted(sac, key=lambda a: -a.penalty) + [a for a in done if a.algo == "tssac"]

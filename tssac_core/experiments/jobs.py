@@ -14,8 +14,8 @@ A job's state is read from its run directory alone:
 Each job runs in its own process group (its own session), with stdout and stderr appended to
 ``train.log`` in its run directory. On SIGINT or SIGTERM the runner stops every job it started (SIGTERM
 to the group, SIGKILL after a grace period) before it exits, so no training process outlives it, and
-writes in each stopped job's train.log how long that invocation ran (its time counts in the run's wall
-time: :func:`tssac_core.experiments.report.training_wall_s`).
+records how long each stopped job's invocation ran (its time counts in the run's wall time:
+:mod:`tssac_core.train.wall_time`), also as a line in its train.log.
 """
 
 from __future__ import annotations
@@ -38,12 +38,13 @@ from typing import Any, Protocol, cast
 
 import tssac_core
 from tssac_core.cli import UsageError, write_json
-from tssac_core.errors import CheckpointError
+from tssac_core.common.errors import CheckpointError
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.train.config import TrainConfig, config_record, with_recorded_defaults
 from tssac_core.train.legacy import config_from_saved
+from tssac_core.train.wall_time import Ended, record_invocation
 
 logger = logging.getLogger(__name__)
 
@@ -204,7 +205,9 @@ def start(
 
 
 def log_stopped(job: Job, seconds: float) -> None:
-    """Record in the job's train.log that the runner stopped it after ``seconds`` of training."""
+    """Record that the runner stopped the job after ``seconds`` of training: in its wall time
+    (:mod:`tssac_core.train.wall_time`) and in its train.log."""
+    record_invocation(job.out, seconds, Ended.STOPPED)
     with (job.out / LOG_NAME).open("a") as log:
         log.write(
             f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} runner: stopped after {seconds:.0f} s; the next run resumes it\n"

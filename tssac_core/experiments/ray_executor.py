@@ -14,8 +14,8 @@ state: the node needs to see it, which on a cluster means a shared filesystem (d
   process dies with its worker (``PR_SET_PDEATHSIG``), so the retry finds the run partial and resumes it from
   its last finished epoch. A task that raises is not retried.
 - Ctrl-C or SIGTERM: every running task is cancelled (a KeyboardInterrupt inside it): it stops its
-  training process as the local executor does (SIGTERM to its group, then SIGKILL) and writes the
-  "stopped after" line; queued jobs are dropped. Each run stays resumable.
+  training process as the local executor does (SIGTERM to its group, then SIGKILL) and records the stop
+  (``jobs.log_stopped``); queued jobs are dropped. Each run stays resumable.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ from tssac_core.experiments.jobs import (
     start,
     stop,
 )
-from tssac_core.ray_cluster import RayTarget, cluster_cpus, ray_session
-from tssac_core.ray_map import TaskError, cancel, next_yield
+from tssac_core.parallel.ray_cluster import RayTarget, cluster_cpus, ray_session
+from tssac_core.parallel.ray_map import TaskError, cancel, next_yield
 
 WORKER_RETRIES = 3
 """Times the driver submits a job again after its worker process died (each run resumes the last)."""

@@ -15,6 +15,12 @@ from typing import Any
 import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.common.stats import (
+    bootstrap_mean_interval,
+    cvar,
+    wilson_interval,
+    worst_missions,
+)
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
@@ -22,12 +28,6 @@ from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
-from tssac_core.stats import (
-    bootstrap_mean_interval,
-    cvar,
-    wilson_interval,
-    worst_missions,
-)
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions a summary lists."""
@@ -70,7 +70,7 @@ class MissionResults:
     def summary(self, cost_limit: float) -> dict[str, Any]:
         """The JSON figures: ``success_rate`` with its 95% Wilson interval, ``mean_cost`` (per UAV per episode) with
         its 95% bootstrap interval over missions, ``episodes``, per role the tail (within C, worst, CVaR_0.95), and
-        the costliest UAV-missions (:mod:`tssac_core.stats`)."""
+        the costliest UAV-missions (:mod:`tssac_core.common.stats`)."""
         per_role = {}
         for j, role in enumerate(ROLES):
             per_role[role.value] = {
@@ -151,8 +151,8 @@ def fly_missions(
 
     ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
     number of missions that finished since the last call, ``on_step`` after every step of the batch with the
-    missions that flew it and those still flying (:class:`tssac_core.progress.TimeLeft`). ``shield``: fly every
-    UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
+    missions that flew it and those still flying (:class:`tssac_core.reporting.progress.TimeLeft`). ``shield``: fly
+    every UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
     """
     missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step)
     try:

@@ -3,7 +3,7 @@
 :class:`RoleTask` runs N worlds for one learning role (decoy, detect or strike) with its teammates flown by
 given pilots (:mod:`tssac_core.sim.team`), resetting finished worlds itself. The training loop uses it directly;
 the gymnasium env and vector env (:mod:`tssac_core.sim.env`, :mod:`tssac_core.sim.vector_env`) and the OmniSafe
-adapter (:mod:`tssac_core.omnisafe_env`) are faces over it.
+adapter (:mod:`tssac_core.train.omnisafe_env`) are faces over it.
 """
 
 from __future__ import annotations

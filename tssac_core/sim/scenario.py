@@ -219,7 +219,7 @@ class Expect:
     max_mean_cost: float = 3.0
     """Maximum mean hazard cost per UAV per episode."""
     min_success_low95: float = 0.0
-    """The lower end of the success rate's 95% Wilson interval must reach this (tssac_core.stats)."""
+    """The lower end of the success rate's 95% Wilson interval must reach this (tssac_core.common.stats)."""
     max_cost_high95: float | None = None
     """The upper end of the mean cost's 95% bootstrap interval over missions must stay within this (None: no bound).
     Unlike the mean, it sees one costly mission among few: a single UAV 30 steps inside a radar in one of six

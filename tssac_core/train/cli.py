@@ -27,11 +27,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from tssac_core.cli import EXIT_INTERRUPTED, UsageError, run, write_json
-from tssac_core.ray_cluster import RayTarget
+from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import read_config
+from tssac_core.train.wall_time import Ended, record_invocation
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -88,10 +89,9 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
             train_role(cfg, scenario, role, out, resume, bar, on_epoch=sink.write if sink is not None else None)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
-    print(
-        f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {time.perf_counter() - start:.0f} s; "
-        f"results in {out}"
-    )
+    wall_s = time.perf_counter() - start
+    record_invocation(out, wall_s, Ended.FINISHED)
+    print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {wall_s:.0f} s; results in {out}")
     return 0
 
 

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import export_actor
 from tssac_core.deploy.manifest import record
 from tssac_core.deploy.policy import Policy, read_checkpoint
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import RoleTask, TaskStep
 from tssac_core.sim.hard_layouts import HardLayouts
 from tssac_core.sim.observation import ObservationMode

@@ -52,8 +52,8 @@ from tssac_core.algos.onpolicy.ppo import (
 )
 from tssac_core.algos.replay import ReplayBuffer
 from tssac_core.algos.sac_lagrangian import SacLagrangian, transfer
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.env import TaskStep
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario
@@ -86,8 +86,7 @@ class OffPolicyLearner:
         self.rng = np.random.default_rng([cfg.seed, role.index])
         self.transferred = False
         self.recent_costs: deque[float] = collections.deque(maxlen=self.sac_cfg.cost_window)
-        """The learner's costs of the last finished episodes (the multiplier's measurement with
-        multiplier_signal "episode_cost")."""
+        """The learner's costs of the last finished episodes (a measurement the multiplier's signal may be)."""
 
     def start(self, source: Path | None) -> None:
         """A fresh role: TSSAC's transfer, or --init-from (fine-tuning)."""
@@ -131,23 +130,16 @@ class OffPolicyLearner:
             return 0
         due = env_steps // self.cfg.update_every - updates
         sac_cfg, learner = self.sac_cfg, self.learner
+        window = learner.signal.recent_window  # transitions drawn for the signal only when it is Q^c on them
         for _ in range(due):
             batch = self.buffer.sample(sac_cfg.batch_size, self.rng)
-            window = sac_cfg.multiplier_window if sac_cfg.multiplier_signal == "q_c" else None
-            recent = (
-                self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng)
-                if window and learner.uses_multiplier
-                else None
-            )
+            recent = self.buffer.sample_recent(sac_cfg.batch_size, window, self.rng) if window is not None else None
             log.stats.append(learner.update(batch, recent, self.episode_cost()))
         log.update_time += time.perf_counter() - t1
         return max(due, 0)
 
-    def episode_cost(self) -> float | None:
-        """Multiplier_signal "episode_cost": the mean learner cost of the recent finished episodes (0
-        before the first ends); None otherwise (the learner measures Q^c)."""
-        if not self.learner.uses_multiplier or self.sac_cfg.multiplier_signal != "episode_cost":
-            return None
+    def episode_cost(self) -> float:
+        """The mean learner cost of the recent finished episodes (0 before the first ends)."""
         return float(np.mean(self.recent_costs)) if self.recent_costs else 0.0
 
     def end_epoch(self, log: EpochLog) -> tuple[int, dict[str, float]]:

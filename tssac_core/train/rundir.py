@@ -3,9 +3,10 @@
 Output in ``--out``: ``config.json``, ``metrics.csv`` (one row per role and epoch), one checkpoint per role
 (``decoy.pt``, ``detect.pt``, ``strike.pt``) and its exported actor (``<role>.npz``), ``SHA256SUMS`` (the
 SHA-256 of config.json and each finished role's two files, updated as each role ships: tssac_core.deploy.manifest),
-``fig7_return_cost.png`` and ``fig8_multiplier.png``, and ``resume/`` (the last completed epoch: learner,
-replay buffer, worlds and random states), from which ``--resume`` continues, losing at most the epoch that
-was running.
+``fig7_return_cost.png`` and ``fig8_multiplier.png``, ``wall_time.json`` (the wall time of each invocation that
+finished, or that the grid runner stopped: :mod:`tssac_core.train.wall_time`), and ``resume/`` (the last completed
+epoch: learner, replay buffer, worlds and random states), from which ``--resume`` continues, losing at most the
+epoch that was running.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import torch
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.sac_lagrangian import UpdateStats
 from tssac_core.cli import UsageError, write_json
+from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
 from tssac_core.deploy.numpy_actor import NumpyPolicy
 from tssac_core.deploy.policy import (
@@ -31,7 +33,6 @@ from tssac_core.deploy.policy import (
     read_checkpoint,
     save_role_checkpoint,
 )
-from tssac_core.errors import CheckpointError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario, load
 from tssac_core.train.config import (
@@ -224,7 +225,7 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
 
 
 def write_plots(out: Path, cost_limit: float) -> None:
-    from tssac_core.plots import plot_training
+    from tssac_core.reporting.plots import plot_training
 
     plot_training(out / "metrics.csv", out, cost_limit)
 

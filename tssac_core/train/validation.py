@@ -23,7 +23,7 @@ between selections. Ties go to the lower cost, then to the earlier epoch.
 Tail-aware selection (``tail=True``, TrainConfig.selection "tail"): a mean over a few dozen missions cannot see
 a failure that comes once in a hundred missions, so the best of 25 such epochs is often one that has them (the
 winner's curse; models/tssac/README.md). Each epoch is screened on its missions with the role's figures of
-:mod:`tssac_core.stats`: the upper end of the 95% bootstrap interval of its mean cost, the fraction of its
+:mod:`tssac_core.common.stats`: the upper end of the 95% bootstrap interval of its mean cost, the fraction of its
 UAV-missions within C, its CVaR_0.95 and worst cost. An epoch is *feasible* when that upper bound is within
 C and at least TAIL_WITHIN_FRACTION of its UAV-missions are; the key is (feasible, mission success if feasible,
 within-C fraction, -upper bound, epoch): a tie goes to the later epoch, the one trained longer. The best
@@ -45,13 +45,13 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.common.files import replace_durably
+from tssac_core.common.stats import bootstrap_mean_interval, cvar, within_fraction
 from tssac_core.deploy.policy import Policy, read_checkpoint
-from tssac_core.files import replace_durably
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, sample_layout
 from tssac_core.sim.team import GUIDANCE, Pilot
-from tssac_core.stats import bootstrap_mean_interval, cvar, within_fraction
 
 logger = logging.getLogger(__name__)
 

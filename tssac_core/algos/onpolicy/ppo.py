@@ -31,9 +31,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, SignalRule, choose_signal
 from tssac_core.algos.networks import SquashedGaussianActor, mlp, tanh_log_abs_det_jacobian
 from tssac_core.algos.onpolicy.config import OnPolicyAlgo, OnPolicyConfig
+from tssac_core.algos.sac_config import MultiplierSignal
 
 logger = logging.getLogger(__name__)
 
@@ -268,6 +269,8 @@ class Ppo:
             lr=config.beta_lr,
             upper=config.multiplier_max,
         )
+        # The on-policy rollout measures episode costs: lambda compares their mean with C itself (scale 1).
+        self.signal: SignalRule = choose_signal(MultiplierSignal.EPISODE_COST, self.uses_multiplier)
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, deterministic: bool) -> np.ndarray:
@@ -284,7 +287,7 @@ class Ppo:
         """
         cfg = self.config
         if self.uses_multiplier:
-            multiplier_loss = self.multiplier.update(float(episode_cost)).item()
+            multiplier_loss = self.multiplier.update(self.signal.measured(float(episode_cost))).item()
             multiplier = self.multiplier.beta.item()
         else:
             multiplier_loss = multiplier = math.nan

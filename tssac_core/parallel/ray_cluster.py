@@ -25,7 +25,7 @@ from typing import Any
 
 from tssac_core.cli import UsageError
 
-PROJECT_ROOT = Path(__file__).resolve().parent.parent
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 """The checkout whose tssac_core, sim_vehicles and mavlink_bridge the workers import."""
 OBJECT_STORE_BYTES = 128 * 2**20
 """The local Ray's shared-memory object store: mission results and small arguments only."""

@@ -16,8 +16,8 @@ from collections.abc import Callable, Generator, Sequence
 import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.ray_cluster import RayTarget
-from tssac_core.ray_map import map_on_ray
+from tssac_core.parallel.ray_cluster import RayTarget
+from tssac_core.parallel.ray_map import map_on_ray
 from tssac_core.sim.missions import MissionResults, iter_missions
 from tssac_core.sim.scenario import Scenario
 from tssac_core.sim.team import Pilot

@@ -24,7 +24,7 @@ from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from tssac_core.ray_cluster import RayTarget, ray_session
+from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 
 T = TypeVar("T")
 R = TypeVar("R")

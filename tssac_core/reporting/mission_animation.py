@@ -1,7 +1,7 @@
 """``fly --animate FILE.gif|mp4``: one mission as a film, for people who would rather watch than read.
 
-The map of :func:`tssac_core.plots.draw_layout` (radar coverage, the SAM's rings, the target; the legend in plain
-words), then frame by frame: each UAV's track so far and its position, the stretches flown under the
+The map of :func:`tssac_core.reporting.plots.draw_layout` (radar coverage, the SAM's rings, the target; the legend in
+plain words), then frame by frame: each UAV's track so far and its position, the stretches flown under the
 runtime-assurance monitor's backup as they are flown, the mission events (radar on, identified, hit, hazard,
 left area) from the moment they happen, and the mission clock. A GIF is written with Pillow (matplotlib's
 ``PillowWriter``); an MP4 needs ffmpeg on PATH (``FFMpegWriter``), which the command checks before flying.
@@ -73,7 +73,11 @@ def write_film(film: MissionFilm, path: Path) -> Path:
     import matplotlib.pyplot as plt  # matplotlib here: the command checks the file name without it
     from matplotlib import animation
 
-    from tssac_core.plots import LEGEND_BESIDE, ROLE_COLOURS, draw_layout  # Agg backend (tssac_core.plots)
+    from tssac_core.reporting.plots import (  # Agg backend (tssac_core.reporting.plots)
+        LEGEND_BESIDE,
+        ROLE_COLOURS,
+        draw_layout,
+    )
 
     steps = max((len(t) for t in film.tracks_km.values()), default=0)
     fig, ax = plt.subplots(figsize=(9.8, 6.5))
