@@ -10,7 +10,7 @@ protocol is described in ``docs/mavlink.md``. Modules, one job each:
 * :mod:`~sim_vehicles.params` — the parameter table;
 * :mod:`~sim_vehicles.mavlink_io` — the UDP endpoint around pymavlink (framing, signing checks, peers);
 * :mod:`~sim_vehicles.signing` — signing keys and replay detection;
-* :mod:`~sim_vehicles.link` — GPS and datalink models;
+* :mod:`~sim_vehicles.link_model` — GPS and datalink models;
 * :mod:`~sim_vehicles.events` — mission events and their NAMED_VALUE_INT names;
 * :mod:`~sim_vehicles.truth_log` — the JSON Lines truth log;
 * :mod:`~tssac_core.deploy.geodetic` — frames and the flat-earth conversion.

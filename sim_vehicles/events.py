@@ -101,7 +101,7 @@ class MissionEvent:
 
 
 @dataclass
-class MissionFlags:
+class WorldFlags:
     """The mission state every vehicle re-announces at 1 Hz."""
 
     radar_on: bool = False

@@ -19,7 +19,7 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles.link import GpsFix
+from sim_vehicles.link_model import GpsFix
 from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from tssac_core.sim.scenario import Origin
 

@@ -1,8 +1,8 @@
 """One SITL vehicle's state: an autopilot around one UAV of the world.
 
 The vehicle owns its :class:`~sim_vehicles.mavlink_io.MavEndpoint` (socket, framing, signing), two
-:class:`~sim_vehicles.link.LinkChannel` (datalink out and in) and a
-:class:`~sim_vehicles.link.GpsReceiver`. It never moves itself: the runner
+:class:`~sim_vehicles.link_model.LinkChannel` (datalink out and in) and a
+:class:`~sim_vehicles.link_model.GpsReceiver`. It never moves itself: the runner
 (:mod:`sim_vehicles.world_runner`) asks it for its action (:meth:`Vehicle.action`), steps the world,
 hands it the new true state (:meth:`Vehicle.observe`) and lets it publish (:meth:`Vehicle.publish`).
 
@@ -17,7 +17,7 @@ which imports this module and not the other way round; it changes this state onl
 * Setpoints (:mod:`sim_vehicles.setpoints`): the companion's acceleration + yaw rate, MAVSDK's
   forward speed + yaw rate, or SET_ATTITUDE_TARGET's thrust + yaw rate; obeyed only armed in
   GUIDED. The world's action is (omega / turn_rate_max, u / accel_max) in [-1, 1], omega = -yaw_rate.
-* Setpoint-timeout failsafe: armed in GUIDED with no setpoint for ``GUID_TIMEOUT`` simulated seconds,
+* FlownSetpoint-timeout failsafe: armed in GUIDED with no setpoint for ``GUID_TIMEOUT`` simulated seconds,
   hold heading and speed (STATUSTEXT, ``system_status`` CRITICAL) until the next setpoint.
 * Datalink failsafe (ArduPlane's ``FS_GCS_ENABL``, ``FS_LONG_TIMEOUT``, ``FS_LONG_ACTN``): armed, with
   the failsafe enabled, and no valid message from any client for ``FS_LONG_TIMEOUT`` wall seconds
@@ -37,8 +37,8 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import navigation, telemetry
-from sim_vehicles.events import EventKind, MissionEvent, MissionFlags
-from sim_vehicles.link import GpsFix, GpsReceiver, LinkChannel
+from sim_vehicles.events import EventKind, MissionEvent, WorldFlags
+from sim_vehicles.link_model import GpsFix, GpsReceiver, LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
 from sim_vehicles.modes import AUTONOMOUS, FlightMode
 from sim_vehicles.params import ParamTable, vehicle_params
@@ -89,7 +89,7 @@ class Clock:
     sim_s: float = 0.0
     """Simulated time (s since boot)."""
     link_s: float = 0.0
-    """The link models' clock (see :mod:`sim_vehicles.link`)."""
+    """The link models' clock (see :mod:`sim_vehicles.link_model`)."""
     wall_s: float = 0.0
     """time.monotonic() of the current loop iteration."""
     unix_start_s: float = 0.0
@@ -123,7 +123,7 @@ class VehicleSetup:
 
 
 @dataclass(frozen=True)
-class Setpoint:
+class FlownSetpoint:
     """The setpoint being flown."""
 
     demand: Demand
@@ -228,7 +228,7 @@ class Vehicle:
         setup: VehicleSetup,
         endpoint: MavEndpoint,
         clock: Clock,
-        flags: MissionFlags,
+        flags: WorldFlags,
         rngs: VehicleRngs,
         tlog: BinaryIO | None = None,
         on_event: EventSink | None = None,
@@ -264,7 +264,7 @@ class Vehicle:
         self.mode = FlightMode.MANUAL
         self.failsafe = False
         self.fence_breached = False
-        self.setpoint: Setpoint | None = None
+        self.setpoint: FlownSetpoint | None = None
         self._guided_from: tuple[FlightMode, float] | None = None
         """(the mode before GUIDED, wall time of the switch) while in GUIDED: a refused goto undoes the switch."""
         self.last_setpoint_s = 0.0
@@ -714,7 +714,7 @@ class Vehicle:
             self.refuse("ignored", "SP ignored: arm and set GUIDED (15) first")
             return False
         now = self.clock.sim_s
-        self.setpoint = Setpoint(demand, now)
+        self.setpoint = FlownSetpoint(demand, now)
         self.last_setpoint_s = now
         self.counters.setpoints_accepted += 1
         if self.failsafe:

@@ -64,7 +64,7 @@ import numpy as np
 
 from sim_vehicles.commands import CommandHandler
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
-from sim_vehicles.events import EventKind, MissionEnd, MissionFlags, events_from_step
+from sim_vehicles.events import EventKind, MissionEnd, WorldFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
@@ -199,7 +199,7 @@ class WorldRunner:
         self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
-        self.flags = MissionFlags()
+        self.flags = WorldFlags()
         self.clock = Clock(unix_start_s=time.time(), lockstep=self.lockstep)
         self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
         self._paced = not self.lockstep

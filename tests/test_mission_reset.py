@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 from mavlink_bridge.fly.config import config_from_args
-from mavlink_bridge.fly.missions import MissionRunner
+from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.deploy.mission_reset import MissionInput, NextMission, ResetError
 from tssac_core.deploy.truth_log_schema import HEADER, STEP, SUMMARY

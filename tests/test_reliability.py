@@ -23,11 +23,11 @@ import pytest
 from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, sitl, wait_until
 from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
-from mavlink_bridge.fly.missions import child_failure
+from mavlink_bridge.fly.mission_runner import child_failure
 from mavlink_bridge.link import MavLink
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
-from sim_vehicles.link import LinkChannel, keyed_uniforms
+from sim_vehicles.link_model import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
 from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, companion_link_id, now_10us
 from tssac_core.deploy.truth_log_schema import read_truth_log

@@ -24,7 +24,7 @@ from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink
 
 from sim_vehicles.__main__ import main
 from sim_vehicles.config import SitlConfig
-from sim_vehicles.link import GpsReceiver, LinkChannel
+from sim_vehicles.link_model import GpsReceiver, LinkChannel
 from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import WorldRunner
 from tssac_core.deploy.geodetic import (

@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
-from mavlink_bridge.fly.missions import ChildFailed, MissionRunner
+from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
 from mavlink_bridge.fly.workers import fly_on_workers

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
-from mavlink_bridge.fly.missions import MissionRunner
+from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import map_on_ray

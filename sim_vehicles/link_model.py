@@ -103,7 +103,7 @@ class GpsReceiver:
 
 
 @dataclass
-class LinkCounters:
+class LinkModelCounters:
     """What a channel did to the datagrams pushed into it."""
 
     pushed: int = 0
@@ -135,7 +135,7 @@ class LinkChannel(Generic[D]):
         self._heap: list[_Queued[D]] = []
         self._seq = itertools.count()
         self._held: tuple[_Queued[D], float] | None = None  # (datagram, hold deadline)
-        self.counters = LinkCounters()
+        self.counters = LinkModelCounters()
 
     @property
     def ideal(self) -> bool:
