@@ -199,6 +199,9 @@ DANGEROUS_ON = {Adversary.TURN_LEFT: "corner", Adversary.TURN_RIGHT: "corner"}
 """Where each adversary meets a radar or an edge within 150 s without the monitor (random.yaml for the others):
 from random.yaml's starts a full turn's 6.9 km circle reaches neither."""
 
+# One test process runs this file: its module fixture is built once.
+pytestmark = pytest.mark.xdist_group("test_adversaries")
+
 
 @pytest.mark.parametrize("adversary", list(Adversary), ids=str)
 def test_without_the_monitor_every_adversary_enters_radars_or_leaves(adversary, layout_sets):

@@ -36,6 +36,9 @@ from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
 
+# One test process runs this file: its module fixture is built once.
+pytestmark = pytest.mark.xdist_group("test_bridge")
+
 M = mavlink2
 GUIDED = 15
 

@@ -48,6 +48,10 @@ from tssac_core.train.wall_time import (
     training_wall_s,
 )
 
+# One test process runs this file and tests/test_ray.py: the smoke grid (a module fixture) is trained once, and
+# one Ray at a time starts on this machine.
+pytestmark = pytest.mark.xdist_group("ray")
+
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
 

@@ -35,7 +35,9 @@ from tssac_core.train.wall_time import Ended, read_invocations
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "experiments" / "smoke.yaml"
 RAY = RayTarget()
-pytestmark = pytest.mark.timeout(900)  # the first test waits for the Ray start: seconds (minutes on a loaded machine)
+# The first test waits for the Ray start: seconds (minutes on a loaded machine). One Ray at a time on this machine:
+# the tests that start one run in the same xdist worker.
+pytestmark = [pytest.mark.timeout(900), pytest.mark.xdist_group("ray")]
 
 
 @pytest.fixture(scope="module")

@@ -15,6 +15,9 @@ from tssac_core.cli import run
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.train.cli import main
 
+# One test process runs this file: its module fixture is built once.
+pytestmark = pytest.mark.xdist_group("test_resume")
+
 TINY = [*tiny_args(epochs=None, validation=2), "--seed", "2", "--action-repeat", "10"]
 
 

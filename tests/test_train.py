@@ -22,6 +22,9 @@ from tssac_core.deploy.policy import CheckpointError, Policy, load_team
 from tssac_core.sim.scenario import Role
 from tssac_core.train.cli import main
 
+# One test process runs this file: its module fixture is built once.
+pytestmark = pytest.mark.xdist_group("test_train")
+
 TINY = [
     "--epochs",
     "2",
