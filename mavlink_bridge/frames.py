@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from tssac_core.deploy.geodetic import geodetic_to_local
 from tssac_core.sim.scenario import Origin, VehicleSpec
+from tssac_core.wire.geodetic import geodetic_to_local
 
 
 @dataclass(frozen=True)

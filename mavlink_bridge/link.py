@@ -14,13 +14,13 @@ Connection strings follow pymavlink / MAVProxy:
 * ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer the vehicle (below).
 
 Receiving keeps UDP's datagram boundaries: every datagram is split into frames on its own, by the scanner
-the SITL vehicles use (:mod:`tssac_core.deploy.mavlink_framing`), so a truncated frame never swallows the
+the SITL vehicles use (:mod:`tssac_core.wire.framing`), so a truncated frame never swallows the
 start of the next datagram, a valid frame behind a garbage header is still found, and frames of message ids
 the dialect does not know are dropped. Only the vehicle is heard: with ``udpout`` a datagram
 from any address but the vehicle's is dropped unread (counted in ``foreign_rx``); with ``udpin`` the
 first sender of an accepted message is the vehicle (with signing, the sender of the latest correctly
 signed one). With signing, every frame is verified by
-:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier` — signature first, then the stream's
+:class:`tssac_core.wire.signing.SignatureVerifier` — signature first, then the stream's
 timestamp — before it is believed; pymavlink only decodes (its own check records a forged frame's
 timestamp before it compares the signature, and one far-future forgery would lock the vehicle's stream
 out). So mission events (NAMED_VALUE_INT ``MSN_END``, ``HIT``) are as authenticated as everything else. Messages that
@@ -51,8 +51,8 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.mavlink_framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
+from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
+from tssac_core.wire.signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
     "CommandError",
@@ -73,7 +73,7 @@ M = mavlink2
 MAX_DATAGRAM = 65535
 _TLOG_FLUSH_S = 1.0
 DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, crc16_mcrf4xx)
-"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
+"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.wire.framing.scan_frames`."""
 
 SETPOINT_TYPE_MASK = (
     M.POSITION_TARGET_TYPEMASK_X_IGNORE
@@ -249,7 +249,7 @@ class MavLink:
         return self.mav.signing.secret_key is not None
 
     def new_mission(self, tlog_path: Path | None) -> None:
-        """Start afresh on the same socket after a mission reset (:mod:`tssac_core.deploy.mission_reset`): drop
+        """Start afresh on the same socket after a mission reset (:mod:`tssac_core.wire.mission_reset`): drop
         what is queued or waiting in the socket (all of it from the previous mission: a reset vehicle is silent
         until it hears from us), learn the vehicle again from its next heartbeat, count from 0, and write the
         mission's own tlog. The signing state is kept: our timestamps only grow."""
@@ -352,7 +352,7 @@ class MavLink:
     def _parse_datagram(self, data: bytes) -> list[Message]:
         """The accepted messages of one datagram (with signing: correctly signed and fresh).
 
-        Framed by the SITL's scanner (:func:`tssac_core.deploy.mavlink_framing.scan_frames`): a valid frame
+        Framed by the SITL's scanner (:func:`tssac_core.wire.framing.scan_frames`): a valid frame
         behind a garbage header is found, frames of unknown message ids are dropped (never handed on as
         pymavlink's ``UNKNOWN_*``), a frame cut off by the end of the datagram is dropped.
         """

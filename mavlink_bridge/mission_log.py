@@ -1,6 +1,6 @@
 """Reading a SITL world's truth log (JSON Lines) into a mission's outcome, tracks and event markers.
 
-The format is :mod:`tssac_core.deploy.truth_log_schema` (the bundled SITL writes it; it is read here
+The format is :mod:`tssac_core.wire.truth_log_schema` (the bundled SITL writes it; it is read here
 without importing the SITL): a
 ``header`` line (scenario, seed, the layout flown, ...), one ``step`` line per world step (true
 states per role: ``x_m``, ``y_m``, ``cost``, ``cost_total``, ``failsafe`` ...), ``event`` lines
@@ -17,7 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from mavlink_bridge.companion_shield import ENGAGED_TEXT, RELEASED_TEXT
-from tssac_core.deploy.truth_log_schema import (
+from tssac_core.sim.scenario import ROLES
+from tssac_core.wire.mission_events import EventName
+from tssac_core.wire.truth_log_schema import (
     EVENT,
     FLAGS,
     HEADER,
@@ -26,12 +28,17 @@ from tssac_core.deploy.truth_log_schema import (
     SUMMARY,
     VEHICLES_KEY,
 )
-from tssac_core.sim.scenario import ROLES
 
-TASK_EVENTS = {"decoy": ("RADAR_ON", 1), "detect": ("IDENT", 1), "strike": ("HIT", 1)}
+TASK_EVENTS = {"decoy": (EventName.RADAR_ON, 1), "detect": (EventName.IDENT, 1), "strike": (EventName.HIT, 1)}
 """The event that completes each role's task (eq. 9)."""
-EVENT_LABELS = {"RADAR_ON": "radar on", "IDENT": "identified", "HIT": "hit", "HAZARD": "hazard", "FENCE": "left area"}
-_EVENT_VEHICLE = {"RADAR_ON": "decoy", "IDENT": "detect", "HIT": "strike"}
+EVENT_LABELS = {
+    EventName.RADAR_ON: "radar on",
+    EventName.IDENT: "identified",
+    EventName.HIT: "hit",
+    EventName.HAZARD: "hazard",
+    EventName.FENCE: "left area",
+}
+_EVENT_VEHICLE = {EventName.RADAR_ON: "decoy", EventName.IDENT: "detect", EventName.HIT: "strike"}
 
 
 class TruthLogError(ValueError):
@@ -127,16 +134,18 @@ class MissionRecord:
         """(track index, label, x_km, y_km) of the mission events: ``event_markers_km`` with when they happened."""
         out = []
         for e in self.events:
-            name = e.get("event")
-            if name not in EVENT_LABELS or e.get("value") == 0 and name == "RADAR_ON":
+            if e.get("event") not in set(EventName):
                 continue
-            role = e.get("vehicle") or _EVENT_VEHICLE.get(str(name))
+            name = EventName(e["event"])
+            if name not in EVENT_LABELS or e.get("value") == 0 and name == EventName.RADAR_ON:
+                continue
+            role = e.get("vehicle") or _EVENT_VEHICLE.get(name)
             track = self.tracks_m.get(str(role))
             if not track:
                 continue
             k = min(max(int(e.get("step", 0)) - 1, 0), len(track) - 1)
             x, y = track[k]
-            label = EVENT_LABELS[str(name)] + (f" ({role})" if name in ("HAZARD", "FENCE") else "")
+            label = EVENT_LABELS[name] + (f" ({role})" if name in (EventName.HAZARD, EventName.FENCE) else "")
             out.append((k, label, x / 1000.0, y / 1000.0))
         return out
 

@@ -13,7 +13,7 @@ protocol is described in ``docs/mavlink.md``. Modules, one job each:
 * :mod:`~sim_vehicles.link_model` — GPS and datalink models;
 * :mod:`~sim_vehicles.events` — mission events and their NAMED_VALUE_INT names;
 * :mod:`~sim_vehicles.truth_log` — the JSON Lines truth log;
-* :mod:`~tssac_core.deploy.geodetic` — frames and the flat-earth conversion.
+* :mod:`~tssac_core.wire.geodetic` — frames and the flat-earth conversion.
 """
 
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig

@@ -9,7 +9,7 @@ Prints one line per vehicle with the connection string a client uses, then a rea
 
 and, when the run ends, one ``end ...`` line (reason, success, steps, simulated time, cost per role).
 With ``--serve`` the process then reads the next mission from standard input and flies it on the same ports
-(the mission-reset protocol, :mod:`tssac_core.deploy.mission_reset`): a ``ready mission=N ...`` line, the
+(the mission-reset protocol, :mod:`tssac_core.wire.mission_reset`): a ``ready mission=N ...`` line, the
 mission, its ``end ...`` line, and so on until ``{"quit": true}`` or the end of the input.
 Exit status: 0 when the mission ended or the run was stopped (SIGINT / SIGTERM); 2 on bad input
 (scenario, key file, port in use, options), with one line on stderr; 1 on an unexpected failure.
@@ -32,8 +32,8 @@ from typing import NoReturn
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
-from tssac_core.deploy.mission_reset import MissionInput, ResetError, redirect_stderr
 from tssac_core.sim.scenario import ScenarioError, load
+from tssac_core.wire.mission_reset import MissionInput, ResetError, redirect_stderr
 
 PROG = "python -m sim_vehicles"
 

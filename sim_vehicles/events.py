@@ -29,28 +29,28 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import StepResult
+from tssac_core.wire.mission_events import (
+    HIT_TEXT,
+    IDENTIFIED_TEXT,
+    RADAR_TEXTS,
+    EventName,
+    MissionEnd,
+    mission_end_text,
+)
 
 
 class EventKind(enum.Enum):
-    RADAR = "RADAR_ON"
-    IDENTIFIED = "IDENT"
-    HIT = "HIT"
-    HAZARD = "HAZARD"
-    GEOFENCE = "FENCE"
-    MISSION_END = "MSN_END"
+    RADAR = EventName.RADAR_ON
+    IDENTIFIED = EventName.IDENT
+    HIT = EventName.HIT
+    HAZARD = EventName.HAZARD
+    GEOFENCE = EventName.FENCE
+    MISSION_END = EventName.MSN_END
 
     @property
     def value_name(self) -> str:
         """The NAMED_VALUE_INT name (at most 10 characters)."""
-        return self.value
-
-
-class MissionEnd(enum.IntEnum):
-    """MSN_END values."""
-
-    SUCCESS = 1
-    GEOFENCE = 2
-    EPISODE_CAP = 3
+        return str(self.value)
 
 
 @dataclass(frozen=True)
@@ -72,21 +72,16 @@ class MissionEvent:
         """(MAV_SEVERITY, text) of the STATUSTEXT announcing it."""
         k, v = self.kind, self.value
         if k is EventKind.RADAR:
-            return mavlink2.MAV_SEVERITY_WARNING, "SAM radar ON" if v else "SAM radar OFF"
+            return mavlink2.MAV_SEVERITY_WARNING, RADAR_TEXTS[bool(v)]
         if k is EventKind.IDENTIFIED:
-            return mavlink2.MAV_SEVERITY_NOTICE, "Target identified"
+            return mavlink2.MAV_SEVERITY_NOTICE, IDENTIFIED_TEXT
         if k is EventKind.HIT:
-            return mavlink2.MAV_SEVERITY_NOTICE, "Target hit"
+            return mavlink2.MAV_SEVERITY_NOTICE, HIT_TEXT
         if k is EventKind.HAZARD:
             return mavlink2.MAV_SEVERITY_WARNING, f"Hazard: {ROLES[v].value} entered radar range"
         if k is EventKind.GEOFENCE:
             return mavlink2.MAV_SEVERITY_CRITICAL, f"Geofence: {ROLES[v].value} left the area"
-        text = {
-            MissionEnd.SUCCESS: "success",
-            MissionEnd.GEOFENCE: "geofence breach",
-            MissionEnd.EPISODE_CAP: "episode cap",
-        }
-        return mavlink2.MAV_SEVERITY_NOTICE, f"Mission end: {text.get(MissionEnd(v), str(v))}"
+        return mavlink2.MAV_SEVERITY_NOTICE, mission_end_text(MissionEnd(v))
 
     def as_dict(self) -> dict[str, object]:
         role = ROLES[self.vehicle].value if self.vehicle is not None else None
@@ -94,7 +89,7 @@ class MissionEvent:
             "type": "event",
             "step": self.step,
             "t_s": round(self.time_s, 6),
-            "event": self.kind.value,
+            "event": str(self.kind.value),
             "value": self.value,
             "vehicle": role,
         }
@@ -111,12 +106,12 @@ class WorldFlags:
 
     def named_values(self) -> list[tuple[str, int]]:
         out = [
-            (EventKind.RADAR.value, int(self.radar_on)),
-            (EventKind.IDENTIFIED.value, int(self.identified)),
-            (EventKind.HIT.value, int(self.hit)),
+            (str(EventName.RADAR_ON), int(self.radar_on)),
+            (str(EventName.IDENT), int(self.identified)),
+            (str(EventName.HIT), int(self.hit)),
         ]
         if self.end is not None:
-            out.append((EventKind.MISSION_END.value, int(self.end)))
+            out.append((str(EventName.MSN_END), int(self.end)))
         return out
 
 

@@ -9,10 +9,10 @@ vehicle sends, one without a key that only decodes frames already checked here. 
 frame must not swallow the next datagram), a bind that fails when the port is taken (``mavudp`` sets
 SO_REUSEADDR), and socket errors counted rather than swallowed.
 
-Every datagram is split into frames by :func:`tssac_core.deploy.mavlink_framing.scan_frames` (the companion's
+Every datagram is split into frames by :func:`tssac_core.wire.framing.scan_frames` (the companion's
 link uses the same scanner); a frame is decoded only if its CRC (with the message's CRC_EXTRA) matches and,
 with signing, its signature verifies
-(:class:`tssac_core.deploy.mavlink_signing.SignatureVerifier`:
+(:class:`tssac_core.wire.signing.SignatureVerifier`:
 signature first, then the stream's timestamp — pymavlink's own check records the timestamp first).
 Garbage bytes, truncated frames, bad CRCs, unknown message ids, unsigned, wrongly signed and replayed
 messages are dropped and counted in :class:`RxCounters`; a header that does not check out (unknown id,
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles import signing
-from tssac_core.deploy.mavlink_framing import (
+from tssac_core.wire.framing import (
     Dialect,
     FrameDecoder,
     FramePacker,
@@ -51,7 +51,7 @@ from tssac_core.deploy.mavlink_framing import (
     scan_frames,
     source,
 )
-from tssac_core.deploy.mavlink_signing import (
+from tssac_core.wire.signing import (
     COMPANION_LINK_BASE,
     SIGNATURE_BLOCK_LEN,
     SignatureVerifier,
@@ -76,7 +76,7 @@ MAX_MONITORS = 4
 MONITOR_BYTES_PER_S = 2000
 """Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
 DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, crc16_mcrf4xx)
-"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.deploy.mavlink_framing.scan_frames`."""
+"""ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.wire.framing.scan_frames`."""
 
 
 class Sender(enum.Enum):

@@ -8,7 +8,7 @@ makes a file that matches it.
 
 With a key the vehicle signs everything it sends (:func:`enable_signing`: the same
 :class:`MAVLinkSigning` fields ``mavfile.setup_signing`` sets, link id 0) and accepts only correctly
-signed, fresh messages, checked by :class:`tssac_core.deploy.mavlink_signing.SignatureVerifier` in
+signed, fresh messages, checked by :class:`tssac_core.wire.signing.SignatureVerifier` in
 :mod:`sim_vehicles.mavlink_io` (signature first, then the timestamp). Unsigned HEARTBEAT and
 RADIO_STATUS (:data:`MONITOR_IDS`) are accepted only from passive monitors and only when the run allows
 them (``--unsigned-monitors``); rejections are counted by kind in :class:`sim_vehicles.mavlink_io.RxCounters`.
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.deploy.mavlink_signing import KEY_LEN, now_10us
+from tssac_core.wire.signing import KEY_LEN, now_10us
 
 MONITOR_IDS = frozenset({mavlink2.MAVLINK_MSG_ID_HEARTBEAT, mavlink2.MAVLINK_MSG_ID_RADIO_STATUS})
 """Message ids a passive monitor may send unsigned while signing is on (when the run allows monitors)."""

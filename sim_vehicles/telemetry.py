@@ -20,8 +20,8 @@ from typing import TypeAlias
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles.link_model import GpsFix
-from tssac_core.deploy.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 from tssac_core.sim.scenario import Origin
+from tssac_core.wire.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 
 _log = logging.getLogger(__name__)
 

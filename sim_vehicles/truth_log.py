@@ -1,6 +1,6 @@
 """The truth log's writer: JSON Lines, one object per line, written as the mission runs.
 
-The format (line types, fields, units) is :mod:`tssac_core.deploy.truth_log_schema`.
+The format (line types, fields, units) is :mod:`tssac_core.wire.truth_log_schema`.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import logging
 from pathlib import Path
 from typing import IO, Any
 
-from tssac_core.deploy.truth_log_schema import HEADER, SUMMARY, VehicleRow, encode, encode_step
+from tssac_core.wire.truth_log_schema import HEADER, SUMMARY, VehicleRow, encode, encode_step
 
 _log = logging.getLogger(__name__)
 

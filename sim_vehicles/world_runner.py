@@ -64,15 +64,16 @@ import numpy as np
 
 from sim_vehicles.commands import CommandHandler
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
-from sim_vehicles.events import EventKind, MissionEnd, WorldFlags, events_from_step
+from sim_vehicles.events import EventKind, WorldFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
-from tssac_core.deploy.mavlink_signing import StreamKey
-from tssac_core.deploy.truth_log_schema import VehicleRow
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
+from tssac_core.wire.mission_events import MissionEnd
+from tssac_core.wire.signing import StreamKey
+from tssac_core.wire.truth_log_schema import VehicleRow
 
 _log = logging.getLogger(__name__)
 
@@ -177,7 +178,7 @@ class WorldRunner:
 
     def next_mission(self, scenario: Scenario, seed: int, truth_log: Path | None, tlog_dir: Path | None) -> None:
         """Reset for another mission, as an autopilot reboots: a new layout, world, clock and vehicles on the same
-        sockets, which forget their clients (see :mod:`tssac_core.deploy.mission_reset`). The last mission must have
+        sockets, which forget their clients (see :mod:`tssac_core.wire.mission_reset`). The last mission must have
         ended (:meth:`run_mission` returned)."""
         if self._closed:
             raise SitlError("the world is closed")
@@ -549,12 +550,7 @@ class WorldRunner:
 
     def _finish(self) -> None:
         w = self.world
-        end = {
-            MissionEnd.SUCCESS: "success",
-            MissionEnd.GEOFENCE: "geofence",
-            MissionEnd.EPISODE_CAP: "episode_cap",
-            None: "stopped",
-        }[self._end]
+        end = "stopped" if self._end is None else self._end.status
         cost = {v.role: float(w.cost_total[0, v.index]) for v in self.vehicles}
         steps = int(w.steps[0])
         self.result = RunResult(

@@ -141,7 +141,7 @@ def test_the_monitor_sits_below_every_room():
 
 
 ROOMS = (
-    ("tssac_core.common", "tssac_core.assurance"),
+    ("tssac_core.common", "tssac_core.assurance", "tssac_core.wire"),
     ("tssac_core.sim",),
     ("tssac_core.algos",),
     ("tssac_core.cli",),
@@ -184,12 +184,29 @@ def test_rooms_import_downward_only():
     assert not offenders, offenders
 
 
-def test_the_common_room_imports_nothing_of_the_project():
+@pytest.mark.parametrize(("room", "also_forbidden"), [("common", ()), ("wire", ("pymavlink", "numpy", "torch"))])
+def test_the_bottom_rooms_import_nothing_of_the_project(room: str, also_forbidden: tuple[str, ...]):
+    """``common`` (files, errors, stats) and ``wire`` (what the SITL and the bridge both speak) sit below every room:
+    the wire is standard library only, so both ends import it and neither parses frames itself."""
     offenders = sorted(
         f"{module_name(p)} imports {m}"
-        for p in (ROOT / "tssac_core" / "common").rglob("*.py")
+        for p in (ROOT / "tssac_core" / room).rglob("*.py")
         for m in imports_of(p)
-        if m.split(".")[0] in PACKAGES
+        if m.split(".")[0] in PACKAGES + also_forbidden
+    )
+    assert not offenders, offenders
+
+
+def test_no_frame_is_parsed_outside_the_wire():
+    """pymavlink's own parser (``parse_char``, ``parse_buffer``, ``decode``) is called nowhere: both ends split and
+    decode datagrams with the wire's scanner and decoder."""
+    offenders = sorted(
+        f"{module_name(p)}: {call}"
+        for pkg in PACKAGES
+        for p in (ROOT / pkg).rglob("*.py")
+        if not module_name(p).startswith("tssac_core.wire")
+        for call in ("parse_char(", "parse_buffer(", ".decode(bytearray")
+        if call in p.read_text()
     )
     assert not offenders, offenders
 

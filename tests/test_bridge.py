@@ -30,11 +30,11 @@ from sitl_helpers import EXACT_LINK, REPO, STRIKE, lockstep, mavlink2, mavutil, 
 from mavlink_bridge.companion import cli as companion_cli
 from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
-from tssac_core.deploy.geodetic import deg_e7, local_to_geodetic
-from tssac_core.deploy.mavlink_signing import now_10us
-from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
+from tssac_core.wire.geodetic import deg_e7, local_to_geodetic
+from tssac_core.wire.signing import now_10us
+from tssac_core.wire.truth_log_schema import read_truth_log
 
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_bridge")
@@ -675,7 +675,7 @@ def _random_fields(cls: type, rng: np.random.Generator) -> list[object]:
 @pytest.mark.parametrize("signed", [False, True])
 def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(signed: bool) -> None:
     from mavlink_bridge.link import DIALECT
-    from tssac_core.deploy.mavlink_framing import FramePacker, scan_frames
+    from tssac_core.wire.framing import FramePacker, scan_frames
 
     rng = np.random.default_rng(7)
     packer = FramePacker(DIALECT.crc16)
@@ -699,7 +699,7 @@ def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(si
 
 
 def test_crc16_is_mavlinks_x25_checksum_with_or_without_fastcrc() -> None:
-    from tssac_core.deploy.mavlink_framing import crc16_mcrf4xx, crc16_mcrf4xx_python
+    from tssac_core.wire.framing import crc16_mcrf4xx, crc16_mcrf4xx_python
 
     rng = np.random.default_rng(3)
     for n in (0, 1, 2, 9, 63, 280):
@@ -711,7 +711,7 @@ def test_crc16_is_mavlinks_x25_checksum_with_or_without_fastcrc() -> None:
 @pytest.mark.parametrize("signed", [False, True])
 def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect(signed: bool) -> None:
     from mavlink_bridge.link import DIALECT
-    from tssac_core.deploy.mavlink_framing import FrameDecoder, scan_frames
+    from tssac_core.wire.framing import FrameDecoder, scan_frames
 
     rng = np.random.default_rng(5)
     decoder = FrameDecoder(M.mavlink_map, M.MAVLink_header)

@@ -1,5 +1,5 @@
 """The mission-reset protocol: the world and the companions fly mission after mission in the same processes, with
-the same missions as processes started for each (tssac_core.deploy.mission_reset, fly's crew)."""
+the same missions as processes started for each (tssac_core.wire.mission_reset, fly's crew)."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ import pytest
 from mavlink_bridge.fly.config import config_from_args
 from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes import ChildProcesses
-from tssac_core.deploy.mission_reset import MissionInput, NextMission, ResetError
-from tssac_core.deploy.truth_log_schema import HEADER, STEP, SUMMARY
+from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError
+from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
 
 REPO = Path(__file__).resolve().parents[1]
 RANDOM = REPO / "scenarios" / "random.yaml"

@@ -29,9 +29,9 @@ from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
 from sim_vehicles.link_model import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
-from tssac_core.deploy.mavlink_signing import SignatureVerifier, Verdict, companion_link_id, now_10us
-from tssac_core.deploy.truth_log_schema import read_truth_log
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
+from tssac_core.wire.signing import SignatureVerifier, Verdict, companion_link_id, now_10us
+from tssac_core.wire.truth_log_schema import read_truth_log
 
 M = mavlink2
 KEY = bytes(range(32))

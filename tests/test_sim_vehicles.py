@@ -27,16 +27,16 @@ from sim_vehicles.config import SitlConfig
 from sim_vehicles.link_model import GpsReceiver, LinkChannel
 from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import WorldRunner
-from tssac_core.deploy.geodetic import (
+from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
+from tssac_core.sim.world import World
+from tssac_core.wire.geodetic import (
     geodetic_to_local,
     heading_cdeg,
     local_to_geodetic,
     phi_from_yaw_ned,
     yaw_ned_from_phi,
 )
-from tssac_core.deploy.truth_log_schema import read_truth_log
-from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
-from tssac_core.sim.world import World
+from tssac_core.wire.truth_log_schema import read_truth_log
 
 M = mavlink2
 
@@ -1048,7 +1048,7 @@ def test_cli_sigterm_stops_cleanly(tmp_path: Path) -> None:
 
 
 def test_truth_log_step_lines_are_the_bytes_json_dumps_writes() -> None:
-    from tssac_core.deploy.truth_log_schema import STEP, VEHICLES_KEY, VehicleRow, encode, encode_step
+    from tssac_core.wire.truth_log_schema import STEP, VEHICLES_KEY, VehicleRow, encode, encode_step
 
     rng = np.random.default_rng(11)
     odd = [0.0, -0.0, 1e-9, 123456789.123456789, math.nan, math.inf, -math.inf, 5e-324, 1e300]

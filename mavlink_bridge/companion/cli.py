@@ -20,8 +20,8 @@ from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
 from tssac_core.common.errors import CheckpointError
-from tssac_core.deploy.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
 from tssac_core.sim.scenario import Role, ScenarioError, load
+from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
 
 if TYPE_CHECKING:
     from mavlink_bridge.companion.machine import Companion
@@ -217,7 +217,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 link = open_link(config)
             result = companion.run(link)
             _print_end(result)
-            # --serve: mission after mission over the same link (tssac_core.deploy.mission_reset).
+            # --serve: mission after mission over the same link (tssac_core.wire.mission_reset).
             missions = MissionInput(0)  # standard input, read only by a serving companion
             while link is not None and result.exit_code == 0 and not stopped:
                 mission = missions.next(lambda: stopped)

@@ -23,7 +23,7 @@ from mavlink_bridge.companion.config import (
     CompanionConfig,
 )
 from mavlink_bridge.companion.pilots import DecisionClock, Pilot, make_pilot
-from mavlink_bridge.companion.status import END_STATUS, CompanionCounters, CompanionResult, MissionFlags
+from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
     HOLD,
@@ -37,8 +37,18 @@ from mavlink_bridge.frames import (
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
-from tssac_core.deploy.mavlink_signing import companion_link_id
 from tssac_core.sim.world import World
+from tssac_core.wire.mission_events import (
+    FLAGS,
+    HIT_TEXT,
+    IDENTIFIED_TEXT,
+    MISSION_END_PREFIX,
+    RADAR_TEXTS,
+    EventName,
+    MissionEnd,
+    end_from_text,
+)
+from tssac_core.wire.signing import companion_link_id
 
 _log = logging.getLogger("mavlink_bridge.companion")
 
@@ -387,32 +397,30 @@ class Companion:
             self.fix_rx_s = rx_s
 
     def _on_named_value(self, name: str, value: int, stamp_ms: int) -> None:
-        if name not in ("RADAR_ON", "IDENT", "HIT", "MSN_END"):
+        if name not in FLAGS:
             return
         if self.flags.set(name, value, stamp_ms):
             _log.info("%s: %s = %d at %.1f s", self.cfg.role.value, name, value, stamp_ms / 1000.0)
-        if name == "HIT" and value == 1:
+        if name == EventName.HIT and value == 1:
             self._claim_end("success", f"target hit at {stamp_ms / 1000.0:.1f} s")
-        if name == "MSN_END" and value in END_STATUS:
-            self._claim_end(END_STATUS[value], f"mission ended ({END_STATUS[value]}) at {stamp_ms / 1000.0:.1f} s")
+        if name == EventName.MSN_END and value in set(MissionEnd):
+            end = MissionEnd(value)
+            self._claim_end(end.status, f"mission ended ({end.status}) at {stamp_ms / 1000.0:.1f} s")
 
     def _on_statustext(self, text: str) -> None:
         _log.info("%s: vehicle says: %s", self.cfg.role.value, text)
         # The flags normally come as NAMED_VALUE_INT; the texts are the human-readable fallback.
         stamp = self.vt_ms or 0
-        if text == "SAM radar ON":
-            self.flags.set("RADAR_ON", 1, stamp)
-        elif text == "SAM radar OFF":
-            self.flags.set("RADAR_ON", 0, stamp)
-        elif text == "Target identified":
-            self.flags.set("IDENT", 1, stamp)
-        elif text == "Target hit":
+        if text in (RADAR_TEXTS[True], RADAR_TEXTS[False]):
+            self.flags.set(EventName.RADAR_ON, int(text == RADAR_TEXTS[True]), stamp)
+        elif text == IDENTIFIED_TEXT:
+            self.flags.set(EventName.IDENT, 1, stamp)
+        elif text == HIT_TEXT:
             self._claim_end("success", f"target hit (STATUSTEXT) at {stamp / 1000.0:.1f} s")
-        elif text.startswith("Mission end: "):
-            what = text[len("Mission end: ") :]
-            status = {"success": "success", "geofence breach": "geofence", "episode cap": "episode_cap"}.get(
-                what, what.replace(" ", "_")
-            )
+        elif text.startswith(MISSION_END_PREFIX):
+            end = end_from_text(text)
+            what = text[len(MISSION_END_PREFIX) :]
+            status = end.status if end is not None else what.replace(" ", "_")
             self._claim_end(status, f"mission ended ({what}) at {stamp / 1000.0:.1f} s")
 
     # ----------------------------------------------------------------------- mission end
@@ -556,8 +564,8 @@ class Companion:
             y_m,
             f.speed_m_s,
             f.heading_rad,
-            bool(self.flags.get("RADAR_ON")),
-            bool(self.flags.get("IDENT")),
+            bool(self.flags.get(EventName.RADAR_ON)),
+            bool(self.flags.get(EventName.IDENT)),
         )
         action = self.pilot.action(self.world, self.role_index, step)
         why: str | None = None

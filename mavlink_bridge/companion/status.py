@@ -77,7 +77,3 @@ class CompanionResult:
         d = asdict(self)
         d["exit_code"] = self.exit_code
         return d
-
-
-END_STATUS = {1: "success", 2: "geofence", 3: "episode_cap"}
-"""MSN_END values -> status."""

@@ -79,7 +79,7 @@ class FlyConfig:
     """``--animate``: each mission as a .gif or .mp4 film (tssac_core.reporting.mission_animation)."""
     persistent: bool = True
     """One world and three companions fly every mission of the run (of each worker), reset between missions
-    (tssac_core.deploy.mission_reset); False (``--fresh-processes``): four new processes per mission."""
+    (tssac_core.wire.mission_reset); False (``--fresh-processes``): four new processes per mission."""
 
     @property
     def on_ray(self) -> bool:

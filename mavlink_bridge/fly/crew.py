@@ -1,7 +1,7 @@
 """The processes ``fly`` keeps alive across a campaign: one SITL world and one companion per UAV.
 
 They are started with ``--serve`` for the campaign's first mission (standard input and output piped) and are
-told each next mission over the mission-reset protocol (:mod:`tssac_core.deploy.mission_reset`). fly reads
+told each next mission over the mission-reset protocol (:mod:`tssac_core.wire.mission_reset`). fly reads
 their ``ready`` and ``end`` lines through :class:`LineReader`; a process that dies or hangs ends the crew, and the
 next mission starts a new one.
 """
@@ -16,7 +16,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from mavlink_bridge.processes import Child
-from tssac_core.deploy.mission_reset import QUIT, NextMission
+from tssac_core.wire.mission_reset import QUIT, NextMission
 
 QUIT_LINE = json.dumps(QUIT) + "\n"
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100

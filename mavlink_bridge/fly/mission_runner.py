@@ -23,9 +23,9 @@ from mavlink_bridge.fly.report import animate_mission_record, plot_mission_recor
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
 from mavlink_bridge.mission_log import TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
-from tssac_core.deploy.mission_reset import NextMission
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
+from tssac_core.wire.mission_reset import NextMission
 
 _log = logging.getLogger("mavlink_bridge.fly")
 

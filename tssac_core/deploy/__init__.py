@@ -1,8 +1,7 @@
-"""What flies a trained policy, and what the SITL vehicles and the MAVLink bridge share.
+"""What flies a trained policy: its checkpoints, the exported actor and their manifest.
 
 ``policy`` (role checkpoints, torch) · ``numpy_actor`` (the exported actor, numpy only) · ``export``
 (checkpoint -> ``<role>.npz``; ``python -m tssac_core.deploy.export``) · ``manifest`` (``SHA256SUMS``, the
-models' integrity manifest; ``python -m tssac_core.deploy.manifest write|check DIR``) · ``geodetic`` (the
-flat-earth frame between the world's metres and MAVLink's degrees) · ``truth_log_schema`` (the SITL world's truth log) ·
-``mavlink_signing`` (MAVLink 2 signatures verified before their timestamps count; standard library only).
+models' integrity manifest; ``python -m tssac_core.deploy.manifest write|check DIR``). What the SITL and the bridge
+share on the wire is in :mod:`tssac_core.wire`.
 """

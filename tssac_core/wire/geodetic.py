@@ -20,10 +20,18 @@ LOCAL_POSITION_NED, which is exact.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-if TYPE_CHECKING:  # stdlib only at run time: the companion and the SITL both import this module
-    from tssac_core.sim.scenario import Origin
+
+class Origin(Protocol):
+    """Where the area's south-west corner is (a scenario's ``origin``, :class:`tssac_core.sim.scenario.Origin`)."""
+
+    @property
+    def lat_deg(self) -> float: ...
+
+    @property
+    def lon_deg(self) -> float: ...
+
 
 EARTH_RADIUS_M = 6_378_100.0
 """Sphere radius of the flat-earth conversion (ArduPilot's LOCATION_SCALING_FACTOR * 1e7 * 180 / pi)."""
