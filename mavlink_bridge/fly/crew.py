@@ -91,8 +91,6 @@ class Crew:
 
     world: LineReader
     companions: list[LineReader]
-    missions: int = 1
-    """Missions this crew has flown or is flying."""
     ended: set[str] = field(default_factory=set)
     """Names of the processes that printed this mission's ``end`` line."""
 

@@ -320,7 +320,6 @@ class MissionRunner:
         crew = self.crew
         cpu0 = crew.cpu_s()
         _log.info("mission %d: reset %s", index, " ".join(f"{c.name}={c.pid}" for c in crew.children))
-        crew.missions += 1
         crew.ended.clear()
         crew.tell(crew.world, NextMission(index, scenario_file, seed=seed, truth_log=truth, log=mdir / "sitl.log"))
         # The world has reset (forgotten its clients, drained its sockets) when it says ready: only then may the
