@@ -16,7 +16,9 @@ Seeds: the adversaries' own range, used for nothing else. Mission k of a batched
 (``evaluate --controller NAME --seed S --mission K``, ``fly --pilot NAME --seed S --mission K``). The tests use
 ``--seed`` + 0..59.
 
-A run below the default size is marked ``"smoke": true`` in the JSON.
+A run below the default size is marked ``"smoke": true`` in the JSON. With ``--json`` the file is written again
+after every row (``"complete": false`` until the last), and ``--resume`` keeps the rows of such a file that the same
+settings wrote and flies only the rest, so a run stopped part-way (a session's end, Ctrl-C) loses at most one row.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
@@ -75,6 +77,18 @@ class BenchConfig:
     sitl: tuple[str, ...]
     json_path: Path | None
     progress: bool
+    resume: bool
+
+    def settings(self) -> dict[str, Any]:
+        """What a row depends on: rows written under other settings are never reused by ``--resume``."""
+        settings = {
+            "episodes": self.episodes,
+            "sitl_missions": self.sitl_missions,
+            "seed": self.seed,
+            "episode_steps": self.episode_steps,
+            "shield": dataclasses.asdict(ShieldConfig()),
+        }
+        return json.loads(json.dumps(settings))  # as the file holds them (tuples as lists)
 
     @property
     def smoke(self) -> bool:
@@ -97,8 +111,11 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
     p.add_argument("--batched", nargs="+", default=list(BATCHED), help="batched scenarios (default random corner)")
     p.add_argument("--sitl", nargs="+", default=list(SITL), help="SITL scenarios (default random degraded)")
     p.add_argument("--json", type=Path, help="write the rows here")
+    p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
+    if a.resume and a.json is None:
+        raise UsageError("--resume needs --json (the file whose rows it keeps)")
     names = [n.strip() for n in a.adversaries.split(",") if n.strip()]
     unknown = [n for n in names if n not in ADVERSARY_NAMES]
     if unknown or not names:
@@ -121,6 +138,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         sitl=tuple(a.sitl),
         json_path=a.json,
         progress=not a.no_progress,
+        resume=a.resume,
     )
 
 
@@ -230,44 +248,79 @@ def print_table(rows: list[dict[str, Any]]) -> None:
         )
 
 
+def row_key(row: dict[str, Any]) -> tuple[str, str, bool]:
+    return (row["adversary"], row["where"], bool(row["monitor"]))
+
+
+def kept_rows(cfg: BenchConfig) -> dict[tuple[str, str, bool], dict[str, Any]]:
+    """The rows ``--resume`` keeps: those of ``--json`` written under the same settings (none without --resume)."""
+    if not cfg.resume or cfg.json_path is None or not cfg.json_path.is_file():
+        return {}
+    try:
+        old = json.loads(cfg.json_path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise UsageError(f"--resume: cannot read {cfg.json_path}: {exc}") from None
+    if not isinstance(old, dict) or old.get("settings") != cfg.settings():
+        raise UsageError(f"--resume: {cfg.json_path} was written with other settings; give another --json")
+    return {row_key(r): r for r in old.get("rows", [])}
+
+
+def write_rows(cfg: BenchConfig, argv: Sequence[str] | None, rows: list[dict[str, Any]], complete: bool) -> None:
+    if cfg.json_path is None:
+        return
+    write_json(
+        cfg.json_path,
+        {
+            "smoke": cfg.smoke,
+            "note": SMOKE_NOTE if cfg.smoke else "",
+            "complete": complete,
+            "size": f"{cfg.episodes} batched missions per adversary and scenario (off and on), "
+            f"{cfg.sitl_missions} SITL missions per adversary and scenario (on)",
+            "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
+            "settings": cfg.settings(),
+            "episode_steps": cfg.episode_steps,
+            "shield": dataclasses.asdict(ShieldConfig()),
+            "rows": rows,
+            "wall_time_s": round(sum(r["wall_time_s"] for r in rows), 1),
+        },
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_args(argv)
-    started = time.monotonic()
+    kept = kept_rows(cfg)
     rows: list[dict[str, Any]] = []
-    batched_total = len(cfg.adversaries) * len(cfg.batched) * 2 * cfg.episodes
+
+    def add(key: tuple[str, str, bool], fly: Callable[[], dict[str, Any]]) -> None:
+        rows.append(kept[key] if key in kept else fly())
+        write_rows(cfg, argv, rows, complete=False)
+
+    batched = [(a, n, s) for a in cfg.adversaries for n in cfg.batched for s in (False, True)]
+    todo = [b for b in batched if (b[0].value, f"batched {b[1]}", b[2]) not in kept]
     with (
-        ray_session(RayTarget(None)) if cfg.workers > 1 else contextlib.nullcontext(),  # one Ray for every row
-        tqdm(total=batched_total, desc="batched missions", disable=not cfg.progress, file=sys.stderr) as bar,
+        ray_session(RayTarget(None)) if cfg.workers > 1 and todo else contextlib.nullcontext(),  # one Ray, every row
+        tqdm(total=len(todo) * cfg.episodes, desc="batched missions", disable=not cfg.progress) as bar,
     ):
-        for adversary in cfg.adversaries:
-            for name in cfg.batched:
-                for shield in (False, True):
-                    rows.append(batched_row(adversary, name, shield, cfg, bar))
+        for adversary, name, shield in batched:
+            add(
+                (adversary.value, f"batched {name}", shield),
+                lambda: batched_row(adversary, name, shield, cfg, bar),  # noqa: B023 (called at once)
+            )
     if cfg.sitl_missions:
-        sitl_total = len(cfg.adversaries) * len(cfg.sitl) * cfg.sitl_missions
+        sitl = [(a, n) for a in cfg.adversaries for n in cfg.sitl]
+        todo_sitl = [b for b in sitl if (b[0].value, f"SITL {b[1]}", True) not in kept]
         with (
             tempfile.TemporaryDirectory(prefix="bench-adversaries-") as tmp,
-            tqdm(total=sitl_total, desc="SITL missions", disable=not cfg.progress, file=sys.stderr) as bar,
+            tqdm(total=len(todo_sitl) * cfg.sitl_missions, desc="SITL missions", disable=not cfg.progress) as bar,
         ):
-            for adversary in cfg.adversaries:
-                for name in cfg.sitl:
-                    rows.append(sitl_row(adversary, name, cfg, Path(tmp), bar))
+            for adversary, name in sitl:
+                add(
+                    (adversary.value, f"SITL {name}", True),
+                    lambda: sitl_row(adversary, name, cfg, Path(tmp), bar),  # noqa: B023 (called at once)
+                )
     print_table(rows)
+    write_rows(cfg, argv, rows, complete=True)
     if cfg.json_path is not None:
-        write_json(
-            cfg.json_path,
-            {
-                "smoke": cfg.smoke,
-                "note": SMOKE_NOTE if cfg.smoke else "",
-                "size": f"{cfg.episodes} batched missions per adversary and scenario (off and on), "
-                f"{cfg.sitl_missions} SITL missions per adversary and scenario (on)",
-                "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
-                "episode_steps": cfg.episode_steps,
-                "shield": dataclasses.asdict(ShieldConfig()),
-                "rows": rows,
-                "wall_time_s": round(time.monotonic() - started, 1),
-            },
-        )
         print(f"wrote {cfg.json_path}")
     return 0
 
