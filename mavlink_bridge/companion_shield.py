@@ -35,8 +35,8 @@ from tssac_core.assurance.monitor import (
     largest_backup_error_m,
 )
 from tssac_core.sim.scenario import Role, Scenario
-from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import VehicleMonitor
+from tssac_core.sim.world_state import WorldState
 
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
@@ -67,10 +67,10 @@ class ShieldCounters:
 class CompanionShield:
     """One vehicle's monitor with its held action, its queue of sent commands and its counts."""
 
-    def __init__(self, world: World, role: Role, scenario: Scenario, cfg: ShieldConfig, lockstep: bool) -> None:
+    def __init__(self, state: WorldState, role: Role, scenario: Scenario, cfg: ShieldConfig, lockstep: bool) -> None:
         self.cfg = cfg
         self.role = role
-        self.monitor = VehicleMonitor(world, role.index, cfg)
+        self.monitor = VehicleMonitor(state, role.index, cfg)
         self.dt_s = scenario.dt_s
         self.latency_s = scenario.link.latency_ms / 1000.0
         self.off_lockstep = not lockstep

@@ -27,6 +27,7 @@ from tssac_core.sim.adversaries import (
 from tssac_core.sim.missions import MissionResults, fly_missions, mission_layout
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, load
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import initial_state, snapshot
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 SEED = 2_100_001
@@ -124,14 +125,14 @@ def world_of(scenario: Scenario, layouts: list[Layout]) -> World:
 def test_a_mission_draws_the_same_random_actions_alone_and_from_the_file_fly_writes(tmp_path: Path):
     scenario = load(SCENARIOS / "random.yaml")
     layouts = [mission_layout(scenario, SEED, k) for k in range(4)]
-    batch = layout_keys(world_of(scenario, layouts))
+    batch = layout_keys(snapshot(world_of(scenario, layouts)))
     assert len(set(batch.reshape(-1).tolist())) == batch.size  # every UAV of every layout its own stream
     # fly writes mission k's layout into a scenario file that the companions read.
     path = tmp_path / "mission.yaml"
     dump(dataclasses.replace(scenario, layout=layouts[2], random=None), path)
     fixed = load(path)
     assert fixed.layout is not None
-    assert np.array_equal(layout_keys(world_of(fixed, [fixed.layout]))[0], batch[2])
+    assert np.array_equal(layout_keys(snapshot(world_of(fixed, [fixed.layout])))[0], batch[2])
 
 
 def test_the_companion_pilot_decides_as_the_batched_pilot():
@@ -139,17 +140,16 @@ def test_the_companion_pilot_decides_as_the_batched_pilot():
     layout = mission_layout(scenario, SEED, 0)
     for adversary in Adversary:
         batched = world_of(scenario, [layout])
-        mirror = world_of(scenario, [layout])  # the companion's copy, fed the estimate by World.mirror
+        start = initial_state(scenario, layout)  # the companion's state, fed the estimate by with_vehicle
         batch_pilot = AdversaryPilot(adversary)
         pilots = [AdversarialPilot(adversary) for _ in ROLES]
         rng = np.random.default_rng(5)
         held = np.zeros((1, 3, 2))
         for step in range(35):
             if step % DECISION_STEPS == 0:
-                held = np.stack([batch_pilot.actions(batched, j) for j in range(3)], axis=1)
+                held = np.stack([batch_pilot.actions(snapshot(batched), j) for j in range(3)], axis=1)
             for j, pilot in enumerate(pilots):
-                mirror.mirror(
-                    0,
+                mirror = start.with_vehicle(
                     j,
                     batched.x_m[0, j],
                     batched.y_m[0, j],
@@ -157,6 +157,7 @@ def test_the_companion_pilot_decides_as_the_batched_pilot():
                     batched.phi_rad[0, j],
                     False,
                     False,
+                    step,
                 )
                 action = pilot.action(mirror, j, step)
                 assert pilot.decided == (step % DECISION_STEPS == 0), (adversary, step)

@@ -32,6 +32,7 @@ from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, 
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import snapshot
 from tssac_core.wire.geodetic import deg_e7, local_to_geodetic
 from tssac_core.wire.signing import now_10us
 from tssac_core.wire.truth_log_schema import read_truth_log
@@ -562,7 +563,9 @@ def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path
     scen = load(scen_file)
     world = World(scen, 1)
     world.reset([0], [scen.layout])
-    first = action_to_setpoint(tuple(policy.act(observe(world, 0, policy.observation_mode, RouteMap())[0])), spec)
+    first = action_to_setpoint(
+        tuple(policy.act(observe(snapshot(world), 0, policy.observation_mode, RouteMap())[0])), spec
+    )
     assert setpoints[0] == pytest.approx((first.yaw_rate_rad_s, first.accel_m_s2), abs=1e-4)
 
 

@@ -16,6 +16,7 @@ from tssac_core.sim.observation import EXTENDED_SIZE, ObservationMode, observati
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.scenario import Role, load
 from tssac_core.sim.world import KM, StepResult
+from tssac_core.sim.world_state import snapshot
 
 
 @pytest.mark.parametrize("role", ["Decoy", "Detect", "Strike"])
@@ -116,10 +117,10 @@ def test_route_observation_points_the_way_around_the_radars(strike_path):
     # Inside the SAM's detection disk the route is the SAM's bearing.
     w = task.world
     w.x_m[0, 2], w.y_m[0, 2], w.phi_rad[0, 2] = 60_000.0, 60_000.0, 0.3
-    inside = observe(w, 2, ObservationMode.ROUTE, task.obs_routes)[0]
+    inside = observe(snapshot(w), 2, ObservationMode.ROUTE, task.obs_routes)[0]
     assert inside[22] == pytest.approx(inside[6], abs=1e-5) and inside[23] == pytest.approx(inside[7], abs=1e-5)
     with pytest.raises(ValueError, match="route direction"):
-        observe(w, 2, ObservationMode.ROUTE)
+        observe(snapshot(w), 2, ObservationMode.ROUTE)
 
 
 def result(**kw) -> StepResult:
@@ -233,7 +234,7 @@ def test_guidance_team_completes_the_fixed_mission(strike_path):
 
     g = Guidance()
     while True:
-        action = g.actions(env.unwrapped.task.world)[0, 2]
+        action = g.actions(snapshot(env.unwrapped.task.world))[0, 2]
         obs, r, term, trunc, info = env.step(action.astype(np.float32))
         total_cost += info["cost"]
         steps += 1
@@ -293,10 +294,10 @@ def test_unused_radar_slots_do_not_change_the_observation(strike_path):
         w.reset([0], [s.layout])
     for j in range(3):
         np.testing.assert_array_equal(
-            observe(snug, j, ObservationMode.EXTENDED), observe(roomy, j, ObservationMode.EXTENDED)
+            observe(snapshot(snug), j, ObservationMode.EXTENDED), observe(snapshot(roomy), j, ObservationMode.EXTENDED)
         )
     one = World(s, 1, max_radars=1)
     lay = s.layout
     one.reset([0], [type(lay)(lay.sam_km, lay.target_km, lay.radars[:1], lay.starts)])
-    obs = observe(one, 0, ObservationMode.EXTENDED)[0]
+    obs = observe(snapshot(one), 0, ObservationMode.EXTENDED)[0]
     np.testing.assert_array_equal(obs[14:20], [1.0, 1.0, 0.0, 1.0, 1.0, 0.0])  # missing radars: far, dead ahead

@@ -11,6 +11,7 @@ from tssac_core.sim.env import RoleTask
 from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource, start_detours_km
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import Layout, Radar, Role, Start, load, sample_layout
+from tssac_core.sim.world_state import snapshot
 
 RANDOM = load("scenarios/random.yaml")
 
@@ -73,7 +74,7 @@ def test_a_threshold_no_layout_reaches_gives_the_hardest_drawn():
 def test_training_worlds_start_on_hard_layouts():
     task = RoleTask(RANDOM, Role.DETECT, n=4, seed=1, hard_layouts=HardLayouts(fraction=1.0, detour_km=20.0))
     task.reset()
-    assert (RouteMap().detour_m(task.world).max(axis=1) >= 20_000.0).all()
+    assert (RouteMap().detour_m(snapshot(task.world)).max(axis=1) >= 20_000.0).all()
 
 
 @pytest.mark.parametrize(

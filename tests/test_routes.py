@@ -10,6 +10,7 @@ import pytest
 from tssac_core.sim.routes import KING_MOVES, KNIGHT_MOVES, RouteConfig, RouteMap, sample_bilinear, wavefront
 from tssac_core.sim.scenario import Layout, Radar, Role, Start, load
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import snapshot
 
 
 def corner_goal(size: int = 21) -> np.ndarray:
@@ -78,10 +79,10 @@ def one_radar_world(radar_km: tuple[float, float], uav_km: tuple[float, float]) 
 def test_detour_behind_a_radar_is_the_way_round_it():
     routes = RouteMap(RouteConfig(grid_m=1000.0, margin_m=0.0, hazard_weight=1e6))
     # Free line of sight: no detour (up to the metric's 2.7%).
-    clear = routes.detour_m(one_radar_world((30.0, 85.0), (10.0, 50.0)))
+    clear = routes.detour_m(snapshot(one_radar_world((30.0, 85.0), (10.0, 50.0))))
     assert clear.max() < 0.03 * (60_000 - 20_000)
     # A radar of 12 km radius halfway on the line: the way is tangent, arc, tangent to the 20 km disk.
-    blocked = routes.detour_m(one_radar_world((30.0, 50.0), (10.0, 50.0)))[0, 0]
+    blocked = routes.detour_m(snapshot(one_radar_world((30.0, 50.0), (10.0, 50.0))))[0, 0]
     # The shortest way from (10, 50) to the 20 km disk round (70, 50) past a 12 km disk round (30, 50):
     # tangent to the radar (16 km), along its edge from 126.9 deg to 72.5 deg (11.4 km), then on the
     # tangent through the SAM to the disk (38.2 - 20 km); 45.5 km against 40 km straight.
@@ -90,29 +91,29 @@ def test_detour_behind_a_radar_is_the_way_round_it():
     # The grid's metric and the rasterised disk make the way up to 3% longer than the exact one.
     assert (way - 40.0) * 1000 <= blocked <= (way - 40.0) * 1000 + 0.03 * way * 1000
     # Inside the SAM's detection disk the detour is zero.
-    inside = routes.detour_m(one_radar_world((30.0, 85.0), (60.0, 50.0)))
+    inside = routes.detour_m(snapshot(one_radar_world((30.0, 85.0), (60.0, 50.0))))
     assert np.all(inside == 0.0)
     # One vehicle's detour is that column of all of them.
     w = one_radar_world((30.0, 50.0), (10.0, 50.0))
-    np.testing.assert_array_equal(routes.detour_m(w, 1), routes.detour_m(w)[:, 1])
+    np.testing.assert_array_equal(routes.detour_m(snapshot(w), 1), routes.detour_m(snapshot(w))[:, 1])
 
 
 def test_field_cache_rebuilds_only_for_new_layouts():
     routes = RouteMap()
     w = one_radar_world((30.0, 50.0), (10.0, 50.0))
-    first = routes.cache.fields(w).copy()
+    first = routes.cache.fields(snapshot(w)).copy()
     builds: list[int] = []
     build = routes.cache.build
     routes.cache.build = lambda world, k: (builds.append(k), build(world, k))[1]
-    routes.detour_m(w)
+    routes.detour_m(snapshot(w))
     w.step(np.zeros((1, 3, 2)))
-    routes.detour_m(w)
+    routes.detour_m(snapshot(w))
     assert builds == []  # same layout: no rebuild
     w.reset(np.arange(1), [one_radar_layout((30.0, 20.0), (10.0, 50.0))])
-    routes.detour_m(w)
+    routes.detour_m(snapshot(w))
     assert builds == [0]
-    assert not np.array_equal(first, routes.cache.fields(w))
+    assert not np.array_equal(first, routes.cache.fields(snapshot(w)))
     # Another World whose layout ids coincide but whose radars differ: rebuilt too.
     other = one_radar_world((30.0, 80.0), (10.0, 50.0))
-    routes.detour_m(other)
+    routes.detour_m(snapshot(other))
     assert builds == [0, 0]

@@ -28,6 +28,7 @@ from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.scenario import Role, load, sample_layout
 from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import VehicleMonitor, WorldMonitor
+from tssac_core.sim.world_state import snapshot
 
 
 class SteerIntoRadar:
@@ -111,11 +112,11 @@ def test_vehicle_monitor_decides_as_the_batched_world(short_random):
         one = World(scenario, 1)
         one.reset([0], [lay])
         for j in range(3):
-            singles[i, j] = VehicleMonitor(one, j, cfg)
+            singles[i, j] = VehicleMonitor(snapshot(one), j, cfg)
     pilot = SteerIntoRadar()
     engaged_seen = 0
     while world.running.any() and world.steps[0] < scenario.episode_steps:
-        proposed = np.stack([pilot(observe(world, j, pilot.observation_mode)) for j in range(3)], axis=1)
+        proposed = np.stack([pilot(observe(snapshot(world), j, pilot.observation_mode)) for j in range(3)], axis=1)
         due = world.steps[0] % 10 == 0
         state = (world.x_m.copy(), world.y_m.copy(), world.v_m_s.copy(), world.phi_rad.copy())
         actions = batched.actions(world, proposed)
@@ -242,8 +243,8 @@ def test_companion_monitor_margin_and_pending(random_path):
     world = World(s, 1)
     world.reset([0], [lay])
     cfg = ShieldConfig()
-    lockstep = CompanionShield(world, Role.DECOY, s, cfg, lockstep=True)
-    reference = VehicleMonitor(world, 0, cfg)
+    lockstep = CompanionShield(snapshot(world), Role.DECOY, s, cfg, lockstep=True)
+    reference = VehicleMonitor(snapshot(world), 0, cfg)
     state = (world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0])
     for k in range(30):
         proposed = np.array([1.0 if k % 7 < 3 else -0.5, 0.3])
@@ -255,7 +256,7 @@ def test_companion_monitor_margin_and_pending(random_path):
         state = (xs[0, -1], ys[0, -1], vs[0, -1], ps[0, -1])
     assert lockstep.pending_ticks() == 0 and not lockstep.lossy  # a perfect link in lockstep: nothing in flight
     slow = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0))
-    realtime = CompanionShield(world, Role.DECOY, slow, cfg, lockstep=False)
+    realtime = CompanionShield(snapshot(world), Role.DECOY, slow, cfg, lockstep=False)
     assert realtime.pending_ticks() == 4 and realtime.lossy and realtime.off_lockstep  # 2 x 0.2 s of 0.1 s ticks
     realtime.sent(np.array([1.0, 1.0]))
     pending = realtime._pending()
@@ -264,7 +265,7 @@ def test_companion_monitor_margin_and_pending(random_path):
     # Lockstep over a slow, lossy link (degraded.yaml): the link runs on simulated time, so the round trip is
     # in ticks as well, and a lost setpoint leaves the vehicle on the previous command.
     lossy = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0, packet_loss=0.1))
-    degraded = CompanionShield(world, Role.DECOY, lossy, cfg, lockstep=True)
+    degraded = CompanionShield(snapshot(world), Role.DECOY, lossy, cfg, lockstep=True)
     assert degraded.pending_ticks() == 4 and degraded.lossy and not degraded.off_lockstep
     assert companion_margin_m(cfg, 300.0, off_lockstep=True) == pytest.approx(100.0 + 150.0)
     assert companion_margin_m(cfg, 300.0, off_lockstep=False) == pytest.approx(100.0)

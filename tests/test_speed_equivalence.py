@@ -23,6 +23,7 @@ from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import Role, load, sample_layout
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import snapshot
 
 
 def reference_step(w: World, action: np.ndarray) -> dict[str, np.ndarray]:
@@ -142,7 +143,7 @@ def test_extended_observation_matches_its_table(random_path):
     for _ in range(300):
         w.step(rng.uniform(-1, 1, (4, 3, 2)))
         for j in range(3):
-            obs = observe(w, j, ObservationMode.EXTENDED)
+            obs = observe(snapshot(w), j, ObservationMode.EXTENDED)
             for i in range(4):
                 x, y, phi = w.x_m[i, j], w.y_m[i, j], w.phi_rad[i, j]
 
@@ -185,10 +186,12 @@ def test_learner_reward_equals_the_all_vehicle_reward(random_path):
     for _ in range(200):
         w = task.world
         moving = w.active & w.running[:, None]
-        before = routes.detour_m(w)
+        before = routes.detour_m(snapshot(w))
         result, r, _ = task.advance(rng.uniform(-1, 1, (3, 2)))
-        np.testing.assert_array_equal(task.detour_m, routes.detour_m(w)[:, 1])
-        np.testing.assert_array_equal(r, reward(result, moving, RewardConfig(), before, routes.detour_m(w))[:, 1])
+        np.testing.assert_array_equal(task.detour_m, routes.detour_m(snapshot(w))[:, 1])
+        np.testing.assert_array_equal(
+            r, reward(result, moving, RewardConfig(), before, routes.detour_m(snapshot(w)))[:, 1]
+        )
 
 
 # Recorded with the code of commit 177b980 (before the speed work) by the two rollouts below.

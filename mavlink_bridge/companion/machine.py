@@ -37,7 +37,7 @@ from mavlink_bridge.frames import (
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.cli import UsageError, write_json
-from tssac_core.sim.world import World
+from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.mission_events import (
     FLAGS,
     HIT_TEXT,
@@ -108,14 +108,16 @@ class Companion:
         self.spec = s.vehicle(config.role)
         self.dt_ms = int(round(s.dt_s * 1000.0))
         self.pilot: Pilot = make_pilot(config)
-        self.world = World(s, 1)
-        self.world.reset([0], [s.layout])
+        self.layout_state: WorldState = initial_state(s, s.layout)
+        """The mission's start as the pilots see it; each tick the filter's estimate replaces this vehicle's state."""
         self.shield = (
             None
             if config.shield is None
-            else CompanionShield(self.world, config.role, s, config.shield, config.lockstep)
+            else CompanionShield(self.layout_state, config.role, s, config.shield, config.lockstep)
         )
-        self.pilot.action(self.world, self.role_index, 0)  # warm up: the guidance plans its route once per layout
+        self.pilot.action(
+            self.layout_state, self.role_index, 0
+        )  # warm up: the guidance plans its route once per layout
         self.pilot.reset()
         _log.info("%s: pilot %s", config.role.value, self.pilot.name)
         link_model = s.link
@@ -557,8 +559,7 @@ class Companion:
             return self._shielded(np.full(2, np.nan), step), gap
         f = self.filter
         x_m, y_m = f.pos_m
-        self.world.mirror(
-            0,
+        state = self.layout_state.with_vehicle(
             self.role_index,
             x_m,
             y_m,
@@ -566,8 +567,9 @@ class Companion:
             f.heading_rad,
             bool(self.flags.get(EventName.RADAR_ON)),
             bool(self.flags.get(EventName.IDENT)),
+            step,
         )
-        action = self.pilot.action(self.world, self.role_index, step)
+        action = self.pilot.action(state, self.role_index, step)
         why: str | None = None
         if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             self.counters.nonfinite_actions += 1

@@ -20,7 +20,7 @@ from tssac_core.sim.guidance import Guidance
 from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import Role
-from tssac_core.sim.world import World
+from tssac_core.sim.world_state import WorldState
 
 
 class DecisionClock:
@@ -49,7 +49,7 @@ class Pilot(Protocol):
     decided: bool
 
     def reset(self) -> None: ...
-    def action(self, world: World, role_index: int, step: int) -> np.ndarray: ...
+    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray: ...
 
 
 class GuidancePilot:
@@ -65,8 +65,8 @@ class GuidancePilot:
     def reset(self) -> None:
         pass
 
-    def action(self, world: World, role_index: int, step: int) -> np.ndarray:
-        return np.asarray(self._guidance.actions(world)[0, role_index], dtype=np.float64)
+    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray:
+        return np.asarray(self._guidance.actions(state)[0, role_index], dtype=np.float64)
 
 
 class StraightPilot:
@@ -83,7 +83,7 @@ class StraightPilot:
     def reset(self) -> None:
         self._clock.reset()
 
-    def action(self, world: World, role_index: int, step: int) -> np.ndarray:
+    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray:
         self.decided = self._clock.due(step)
         return np.zeros(2)
 
@@ -106,10 +106,10 @@ class AdversarialPilot:
         self._held = None
         self._clock.reset()
 
-    def action(self, world: World, role_index: int, step: int) -> np.ndarray:
+    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray:
         self.decided = self._clock.due(step, force=self._held is None)
         if self.decided:
-            actions = adversary_actions(self.adversary, situation(world, steps=step))
+            actions = adversary_actions(self.adversary, situation(state, steps=step))
             self._held = np.asarray(actions[0, role_index], dtype=np.float64)
         assert self._held is not None
         return self._held
@@ -132,10 +132,10 @@ class PolicyPilot:
         self._held = None
         self._clock.reset()
 
-    def action(self, world: World, role_index: int, step: int) -> np.ndarray:
+    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray:
         self.decided = self._clock.due(step, force=self._held is None)
         if self.decided:
-            obs = observe(world, role_index, self.mode, self.routes)[0]
+            obs = observe(state, role_index, self.mode, self.routes)[0]
             self._held = np.asarray(self.policy.act(obs), dtype=np.float64).reshape(2)
         assert self._held is not None
         return self._held

@@ -38,7 +38,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from tssac_core.sim.world import N_ROLES, World
+from tssac_core.sim.world import N_ROLES
+from tssac_core.sim.world_state import WorldState
 
 DECISION_STEPS = 10
 """World steps between two decisions of an adversary (the shipped policies' action_repeat)."""
@@ -84,21 +85,21 @@ class Situation:
     """The area is [0, area_m]^2."""
 
 
-def situation(world: World, steps: np.ndarray | int | None = None) -> Situation:
-    """Every UAV of ``world`` as an adversary sees it, shape (N, 3); ``steps``: the world step of each world (N,)
-    (default ``world.steps``; a companion passes its vehicle's tick)."""
-    n = world.n
+def situation(state: WorldState, steps: np.ndarray | int | None = None) -> Situation:
+    """Every UAV of ``state`` as an adversary sees it, shape (N, 3); ``steps``: the world step of each world (N,)
+    (default ``state.steps``)."""
+    n = state.n
     shape = (n, N_ROLES)
-    step = world.steps if steps is None else np.broadcast_to(np.asarray(steps, dtype=np.int64), (n,))
-    c = world.c
+    step = state.steps if steps is None else np.broadcast_to(np.asarray(steps, dtype=np.int64), (n,))
+    c = state.c
     return Situation(
-        x_m=world.x_m.copy(),
-        y_m=world.y_m.copy(),
-        phi_rad=world.phi_rad.copy(),
+        x_m=state.x_m.copy(),
+        y_m=state.y_m.copy(),
+        phi_rad=state.phi_rad.copy(),
         decision=np.broadcast_to((step // DECISION_STEPS)[:, None], shape),
-        key=layout_keys(world),
-        radar_m=np.broadcast_to(world.radar_m[:, None], (n, N_ROLES, *world.radar_m.shape[1:])),
-        radar_r_m=np.broadcast_to(world.radar_r_m[:, None], (n, N_ROLES, world.radar_r_m.shape[1])),
+        key=layout_keys(state),
+        radar_m=np.broadcast_to(state.radar_m[:, None], (n, N_ROLES, *state.radar_m.shape[1:])),
+        radar_r_m=np.broadcast_to(state.radar_r_m[:, None], (n, N_ROLES, state.radar_r_m.shape[1])),
         turn_per_decision_rad=np.broadcast_to(c.turn_rate_max_rad_s * c.dt_s * DECISION_STEPS, shape),
         area_m=c.area_m,
     )
@@ -178,11 +179,11 @@ def uniform(key: np.ndarray, counter: np.ndarray, stream: int) -> np.ndarray:
     return (z >> np.uint64(11)).astype(np.float64) * 2.0**-53
 
 
-def layout_keys(world: World) -> np.ndarray:
+def layout_keys(state: WorldState) -> np.ndarray:
     """Each UAV's random key, (N, 3) uint64: a hash of its world's layout (SAM, target, radars) and its role."""
-    parts = [world.sam_m, world.target_m, world.radar_m.reshape(world.n, -1), world.radar_r_m]
+    parts = [state.sam_m, state.target_m, state.radar_m.reshape(state.n, -1), state.radar_r_m]
     numbers = np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float64)
-    h = np.zeros(world.n, dtype=np.uint64)
+    h = np.zeros(state.n, dtype=np.uint64)
     for column in numbers.view(np.uint64).T:
         h = _splitmix(h ^ column)
     return _splitmix(h[:, None] ^ np.arange(1, N_ROLES + 1, dtype=np.uint64)[None, :])
@@ -196,6 +197,6 @@ class AdversaryPilot:
     adversary: Adversary
     action_repeat: ClassVar[int] = DECISION_STEPS
 
-    def actions(self, world: World, role_index: int) -> np.ndarray:
+    def actions(self, state: WorldState, role_index: int) -> np.ndarray:
         """The actions (N, 2) of vehicle ``role_index`` in every world."""
-        return adversary_actions(self.adversary, situation(world))[:, role_index]
+        return adversary_actions(self.adversary, situation(state))[:, role_index]

@@ -22,6 +22,7 @@ from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.role_task import RoleTask, TaskStep, Teammates, resolve_pilots
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
 from tssac_core.sim.team import GUIDANCE
+from tssac_core.sim.world_state import snapshot
 
 __all__ = ["DEFAULT_ACTION_REPEAT", "RoleTask", "TaskStep", "Teammates", "UavRoleEnv", "resolve_pilots"]
 
@@ -133,7 +134,7 @@ class UavRoleEnv(gym.Env):
         info = self._info()
         info["cost"] = total_c
         return (
-            observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[0],
+            observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes)[0],
             total_r,
             terminated,
             truncated,

@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.sim.routes import FieldCache, cell_centres, field_gradient, radar_depth, sam_disk, wavefront
-from tssac_core.sim.world import World, _wrap
+from tssac_core.sim.world import _wrap
+from tssac_core.sim.world_state import WorldState
 
 
 @dataclass(frozen=True)
@@ -56,54 +57,54 @@ class GuidanceConfig:
     """Cruise speed: v_min + fraction * (v_max - v_min) (full speed: long detours must fit the episode cap)."""
 
 
-def orbit_radii_m(world: World, cfg: GuidanceConfig) -> np.ndarray:
-    c = world.c
+def orbit_radii_m(state: WorldState, cfg: GuidanceConfig) -> np.ndarray:
+    c = state.c
     inner = np.array([c.r3_m, c.r1_m, 0.0])
     outer = np.array([c.r4_m, c.r2_m, c.r1_m])
     return inner + np.asarray(cfg.orbit_fraction) * (outer - inner)
 
 
 class Guidance:
-    """The controller for every vehicle of every world of a World; caches one plan per layout."""
+    """The controller for every vehicle of every world of a :class:`WorldState`; caches one plan per layout."""
 
     def __init__(self, cfg: GuidanceConfig = GuidanceConfig()) -> None:
         self.cfg = cfg
         self._plans = FieldCache(self._plan)
 
-    def _plan(self, world: World, k: int) -> np.ndarray:
-        return navigation_function(world, k, self.cfg)
+    def _plan(self, state: WorldState, k: int) -> np.ndarray:
+        return navigation_function(state, k, self.cfg)
 
-    def actions(self, world: World) -> np.ndarray:
-        """Actions (N, 3, 2) in [-1, 1] for every vehicle of every world."""
-        cfg, c = self.cfg, world.c
-        x, y = world.x_m, world.y_m
-        dx, dy = x - world.sam_m[:, 0:1], y - world.sam_m[:, 1:2]
+    def actions(self, state: WorldState) -> np.ndarray:
+        """Actions (N, 3, 2) in [-1, 1] for every vehicle of every state."""
+        cfg, c = self.cfg, state.c
+        x, y = state.x_m, state.y_m
+        dx, dy = x - state.sam_m[:, 0:1], y - state.sam_m[:, 1:2]
         d_sam = np.hypot(dx, dy)
-        zone_course = np.arctan2(dy, dx) + np.pi / 2 + np.arctan((d_sam - orbit_radii_m(world, cfg)) / cfg.transition_m)
+        zone_course = np.arctan2(dy, dx) + np.pi / 2 + np.arctan((d_sam - orbit_radii_m(state, cfg)) / cfg.transition_m)
 
-        gx, gy = self._route_gradient(world)
+        gx, gy = self._route_gradient(state)
         route_course = np.arctan2(-gy, -gx)
         w = np.clip((d_sam - c.r4_m) / cfg.blend_m, 0.0, 1.0)
         course = zone_course + w * _wrap(route_course - zone_course)
 
-        course = self._safety(world, course)
-        err = _wrap(course - world.phi_rad)
+        course = self._safety(state, course)
+        err = _wrap(course - state.phi_rad)
         omega_cmd = cfg.heading_gain_1_s * err / c.turn_rate_max_rad_s
         cruise = c.speed_min_m_s + cfg.cruise_fraction * (c.speed_max_m_s - c.speed_min_m_s)
-        accel_cmd = cfg.speed_gain_1_s * (cruise - world.v_m_s) / c.accel_max_m_s2
+        accel_cmd = cfg.speed_gain_1_s * (cruise - state.v_m_s) / c.accel_max_m_s2
         return np.clip(np.stack([omega_cmd, accel_cmd], axis=-1), -1.0, 1.0)
 
-    def _route_gradient(self, world: World) -> tuple[np.ndarray, np.ndarray]:
+    def _route_gradient(self, state: WorldState) -> tuple[np.ndarray, np.ndarray]:
         """Gradient of the navigation function at every vehicle, (N, 3) each."""
-        return field_gradient(self._plans.fields(world), self.cfg.grid_m, world.x_m, world.y_m)
+        return field_gradient(self._plans.fields(state), self.cfg.grid_m, state.x_m, state.y_m)
 
-    def _safety(self, world: World, course: np.ndarray) -> np.ndarray:
+    def _safety(self, state: WorldState, course: np.ndarray) -> np.ndarray:
         cfg = self.cfg
-        rx = world.radar_m[:, None, :, 0] - world.x_m[:, :, None]
-        ry = world.radar_m[:, None, :, 1] - world.y_m[:, :, None]
+        rx = state.radar_m[:, None, :, 0] - state.x_m[:, :, None]
+        ry = state.radar_m[:, None, :, 1] - state.y_m[:, :, None]
         rd = np.hypot(rx, ry)
-        real = world.radar_r_m[:, None, :] > 0
-        rb = world.radar_r_m[:, None, :] + cfg.safety_margin_m
+        real = state.radar_r_m[:, None, :] > 0
+        rb = state.radar_r_m[:, None, :] + cfg.safety_margin_m
         bearing = np.arctan2(ry, rx)
         half = np.arcsin(np.clip(rb / np.maximum(rd, 1.0), 0.0, 1.0))
         half = np.where(rd < rb, np.pi / 2 + np.clip((rb - rd) / rb, 0, 1) * np.pi / 4, half)
@@ -120,15 +121,15 @@ class Guidance:
         return np.where(any_blocked, b + np.where(o >= 0, 1.0, -1.0) * h, course)
 
 
-def navigation_function(world: World, k: int, cfg: GuidanceConfig) -> np.ndarray:
+def navigation_function(state: WorldState, k: int, cfg: GuidanceConfig) -> np.ndarray:
     """Geodesic distance (in cells) from every cell to the SAM's detection disk, around inflated radars.
 
     8-neighbour wavefront (:func:`tssac_core.sim.routes.wavefront`); blocked cells get the largest free
     value plus their depth into the obstacle, so the gradient also points out of a disk.
     """
-    cx, cy = cell_centres(world.c.area_m, cfg.grid_m)
-    goal = sam_disk(world, k, cx, cy)
-    depth = np.maximum(radar_depth(world, k, cx, cy, cfg.plan_margin_m), 0.0)
+    cx, cy = cell_centres(state.c.area_m, cfg.grid_m)
+    goal = sam_disk(state, k, cx, cy)
+    depth = np.maximum(radar_depth(state, k, cx, cy, cfg.plan_margin_m), 0.0)
     free = depth <= 0
     dist = wavefront(goal, np.where(free | goal, 1.0, np.inf))
     reachable = np.isfinite(dist)

@@ -22,6 +22,7 @@ import numpy as np
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import snapshot
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ def start_detours_km(
     (of len(layouts) worlds) and ``routes`` may be given to be reused."""
     world = world or World(scenario, len(layouts))
     world.reset(np.arange(len(layouts)), layouts, (True,) * len(ROLES))
-    return (routes or RouteMap()).detour_m(world) / 1000.0
+    return (routes or RouteMap()).detour_m(snapshot(world)) / 1000.0
 
 
 class LayoutSource:

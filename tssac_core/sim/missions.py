@@ -28,6 +28,7 @@ from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Pilot, Team, decision_interval
 from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
+from tssac_core.sim.world_state import snapshot
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions a summary lists."""
@@ -202,7 +203,7 @@ def iter_missions(
             track.append(np.where(world.running[:, None, None], pos, np.nan))
         moving = world.active & world.running[:, None]
         was_running = world.running.copy()
-        detour_prev = routes.detour_m(world)
+        detour_prev = routes.detour_m(snapshot(world))
         actions = team.actions(world)
         if monitor is not None:
             actions = monitor.actions(world, actions)
@@ -210,7 +211,7 @@ def iter_missions(
                 backup_track.append(monitor.engaged & moving)
         actions = hold_nonfinite(actions)
         result = world.step(actions)
-        returns += reward(result, moving, cfg, detour_prev, routes.detour_m(world))
+        returns += reward(result, moving, cfg, detour_prev, routes.detour_m(snapshot(world)))
         out |= result.out_of_area
         finished = int((was_running & ~world.running).sum())
         if on_step is not None:

@@ -58,7 +58,8 @@ import functools
 import numpy as np
 
 from tssac_core.sim.routes import RouteMap
-from tssac_core.sim.world import World, WorldConstants, cached_constant, constant_operand
+from tssac_core.sim.world import WorldConstants, cached_constant, constant_operand
+from tssac_core.sim.world_state import WorldState
 
 LOCAL_SCALE_M = 20_000.0
 """Scale of the local (zone and hazard) ranges: the SAM's detection range R4."""
@@ -121,9 +122,9 @@ def build_observation(
 ) -> np.ndarray:
     """Observations of one role in N worlds, (N, mode.size) float32.
 
-    Vehicle arrays are the observing UAV's: position ``xy_m`` (2, N), x over y (as ``World.xy_m``), the
+    Vehicle arrays are the observing UAV's: position ``xy_m`` (2, N), x over y (as ``WorldState.xy_m``), the
     others (N,); ``points_xy_m`` (2, N, 2 + K), x over y: the target, the SAM and the radar slots (as
-    ``World.points_xy_m``); ``radar_r_m`` (N, K); ``unused_radar_slots``: some radius is 0 (a slot no
+    ``WorldState.points_xy_m``); ``radar_r_m`` (N, K); ``unused_radar_slots``: some radius is 0 (a slot no
     radar fills); flags (N,); ``route_dir`` (N, 2) unit vectors in the world frame (route mode only).
     This is the only place observations are made.
 
@@ -276,9 +277,10 @@ _FAR_RADAR = np.array([1e9, 1.0, 0.0])
 """Features of a radar slot a layout does not use: sorted last, range clipped to 1, bearing dead ahead."""
 
 
-def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteMap | None = None) -> np.ndarray:
-    """Observations of one role in every world of ``world``, (N, mode.size) float32.
+def observe(state: WorldState, role_index: int, mode: ObservationMode, routes: RouteMap | None = None) -> np.ndarray:
+    """Observations of one role in every world of ``state``, (N, mode.size) float32.
 
+    ``state``: a batched World's :func:`~tssac_core.sim.world_state.snapshot`, or a companion's estimate.
     ``routes``: the route fields of the route mode (one RouteMap per World you observe: it caches a
     field per layout); ignored by the other modes.
     """
@@ -286,14 +288,14 @@ def observe(world: World, role_index: int, mode: ObservationMode, routes: RouteM
     return build_observation(
         j,
         mode,
-        world.c,
-        world.xy_m[:, :, j],
-        world.v_m_s[:, j],
-        world.phi_rad[:, j],
-        world.points_xy_m,
-        world.radar_r_m,
-        world.has_unused_radar_slots,
-        world.radar_on,
-        world.identified,
-        routes.direction(world, j) if mode is ObservationMode.ROUTE and routes is not None else None,
+        state.c,
+        state.xy_m[:, :, j],
+        state.v_m_s[:, j],
+        state.phi_rad[:, j],
+        state.points_xy_m,
+        state.radar_r_m,
+        state.has_unused_radar_slots,
+        state.radar_on,
+        state.identified,
+        routes.direction(state, j) if mode is ObservationMode.ROUTE and routes is not None else None,
     )

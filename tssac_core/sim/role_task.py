@@ -21,6 +21,7 @@ from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
 from tssac_core.sim.world import StepResult, World
+from tssac_core.sim.world_state import snapshot
 
 Teammates = str | Mapping[str, Pilot] | None
 
@@ -140,7 +141,7 @@ class RoleTask:
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
         self._measure_detours()
-        return observe(self.world, self.j, self.mode, self.obs_routes)
+        return observe(snapshot(self.world), self.j, self.mode, self.obs_routes)
 
     def snapshot(self) -> bytes:
         """The task's state (worlds, layout generator, running episode sums) for a resume file."""
@@ -153,7 +154,7 @@ class RoleTask:
 
     def _measure_detours(self) -> None:
         if self.reward_config.around_radars:
-            self.detour_m = self.routes.detour_m(self.world, self.j)
+            self.detour_m = self.routes.detour_m(snapshot(self.world), self.j)
 
     def advance(self, action: np.ndarray) -> tuple[StepResult, np.ndarray, np.ndarray]:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
@@ -189,7 +190,7 @@ class RoleTask:
             r, cost = r + r_k, cost + cost_k
             terminated |= result.terminated
             truncated |= result.truncated
-        final_obs = observe(self.world, self.j, self.mode, self.obs_routes)
+        final_obs = observe(snapshot(self.world), self.j, self.mode, self.obs_routes)
         ended = terminated | truncated
         ep_return = np.where(ended, self.ep_return, 0.0)
         ep_cost = np.where(ended, self.ep_cost, 0.0)

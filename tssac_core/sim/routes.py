@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.sim.world import World, cached_constant, constant_operand
+from tssac_core.sim.world import cached_constant, constant_operand
+from tssac_core.sim.world_state import WorldState
 
 _SQRT2, _SQRT5 = float(np.sqrt(2.0)), float(np.sqrt(5.0))
 KING_MOVES = [((1, 0), 1.0), ((-1, 0), 1.0), ((0, 1), 1.0), ((0, -1), 1.0)] + [
@@ -148,50 +149,49 @@ def cell_centres(area_m: float, grid_m: float) -> tuple[np.ndarray, np.ndarray]:
     return np.meshgrid(centres, centres, indexing="ij")
 
 
-def radar_depth(world: World, k: int, cx: np.ndarray, cy: np.ndarray, margin_m: float) -> np.ndarray:
+def radar_depth(state: WorldState, k: int, cx: np.ndarray, cy: np.ndarray, margin_m: float) -> np.ndarray:
     """How deep every cell lies inside world k's radars inflated by ``margin_m`` (<= 0: outside all), metres."""
     depth = np.full(cx.shape, -np.inf)
-    for pos, r in zip(world.radar_m[k], world.radar_r_m[k]):
+    for pos, r in zip(state.radar_m[k], state.radar_r_m[k]):
         if r > 0:
             depth = np.maximum(depth, r + margin_m - np.hypot(cx - pos[0], cy - pos[1]))
     return depth
 
 
-def sam_disk(world: World, k: int, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+def sam_disk(state: WorldState, k: int, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
     """Cells whose centre lies in world k's SAM detection disk (D <= R4)."""
-    sam = world.sam_m[k]
-    return np.hypot(cx - sam[0], cy - sam[1]) <= world.c.r4_m
+    sam = state.sam_m[k]
+    return np.hypot(cx - sam[0], cy - sam[1]) <= state.c.r4_m
 
 
 class FieldCache:
-    """One grid field per world of a World, rebuilt only for worlds whose SAM or radars changed.
+    """One grid field per world of a :class:`WorldState`, rebuilt only for worlds whose SAM or radars changed.
 
-    Keyed by the layout's content, not only by the world's layout ids, so that a cache stays right when
+    Keyed by the layout's content, not only by the state's ``layout_token``, so that a cache stays right when
     the World it serves is replaced (a resumed training run unpickles its worlds into a task that was
-    built afresh); the ids are the fast path while the World stays the same object.
+    built afresh); the token is the fast path while the layouts stay the same.
     """
 
-    def __init__(self, build: Callable[[World, int], np.ndarray]) -> None:
+    def __init__(self, build: Callable[[WorldState, int], np.ndarray]) -> None:
         self.build = build
         self._fields: np.ndarray | None = None
         self._keys: np.ndarray | None = None
-        self._world: World | None = None
-        self._layout_version = -1
+        self._token: object = None
 
-    def fields(self, world: World) -> np.ndarray:
+    def fields(self, state: WorldState) -> np.ndarray:
         """(N, size, size) fields, current for every world's layout."""
-        # Every step asks: one integer comparison while the World stays the same and nothing was reset.
-        if self._fields is not None and world is self._world and world.layout_version == self._layout_version:
+        # Every step asks: one identity comparison while nothing was reset.
+        if self._fields is not None and self._token is not None and state.layout_token is self._token:
             return self._fields
-        keys = np.concatenate([world.sam_m, world.radar_m.reshape(world.n, -1), world.radar_r_m], axis=1)
+        keys = np.concatenate([state.sam_m, state.radar_m.reshape(state.n, -1), state.radar_r_m], axis=1)
         if self._fields is None or self._keys is None or self._keys.shape != keys.shape:
-            first = self.build(world, 0)
-            self._fields = np.zeros((world.n, *first.shape), dtype=np.float32)
+            first = self.build(state, 0)
+            self._fields = np.zeros((state.n, *first.shape), dtype=np.float32)
             self._keys = np.full(keys.shape, np.nan)
         for k in np.flatnonzero(np.any(self._keys != keys, axis=1)):
-            self._fields[k] = self.build(world, int(k))
+            self._fields[k] = self.build(state, int(k))
             self._keys[k] = keys[k]
-        self._world, self._layout_version = world, world.layout_version
+        self._token = state.layout_token
         return self._fields
 
 
@@ -273,36 +273,36 @@ class RouteMap:
         self.cfg = cfg
         self.cache = FieldCache(self._build)
 
-    def _build(self, world: World, k: int) -> np.ndarray:
+    def _build(self, state: WorldState, k: int) -> np.ndarray:
         cfg = self.cfg
-        cx, cy = cell_centres(world.c.area_m, cfg.grid_m)
-        inside = radar_depth(world, k, cx, cy, cfg.margin_m) > 0
+        cx, cy = cell_centres(state.c.area_m, cfg.grid_m)
+        inside = radar_depth(state, k, cx, cy, cfg.margin_m) > 0
         return (
-            wavefront(sam_disk(world, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
+            wavefront(sam_disk(state, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
         )
 
-    def detour_m(self, world: World, vehicle: int | None = None) -> np.ndarray:
+    def detour_m(self, state: WorldState, vehicle: int | None = None) -> np.ndarray:
         """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""
         cols = slice(None) if vehicle is None else slice(vehicle, vehicle + 1)
         # (2, N, 3 or 1), copied: one vehicle's column is a strided view, and a copy costs less than the
         # slower path numpy takes for strided operands in the next calls.
-        xy = world.xy_m[:, :, cols].copy()
-        route = _sample_stacked(self.cache.fields(world), self.cfg.grid_m, xy)
-        to_sam = xy - world.sam_xy_m[:, :, cols].copy()
+        xy = state.xy_m[:, :, cols].copy()
+        route = _sample_stacked(self.cache.fields(state), self.cfg.grid_m, xy)
+        to_sam = xy - state.sam_xy_m[:, :, cols].copy()
         # Afresh, not in place: one vehicle's (N, 1) arrays have a single element at N = 1, and an in-place
         # update of that takes numpy's slow path.
-        straight = np.hypot(to_sam[0], to_sam[1]) - cached_constant(world.c.r4_m)
+        straight = np.hypot(to_sam[0], to_sam[1]) - cached_constant(state.c.r4_m)
         route = np.maximum(route - straight, _ZERO)
         detour = np.where(straight > _ZERO, route, _ZERO)
         return detour if vehicle is None else detour[:, 0]
 
-    def direction(self, world: World, vehicle: int) -> np.ndarray:
+    def direction(self, state: WorldState, vehicle: int) -> np.ndarray:
         """Unit vector (N, 2), world frame, along which one vehicle's way to the SAM's detection disk
         starts (down the route field); straight at the SAM where the field is flat (inside the disk)."""
-        x, y = world.x_m[:, vehicle : vehicle + 1], world.y_m[:, vehicle : vehicle + 1]
-        gx, gy = field_gradient(self.cache.fields(world), self.cfg.grid_m, x, y)
+        x, y = state.x_m[:, vehicle : vehicle + 1], state.y_m[:, vehicle : vehicle + 1]
+        gx, gy = field_gradient(self.cache.fields(state), self.cfg.grid_m, x, y)
         down = -np.concatenate([gx, gy], axis=1).astype(np.float64)
-        to_sam = world.sam_m - np.concatenate([x, y], axis=1)
+        to_sam = state.sam_m - np.concatenate([x, y], axis=1)
         norm = np.hypot(down[:, 0], down[:, 1])[:, None]
         flat = norm < 1e-3 * self.cfg.grid_m
         v = np.where(flat, to_sam, down)

@@ -23,6 +23,7 @@ from tssac_core.sim.observation import ObservationMode, observe
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import World
+from tssac_core.sim.world_state import snapshot
 
 GUIDANCE = "guidance"
 Pilot = str | Callable[[np.ndarray], np.ndarray] | AdversaryPilot | None
@@ -62,25 +63,26 @@ class Team:
         if self._held is None or self._held.shape[0] != world.n:
             self._held = np.zeros((world.n, len(ROLES), 2))
         actions = np.zeros((world.n, len(ROLES), 2))
+        state = snapshot(world)
         guided = None
         for j, pilot in self._flown:
             if j == skip:
                 continue
             if pilot == GUIDANCE:
                 if guided is None:
-                    guided = self.guidance.actions(world)
+                    guided = self.guidance.actions(state)
                 actions[:, j] = guided[:, j]
             elif isinstance(pilot, AdversaryPilot):
                 due = world.steps % pilot.action_repeat == 0
                 if due.any():
-                    self._held[:, j] = np.where(due[:, None], pilot.actions(world, j), self._held[:, j])
+                    self._held[:, j] = np.where(due[:, None], pilot.actions(state, j), self._held[:, j])
                 actions[:, j] = self._held[:, j]
             elif callable(pilot):
                 mode = getattr(pilot, "observation_mode", self.default_mode)
                 repeat = decision_interval(pilot)
                 due = world.steps % repeat == 0
                 if due.any():  # between decisions nobody needs the pilot: skip its forward pass
-                    fresh = np.asarray(pilot(observe(world, j, mode, self.routes)), dtype=np.float64)
+                    fresh = np.asarray(pilot(observe(state, j, mode, self.routes)), dtype=np.float64)
                     self._held[:, j] = np.where(due[:, None], fresh, self._held[:, j])
                 actions[:, j] = self._held[:, j]
         return actions

@@ -28,6 +28,7 @@ from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.role_task import RoleTask, Teammates
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, Role, Scenario, load
 from tssac_core.sim.team import GUIDANCE
+from tssac_core.sim.world_state import snapshot
 
 INFO_KEYS = ("cost", "radar_on", "identified", "hit", "task_done", "in_hazard")
 """The per-world info of :class:`tssac_core.sim.env.UavRoleEnv`, in its order."""
@@ -109,7 +110,7 @@ class RoleVectorEnv(gym.vector.VectorEnv):
             infos = {"final_obs": final_obs, "_final_obs": ended.copy(), "final_info": final, "_final_info": ended}
             obs = self.task.reset(np.flatnonzero(ended), self._rngs)
         else:
-            obs = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)
+            obs = observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes)
         infos.update(self._infos(np.ones(self.num_envs, dtype=bool), np.where(ended, 0.0, cost)))
         return obs.astype(np.float32), reward, terminated, truncated, infos
 
@@ -126,7 +127,7 @@ class RoleVectorEnv(gym.vector.VectorEnv):
 
     def _keep_final(self, idx: np.ndarray, final_obs: np.ndarray, final_flags: dict[str, np.ndarray]) -> None:
         """Record the last observation and flags of worlds ``idx``, which ended at this world step."""
-        obs = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes).astype(np.float32)
+        obs = observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes).astype(np.float32)
         flags = self._flags()
         for i in idx:
             final_obs[i] = obs[i]

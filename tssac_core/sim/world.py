@@ -146,7 +146,7 @@ class StepResult:
 class World:
     """N worlds of three UAVs, stepped together.
 
-    State arrays (public, read them freely; write only through reset/step/mirror): ``x_m, y_m, v_m_s,
+    State arrays (public, read them freely; write only through reset/step): ``x_m, y_m, v_m_s,
     phi_rad`` (N, 3); layout ``sam_m`` (N, 2), ``target_m`` (N, 2), ``radar_m`` (N, K, 2),
     ``radar_r_m`` (N, K); flags ``active`` (N, 3) (inactive vehicles are parked: they neither move
     nor count), ``running`` (N,) (a finished world is frozen until reset), ``radar_on``,
@@ -246,6 +246,12 @@ class World:
         return self.radar_r_m.shape[1]
 
     @property
+    def layout_token(self) -> object:
+        """A new object whenever any world gets a new layout (reset) or this World is rebuilt (unpickled): while it
+        is the same object, so are the layout arrays (caches of per-layout work compare it)."""
+        return self._layout_token
+
+    @property
     def layout_version(self) -> int:
         """Grows whenever any world gets a new layout (reset): one number to compare instead of ``layout_id``."""
         return self._resets
@@ -277,6 +283,7 @@ class World:
         """Target, SAM and radar positions, (2, N, 2 + K)."""
         self._unused_slots = False
         self._cache_layouts(np.arange(self.n))
+        self._layout_token = object()
         self._update_moving()
 
     def _cache_layouts(self, idx: np.ndarray) -> None:
@@ -323,6 +330,7 @@ class World:
             "_radar_r2",
             "_points_xy",
             "_unused_slots",
+            "_layout_token",
             "_moving",
             "_dt_moving",
             "_running_steps",
@@ -362,6 +370,7 @@ class World:
         self._cache_layouts(idx)
         self.layout_id[idx] = self._resets + np.arange(len(idx))
         self._resets += len(idx)
+        self._layout_token = object()
         self.v_m_s[idx] = self.c.speed_init_m_s
         self.active[idx] = active
         self.running[idx] = True
@@ -387,30 +396,6 @@ class World:
         self._dt_moving = dt
         self._running_steps = self.running.astype(np.int64)  # what a step adds to ``steps``
         self._running_count = np.count_nonzero(self.running)
-
-    def mirror(
-        self,
-        index: int,
-        role_index: int,
-        x_m: float,
-        y_m: float,
-        v_m_s: float,
-        phi_rad: float,
-        radar_on: bool,
-        identified: bool,
-    ) -> None:
-        """Set one vehicle's state and the mission flags from an outside estimate.
-
-        For a companion computer that keeps a one-world copy of a real (or SITL) vehicle, so that the
-        observation and the guidance controller see what its filter and datalink tell it. Only the
-        estimate is written; nothing is stepped.
-        """
-        self.x_m[index, role_index] = x_m
-        self.y_m[index, role_index] = y_m
-        self.v_m_s[index, role_index] = v_m_s
-        self.phi_rad[index, role_index] = _wrap(phi_rad)
-        self.radar_on[index] = radar_on
-        self.identified[index] = identified
 
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits

@@ -21,6 +21,7 @@ from tssac_core.assurance.monitor import (
     decide,
 )
 from tssac_core.sim.world import N_ROLES, World
+from tssac_core.sim.world_state import WorldState
 
 
 @dataclass
@@ -118,13 +119,13 @@ class VehicleMonitor:
     """The monitor for one vehicle (a companion computer): the same :func:`decide`, M = 1, with the margin
     and the pending commands the caller measures (Kalman covariance, link latency)."""
 
-    def __init__(self, world: World, role_index: int, cfg: ShieldConfig) -> None:
-        if world.n != 1:
-            raise ValueError(f"a vehicle monitor watches one world, got {world.n}")
-        c = world.c
+    def __init__(self, state: WorldState, role_index: int, cfg: ShieldConfig) -> None:
+        if state.n != 1:
+            raise ValueError(f"a vehicle monitor watches one world, got {state.n}")
+        c = state.c
         self.cfg = cfg
         self.dt_s = c.dt_s
-        self.hazards = Hazards(world.radar_m.copy(), world.radar_r_m.copy(), c.area_m)
+        self.hazards = Hazards(state.radar_m.copy(), state.radar_r_m.copy(), c.area_m)
         j = role_index
         self.limits = Limits(
             c.speed_min_m_s[j : j + 1],

@@ -36,6 +36,7 @@ from tssac_core.deploy.numpy_actor import team_pilots
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
 from tssac_core.sim.role_task import RoleTask, Teammates
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, load
+from tssac_core.sim.world_state import snapshot
 
 ENV_IDS = {f"Tssac{role.value.capitalize()}-v0": role for role in ROLES}
 """OmniSafe env id -> the learning role."""
@@ -128,7 +129,9 @@ class TssacRoleEnv(CMDP):
             terminated |= result.terminated
             truncated |= result.truncated
             if newly.any():
-                final_obs[newly] = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)[newly]
+                final_obs[newly] = observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes)[
+                    newly
+                ]
             if (terminated | truncated).all():
                 break
         ended = terminated | truncated
@@ -137,7 +140,7 @@ class TssacRoleEnv(CMDP):
             obs = self.task.reset(np.flatnonzero(ended), self._rngs)
             info["final_observation"] = self._out(np.where(ended[:, None], final_obs, obs))
         else:
-            obs = observe(self.task.world, self.task.j, self.mode, self.task.obs_routes)
+            obs = observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes)
         return (
             self._out(obs),
             self._out(reward),
