@@ -14,7 +14,7 @@ import pytest
 
 from mavlink_bridge.companion.cli import build_companion
 from mavlink_bridge.companion.config import PILOT_NAMES, CompanionConfig
-from mavlink_bridge.companion.pilots import AdversarialPilot
+from mavlink_bridge.companion.pilots import HeldPilot
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.adversaries import (
     DECISION_STEPS,
@@ -142,7 +142,7 @@ def test_the_companion_pilot_decides_as_the_batched_pilot():
         batched = world_of(scenario, [layout])
         start = initial_state(scenario, layout)  # the companion's state, fed the estimate by with_vehicle
         batch_pilot = AdversaryPilot(adversary)
-        pilots = [AdversarialPilot(adversary) for _ in ROLES]
+        pilots = [HeldPilot(AdversaryPilot(adversary)) for _ in ROLES]
         rng = np.random.default_rng(5)
         held = np.zeros((1, 3, 2))
         for step in range(35):
@@ -171,7 +171,7 @@ def test_the_companion_flies_the_pilot_it_is_given():
     for name in PILOT_NAMES:
         companion = build_companion(CompanionConfig("udpout:127.0.0.1:9", Role.STRIKE, strike, pilot=name))
         assert companion.pilot.name == name
-        assert isinstance(companion.pilot, AdversarialPilot) == (name in {a.value for a in Adversary})
+        assert isinstance(companion.pilot.pilot, AdversaryPilot) == (name in {a.value for a in Adversary})
 
 
 # ---------------------------------------------------------------------------------------------- batched world

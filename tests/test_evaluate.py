@@ -10,8 +10,8 @@ from tssac_core.cli import run
 from tssac_core.common.stats import wilson_interval
 from tssac_core.evaluate import main
 from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.scenario import load
-from tssac_core.sim.team import GUIDANCE
 
 
 def test_guidance_solves_random_layouts(random_path):

@@ -58,7 +58,7 @@ def test_the_companion_flies_an_export_without_importing_torch(models: Path):
         "import sys\n"
         "import mavlink_bridge.companion.pilots as c\n"
         "from tssac_core.sim.scenario import Role\n"
-        f"pilot = c.PolicyPilot(__import__('pathlib').Path({str(models / 'strike.npz')!r}), Role.STRIKE)\n"
+        f"pilot = c.policy_pilot(__import__('pathlib').Path({str(models / 'strike.npz')!r}), Role.STRIKE)\n"
         "print(type(pilot.policy).__name__, 'torch' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)

@@ -28,8 +28,8 @@ from tssac_core.parallel.mission_shards import fly_missions_sharded, shard
 from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
 from tssac_core.parallel.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.scenario import load as load_scenario
-from tssac_core.sim.team import GUIDANCE
 from tssac_core.train.wall_time import Ended, read_invocations
 
 ROOT = Path(__file__).resolve().parent.parent

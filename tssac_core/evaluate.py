@@ -34,8 +34,8 @@ from tssac_core.cli import UsageError, run, write_json
 from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.pilots import GUIDANCE, PilotSpec
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
-from tssac_core.sim.team import GUIDANCE, Pilot
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -99,7 +99,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return args
 
 
-def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[Pilot]:
+def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[PilotSpec]:
     """The team's pilots: the actors in ``models``, else the ``controller`` (guidance or an adversary) for every UAV."""
     if models is None:
         if controller in ADVERSARY_NAMES:

@@ -10,13 +10,11 @@ from mavlink_bridge.filter_model import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
+from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
-GUIDANCE = "guidance"
-STRAIGHT = "straight"
-"""A test pilot: heading and speed held (see :class:`mavlink_bridge.companion.pilots.StraightPilot`)."""
 PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
 """``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 MIN_POS_SIGMA_M = 0.1

@@ -22,7 +22,7 @@ from mavlink_bridge.companion.config import (
     MIN_VEL_SIGMA_M_S,
     CompanionConfig,
 )
-from mavlink_bridge.companion.pilots import DecisionClock, Pilot, make_pilot
+from mavlink_bridge.companion.pilots import DecisionClock, HeldPilot, make_pilot
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (
@@ -107,7 +107,7 @@ class Companion:
         self.role_index = config.role.index
         self.spec = s.vehicle(config.role)
         self.dt_ms = int(round(s.dt_s * 1000.0))
-        self.pilot: Pilot = make_pilot(config)
+        self.pilot: HeldPilot = make_pilot(config)
         self.layout_state: WorldState = initial_state(s, s.layout)
         """The mission's start as the pilots see it; each tick the filter's estimate replaces this vehicle's state."""
         self.shield = (

@@ -18,14 +18,12 @@ from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
+from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
 PROG = "python -m mavlink_bridge.fly"
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MODELS = REPO / "models" / "tssac"
-GUIDANCE = "guidance"
-STRAIGHT = "straight"
-"""A test pilot: every UAV holds heading and speed (``mavlink_bridge.companion --pilot straight``)."""
 PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
 """``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 

@@ -32,8 +32,8 @@ from tssac_core.cli import write_json
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.pilots import GUIDANCE, PilotSpec
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
-from tssac_core.sim.team import GUIDANCE, Pilot
 
 
 class EvalLabel(enum.Enum):
@@ -245,7 +245,7 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
     if hit is not None:
         return hit
     scenario = load(spec.scenario)
-    pilots: list[Pilot] = team_pilots(team) if team is not None else [GUIDANCE] * len(ROLES)
+    pilots: list[PilotSpec] = team_pilots(team) if team is not None else [GUIDANCE] * len(ROLES)
     layouts = layouts_in_turn(scenario, spec.episodes, spec.seed) if spec.layouts is LayoutRule.IN_TURN else None
     results = fly_missions(
         scenario, pilots, spec.episodes, spec.seed, layouts=layouts, shield=ShieldConfig() if spec.monitor else None
@@ -279,7 +279,7 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
     return TeamEvaluation.from_record(summary)
 
 
-def team_pilots(team: Path) -> list[Pilot]:
+def team_pilots(team: Path) -> list[PilotSpec]:
     """The three role policies of a models directory (torch is imported here, when a team is first flown)."""
     from tssac_core.deploy.policy import load_team
 

@@ -25,8 +25,8 @@ from tssac_core.common.stats import bootstrap_mean_interval, cvar, wilson_interv
 from tssac_core.experiments.evaluations import EvalLabel, Evaluations, LayoutRule, TeamEvaluation, eval_specs
 from tssac_core.experiments.grid import AlgoEntry, Grid, Job
 from tssac_core.experiments.learning_curves import mean_task_success, read_metrics, steps_to_threshold
+from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.scenario import load
-from tssac_core.sim.team import GUIDANCE
 from tssac_core.train.wall_time import training_wall_s
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {

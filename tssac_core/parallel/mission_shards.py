@@ -19,8 +19,8 @@ from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import map_on_ray
 from tssac_core.sim.missions import MissionResults, iter_missions
+from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import Scenario
-from tssac_core.sim.team import Pilot
 from tssac_core.sim.world_monitor import MonitorCounts
 
 PROGRESS_EVERY_S = 0.5
@@ -64,7 +64,7 @@ def merge_counts(parts: Sequence[MonitorCounts | None]) -> MonitorCounts:
     )
 
 
-Shard = tuple[Scenario, Sequence[Pilot], int, list[int], ShieldConfig | None]
+Shard = tuple[Scenario, Sequence[PilotSpec], int, list[int], ShieldConfig | None]
 """What a shard's task gets: the scenario, the pilots, the run's seed, its mission indices, the monitor's margins."""
 
 
@@ -89,7 +89,7 @@ def fly_shard(piece: Shard) -> Generator[int, None, MissionResults]:
 
 def fly_missions_sharded(
     scenario: Scenario,
-    pilots: Sequence[Pilot],
+    pilots: Sequence[PilotSpec],
     indices: Sequence[int],
     seed: int,
     workers: int,

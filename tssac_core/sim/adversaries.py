@@ -191,11 +191,15 @@ def layout_keys(state: WorldState) -> np.ndarray:
 
 @dataclass(frozen=True)
 class AdversaryPilot:
-    """An adversary as a pilot of the batched world (:class:`tssac_core.sim.team.Team`): it reads the world's
-    state, not an observation, and decides every ``action_repeat`` steps."""
+    """An adversary as a :class:`~tssac_core.sim.pilots.Pilot` (of the batched world's Team or a companion): it reads
+    the state, not an observation, and decides every ``action_repeat`` steps."""
 
     adversary: Adversary
     action_repeat: ClassVar[int] = DECISION_STEPS
+
+    @property
+    def name(self) -> str:
+        return self.adversary.value
 
     def actions(self, state: WorldState, role_index: int) -> np.ndarray:
         """The actions (N, 2) of vehicle ``role_index`` in every world."""

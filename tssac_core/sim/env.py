@@ -18,10 +18,10 @@ import gymnasium as gym
 import numpy as np
 
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
+from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.role_task import RoleTask, TaskStep, Teammates, resolve_pilots
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
-from tssac_core.sim.team import GUIDANCE
 from tssac_core.sim.world_state import snapshot
 
 __all__ = ["DEFAULT_ACTION_REPEAT", "RoleTask", "TaskStep", "Teammates", "UavRoleEnv", "resolve_pilots"]

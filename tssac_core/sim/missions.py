@@ -22,10 +22,11 @@ from tssac_core.common.stats import (
     worst_missions,
 )
 from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.pilots import PilotSpec, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
-from tssac_core.sim.team import Pilot, Team, decision_interval
+from tssac_core.sim.team import Team
 from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
 from tssac_core.sim.world_state import snapshot
@@ -136,7 +137,7 @@ def hold_nonfinite(actions: np.ndarray) -> np.ndarray:
 
 def fly_missions(
     scenario: Scenario,
-    pilots: Sequence[Pilot],
+    pilots: Sequence[PilotSpec],
     episodes: int,
     seed: int,
     mode: ObservationMode = ObservationMode.EXTENDED,
@@ -168,7 +169,7 @@ def fly_missions(
 
 def iter_missions(
     scenario: Scenario,
-    pilots: Sequence[Pilot],
+    pilots: Sequence[PilotSpec],
     episodes: int,
     seed: int,
     mode: ObservationMode = ObservationMode.EXTENDED,

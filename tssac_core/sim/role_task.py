@@ -16,17 +16,18 @@ import numpy as np
 
 from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
 from tssac_core.sim.observation import ObservationMode, observe
+from tssac_core.sim.pilots import GUIDANCE, PilotSpec, check_pilot
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES, Role, Scenario
-from tssac_core.sim.team import GUIDANCE, Pilot, Team, check_pilot
+from tssac_core.sim.team import Team
 from tssac_core.sim.world import StepResult, World
 from tssac_core.sim.world_state import snapshot
 
-Teammates = str | Mapping[str, Pilot] | None
+Teammates = str | Mapping[str, PilotSpec] | None
 
 
-def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
+def resolve_pilots(role: Role, teammates: Teammates) -> list[PilotSpec]:
     """Pilots for the three vehicles; the learner's own slot is ``"learner"``.
 
     ``teammates`` is ``"guidance"`` (all teammates flown by the guidance controller), ``"none"`` or
@@ -34,7 +35,7 @@ def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
     missing from the mapping are parked.
     """
     if teammates == GUIDANCE:
-        table: Mapping[str, Pilot] = {r.value: GUIDANCE for r in ROLES}
+        table: Mapping[str, PilotSpec] = {r.value: GUIDANCE for r in ROLES}
     elif teammates is None or teammates == "none":
         table = {}
     elif isinstance(teammates, Mapping):
@@ -44,7 +45,7 @@ def resolve_pilots(role: Role, teammates: Teammates) -> list[Pilot]:
                 raise ValueError(f"teammates: unknown role {name!r}")
     else:
         raise ValueError(f"teammates must be 'guidance', 'none' or a mapping role -> pilot, got {teammates!r}")
-    pilots: list[Pilot] = []
+    pilots: list[PilotSpec] = []
     for r in ROLES:
         if r is role:
             pilots.append("learner")

@@ -24,10 +24,10 @@ from gymnasium.vector.utils import batch_space
 
 from tssac_core.sim.env import DEFAULT_ACTION_REPEAT, DEFAULT_OBSERVATION, check_action_repeat
 from tssac_core.sim.observation import ObservationMode, observation_bounds, observe
+from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.role_task import RoleTask, Teammates
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, Role, Scenario, load
-from tssac_core.sim.team import GUIDANCE
 from tssac_core.sim.world_state import snapshot
 
 INFO_KEYS = ("cost", "radar_on", "identified", "hit", "task_done", "in_hazard")

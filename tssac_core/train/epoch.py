@@ -21,8 +21,8 @@ from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.sim.env import RoleTask, TaskStep
 from tssac_core.sim.hard_layouts import HardLayouts
 from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import ROLES, Role, Scenario
-from tssac_core.sim.team import Pilot
 from tssac_core.train.config import TrainConfig, reward_config
 from tssac_core.train.rundir import role_checkpoint
 from tssac_core.train.validation import EpochSelector
@@ -30,16 +30,16 @@ from tssac_core.train.validation import EpochSelector
 logger = logging.getLogger("tssac_core.train")
 
 
-def teammates_for(role: Role, cfg: TrainConfig, out: Path) -> dict[str, Pilot]:
+def teammates_for(role: Role, cfg: TrainConfig, out: Path) -> dict[str, PilotSpec]:
     """Earlier roles fly their trained policies (the judgement condition); later ones are parked."""
-    pilots: dict[str, Pilot] = {}
+    pilots: dict[str, PilotSpec] = {}
     for earlier in ROLES[: role.index]:
         pilots[earlier.value] = Policy.load(role_checkpoint(cfg, out, earlier), earlier)
     return pilots
 
 
 def make_task(
-    cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, Pilot]
+    cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, PilotSpec]
 ) -> RoleTask:
     """The training worlds of one role: its reward, its (tightened) cost, its teammates, its seed."""
     return RoleTask(

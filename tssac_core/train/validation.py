@@ -50,8 +50,8 @@ from tssac_core.common.stats import bootstrap_mean_interval, cvar, within_fracti
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.pilots import GUIDANCE, PilotSpec
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, sample_layout
-from tssac_core.sim.team import GUIDANCE, Pilot
 
 logger = logging.getLogger(__name__)
 
@@ -145,7 +145,7 @@ class EpochSelector:
         out: Path,
         episodes: int,
         seed: int,
-        teammates: Mapping[str, Pilot],
+        teammates: Mapping[str, PilotSpec],
         mode: ObservationMode,
         within_limit: bool = True,
         tail: bool = False,
@@ -155,7 +155,7 @@ class EpochSelector:
         self.seed = seed
         rng = np.random.default_rng([seed, role.index, SEED_TAG])
         self.layouts = [sample_layout(scenario, rng, protected_starts=False) for _ in range(episodes)]
-        self.pilots: list[Pilot] = [teammates.get(r.value) if r.index < role.index else GUIDANCE for r in ROLES]
+        self.pilots: list[PilotSpec] = [teammates.get(r.value) if r.index < role.index else GUIDANCE for r in ROLES]
         self.out = out
         self.candidate = out / "resume" / f"{role.value}-last.pt"
         self.best_path = out / "resume" / f"{role.value}-best.pt"
