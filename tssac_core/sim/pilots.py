@@ -29,6 +29,8 @@ from tssac_core.sim.world_state import WorldState
 
 GUIDANCE = "guidance"
 STRAIGHT = "straight"
+LEARNER = "learner"
+"""The slot of the role being trained (:func:`tssac_core.sim.role_task.resolve_pilots`): the learner sets its action."""
 
 
 @runtime_checkable
@@ -47,8 +49,8 @@ class Pilot(Protocol):
 
 
 PilotSpec = str | Callable[[np.ndarray], np.ndarray] | Pilot | None
-"""A pilot as callers name it: ``"guidance"``, a callable policy, a :class:`Pilot`, or None (the UAV is parked:
-it does not move and no task or cost of it counts)."""
+"""A pilot as callers name it: ``"guidance"``, a callable policy, a :class:`Pilot`, :data:`LEARNER`, or None (the UAV
+is parked: it does not move and no task or cost of it counts)."""
 
 
 class GuidancePilot:
@@ -113,8 +115,8 @@ def check_pilot(pilot: PilotSpec, role_name: str) -> None:
 
 def as_pilot(spec: PilotSpec, default_mode: ObservationMode, routes: RouteMap, guidance: GuidancePilot) -> Pilot | None:
     """The Pilot ``spec`` names: ``guidance`` for ``"guidance"``, a callable as a :class:`PolicyPilot` observing with
-    ``routes``; a Pilot as it is."""
-    if spec is None:
+    ``routes``; a Pilot as it is; None for None and for :data:`LEARNER` (whose action is not the team's)."""
+    if spec is None or spec == LEARNER:
         return None
     if isinstance(spec, Pilot):
         return spec

@@ -16,7 +16,7 @@ import numpy as np
 
 from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
 from tssac_core.sim.observation import ObservationMode, observe
-from tssac_core.sim.pilots import GUIDANCE, PilotSpec, check_pilot
+from tssac_core.sim.pilots import GUIDANCE, LEARNER, PilotSpec, check_pilot
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES, Role, Scenario
@@ -48,7 +48,7 @@ def resolve_pilots(role: Role, teammates: Teammates) -> list[PilotSpec]:
     pilots: list[PilotSpec] = []
     for r in ROLES:
         if r is role:
-            pilots.append("learner")
+            pilots.append(LEARNER)
         else:
             pilot = table.get(r.value)
             check_pilot(pilot, r.value)
