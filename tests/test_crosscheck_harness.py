@@ -156,6 +156,14 @@ def test_rows_are_written_at_once_skipped_after_and_never_mixed(tmp_path):
         again.done(job, {**SETTING, "epochs": 50})
     with pytest.raises(RowsError, match="already holds"):
         again.add(row("ours", "cpo", 0, [True] * 4, [0.0] * 4))
+    side = RowStore(path)  # another command on the same file, opened before the next row lands
+    again.add(row("ours", "ppo_lag", 0, [True] * 4, [0.0] * 4))
+    side.add(row("omnisafe", "cpo", 0, [False] * 4, [9.0] * 4))
+    assert {(r["impl"], r["algo"]) for r in RowStore(path).rows} == {
+        ("ours", "cpo"),
+        ("ours", "ppo_lag"),
+        ("omnisafe", "cpo"),
+    }
     path.write_text(json.dumps({"rows": []}))
     with pytest.raises(RowsError, match="not a cross-check"):
         RowStore(path)
@@ -176,6 +184,9 @@ def test_pool_takes_every_seeds_missions_and_the_table_shows_them():
     assert omni["per_seed_task_success"] == [1.0, 0.5]
     text = table(pooled)
     assert "| ppo_lag | omnisafe | 2 | 75.0% (" in text and "100%, 50%" in text and "2600001-2600004" in text
+    assert text.rstrip().endswith("| 40 | n/a |")  # no CPU figure recorded
+    rows[0]["cpu_ms_per_decision"], rows[1]["cpu_ms_per_decision"] = 3.0, None
+    assert "| 40 | 3.0 |" in table(pool(rows))
     with pytest.raises(RowsError, match="different settings"):
         pool([*rows, row("ours", "cpo", 1, [True] * 4, [0.0] * 4, {**SETTING, "eval_seed": 1})])
     with pytest.raises(RowsError, match="no rows"):

@@ -138,7 +138,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ep_ret, ep_cost, ep_len = agent.learn()
     wall = time.perf_counter() - start
     cfgs = agent.cfgs
-    checked = export(cfgs, last_checkpoint(Path(custom["logger_cfgs"]["log_dir"])), args.out / "actor.npz")
+    checkpoint = last_checkpoint(Path(custom["logger_cfgs"]["log_dir"]))
+    if checkpoint.name != f"epoch-{cfgs.train_cfgs.epochs}.pt":  # the logger names it by epochs finished
+        print(f"error: the last saved actor is {checkpoint}, not the last epoch's", file=sys.stderr)
+        return 1
+    checked = export(cfgs, checkpoint, args.out / "actor.npz")
     record = {
         "algo": algo,
         "train_wall_s": round(wall, 2),

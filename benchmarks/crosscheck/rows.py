@@ -9,6 +9,7 @@ training wall time and the exact commands.
 
 from __future__ import annotations
 
+import fcntl
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -80,19 +81,26 @@ def make_row(
 
 
 class RowStore:
-    """The rows of one results file (JSON: {"format": FORMAT, "rows": [...]}); every ``add`` rewrites it atomically."""
+    """The rows of one results file (JSON: {"format": FORMAT, "rows": [...]}). Every ``done`` reads the file again
+    and every ``add`` reads, appends and rewrites it atomically under a lock (``<file>.lock``), so commands run side
+    by side (say one per algorithm) can share one file without losing each other's rows."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.rows: list[dict[str, Any]] = []
-        if path.exists():
-            try:
-                data = json.loads(path.read_text())
-            except ValueError as exc:
-                raise RowsError(f"{path}: not JSON ({exc})") from None
-            if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("rows"), list):
-                raise RowsError(f"{path}: not a cross-check results file (format {FORMAT})")
-            self.rows = data["rows"]
+        self.reload()
+
+    def reload(self) -> None:
+        if not self.path.exists():
+            self.rows = []
+            return
+        try:
+            data = json.loads(self.path.read_text())
+        except ValueError as exc:
+            raise RowsError(f"{self.path}: not JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("rows"), list):
+            raise RowsError(f"{self.path}: not a cross-check results file (format {FORMAT})")
+        self.rows = data["rows"]
 
     def find(self, job: Job) -> dict[str, Any] | None:
         for row in self.rows:
@@ -102,6 +110,7 @@ class RowStore:
 
     def done(self, job: Job, the_setting: dict[str, Any]) -> bool:
         """Whether ``job``'s row is there; RowsError if it was made with another setting (a rerun must not mix)."""
+        self.reload()
         row = self.find(job)
         if row is None:
             return False
@@ -113,10 +122,14 @@ class RowStore:
 
     def add(self, row: dict[str, Any]) -> None:
         job = Job(row["impl"], row["algo"], row["seed"])
-        if self.find(job) is not None:
-            raise RowsError(f"{self.path} already holds {job.name}")
-        self.rows.append(row)
-        write_json(self.path, {"format": FORMAT, "rows": self.rows})
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.with_name(self.path.name + ".lock").open("w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            self.reload()
+            if self.find(job) is not None:
+                raise RowsError(f"{self.path} already holds {job.name}")
+            self.rows.append(row)
+            write_json(self.path, {"format": FORMAT, "rows": self.rows})
 
 
 def pool(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -145,9 +158,16 @@ def pool(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "per_seed_mean_cost": [r["mean_cost"]["value"] for r in group],
                 "train_wall_s": float(np.mean([r["train_wall_s"] for r in group])),
                 "ms_per_decision": float(np.mean([r["ms_per_decision"] for r in group])),
+                "cpu_ms_per_decision": mean_of([r.get("cpu_ms_per_decision") for r in group]),
             }
         )
     return pooled
+
+
+def mean_of(values: Sequence[float | None]) -> float | None:
+    """The mean of the values that are there (a row trained in an earlier invocation has no CPU figure)."""
+    there = [v for v in values if v is not None]
+    return float(np.mean(there)) if there else None
 
 
 def _pct(interval: dict[str, float]) -> str:
@@ -160,24 +180,27 @@ def table(pooled: Sequence[dict[str, Any]]) -> str:
         raise RowsError("no rows to report")
     s = pooled[0]["setting"]
     head = (
-        f"Detect role beside the shipped decoy, {s['epochs']} epochs x {s['steps_per_epoch']:,} decisions of 1 s; "
+        f"Detect role beside the shipped decoy, trained for {s['epochs']} x {s['steps_per_epoch']:,} decisions of 1 s "
+        f"(epochs x decisions per epoch); "
         f"{s['eval_episodes']} evaluation layouts per seed (layout seeds {s['eval_seed']}-"
         f"{s['eval_seed'] + s['eval_episodes'] - 1}), pooled over the seeds; 95% intervals (Wilson; bootstrap for "
-        f"the mean cost); C = {s['cost_limit']:g} world steps per UAV-mission.\n\n"
+        f"the mean cost); C = {s['cost_limit']:g} world steps per UAV-mission. Train s: the learner's wall time; "
+        f"CPU ms: the training command's CPU time (start-up included) per decision.\n\n"
     )
     lines = [
         "| Algorithm | Implementation | Seeds | Detect task success | Mean cost per UAV-mission | Within C | "
-        "Per-seed task success | Train s per run | ms per decision |",
+        "Per-seed task success | Train s per run | CPU ms per decision |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for p in pooled:
         if p["setting"] != s:
             raise RowsError("rows made with different settings cannot share a table")
         c = p["mean_cost"]
+        cpu = "n/a" if p["cpu_ms_per_decision"] is None else f"{p['cpu_ms_per_decision']:.1f}"
         per_seed = ", ".join(f"{100 * v:.0f}%" for v in p["per_seed_task_success"])
         lines.append(
             f"| {p['algo']} | {p['impl']} | {len(p['seeds'])} | {_pct(p['task_success'])} | "
             f"{c['value']:.2f} ({c['low']:.2f}-{c['high']:.2f}) | {_pct(p['within_c'])} | {per_seed} | "
-            f"{p['train_wall_s']:.0f} | {p['ms_per_decision']:.1f} |"
+            f"{p['train_wall_s']:.0f} | {cpu} |"
         )
     return head + "\n".join(lines) + "\n"
