@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from tssac_core.wire import units
+
 
 @dataclass
 class Clock:
@@ -22,4 +24,4 @@ class Clock:
 
     @property
     def time_boot_ms(self) -> int:
-        return int(round(self.sim_s * 1000.0))
+        return units.ms_from_s(self.sim_s)

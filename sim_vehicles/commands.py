@@ -25,6 +25,7 @@ from sim_vehicles.mavlink_io import Address
 from sim_vehicles.modes import FlightMode
 from sim_vehicles.vehicle import Vehicle
 from sim_vehicles.vehicle_link import VehicleLink
+from tssac_core.wire import units
 
 _log = logging.getLogger(__name__)
 M = mavlink2
@@ -342,4 +343,4 @@ class CommandHandler:
 
     def _on_timesync(self, msg: Msg, addr: Address) -> None:
         if msg.tc1 == 0:  # a request; answer with our (simulated) clock in ns
-            self.link.send(self.link.mav.timesync_encode(int(round(self.v.clock.sim_s * 1e9)), msg.ts1), addr)
+            self.link.send(self.link.mav.timesync_encode(units.ns_from_s(self.v.clock.sim_s), msg.ts1), addr)

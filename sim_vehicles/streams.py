@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sim_vehicles import telemetry
 from sim_vehicles.link_model import GpsFix
 from sim_vehicles.vehicle import EPS_S, Vehicle
+from tssac_core.wire import units
 
 M = mavlink2  # message ids and enums
 
@@ -91,7 +92,7 @@ class StreamTable:
         elif interval_us == 0:
             stream.interval_s = DEFAULT_INTERVALS_S[mid]
         elif 0 < interval_us <= MAX_INTERVAL_US:  # also false for NaN
-            stream.interval_s = interval_us / 1e6
+            stream.interval_s = units.s_from_us(interval_us)
         else:
             return M.MAV_RESULT_DENIED
         stream.next_due_s = now_s
@@ -102,7 +103,7 @@ class StreamTable:
         stream = self.streams.get(mid)
         if stream is None:
             return None
-        return -1 if stream.interval_s is None else min(MAX_INTERVAL_US, int(round(stream.interval_s * 1e6)))
+        return -1 if stream.interval_s is None else min(MAX_INTERVAL_US, units.us_from_s(stream.interval_s))
 
 
 def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list[mavlink2.MAVLink_message]:

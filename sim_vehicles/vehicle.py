@@ -16,7 +16,8 @@ only through the methods here (:meth:`Vehicle.set_mode`, :meth:`Vehicle.set_arme
   armed. Disarmed, the vehicle holds heading and speed (it is airborne from the first step).
 * Setpoints (:mod:`sim_vehicles.setpoints`): the companion's acceleration + yaw rate, MAVSDK's
   forward speed + yaw rate, or SET_ATTITUDE_TARGET's thrust + yaw rate; obeyed only armed in
-  GUIDED. The world's action is (omega / turn_rate_max, u / accel_max) in [-1, 1], omega = -yaw_rate.
+  GUIDED. The world's action is (omega / turn_rate_max, u / accel_max) in [-1, 1], omega = -yaw_rate
+  (:mod:`tssac_core.wire.units`: the companion scales its setpoints with the same functions).
 * Setpoint-timeout failsafe: armed in GUIDED with no setpoint for ``GUID_TIMEOUT`` simulated seconds,
   hold heading and speed (STATUSTEXT, ``system_status`` CRITICAL) until the next setpoint.
 * Datalink failsafe (ArduPlane's ``FS_GCS_ENABL``, ``FS_LONG_TIMEOUT``, ``FS_LONG_ACTN``): armed, with
@@ -44,6 +45,7 @@ from sim_vehicles.params import ParamTable, vehicle_params
 from sim_vehicles.setpoints import Demand, Refusal, accel_command
 from sim_vehicles.telemetry import VehicleTruth
 from tssac_core.sim.scenario import LinkModel, Origin
+from tssac_core.wire import units
 
 _log = logging.getLogger(__name__)
 
@@ -262,7 +264,7 @@ class Vehicle:
         self.check_datalink()
         omega, accel = self._command_now()
         su = self.setup
-        a = (omega / su.turn_rate_max_rad_s, accel / su.accel_max_m_s2)
+        a = units.action_from_command(omega, accel, su.turn_rate_max_rad_s, su.accel_max_m_s2)
         self.last_action = a
         return a
 
@@ -274,7 +276,8 @@ class Vehicle:
             if sp.demand.course_rad is not None:
                 omega = navigation.course_turn_rate(t.phi_rad, sp.demand.course_rad, su.turn_rate_max_rad_s)
             else:
-                omega = min(su.turn_rate_max_rad_s, max(-su.turn_rate_max_rad_s, -sp.demand.yaw_rate_rad_s))
+                omega = units.omega_from_yaw_rate(sp.demand.yaw_rate_rad_s)
+                omega = min(su.turn_rate_max_rad_s, max(-su.turn_rate_max_rad_s, omega))
             accel = accel_command(
                 sp.demand, t.speed_m_s, su.accel_max_m_s2, su.speed_min_m_s, su.speed_max_m_s, su.dt_s
             )

@@ -31,6 +31,7 @@ from sim_vehicles.link_model import LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
 from sim_vehicles.setpoints import Refusal, parse_attitude_target, parse_position_target
 from sim_vehicles.vehicle import Vehicle
+from tssac_core.wire import units
 
 M = mavlink2  # message ids and enums
 COALESCE_BYTES = 1200
@@ -226,7 +227,7 @@ class VehicleLink:
 
     def _write_tlog(self, frame: bytes) -> None:
         assert self._tlog is not None
-        stamp_us = int(round((self.clock.unix_start_s + self.clock.sim_s) * 1e6))
+        stamp_us = units.us_from_s(self.clock.unix_start_s + self.clock.sim_s)
         self._tlog.write(struct.pack(">Q", stamp_us) + frame)
 
     # ------------------------------------------------------------------------------ telemetry
@@ -262,7 +263,7 @@ class VehicleLink:
         severity, text = event.statustext()
         self.send(telemetry.statustext(self.mav, severity, text))
         self.send(
-            telemetry.named_value_int(self.mav, int(round(event.time_s * 1000.0)), event.kind.value_name, event.value)
+            telemetry.named_value_int(self.mav, units.ms_from_s(event.time_s), event.kind.value_name, event.value)
         )
 
     def statustext(self, severity: int, text: str, dest: Address | None = None) -> None:

@@ -32,9 +32,10 @@ from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, 
 from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
-from tssac_core.wire.geodetic import deg_e7, local_to_geodetic
+from tssac_core.wire.geodetic import local_to_geodetic
 from tssac_core.wire.signing import now_10us
 from tssac_core.wire.truth_log_schema import read_truth_log
+from tssac_core.wire.units import deg_e7
 
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_bridge")
