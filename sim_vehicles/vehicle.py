@@ -169,7 +169,7 @@ class _NoRadio:
         pass
 
 
-EventSink = Callable[[str, str, int, "str | None"], None]
+EventSink = Callable[[str, str, int, str | None], None]
 """(role, event name, value, text or None) -> None: arming, mode, failsafe changes and relayed STATUSTEXTs for the
 truth log."""
 
