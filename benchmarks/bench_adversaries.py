@@ -108,8 +108,13 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
     p.add_argument("--workers", type=int, default=2, help="Ray workers for the batched and the SITL missions")
     p.add_argument("--seed", type=int, default=SEED, help=f"start of the seed range (default {SEED:,})")
     p.add_argument("--episode-steps", type=int, help="cap every mission at N steps (default: the scenario's)")
-    p.add_argument("--batched", nargs="+", default=list(BATCHED), help="batched scenarios (default random corner)")
-    p.add_argument("--sitl", nargs="+", default=list(SITL), help="SITL scenarios (default random degraded)")
+    p.add_argument(
+        "--batched",
+        nargs="*",
+        default=list(BATCHED),
+        help="batched scenarios (default random corner; none: none)",
+    )
+    p.add_argument("--sitl", nargs="*", default=list(SITL), help="SITL scenarios (default random degraded; none: none)")
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")

@@ -192,11 +192,11 @@ def case_peer_flood(n: int = 300) -> dict[str, Any]:
         for p in peers:
             p.heartbeat()
         time.sleep(0.5)
-        v = world.runner.vehicles[0]
-        b0, t0 = v.endpoint.tx.bytes, time.monotonic()
+        endpoint = world.runner.links[0].endpoint
+        b0, t0 = endpoint.tx.bytes, time.monotonic()
         time.sleep(2.0)
-        rate = (v.endpoint.tx.bytes - b0) / (time.monotonic() - t0)
-        return {"fake_peers": n, "clients_served": len(v.endpoint.peers), "tx_bytes_per_s": round(rate)}
+        rate = (endpoint.tx.bytes - b0) / (time.monotonic() - t0)
+        return {"fake_peers": n, "clients_served": len(endpoint.peers), "tx_bytes_per_s": round(rate)}
     finally:
         for p in peers:
             p.close()
@@ -280,12 +280,12 @@ def _companion(world: World, key_file: Path | None, tmp: Path) -> tuple[subproce
 
 
 def _wait_flying(world: World, timeout_s: float = 90.0) -> tuple[str, int] | None:
-    v = world.runner.vehicles[0]
+    v, endpoint = world.runner.vehicles[0], world.runner.links[0].endpoint
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if v.armed and int(v.mode) == 15 and v.endpoint.peers:
+        if v.armed and int(v.mode) == 15 and endpoint.peers:
             time.sleep(0.5)
-            return next(iter(v.endpoint.peers))
+            return next(iter(endpoint.peers))
         time.sleep(0.05)
     return None
 

@@ -15,6 +15,7 @@ import argparse
 import csv
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -33,8 +34,15 @@ def main() -> None:
     args = p.parse_args()
 
     import omnisafe  # OmniSafe's own environment only
+    import omnisafe.algorithms.algo_wrapper as wrapper
 
     import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDecoy-v0, TssacDetect-v0, TssacStrike-v0)
+
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.crosscheck.omnisafe_side import default_cfgs_with_env_section
+
+    # OmniSafe 0.5.0's off-policy yamls (SACLag, ...) have no env_cfgs section, so it refuses ours without this.
+    wrapper.get_default_kwargs_yaml = default_cfgs_with_env_section(wrapper.get_default_kwargs_yaml)
 
     env_cfgs: dict[str, object] = {"scenario": str(ROOT / "scenarios" / "random.yaml"), "teammates": args.teammates}
     if args.teammates not in ("guidance", "none") and args.role != "Decoy":

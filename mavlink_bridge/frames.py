@@ -4,7 +4,8 @@ World (eq. 5): x east, y north in metres from the area's south-west corner; head
 counter-clockwise from east; turn rate omega counter-clockwise-positive; action [omega, u] in
 [-1, 1], scaled by the vehicle's limits (``turn_rate_max_deg_s``, ``accel_max_m_s2`` of the scenario).
 
-MAVLink (as the bundled SITL documents it, ``sim_vehicles.telemetry`` / ``sim_vehicles.vehicle``):
+MAVLink (as the bundled SITL documents it, ``sim_vehicles.telemetry`` / ``sim_vehicles.vehicle``; every unit,
+axis and sign below is converted by :mod:`tssac_core.wire.units`, the functions the SITL uses too):
 
 * LOCAL_POSITION_NED: origin at the area's SW corner, ``x`` north = world y, ``y`` east = world x,
   ``vx`` north, ``vy`` east (m, m/s).
@@ -21,6 +22,7 @@ import math
 from dataclasses import dataclass
 
 from tssac_core.sim.scenario import Origin, VehicleSpec
+from tssac_core.wire import units
 from tssac_core.wire.geodetic import geodetic_to_local
 
 
@@ -37,15 +39,18 @@ class Measurement:
 
 def from_local_position_ned(time_boot_ms: int, x_m: float, y_m: float, vx_m_s: float, vy_m_s: float) -> Measurement:
     """LOCAL_POSITION_NED fields -> world measurement (x north -> north, y east -> east)."""
-    return Measurement(time_boot_ms / 1000.0, float(y_m), float(x_m), float(vy_m_s), float(vx_m_s))
+    east, north = units.world_from_ned(x_m, y_m)
+    vel_east, vel_north = units.world_from_ned(vx_m_s, vy_m_s)
+    return Measurement(units.s_from_ms(time_boot_ms), float(east), float(north), float(vel_east), float(vel_north))
 
 
 def from_global_position_int(
     origin: Origin, time_boot_ms: int, lat_e7: int, lon_e7: int, vx_cm_s: int, vy_cm_s: int
 ) -> Measurement:
     """GLOBAL_POSITION_INT fields -> world measurement."""
-    east, north = geodetic_to_local(origin, lat_e7 * 1e-7, lon_e7 * 1e-7)
-    return Measurement(time_boot_ms / 1000.0, east, north, vy_cm_s / 100.0, vx_cm_s / 100.0)
+    east, north = geodetic_to_local(origin, units.deg_from_e7(lat_e7), units.deg_from_e7(lon_e7))
+    vel_east, vel_north = units.world_from_ned(units.m_from_cm(vx_cm_s), units.m_from_cm(vy_cm_s))
+    return Measurement(units.s_from_ms(time_boot_ms), east, north, vel_east, vel_north)
 
 
 @dataclass(frozen=True)
@@ -66,14 +71,18 @@ def action_to_setpoint(action: tuple[float, float], spec: VehicleSpec) -> Setpoi
     """[omega, u] in [-1, 1] (clipped) -> heading rate and forward acceleration at the vehicle's limits."""
     omega_n = min(1.0, max(-1.0, float(action[0])))
     u_n = min(1.0, max(-1.0, float(action[1])))
-    omega_rad_s = omega_n * math.radians(spec.turn_rate_max_deg_s)
-    return Setpoint(yaw_rate_rad_s=-omega_rad_s, accel_m_s2=u_n * spec.accel_max_m_s2)
+    omega_rad_s, accel_m_s2 = units.command_from_action(
+        omega_n, u_n, math.radians(spec.turn_rate_max_deg_s), spec.accel_max_m_s2
+    )
+    return Setpoint(yaw_rate_rad_s=units.yaw_rate_from_omega(omega_rad_s), accel_m_s2=accel_m_s2)
 
 
 def setpoint_to_action(setpoint: Setpoint, spec: VehicleSpec) -> tuple[float, float]:
     """The inverse of :func:`action_to_setpoint`: the [omega, u] a setpoint commands (the monitor's record of
     what the vehicle was sent)."""
-    return (
-        -setpoint.yaw_rate_rad_s / math.radians(spec.turn_rate_max_deg_s),
-        setpoint.accel_m_s2 / spec.accel_max_m_s2,
+    return units.action_from_command(
+        units.omega_from_yaw_rate(setpoint.yaw_rate_rad_s),
+        setpoint.accel_m_s2,
+        math.radians(spec.turn_rate_max_deg_s),
+        spec.accel_max_m_s2,
     )

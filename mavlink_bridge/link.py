@@ -51,6 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from tssac_core.wire import units
 from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
 from tssac_core.wire.signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
@@ -555,7 +556,7 @@ class MavLink:
         self, message_id: int, interval_s: float, timeout_s: float = 1.0, retries: int = 3
     ) -> Message:
         """MAV_CMD_SET_MESSAGE_INTERVAL, checked: ``interval_s`` > 0, or -1 to stop the stream."""
-        interval_us = -1.0 if interval_s < 0 else interval_s * 1e6
+        interval_us = -1.0 if interval_s < 0 else interval_s * units.US_PER_S  # a float parameter: not rounded
         return self.command_checked(
             M.MAV_CMD_SET_MESSAGE_INTERVAL, (float(message_id), interval_us), timeout_s, retries
         )
@@ -571,7 +572,7 @@ class MavLink:
     def _log_frame(self, frame: bytes) -> None:
         if self._tlog is None:
             return
-        stamp_us = int(time.time() * 1e6) & ~3
+        stamp_us = int(time.time() * units.US_PER_S) & ~3
         try:
             self._tlog.write(struct.pack(">Q", stamp_us) + frame)
             now = time.monotonic()

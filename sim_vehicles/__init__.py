@@ -5,8 +5,14 @@ protocol is described in ``docs/mavlink.md``. Modules, one job each:
 
 * :mod:`~sim_vehicles.config` — the run's configuration (frozen dataclass, enums);
 * :mod:`~sim_vehicles.world_runner` — the loop: world steps, real time / speed-up / lockstep, events;
-* :mod:`~sim_vehicles.vehicle` — one vehicle's autopilot behaviour (modes, commands, setpoints, failsafe);
+* :mod:`~sim_vehicles.clock` — the simulated, link-model, wall and Unix clocks the runner keeps;
+* :mod:`~sim_vehicles.vehicle` — one vehicle's state and decisions (modes, setpoints, failsafes, its action);
+* :mod:`~sim_vehicles.vehicle_link` — one vehicle's MAVLink side (link model both ways, telemetry, lockstep credit);
+* :mod:`~sim_vehicles.commands` — what a vehicle does with its clients' messages (commands, parameters, ...);
+* :mod:`~sim_vehicles.streams` — which telemetry a vehicle sends when, and each stream's messages;
 * :mod:`~sim_vehicles.telemetry` — telemetry messages from a state (frames and units);
+* :mod:`~sim_vehicles.setpoints` — setpoint messages -> what the vehicle flies;
+* :mod:`~sim_vehicles.modes` / :mod:`~sim_vehicles.navigation` — flight modes and the autonomous modes' guidance;
 * :mod:`~sim_vehicles.params` — the parameter table;
 * :mod:`~sim_vehicles.mavlink_io` — the UDP endpoint around pymavlink (framing, signing checks, peers);
 * :mod:`~sim_vehicles.signing` — signing keys and replay detection;

@@ -1,7 +1,8 @@
 """What a vehicle does with the messages its clients send: commands, modes, setpoints, parameters,
 missions, FTP and time sync.
 
-:class:`CommandHandler` reads messages and answers them; it changes the vehicle's state only through
+:class:`CommandHandler` reads messages and answers them over the vehicle's
+:class:`~sim_vehicles.vehicle_link.VehicleLink`; it changes the vehicle's state only through
 :class:`sim_vehicles.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
 Every COMMAND_LONG / COMMAND_INT is answered with a COMMAND_ACK to its sender. Messages addressed to
 another system or component are ignored (counted) and never passed on: a ground station on ``--out``
@@ -23,6 +24,8 @@ from sim_vehicles import modes, setpoints
 from sim_vehicles.mavlink_io import Address
 from sim_vehicles.modes import FlightMode
 from sim_vehicles.vehicle import Vehicle
+from sim_vehicles.vehicle_link import VehicleLink
+from tssac_core.wire import units
 
 _log = logging.getLogger(__name__)
 M = mavlink2
@@ -46,8 +49,9 @@ GOTO_REFUSAL = "Goto refused: fly GUIDED setpoints"
 class CommandHandler:
     """The incoming side of one vehicle (see the module docstring)."""
 
-    def __init__(self, vehicle: Vehicle) -> None:
+    def __init__(self, vehicle: Vehicle, link: VehicleLink) -> None:
         self.v = vehicle
+        self.link = link
         self._home_upload_from: Address | None = None
         """The client uploading a one-item (home slot only) mission, until its item 0 arrives."""
         self._handlers: dict[str, Callable[[Msg, Address], None]] = {
@@ -91,7 +95,7 @@ class CommandHandler:
             if isinstance(msg.text, str)
             else bytes(msg.text).rstrip(b"\x00").decode("ascii", "replace")
         )
-        self.v.relay_statustext(int(msg.severity), text, addr)
+        self.link.relay_statustext(int(msg.severity), text, addr)
 
     def handle(self, msg: Msg, addr: Address) -> None:
         v = self.v
@@ -111,8 +115,8 @@ class CommandHandler:
             _log.exception("%s: handling %s failed", v.role, msg.get_type())
 
     def _reply_ack(self, command: int, result: int, msg: Msg, addr: Address) -> None:
-        self.v.send(
-            self.v.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), addr
+        self.link.send(
+            self.link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), addr
         )
 
     # ------------------------------------------------------------------------------ commands
@@ -138,7 +142,7 @@ class CommandHandler:
             result, replies = handler(params)
         self._reply_ack(command, result, msg, addr)
         for reply in replies:
-            v.send(reply, addr)
+            self.link.send(reply, addr)
 
     def _cmd_arm_disarm(self, p: tuple[float, ...]) -> CommandResult:
         if abs(p[0] - 1.0) < 1e-3:
@@ -166,7 +170,7 @@ class CommandHandler:
         """A goto (MAVSDK's goto_location: GUIDED, then MAV_CMD_DO_REPOSITION) is not flown here: refused, and the
         switch to GUIDED made for it is undone, so the vehicle does not sit in GUIDED without a setpoint."""
         v = self.v
-        v.statustext(M.MAV_SEVERITY_WARNING, GOTO_REFUSAL)
+        self.link.statustext(M.MAV_SEVERITY_WARNING, GOTO_REFUSAL)
         v.undo_guided_switch("goto refused")
         return M.MAV_RESULT_UNSUPPORTED, []
 
@@ -177,35 +181,35 @@ class CommandHandler:
     def _set_mode(self, base_mode: int, custom_mode: int) -> int:
         v = self.v
         if not base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            v.statustext(M.MAV_SEVERITY_WARNING, "Set mode: base_mode needs CUSTOM_MODE_ENABLED")
+            self.link.statustext(M.MAV_SEVERITY_WARNING, "Set mode: base_mode needs CUSTOM_MODE_ENABLED")
             return M.MAV_RESULT_DENIED
         try:
             mode = FlightMode(custom_mode)
         except ValueError:
-            v.statustext(M.MAV_SEVERITY_WARNING, modes.refusal(custom_mode))
+            self.link.statustext(M.MAV_SEVERITY_WARNING, modes.refusal(custom_mode))
             return M.MAV_RESULT_DENIED
         v.set_mode(mode)
         return M.MAV_RESULT_ACCEPTED
 
     def _cmd_request_message(self, p: tuple[float, ...]) -> CommandResult:
-        msgs = self.v.requested(int(p[0]) if math.isfinite(p[0]) else -1)
+        msgs = self.link.requested(int(p[0]) if math.isfinite(p[0]) else -1)
         if msgs is None:
             return M.MAV_RESULT_UNSUPPORTED, []
         return (M.MAV_RESULT_ACCEPTED, msgs) if msgs else (M.MAV_RESULT_FAILED, [])
 
     def _cmd_request_capabilities(self, p: tuple[float, ...]) -> CommandResult:
-        return M.MAV_RESULT_ACCEPTED, self.v.build(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        return M.MAV_RESULT_ACCEPTED, self.link.build(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
 
     def _cmd_set_message_interval(self, p: tuple[float, ...]) -> CommandResult:
-        ok = self.v.set_stream_interval(int(p[0]) if math.isfinite(p[0]) else -1, p[1])
+        ok = self.link.set_stream_interval(int(p[0]) if math.isfinite(p[0]) else -1, p[1])
         return ok, []
 
     def _cmd_get_message_interval(self, p: tuple[float, ...]) -> CommandResult:
         mid = int(p[0]) if math.isfinite(p[0]) else -1
-        interval_us = self.v.stream_interval_us(mid)
+        interval_us = self.link.stream_interval_us(mid)
         if interval_us is None:
             return M.MAV_RESULT_UNSUPPORTED, []
-        return M.MAV_RESULT_ACCEPTED, [self.v.mav.message_interval_encode(mid, interval_us)]
+        return M.MAV_RESULT_ACCEPTED, [self.link.mav.message_interval_encode(mid, interval_us)]
 
     # ----------------------------------------------------------------------------- setpoints
 
@@ -231,11 +235,11 @@ class CommandHandler:
         params = self.v.params
         p = params.at(index)
         assert p is not None
-        return self.v.mav.param_value_encode(p.name.encode("ascii"), p.value, p.param_type, len(params), index)
+        return self.link.mav.param_value_encode(p.name.encode("ascii"), p.value, p.param_type, len(params), index)
 
     def _on_param_request_list(self, msg: Msg, addr: Address) -> None:
         for i in range(len(self.v.params)):
-            self.v.send(self._param_value(i), addr)
+            self.link.send(self._param_value(i), addr)
 
     def _on_param_request_read(self, msg: Msg, addr: Address) -> None:
         params = self.v.params
@@ -244,7 +248,7 @@ class CommandHandler:
             _log.info("%s: PARAM_REQUEST_READ of unknown parameter %r / %d", self.v.role, msg.param_id, msg.param_index)
             self._param_error(msg, addr, M.MAV_PARAM_ERROR_DOES_NOT_EXIST)
             return
-        self.v.send(self._param_value(index), addr)
+        self.link.send(self._param_value(index), addr)
 
     def _on_param_set(self, msg: Msg, addr: Address) -> None:
         v = self.v
@@ -252,37 +256,37 @@ class CommandHandler:
         refused = v.params.set(msg.param_id, float(msg.param_value))
         if refused is None:
             assert index is not None
-            v.send(self._param_value(index))  # a changed value goes to every client
+            self.link.send(self._param_value(index))  # a changed value goes to every client
             return
         # As ArduPilot 4.6: PARAM_ERROR first (MAVSDK ends the set with its code), then why, then the old value.
         self._param_error(msg, addr, refused.error)
         if index is None:
             _log.info("%s: PARAM_SET of unknown parameter %r", v.role, msg.param_id)
             return
-        v.statustext(M.MAV_SEVERITY_WARNING, refused.text, addr)
-        v.send(self._param_value(index), addr)
+        self.link.statustext(M.MAV_SEVERITY_WARNING, refused.text, addr)
+        self.link.send(self._param_value(index), addr)
 
     def _param_error(self, msg: Msg, addr: Address, error: int) -> None:
         param_id = msg.param_id.encode("ascii", "replace") if isinstance(msg.param_id, str) else bytes(msg.param_id)
         index = getattr(msg, "param_index", -1)
-        self.v.send(
-            self.v.mav.param_error_encode(msg.get_srcSystem(), msg.get_srcComponent(), param_id, index, error), addr
+        self.link.send(
+            self.link.mav.param_error_encode(msg.get_srcSystem(), msg.get_srcComponent(), param_id, index, error), addr
         )
 
     # ---------------------------------------------------------------- missions, FTP, time
 
     def _on_mission_request_list(self, msg: Msg, addr: Address) -> None:
         # No mission, fence or rally items: ground stations ask on connect and wait for an answer.
-        self.v.send(
-            self.v.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type), addr
+        self.link.send(
+            self.link.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type), addr
         )
 
     def _on_mission_request_item(self, msg: Msg, addr: Address) -> None:
         # There are no items to send.
-        ack = self.v.mav.mission_ack_encode(
+        ack = self.link.mav.mission_ack_encode(
             msg.get_srcSystem(), msg.get_srcComponent(), M.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type
         )
-        self.v.send(ack, addr)
+        self.link.send(ack, addr)
 
     def _on_mission_upload(self, msg: Msg, addr: Address) -> None:
         """MISSION_COUNT: an empty upload clears (0 items, or the home slot alone: MAVSDK's clear_mission() for
@@ -291,12 +295,14 @@ class CommandHandler:
             self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
         elif msg.count == 1 and msg.mission_type == M.MAV_MISSION_TYPE_MISSION:
             self._home_upload_from = addr
-            self.v.send(
-                self.v.mav.mission_request_int_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type),
+            self.link.send(
+                self.link.mav.mission_request_int_encode(
+                    msg.get_srcSystem(), msg.get_srcComponent(), 0, msg.mission_type
+                ),
                 addr,
             )
         else:
-            self.v.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
+            self.link.statustext(M.MAV_SEVERITY_WARNING, MISSION_UPLOAD_REFUSAL, addr)
             self._mission_ack(msg, addr, M.MAV_MISSION_UNSUPPORTED)
 
     def _on_mission_item(self, msg: Msg, addr: Address) -> None:
@@ -307,8 +313,8 @@ class CommandHandler:
         self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
 
     def _mission_ack(self, msg: Msg, addr: Address, result: int) -> None:
-        ack = self.v.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result, msg.mission_type)
-        self.v.send(ack, addr)
+        ack = self.link.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result, msg.mission_type)
+        self.link.send(ack, addr)
 
     def _on_mission_clear_all(self, msg: Msg, addr: Address) -> None:
         self._mission_ack(msg, addr, M.MAV_MISSION_ACCEPTED)
@@ -327,8 +333,9 @@ class CommandHandler:
         # seq + 1, session, opcode, size, req_opcode, burst_complete, padding, offset, data
         header = struct.pack("<HBBBBBBI", (seq + 1) % 65536, session, reply, len(data), opcode, 0, 0, 0)
         body = (header + data).ljust(FTP_PAYLOAD_LEN, b"\0")
-        self.v.send(
-            self.v.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)), addr
+        self.link.send(
+            self.link.mav.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(), list(body)),
+            addr,
         )
         size = payload[4]
         if opcode == FTP_OPEN_FILE_RO and payload[12 : 12 + size].startswith(FTP_PARAM_FILE):
@@ -336,4 +343,4 @@ class CommandHandler:
 
     def _on_timesync(self, msg: Msg, addr: Address) -> None:
         if msg.tc1 == 0:  # a request; answer with our (simulated) clock in ns
-            self.v.send(self.v.mav.timesync_encode(int(round(self.v.clock.sim_s * 1e9)), msg.ts1), addr)
+            self.link.send(self.link.mav.timesync_encode(units.ns_from_s(self.v.clock.sim_s), msg.ts1), addr)

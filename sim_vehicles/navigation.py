@@ -21,17 +21,14 @@ from __future__ import annotations
 
 import math
 
+from tssac_core.wire.geodetic import wrap_pi
+
 ORBIT_RATE_FRACTION = 0.8
 """The steady turn of an orbit uses at most this fraction of the turn-rate limit."""
 ORBIT_GAIN = 2.0
 """k of the vector field: how sharply the course converges onto the circle (per radius)."""
 COURSE_TIME_CONSTANT_S = 2.0
 """Course errors are corrected at error / this (rad/s) before the limit."""
-
-
-def wrap_pi(angle: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def orbit_radius_m(requested_m: float, speed_m_s: float, turn_rate_max_rad_s: float) -> float:

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from tssac_core.wire import units
+
 M = mavlink2
 
 BODY_FRAMES = frozenset({M.MAV_FRAME_BODY_FRD, M.MAV_FRAME_BODY_NED})
@@ -136,7 +138,8 @@ def _parse_ned_velocity(msg: mavlink2.MAVLink_message) -> Demand | Refusal:
     speed = math.hypot(msg.vx, msg.vy)
     if speed <= SIDE_SPEED_TOLERANCE_M_S:
         return Refusal("no_course", "SP vN = vE = 0: a fixed wing needs a course")
-    return Demand(SetpointForm.VELOCITY_NED, 0.0, speed_m_s=speed, course_rad=math.atan2(msg.vx, msg.vy))
+    east, north = units.world_from_ned(msg.vx, msg.vy)
+    return Demand(SetpointForm.VELOCITY_NED, 0.0, speed_m_s=speed, course_rad=units.course_phi(east, north))
 
 
 def parse_attitude_target(msg: mavlink2.MAVLink_message) -> Demand | Refusal:

@@ -2,7 +2,8 @@
 
 Inputs are in the world's frame (x east, y north in metres from the area's south-west corner, heading
 phi CCW from east, turn rate omega CCW-positive); outputs follow the MAVLink message definitions
-(NED, yaw clockwise from north, degE7, mm, cm/s, centidegrees). Altitude is constant: the flight
+(NED, yaw clockwise from north, degE7, mm, cm/s, centidegrees), converted by :mod:`tssac_core.wire.units` and
+:mod:`tssac_core.wire.geodetic`, which the companion reads them back with. Altitude is constant: the flight
 altitude ``origin.alt_m`` above mean sea level. Home is the vehicle's start position at sea level,
 so ``relative_alt`` (height above home) equals ``alt`` as well.
 
@@ -21,7 +22,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim_vehicles.link_model import GpsFix
 from tssac_core.sim.scenario import Origin
-from tssac_core.wire.geodetic import deg_e7, heading_cdeg, local_to_geodetic, yaw_ned_from_phi
+from tssac_core.wire import units
+from tssac_core.wire.geodetic import heading_cdeg, local_to_geodetic, yaw_ned_from_phi
 
 _log = logging.getLogger(__name__)
 
@@ -78,15 +80,16 @@ def heartbeat(mav: MAV, armed: bool, custom_mode: int, guided: bool, system_stat
 def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -> Msg:
     """GLOBAL_POSITION_INT of a GPS fix (time_boot_ms = the fix's time); hdg from the true heading."""
     lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
-    alt_mm = int(round(origin.alt_m * 1000.0))
+    alt_mm = units.mm_from_m(origin.alt_m)
+    vx, vy = units.ned_from_world(fix.vel_east_m_s, fix.vel_north_m_s)
     return mav.global_position_int_encode(
-        int(round(fix.time_s * 1000.0)),
-        deg_e7(lat),
-        deg_e7(lon),
+        units.ms_from_s(fix.time_s),
+        units.deg_e7(lat),
+        units.deg_e7(lon),
         alt_mm,
         alt_mm,
-        _i16(fix.vel_north_m_s * 100.0),
-        _i16(fix.vel_east_m_s * 100.0),
+        _i16(units.cm_from_m(vx)),
+        _i16(units.cm_from_m(vy)),
         0,
         heading_cdeg(phi_rad),
     )
@@ -94,9 +97,9 @@ def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -
 
 def local_position_ned(mav: MAV, fix: GpsFix) -> Msg:
     """LOCAL_POSITION_NED of a GPS fix: x north = world y, y east = world x, z 0 (flight altitude)."""
-    return mav.local_position_ned_encode(
-        int(round(fix.time_s * 1000.0)), fix.north_m, fix.east_m, 0.0, fix.vel_north_m_s, fix.vel_east_m_s, 0.0
-    )
+    x, y = units.ned_from_world(fix.east_m, fix.north_m)
+    vx, vy = units.ned_from_world(fix.vel_east_m_s, fix.vel_north_m_s)
+    return mav.local_position_ned_encode(units.ms_from_s(fix.time_s), x, y, 0.0, vx, vy, 0.0)
 
 
 def gps_raw_int(
@@ -111,7 +114,7 @@ def gps_raw_int(
     """GPS_RAW_INT: the latest fix, fix_type 3D while it is fresh, NO_FIX otherwise (time_usec = time since boot)."""
     if fix is None:
         return mav.gps_raw_int_encode(
-            time_boot_ms * 1000,
+            units.us_from_ms(time_boot_ms),
             mavlink2.GPS_FIX_TYPE_NO_FIX,
             0,
             0,
@@ -124,22 +127,22 @@ def gps_raw_int(
         )
     lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
     speed = math.hypot(fix.vel_east_m_s, fix.vel_north_m_s)
-    cog = heading_cdeg(math.atan2(fix.vel_north_m_s, fix.vel_east_m_s))
+    cog = heading_cdeg(units.course_phi(fix.vel_east_m_s, fix.vel_north_m_s))
     return mav.gps_raw_int_encode(
-        time_boot_ms * 1000,
+        units.us_from_ms(time_boot_ms),
         mavlink2.GPS_FIX_TYPE_3D_FIX if has_fix else mavlink2.GPS_FIX_TYPE_NO_FIX,
-        deg_e7(lat),
-        deg_e7(lon),
-        int(round(origin.alt_m * 1000.0)),
+        units.deg_e7(lat),
+        units.deg_e7(lon),
+        units.mm_from_m(origin.alt_m),
         HDOP_X100,
         UINT16_MAX,
-        min(UINT16_MAX - 1, int(round(speed * 100.0))),
+        min(UINT16_MAX - 1, int(round(units.cm_from_m(speed)))),
         cog,
         SATELLITES if has_fix else 0,
-        int(round(origin.alt_m * 1000.0)),
-        int(round(position_sigma_m * 1000.0)),
+        units.mm_from_m(origin.alt_m),
+        units.mm_from_m(position_sigma_m),
         0,
-        int(round(velocity_sigma_m_s * 1000.0)),
+        units.mm_from_m(velocity_sigma_m_s),
         0,
         0,
     )
@@ -147,14 +150,14 @@ def gps_raw_int(
 
 def attitude(mav: MAV, truth: VehicleTruth, time_boot_ms: int) -> Msg:
     """ATTITUDE: yaw = pi/2 - phi (wrapped), yawspeed = -omega; roll is the coordinated-turn bank angle."""
-    yawspeed = -truth.turn_rate_rad_s
+    yawspeed = units.yaw_rate_from_omega(truth.turn_rate_rad_s)
     roll = math.atan(truth.speed_m_s * yawspeed / GRAVITY_M_S2)
     return mav.attitude_encode(time_boot_ms, roll, 0.0, yaw_ned_from_phi(truth.phi_rad), 0.0, 0.0, yawspeed)
 
 
 def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Msg:
     """VFR_HUD: air = ground speed (no wind); throttle = 50 + 50 * the acceleration command in [-1, 1]."""
-    heading_deg = heading_cdeg(truth.phi_rad) // 100
+    heading_deg = units.deg_from_cdeg(heading_cdeg(truth.phi_rad))
     throttle = int(round(50.0 + 50.0 * max(-1.0, min(1.0, accel_cmd))))
     return mav.vfr_hud_encode(truth.speed_m_s, truth.speed_m_s, heading_deg, throttle, alt_m, 0.0)
 
@@ -213,31 +216,35 @@ def extended_sys_state(mav: MAV) -> Msg:
 
 def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
     """SYSTEM_TIME: both clocks follow simulated time (unix time = start of the run + simulated time)."""
-    return mav.system_time_encode(int(round((unix_start_s + time_s) * 1e6)), int(round(time_s * 1000.0)))
+    return mav.system_time_encode(units.us_from_s(unix_start_s + time_s), units.ms_from_s(time_s))
 
 
 def home_position(mav: MAV, origin: Origin, home_east_m: float, home_north_m: float, time_s: float) -> Msg:
     """HOME_POSITION: the start position at sea level; local x/y/z in the LOCAL_POSITION_NED frame."""
     lat, lon = local_to_geodetic(origin, home_east_m, home_north_m)
+    x, y = units.ned_from_world(home_east_m, home_north_m)
     return mav.home_position_encode(
-        deg_e7(lat),
-        deg_e7(lon),
+        units.deg_e7(lat),
+        units.deg_e7(lon),
         0,
-        home_north_m,
-        home_east_m,
+        x,
+        y,
         origin.alt_m,
         [1.0, 0.0, 0.0, 0.0],
         0.0,
         0.0,
         0.0,
-        int(round(time_s * 1e6)),
+        units.us_from_s(time_s),
     )
 
 
 def gps_global_origin(mav: MAV, origin: Origin, time_s: float) -> Msg:
     """GPS_GLOBAL_ORIGIN: the LOCAL_POSITION_NED origin (area's SW corner, flight altitude)."""
     return mav.gps_global_origin_encode(
-        deg_e7(origin.lat_deg), deg_e7(origin.lon_deg), int(round(origin.alt_m * 1000.0)), int(round(time_s * 1e6))
+        units.deg_e7(origin.lat_deg),
+        units.deg_e7(origin.lon_deg),
+        units.mm_from_m(origin.alt_m),
+        units.us_from_s(time_s),
     )
 
 

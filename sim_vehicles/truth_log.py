@@ -9,7 +9,7 @@ import logging
 from pathlib import Path
 from typing import IO, Any
 
-from tssac_core.wire.truth_log_schema import HEADER, SUMMARY, VehicleRow, encode, encode_step
+from tssac_core.wire.truth_log_schema import EVENT, HEADER, SUMMARY, VehicleRow, encode, encode_step
 
 _log = logging.getLogger(__name__)
 
@@ -27,6 +27,20 @@ class TruthLog:
             self._file.write(encode_step(step, time_s, flags, rows))
 
     def event(self, record: dict[str, Any]) -> None:
+        self._write(record)
+
+    def vehicle_event(self, step: int, time_s: float, role: str, name: str, value: int, text: str | None) -> None:
+        """A vehicle's own event (ARMED, MODE, FAILSAFE, DATALINK) or a client's STATUSTEXT it relayed (``text``)."""
+        record: dict[str, Any] = {
+            "type": EVENT,
+            "step": step,
+            "t_s": round(time_s, 6),
+            "event": name,
+            "value": value,
+            "vehicle": role,
+        }
+        if text is not None:
+            record["text"] = text  # a client's STATUSTEXT
         self._write(record)
 
     def summary(self, record: dict[str, Any]) -> None:

@@ -62,13 +62,16 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from sim_vehicles.clock import Clock
 from sim_vehicles.commands import CommandHandler
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.events import EventKind, WorldFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
+from sim_vehicles.modes import FlightMode
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
-from sim_vehicles.vehicle import Clock, FlightMode, Vehicle, VehicleRngs, VehicleSetup
+from sim_vehicles.vehicle import Vehicle, VehicleSetup
+from sim_vehicles.vehicle_link import VehicleLink
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
@@ -144,6 +147,8 @@ class WorldRunner:
         self._truth: TruthLog | None = None
         self._tlogs: list[BinaryIO] = []
         self.vehicles: list[Vehicle] = []
+        self.links: list[VehicleLink] = []
+        """links[i] is vehicles[i]'s MAVLink side."""
         try:
             self._open_endpoints(config)
             self._begin(config)
@@ -210,6 +215,7 @@ class WorldRunner:
         """This process's CPU clock at the first world step (the summary reports the flight's CPU)."""
         self._linger_steps = 0
         self.vehicles = []
+        self.links = []
         self.result: RunResult | None = None
         if config.layout_out is not None:
             try:
@@ -250,14 +256,13 @@ class WorldRunner:
                 except OSError as exc:
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)
-            vehicle = Vehicle(
-                setup, endpoint, self.clock, self.flags, VehicleRngs(tx, rx, gps), tlog, self._vehicle_event
-            )
-            vehicle.add_outputs(config.outputs)
-            handler = CommandHandler(vehicle)
-            vehicle.handler = handler
+            vehicle = Vehicle(setup, self.clock, self.flags, gps, self._vehicle_event)
+            link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
+            link.add_outputs(config.outputs)
+            link.handler = CommandHandler(vehicle, link)
             vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
             self.vehicles.append(vehicle)
+            self.links.append(link)
         if config.truth_log is not None:
             header = {
                 "scenario": s.name,
@@ -268,7 +273,7 @@ class WorldRunner:
                 "speedup": config.speedup,
                 "roles": [r.value for r in ROLES],
                 "sysids": [v.sysid for v in self.vehicles],
-                "ports": [v.endpoint.port for v in self.vehicles],
+                "ports": [link.endpoint.port for link in self.links],
                 "layout": to_dict(dataclasses.replace(s, layout=self.layout, random=None))["layout"],
             }
             try:
@@ -278,7 +283,10 @@ class WorldRunner:
 
     @property
     def endpoints(self) -> list[Endpoint]:
-        return [Endpoint(v.role, v.sysid, v.endpoint.host, v.endpoint.port) for v in self.vehicles]
+        return [
+            Endpoint(v.role, v.sysid, link.endpoint.host, link.endpoint.port)
+            for v, link in zip(self.vehicles, self.links, strict=True)
+        ]
 
     def request_stop(self) -> None:
         """End the run at the next loop iteration (safe from another thread or a signal handler)."""
@@ -310,23 +318,23 @@ class WorldRunner:
     def _loop(self) -> None:
         self._wall0 = time.monotonic()
         self.clock.wall_s = self._wall0
-        for v in self.vehicles:
-            v.publish(tick=self.lockstep)  # t = 0: first GPS fix, stream schedules start
+        for link in self.links:
+            link.publish(tick=self.lockstep)  # t = 0: first GPS fix, stream schedules start
         self._anchor(self._wall0)
         self._paced = not self.lockstep
         self._barrier_wall = self._wall0
         self._last_output_wall = self._wall0
-        sockets = [v.endpoint for v in self.vehicles]
+        sockets = [link.endpoint for link in self.links]
         while not self._stop.is_set() and self._phase is not _Phase.DONE:
             now = time.monotonic()
             self._tick_clock(now)
-            for v in self.vehicles:
-                v.poll_socket()
-            for v in self.vehicles:
-                v.process_incoming()
+            for link in self.links:
+                link.poll_socket()
+            for link in self.links:
+                link.process_incoming()
             deadline = self._advance(now)
-            for v in self.vehicles:
-                v.flush()
+            for link in self.links:
+                link.flush()
             if self._phase is _Phase.DONE:
                 break
             select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))
@@ -346,8 +354,8 @@ class WorldRunner:
         if deadline_wall is not None:
             waits.append(deadline_wall - now_wall)
         if not self._link_on_sim_time:  # on simulated time, only steps bring link deliveries closer
-            for v in self.vehicles:
-                due = v.next_link_due_s()
+            for link in self.links:
+                due = link.next_link_due_s()
                 if due is not None:
                     waits.append((due - self.clock.link_s) / self.config.speedup)
         return max(0.0, min(waits))
@@ -371,7 +379,10 @@ class WorldRunner:
 
     def _start_gate_open(self) -> bool:
         # Lockstep: armed in GUIDED and the client has answered a tick (its mode change acknowledged).
-        ready = [v.holds_world if self.lockstep else v.armed and v.mode is FlightMode.GUIDED for v in self.vehicles]
+        ready = [
+            link.holds_world if self.lockstep else v.armed and v.mode is FlightMode.GUIDED
+            for v, link in zip(self.vehicles, self.links, strict=True)
+        ]
         return all(ready) if self.config.lockstep_start is LockstepStart.ALL else any(ready)
 
     def _anchor(self, now: float) -> None:
@@ -397,7 +408,7 @@ class WorldRunner:
         return now if n == MAX_CATCHUP_STEPS else self._next_step_wall()
 
     def _advance_lockstep(self, now: float) -> float | None:
-        in_loop = [v for v in self.vehicles if v.holds_world]
+        in_loop = [link for link in self.links if link.holds_world]
         if not in_loop:
             if not self._paced:
                 _log.info("lockstep: no vehicle in the loop; running at %g x real time", self.config.speedup)
@@ -407,18 +418,23 @@ class WorldRunner:
         if self._paced:
             self._paced = False
             self._barrier_wall = now
-        waiting = [v for v in in_loop if not v.answered()]
-        for v in waiting:
+        waiting = [link for link in in_loop if not link.answered()]
+        for link in waiting:
+            v = link.vehicle
             since = max(self._barrier_wall, v.loop_since_wall_s)
             if now - since > v.setpoint_timeout_s:
                 v.enter_failsafe(f"no setpoint for {v.setpoint_timeout_s:g} s wall")
-        waiting = [v for v in waiting if v.holds_world]
+        waiting = [link for link in waiting if link.holds_world]
         if waiting:
             keepalive = self._keepalive(now)
             return min(
-                [keepalive] + [max(self._barrier_wall, v.loop_since_wall_s) + v.setpoint_timeout_s for v in waiting]
+                [keepalive]
+                + [
+                    max(self._barrier_wall, link.vehicle.loop_since_wall_s) + link.vehicle.setpoint_timeout_s
+                    for link in waiting
+                ]
             )
-        if not any(v.holds_world for v in self.vehicles):
+        if not any(link.holds_world for link in self.links):
             return now  # every waiting vehicle just failed safe: run paced from the next iteration
         n = 0
         while True:
@@ -428,11 +444,11 @@ class WorldRunner:
             if self._phase is not _Phase.RUN or n == MAX_CATCHUP_STEPS:
                 break
             # Setpoints the link delivers at the new step time are flown from it on.
-            for v in self.vehicles:
-                v.process_incoming()
+            for link in self.links:
+                link.process_incoming()
             # With link latency the newest tick the clients have seen may already be answered: step on.
-            if not all(v.answered() for v in self.vehicles if v.holds_world) or not any(
-                v.holds_world for v in self.vehicles
+            if not all(link.answered() for link in self.links if link.holds_world) or not any(
+                link.holds_world for link in self.links
             ):
                 break
         return now if n == MAX_CATCHUP_STEPS else now + min(v.setpoint_timeout_s for v in self.vehicles)
@@ -443,8 +459,8 @@ class WorldRunner:
         while self.clock.sim_s + _EPS < end_s and n < MAX_CATCHUP_STEPS and self._step_due(now):
             self._linger_steps += 1
             self.clock.sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
-            for v in self.vehicles:
-                v.publish(tick=self.lockstep)
+            for link in self.links:
+                link.publish(tick=self.lockstep)
             n += 1
         if self.clock.sim_s + _EPS >= end_s:
             self._phase = _Phase.DONE
@@ -454,8 +470,8 @@ class WorldRunner:
     def _keepalive(self, now: float) -> float:
         if now - self._last_output_wall >= KEEPALIVE_S:
             self._last_output_wall = now
-            for v in self.vehicles:
-                v.send_snapshot()
+            for link in self.links:
+                link.send_snapshot()
         return self._last_output_wall + KEEPALIVE_S
 
     # ---------------------------------------------------------------------------------- step
@@ -477,12 +493,12 @@ class WorldRunner:
         self.flags.radar_on = bool(w.radar_on[0])
         self.flags.identified = bool(w.identified[0])
         self.flags.hit = bool(w.hit[0])
-        for v in self.vehicles:
+        for v, link in zip(self.vehicles, self.links, strict=True):
             v.observe(self._truth_of(v.index, actions[0, v.index], float(v_before[v.index])))
             # Each vehicle's telemetry leaves before the next vehicle's is built and before the
             # bookkeeping below: its client starts on the step while the world finishes it.
-            v.publish(tick=self.lockstep)
-            v.flush()
+            link.publish(tick=self.lockstep)
+            link.flush()
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
         if self._truth is not None:
             flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
@@ -494,8 +510,9 @@ class WorldRunner:
             if event.kind is EventKind.MISSION_END:
                 self._end = MissionEnd(event.value)
                 self.flags.end = self._end
-            for v in self.vehicles:
-                v.announce(event)
+            for v, link in zip(self.vehicles, self.links, strict=True):
+                v.mission_event(event)
+                link.announce(event)
             if self._truth is not None:
                 self._truth.event(event.as_dict())
         if result.terminated[0] or result.truncated[0]:
@@ -534,17 +551,7 @@ class WorldRunner:
 
     def _vehicle_event(self, role: str, name: str, value: int, text: str | None = None) -> None:
         if self._truth is not None:
-            record = {
-                "type": "event",
-                "step": int(self.world.steps[0]),
-                "t_s": round(self.clock.sim_s, 6),
-                "event": name,
-                "value": value,
-                "vehicle": role,
-            }
-            if text is not None:
-                record["text"] = text  # a client's STATUSTEXT
-            self._truth.event(record)
+            self._truth.vehicle_event(int(self.world.steps[0]), self.clock.sim_s, role, name, value, text)
 
     # ------------------------------------------------------------------------------- finish
 
@@ -569,7 +576,9 @@ class WorldRunner:
                     "radar_on": bool(w.radar_on[0]),
                     "identified": bool(w.identified[0]),
                     "hit": bool(w.hit[0]),
-                    "counters": {v.role: self.counters_of(v) for v in self.vehicles},
+                    "counters": {
+                        v.role: self.counters_of(v, link) for v, link in zip(self.vehicles, self.links, strict=True)
+                    },
                     "flight_cpu_s": None
                     if self._first_step_cpu_s is None
                     else round(time.process_time() - self._first_step_cpu_s, 4),
@@ -578,17 +587,17 @@ class WorldRunner:
         self._close_mission_files()
 
     @staticmethod
-    def counters_of(v: Vehicle) -> dict[str, Any]:
+    def counters_of(v: Vehicle, link: VehicleLink) -> dict[str, Any]:
         """Every counter of a vehicle (protocol, framing, signing, link, GPS) as plain data."""
         return {
             "protocol": asdict(v.counters),
-            "rx": asdict(v.endpoint.rx),
-            "tx": asdict(v.endpoint.tx),
-            "link_out": asdict(v.tx.counters),
-            "link_in": asdict(v.rx.counters),
+            "rx": asdict(link.endpoint.rx),
+            "tx": asdict(link.endpoint.tx),
+            "link_out": asdict(link.tx.counters),
+            "link_in": asdict(link.rx.counters),
             "gps": {"fixes": v.gps.fixes, "dropouts": v.gps.dropouts},
-            "peers": len(v.endpoint.peers),
-            "monitors": len(v.endpoint.monitors),
+            "peers": len(link.endpoint.peers),
+            "monitors": len(link.endpoint.monitors),
         }
 
     def _close_mission_files(self) -> None:

@@ -55,6 +55,14 @@ class RunningSitl:
     def vehicle(self, index: int) -> Any:
         return self.runner.vehicles[index]
 
+    def link(self, index: int) -> Any:
+        """The vehicle's MAVLink side (:class:`sim_vehicles.vehicle_link.VehicleLink`)."""
+        return self.runner.links[index]
+
+    def endpoint(self, index: int) -> Any:
+        """The vehicle's UDP endpoint (:class:`sim_vehicles.mavlink_io.MavEndpoint`)."""
+        return self.runner.links[index].endpoint
+
     def stop(self, timeout_s: float = 5.0) -> RunResult | None:
         self.runner.request_stop()
         self.thread.join(timeout_s)

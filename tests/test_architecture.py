@@ -218,3 +218,165 @@ def test_ray_workers_import_this_checkout():
 
     assert PROJECT_ROOT == ROOT and (PROJECT_ROOT / "tssac_core" / "__init__.py").is_file()
     assert worker_pythonpath().split(os.pathsep)[0] == str(ROOT)
+
+
+WIRE_FIELD_MODULES = (
+    "mavlink_bridge/frames.py",
+    "mavlink_bridge/link.py",
+    "sim_vehicles/clock.py",
+    "sim_vehicles/commands.py",
+    "sim_vehicles/setpoints.py",
+    "sim_vehicles/streams.py",
+    "sim_vehicles/telemetry.py",
+    "sim_vehicles/vehicle.py",
+    "sim_vehicles/vehicle_link.py",
+)
+"""The modules that write or read MAVLink fields, on either end."""
+WIRE_FLOAT_SCALES = frozenset({100.0, 1000.0, 1e6, 1e7, 1e9, 1e-7})
+"""The scales of :mod:`tssac_core.wire.units` (cm, ms and mm, us, degE7, ns, degE7 back) as float literals."""
+WIRE_INT_SCALES = frozenset({100, 1000, 1_000_000, 10_000_000})
+"""The same as integers, counted where they multiply or divide (``HDOP_X100 = 100`` is a value, not a scale)."""
+
+
+def scale_literals(path: Path) -> list[str]:
+    """Where ``path`` spells one of the wire's scales itself."""
+    tree = ast.parse(path.read_text())
+    scaled = {
+        id(side)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Mult, ast.Div, ast.FloorDiv))
+        for side in (node.left, node.right)
+    }
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Constant):
+            continue
+        value = node.value
+        if (type(value) is float and value in WIRE_FLOAT_SCALES) or (
+            type(value) is int and value in WIRE_INT_SCALES and id(node) in scaled
+        ):
+            found.append(f"{path.name}:{node.lineno}: {value!r}")
+    return sorted(found)
+
+
+def test_units_are_converted_only_in_the_wire():
+    """Both ends take MAVLink's scales (ms, us, mm, cm/s, degE7, ns) from ``tssac_core.wire.units``: a field module
+    that spells one has re-written a conversion the other end reads back with the wire's function."""
+    offenders = sorted(line for module in WIRE_FIELD_MODULES for line in scale_literals(ROOT / module))
+    assert not offenders, offenders
+
+
+def test_the_scale_finder_finds_a_scale(tmp_path: Path):
+    sample = tmp_path / "sample.py"
+    sample.write_text(
+        "HDOP_X100 = 100\nt_ms = int(round(t_s * 1000.0))\nus = ms * 1000\nif n in (1, 100, 1000): pass\n"
+    )
+    assert scale_literals(sample) == ["sample.py:2: 1000.0", "sample.py:3: 1000"]
+
+
+def test_no_wire_conversion_is_defined_twice():
+    """The functions of ``tssac_core.wire.units`` and ``geodetic`` are defined there only."""
+    wire = {
+        node.name
+        for name in ("units", "geodetic")
+        for node in ast.walk(ast.parse((ROOT / "tssac_core" / "wire" / f"{name}.py").read_text()))
+        if isinstance(node, ast.FunctionDef) and not node.name.startswith("_")
+    }
+    assert {"ms_from_s", "world_from_ned", "yaw_rate_from_omega", "deg_e7", "local_to_geodetic"} <= wire
+    offenders = sorted(
+        f"{module_name(p)} defines {node.name}"
+        for pkg in PACKAGES
+        for p in (ROOT / pkg).rglob("*.py")
+        if not module_name(p).startswith("tssac_core.wire")
+        for node in ast.walk(ast.parse(p.read_text()))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name in wire
+    )
+    assert not offenders, offenders
+
+
+def test_both_ends_convert_through_the_wire(monkeypatch: pytest.MonkeyPatch):
+    """A setpoint from the companion to the SITL and a fix from the SITL to the companion: each end calls the wire's
+    conversions (recorded), and the round trips give back what went in."""
+    import math
+
+    import numpy as np
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
+    from sim_vehicles import setpoints, telemetry
+    from sim_vehicles.clock import Clock
+    from sim_vehicles.events import WorldFlags
+    from sim_vehicles.link_model import GpsFix
+    from sim_vehicles.modes import FlightMode
+    from sim_vehicles.vehicle import Vehicle, VehicleSetup
+    from tssac_core.sim.scenario import Role, load
+    from tssac_core.wire import units
+
+    calls: list[str] = []
+
+    def recording(name: str):  # noqa: ANN202
+        original = getattr(units, name)
+
+        def wrapper(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            calls.append(name)
+            return original(*args, **kwargs)
+
+        return wrapper
+
+    for name, value in list(vars(units).items()):
+        if callable(value) and getattr(value, "__module__", None) == units.__name__:
+            monkeypatch.setattr(units, name, recording(name))
+
+    def took(*names: str) -> bool:
+        seen = set(calls)
+        calls.clear()
+        return set(names) <= seen
+
+    scen = load(ROOT / "scenarios" / "strike.yaml")
+    spec = scen.vehicle(Role.DECOY)
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    # The companion scales an action into a setpoint; the SITL parses it and flies it back into an action.
+    setpoint = action_to_setpoint((0.5, -0.25), spec)
+    assert took("command_from_action", "yaw_rate_from_omega")
+    setup = VehicleSetup(
+        index=0,
+        role="decoy",
+        sysid=1,
+        turn_rate_max_rad_s=math.radians(spec.turn_rate_max_deg_s),
+        accel_max_m_s2=spec.accel_max_m_s2,
+        speed_min_m_s=spec.speed_min_m_s,
+        speed_max_m_s=spec.speed_max_m_s,
+        dt_s=scen.dt_s,
+        origin=scen.origin,
+        home_east_m=0.0,
+        home_north_m=0.0,
+        link=scen.link,
+        setpoint_timeout_s=1.0,
+    )
+    vehicle = Vehicle(setup, Clock(), WorldFlags(), np.random.default_rng(0))
+    vehicle.set_armed(True)
+    vehicle.set_mode(FlightMode.GUIDED)
+    msg = mav.set_position_target_local_ned_encode(
+        0, 1, 1, 12, 1087, 0, 0, 0, 0, 0, 0, setpoint.accel_m_s2, 0, 0, 0, setpoint.yaw_rate_rad_s
+    )
+    demand = setpoints.parse_position_target(msg)
+    assert isinstance(demand, setpoints.Demand) and vehicle.fly_demand(demand)
+    calls.clear()
+    assert vehicle.action() == pytest.approx((0.5, -0.25))
+    assert took("omega_from_yaw_rate", "action_from_command")
+
+    # The SITL writes a fix as LOCAL_POSITION_NED and GLOBAL_POSITION_INT; the companion reads it back.
+    fix = GpsFix(time_s=12.3, east_m=40_000.0, north_m=25_000.0, vel_east_m_s=-120.0, vel_north_m_s=200.0)
+    local = telemetry.local_position_ned(mav, fix)
+    glob = telemetry.global_position_int(mav, scen.origin, fix, 1.0)
+    att = telemetry.attitude(mav, telemetry.VehicleTruth(0.0, 0.0, 200.0, 1.0, 0.05, 0.0), 0)
+    assert took("ned_from_world", "ms_from_s", "cm_from_m", "mm_from_m", "deg_e7", "yaw_rate_from_omega")
+    assert att.yawspeed == pytest.approx(-0.05)
+    m = from_local_position_ned(local.time_boot_ms, local.x, local.y, local.vx, local.vy)
+    g = from_global_position_int(scen.origin, glob.time_boot_ms, glob.lat, glob.lon, glob.vx, glob.vy)
+    assert took("world_from_ned", "s_from_ms", "m_from_cm", "deg_from_e7")
+    for got in (m, g):
+        assert got.t_s == pytest.approx(12.3)
+        assert (got.east_m, got.north_m) == pytest.approx((40_000.0, 25_000.0), abs=0.02)
+        assert (got.vel_east_m_s, got.vel_north_m_s) == pytest.approx((-120.0, 200.0), abs=0.01)

@@ -33,9 +33,10 @@ from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
-from tssac_core.wire.geodetic import deg_e7, local_to_geodetic
+from tssac_core.wire.geodetic import local_to_geodetic
 from tssac_core.wire.signing import now_10us
 from tssac_core.wire.truth_log_schema import read_truth_log
+from tssac_core.wire.units import deg_e7
 
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_bridge")
@@ -246,7 +247,7 @@ def test_link_commands_are_acknowledged_retried_and_nothing_is_lost() -> None:
             link.set_mode(GUIDED)
             assert wait_until(lambda: s.vehicle(0).mode == GUIDED, 1.0)
             link.set_message_interval(M.MAVLINK_MSG_ID_ATTITUDE, -1)
-            assert s.vehicle(0)._streams[M.MAVLINK_MSG_ID_ATTITUDE].interval_s is None
+            assert s.link(0).streams.streams[M.MAVLINK_MSG_ID_ATTITUDE].interval_s is None
         s.stop()
     # A peer that never answers: every attempt times out, retries are counted, the wait is bounded.
     silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -278,14 +279,14 @@ def test_link_signing_right_key_flies_wrong_or_no_key_is_refused() -> None:
             assert wrong.counters.datagrams_rx == 0
             with pytest.raises(CommandError, match="no COMMAND_ACK"):
                 wrong.arm(timeout_s=0.3, retries=2)  # ... and it obeys nothing we sign
-        assert s.vehicle(1).endpoint.rx.bad_signature >= 2 and not s.vehicle(1).armed
+        assert s.endpoint(1).rx.bad_signature >= 2 and not s.vehicle(1).armed
         with MavLink(f"udpout:127.0.0.1:{s.ports[2]}") as unsigned:
             with pytest.raises(LinkError, match="no heartbeat"):
                 unsigned.wait_heartbeat(1.0)  # unsigned HEARTBEATs pass only with --unsigned-monitors ...
             with pytest.raises(CommandError, match="no COMMAND_ACK"):
                 unsigned.arm(timeout_s=0.3, retries=2)  # ... and no unsigned command is obeyed
             assert unsigned.counters.datagrams_rx == 0
-        assert not s.vehicle(2).armed and s.vehicle(2).endpoint.rx.unsigned_rejected >= 2
+        assert not s.vehicle(2).armed and s.endpoint(2).rx.unsigned_rejected >= 2
         s.stop()
 
 

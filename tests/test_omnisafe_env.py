@@ -62,5 +62,23 @@ def test_same_seed_same_layouts_and_one_world_is_unbatched():
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="unknown env_cfgs"):
         make("TssacDecoy-v0", num_envs=1, colour="red")
+    with pytest.raises(ValueError, match="cost_margin_km"):
+        make("TssacDecoy-v0", num_envs=1, cost_margin_km=-1)
     with pytest.raises(ValueError, match="learning role"):
         make("TssacDetect-v0", num_envs=1, teammates=str(ROOT / "models" / "tssac"), teammate_roles=["detect"])
+
+
+def test_cost_margin_is_the_tightened_cost_our_learners_constrain():
+    """cost_margin_km (the cross-check sets our TrainConfig's 1 km): the learner's cost counts steps near a radar
+    too, never fewer than eq. 11's inside it."""
+    exact, margin = make("TssacDetect-v0", num_envs=2), make("TssacDetect-v0", num_envs=2, cost_margin_km=1.0)
+    assert exact.task.cost_margin_m == 0.0 and margin.task.cost_margin_m == 1000.0
+    for env in (exact, margin):
+        env.set_seed(5)
+        env.reset()
+    totals = [0.0, 0.0]
+    for _ in range(300):
+        action = torch.tensor([[0.3, 1.0], [-0.2, 1.0]])
+        for i, env in enumerate((exact, margin)):
+            totals[i] += float(env.step(action)[2].sum())
+    assert totals[1] >= totals[0]

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from sitl_helpers import GUIDED, STRIKE, Client, lockstep, mavlink2, scenario, sitl, wait_until
+from sitl_helpers import GUIDED, STRIKE, Client, RunningSitl, lockstep, mavlink2, scenario, sitl, wait_until
 from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
 from mavlink_bridge.fly.mission_runner import child_failure
@@ -114,7 +114,7 @@ def test_verifier_checks_the_signature_before_believing_the_timestamp() -> None:
 @pytest.mark.parametrize("forged", ["heartbeat", "command", "same_port"])
 def test_forged_far_future_frames_never_lock_the_signed_client_out(forged: str) -> None:
     with sitl(speedup=5.0, signing_key=KEY) as s, Client(s.ports[0], key=KEY) as good:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         good.connect()
         link_id = good.mav.signing.link_id
         msg = _request_home() if forged == "command" else _heartbeat()
@@ -123,28 +123,28 @@ def test_forged_far_future_frames_never_lock_the_signed_client_out(forged: str) 
         try:
             for f in frames:
                 (good.conn.write if forged == "same_port" else evil.send)(f)
-            assert wait_until(lambda: v.endpoint.rx.bad_signature >= 50, 2.0)
+            assert wait_until(lambda: endpoint.rx.bad_signature >= 50, 2.0)
             assert evil.received_bytes(0.3) == 0
         finally:
             evil.close()
         for _ in range(5):  # every genuine command still gets through
             assert good.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION, retries=1) is not None
-        assert v.endpoint.rx.replayed == 0 and len(v.endpoint.peers) == 1
+        assert endpoint.rx.replayed == 0 and len(endpoint.peers) == 1
         s.stop()
 
 
 @pytest.mark.timeout(30)
 def test_no_telemetry_without_the_key_by_default() -> None:
     with sitl(speedup=5.0, signing_key=KEY) as s:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         unsigned, wrong = _Raw(s.ports[0]), _Raw(s.ports[0])
         try:
             for _ in range(3):
                 unsigned.send(bytes(_heartbeat().pack(mavlink2.MAVLink(None, srcSystem=255))))
                 wrong.send(_signed(_heartbeat(), 255, 190, 1, WRONG_KEY, now_10us()))
             assert unsigned.received_bytes(1.0) == 0 and wrong.received_bytes(0.2) == 0
-            assert v.endpoint.rx.unsigned_rejected == 3 and v.endpoint.rx.bad_signature == 3
-            assert not v.endpoint.peers and not v.endpoint.monitors
+            assert endpoint.rx.unsigned_rejected == 3 and endpoint.rx.bad_signature == 3
+            assert not endpoint.peers and not endpoint.monitors
         finally:
             unsigned.close()
             wrong.close()
@@ -154,16 +154,14 @@ def test_no_telemetry_without_the_key_by_default() -> None:
 @pytest.mark.timeout(30)
 def test_unsigned_monitors_only_when_allowed_bounded_and_never_obeyed() -> None:
     with sitl(speedup=5.0, signing_key=KEY, unsigned_monitors=True) as s:
-        v = s.vehicle(0)
+        v, endpoint = s.vehicle(0), s.endpoint(0)
         monitors = [Client(s.ports[0]) for _ in range(MAX_MONITORS + 2)]
         wrong = _Raw(s.ports[0])
         try:
             for m in monitors:
                 m.heartbeat()
             wrong.send(_signed(_heartbeat(), 255, 190, 1, WRONG_KEY, now_10us()))
-            assert wait_until(
-                lambda: len(v.endpoint.monitors) == MAX_MONITORS and v.endpoint.rx.peers_refused >= 2, 2.0
-            )
+            assert wait_until(lambda: len(endpoint.monitors) == MAX_MONITORS and endpoint.rx.peers_refused >= 2, 2.0)
             first = monitors[0]
             assert first.wait_type("HEARTBEAT", 2.0) is not None  # it can watch
             assert first.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout_s=0.3, retries=2) is None  # not command
@@ -172,7 +170,7 @@ def test_unsigned_monitors_only_when_allowed_bounded_and_never_obeyed() -> None:
             first.conn.port.setblocking(False)
             got = _drain_bytes(first.conn.port, 2.0)
             assert 0 < got <= 3 * MONITOR_BYTES_PER_S
-            assert v.endpoint.tx.monitor_throttled > 0
+            assert endpoint.tx.monitor_throttled > 0
         finally:
             for m in monitors:
                 m.close()
@@ -193,14 +191,14 @@ def _drain_bytes(sock: socket.socket, duration_s: float) -> int:
 @pytest.mark.timeout(30)
 def test_client_table_is_bounded_and_the_first_client_keeps_its_service() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[0]) as good:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         good.connect()
         crowd = [_Raw(s.ports[0]) for _ in range(MAX_PEERS + 20)]
         try:
             for c in crowd:
                 c.send(bytes(_heartbeat().pack(mavlink2.MAVLink(None, srcSystem=200))))
-            assert wait_until(lambda: v.endpoint.rx.peers_refused >= 21, 2.0)
-            assert len(v.endpoint.peers) == MAX_PEERS
+            assert wait_until(lambda: endpoint.rx.peers_refused >= 21, 2.0)
+            assert len(endpoint.peers) == MAX_PEERS
             assert good.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION) is not None
         finally:
             for c in crowd:
@@ -264,9 +262,9 @@ def test_replay_across_vehicles_gives_a_keyless_spy_nothing() -> None:
             assert _spy_bytes(s.ports[1], telemetry) == 0  # ... or sent to another vehicle
             for link in links:
                 assert link.arm().result == M.MAV_RESULT_ACCEPTED  # the genuine companions are not locked out
-            detect = s.vehicle(1).endpoint
+            detect = s.endpoint(1)
             assert detect.rx.wrong_link >= 2 and detect.rx.from_vehicles >= 1 and len(detect.peers) == 1
-            assert s.vehicle(0).endpoint.rx.from_vehicles >= 1 and len(s.vehicle(0).endpoint.peers) == 1
+            assert s.endpoint(0).rx.from_vehicles >= 1 and len(s.endpoint(0).peers) == 1
         finally:
             for link in links:
                 link.close()
@@ -299,7 +297,7 @@ def test_absurd_message_intervals_are_refused_and_get_always_answers() -> None:
 @pytest.mark.timeout(30)
 def test_garbage_header_with_unknown_id_does_not_hide_the_next_frame() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[0]) as c:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         c.connect()
         for n in range(3):
             valid = bytes(_request_home().pack(c.mav))
@@ -307,7 +305,7 @@ def test_garbage_header_with_unknown_id_does_not_hide_the_next_frame() -> None:
             garbage = bytes([0xFD, len(valid) - 2, 0, 0, 0, 1, 1, 0xEE, 0xEE, 0xEE])
             c.conn.write(garbage + valid)
             assert c.wait_type("COMMAND_ACK", 1.0, command=M.MAV_CMD_REQUEST_MESSAGE) is not None, n
-        assert v.endpoint.rx.unknown_id >= 3
+        assert endpoint.rx.unknown_id >= 3
         s.stop()
 
 
@@ -388,18 +386,18 @@ def test_lockstep_over_a_lossy_slow_link_runs_in_simulated_time_and_repeats(tmp_
 # ------------------------------------------------------------------------------- the companion
 
 
-def _flying(v: object, timeout_s: float = 60.0) -> None:
-    assert wait_until(lambda: v.in_loop and v.endpoint.peers, timeout_s), "the companion did not engage"
+def _flying(s: RunningSitl, timeout_s: float = 60.0) -> None:
+    assert wait_until(lambda: s.vehicle(0).in_loop and s.endpoint(0).peers, timeout_s), "the companion did not engage"
 
 
 @pytest.mark.timeout(180)
 def test_companion_hears_only_its_vehicle_a_forged_mission_end_changes_nothing(tmp_path: Path) -> None:
     scen_file = _scenario_file(tmp_path)
     with sitl(load(scen_file), setpoint_timeout_s=5.0, **lockstep()) as s:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         with CompanionProcess(tmp_path, s.ports[0], scen_file, "--lockstep", "--duration-s", "8") as comp:
-            _flying(v)
-            (companion,) = v.endpoint.peers
+            _flying(s)
+            (companion,) = endpoint.peers
             evil = _Raw(companion[1])
             forger = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)  # the vehicle's ids, another port
             try:
@@ -425,7 +423,7 @@ def test_unsigned_companion_flies_on_through_a_mission_end_spoofed_from_the_vehi
     with sitl(load(scen_file), setpoint_timeout_s=5.0, speedup=5.0) as s, UdpRelay(s.ports[0]) as relay:
         v = s.vehicle(0)
         with CompanionProcess(tmp_path, relay.port, scen_file, "--duration-s", "20") as comp:
-            _flying(v)
+            _flying(s)
             assert relay.companion is not None
             forger = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
             forged = [
@@ -456,11 +454,10 @@ def test_signed_companion_refuses_forgeries_on_the_vehicles_own_address_and_stre
         sitl(load(scen_file), setpoint_timeout_s=5.0, signing_key=KEY, **lockstep()) as s,
         UdpRelay(s.ports[0]) as relay,
     ):
-        v = s.vehicle(0)
         with CompanionProcess(
             tmp_path, relay.port, scen_file, "--lockstep", "--duration-s", "8", "--signing-key", str(key_file)
         ) as comp:
-            _flying(v)
+            _flying(s)
             assert relay.companion is not None
             # From the relay's port, i.e. the vehicle's address as the companion sees it; the vehicle's stream
             # (link 0, system 1, component 1); a wrong key; timestamps a year ahead.

@@ -198,7 +198,7 @@ def test_heartbeat_and_telemetry_at_their_rates_in_sim_time() -> None:
 def test_frames_of_one_step_share_a_datagram() -> None:
     # A step's telemetry (ATTITUDE, the two position messages, VFR_HUD...) leaves in one datagram per
     # client, every frame whole and valid, no datagram larger than COALESCE_BYTES unless it is one frame.
-    from sim_vehicles.vehicle import COALESCE_BYTES
+    from sim_vehicles.vehicle_link import COALESCE_BYTES
 
     with sitl(scenario(), speedup=20.0) as s, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
@@ -235,7 +235,7 @@ def test_two_clients_share_a_vehicle_and_other_sysids_are_ignored() -> None:
         companion.connect()
         # Both receive the stream.
         assert gcs.wait_type("ATTITUDE", 1.0) is not None and companion.wait_type("ATTITUDE", 1.0) is not None
-        assert len(s.vehicle(0).endpoint.peers) == 2
+        assert len(s.endpoint(0).peers) == 2
         # A command for another system is not ours: no ACK, counted.
         before = s.vehicle(0).counters.not_for_us
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, target=7, timeout_s=0.3, retries=1) is None
@@ -717,8 +717,8 @@ def test_lockstep_advances_exactly_one_step_per_setpoint_round() -> None:
 def test_signing_rejects_unsigned_wrong_and_replayed_commands() -> None:
     key = bytes(range(32))
     with sitl(speedup=5.0, signing_key=key) as s:
-        v = s.vehicle(0)
-        rx = v.endpoint.rx
+        v, endpoint = s.vehicle(0), s.endpoint(0)
+        rx = endpoint.rx
         with Client(s.ports[0], key=key) as good:
             hb = good.connect()
             assert hb._signed  # the vehicle signs what it sends
@@ -753,7 +753,7 @@ def test_signing_rejects_unsigned_wrong_and_replayed_commands() -> None:
 @pytest.mark.timeout(30)
 def test_garbage_on_the_port_is_dropped_and_counted() -> None:
     with sitl(speedup=5.0) as s, Client(s.ports[0]) as c:
-        v = s.vehicle(0)
+        endpoint = s.endpoint(0)
         c.connect()
         valid = c.mav.command_long_encode(
             1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
@@ -771,12 +771,12 @@ def test_garbage_on_the_port_is_dropped_and_counted() -> None:
                     sock.sendto(bad_crc, ("127.0.0.1", s.ports[0]))
                     sock.sendto(b"\xfd\xff\x00" + rng.randbytes(10), ("127.0.0.1", s.ports[0]))  # lying length
             sock.sendto(rng.randbytes(60_000), ("127.0.0.1", s.ports[0]))
-            assert wait_until(lambda: v.endpoint.rx.datagrams >= 300 + 15 * 3 + 1, 3.0)
+            assert wait_until(lambda: endpoint.rx.datagrams >= 300 + 15 * 3 + 1, 3.0)
         finally:
             sock.close()
-        rx = v.endpoint.rx
+        rx = endpoint.rx
         assert rx.garbage_bytes > 10_000 and rx.truncated >= 15 and rx.bad_crc >= 15
-        assert len(v.endpoint.peers) == 1  # the garbage sender never became a peer
+        assert len(endpoint.peers) == 1  # the garbage sender never became a peer
         # Still serving: telemetry flows and commands are answered; a valid frame behind garbage is found.
         assert c.wait_type("HEARTBEAT", 2.0) is not None
         c.conn.write(b"\x00\x01garbage" + valid)
@@ -855,7 +855,7 @@ def test_configured_packet_loss_is_observed() -> None:
         sent = (att[-1] - att[0]) / 100 + 1
         assert len(att) / sent == pytest.approx(1 - loss, abs=0.08)
         # Incoming: the vehicle's incoming channel drops datagrams at the same rate.
-        link_in = s.vehicle(0).rx.counters
+        link_in = s.link(0).rx.counters
         before_pushed, before_lost = link_in.pushed, link_in.lost
         for _ in range(400):
             c.heartbeat()

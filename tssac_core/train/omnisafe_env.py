@@ -16,10 +16,13 @@ What OmniSafe passes as ``env_cfgs`` (all optional; the defaults are the shipped
     teammate_roles  with a models directory: the roles its actors fly (default: the roles before this one, as
                     the curriculum trains; e.g. ["decoy"] beside the detect UAV); the others are parked
     layout_seed     layouts come from generators seeded layout_seed + i for world i (default: OmniSafe's seed)
+    cost_margin_km  the cost counts world steps within this distance of a radar (default 0: eq. 11 exactly); our
+                    own training command's default is 1 (``--cost-margin-km``, TrainConfig.cost_margin_km)
 
 Reward and cost of a step are summed over its ``action_repeat`` world steps; cost is eq. 11's (steps inside a
-radar). Finished worlds are reset in the same step (``need_auto_reset_wrapper`` False): ``info["final_observation"]``
-holds their last observation, as OmniSafe's AutoReset wrapper would. The episode cap truncates.
+radar), or with ``cost_margin_km`` the tightened cost our learners constrain. Finished worlds are reset in the same
+step (``need_auto_reset_wrapper`` False): ``info["final_observation"]`` holds their last observation, as OmniSafe's
+AutoReset wrapper would. The episode cap truncates.
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ class TssacRoleEnv(CMDP):
         teammates: str = "guidance",
         teammate_roles: list[str] | None = None,
         layout_seed: int | None = None,
+        cost_margin_km: float = 0.0,
         **kwargs: Any,
     ) -> None:
         super().__init__(env_id)
@@ -81,6 +85,8 @@ class TssacRoleEnv(CMDP):
             raise ValueError(f"{env_id}: unknown env_cfgs {', '.join(sorted(kwargs))}")
         if action_repeat < 1:
             raise ValueError(f"action_repeat must be >= 1, got {action_repeat}")
+        if cost_margin_km < 0:
+            raise ValueError(f"cost_margin_km must be >= 0, got {cost_margin_km}")
         self.role = ENV_IDS[env_id]
         self._num_envs = num_envs
         self._device = torch.device(device)
@@ -89,7 +95,9 @@ class TssacRoleEnv(CMDP):
         self.action_repeat = action_repeat
         self.layout_seed = layout_seed
         pilots = teammates_from(self.role, teammates, teammate_roles)
-        self.task = RoleTask(self.scenario, self.role, num_envs, self.mode, pilots)
+        self.task = RoleTask(
+            self.scenario, self.role, num_envs, self.mode, pilots, cost_margin_m=cost_margin_km * 1000.0
+        )
         low, high = observation_bounds(self.mode)
         self._observation_space = spaces.Box(low, high, dtype=np.float32)
         self._action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)

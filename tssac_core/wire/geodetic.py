@@ -2,9 +2,10 @@
 
 The world (:mod:`tssac_core.sim.world`) works in x east, y north (metres from the area's south-west
 corner) with heading phi counter-clockwise from east (eq. 5). MAVLink speaks NED (x north, y east,
-z down), yaw clockwise from north, and latitude/longitude in degE7. Everything that crosses that
-boundary goes through this module, on both sides: the SITL vehicles (:mod:`sim_vehicles.telemetry`)
-and the companion (:mod:`mavlink_bridge.frames`).
+z down), yaw clockwise from north, and latitude/longitude in degrees. The projection and the headings
+that cross that boundary go through this module, on both sides: the SITL vehicles
+(:mod:`sim_vehicles.telemetry`) and the companion (:mod:`mavlink_bridge.frames`); the units of the fields
+(degE7, cm/s, ms, ...) and the NED axes and signs are :mod:`tssac_core.wire.units`.
 
 Flat earth (an equirectangular projection about the scenario's ``origin``)::
 
@@ -51,11 +52,6 @@ def geodetic_to_local(origin: Origin, lat_deg: float, lon_deg: float) -> tuple[f
     east = math.radians(d_lon) * EARTH_RADIUS_M * math.cos(math.radians(origin.lat_deg))
     north = math.radians(lat_deg - origin.lat_deg) * EARTH_RADIUS_M
     return east, north
-
-
-def deg_e7(deg: float) -> int:
-    """Degrees as MAVLink's int32 degE7."""
-    return int(round(deg * 1e7))
 
 
 def wrap_pi(angle_rad: float) -> float:

@@ -1,0 +1,290 @@
+"""One vehicle's MAVLink side: its endpoint behind the link model, its telemetry, the lockstep credit, the tlog.
+
+A :class:`VehicleLink` owns the vehicle's :class:`~sim_vehicles.mavlink_io.MavEndpoint` (socket, framing,
+signing, clients), two :class:`~sim_vehicles.link_model.LinkChannel` (datalink out and in) and the
+:class:`~sim_vehicles.streams.StreamTable`; it reads the :class:`~sim_vehicles.vehicle.Vehicle`'s state to make
+telemetry and hands what clients send to its :class:`MessageHandler`
+(:class:`sim_vehicles.commands.CommandHandler`, attached by the runner). The runner drives it: drain the socket
+(:meth:`VehicleLink.poll_socket`), handle what the incoming channel delivers (:meth:`VehicleLink.process_incoming`),
+after each step publish the due streams (:meth:`VehicleLink.publish`), and send what the outgoing channel delivers
+(:meth:`VehicleLink.flush`).
+
+Lockstep credit: a setpoint that reaches the socket credits the barrier with the step it answers (its
+``time_boot_ms``); the newest step tick (SYSTEM_TIME) the outgoing channel has delivered is the step a client can
+have seen. A vehicle in the loop holds the world once its client has answered a tick since it took control
+(:attr:`VehicleLink.holds_world`), and the world steps when every such client has answered the newest tick
+(:meth:`VehicleLink.answered`).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import BinaryIO, Protocol
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sim_vehicles import streams, telemetry
+from sim_vehicles.events import MissionEvent
+from sim_vehicles.link_model import LinkChannel
+from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
+from sim_vehicles.setpoints import Refusal, parse_attitude_target, parse_position_target
+from sim_vehicles.vehicle import Vehicle
+from tssac_core.wire import units
+
+M = mavlink2  # message ids and enums
+COALESCE_BYTES = 1200
+"""Largest datagram :meth:`VehicleLink.flush` builds from several frames (below any path MTU on a LAN)."""
+
+
+class MessageHandler(Protocol):
+    """The incoming side of a vehicle: reads a client's message, answers it, changes the vehicle's state."""
+
+    def handle(self, msg: mavlink2.MAVLink_message, addr: Address) -> None: ...
+
+
+@dataclass
+class LockstepCredit:
+    """Where the vehicle's clients stand in the lockstep (time_boot_ms of steps; -1 none)."""
+
+    answered_ms: int = -1
+    """Newest step a client has answered with a setpoint (at the socket, before the link model)."""
+    tick_seen_ms: int = -1
+    """Newest step tick (SYSTEM_TIME) the datalink has delivered to the clients."""
+    entry_ms: int = -1
+    """``answered_ms`` when the vehicle last came under companion control (it holds the world once that grows)."""
+
+
+class VehicleLink:
+    """The MAVLink side of one vehicle (see the module docstring)."""
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        endpoint: MavEndpoint,
+        tx_rng: np.random.Generator,
+        rx_rng: np.random.Generator,
+        tlog: BinaryIO | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.endpoint = endpoint
+        self.clock = vehicle.clock
+        link = vehicle.setup.link
+        self.tx: LinkChannel[tuple[bytes, Address, int]] = LinkChannel(link, tx_rng)
+        """Frames out: (frame, destination or None for every client, the tick's time_boot_ms or -1)."""
+        self.rx: LinkChannel[tuple[Parsed, Address]] = LinkChannel(link, rx_rng)
+        """Datagrams in, already checked and decoded at the socket (see :meth:`poll_socket`)."""
+        self.streams = streams.StreamTable()
+        self.outputs: tuple[Address, ...] = ()
+        """Ground-station addresses (``--out``) that get the stream from the start and are never forgotten."""
+        self.credit = LockstepCredit()
+        self.handler: MessageHandler | None = None
+        """What handles incoming messages (:class:`sim_vehicles.commands.CommandHandler`, attached by the runner)."""
+        self._tlog = tlog
+        self._sent_step_ms = -1
+        self._sent_in_step: dict[int, int] = {}
+        """Frames sent per message id at time _sent_step_ms: the occurrence part of their link-model key."""
+        self._rx_setpoints: dict[int, int] = {}
+        """Datagrams holding a setpoint, per stamp: the occurrence part of their link-model key."""
+        vehicle.radio = self
+
+    @property
+    def mav(self) -> mavlink2.MAVLink:
+        return self.endpoint.mav
+
+    # ------------------------------------------------------------------------- lockstep credit
+
+    def took_control(self) -> None:
+        """The vehicle has come under companion control (:class:`sim_vehicles.vehicle.Radio`)."""
+        self.credit.entry_ms = self.credit.answered_ms
+
+    @property
+    def holds_world(self) -> bool:
+        """Lockstep barrier member: in the loop, and its client has answered a tick since it took control.
+
+        Until that first answer the world does not wait for it: the client may still be waiting for the
+        COMMAND_ACK of the mode change, which a lossy, slow link delivers only as simulated time runs.
+        """
+        return self.vehicle.in_loop and self.credit.answered_ms > self.credit.entry_ms
+
+    def answered(self) -> bool:
+        """Lockstep: a client has answered the newest step tick the datalink delivered (see :meth:`poll_socket`)."""
+        return self.credit.answered_ms >= self.credit.tick_seen_ms
+
+    def _credit(self, msg: mavlink2.MAVLink_message) -> bool:
+        """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now)."""
+        mtype = msg.get_type()
+        if mtype == "SET_POSITION_TARGET_LOCAL_NED":
+            parsed = parse_position_target(msg)
+        elif mtype == "SET_ATTITUDE_TARGET":
+            parsed = parse_attitude_target(msg)
+        else:
+            return False
+        if isinstance(parsed, Refusal):
+            return False
+        v = self.vehicle
+        if msg.target_system not in (0, v.sysid) or msg.target_component not in (0, v.compid):
+            return False
+        stamp = int(msg.time_boot_ms)
+        c = self.credit
+        c.answered_ms = max(c.answered_ms, c.tick_seen_ms if stamp == 0 else min(stamp, self.clock.time_boot_ms))
+        return True
+
+    # ------------------------------------------------------------------------------- incoming
+
+    def add_outputs(self, outputs: tuple[Address, ...]) -> None:
+        """Ground stations (``--out``) that get every stream from the start and whose commands are taken."""
+        self.outputs = tuple(outputs)
+        for out in self.outputs:
+            self.endpoint.peers.setdefault(out, self.clock.wall_s)
+
+    def poll_socket(self) -> None:
+        """Check and decode waiting datagrams and move them into the incoming link channel.
+
+        Checking (signatures, replays) happens here, at the socket, so that the link model acts on
+        messages: a setpoint the link then loses or delays still tells the lockstep barrier that its
+        client has answered the step (:meth:`answered`). The vehicle flies the previous command until
+        the setpoint arrives, or through the step if it never does, as a real vehicle would.
+        """
+        for out in self.outputs:  # --out ground stations are never forgotten
+            self.endpoint.peers[out] = self.clock.wall_s
+        self.endpoint.expire_peers(self.clock.wall_s)
+        for data, addr in self.endpoint.receive():
+            parsed = self.endpoint.parse(data, addr)
+            if parsed.sender is None:
+                continue  # nothing accepted: it never reaches the vehicle, and its sender is nobody
+            key = None
+            for msg in parsed.messages:
+                if self._credit(msg):
+                    stamp = int(msg.time_boot_ms)
+                    if len(self._rx_setpoints) > 256:  # only recent stamps matter; clients may send any
+                        self._rx_setpoints.clear()
+                    n = self._rx_setpoints[stamp] = self._rx_setpoints.get(stamp, -1) + 1
+                    key = hash((msg.get_msgId(), stamp, n))
+            self.rx.push(self.clock.link_s, (parsed, addr), key)
+
+    def process_incoming(self) -> None:
+        """Handle the datagrams the incoming channel delivers now."""
+        for parsed, addr in self.rx.pop_due(self.clock.link_s):
+            if parsed.sender is Sender.CLIENT:  # an unsigned monitor keeps no datalink alive
+                self.vehicle.heard_client()
+            assert parsed.sender is not None
+            if self.endpoint.admit(addr, parsed.sender):
+                self.send_snapshot(addr)
+            for msg in parsed.messages:
+                if self._tlog is not None:
+                    self._write_tlog(bytes(msg.get_msgbuf()))
+                assert self.handler is not None, "no message handler attached"
+                self.handler.handle(msg, addr)
+
+    # ------------------------------------------------------------------------------- outgoing
+
+    def send(self, msg: mavlink2.MAVLink_message, dest: Address | None = None) -> None:
+        """Queue one message for ``dest`` (None: every client and monitor) on the outgoing link.
+
+        Each destination is a link of its own with its own sequence numbers (:meth:`MavEndpoint.encode`), taken
+        in the order the frames are queued: a client never sees a gap for a frame that went to another one."""
+        dests = [dest] if dest is not None else self.endpoint.destinations()
+        if not dests:
+            return
+        # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
+        mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
+        tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
+        if now_ms != self._sent_step_ms:
+            self._sent_step_ms, self._sent_in_step = now_ms, {}
+        n = self._sent_in_step[mid] = self._sent_in_step.get(mid, 0) + 1
+        lossless = self.clock.lockstep and tick_ms >= 0
+        for i, to in enumerate(dests):
+            buf = self.endpoint.encode(msg, to)
+            if i == 0 and self._tlog is not None:
+                self._write_tlog(buf)  # one copy per message, as the vehicle sent it
+            self.tx.push(self.clock.link_s, (buf, to, tick_ms), hash((mid, now_ms, n)), lossless)
+
+    def flush(self) -> None:
+        """Send the frames the outgoing channel delivers now, packed into datagrams per destination.
+
+        Frames released together for the same destination share one datagram (in order, up to
+        COALESCE_BYTES), as a flight controller's UDP output does: one system call per destination and
+        step instead of one per message. Loss, duplication and latency still act on every frame.
+        """
+        batches: dict[Address, list[bytes]] = {}
+        for data, dest, tick_ms in self.tx.pop_due(self.clock.link_s):
+            self.credit.tick_seen_ms = max(self.credit.tick_seen_ms, tick_ms)
+            frames = batches.setdefault(dest, [])
+            if frames and len(frames[-1]) + len(data) <= COALESCE_BYTES:
+                frames[-1] += data
+            else:
+                frames.append(bytes(data))
+        for dest, frames in batches.items():
+            for datagram in frames:
+                self.endpoint.sendto(datagram, dest)
+
+    def next_link_due_s(self) -> float | None:
+        """Link time at which a channel next has something to deliver."""
+        times = [t for t in (self.tx.next_due_s(), self.rx.next_due_s()) if t is not None]
+        return min(times) if times else None
+
+    def _write_tlog(self, frame: bytes) -> None:
+        assert self._tlog is not None
+        stamp_us = units.us_from_s(self.clock.unix_start_s + self.clock.sim_s)
+        self._tlog.write(struct.pack(">Q", stamp_us) + frame)
+
+    # ------------------------------------------------------------------------------ telemetry
+
+    def build(self, mid: int) -> list[mavlink2.MAVLink_message]:
+        """The message(s) of one id for the vehicle's current state ([] if there is nothing to say yet)."""
+        return streams.build(mid, self.vehicle, self.mav, self.endpoint.rx.rejected)
+
+    def publish(self, tick: bool = False) -> None:
+        """After a step: take a GPS fix if one is due and send every stream that is due.
+
+        ``tick`` (lockstep): also send SYSTEM_TIME now if its stream did not, so clients see every step.
+        """
+        self.vehicle.sample_gps()
+        now = self.clock.sim_s
+        due = self.streams.take_due(now, self.vehicle.gps.last_fix)
+        if self.endpoint.has_clients:
+            for mid in due:
+                for msg in self.build(mid):
+                    self.send(msg)
+        if tick and M.MAVLINK_MSG_ID_SYSTEM_TIME not in due:
+            self.send(telemetry.system_time(self.mav, self.clock.unix_start_s, now))
+
+    def send_snapshot(self, dest: Address | None = None) -> None:
+        """The current state at once (a new peer; a lockstep world holding still): heartbeat, status, flags,
+        position."""
+        for mid in streams.SNAPSHOT:
+            for msg in self.build(mid):
+                self.send(msg, dest)
+
+    def announce(self, event: MissionEvent) -> None:
+        """A mission event as STATUSTEXT + NAMED_VALUE_INT to every peer."""
+        severity, text = event.statustext()
+        self.send(telemetry.statustext(self.mav, severity, text))
+        self.send(
+            telemetry.named_value_int(self.mav, units.ms_from_s(event.time_s), event.kind.value_name, event.value)
+        )
+
+    def statustext(self, severity: int, text: str, dest: Address | None = None) -> None:
+        self.send(telemetry.statustext(self.mav, severity, text), dest)
+
+    def relay_statustext(self, severity: int, text: str, source: Address) -> None:
+        """A client's STATUSTEXT (a companion's note) to every other client, into the tlog as sent, and into the
+        truth log as a STATUSTEXT event with its text, as an autopilot forwards it to its ground stations."""
+        for peer in set(self.endpoint.peers) | set(self.outputs):
+            if peer != source:
+                self.statustext(severity, text, peer)
+        self.vehicle.event("STATUSTEXT", severity, text)
+
+    def requested(self, mid: int) -> list[mavlink2.MAVLink_message] | None:
+        """MAV_CMD_REQUEST_MESSAGE: the message(s) of ``mid`` now ([] if there is nothing yet), None if unknown."""
+        return self.build(mid) if mid in streams.REQUESTABLE else None
+
+    def set_stream_interval(self, mid: int, interval_us: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL (-1 off, 0 default, > 0 microseconds); returns the MAV_RESULT."""
+        return self.streams.set_interval(mid, interval_us, self.clock.sim_s)
+
+    def stream_interval_us(self, mid: int) -> int | None:
+        """MAV_CMD_GET_MESSAGE_INTERVAL: -1 off, else microseconds; None for an unknown stream."""
+        return self.streams.interval_us(mid)

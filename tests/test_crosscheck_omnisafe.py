@@ -1,0 +1,94 @@
+"""The cross-check's OmniSafe side (benchmarks/crosscheck/omnisafe_side.py), opt-in: skipped unless omnisafe is
+importable, which it is only in OmniSafe's own environment (README, "OmniSafe"):
+
+    PYTHONPATH=. /work/omnisafe-venv/bin/python -m pytest -q tests/test_crosscheck_omnisafe.py -p no:cacheprovider \
+        -o addopts=""
+
+OmniSafe accepts every configuration the driver builds (no key it does not know, the cost limit where its algorithm
+reads it), and the exported numpy actor is OmniSafe's deterministic actor behind its observation normaliser.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+omnisafe = pytest.importorskip("omnisafe")
+torch = pytest.importorskip("torch")
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import omnisafe.algorithms.algo_wrapper as wrapper  # noqa: E402
+from gymnasium import spaces  # noqa: E402
+from omnisafe.common.normalizer import Normalizer  # noqa: E402
+from omnisafe.models.actor.actor_builder import ActorBuilder  # noqa: E402
+from omnisafe.utils.config import Config, get_default_kwargs_yaml  # noqa: E402
+from omnisafe.utils.tools import recursive_check_config  # noqa: E402
+
+from benchmarks.crosscheck.actor_file import OmniSafeActor  # noqa: E402
+from benchmarks.crosscheck.omnisafe_side import default_cfgs_with_env_section, export, last_checkpoint  # noqa: E402
+from benchmarks.crosscheck.settings import ALGOS, Budget, Shared, omnisafe_cfgs  # noqa: E402
+from tssac_core.sim.observation import ObservationMode, observation_bounds  # noqa: E402
+
+SHARED = Shared(3.0, 1.0, 0.995, (128, 128), 10, 2, 1000)
+TYPES = {"cpo": "on-policy", "ppo_lag": "on-policy", "sac_lag": "off-policy"}
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_omnisafe_accepts_every_configuration_and_reads_the_limit_there(algo, tmp_path):
+    patched = default_cfgs_with_env_section(get_default_kwargs_yaml)
+    defaults = patched(ALGOS[algo], "TssacDetect-v0", TYPES[algo])
+    cfgs = omnisafe_cfgs(algo, Budget(50, 4000), 0, SHARED, tmp_path)
+    recursive_check_config(cfgs, defaults)  # KeyError for a key OmniSafe does not have
+    section = "algo_cfgs" if algo == "cpo" else "lagrange_cfgs"
+    assert "cost_limit" in defaults[section]
+    defaults.recurisve_update(cfgs)
+    assert defaults[section]["cost_limit"] == 3.0 and defaults.train_cfgs.total_steps == 200_000
+
+
+def test_unpatched_off_policy_defaults_refuse_env_cfgs():
+    """Why omnisafe_side patches OmniSafe's defaults: its SACLag.yaml has no env_cfgs section."""
+    defaults = get_default_kwargs_yaml("SACLag", "TssacDetect-v0", "off-policy")
+    with pytest.raises(KeyError, match="env_cfgs"):
+        recursive_check_config({"env_cfgs": {"teammates": "none"}}, defaults)
+    assert wrapper.get_default_kwargs_yaml is not None
+
+
+@pytest.mark.parametrize("actor_type, activation", [("gaussian_learning", "tanh"), ("gaussian_sac", "relu")])
+def test_export_is_omnisafes_deterministic_actor(tmp_path, actor_type, activation):
+    low, high = observation_bounds(ObservationMode.ROUTE)
+    obs_space = spaces.Box(low, high, dtype=np.float32)
+    act_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+    actor = ActorBuilder(obs_space, act_space, [16, 16], activation, "kaiming_uniform").build_actor(actor_type)
+    norm = Normalizer(obs_space.shape, clip=5)
+    rng = np.random.default_rng(1)
+    norm.normalize(torch.as_tensor(rng.normal(3.0, 2.0, size=(64, len(low))), dtype=torch.float32))
+    save = tmp_path / "log" / "torch_save"
+    save.mkdir(parents=True)
+    params = {"pi": actor.state_dict(), "obs_normalizer": norm.state_dict()}
+    torch.save(params, save / "epoch-2.pt")
+    torch.save({"pi": {}}, save / "epoch-10.pt")
+    assert last_checkpoint(tmp_path / "log").name == "epoch-10.pt"  # by number, not by name
+    cfgs = Config.dict2config(
+        {
+            "algo": "X",
+            "algo_cfgs": {"obs_normalize": True},
+            "env_cfgs": {"action_repeat": 10},
+            "model_cfgs": {
+                "actor_type": actor_type,
+                "weight_initialization_mode": "kaiming_uniform",
+                "actor": {"hidden_sizes": [16, 16], "activation": activation},
+            },
+        }
+    )
+    checked = export(cfgs, save / "epoch-2.pt", tmp_path / "actor.npz")
+    assert checked["export_max_abs_diff"] < 1e-5
+    obs = rng.normal(3.0, 2.0, size=(5, len(low))).astype(np.float32)
+    with torch.no_grad():
+        x = torch.clamp((torch.as_tensor(obs) - norm._mean) / norm._std, -5, 5)
+        ref = torch.clamp(actor.predict(x, deterministic=True), -1, 1).numpy()
+    np.testing.assert_allclose(OmniSafeActor.load(tmp_path / "actor.npz")(obs), ref, atol=1e-5)
