@@ -41,7 +41,7 @@ from tqdm import tqdm
 
 import tssac_core
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import UsageError, run, write_json
+from tssac_core.common.cli import UsageError, run, write_json
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot

@@ -21,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the benchmarks.crosscheck package of this checkout
 
 from benchmarks.crosscheck.driver import main  # noqa: E402
-from tssac_core.cli import run  # noqa: E402
+from tssac_core.common.cli import run  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(run(main))

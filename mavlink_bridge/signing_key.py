@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 
 
 def read_signing_key(path: Path) -> bytes:

@@ -29,7 +29,7 @@ from benchmarks.crosscheck.settings import (  # noqa: E402
     parse_override,
     shared_settings,
 )
-from tssac_core.cli import run  # noqa: E402
+from tssac_core.common.cli import run  # noqa: E402
 from tssac_core.sim.observation import ObservationMode  # noqa: E402
 from tssac_core.train.arguments import parse_cli  # noqa: E402
 

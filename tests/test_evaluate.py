@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.common.stats import wilson_interval
 from tssac_core.evaluate import main
 from tssac_core.sim.missions import MissionResults, fly_missions

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.common.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.experiments.cli import main, train
 from tssac_core.experiments.evaluations import PerEpisode, TeamEvaluation
@@ -587,7 +587,7 @@ def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
 def test_finish_by_reads_a_clock_time_or_a_date_and_refuses_the_past():
     from datetime import datetime
 
-    from tssac_core.cli import UsageError
+    from tssac_core.common.cli import UsageError
     from tssac_core.experiments.deadline import parse_finish_by
 
     now = datetime(2026, 11, 25, 9, 30)

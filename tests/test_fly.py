@@ -25,7 +25,7 @@ import pytest
 from mavlink_bridge.fly import cli as fly
 from mavlink_bridge.fly.config import DEFAULT_MODELS
 from mavlink_bridge.fly.mission_runner import mission_layout
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.scenario import Layout, Radar, Start, dump, load, sample_layout
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ import pytest
 from mavlink_bridge.fly.config import config_from_args
 from mavlink_bridge.fly.mission_runner import mission_layout as fly_layout
 from mavlink_bridge.fly.scoring import summarise
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.common.stats import wilson_interval
 from tssac_core.sim.missions import mission_layout
 from tssac_core.sim.scenario import load

@@ -86,7 +86,7 @@ def test_bad_settings_are_refused(fraction, detour_km, max_draws):
 
 
 def test_bad_arguments_are_one_line(tmp_path, capsys):
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
     from tssac_core.train.cli import main
 
     assert run(main, ["--out", str(tmp_path / "x"), "--hard-layouts", "1.5"]) == 2

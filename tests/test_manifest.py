@@ -14,7 +14,7 @@ from tiny_training import tiny_args
 
 from mavlink_bridge.companion.cli import main as companion_main
 from mavlink_bridge.fly.cli import main as fly_main
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import main as export_main
 from tssac_core.deploy.manifest import MANIFEST, model_files, problems, read_manifest, record, write_manifest

@@ -11,7 +11,7 @@ import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
 from mavlink_bridge.fly.config import config_from_args  # noqa: E402
-from tssac_core.cli import UsageError  # noqa: E402
+from tssac_core.common.cli import UsageError  # noqa: E402
 from tssac_core.reporting.mission_animation import (  # noqa: E402
     AnimationFormatError,
     MissionFilm,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.arguments import parse_args

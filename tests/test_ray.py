@@ -19,7 +19,7 @@ import pytest
 from tiny_training import tiny_args
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.evaluate import main as evaluate_main
 from tssac_core.experiments.cli import train
 from tssac_core.experiments.grid import load_grid

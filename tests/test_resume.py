@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from tiny_training import tiny_args
 
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.deploy.policy import Policy, read_checkpoint
 from tssac_core.train.cli import main
 

@@ -232,7 +232,7 @@ def _hostile_files(strike_path: Path, tmp_path: Path) -> list[Path]:
 
 def test_every_command_reports_a_hostile_scenario_file_in_one_line_and_exits_2(strike_path, tmp_path, capsys):
     from mavlink_bridge.fly.cli import main as fly
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
     from tssac_core.evaluate import main as evaluate
     from tssac_core.train.cli import main as train
 

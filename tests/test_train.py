@@ -128,7 +128,7 @@ def test_transfer_initialises_the_next_role(tmp_path):
 
 def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_path, capsys):
     """--teammates DIR: the earlier roles come from DIR (not --out); TSSAC's strike starts as DIR's detect."""
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     out = tmp_path / "strike-only"
     args = no_update_run("[32,32]", "--roles", "strike")
@@ -148,7 +148,7 @@ def test_teammates_directory_flies_and_transfers_the_earlier_roles(trained, tmp_
 def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(tmp_path, capsys, caplog):
     """A trained strike UAV, flown (no update) beside its team, completes its task at once: with
     --stop-at-task-success the role ends after epoch 1 of 3 and ships; a value outside [0, 1] is one line."""
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     caplog.set_level("INFO")
     # The tail-selection team keeps its learner state (models/tssac holds actors only: it was compacted by the grid).
@@ -302,7 +302,7 @@ def test_resume_after_kill_continues_identically(tmp_path):
 
 
 def test_bad_arguments(tmp_path, capsys):
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     assert run(main, ["--out", str(tmp_path / "x"), "--roles", "strike,decoy"]) == 2
     assert "curriculum order" in capsys.readouterr().err
@@ -321,7 +321,7 @@ def test_bad_arguments(tmp_path, capsys):
     ],
 )
 def test_a_bad_learner_setting_is_one_line_before_any_work(tmp_path, capsys, algo, setting, message):
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     assert run(main, ["--algo", algo, "--set", setting, "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
@@ -337,7 +337,7 @@ def test_a_bad_learner_setting_is_one_line_before_any_work(tmp_path, capsys, alg
     ],
 )
 def test_resume_with_a_damaged_config_json_is_one_line(tmp_path, capsys, content, message):
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     (tmp_path / "config.json").write_text(content)
     assert run(main, ["--out", str(tmp_path), "--resume"]) == 2

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tssac_core.cli import EXIT_INTERRUPTED, run
+from tssac_core.common.cli import EXIT_INTERRUPTED, run
 from tssac_core.train import loop
 from tssac_core.train.cli import main
 from tssac_core.train.tensorboard import scalars

@@ -32,7 +32,7 @@ def test_each_seed_is_its_single_run_and_the_whole_resumes(tmp_path: Path, capsy
     assert metrics(out / "seed0") != metrics(out / "seed1")
     # Everything is finished: --resume runs nothing and succeeds; a second start refuses (one line, exit 2).
     assert main(["--out", str(out), "--resume", "--no-progress"]) == 0
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     assert run(main, [*TINY, "--seeds", "0,1", "--out", str(out)]) == 2
     assert "already holds a run" in capsys.readouterr().err

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.algorithms import ALGORITHMS
 from tssac_core.train.arguments import parse_cli

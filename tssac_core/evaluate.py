@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import UsageError, run, write_json
+from tssac_core.common.cli import UsageError, run, write_json
 from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions

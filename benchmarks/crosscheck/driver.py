@@ -42,7 +42,7 @@ from benchmarks.crosscheck.settings import (
     parse_override,
     shared_settings,
 )
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.scenario import load
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.wall_time import Ended, read_invocations

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.crosscheck.settings import ALGOS, IMPLS, Budget, Job
-from tssac_core.cli import write_json
+from tssac_core.common.cli import write_json
 from tssac_core.common.stats import bootstrap_mean_interval, wilson_interval
 
 FORMAT = "tssac-crosscheck-rows"

@@ -18,7 +18,7 @@ from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from mavlink_bridge.filter_model import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import Role, Scenario

@@ -36,7 +36,7 @@ from mavlink_bridge.frames import (
 )
 from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
-from tssac_core.cli import UsageError, write_json
+from tssac_core.common.cli import UsageError, write_json
 from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.mission_events import (
     FLAGS,

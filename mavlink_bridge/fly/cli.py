@@ -22,7 +22,7 @@ from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes import ChildProcesses
-from tssac_core.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
+from tssac_core.common.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import TaskFailed
 from tssac_core.sim.scenario import ScenarioError

@@ -12,7 +12,7 @@ from typing import NoReturn
 
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file

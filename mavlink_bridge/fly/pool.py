@@ -18,7 +18,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from tssac_core.cli import write_json
+from tssac_core.common.cli import write_json
 from tssac_core.common.stats import mission_statistics
 from tssac_core.sim.scenario import ROLES
 

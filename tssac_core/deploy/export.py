@@ -110,6 +110,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from tssac_core.cli import run
+    from tssac_core.common.cli import run
 
     raise SystemExit(run(main))

@@ -2,7 +2,7 @@
 
 import sys
 
-from tssac_core.cli import run
+from tssac_core.common.cli import run
 from tssac_core.experiments.cli import main
 
 sys.exit(run(main))

@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from tssac_core.cli import UsageError, run
+from tssac_core.common.cli import UsageError, run
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
 from tssac_core.experiments.evaluations import EvalLabel, eval_specs, evaluate_all, fly_one
 from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute

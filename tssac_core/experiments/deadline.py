@@ -17,7 +17,7 @@ import datetime as dt
 import time
 from collections.abc import Callable
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.experiments.grid import Job, learner_family
 from tssac_core.experiments.jobs import JobState, Status, job_state
 from tssac_core.experiments.learning_curves import read_metrics

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.cli import write_json
+from tssac_core.common.cli import write_json
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.experiments.grid import Grid, Job
 from tssac_core.sim.missions import MissionResults, fly_missions

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.yaml_file import read_yaml

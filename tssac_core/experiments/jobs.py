@@ -37,7 +37,7 @@ from types import FrameType
 from typing import Any, Protocol, cast
 
 import tssac_core
-from tssac_core.cli import UsageError, write_json
+from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tssac_core.cli import write_json
+from tssac_core.common.cli import write_json
 from tssac_core.experiments.summary import (
     TRANSFER_ROLES,
     AlgorithmSummary,

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError, run, write_json
+from tssac_core.common.cli import UsageError, run, write_json
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 """The checkout whose tssac_core, sim_vehicles and mavlink_bridge the workers import."""

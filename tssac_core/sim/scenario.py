@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from tssac_core.assurance.monitor import EstimateError, Hazards, Limits, ShieldConfig, handover_error, start_excess_m
+from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import read_yaml
 
 
@@ -65,7 +66,7 @@ MAX_LATENCY_MS = 60_000.0
 MAX_EXPECT_EPISODES = 100_000
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError):
     """A scenario file that cannot be used; ``str()`` is one line: ``file: field: problem``."""
 
     def __init__(self, source: str, field_path: str, problem: str) -> None:

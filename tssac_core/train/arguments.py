@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection

@@ -26,7 +26,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from tssac_core.cli import EXIT_INTERRUPTED, UsageError, run, write_json
+from tssac_core.common.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli

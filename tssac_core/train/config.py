@@ -10,7 +10,7 @@ from typing import Any
 
 from tssac_core.algos.onpolicy.config import OnPolicyConfig
 from tssac_core.algos.sac_config import SacConfig
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.routes import RouteConfig

@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.train.algorithms import ALGORITHMS, Selection
 from tssac_core.train.config import TrainConfig, has_multiplier_signal
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.yaml_file import FileError, read_yaml
 from tssac_core.train.algorithms import ALGORITHMS, Family, Selection, family_of

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from tssac_core.cli import UsageError
+from tssac_core.common.cli import UsageError
 from tssac_core.deploy.policy import torch_save_atomic
 from tssac_core.sim.scenario import Role
 

@@ -21,7 +21,7 @@ import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.sac_lagrangian import UpdateStats
-from tssac_core.cli import UsageError, write_json
+from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
 from tssac_core.deploy.numpy_actor import NumpyPolicy

@@ -15,7 +15,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from tssac_core.cli import write_json
+from tssac_core.common.cli import write_json
 
 WALL_TIME_FILE = "wall_time.json"
 

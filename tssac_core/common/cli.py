@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from tssac_core.common.errors import InputError
 from tssac_core.common.files import replace_durably
 
 EXIT_BAD_INPUT = 2
@@ -21,13 +22,10 @@ class UsageError(Exception):
 
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
     """Run a command's ``main``: known errors become one line on stderr and exit code 2."""
-    from tssac_core.common.errors import CheckpointError
-    from tssac_core.sim.scenario import ScenarioError
-
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         return main(argv)
-    except (UsageError, ScenarioError, CheckpointError) as exc:
+    except (UsageError, InputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as exc:
