@@ -5,20 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from tssac_core.common.cli import UsageError
+from tssac_core.wire.signing import SigningKeyError, load_key
 
 
 def read_signing_key(path: Path) -> bytes:
-    """A key file: 32 raw bytes or 64 hex characters (the SITL's format); UsageError otherwise."""
+    """A key file in the wire's one format (:func:`tssac_core.wire.signing.load_key`); UsageError otherwise."""
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise UsageError(f"signing key {path}: cannot read file ({exc.strerror or exc})") from None
-    if len(data) == 32:
-        return data
-    text = data.strip()
-    if len(text) == 64:
-        try:
-            return bytes.fromhex(text.decode("ascii"))
-        except (UnicodeDecodeError, ValueError):
-            pass
-    raise UsageError(f"signing key {path}: expected 32 raw bytes or 64 hex characters, got {len(data)} bytes")
+        return load_key(path)
+    except SigningKeyError as exc:
+        raise UsageError(str(exc)) from None

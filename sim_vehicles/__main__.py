@@ -30,10 +30,10 @@ from types import FrameType
 from typing import NoReturn
 
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
-from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
 from tssac_core.sim.scenario import ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, ResetError, redirect_stderr
+from tssac_core.wire.signing import SigningKeyError, load_key
 
 PROG = "python -m sim_vehicles"
 

@@ -1,10 +1,9 @@
 """MAVLink 2 message signing on the vehicle: the key file and the signing of what it sends.
 
-Key file (``--signing-key FILE``): either exactly 32 raw bytes, or 64 hexadecimal characters (surrounding
-whitespace and a trailing newline allowed). MAVProxy's ``signing setup PASSPHRASE`` uses
-``sha256(PASSPHRASE)`` as the key, so ``python -c "import hashlib;print(hashlib.sha256(b'PASSPHRASE').hexdigest())" >
-key.hex``
-makes a file that matches it.
+Key file (``--signing-key FILE``, read by :func:`tssac_core.wire.signing.load_key`): either exactly 32 raw bytes, or
+64 hexadecimal characters (surrounding whitespace and a trailing newline allowed). MAVProxy's ``signing setup
+PASSPHRASE`` uses ``sha256(PASSPHRASE)`` as the key, so ``python -c "import hashlib;
+print(hashlib.sha256(b'PASSPHRASE').hexdigest())" > key.hex`` makes a file that matches it.
 
 With a key the vehicle signs everything it sends (:func:`enable_signing`: the same
 :class:`MAVLinkSigning` fields ``mavfile.setup_signing`` sets, link id 0) and accepts only correctly
@@ -16,35 +15,12 @@ them (``--unsigned-monitors``); rejections are counted by kind in :class:`sim_ve
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.wire.signing import KEY_LEN, now_10us
+from tssac_core.wire.signing import KEY_LEN, SigningKeyError, now_10us
 
 MONITOR_IDS = frozenset({mavlink2.MAVLINK_MSG_ID_HEARTBEAT, mavlink2.MAVLINK_MSG_ID_RADIO_STATUS})
 """Message ids a passive monitor may send unsigned while signing is on (when the run allows monitors)."""
-
-
-class SigningKeyError(ValueError):
-    """A key file that cannot be used; ``str()`` is one line."""
-
-
-def load_key(path: str | Path) -> bytes:
-    """Read a signing key file: 32 raw bytes or 64 hex characters."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise SigningKeyError(f"signing key {path}: cannot read file ({exc.strerror or exc})") from None
-    if len(data) == KEY_LEN:
-        return data
-    text = data.strip()
-    if len(text) == 2 * KEY_LEN:
-        try:
-            return bytes.fromhex(text.decode("ascii"))
-        except (UnicodeDecodeError, ValueError):
-            pass
-    raise SigningKeyError(f"signing key {path}: expected 32 raw bytes or 64 hex characters, got {len(data)} bytes")
 
 
 def enable_signing(mav: mavlink2.MAVLink, key: bytes, link_id: int = 0, now_unix_s: float | None = None) -> None:

@@ -25,7 +25,6 @@ from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink
 from sim_vehicles.__main__ import main
 from sim_vehicles.config import SitlConfig
 from sim_vehicles.link_model import GpsReceiver, LinkChannel
-from sim_vehicles.signing import SigningKeyError, load_key
 from sim_vehicles.world_runner import WorldRunner
 from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
 from tssac_core.sim.world import World
@@ -36,6 +35,7 @@ from tssac_core.wire.geodetic import (
     phi_from_yaw_ned,
     yaw_ned_from_phi,
 )
+from tssac_core.wire.signing import SigningKeyError, load_key
 from tssac_core.wire.truth_log_schema import read_truth_log
 
 M = mavlink2

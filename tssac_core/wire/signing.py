@@ -37,6 +37,7 @@ import hmac
 import struct
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
 
 __all__ = [
@@ -89,6 +90,28 @@ class SigningCounters:
     unsigned: int = 0
     bad_signature: int = 0
     replayed: int = 0
+
+
+class SigningKeyError(ValueError):
+    """A key file that cannot be used; ``str()`` is one line."""
+
+
+def load_key(path: str | Path) -> bytes:
+    """Read a signing key file, the one format of the SITL and the companion: exactly 32 raw bytes, or 64 hexadecimal
+    characters (surrounding whitespace and a trailing newline allowed)."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise SigningKeyError(f"signing key {path}: cannot read file ({exc.strerror or exc})") from None
+    if len(data) == KEY_LEN:
+        return data
+    text = data.strip()
+    if len(text) == 2 * KEY_LEN:
+        try:
+            return bytes.fromhex(text.decode("ascii"))
+        except (UnicodeDecodeError, ValueError):
+            pass
+    raise SigningKeyError(f"signing key {path}: expected 32 raw bytes or 64 hex characters, got {len(data)} bytes")
 
 
 def now_10us(now_unix_s: float | None = None) -> int:
