@@ -14,7 +14,7 @@ import pytest
 
 from mavlink_bridge.companion.cli import build_companion
 from mavlink_bridge.companion.config import PILOT_NAMES, CompanionConfig
-from mavlink_bridge.companion.pilots import HeldPilot
+from mavlink_bridge.companion.held_pilot import HeldPilot
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.adversaries import (
     DECISION_STEPS,

@@ -56,7 +56,7 @@ def test_exported_actor_acts_like_the_torch_policy(models: Path, role: Role):
 def test_the_companion_flies_an_export_without_importing_torch(models: Path):
     code = (
         "import sys\n"
-        "import mavlink_bridge.companion.pilots as c\n"
+        "import mavlink_bridge.companion.held_pilot as c\n"
         "from tssac_core.sim.scenario import Role\n"
         f"pilot = c.policy_pilot(__import__('pathlib').Path({str(models / 'strike.npz')!r}), Role.STRIKE)\n"
         "print(type(pilot.policy).__name__, 'torch' in sys.modules)\n"

@@ -22,7 +22,7 @@ from mavlink_bridge.companion.config import (
     MIN_VEL_SIGMA_M_S,
     CompanionConfig,
 )
-from mavlink_bridge.companion.pilots import DecisionClock, HeldPilot, make_pilot
+from mavlink_bridge.companion.held_pilot import DecisionClock, HeldPilot, make_pilot
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion_shield import CompanionShield
 from mavlink_bridge.frames import (

@@ -1,5 +1,5 @@
 """Who flies a UAV: one :class:`Pilot` type, for the batched world's :class:`~tssac_core.sim.team.Team` and for a
-companion computer (:mod:`mavlink_bridge.companion.pilots`) alike.
+companion computer (:mod:`mavlink_bridge.companion.held_pilot`) alike.
 
 A pilot flies one role in every world of a :class:`~tssac_core.sim.world_state.WorldState` (the batched world's
 N worlds, or a companion's one) and makes a new decision every ``action_repeat`` steps; whoever flies it holds
