@@ -52,7 +52,7 @@ from typing import BinaryIO, TypeAlias
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from tssac_core.wire import units
-from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, crc16_mcrf4xx, scan_frames
+from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames
 from tssac_core.wire.signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -73,7 +73,7 @@ M = mavlink2
 
 MAX_DATAGRAM = 65535
 _TLOG_FLUSH_S = 1.0
-DIALECT = Dialect({mid: cls.crc_extra for mid, cls in M.mavlink_map.items()}, crc16_mcrf4xx)
+DIALECT = Dialect.of_messages(M.mavlink_map)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.wire.framing.scan_frames`."""
 
 SETPOINT_TYPE_MASK = (

@@ -46,7 +46,6 @@ from tssac_core.wire.framing import (
     Dialect,
     FrameDecoder,
     FramePacker,
-    crc16_mcrf4xx,
     message_id,
     scan_frames,
     source,
@@ -75,7 +74,7 @@ MAX_MONITORS = 4
 """Unsigned monitors served at once (signing on, ``unsigned_monitors`` set)."""
 MONITOR_BYTES_PER_S = 2000
 """Telemetry budget of one unsigned monitor: 1 Hz heartbeat, status and a position, not the 10 Hz streams."""
-DIALECT = Dialect({mid: cls.crc_extra for mid, cls in mavlink2.mavlink_map.items()}, crc16_mcrf4xx)
+DIALECT = Dialect.of_messages(mavlink2.mavlink_map)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.wire.framing.scan_frames`."""
 
 

@@ -81,6 +81,12 @@ class Dialect:
     crc16: Callable[[bytes], int]
     """CRC-16/MCRF4XX of a byte string (MAVLink's X.25 checksum)."""
 
+    @classmethod
+    def of_messages(cls, message_classes: Mapping[int, Any]) -> Dialect:
+        """The dialect of a generated message table (message id -> a class with ``crc_extra``, e.g. pymavlink's
+        ``ardupilotmega.mavlink_map``), with MAVLink's checksum: how both ends build theirs."""
+        return cls({mid: int(c.crc_extra) for mid, c in message_classes.items()}, crc16_mcrf4xx)
+
 
 @dataclass
 class Scan:
