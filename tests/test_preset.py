@@ -159,3 +159,48 @@ def test_a_bad_preset_row_is_one_line(tmp_path: Path, monkeypatch, capsys, row: 
     assert run(grid_main, ["--grid", str(grid), "--results", str(tmp_path / "r"), "--dry-run"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and err.startswith(f"error: {grid}: ") and message in err, err
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        ("many", "expected an integer, got 'many'"),
+        ("true", "expected an integer, got True"),
+        ("2.5", "expected an integer, got 2.5"),
+        ("10000000000", "out of range: 10000000000 (numbers are at most 1e+09 in size)"),
+    ],
+)
+def test_scenario_preset_and_grid_word_a_bad_value_alike(tmp_path: Path, monkeypatch, value: str, problem: str):
+    """One reader judges a value in all three file kinds (tssac_core.sim.yaml_file.typed_value): the same bad
+    integer gets the same words in a scenario's ``episode_steps``, a preset's ``epochs`` and a grid's
+    ``evaluation.episodes``."""
+    from tssac_core.experiments.grid import GridError
+    from tssac_core.sim.scenario import ScenarioError, load
+    from tssac_core.train.preset import PresetError, load_preset
+
+    monkeypatch.chdir(ROOT)
+    scenario = (ROOT / "scenarios" / "strike.yaml").read_text()
+    assert "episode_steps:" in scenario
+    lines = [f"episode_steps: {value}" if ln.startswith("episode_steps:") else ln for ln in scenario.splitlines()]
+    grid = (ROOT / "experiments" / "smoke.yaml").read_text()
+    assert "  episodes: 2" in grid
+    cases = [
+        (ScenarioError, lambda: load(write(tmp_path / "s.yaml", "\n".join(lines) + "\n")), "episode_steps"),
+        (PresetError, lambda: load_preset(write(tmp_path / "p.yaml", f"epochs: {value}\n")), "epochs"),
+        (
+            GridError,
+            lambda: load_grid(write(tmp_path / "g.yaml", grid.replace("  episodes: 2", f"  episodes: {value}"))),
+            "evaluation.episodes",
+        ),
+    ]
+    for error, read, where in cases:
+        with pytest.raises(error) as info:
+            read()
+        assert str(info.value).endswith(f"{where}: {problem}"), str(info.value)
+
+
+def test_a_preset_number_must_be_finite(tmp_path: Path):
+    from tssac_core.train.preset import PresetError, load_preset
+
+    with pytest.raises(PresetError, match=r"route_margin_km: expected a finite number, got nan"):
+        load_preset(write(tmp_path / "p.yaml", "route_margin_km: .nan\n"))

@@ -56,7 +56,7 @@ from typing import Any
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
-from tssac_core.sim.yaml_file import read_yaml
+from tssac_core.sim.yaml_file import read_yaml, typed_value
 from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, check_learner_settings
 from tssac_core.train.preset import Preset, load_preset, preset_config, read_settings
@@ -295,16 +295,13 @@ class _Reader:
         return value
 
     def integer(self, value: Any, where: str, minimum: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(where, f"expected an integer, got {value!r}")
+        value = typed_value(int, value, where, self.source, GridError)
         if minimum is not None and value < minimum:
             raise self.fail(where, f"must be >= {minimum}, got {value}")
         return value
 
     def number(self, value: Any, where: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(where, f"expected a number, got {value!r}")
-        return float(value)
+        return float(typed_value(float, value, where, self.source, GridError))
 
     def string(self, value: Any, where: str) -> str:
         if not isinstance(value, str) or not value:
@@ -365,9 +362,9 @@ class _Reader:
             return {}
         episodes = self.integer(ev["tail_episodes"], "evaluation.tail_episodes", minimum=1)
         seed = self.integer(ev.get("tail_seed", Evaluation.tail_seed), "evaluation.tail_seed", minimum=0)
-        monitor = ev.get("tail_monitor", Evaluation.tail_monitor)
-        if not isinstance(monitor, bool):
-            raise self.fail("evaluation.tail_monitor", f"expected true or false, got {monitor!r}")
+        monitor = typed_value(
+            bool, ev.get("tail_monitor", Evaluation.tail_monitor), "evaluation.tail_monitor", self.source, GridError
+        )
         first = self.integer(ev.get("seed", Evaluation.seed), "evaluation.seed", minimum=0)
         count = self.integer(ev.get("episodes", Evaluation.episodes), "evaluation.episodes", minimum=1)
         if seed < first + count and first < seed + episodes:

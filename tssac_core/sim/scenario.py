@@ -20,19 +20,16 @@ import dataclasses
 import enum
 import hashlib
 import math
-import types
-import typing
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 import yaml
 
 from tssac_core.assurance.monitor import EstimateError, Hazards, Limits, ShieldConfig, handover_error, start_excess_m
 from tssac_core.common.errors import InputError
-from tssac_core.sim.yaml_file import read_yaml
+from tssac_core.sim.yaml_file import read_yaml, typed_value
 
 
 class Role(enum.Enum):
@@ -55,8 +52,6 @@ DEFAULT_SCENARIO = SCENARIOS_DIR / "random.yaml"
 """What training and evaluation fly unless told otherwise."""
 
 
-MAX_MAGNITUDE = 1e9
-"""No number in a scenario file is larger than this (in size): what the checks below do not bound, this does."""
 MAX_AREA_KM = 1000.0
 """The feasibility check walks a 1 km grid of the area: 10^6 cells at most."""
 MAX_EPISODE_STEPS = 1_000_000
@@ -272,97 +267,6 @@ class Scenario:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-# ------------------------------------------------------------------------------ generic loading
-
-
-def _type_name(tp: Any) -> str:
-    return getattr(tp, "__name__", str(tp))
-
-
-def _build(tp: Any, value: Any, where: str, source: str) -> Any:
-    """Convert ``value`` (plain YAML data) into type ``tp``, or raise ScenarioError at ``where``."""
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return _build(inner, value, where, source)
-    if dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise ScenarioError(source, where, f"expected a mapping, got {type(value).__name__}")
-        hints = typing.get_type_hints(tp)
-        names = {f.name for f in dataclasses.fields(tp)}
-        for key in value:
-            if key not in names:
-                raise ScenarioError(
-                    source, _join(where, str(key)), f"unknown key (allowed: {', '.join(sorted(names))})"
-                )
-        kwargs = {}
-        for f in dataclasses.fields(tp):
-            if f.name in value:
-                kwargs[f.name] = _build(hints[f.name], value[f.name], _join(where, f.name), source)
-            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ScenarioError(source, _join(where, f.name), "missing required field")
-        build = cast(Callable[..., Any], tp)  # a dataclass type (dataclasses.fields above), called with its fields
-        return build(**kwargs)
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise ScenarioError(source, where, f"expected a list, got {type(value).__name__}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_build(args[0], v, f"{where}[{i}]", source) for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ScenarioError(source, where, f"expected a list of {len(args)} numbers, got {len(value)}")
-        return tuple(_build(a, v, f"{where}[{i}]", source) for i, (a, v) in enumerate(zip(args, value)))
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise ScenarioError(source, where, f"expected a mapping, got {type(value).__name__}")
-        return {str(k): _build(args[1], v, _join(where, str(k)), source) for k, v in value.items()}
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(source, where, f"expected a number, got {_short(value)}")
-        if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(
-                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
-            )
-        if not math.isfinite(value):
-            raise ScenarioError(source, where, f"expected a finite number, got {value!r}")
-        if abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(
-                source, where, f"out of range: {value!r} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
-            )
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(source, where, f"expected an integer, got {_short(value)}")
-        if abs(value) > MAX_MAGNITUDE:
-            raise ScenarioError(
-                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
-            )
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ScenarioError(source, where, f"expected true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ScenarioError(source, where, f"expected a string, got {value!r}")
-        return value
-    raise TypeError(f"unsupported schema type {_type_name(tp)} at {where}")  # a bug in the schema
-
-
-def _short(value: Any, max_chars: int = 40) -> str:
-    """``repr(value)`` cut to ``max_chars`` (a 4,000-digit integer makes no error line readable)."""
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**max_chars:
-        return f"an integer of {len(str(abs(value)))} digits"
-    text = repr(value)
-    return text if len(text) <= max_chars else text[: max_chars - 3] + "..."
-
-
-def _join(where: str, name: str) -> str:
-    return f"{where}.{name}" if where else name
-
-
 def _plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {
@@ -384,7 +288,7 @@ def to_dict(scenario: Scenario) -> dict[str, Any]:
 
 def from_dict(data: Any, source: str = "<scenario>") -> Scenario:
     """Build and validate a scenario from plain data; raises ScenarioError."""
-    scenario = _build(Scenario, data, "", source)
+    scenario = typed_value(Scenario, data, "", source, ScenarioError)
     validate(scenario, source)
     return scenario
 

@@ -28,7 +28,7 @@ from typing import Any
 
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.sim.yaml_file import FileError, read_yaml
+from tssac_core.sim.yaml_file import FileError, read_yaml, typed_value
 from tssac_core.train.algorithms import ALGORITHMS, Family, Selection, family_of
 from tssac_core.train.config import TrainConfig
 
@@ -165,15 +165,14 @@ def check_value(key: str, value: Any) -> Any:
         if value not in CHOICES[key]:
             raise ValueError(f"expected one of {', '.join(CHOICES[key])}, got {value!r}")
         return value
-    if isinstance(default, bool) or isinstance(value, bool):
-        raise ValueError(f"expected a {type(default).__name__}, got {value!r}")
-    if isinstance(default, int) and not isinstance(value, int):
-        raise ValueError(f"expected an integer, got {value!r}")
-    if isinstance(default, float) and not isinstance(value, (int, float)):
-        raise ValueError(f"expected a number, got {value!r}")
-    if isinstance(default, str) and not isinstance(value, str):
-        raise ValueError(f"expected a word or path, got {value!r}")
-    return checked_range(key, float(value) if isinstance(default, float) else value)
+    if isinstance(default, (bool, int, float, str)):
+        value = typed_value(type(default), value, key, "", _problem)  # the scenario's and the grid's checks
+    return checked_range(key, value)
+
+
+def _problem(_source: str, _field: str, problem: str) -> ValueError:
+    """:func:`typed_value`'s error as :func:`check_value`'s ValueError: the problem alone (callers add the place)."""
+    return ValueError(problem)
 
 
 def checked_range(key: str, value: Any) -> Any:
