@@ -36,7 +36,7 @@ from tssac_core.experiments.summary import (
     transfer_speedup,
     within_limit,
 )
-from tssac_core.experiments.table import _tail_rate
+from tssac_core.experiments.table import _tail_rate, cascade_row
 from tssac_core.train.config import selects_within_limit
 from tssac_core.train.rundir import METRIC_FIELDS
 from tssac_core.train.wall_time import (
@@ -343,6 +343,9 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert "layout seeds 990001-990003" in table and "--seed 990001 --shield" not in table
     assert "1 epochs x 20 learner decisions per role" in table and "Shrunk from the paper's 50 epochs" in table
     assert "## Transfer inside the grid's curricula" in table and "| detect |" in table and "| strike |" in table
+    assert "## Where the missions stop: each role's task, given the one before it" in table and re.search(
+        r"^\| guidance controller \| 100\.0% \(43\.9-100\.0; 3 of 3\) \| ", table, re.M
+    )
     data = json.loads((smoke / "experiments.json").read_text())
     assert [a["name"] for a in data["algorithms"]] == ["tssac", "sac_lag"]
     tssac = data["algorithms"][0]
@@ -971,6 +974,35 @@ def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_interval
     assert t["backup_time_fraction"] == 40 / 2400 and t["interventions_per_uav_mission"] == 8 / 24
     assert list(t)[-2:] == ["backup_time_fraction", "interventions_per_uav_mission"]
     assert _tail_rate(pool, 3) == "87.5% (52.9-97.8) [2 of 3 seeds]" and _tail_rate(pool, 2) == "87.5% (52.9-97.8)"
+
+
+def test_the_cascade_counts_each_roles_task_among_the_missions_the_role_before_it_finished():
+    """A cache's per-role task rates come back as counts, pool over seeds, and each role's share is taken of the
+    missions in which the role before it finished (the tasks nest, eq. 9), with its Wilson interval."""
+
+    def cached(rates: tuple[float, float, float], success: list[bool]) -> TeamEvaluation:
+        record = {
+            "success_rate": float(np.mean(success)),
+            "mean_cost": 0.0,
+            "episodes": len(success),
+            "cost_limit": 3.0,
+            "roles": {role: {"task_success_rate": r} for role, r in zip(("decoy", "detect", "strike"), rates)},
+            "per_episode": {"success": success, "cost": [[0.0] * 3] * len(success), "out_of_area": [[False] * 3] * 4},
+        }
+        return TeamEvaluation.from_record(record)
+
+    one = cached((1.0, 0.75, 0.5), [True, True, False, False])  # 0.75 x 4 missions: 3, read back as a count
+    two = cached((0.5, 0.25, 0.0), [False] * 4)
+    assert one.tasks_finished == {"decoy": 4, "detect": 3, "strike": 2}
+    pool = pooled_tail([one, two])
+    assert pool.figures is not None and pool.figures.tasks_finished == {"decoy": 6, "detect": 4, "strike": 2}
+    row = cascade_row("tssac", pool)
+    w = wilson_interval(4, 6)  # the detect UAV's share: of the 6 missions whose decoy finished, not of all 8
+    assert f"| {100 * w.value:.1f}% ({100 * w.low:.1f}-{100 * w.high:.1f}; 4 of 6) |" in row
+    assert row.startswith("| tssac | 75.0% (") and "; 6 of 8) |" in row and "; 2 of 4) | 25.0% (" in row
+    assert cascade_row("sac", pooled_tail([evaluation(3.0, cost=[[0.0] * 3], out_of_area=[[False] * 3])])) == (
+        "| sac | — | — | — | — |"
+    )  # a cache from before the per-role figures
 
 
 def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_stopped(tmp_path):

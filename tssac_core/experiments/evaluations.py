@@ -162,6 +162,8 @@ class TeamEvaluation:
     """95% Wilson score interval (None in a cache written before evaluations had intervals)."""
     mean_cost_interval95: tuple[float, float] | None
     """95% bootstrap interval over missions (None likewise)."""
+    tasks_finished: dict[str, int] | None = None
+    """Per role, the missions in which that role finished its task (None in a cache without per-role figures)."""
 
     @classmethod
     def from_record(cls, data: dict[str, Any]) -> TeamEvaluation:
@@ -170,6 +172,11 @@ class TeamEvaluation:
 
         def interval(key: str) -> tuple[float, float] | None:
             return (data[key][0], data[key][1]) if key in data else None
+
+        roles = data.get("roles")
+        tasks = None
+        if roles is not None:  # a rate over the evaluation's missions: back to a count
+            tasks = {role: round(figures["task_success_rate"] * data["episodes"]) for role, figures in roles.items()}
 
         return cls(
             success_rate=data["success_rate"],
@@ -180,6 +187,7 @@ class TeamEvaluation:
             per_episode=PerEpisode.from_record(data["per_episode"]),
             success_interval95=interval("success_interval95"),
             mean_cost_interval95=interval("mean_cost_interval95"),
+            tasks_finished=tasks,
         )
 
 

@@ -143,6 +143,8 @@ class TailFigures:
     largest: list[float]
     left_area: int
     """UAVs that left the area."""
+    tasks_finished: dict[str, int] | None = None
+    """Per role, the missions in which that role finished its task (None unless every evaluation says)."""
 
 
 @dataclass(frozen=True)
@@ -203,6 +205,7 @@ def pooled_tail(evaluations: list[TeamEvaluation]) -> TailPool:
         cvar95_cost=cvar(cost),
         largest=sorted(cost.ravel().tolist(), reverse=True)[:3],
         left_area=left_area,
+        tasks_finished=_pooled_tasks(evaluations),
     )
     counts = [p.monitor for p in per if p.monitor is not None]
     monitor = None
@@ -214,6 +217,17 @@ def pooled_tail(evaluations: list[TeamEvaluation]) -> TailPool:
             interventions_per_uav_mission=float(np.concatenate([c.interventions for c in counts]).mean()),
         )
     return TailPool(missions=int(success.size), seeds=len(evaluations), figures=figures, monitor=monitor)
+
+
+def _pooled_tasks(evaluations: list[TeamEvaluation]) -> dict[str, int] | None:
+    """Per role, the pooled missions in which it finished its task; None if an evaluation does not say."""
+    counts: dict[str, int] = {}
+    for e in evaluations:
+        if e.tasks_finished is None:
+            return None
+        for role, k in e.tasks_finished.items():
+            counts[role] = counts.get(role, 0) + k
+    return counts
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from tssac_core.common.cli import write_json
+from tssac_core.common.stats import wilson_interval
 from tssac_core.experiments.summary import (
     TRANSFER_ROLES,
     AlgorithmSummary,
@@ -220,6 +221,50 @@ def tail_markdown(summary: Summary) -> list[str]:
     return lines
 
 
+CASCADE = ("decoy", "detect", "strike")
+"""The roles in the order their tasks nest (eq. 9): the detect UAV identifies the target only while the radar is on,
+which the decoy's ring switches on, and the strike UAV hits only an identified target."""
+
+
+def _share(k: int, n: int) -> str:
+    """k of n with its 95% Wilson interval."""
+    if n == 0:
+        return "— (0 of 0)"
+    w = wilson_interval(k, n)
+    return f"{100 * w.value:.1f}% ({100 * w.low:.1f}-{100 * w.high:.1f}; {k:,} of {n:,})"
+
+
+def cascade_markdown(summary: Summary) -> list[str]:
+    """Where the tail's missions stop: each role's task, given the task before it (the tasks nest, so a role's
+    missions are those in which the role before it finished)."""
+    n = summary.evaluation.tail_episodes
+    lines = [
+        "",
+        "## Where the missions stop: each role's task, given the one before it",
+        "",
+        f"The {n} layouts above, monitor off, pooled over the seeds. The tasks nest (eq. 9): the detect UAV identifies "
+        "the target only while the decoy holds its ring (which switches the radar on), and the strike UAV hits only "
+        "an identified target; so a mission succeeds in the share of the first column times the second times the "
+        "third, and the column where a row is low is where its missions stop. Each share with its 95% Wilson interval "
+        "and its count.",
+        "",
+        "| algorithm | decoy's task | detect's, given the decoy's | strike's, given the detect's | mission success |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    lines += [cascade_row(name, tail) for name, tail, _, _, _ in _tail_rows(summary)]
+    return lines
+
+
+def cascade_row(name: str, tail: TailPool | None) -> str:
+    """One row of :func:`cascade_markdown`: each role's task among the missions in which the role before it finished."""
+    f = tail.figures if tail is not None else None
+    if tail is None or f is None or f.tasks_finished is None:
+        return f"| {name} | — | — | — | — |"
+    done = [f.tasks_finished[role] for role in CASCADE]
+    before = [tail.missions, *done[:-1]]
+    return f"| {name} | " + " | ".join(_share(k, m) for k, m in zip(done, before)) + f" | {_tail_rate(tail)} |"
+
+
 def _main_row(a: AlgorithmSummary, tail_cells: list[str]) -> str:
     paper = a.paper
     p_rate, p_cost = (f"{100 * paper.success_rate:.0f}%", f"{paper.mean_cost:.1f}") if paper else ("—", "—")
@@ -271,6 +316,7 @@ def table_markdown(summary: Summary) -> str:
     )
     if tail_headers:
         lines += tail_markdown(summary)
+        lines += cascade_markdown(summary)
     lines += [
         "",
         "## The mean cost against the limit",
