@@ -54,14 +54,14 @@ def test_the_plot_legend_names_every_kind_in_plain_words(tmp_path, monkeypatch):
 
 
 def test_the_film_shows_what_happened_by_then(tmp_path):
-    steps = 600
+    steps = 48  # one frame per step (a longer mission is drawn at a stride: test_frame_steps_keep_the_last_step)
     film = MissionFilm(
         layout=layout(),
         tracks_km=straight_tracks(steps),
         ranges_km=RANGES,
         dt_s=0.1,
-        events=[(300, "radar on", 16.0, 16.0)],
-        backup_steps={"decoy": [(100, 200)]},
+        events=[(24, "radar on", 16.0, 16.0)],
+        backup_steps={"decoy": [(8, 16)]},
         title="test",
     )
     out = write_film(film, tmp_path / "m.gif")

@@ -118,10 +118,11 @@ def write_film(film: MissionFilm, path: Path) -> Path:
         clock.set_text(f"t = {step * film.dt_s:.0f} s")
         return [*lines.values(), *heads.values(), *backups.values(), event_marks, clock, *texts]
 
-    film_frames = frame_steps(steps)
-    anim = animation.FuncAnimation(fig, draw, frames=film_frames, blit=False)
     writer = animation.PillowWriter(fps=FPS) if path.suffix.lower() == ".gif" else animation.FFMpegWriter(fps=FPS)
     path.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(str(path), writer=writer)
+    with writer.saving(fig, str(path), dpi=fig.dpi):  # one figure draw per frame (FuncAnimation draws two or three)
+        for step in frame_steps(steps):
+            draw(step)
+            writer.grab_frame()
     plt.close(fig)
     return path
