@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tssac_core.sim.scenario import Layout, Radar, Start, load
-from tssac_core.sim.world import KM, World
+from tssac_core.sim.world import KM, World, wrap_angle
 
 
 def layout(sam=(65.0, 65.0), radars=(), starts=None) -> Layout:
@@ -65,6 +65,19 @@ def scenario_role(name):
     from tssac_core.sim.scenario import Role
 
     return Role(name)
+
+
+def test_headings_wrap_into_minus_pi_to_pi():
+    """Eq. 6's heading bound: every angle maps into [-pi, pi), the same direction, arrays and scalars alike."""
+    assert wrap_angle(math.pi) == -math.pi and wrap_angle(-math.pi) == -math.pi
+    assert wrap_angle(1.5 * math.pi) == pytest.approx(-0.5 * math.pi) and wrap_angle(-2.5 * math.pi) == pytest.approx(
+        -0.5 * math.pi
+    )
+    angles = np.linspace(-20.0, 20.0, 101)
+    wrapped = wrap_angle(angles)
+    assert np.all(wrapped >= -math.pi) and np.all(wrapped < math.pi)
+    np.testing.assert_allclose(np.sin(wrapped), np.sin(angles), atol=1e-12)
+    np.testing.assert_allclose(np.cos(wrapped), np.cos(angles), atol=1e-12)
 
 
 def test_speed_and_heading_bounds(scenario):

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.sim.routes import FieldCache, cell_centres, field_gradient, radar_depth, sam_disk, wavefront
-from tssac_core.sim.world import _wrap
+from tssac_core.sim.world import wrap_angle
 from tssac_core.sim.world_state import WorldState
 
 
@@ -85,10 +85,10 @@ class Guidance:
         gx, gy = self._route_gradient(state)
         route_course = np.arctan2(-gy, -gx)
         w = np.clip((d_sam - c.r4_m) / cfg.blend_m, 0.0, 1.0)
-        course = zone_course + w * _wrap(route_course - zone_course)
+        course = zone_course + w * wrap_angle(route_course - zone_course)
 
         course = self._safety(state, course)
-        err = _wrap(course - state.phi_rad)
+        err = wrap_angle(course - state.phi_rad)
         omega_cmd = cfg.heading_gain_1_s * err / c.turn_rate_max_rad_s
         cruise = c.speed_min_m_s + cfg.cruise_fraction * (c.speed_max_m_s - c.speed_min_m_s)
         accel_cmd = cfg.speed_gain_1_s * (cruise - state.v_m_s) / c.accel_max_m_s2
@@ -109,7 +109,7 @@ class Guidance:
         half = np.arcsin(np.clip(rb / np.maximum(rd, 1.0), 0.0, 1.0))
         half = np.where(rd < rb, np.pi / 2 + np.clip((rb - rd) / rb, 0, 1) * np.pi / 4, half)
         near = real & (rd - rb < cfg.safety_lookahead_m)
-        off = _wrap(course[..., None] - bearing)
+        off = wrap_angle(course[..., None] - bearing)
         blocked = near & (np.abs(off) < half)
         # The nearest blocking radar decides (margins are small, so radars rarely block together).
         key = np.where(blocked, rd - rb, np.inf)

@@ -366,7 +366,7 @@ class World:
                 start = lay.starts[role.value]
                 self.x_m[i, j] = start.position_km[0] * KM
                 self.y_m[i, j] = start.position_km[1] * KM
-                self.phi_rad[i, j] = _wrap(math.radians(start.heading_deg))
+                self.phi_rad[i, j] = wrap_angle(math.radians(start.heading_deg))
         self._cache_layouts(idx)
         self.layout_id[idx] = self._resets + np.arange(len(idx))
         self._resets += len(idx)
@@ -589,7 +589,7 @@ def _and_not(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.greater(a, b)
 
 
-def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
     """Wrap an angle to [-pi, pi) (eq. 6 heading bounds)."""
     return (angle + math.pi) % (2 * math.pi) - math.pi
 

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tssac_core.sim.scenario import Layout, Scenario
-from tssac_core.sim.world import World, WorldConstants, _wrap
+from tssac_core.sim.world import World, WorldConstants, wrap_angle
 
 
 class WorldState(NamedTuple):
@@ -85,7 +85,7 @@ class WorldState(NamedTuple):
         xy[0, 0, j] = x_m
         xy[1, 0, j] = y_m
         v[0, j] = v_m_s
-        phi[0, j] = _wrap(phi_rad)
+        phi[0, j] = wrap_angle(phi_rad)
         return self._replace(
             xy_m=xy,
             v_m_s=v,
