@@ -144,13 +144,14 @@ class RoleTask:
         self._measure_detours()
         return observe(snapshot(self.world), self.j, self.mode, self.obs_routes)
 
-    def snapshot(self) -> bytes:
-        """The task's state (worlds, layout generator, running episode sums) for a resume file."""
+    def state(self) -> bytes:
+        """The task's state (worlds, layout generator, running episode sums) for a resume file, as the learners'
+        ``state()``."""
         return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost))
 
-    def restore(self, snapshot: bytes) -> None:
-        """Continue from a :meth:`snapshot` (the pilots stay those this task was built with)."""
-        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(snapshot)
+    def restore(self, state: bytes) -> None:
+        """Continue from a :meth:`state` (the pilots stay those this task was built with)."""
+        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(state)
         self._measure_detours()
 
     def _measure_detours(self) -> None:

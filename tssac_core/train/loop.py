@@ -133,7 +133,7 @@ def train_role(
                 epoch,
                 env_steps,
                 updates,
-                task.snapshot(),
+                task.state(),
                 obs,
                 torch.get_rng_state(),
                 selector.state_dict(),
