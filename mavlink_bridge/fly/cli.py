@@ -22,10 +22,9 @@ from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes import ChildProcesses
-from tssac_core.common.cli import EXIT_BAD_INPUT, EXIT_INTERRUPTED, UsageError, write_json
+from tssac_core.common.cli import BAD_INPUT, EXIT_BAD_INPUT, EXIT_INTERRUPTED, bad_input_line, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import TaskFailed
-from tssac_core.sim.scenario import ScenarioError
 
 EXIT_FAILED = 1
 
@@ -49,11 +48,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (UsageError, ScenarioError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as exc:
-        print(f"{PROG}: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+    except BAD_INPUT as exc:
+        print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     children = ChildProcesses()
@@ -105,8 +101,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ChildFailed as exc:
         error = str(exc)
         code = EXIT_FAILED
-    except (UsageError, ScenarioError) as exc:
-        error = str(exc)
+    except BAD_INPUT as exc:
+        error = bad_input_line(exc)
         code = EXIT_BAD_INPUT
     finally:
         # No second signal may cut the clean-up short: the children are in their own sessions.

@@ -20,16 +20,24 @@ class UsageError(Exception):
     """Bad input a user can fix; the message is the one line they see."""
 
 
+BAD_INPUT = (UsageError, InputError, OSError)
+"""What a command reports in one line with exit code 2: bad input, and files it cannot read or write."""
+
+
+def bad_input_line(exc: Exception) -> str:
+    """The one line a user sees for a :data:`BAD_INPUT` error."""
+    if isinstance(exc, OSError):
+        return f"{exc.filename or ''}: {exc.strerror or exc}"
+    return str(exc)
+
+
 def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None = None) -> int:
     """Run a command's ``main``: known errors become one line on stderr and exit code 2."""
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         return main(argv)
-    except (UsageError, InputError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as exc:
-        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+    except BAD_INPUT as exc:
+        print(f"error: {bad_input_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
