@@ -43,6 +43,7 @@ from tssac_core.train.wall_time import (
     WALL_TIME_FILE,
     Ended,
     Invocation,
+    begin_invocation,
     read_invocations,
     record_invocation,
     training_wall_s,
@@ -1019,3 +1020,24 @@ def test_training_wall_time_sums_the_invocations_that_finished_or_the_runner_sto
     ]
     assert training_wall_s(tmp_path) == 600.0
     assert json.loads((tmp_path / WALL_TIME_FILE).read_text())["invocations"][0] == {"seconds": 100, "ended": "stopped"}
+
+
+def test_an_invocation_keeps_its_time_up_to_date_and_a_killed_one_still_counts(tmp_path):
+    """A training invocation opens a running record and updates it every epoch; the next invocation finds it running
+    (killed without a record of its end) and keeps its seconds as killed; a finish or the runner's stop closes the
+    running record instead of adding one."""
+    begin_invocation(tmp_path)
+    record_invocation(tmp_path, 40.2, Ended.RUNNING)  # after an epoch
+    record_invocation(tmp_path, 80.4, Ended.RUNNING)  # after the next; then a kill -9
+    begin_invocation(tmp_path)
+    assert read_invocations(tmp_path) == [Invocation(80, Ended.KILLED), Invocation(0, Ended.RUNNING)]
+    record_invocation(tmp_path, 30.0, Ended.RUNNING)
+    record_invocation(tmp_path, 55.0, Ended.STOPPED)  # the runner stops it, with its own count
+    begin_invocation(tmp_path)
+    record_invocation(tmp_path, 12.0, Ended.FINISHED)
+    assert read_invocations(tmp_path) == [
+        Invocation(80, Ended.KILLED),
+        Invocation(55, Ended.STOPPED),
+        Invocation(12, Ended.FINISHED),
+    ]
+    assert training_wall_s(tmp_path) == 147.0

@@ -21,6 +21,7 @@ from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.deploy.policy import CheckpointError, Policy, load_team
 from tssac_core.sim.scenario import Role
 from tssac_core.train.cli import main
+from tssac_core.train.wall_time import Ended, Invocation, read_invocations
 
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_train")
@@ -293,7 +294,12 @@ def test_resume_after_kill_continues_identically(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     assert not (cut / "decoy.pt").is_file(), "the run finished before it could be killed"
+    (killed,) = read_invocations(cut)  # brought up to date after the first epoch, so the kill loses no more
+    assert killed.ended is Ended.RUNNING
     assert main(["--out", str(cut), "--resume", "--no-progress"]) == 0
+    assert [i.ended for i in read_invocations(cut)] == [Ended.KILLED, Ended.FINISHED]
+    assert read_invocations(cut)[0] == Invocation(killed.seconds, Ended.KILLED)  # its seconds count
+    assert [i.ended for i in read_invocations(whole)] == [Ended.FINISHED]
     a = torch.load(whole / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(cut / "decoy.pt", weights_only=False)["actor"]
     assert all(torch.equal(a[k], b[k]) for k in a)

@@ -25,6 +25,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from tssac_core.common.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
@@ -32,7 +33,7 @@ from tssac_core.sim.scenario import Role
 from tssac_core.train.arguments import EXECUTORS, SeedJobs, parse_cli
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.legacy import read_config
-from tssac_core.train.wall_time import Ended, record_invocation
+from tssac_core.train.wall_time import Ended, begin_invocation, record_invocation
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -74,7 +75,14 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
     torch.set_num_threads(cfg.threads)
     total = len(cfg.roles) * cfg.epochs * cfg.steps_per_epoch
     start = time.perf_counter()
+    begin_invocation(out)
     sink: EpochSink | None = open_sink(tensorboard) if tensorboard is not None else None
+
+    def on_epoch(row: dict[str, Any]) -> None:
+        record_invocation(out, time.perf_counter() - start, Ended.RUNNING)  # a kill now costs this epoch at most
+        if sink is not None:
+            sink.write(row)
+
     with (
         tqdm(
             total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05
@@ -86,7 +94,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
             if shipped(out, role):
                 logger.info("%s: already trained (%s)", role_name, out / f"{role_name}.pt")
                 continue
-            train_role(cfg, scenario, role, out, resume, bar, on_epoch=sink.write if sink is not None else None)
+            train_role(cfg, scenario, role, out, resume, bar, on_epoch=on_epoch)
             write_plots(out, scenario.cost_limit)
     write_plots(out, scenario.cost_limit)
     wall_s = time.perf_counter() - start

@@ -3,8 +3,8 @@
 Output in ``--out``: ``config.json``, ``metrics.csv`` (one row per role and epoch), one checkpoint per role
 (``decoy.pt``, ``detect.pt``, ``strike.pt``) and its exported actor (``<role>.npz``), ``SHA256SUMS`` (the
 SHA-256 of config.json and each finished role's two files, updated as each role ships: tssac_core.deploy.manifest),
-``fig7_return_cost.png`` and ``fig8_multiplier.png``, ``wall_time.json`` (the wall time of each invocation that
-finished, or that the grid runner stopped: :mod:`tssac_core.train.wall_time`), and ``resume/`` (the last completed
+``fig7_return_cost.png`` and ``fig8_multiplier.png``, ``wall_time.json`` (the wall time of each invocation, brought
+up to date after every epoch: :mod:`tssac_core.train.wall_time`), and ``resume/`` (the last completed
 epoch: learner, replay buffer, worlds and random states), from which ``--resume`` continues, losing at most the
 epoch that was running.
 """
