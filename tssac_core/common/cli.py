@@ -16,11 +16,11 @@ EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 
-class UsageError(Exception):
-    """Bad input a user can fix; the message is the one line they see."""
+class UsageError(InputError):
+    """A command-line argument a user can fix; the message is the one line they see."""
 
 
-BAD_INPUT = (UsageError, InputError, OSError)
+BAD_INPUT = (InputError, OSError)
 """What a command reports in one line with exit code 2: bad input, and files it cannot read or write."""
 
 
