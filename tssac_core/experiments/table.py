@@ -20,6 +20,7 @@ from tssac_core.experiments.summary import (
     TrainingBudget,
     TransferFigures,
 )
+from tssac_core.sim.scenario import ROLES
 
 GUIDANCE_NAME = "guidance controller"
 
@@ -221,7 +222,7 @@ def tail_markdown(summary: Summary) -> list[str]:
     return lines
 
 
-CASCADE = ("decoy", "detect", "strike")
+CASCADE = tuple(role.value for role in ROLES)
 """The roles in the order their tasks nest (eq. 9): the detect UAV identifies the target only while the radar is on,
 which the decoy's ring switches on, and the strike UAV hits only an identified target."""
 
