@@ -82,3 +82,23 @@ def test_cost_margin_is_the_tightened_cost_our_learners_constrain():
         for i, env in enumerate((exact, margin)):
             totals[i] += float(env.step(action)[2].sum())
     assert totals[1] >= totals[0]
+
+
+def test_only_a_hit_terminates_unless_leaving_terminates():
+    """Our learners bootstrap through leaving the area (docs/decisions.md); the adapter tells OmniSafe the same by
+    default (leaving is ``truncated``), and ``leaving_terminates`` makes leaving ``terminated``, a zero future."""
+    # Nobody strikes (teammates "none"), so no episode can end in a hit: every end is a leave or the cap.
+    envs = [make("TssacDetect-v0", num_envs=4, teammates="none", leaving_terminates=flag) for flag in (False, True)]
+    for env in envs:
+        env.set_seed(11)
+        env.reset()
+    straight = torch.tensor([[0.0, 1.0]] * 4)  # hold the heading: every UAV flies out of the area
+    leaves = 0
+    for _ in range(400):
+        (_, ra, ca, term_a, trunc_a, _), (_, rb, cb, term_b, trunc_b, _) = (env.step(straight) for env in envs)
+        assert torch.equal(ra, rb) and torch.equal(ca, cb) and torch.equal(term_a | trunc_a, term_b | trunc_b)
+        assert not (term_a & trunc_a).any()
+        assert not term_a.any()  # no hit, so nothing terminates by default
+        leaves += int((term_b & trunc_a).sum())
+        assert torch.all(ra[term_b] < -19)  # the -20 for leaving is paid either way
+    assert leaves >= 4

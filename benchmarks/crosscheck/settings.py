@@ -45,6 +45,8 @@ ALIGNED = (
     "one torch thread",
     "problem: the detect role beside the shipped decoy, random layouts, route observation, action_repeat 10, "
     "cost = world steps (0.1 s) within cost_margin_km of a radar, summed per episode, limit C per episode",
+    "episode ends: only a hit stops bootstrapping; leaving the area and the cap truncate (leaving_terminates false), "
+    "as our learners treat them (docs/decisions.md)",
     "discount: gamma (and cost_gamma) as our recipe's",
     "networks: actor and critic hidden sizes as our recipe's (activations stay OmniSafe's)",
     "SACLag: one update per update_every decisions (update_cycle), first update after update_after decisions "
@@ -182,6 +184,7 @@ def omnisafe_cfgs(
             "teammates": str(TEAMMATES),
             "teammate_roles": ["decoy"],
             "cost_margin_km": shared.cost_margin_km,
+            "leaving_terminates": False,
         },
     }
     if algo in OFF_POLICY:

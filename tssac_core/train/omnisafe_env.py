@@ -18,9 +18,16 @@ What OmniSafe passes as ``env_cfgs`` (all optional; the defaults are the shipped
     layout_seed     layouts come from generators seeded layout_seed + i for world i (default: OmniSafe's seed)
     cost_margin_km  the cost counts world steps within this distance of a radar (default 0: eq. 11 exactly); our
                     own training command's default is 1 (``--cost-margin-km``, TrainConfig.cost_margin_km)
+    leaving_terminates
+                    false (default): only a hit is ``terminated``; leaving the area and the episode cap are
+                    ``truncated``, so OmniSafe's critics bootstrap through them exactly as ours do
+                    (docs/decisions.md, "Leaving the area ends the episode, but the critics bootstrap through it").
+                    true: leaving is ``terminated`` too, a future of zero; then leaving is a way out of the step
+                    penalty, and OmniSafe's CPO and PPOLag learn to leave (benchmarks/crosscheck/README.md)
 
 Reward and cost of a step are summed over its ``action_repeat`` world steps; cost is eq. 11's (steps inside a
-radar), or with ``cost_margin_km`` the tightened cost our learners constrain. Finished worlds are reset in the same
+radar), or with ``cost_margin_km`` the tightened cost our learners constrain. Every episode end is reported as
+OmniSafe reads it (``terminated``: no future; ``truncated``: bootstrap from ``final_observation``). Finished worlds are reset in the same
 step (``need_auto_reset_wrapper`` False): ``info["final_observation"]`` holds their last observation, as OmniSafe's
 AutoReset wrapper would. The episode cap truncates.
 """
@@ -78,6 +85,7 @@ class TssacRoleEnv(CMDP):
         teammate_roles: list[str] | None = None,
         layout_seed: int | None = None,
         cost_margin_km: float = 0.0,
+        leaving_terminates: bool = False,
         **kwargs: Any,
     ) -> None:
         super().__init__(env_id)
@@ -93,6 +101,7 @@ class TssacRoleEnv(CMDP):
         self.scenario = load(scenario)
         self.mode = ObservationMode(observation)
         self.action_repeat = action_repeat
+        self.leaving_terminates = bool(leaving_terminates)
         self.layout_seed = layout_seed
         pilots = teammates_from(self.role, teammates, teammate_roles)
         self.task = RoleTask(
@@ -143,6 +152,10 @@ class TssacRoleEnv(CMDP):
             if (terminated | truncated).all():
                 break
         ended = terminated | truncated
+        if not self.leaving_terminates:
+            # Only a hit ends the future; leaving (and the cap) bootstrap, as in our learners (module docstring).
+            terminated = terminated & self.task.world.hit
+            truncated = ended & ~terminated
         info: dict[str, Any] = {}
         if ended.any():
             obs = self.task.reset(np.flatnonzero(ended), self._rngs)
