@@ -26,9 +26,9 @@ What OmniSafe passes as ``env_cfgs`` (all optional; the defaults are the shipped
                     penalty, and OmniSafe's CPO and PPOLag learn to leave (benchmarks/crosscheck/README.md)
 
 Reward and cost of a step are summed over its ``action_repeat`` world steps; cost is eq. 11's (steps inside a
-radar), or with ``cost_margin_km`` the tightened cost our learners constrain. Every episode end is reported as
-OmniSafe reads it (``terminated``: no future; ``truncated``: bootstrap from ``final_observation``). Finished worlds are reset in the same
-step (``need_auto_reset_wrapper`` False): ``info["final_observation"]`` holds their last observation, as OmniSafe's
+radar), or with ``cost_margin_km`` the tightened cost our learners constrain. OmniSafe reads ``terminated`` as no
+future and bootstraps a ``truncated`` end from ``final_observation``. Finished worlds are reset in the same step
+(``need_auto_reset_wrapper`` False): ``info["final_observation"]`` holds their last observation, as OmniSafe's
 AutoReset wrapper would. The episode cap truncates.
 """
 
