@@ -1,7 +1,7 @@
 """SITL regression tests: the shipped models fly every scenario that has an ``expect:`` block.
 
-Each scenario's missions are flown end to end by ``python -m mavlink_bridge.fly`` in lockstep (or at
-the ``expect.speedup`` the scenario names, for links with latency or loss): the bundled SITL world,
+Each scenario's missions are flown end to end by ``python -m mavlink_bridge.fly`` in lockstep (a degraded
+link's latency and loss in simulated time too; or at the ``expect.speedup`` a scenario names): the bundled SITL world,
 one companion process per UAV (Kalman filter, observation, policy, setpoints over MAVLink), scored
 from the world's truth log. The layouts come from seeds training never drew from
 (training seeds its layout generators with 0-2; these start at 7001). A failure prints the
