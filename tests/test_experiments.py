@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import fcntl
 import json
 import os
 import re
@@ -253,21 +252,11 @@ def test_missing_grid_file(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def smoke(tmp_path_factory) -> Path:
-    """The smoke grid run once per test session through the command (two jobs at once), from the repository root.
-
-    Under xdist it is built under a lock in the directory this session's workers' temporary directories share, so
-    that neither a second worker nor a second setup of this module trains it again."""
-    base = tmp_path_factory.getbasetemp()
-    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    results, built = shared / "smoke-grid" / "results", shared / "smoke-grid" / "built"
-    with (shared / "smoke-grid.lock").open("w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not built.exists():
-            shutil.rmtree(results.parent, ignore_errors=True)
-            with pytest.MonkeyPatch.context() as mp:
-                mp.chdir(ROOT)
-                assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--jobs", "2"]) == 0
-            built.touch()
+    """The smoke grid run once through the command (two jobs at once), from the repository root."""
+    results = tmp_path_factory.mktemp("experiments") / "results"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(ROOT)
+        assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--jobs", "2"]) == 0
     return results
 
 
