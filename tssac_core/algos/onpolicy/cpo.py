@@ -14,8 +14,9 @@ episode's cost is about L times the change of that mean, for episodes of L decis
     c = (J_C - C) / L
 
 with L the mean length in decisions of the same episodes (the rescaling of Ray et al.'s
-safety-starter-agents and of OmniSafe's CPO, which divide by the mean episode length). A^c is centred
-but not scaled (`ppo.normalised_advantages`), so that b^T x and c share units.
+safety-starter-agents, which divides by the mean episode length; OmniSafe 0.5.0's CPO does not: its c is
+EpCost - C per episode, beside standardised cost advantages). A^c is centred but not scaled
+(`ppo.normalised_advantages`), so that b^T x and c share units.
 """
 
 from __future__ import annotations
