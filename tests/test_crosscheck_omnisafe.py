@@ -92,3 +92,36 @@ def test_export_is_omnisafes_deterministic_actor(tmp_path, actor_type, activatio
         x = torch.clamp((torch.as_tensor(obs) - norm._mean) / norm._std, -5, 5)
         ref = torch.clamp(actor.predict(x, deterministic=True), -1, 1).numpy()
     np.testing.assert_allclose(OmniSafeActor.load(tmp_path / "actor.npz")(obs), ref, atol=1e-5)
+
+
+def test_the_cpo_ablation_divides_omnisafes_constraint_value_by_the_episode_length(tmp_path, monkeypatch):
+    """``crosscheck.cpo_constraint=per_decision``: OmniSafe's CPO, built with CPO's defaults and checks, whose c is
+    the episode cost over the limit divided by the mean episode length (as ours); anything else is refused."""
+    import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDetect-v0)
+    from benchmarks.crosscheck.omnisafe_variants import CPOPerDecision, VariantAgent, variant_of
+
+    assert variant_of("CPO", {}) is None and variant_of("CPO", {"cpo_constraint": "per_episode"}) is None
+    assert variant_of("CPO", {"cpo_constraint": "per_decision"}) == "CPOPerDecision"
+    for algo, section, says in [
+        ("PPOLag", {"cpo_constraint": "per_decision"}, "for CPO"),
+        ("CPO", {"cpo_constraint": "per_step"}, "must be one of"),
+        ("CPO", {"colour": "red"}, "unknown crosscheck settings: colour"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            variant_of(algo, section)
+    cfgs = omnisafe_cfgs("cpo", Budget(1, 400), 0, SHARED, tmp_path / "omnisafe")
+    cfgs["env_cfgs"]["teammates"] = "none"
+    cfgs["env_cfgs"].pop("teammate_roles")
+    monkeypatch.setattr(wrapper, "get_default_kwargs_yaml", default_cfgs_with_env_section(get_default_kwargs_yaml))
+    agent = VariantAgent("CPOPerDecision", "CPO", "TssacDetect-v0", cfgs)
+    cpo = agent.agent
+    assert type(cpo) is CPOPerDecision and agent.algo == "CPO" and cpo._cfgs.algo_cfgs.cost_limit == 3.0
+    cpo._logger.store({"Metrics/EpCost": 43.0, "Metrics/EpLen": 200.0})
+    assert cpo._per_decision(torch.tensor(40.0)).item() == pytest.approx(0.2)  # (43 - 3) / 200
+    # The case choice sees c per decision: with c = 40 per episode no step could reach feasibility (case 0); with
+    # 0.2 per decision a step within the trust region can (case 1), as OmniSafe's own CPO decides for c = 0.2.
+    b, q, r, s = torch.tensor([0.3, 0.4]), torch.tensor(0.05), torch.tensor(0.01), torch.tensor(4.0)
+    own = super(CPOPerDecision, cpo)._determine_case
+    assert own(b_grads=b, ep_costs=torch.tensor(40.0), q=q, r=r, s=s)[0] == 0
+    assert cpo._determine_case(b_grads=b, ep_costs=torch.tensor(40.0), q=q, r=r, s=s)[0] == 1
+    assert own(b_grads=b, ep_costs=torch.tensor(0.2), q=q, r=r, s=s)[0] == 1

@@ -114,6 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         custom = json.loads(args.cfgs.read_text())
         algo = custom.pop("algo")
+        ablation = custom.pop("crosscheck", {})  # ours, not OmniSafe's: omnisafe_variants
     except (OSError, ValueError, KeyError) as exc:
         print(f"error: {args.cfgs}: not a custom_cfgs JSON with 'algo': {exc}", file=sys.stderr)
         return 2
@@ -130,8 +131,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     wrapper.get_default_kwargs_yaml = default_cfgs_with_env_section(wrapper.get_default_kwargs_yaml)
     args.out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
+    from benchmarks.crosscheck.omnisafe_variants import VariantAgent, variant_of
+
     try:
-        agent = omnisafe.Agent(algo, "TssacDetect-v0", custom_cfgs=custom)
+        variant = variant_of(algo, ablation)
+        if variant is None:
+            agent = omnisafe.Agent(algo, "TssacDetect-v0", custom_cfgs=custom)
+        else:
+            agent = VariantAgent(variant, algo, "TssacDetect-v0", custom)
     except (KeyError, AssertionError, ValueError) as exc:
         print(f"error: OmniSafe refused the configuration: {exc}", file=sys.stderr)
         return 2
@@ -145,6 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     checked = export(cfgs, checkpoint, args.out / "actor.npz")
     record = {
         "algo": algo,
+        "variant": variant,
         "train_wall_s": round(wall, 2),
         "final": {"EpRet": float(ep_ret), "EpCost": float(ep_cost), "EpLen": float(ep_len)},
         "omnisafe_cfgs": cfgs.todict(),
