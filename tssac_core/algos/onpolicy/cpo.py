@@ -15,7 +15,7 @@ episode's cost is about L times the change of that mean, for episodes of L decis
 
 with L the mean length in decisions of the same episodes (the rescaling of Ray et al.'s
 safety-starter-agents, which divides by the mean episode length; OmniSafe 0.5.0's CPO does not: its c is
-EpCost - C per episode, beside standardised cost advantages). A^c is centred but not scaled
+EpCost - C per episode, beside cost advantages centred as here). A^c is centred but not scaled
 (`ppo.normalised_advantages`), so that b^T x and c share units.
 """
 
