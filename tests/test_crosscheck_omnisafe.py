@@ -125,3 +125,34 @@ def test_the_cpo_ablation_divides_omnisafes_constraint_value_by_the_episode_leng
     assert own(b_grads=b, ep_costs=torch.tensor(40.0), q=q, r=r, s=s)[0] == 0
     assert cpo._determine_case(b_grads=b, ep_costs=torch.tensor(40.0), q=q, r=r, s=s)[0] == 1
     assert own(b_grads=b, ep_costs=torch.tensor(0.2), q=q, r=r, s=s)[0] == 1
+
+
+def test_the_cpo_dual_ablation_takes_our_step_whose_cost_change_is_minus_c(tmp_path, monkeypatch):
+    """``crosscheck.cpo_dual=ours``: in case 1 our dual solution's step lowers the linearised cost by exactly c, where
+    OmniSafe's (nu = max(0, lam c - r) / s) raises it when the reward and cost gradients agree (r > 0)."""
+    import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDetect-v0)
+    from benchmarks.crosscheck.omnisafe_variants import CPOPerDecision, CPOPerDecisionOurDual, VariantAgent, variant_of
+
+    section = {"cpo_constraint": "per_decision", "cpo_dual": "ours"}
+    assert variant_of("CPO", section) == "CPOPerDecisionOurDual"
+    with pytest.raises(ValueError, match="needs crosscheck.cpo_constraint=per_decision"):
+        variant_of("CPO", {"cpo_dual": "ours"})
+    cfgs = omnisafe_cfgs("cpo", Budget(1, 400), 0, SHARED, tmp_path / "omnisafe")
+    cfgs["env_cfgs"]["teammates"] = "none"
+    cfgs["env_cfgs"].pop("teammate_roles")
+    monkeypatch.setattr(wrapper, "get_default_kwargs_yaml", default_cfgs_with_env_section(get_default_kwargs_yaml))
+    cpo = VariantAgent("CPOPerDecisionOurDual", "CPO", "TssacDetect-v0", cfgs).agent
+    cpo._logger.store({"Metrics/EpCost": 8.0, "Metrics/EpLen": 100.0})
+    g, b = torch.tensor([1.0, 0.5]), torch.tensor([0.8, 0.1])  # H = I: x = g, p = b; r = g.b > 0
+    q, r, s = g.dot(g), g.dot(b), b.dot(b)
+    c_episode = torch.tensor(5.0)  # 8 - 3 per episode: c = 0.05 per decision
+    c = 0.05
+    A, B = q - r**2 / s, 2 * 0.01 - c**2 / s
+    assert cpo._determine_case(b_grads=b, ep_costs=c_episode, q=q, r=r, s=s)[0] == 1
+    step_args = dict(optim_case=1, xHx=q, x=g, A=A, B=B, q=q, p=b, r=r, s=s, ep_costs=c_episode)
+    ours, lam, _ = cpo._step_direction(**step_args)
+    assert b.dot(ours).item() == pytest.approx(-c, rel=1e-4)  # the linearised constraint holds with equality
+    assert 0.5 * ours.dot(ours).item() <= 0.01 + 1e-6  # inside the trust region (H = I)
+    theirs, lam_o, _ = super(CPOPerDecisionOurDual, cpo)._step_direction(**step_args)
+    assert type(cpo).__mro__[1] is CPOPerDecision
+    assert b.dot(theirs).item() > 0.0  # OmniSafe's step raises the linearised cost here

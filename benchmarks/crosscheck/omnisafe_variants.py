@@ -8,17 +8,26 @@ per_decision``; omnisafe_side takes the section out before OmniSafe checks the r
 the violation by the mean episode length, ``c = (J_C - C) / L`` (tssac_core/algos/onpolicy/cpo.py). The variant is
 OmniSafe's CPO with only that changed: the c its case choice, its step and its line search receive is divided by
 the mean episode length of the same window of episodes (``Metrics/EpLen``).
+
+``cpo_dual: ours`` (with ``cpo_constraint: per_decision``): in cases 1 and 2 the step of our dual solution
+(tssac_core.algos.onpolicy.cpo.dual_solution: nu = max(0, lam c + r) / s, the active set bounded at -r / c) in
+place of OmniSafe's (nu = max(0, lam c - r) / s, bounded at r / c). With OmniSafe's g, the gradient of the reward to
+raise, its step changes the cost surrogate by 2 r / lam - c to first order instead of -c.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import torch
 from omnisafe.algorithms import registry
 from omnisafe.algorithms.algo_wrapper import AlgoWrapper
 from omnisafe.algorithms.on_policy.second_order.cpo import CPO
 
+from tssac_core.algos.onpolicy.cpo import dual_solution
+
 CONSTRAINT_UNITS = ("per_episode", "per_decision")
+DUALS = ("omnisafe", "ours")
 
 
 @registry.register
@@ -40,6 +49,20 @@ class CPOPerDecision(CPO):
         return super()._cpo_search_step(**kwargs)
 
 
+@registry.register
+class CPOPerDecisionOurDual(CPOPerDecision):
+    """:class:`CPOPerDecision` whose cases 1 and 2 take our dual solution (module docstring)."""
+
+    def _step_direction(self, **kwargs: Any) -> Any:
+        if kwargs["optim_case"] not in (1, 2):
+            return super()._step_direction(**kwargs)
+        q, r, s = (float(kwargs[k]) for k in ("q", "r", "s"))
+        c = float(self._per_decision(kwargs["ep_costs"]))
+        lam, nu = dual_solution(q, r, s, c, float(self._cfgs.algo_cfgs.target_kl))
+        step = (kwargs["x"] - nu * kwargs["p"]) / lam
+        return step, torch.as_tensor(lam), torch.as_tensor(nu)
+
+
 class VariantAgent(AlgoWrapper):
     """``omnisafe.Agent`` for ``algo`` (its defaults and checks) that trains the class registered as ``variant``."""
 
@@ -58,14 +81,19 @@ class VariantAgent(AlgoWrapper):
 def variant_of(algo: str, section: dict[str, Any]) -> str | None:
     """The class to train for ``algo`` under the ``crosscheck`` section, None for OmniSafe's own; ValueError for a
     setting this module does not know."""
-    unknown = set(section) - {"cpo_constraint"}
+    unknown = set(section) - {"cpo_constraint", "cpo_dual"}
     if unknown:
         raise ValueError(f"unknown crosscheck settings: {', '.join(sorted(unknown))}")
     units = section.get("cpo_constraint", "per_episode")
     if units not in CONSTRAINT_UNITS:
         raise ValueError(f"crosscheck.cpo_constraint must be one of {', '.join(CONSTRAINT_UNITS)}, got {units!r}")
+    dual = section.get("cpo_dual", "omnisafe")
+    if dual not in DUALS:
+        raise ValueError(f"crosscheck.cpo_dual must be one of {', '.join(DUALS)}, got {dual!r}")
+    if dual == "ours" and units != "per_decision":
+        raise ValueError("crosscheck.cpo_dual=ours needs crosscheck.cpo_constraint=per_decision (our c)")
     if units == "per_episode":
         return None
     if algo != "CPO":
         raise ValueError(f"crosscheck.cpo_constraint is for CPO, not {algo}")
-    return CPOPerDecision.__name__
+    return (CPOPerDecisionOurDual if dual == "ours" else CPOPerDecision).__name__

@@ -130,7 +130,6 @@ def cpo_step(
         if c < 0.0:
             return CpoStep(reward_step(), NO_COST_GRADIENT, math.sqrt(q / (2.0 * delta)), 0.0)
         return CpoStep(torch.zeros_like(g), NO_COST_GRADIENT, math.nan, 0.0)
-    A = q - r * r / s
     B = 2.0 * delta - c * c / s
     if c < 0.0 and B < 0.0:
         return CpoStep(reward_step(), FEASIBLE_INTERIOR, math.sqrt(q / (2.0 * delta)), 0.0)
@@ -138,6 +137,17 @@ def cpo_step(
         nu = math.sqrt(2.0 * delta / s)
         return CpoStep(-nu * Hinv_b, INFEASIBLE, math.nan, nu)
 
+    lam, nu = dual_solution(q, r, s, c, delta)
+    case = RECOVERABLE if c >= 0.0 else FEASIBLE_ACTIVE
+    return CpoStep((Hinv_g - nu * Hinv_b) / lam, case, lam, nu)
+
+
+def dual_solution(q: float, r: float, s: float, c: float, delta: float) -> tuple[float, float]:
+    """(lam, nu) of :func:`cpo_step`'s cases 1 and 2 (B >= 0): lam the minimiser of the dual over the active and
+    the slack set, nu = max(0, lam c + r) / s, so that the step (1/lam) H^-1 (g - nu b) has b^T x = -c when the
+    constraint is active (g the gradient of the reward to raise, b of the cost)."""
+    A = q - r * r / s
+    B = 2.0 * delta - c * c / s
     # The sets where the constraint is active (lam c + r > 0) and slack, as intervals of lam > 0.
     if c < 0.0:
         boundary = -r / c
@@ -166,9 +176,7 @@ def cpo_step(
         lam = max(lam, _EPS)
         candidates.append((dual(lam), lam))
     _, lam = min(candidates)
-    nu = max(0.0, lam * c + r) / s
-    case = RECOVERABLE if c >= 0.0 else FEASIBLE_ACTIVE
-    return CpoStep((Hinv_g - nu * Hinv_b) / lam, case, lam, nu)
+    return lam, max(0.0, lam * c + r) / s
 
 
 def line_search_accepts(kl: float, surr_r_gain: float, surr_c_rise: float, c: float, max_kl: float, case: int) -> bool:
