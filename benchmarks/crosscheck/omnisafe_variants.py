@@ -1,7 +1,8 @@
 """Ablations of OmniSafe's algorithms for the cross-check, run in OmniSafe's own environment (omnisafe_side).
 
-One so far, named in the custom_cfgs' ``crosscheck`` section (``--omnisafe-set crosscheck.cpo_constraint=
-per_decision``; omnisafe_side takes the section out before OmniSafe checks the rest):
+Two, for CPO, named in the custom_cfgs' ``crosscheck`` section (``--omnisafe-set crosscheck.cpo_constraint=
+per_decision``, ``--omnisafe-set crosscheck.cpo_dual=ours``; omnisafe_side takes the section out before OmniSafe
+checks the rest):
 
 ``cpo_constraint: per_decision``: OmniSafe 0.5.0's CPO compares the episode cost with the limit in episode units,
 ``c = EpCost - cost_limit`` (``CPO._update_actor``), against the gradient of a per-decision surrogate. Ours divides
