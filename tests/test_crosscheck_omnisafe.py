@@ -113,6 +113,9 @@ def test_the_cpo_ablation_divides_omnisafes_constraint_value_by_the_episode_leng
     cfgs["env_cfgs"]["teammates"] = "none"
     cfgs["env_cfgs"].pop("teammate_roles")
     monkeypatch.setattr(wrapper, "get_default_kwargs_yaml", default_cfgs_with_env_section(get_default_kwargs_yaml))
+    from omnisafe.algorithms.on_policy.second_order.cpo import CPO
+
+    assert type(VariantAgent("CPO", "CPO", "TssacDetect-v0", cfgs).agent) is CPO  # no variant: OmniSafe's own
     agent = VariantAgent("CPOPerDecision", "CPO", "TssacDetect-v0", cfgs)
     cpo = agent.agent
     assert type(cpo) is CPOPerDecision and agent.algo == "CPO" and cpo._cfgs.algo_cfgs.cost_limit == 3.0

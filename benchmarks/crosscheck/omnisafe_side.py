@@ -119,7 +119,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {args.cfgs}: not a custom_cfgs JSON with 'algo': {exc}", file=sys.stderr)
         return 2
     try:
-        import omnisafe
         import omnisafe.algorithms.algo_wrapper as wrapper
     except ImportError:
         print(
@@ -135,10 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         variant = variant_of(algo, ablation)
-        if variant is None:
-            agent = omnisafe.Agent(algo, "TssacDetect-v0", custom_cfgs=custom)
-        else:
-            agent = VariantAgent(variant, algo, "TssacDetect-v0", custom)
+        agent = VariantAgent(variant or algo, algo, "TssacDetect-v0", custom)  # omnisafe.Agent for no variant
     except (KeyError, AssertionError, ValueError) as exc:
         print(f"error: OmniSafe refused the configuration: {exc}", file=sys.stderr)
         return 2

@@ -65,7 +65,8 @@ class CPOPerDecisionOurDual(CPOPerDecision):
 
 
 class VariantAgent(AlgoWrapper):
-    """``omnisafe.Agent`` for ``algo`` (its defaults and checks) that trains the class registered as ``variant``."""
+    """``omnisafe.Agent`` for ``algo`` (its defaults and checks) that trains the class registered as ``variant``
+    (``algo`` itself: exactly ``omnisafe.Agent``)."""
 
     def __init__(self, variant: str, algo: str, env_id: str, custom_cfgs: dict[str, Any]) -> None:
         self._variant = variant
