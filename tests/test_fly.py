@@ -287,7 +287,11 @@ def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
     assert len(errors) == 1 and "companion detect" in errors[0] and "killed by signal 9 (SIGKILL)" in errors[0], errors
     assert "its last log line: " in errors[0] or errors[0].endswith("its log is empty")
     results = json.loads(out.read_text())
-    assert results["error"] and "companion detect" in results["error"] and results["episodes"] == 0
+    assert results["error"] and "companion detect" in results["error"]
+    # The crew is kept across missions, so the kill may land in a later mission than the first (a lockstep mission
+    # can end within the 2 s): the JSON holds exactly the missions finished before the one that crashed.
+    crashed = re.match(r"mission (\d+): ", results["error"])
+    assert crashed is not None and results["episodes"] == int(crashed.group(1)) < 3, results["error"]
     assert not [pid for pid in pids if _alive(pid)]
 
 

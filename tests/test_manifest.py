@@ -17,7 +17,15 @@ from mavlink_bridge.fly.cli import main as fly_main
 from tssac_core.common.cli import run
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import main as export_main
-from tssac_core.deploy.manifest import MANIFEST, model_files, problems, read_manifest, record, write_manifest
+from tssac_core.deploy.manifest import (
+    MANIFEST,
+    all_files,
+    model_files,
+    problems,
+    read_manifest,
+    record,
+    write_manifest,
+)
 from tssac_core.deploy.manifest import main as manifest_main
 from tssac_core.deploy.numpy_actor import load_actor
 from tssac_core.deploy.policy import load_team
@@ -192,6 +200,28 @@ def test_record_keeps_the_other_entries(models: Path):
     assert updated is not None and updated.pop("config.json") != entries.pop("config.json") and updated == entries
 
 
+def test_write_all_lists_every_file_of_a_results_row_and_check_guards_each(tmp_path: Path, capsys):
+    row = tmp_path / "omnisafe-cpo-seed0"  # a cross-check row: OmniSafe's actor, no <role> file
+    row.mkdir()
+    (row / "actor.npz").write_bytes(b"weights")
+    (row / "progress.csv").write_text("epoch,return\n1,-300\n")
+    (row / "config.json").write_text("{}\n")
+    (row / "resume").mkdir()  # directories are not listed
+    assert run(manifest_main, ["write", str(row)]) == 0  # without --all: the loader's files only
+    assert read_manifest(row) == {"config.json": read_manifest(row)["config.json"]}  # type: ignore[index]
+    assert run(manifest_main, ["write", "--all", str(row)]) == 0
+    assert sorted(read_manifest(row) or {}) == ["actor.npz", "config.json", "progress.csv"] == all_files(row)
+    assert run(manifest_main, ["check", str(row)]) == 0
+    capsys.readouterr()
+    flip_byte(row / "progress.csv")
+    assert run(manifest_main, ["check", str(row)]) == 2
+    assert "progress.csv: its sha256 differs" in one_error_line(capsys.readouterr().err)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert run(manifest_main, ["write", "--all", str(empty)]) == 2
+    assert "no files here" in one_error_line(capsys.readouterr().err)
+
+
 def test_every_committed_models_directory_has_a_manifest_that_matches():
     """What the repository ships (models/, results/): any directory holding an actor can be checked, and is intact."""
     actors = [p for top in ("models", "results") for p in (REPO / top).rglob("*") if p.suffix in (".pt", ".npz")]
@@ -201,4 +231,5 @@ def test_every_committed_models_directory_has_a_manifest_that_matches():
         entries = read_manifest(d)
         assert entries is not None, f"{d}: no {MANIFEST} (python -m tssac_core.deploy.manifest write {d})"
         assert not problems(d, entries), problems(d, entries)
-        assert sorted(entries) == model_files(d), d
+        assert sorted(entries) in (model_files(d), all_files(d)), d  # a models directory, or a whole results row
+        assert {p.name for p in d.iterdir() if p.suffix in (".pt", ".npz")} <= set(entries), d

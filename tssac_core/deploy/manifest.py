@@ -3,7 +3,9 @@
 The format is the one ``sha256sum`` writes and checks (``cd DIR && sha256sum -c SHA256SUMS``): one line per
 file, ``<64 lowercase hex digits><two spaces><file name>``, sorted by name. The names are plain file names in
 the manifest's own directory. Listed: ``config.json``, ``<role>.pt`` and ``<role>.npz`` (whichever exist);
-not the metrics, logs, plots or ``resume/``, which no loader reads and training keeps appending to.
+not the metrics, logs, plots or ``resume/``, which no loader reads and training keeps appending to. A finished
+results row that is committed as a whole (a cross-check run: OmniSafe's ``actor.npz``, its checkpoint, configs and
+logs) lists every file in its directory instead (``write --all``).
 
 Who writes it: ``python -m tssac_core.train`` (``config.json`` when a run starts or resumes, each role's two
 files when the role ships), ``python -m tssac_core.deploy.export``, the grid's ``--compact``, and
@@ -50,6 +52,12 @@ def model_files(directory: Path) -> list[str]:
     """The files of ``directory`` a manifest lists: ``config.json`` and every ``<role>.pt`` / ``<role>.npz`` there."""
     names = [CONFIG] + [role.value + suffix for role in ROLES for suffix in MODEL_SUFFIXES]
     return sorted(name for name in names if (directory / name).is_file())
+
+
+def all_files(directory: Path) -> list[str]:
+    """Every regular file of ``directory`` but the manifest itself (``write --all``: a finished results row)."""
+    skip = {MANIFEST, MANIFEST + ".tmp"}
+    return sorted(p.name for p in directory.iterdir() if p.is_file() and p.name not in skip)
 
 
 def read_manifest(directory: Path) -> dict[str, str] | None:
@@ -146,12 +154,16 @@ def warn_once(message: str | None) -> None:
         logger.warning(message)
 
 
-def write_command(directory: Path, force: bool) -> str:
-    """``write DIR``: record the model files there now; refused if an existing manifest disagrees with them and not
-    ``force`` (re-recording would bless a damaged file)."""
-    names = model_files(directory) if directory.is_dir() else []
+def write_command(directory: Path, force: bool, every_file: bool = False) -> str:
+    """``write DIR``: record the model files there now (``every_file``: every file there); refused if an existing
+    manifest disagrees with them and not ``force`` (re-recording would bless a damaged file)."""
+    if not directory.is_dir():
+        names = []
+    else:
+        names = all_files(directory) if every_file else model_files(directory)
     if not names:
-        raise CheckpointError(f"{directory}: no config.json, <role>.pt or <role>.npz here")
+        wanted = "files" if every_file else "config.json, <role>.pt or <role>.npz"
+        raise CheckpointError(f"{directory}: no {wanted} here")
     entries = read_manifest(directory)
     found = problems(directory, entries) if entries is not None else []
     if found and not force:
@@ -179,9 +191,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("action", choices=("write", "check"), help="write: record the files now there; check: compare")
     p.add_argument("dirs", nargs="+", type=Path, metavar="DIR", help="models or run directories")
     p.add_argument("--force", action="store_true", help="write: also over a manifest the files no longer match")
+    p.add_argument(
+        "--all", action="store_true", help="write: list every file of the directory (a finished results row)"
+    )
     args = p.parse_args(argv)
     for directory in args.dirs:
-        print(write_command(directory, args.force) if args.action == "write" else check_command(directory))
+        if args.action == "write":
+            print(write_command(directory, args.force, args.all))
+        else:
+            print(check_command(directory))
     return 0
 
 
