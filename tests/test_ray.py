@@ -9,6 +9,7 @@ import json
 import os
 import re
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -125,6 +126,80 @@ def test_fly_on_workers_flies_the_serial_missions(local_ray, tmp_path):
     assert workers["success_rate"] == serial["success_rate"] and workers["mean_cost"] == serial["mean_cost"]
     pids = [set(m["pids"].values()) for m in workers["missions"]]
     assert not pids[0] & pids[1] and not {p for m in serial["missions"] for p in m["pids"].values()} & pids[0]
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (children, their children, ...), from /proc."""
+    parents: dict[int, int] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents[int(stat.parent.name)] = int(fields[1])
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.sitl
+def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
+    """SIGTERM to ``fly --workers 2`` (its own Ray) ends it as Ctrl-C does: exit 130, the JSON of the missions
+    finished so far, and every process it started gone, its crews' and Ray's (``ray.init`` had put Ray's own
+    SIGTERM handler, ``sys.exit``, in place of fly's: no JSON, and Ray's node agent orphaned)."""
+    out = tmp_path / "fly.json"
+    args = ["--scenario", "scenarios/random.yaml", "--pilot", "guidance", "--episodes", "40", "--seed", "41"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mavlink_bridge.fly", *args, "--workers", "2", "--no-progress", "--json", str(out)],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        deadline = time.monotonic() + 240
+        started: set[int] = set()
+        while time.monotonic() < deadline and proc.poll() is None:  # until both workers fly a mission
+            started = _descendants(proc.pid)
+            worlds = [p for p in started if b"sim_vehicles" in _cmdline(p)]
+            if len(worlds) == 2:
+                break
+            time.sleep(0.2)
+        assert len(worlds) == 2, "fly --workers 2 never had two worlds flying"
+        time.sleep(2.0)
+        started = _descendants(proc.pid)
+        assert any(b"ray" in _cmdline(p) for p in started)  # Ray's own processes are among them
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 130, err.decode()[-2000:]
+    results = json.loads(out.read_text())
+    assert results["interrupted"] is True and results["episodes_requested"] == 40 and results["episodes"] < 40
+    assert all(m["success"] for m in results["missions"])
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and [p for p in started if _running(p)]:
+        time.sleep(0.5)
+    left = {p: _cmdline(p)[:120] for p in started if _running(p)}
+    assert not left, left
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
 
 
 def counting(item: int):

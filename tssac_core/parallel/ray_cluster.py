@@ -9,6 +9,10 @@ workers then import this checkout (``PYTHONPATH`` is passed to them), so every n
 same path (docs/ray.md). If Ray is already initialised in this process (a test's module fixture, a
 notebook), that Ray is used and left as it is.
 
+``ray.init`` replaces the process's SIGTERM handler with Ray's own (``sys.exit``, which none of the commands'
+interrupt paths catches: ``fly --workers`` died without its JSON and left Ray's node agent orphaned). The session
+puts the command's handler back, so SIGTERM ends a Ray command as it ends a serial one.
+
 Ray is imported here and in the modules that submit tasks only when they are used: the serial paths
 never pay its import.
 """
@@ -17,6 +21,8 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -74,6 +80,8 @@ def ray_session(target: RayTarget) -> Iterator[Any]:
     if ray.is_initialized():
         yield ray
         return
+    main_thread = threading.current_thread() is threading.main_thread()
+    sigterm = signal.getsignal(signal.SIGTERM) if main_thread else None
     try:
         if target.address is not None:
             # Workers on other nodes do not inherit the driver's environment: point them at this checkout.
@@ -94,6 +102,8 @@ def ray_session(target: RayTarget) -> Iterator[Any]:
         what = f"reach the Ray cluster at {target.address}" if target.address is not None else "start a local Ray"
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise UsageError(f"cannot {what}: {first}") from None
+    if sigterm is not None:
+        signal.signal(signal.SIGTERM, sigterm)  # the command's handler, not Ray's sys.exit (module docstring)
     try:
         yield ray
     finally:
