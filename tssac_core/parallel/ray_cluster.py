@@ -11,7 +11,8 @@ notebook), that Ray is used and left as it is.
 
 ``ray.init`` replaces the process's SIGTERM handler with Ray's own (``sys.exit``, which none of the commands'
 interrupt paths catches: ``fly --workers`` died without its JSON and left Ray's node agent orphaned). The session
-puts the command's handler back, so SIGTERM ends a Ray command as it ends a serial one.
+puts the command's handler back; a command without one gets SIGTERM as KeyboardInterrupt (Ctrl-C) for the length of
+the session, so that Ray is shut down on the way out rather than left behind by an instant death.
 
 Ray is imported here and in the modules that submit tasks only when they are used: the serial paths
 never pay its import.
@@ -27,6 +28,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from tssac_core.common.cli import UsageError
@@ -101,13 +103,22 @@ def ray_session(target: RayTarget) -> Iterator[Any]:
     except (ConnectionError, ValueError, RuntimeError) as exc:
         what = f"reach the Ray cluster at {target.address}" if target.address is not None else "start a local Ray"
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if sigterm is not None:
+            signal.signal(signal.SIGTERM, sigterm)
         raise UsageError(f"cannot {what}: {first}") from None
-    if sigterm is not None:
-        signal.signal(signal.SIGTERM, sigterm)  # the command's handler, not Ray's sys.exit (module docstring)
+    if sigterm is not None:  # the command's handler, not Ray's sys.exit (module docstring)
+        signal.signal(signal.SIGTERM, _interrupt if sigterm is signal.SIG_DFL else sigterm)
     try:
         yield ray
     finally:
         ray.shutdown()
+        if sigterm is not None:
+            signal.signal(signal.SIGTERM, sigterm)
+
+
+def _interrupt(signum: int, _frame: FrameType | None) -> None:
+    """SIGTERM as Ctrl-C, for a command with no SIGTERM handler of its own."""
+    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def cluster_cpus(ray: Any) -> int:
