@@ -419,8 +419,8 @@ def transfer_experiment_markdown(x: TransferFigures) -> list[str]:
         "",
         "## Transfer experiment: decisions to the level, with and without transfer",
         "",
-        f"Each role trained alone with the same trained earlier roles flying (`{x.teammates}`), stopped at the "
-        f"first "
+        f"Each role trained alone with the same trained earlier roles flying (the actors in `{x.teammates}` when the "
+        f"runs trained: a run records the directory, not its files), stopped at the first "
         f"epoch whose task success in training reached {100 * x.threshold:.0f}%, at most {x.epochs} epochs "
         f"({cap:,} decisions). `{with_name}` starts from the previous role's networks in `{x.teammates}` (TSSAC's "
         f"transfer); "
