@@ -144,6 +144,14 @@ def _descendants(pid: int) -> set[int]:
     return found
 
 
+def _cmdline(pid: int) -> bytes:
+    """The process's command line (empty once it is gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
 def _running(pid: int) -> bool:
     """Alive and not a zombie."""
     try:
@@ -168,6 +176,7 @@ def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
     try:
         deadline = time.monotonic() + 240
         started: set[int] = set()
+        worlds: list[int] = []
         while time.monotonic() < deadline and proc.poll() is None:  # until both workers fly a mission
             started = _descendants(proc.pid)
             worlds = [p for p in started if b"sim_vehicles" in _cmdline(p)]
@@ -193,13 +202,6 @@ def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
         time.sleep(0.5)
     left = {p: _cmdline(p)[:120] for p in started if _running(p)}
     assert not left, left
-
-
-def _cmdline(pid: int) -> bytes:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return b""
 
 
 def counting(item: int):
