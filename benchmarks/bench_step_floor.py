@@ -57,10 +57,13 @@ import socket, sys
 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 sock.bind(("127.0.0.1", 0))
 print(sock.getsockname()[1], flush=True)
+sock.settimeout(30.0)  # a benchmark that died without saying stop leaves no echo behind
 reply = bytes({setpoint})
-world = None
 while True:
-    data, world = sock.recvfrom(65536)
+    try:
+        data, world = sock.recvfrom(65536)
+    except TimeoutError:
+        break
     if data == b"stop":
         break
     sock.sendto(reply, world)
