@@ -71,9 +71,13 @@ while True:
 
 
 def _cpu_s(pid: int) -> float:
-    """User + system CPU seconds of a process, from /proc/<pid>/stat."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """User + system CPU seconds of a running process (the fly crew's reader of /proc)."""
+    from mavlink_bridge.fly.crew import process_cpu_s
+
+    used = process_cpu_s(pid)
+    if used is None:
+        raise RuntimeError(f"no CPU figure for process {pid} (it ended, or this is not Linux)")
+    return used
 
 
 def measure_transport(rounds: int, datagram_bytes: int) -> dict[str, float]:

@@ -130,7 +130,7 @@ def cpo_step(
         if c < 0.0:
             return CpoStep(reward_step(), NO_COST_GRADIENT, math.sqrt(q / (2.0 * delta)), 0.0)
         return CpoStep(torch.zeros_like(g), NO_COST_GRADIENT, math.nan, 0.0)
-    B = 2.0 * delta - c * c / s
+    B = _margin_b(c, s, delta)
     if c < 0.0 and B < 0.0:
         return CpoStep(reward_step(), FEASIBLE_INTERIOR, math.sqrt(q / (2.0 * delta)), 0.0)
     if B < 0.0:
@@ -147,7 +147,7 @@ def dual_solution(q: float, r: float, s: float, c: float, delta: float) -> tuple
     the slack set, nu = max(0, lam c + r) / s, so that the step (1/lam) H^-1 (g - nu b) has b^T x = -c when the
     constraint is active (g the gradient of the reward to raise, b of the cost)."""
     A = q - r * r / s
-    B = 2.0 * delta - c * c / s
+    B = _margin_b(c, s, delta)
     # The sets where the constraint is active (lam c + r > 0) and slack, as intervals of lam > 0.
     if c < 0.0:
         boundary = -r / c
@@ -177,6 +177,11 @@ def dual_solution(q: float, r: float, s: float, c: float, delta: float) -> tuple
         candidates.append((dual(lam), lam))
     _, lam = min(candidates)
     return lam, max(0.0, lam * c + r) / s
+
+
+def _margin_b(c: float, s: float, delta: float) -> float:
+    """B = 2 delta - c^2 / s: >= 0 when the constraint's boundary meets the trust region (Achiam et al. 2017)."""
+    return 2.0 * delta - c * c / s
 
 
 def line_search_accepts(kl: float, surr_r_gain: float, surr_c_rise: float, c: float, max_kl: float, case: int) -> bool:
