@@ -26,6 +26,8 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from mavlink_bridge.fly.crew import process_cpu_s
+
 ROOT = Path(__file__).resolve().parents[1]
 SETPOINT_MASK = 1087
 CLIENT_SYSID, CLIENT_COMPID = 255, 191
@@ -100,15 +102,6 @@ class MinimalLink:
         )
 
 
-def _cpu_s(pid: int) -> float | None:
-    """User + system CPU seconds of a process (Linux /proc), None elsewhere."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return None
-
-
 def start_sitl(scenario: Path, timeout_s: float) -> tuple[subprocess.Popen[bytes], list[tuple[str, int]]]:
     cmd = [
         sys.executable,
@@ -153,7 +146,7 @@ def run(steps: int, warmup: int, scenario: Path, timeout_s: float) -> dict[str, 
         current_ms = 0
         for k in range(warmup + steps):
             if k == warmup:
-                t0, cpu0 = time.perf_counter(), _cpu_s(proc.pid)
+                t0, cpu0 = time.perf_counter(), process_cpu_s(proc.pid)
             for link in links:
                 link.setpoint(current_ms)
             # wait for every vehicle's tick of the next step
@@ -168,7 +161,7 @@ def run(steps: int, warmup: int, scenario: Path, timeout_s: float) -> dict[str, 
             current_ms = min(link.latest_ms for link in links)
             done = k + 1 - warmup
         wall = time.perf_counter() - t0
-        cpu1 = _cpu_s(proc.pid)
+        cpu1 = process_cpu_s(proc.pid)
     finally:
         for link in links:
             link.sock.close()

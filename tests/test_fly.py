@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from sitl_helpers import cmdline, running
 
 from mavlink_bridge.fly import cli as fly
 from mavlink_bridge.fly.config import DEFAULT_MODELS
@@ -58,13 +59,8 @@ def _quick_scenario(tmp: Path, strike_km: float = 8.0) -> Path:
 
 def _alive(pid: int) -> bool:
     """A live (not zombie) process with this pid runs our code (a reused pid would not)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-    except OSError:
-        return False
-    state = stat.rsplit(")", 1)[1].split()[0]
-    return state != "Z" and ("sim_vehicles" in cmdline or "mavlink_bridge" in cmdline)
+    line = cmdline(pid)
+    return running(pid) and (b"sim_vehicles" in line or b"mavlink_bridge" in line)
 
 
 def _pids(results: dict[str, Any]) -> list[int]:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sitl_helpers import cmdline, running
 from tiny_training import tiny_args
 
 from tssac_core.assurance.monitor import ShieldConfig
@@ -144,22 +145,6 @@ def _descendants(pid: int) -> set[int]:
     return found
 
 
-def _cmdline(pid: int) -> bytes:
-    """The process's command line (empty once it is gone)."""
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return b""
-
-
-def _running(pid: int) -> bool:
-    """Alive and not a zombie."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 @pytest.mark.sitl
 def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
     """SIGTERM to ``fly --workers 2`` (its own Ray) ends it as Ctrl-C does: exit 130, the JSON of the missions
@@ -179,14 +164,14 @@ def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
         worlds: list[int] = []
         while time.monotonic() < deadline and proc.poll() is None:  # until both workers fly a mission
             started = _descendants(proc.pid)
-            worlds = [p for p in started if b"sim_vehicles" in _cmdline(p)]
+            worlds = [p for p in started if b"sim_vehicles" in cmdline(p)]
             if len(worlds) == 2:
                 break
             time.sleep(0.2)
         assert len(worlds) == 2, "fly --workers 2 never had two worlds flying"
         time.sleep(2.0)
         started = _descendants(proc.pid)
-        assert any(b"ray" in _cmdline(p) for p in started)  # Ray's own processes are among them
+        assert any(b"ray" in cmdline(p) for p in started)  # Ray's own processes are among them
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
     finally:
@@ -198,9 +183,9 @@ def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
     assert results["interrupted"] is True and results["episodes_requested"] == 40 and results["episodes"] < 40
     assert all(m["success"] for m in results["missions"])
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and [p for p in started if _running(p)]:
+    while time.monotonic() < deadline and [p for p in started if running(p)]:
         time.sleep(0.5)
-    left = {p: _cmdline(p)[:120] for p in started if _running(p)}
+    left = {p: cmdline(p)[:120] for p in started if running(p)}
     assert not left, left
 
 
