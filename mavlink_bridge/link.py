@@ -286,17 +286,21 @@ class MavLink:
         if self._backlog:
             return self._pop()
         deadline = time.monotonic() + max(0.0, timeout_s)
-        while True:
-            self._pump()
-            if self._backlog:
-                return self._pop()
-            remaining = deadline - time.monotonic()
-            if remaining <= 0.0 or self._closed:
-                return None
+        remaining = max(0.0, timeout_s)
+        while not self._closed:
+            # select first (it returns at once if a datagram waits): an empty socket costs no failed recvfrom.
             try:
-                select.select([self._sock], [], [], remaining)
+                readable = select.select([self._sock], [], [], remaining)[0]
             except InterruptedError:  # a signal: let the caller look at its stop flag
                 return None
+            if readable:
+                self._pump()
+                if self._backlog:
+                    return self._pop()
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return None
+        return None
 
     def _pop(self) -> Message:
         msg, self.last_rx_s = self._backlog.popleft()

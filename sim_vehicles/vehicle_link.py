@@ -139,8 +139,9 @@ class VehicleLink:
         for out in self.outputs:
             self.endpoint.peers.setdefault(out, self.clock.wall_s)
 
-    def poll_socket(self) -> None:
-        """Check and decode waiting datagrams and move them into the incoming link channel.
+    def poll_socket(self, receive: bool = True) -> None:
+        """Check and decode waiting datagrams and move them into the incoming link channel (``receive`` False: the
+        socket is known to be empty, only the peer table is brought up to date).
 
         Checking (signatures, replays) happens here, at the socket, so that the link model acts on
         messages: a setpoint the link then loses or delays still tells the lockstep barrier that its
@@ -150,6 +151,8 @@ class VehicleLink:
         for out in self.outputs:  # --out ground stations are never forgotten
             self.endpoint.peers[out] = self.clock.wall_s
         self.endpoint.expire_peers(self.clock.wall_s)
+        if not receive:
+            return
         for data, addr in self.endpoint.receive():
             parsed = self.endpoint.parse(data, addr)
             if parsed.sender is None:

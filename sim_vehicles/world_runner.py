@@ -325,11 +325,12 @@ class WorldRunner:
         self._barrier_wall = self._wall0
         self._last_output_wall = self._wall0
         sockets = [link.endpoint for link in self.links]
+        readable: list[MavEndpoint] = sockets  # the first pass reads every socket, then those select saw readable
         while not self._stop.is_set() and self._phase is not _Phase.DONE:
             now = time.monotonic()
             self._tick_clock(now)
             for link in self.links:
-                link.poll_socket()
+                link.poll_socket(receive=link.endpoint in readable)
             for link in self.links:
                 link.process_incoming()
             deadline = self._advance(now)
@@ -337,7 +338,7 @@ class WorldRunner:
                 link.flush()
             if self._phase is _Phase.DONE:
                 break
-            select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))
+            readable = select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))[0]
 
     @property
     def _link_on_sim_time(self) -> bool:

@@ -159,7 +159,7 @@ def test_the_companion_pilot_decides_as_the_batched_pilot():
                     False,
                     step,
                 )
-                action = pilot.action(mirror, j, step)
+                action = pilot.action(lambda: mirror, j, step)
                 assert pilot.decided == (step % DECISION_STEPS == 0), (adversary, step)
                 # The mirror wraps the heading its own way: the same to the last bits or so.
                 np.testing.assert_allclose(action, held[0, j], atol=1e-12, err_msg=f"{adversary} step {step} UAV {j}")

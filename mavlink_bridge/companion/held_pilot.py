@@ -9,6 +9,7 @@ decision (``decided``): the runtime-assurance monitor decides at the pilot's dec
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -60,11 +61,12 @@ class HeldPilot:
         self._held = None
         self._clock.reset()
 
-    def action(self, state: WorldState, role_index: int, step: int) -> np.ndarray:
-        """The action (2,) for vehicle tick ``step``; ``state``: the vehicle's estimate, the layout and the flags."""
+    def action(self, state: Callable[[], WorldState], role_index: int, step: int) -> np.ndarray:
+        """The action (2,) for vehicle tick ``step``; ``state()``: the vehicle's estimate, the layout and the flags,
+        built only at a decision (between them the held action flies, whatever the state)."""
         self.decided = self.repeat == 1 or self._clock.due(step, force=self._held is None)
         if self.decided:
-            self._held = np.asarray(self.pilot.actions(state, role_index)[0], dtype=np.float64).reshape(2)
+            self._held = np.asarray(self.pilot.actions(state(), role_index)[0], dtype=np.float64).reshape(2)
         assert self._held is not None
         return self._held
 

@@ -115,9 +115,7 @@ class Companion:
             if config.shield is None
             else CompanionShield(self.layout_state, config.role, s, config.shield, config.lockstep)
         )
-        self.pilot.action(
-            self.layout_state, self.role_index, 0
-        )  # warm up: the guidance plans its route once per layout
+        self.pilot.action(lambda: self.layout_state, self.role_index, 0)  # warm up: the guidance plans its route
         self.pilot.reset()
         _log.info("%s: pilot %s", config.role.value, self.pilot.name)
         link_model = s.link
@@ -557,19 +555,7 @@ class Companion:
             if self.shield is None:
                 return HOLD, gap
             return self._shielded(np.full(2, np.nan), step), gap
-        f = self.filter
-        x_m, y_m = f.pos_m
-        state = self.layout_state.with_vehicle(
-            self.role_index,
-            x_m,
-            y_m,
-            f.speed_m_s,
-            f.heading_rad,
-            bool(self.flags.get(EventName.RADAR_ON)),
-            bool(self.flags.get(EventName.IDENT)),
-            step,
-        )
-        action = self.pilot.action(state, self.role_index, step)
+        action = self.pilot.action(lambda: self._estimated_state(step), self.role_index, step)
         why: str | None = None
         if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             self.counters.nonfinite_actions += 1
@@ -582,6 +568,22 @@ class Companion:
         if self.shield is not None:
             return self._shielded(action, step), why
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec), None
+
+    def _estimated_state(self, step: int) -> WorldState:
+        """The mission as the pilot sees it at tick ``step``: the layout, this vehicle at the filter's estimate, the
+        flags the datalink told."""
+        f = self.filter
+        x_m, y_m = f.pos_m
+        return self.layout_state.with_vehicle(
+            self.role_index,
+            x_m,
+            y_m,
+            f.speed_m_s,
+            f.heading_rad,
+            bool(self.flags.get(EventName.RADAR_ON)),
+            bool(self.flags.get(EventName.IDENT)),
+            step,
+        )
 
     def _shielded(self, proposed: np.ndarray, step: int) -> Setpoint:
         """The monitor's choice at each decision tick (held between them); a STATUSTEXT at each hand-over.
