@@ -21,8 +21,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from pymavlink import mavutil
 from sitl_helpers import cmdline, running
 
+from mavlink_bridge.companion.machine import LEAN_OFF
 from mavlink_bridge.fly import cli as fly
 from mavlink_bridge.fly.config import DEFAULT_MODELS
 from mavlink_bridge.fly.mission_runner import mission_layout
@@ -175,8 +177,25 @@ def test_fly_guidance_strike_mission_in_lockstep(tmp_path: Path) -> None:
         lines = dump_.stdout.splitlines()
         assert sum("SET_POSITION_TARGET_LOCAL_NED" in ln for ln in lines) >= 2600
         assert any("HEARTBEAT" in ln for ln in lines) and any("COMMAND_ACK" in ln for ln in lines)
+        # fly's own lockstep world, lean telemetry by default: once flying, only the streams the companion reads.
+        flying = _types_after_setpoints(tlog, 100)
+        assert {"HEARTBEAT", "SYSTEM_TIME", "LOCAL_POSITION_NED", "NAMED_VALUE_INT"} <= flying, (role, flying)
+        assert not flying & set(LEAN_OFF), (role, flying)
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 20_000
     assert not [pid for pid in _pids(results) if _alive(pid)]
+
+
+def _types_after_setpoints(tlog: Path, setpoints: int) -> set[str]:
+    """The message types a companion's tlog holds after its first ``setpoints`` setpoints."""
+    log = mavutil.mavlink_connection(str(tlog))
+    seen, types = 0, set()
+    while (msg := log.recv_match()) is not None:
+        kind = msg.get_type()
+        if seen >= setpoints:
+            types.add(kind)
+        seen += kind == "SET_POSITION_TARGET_LOCAL_NED"
+    log.close()
+    return types
 
 
 @pytest.mark.sitl

@@ -52,6 +52,9 @@ from tssac_core.wire.signing import companion_link_id
 
 _log = logging.getLogger("mavlink_bridge.companion")
 
+LEAN_OFF = ("GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "SYS_STATUS", "GPS_RAW_INT", "HOME_POSITION", "EXTENDED_SYS_STATE")
+"""The vehicle streams a companion with ``lean_telemetry`` switches off: those it does not read (it keeps the
+heartbeat, the local position, the flags and the texts, and every lockstep tick)."""
 TIMED_TYPES = frozenset({"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYSTEM_TIME", "NAMED_VALUE_INT"})
 """Messages whose ``time_boot_ms`` is the vehicle's clock."""
 _LOCAL_FRESH_S = 2.0
@@ -267,7 +270,7 @@ class Companion:
         self.armed, self.mode = True, GUIDED_MODE
         intervals = {"LOCAL_POSITION_NED": self.cfg.scenario.dt_s}
         if cfg.lean_telemetry:
-            intervals.update({"GLOBAL_POSITION_INT": -1.0, "ATTITUDE": -1.0, "VFR_HUD": -1.0})
+            intervals.update({name: -1.0 for name in LEAN_OFF})
         for name, interval_s in intervals.items():
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
             try:
