@@ -19,7 +19,15 @@ import pytest
 from tssac_core.common.cli import run
 from tssac_core.common.stats import bootstrap_mean_interval, wilson_interval
 from tssac_core.experiments.cli import main, train
-from tssac_core.experiments.evaluations import PerEpisode, TeamEvaluation
+from tssac_core.experiments.evaluations import (
+    EvalLabel,
+    EvalSpec,
+    LayoutRule,
+    PerEpisode,
+    TeamEvaluation,
+    cache_key,
+    eval_specs,
+)
 from tssac_core.experiments.figures import clipped_error, penalty_entries
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
@@ -193,6 +201,37 @@ def test_paper_grid():
         (("  tail_monitor: true", "  tail_monitor: yes please"), "evaluation.tail_monitor: expected true or false"),
         (("  tail_episodes: 3\n", ""), "evaluation.tail_seed: needs evaluation.tail_episodes"),
         (("  tail_episodes: 3", "  tail_episodes: 0"), "evaluation.tail_episodes: must be >= 1"),
+        (
+            ("  generalization_scenario: scenarios/generalization.yaml\n", ""),
+            "evaluation.generalization_tail_episodes: needs evaluation.generalization_scenario",
+        ),
+        (
+            ("  generalization_tail_episodes: 3\n", "  generalization_tail_seed: 991001\n"),
+            "evaluation.generalization_tail_seed: needs evaluation.generalization_tail_episodes (how many layouts)",
+        ),
+        (
+            ("  generalization_tail_episodes: 3", "  generalization_tail_episodes: 0"),
+            "evaluation.generalization_tail_episodes: must be >= 1",
+        ),
+        (
+            ("  generalization_tail_episodes: 3", "  generalization_tail_episodes: [3]"),
+            "evaluation.generalization_tail_episodes: expected an integer",
+        ),
+        (
+            (
+                "  generalization_tail_episodes: 3\n",
+                "  generalization_tail_episodes: 3\n  generalization_tail_seed: -1\n",
+            ),
+            "evaluation.generalization_tail_seed: must be >= 0",
+        ),
+        (
+            (
+                "  generalization_tail_episodes: 3\n",
+                "  generalization_tail_episodes: 3\n  generalization_tail_seed: 12343\n",
+            ),
+            "evaluation.generalization_tail_seed: its layout seeds 12343-12345 overlap those of evaluation.seed "
+            "(12345-12346): the generalization tail must fly other layouts",
+        ),
         *[
             (("evaluation:", f"transfer: {{{t}}}\nevaluation:"), message)
             for t, message in (
@@ -247,6 +286,41 @@ def test_missing_grid_file(tmp_path, capsys):
     assert "cannot read file" in capsys.readouterr().err
 
 
+def test_the_generalization_tail_is_flown_only_when_the_grid_asks_for_it(tmp_path):
+    """evaluation.generalization_tail_*: that many layouts of the generalisation scenario, one seed per mission, no
+    monitor, cached in a file of its own; a grid without it flies the rest as before, under the same cache keys."""
+    grid = load_grid(SMOKE)
+    assert (grid.evaluation.generalization_tail_episodes, grid.evaluation.generalization_tail_seed) == (3, 991001)
+    specs = {spec.label: spec for spec in eval_specs(grid)}
+    assert list(specs) == [
+        EvalLabel.RANDOM,
+        EvalLabel.GENERALIZATION,
+        EvalLabel.TAIL,
+        EvalLabel.TAIL_MONITOR,
+        EvalLabel.GENERALIZATION_TAIL,
+    ]
+    gen = specs[EvalLabel.GENERALIZATION_TAIL]
+    assert gen == EvalSpec(
+        EvalLabel.GENERALIZATION_TAIL, Path("scenarios/generalization.yaml"), 3, 991001, layouts=LayoutRule.PER_MISSION
+    )
+    assert gen.label.is_tail and not gen.monitor and gen.cache_name() == "eval_generalization_tail.json"
+    own = smoke_text(
+        (
+            "  generalization_tail_episodes: 3\n",
+            "  generalization_tail_episodes: 5\n  generalization_tail_seed: 12347\n",
+        )
+    )  # right after the 50-layout seeds (12345-12346): allowed
+    ev = load_grid(write_grid(tmp_path / "own.yaml", own)).evaluation
+    assert (ev.generalization_tail_episodes, ev.generalization_tail_seed) == (5, 12347)
+    without = load_grid(write_grid(tmp_path / "without.yaml", smoke_text(("  generalization_tail_episodes: 3\n", ""))))
+    assert without.evaluation.generalization_tail_episodes is None
+    rest = eval_specs(without)
+    assert [spec.label for spec in rest] == list(specs)[:-1]
+    assert [cache_key(None, spec) for spec in rest] == [cache_key(None, specs[spec.label]) for spec in rest]
+    full = load_grid("experiments/paper-full.yaml").evaluation  # drawn after training, used by nothing else
+    assert (full.generalization_tail_episodes, full.generalization_tail_seed, full.tail_seed) == (500, 2500001, 2400001)
+
+
 # ------------------------------------------------------------------------------- the smoke grid
 
 
@@ -274,7 +348,8 @@ def test_smoke_grid_trains_every_job(smoke):
 def test_second_invocation_starts_nothing(smoke, capsys):
     logs = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/" + LOG_NAME)}
     caches = {p: p.stat().st_mtime_ns for p in smoke.glob("runs/*/eval_*.json")}
-    assert len(logs) == 2 and len(caches) == 8  # 50 layouts, generalisation, the tail, the tail with the monitor
+    # per run: the 50 layouts, the generalisation scenario's, the tail, with the monitor, and the generalisation tail
+    assert len(logs) == 2 and len(caches) == 10
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(smoke)]) == 0
     out = capsys.readouterr().out
     assert "2 jobs: 2 finished, 0 to run" in out and "started" not in out
@@ -376,6 +451,33 @@ def test_report_writes_table4_json_and_figures(smoke):
         np.sum(flown["per_episode"]["backup_steps"]) / np.sum(flown["per_episode"]["flown_steps"])
     )
     assert "backup_time_fraction" not in tssac["tail"]
+    # the generalisation tail: 3 layouts of the generalisation scenario, pooled like the tail, in a section of its own
+    ev = data["evaluation"]
+    assert (ev["generalization_tail_episodes"], ev["generalization_tail_seed"]) == (3, 991001)
+    flown = json.loads((smoke / "runs" / "tssac-seed0" / "eval_generalization_tail.json").read_text())
+    assert (flown["scenario"], flown["seed"], flown["episodes"]) == ("scenarios/generalization.yaml", 991001, 3)
+    assert flown["cache_key"]["layouts"].startswith("mission k") and "shield" not in flown
+    assert len(flown["per_episode"]["out_of_area"]) == 3 and "return" not in flown["per_episode"]
+    gen = tssac["generalization_tail"]
+    k = sum(flown["per_episode"]["success"])
+    assert gen["missions"] == 3 and gen["flown_seeds"] == [0] and gen["success_rate"] == k / 3
+    assert gen["success_interval95"] == list(wilson_interval(k, 3).as_dict().values())[1:]
+    mean = bootstrap_mean_interval(np.asarray(flown["per_episode"]["cost"]))
+    assert gen["mean_cost_interval95"] == [mean.low, mean.high]
+    guide = data["guidance"]["generalization_tail"]
+    assert guide["missions"] == 3 and "generalization_tail" in data["algorithms"][1]
+    section = table.split("\n## 3 layouts of the generalisation scenario per team, with intervals\n")[1]
+    assert "layout seeds 991001-991003" in section and "`runs/<run>/eval_generalization_tail.json`" in section
+    assert "--models runs/<run> --scenario scenarios/generalization.yaml --episodes 3 --seed 991001`" in section
+    for name, g in (("tssac", gen), ("guidance controller", guide)):
+        (lo, hi), (clo, chi) = g["success_interval95"], g["mean_cost_interval95"]
+        cells = (
+            f"| {name} | {100 * g['success_rate']:.1f}% ({100 * lo:.1f}-{100 * hi:.1f}) | "
+            f"{g['mean_cost']:.2f} ({clo:.2f}-{chi:.2f}) | {100 * g['within_cost_limit']:.1f}% | "
+        )
+        tail = r"(0|—) \| .* \| \d+ of 9 \| \d+\.\d \| .* \| \d+ \|$"  # seeds flown ... UAVs that left the area
+        assert re.search("^" + re.escape(cells) + tail, section, re.M), (cells, section)
+    assert "3 layouts: success rate" in rows[0] and rows[0].count("success rate (95% interval)") == 2  # not in Table 4
     assert data["training"]["epochs_per_role"] == 1 and tssac["training_wall_s"]["mean"] >= 0
     for fig in ("fig7_training", "fig8_multiplier", "fig9_mission", "fig10_test_boxplots", "fig11_generalization"):
         assert (smoke / f"{fig}.png").stat().st_size > 10_000, fig
@@ -400,7 +502,7 @@ def test_compact_keeps_the_pilots_and_their_evaluations(smoke, tmp_path, capsys)
     before = [p.act(obs) for p in load_team(run_dir)]
     sizes = {p: p.stat().st_size for p in run_dir.glob("*.pt")}
     caches = {p: p.read_text() for p in results.glob("runs/*/eval_*.json")}
-    assert (run_dir / "resume").is_dir() and len(caches) == 8
+    assert (run_dir / "resume").is_dir() and len(caches) == 10
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--compact"]) == 0
     assert "compacted 2 finished runs" in capsys.readouterr().out
     assert not (run_dir / "resume").exists()
@@ -722,11 +824,14 @@ def algorithm_row(
     generalization: EvalRow | None = None,
     tail: TailRow | None = None,
     tail_monitor: TailRow | None = None,
+    generalization_tail: TailRow | None = None,
 ) -> AlgorithmSummary:
     """A row of experiments.json with no seeds (figures None), and the evaluations given."""
     nothing = OverSeeds(None, None, {})
     row = EvalRow(nothing, nothing, nothing, CostPool(0, None, None, 0, []))
-    return AlgorithmSummary(name, algo, penalty, [], row, nothing, None, generalization, tail, tail_monitor)
+    return AlgorithmSummary(
+        name, algo, penalty, [], row, nothing, None, generalization, tail, tail_monitor, generalization_tail
+    )
 
 
 def test_figure_12_takes_plain_sac_as_penalty_0_unless_the_grid_trains_one():
@@ -764,6 +869,7 @@ def test_an_algorithm_row_holds_only_the_evaluations_the_grid_flies():
         generalization=EvalRow(nothing, nothing, nothing, CostPool(0, None, None, 0, [])),
         tail=tail,
         tail_monitor=tail,
+        generalization_tail=tail,
     ).to_json()
     assert list(row) == [
         "name",
@@ -772,6 +878,7 @@ def test_an_algorithm_row_holds_only_the_evaluations_the_grid_flies():
         "seeds",
         "tail",
         "tail_monitor",
+        "generalization_tail",
         "random",
         "generalization",
         "training_wall_s",
@@ -895,7 +1002,7 @@ def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_p
     results = tmp_path / "results"
     shutil.copytree(smoke, results)
     run_dir = results / "runs" / "tssac-seed0"
-    for label in ("tail", "tail_monitor"):
+    for label in ("tail", "tail_monitor", "generalization_tail"):
         (run_dir / f"eval_{label}.json").unlink()
     other = results / "runs" / "sac_lag-seed0" / "eval_tail.json"
     stale = json.loads(other.read_text())
@@ -905,23 +1012,31 @@ def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_p
     out = capsys.readouterr().out
     assert "tssac-seed0: not cached, left out (--cached-tail)" in out and "sac_lag-seed0: not cached" in out
     assert not (run_dir / "eval_tail.json").exists() and json.loads(other.read_text()) == stale  # nothing flown
+    assert not (run_dir / "eval_generalization_tail.json").exists()  # a tail too
+    table = (results / "table4.md").read_text()
+    gen_rows = table.split("## 3 layouts of the generalisation scenario")[1].splitlines()
+    assert "| tssac | — | — | — | none | — | — | — | — | — |" in gen_rows and any(
+        row.startswith("| sac_lag | ") and "| 0 | 0: " in row for row in gen_rows
+    )
     rows = [line for line in (results / "table4.md").read_text().splitlines() if line.startswith("| tssac | ")]
     assert [cell.strip() for cell in rows[0].split("|")].count("—") >= 6 and rows[1].startswith(
         "| tssac | none | — |"
     )  # the columns, then the tail table
     data = json.loads((results / "experiments.json").read_text())
     assert data["algorithms"][0]["tail"]["missions"] == 0 and data["algorithms"][1]["tail_monitor"]["missions"] == 3
+    assert [a["generalization_tail"]["missions"] for a in data["algorithms"]] == [0, 3]
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only"]) == 0
     assert "tssac-seed0: success " in capsys.readouterr().out
     assert "layouts" in json.loads(other.read_text())["cache_key"] and (run_dir / "eval_tail_monitor.json").is_file()
+    assert (run_dir / "eval_generalization_tail.json").is_file()
     assert (
         "layouts" not in json.loads((run_dir / "eval_random.json").read_text())["cache_key"]
     )  # Table 4's: drawn in turn
-    caches = {p: p.stat().st_mtime_ns for p in results.glob("runs/*/eval_tail*.json")}
+    caches = {p: p.stat().st_mtime_ns for p in results.glob("runs/*/eval_*tail*.json")}
     assert main(["--grid", "experiments/smoke.yaml", "--results", str(results), "--report-only"]) == 0
     assert {p: p.stat().st_mtime_ns for p in caches} == caches and len(
         caches
-    ) == 4  # all cached now: nothing flown again
+    ) == 6  # all cached now: nothing flown again
 
 
 def test_table4_keeps_its_layouts_and_the_tail_draws_each_mission_from_its_own_seed(random_path):

@@ -33,7 +33,7 @@ OFF_POLICY = ("sac_lag",)
 EVAL_SEED = 2600001
 """Mission k of the evaluation flies the layout drawn from seed EVAL_SEED + k (tssac_core.sim.missions): a seed
 range used for nothing else (training layouts come from seed * 1000 + role on our side, OmniSafe's seed + world
-on its side; the grid's evaluations use 12345, 990001, 2200001-2260001, 2400001)."""
+on its side; the grid's evaluations use 12345, 990001, 2200001-2260001, 2400001, 2500001)."""
 EVAL_EPISODES = 200
 
 OMNISAFE_WARMUP_SHARE = 0.2

@@ -235,7 +235,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         "--cached-tail",
         action="store_true",
         help="fly no new tail evaluation (the grid's evaluation.tail_episodes layouts, "
-        "with and without the monitor): report those already cached, and say which seeds each row lacks",
+        "with and without the monitor, and its evaluation.generalization_tail_episodes layouts): report those "
+        "already cached, and say which seeds each row lacks",
     )
     mode.add_argument(
         "--dry-run",

@@ -4,10 +4,13 @@ Every finished team, and the guidance controller as a reference row, flies the e
 drawn from the grid's evaluation seed (the same layouts for every team), and the generalisation scenario's if the
 grid names one. With ``evaluation.tail_episodes`` (issue 23) every team also flies that many more layouts (e.g.
 500, their own seed), and with ``tail_monitor`` the same layouts a second time through the runtime-assurance
-monitor (issue 24, ``evaluate --shield``).
+monitor (issue 24, ``evaluate --shield``); with ``evaluation.generalization_tail_episodes``, that many layouts of
+the generalisation scenario (their own seed, no monitor). These three are the tails: many layouts, one seed per
+mission (LayoutRule.PER_MISSION), pooled over an algorithm's seeds in the report.
 
 Each evaluation is cached as JSON next to the team (``<run>/eval_random.json``, ``eval_generalization.json``,
-``eval_tail.json``, ``eval_tail_monitor.json``; the guidance controller's under ``<results>/guidance/``): the keys
+``eval_tail.json``, ``eval_tail_monitor.json``, ``eval_generalization_tail.json``; the guidance controller's under
+``<results>/guidance/``): the keys
 of ``tssac_core.evaluate --json`` plus ``per_episode``, the per-mission figures the box plots and the pooled
 intervals need. A cache is reused only if it was made from the same checkpoints, scenario, seed, number of
 episodes and layout rule (and monitor settings), so an interrupted report flies only what is missing when it runs
@@ -47,10 +50,17 @@ class EvalLabel(enum.Enum):
     """The many-layout columns: ``tail_episodes`` more layouts of the evaluation scenario."""
     TAIL_MONITOR = "tail_monitor"
     """The same layouts flown through the runtime-assurance monitor."""
+    GENERALIZATION_TAIL = "generalization_tail"
+    """``generalization_tail_episodes`` layouts of the generalisation scenario."""
 
     @property
     def is_tail(self) -> bool:
-        return self in (EvalLabel.TAIL, EvalLabel.TAIL_MONITOR)
+        """Many layouts, one seed per mission, pooled over seeds (:data:`TAIL_LABELS`)."""
+        return self in TAIL_LABELS
+
+
+TAIL_LABELS = (EvalLabel.TAIL, EvalLabel.TAIL_MONITOR, EvalLabel.GENERALIZATION_TAIL)
+"""The tail evaluations, in the order the grid flies them."""
 
 
 class LayoutRule(enum.Enum):
@@ -61,7 +71,7 @@ class LayoutRule(enum.Enum):
     ``tssac_core.evaluate`` before each mission had its own seed): kept, so that the paper's protocol flies the
     same layouts as before and its cached evaluations stand."""
     PER_MISSION = "mission k: layout seed S + k"
-    """The tail's layouts: ``tssac_core.sim.missions.mission_layout``, as ``tssac_core.evaluate`` and
+    """The tails' layouts: ``tssac_core.sim.missions.mission_layout``, as ``tssac_core.evaluate`` and
     ``mavlink_bridge.fly`` draw them now, so that ``evaluate --seed S --mission k`` flies any one of them again."""
 
 
@@ -88,6 +98,8 @@ class EvalSpec:
 
 
 def eval_specs(grid: Grid) -> list[EvalSpec]:
+    """What every team flies: the evaluation scenario's layouts, then those the grid's ``evaluation:`` adds (the
+    generalisation scenario's, the tail, the tail with the monitor, the generalisation tail)."""
     ev = grid.evaluation
     specs = [EvalSpec(EvalLabel.RANDOM, ev.scenario, ev.episodes, ev.seed)]
     if ev.generalization_scenario is not None:
@@ -97,6 +109,17 @@ def eval_specs(grid: Grid) -> list[EvalSpec]:
         specs.append(tail)
         if ev.tail_monitor:
             specs.append(dataclasses.replace(tail, label=EvalLabel.TAIL_MONITOR, monitor=True))
+    if ev.generalization_tail_episodes is not None:
+        assert ev.generalization_scenario is not None, "the grid file's reader requires it"
+        specs.append(
+            EvalSpec(
+                EvalLabel.GENERALIZATION_TAIL,
+                ev.generalization_scenario,
+                ev.generalization_tail_episodes,
+                ev.generalization_tail_seed,
+                layouts=LayoutRule.PER_MISSION,
+            )
+        )
     return specs
 
 
@@ -118,9 +141,9 @@ class PerEpisode:
     cost: np.ndarray
     """(M, 3) hazard cost per role."""
     returns: np.ndarray | None
-    """(M, 3) return per role: the 50-layout evaluations (the box plots), not the tail's."""
+    """(M, 3) return per role: the 50-layout evaluations (the box plots), not the tails'."""
     out_of_area: np.ndarray | None
-    """(M, 3) bool: the UAV left the area; the tail's."""
+    """(M, 3) bool: the UAV left the area; the tails'."""
     monitor: MonitorPerEpisode | None
     """With the monitor: its counts."""
 
@@ -246,7 +269,7 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
 
     The cache file has the keys of ``tssac_core.evaluate --json`` (with ``--shield``: its ``shield`` figures) plus
     ``per_episode``: ``success`` (M,), ``cost`` (M, 3) per role, and ``return`` (M, 3) for the box plots or, for
-    the tail, ``out_of_area`` (M, 3) and with the monitor its counts per UAV-mission (``backup_steps``,
+    the tails, ``out_of_area`` (M, 3) and with the monitor its counts per UAV-mission (``backup_steps``,
     ``flown_steps``, ``interventions``).
     """
     hit = cached(team, spec, cache)

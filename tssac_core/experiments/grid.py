@@ -24,6 +24,8 @@ Example (``experiments/paper.yaml`` is the full one)::
       tail_episodes: 500           # optional: every team again on 500 more layouts, pooled over seeds with intervals
       tail_seed: 990001
       tail_monitor: true           # and on those layouts through the runtime-assurance monitor (evaluate --shield)
+      generalization_tail_episodes: 500   # optional: every team on 500 layouts of generalization_scenario, likewise
+      generalization_tail_seed: 991001
     transfer:                      # optional: the transfer experiment (TransferExperiment)
       teammates: models/tssac
       with: tssac
@@ -110,6 +112,13 @@ class Evaluation:
     the 50 of ``seed``."""
     tail_monitor: bool = False
     """Fly the tail layouts a second time through the runtime-assurance monitor (``evaluate --shield``)."""
+    generalization_tail_episodes: int | None = None
+    """The generalisation tail: every team also on this many layouts of ``generalization_scenario`` (which it
+    needs), drawn and reported as the tail's, without the monitor; None: not flown."""
+    generalization_tail_seed: int = 991001
+    """Seed of the generalisation tail's layouts (mission k: layout seed ``generalization_tail_seed + k``; the
+    default is the tail's + 1,000, as ``tssac_core.experiments.targets`` draws its generalisation layouts); its
+    layouts must not be the 50 of ``seed``."""
 
 
 @dataclass(frozen=True)
@@ -250,6 +259,7 @@ def load_grid(path: str | Path) -> Grid:
             else None
         ),
         **r.tail(ev),
+        **r.generalization_tail(ev),
     )
     transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
     grid = Grid(Path(path), algos, seeds, preset_config(train_layers), evaluation, transfer)
@@ -353,27 +363,48 @@ class _Reader:
         return layers
 
     def tail(self, ev: dict[str, Any]) -> dict[str, Any]:
-        """``evaluation.tail_*``: how many layouts, which seed, with the monitor or not. Mission k of a seed S flies
-        the layout of seed S + k, so the tail's layout seeds must not overlap the 50 of ``evaluation.seed``."""
-        if ev.get("tail_episodes") is None:
-            for key in ("tail_seed", "tail_monitor"):
-                if key in ev:
-                    raise self.fail(f"evaluation.{key}", "needs evaluation.tail_episodes (how many layouts)")
+        """``evaluation.tail_*``: how many layouts of the evaluation scenario, which seed (:meth:`tail_layouts`),
+        with the monitor or not."""
+        layouts = self.tail_layouts(ev, "tail", also=("tail_monitor",))
+        if layouts is None:
             return {}
-        episodes = self.integer(ev["tail_episodes"], "evaluation.tail_episodes", minimum=1)
-        seed = self.integer(ev.get("tail_seed", Evaluation.tail_seed), "evaluation.tail_seed", minimum=0)
         monitor = typed_value(
             bool, ev.get("tail_monitor", Evaluation.tail_monitor), "evaluation.tail_monitor", self.source, GridError
         )
+        return {**layouts, "tail_monitor": monitor}
+
+    def generalization_tail(self, ev: dict[str, Any]) -> dict[str, Any]:
+        """``evaluation.generalization_tail_*``: how many layouts of the generalisation scenario, which seed
+        (:meth:`tail_layouts`); the grid must name that scenario."""
+        layouts = self.tail_layouts(ev, "generalization_tail")
+        if layouts is not None and ev.get("generalization_scenario") is None:
+            raise self.fail(
+                "evaluation.generalization_tail_episodes",
+                "needs evaluation.generalization_scenario (the scenario whose layouts it flies)",
+            )
+        return layouts or {}
+
+    def tail_layouts(self, ev: dict[str, Any], prefix: str, also: tuple[str, ...] = ()) -> dict[str, int] | None:
+        """``evaluation.<prefix>_episodes`` and ``<prefix>_seed`` (its default: `Evaluation`'s), or None if the
+        episodes are not given (then neither may the seed nor the keys ``also`` be). Mission k of a seed S flies the
+        layout of seed S + k, so the layout seeds must not overlap the 50 of ``evaluation.seed``."""
+        episodes_key, seed_key = f"{prefix}_episodes", f"{prefix}_seed"
+        if ev.get(episodes_key) is None:
+            for key in (seed_key, *also):
+                if key in ev:
+                    raise self.fail(f"evaluation.{key}", f"needs evaluation.{episodes_key} (how many layouts)")
+            return None
+        episodes = self.integer(ev[episodes_key], f"evaluation.{episodes_key}", minimum=1)
+        seed = self.integer(ev.get(seed_key, getattr(Evaluation, seed_key)), f"evaluation.{seed_key}", minimum=0)
         first = self.integer(ev.get("seed", Evaluation.seed), "evaluation.seed", minimum=0)
         count = self.integer(ev.get("episodes", Evaluation.episodes), "evaluation.episodes", minimum=1)
         if seed < first + count and first < seed + episodes:
             raise self.fail(
-                "evaluation.tail_seed",
+                f"evaluation.{seed_key}",
                 f"its layout seeds {seed}-{seed + episodes - 1} overlap those of "
-                f"evaluation.seed ({first}-{first + count - 1}): the tail must fly other layouts",
+                f"evaluation.seed ({first}-{first + count - 1}): the {prefix.replace('_', ' ')} must fly other layouts",
             )
-        return {"tail_episodes": episodes, "tail_seed": seed, "tail_monitor": monitor}
+        return {episodes_key: episodes, seed_key: seed}
 
     def transfer(self, value: Any, entries: dict[str, AlgoEntry]) -> TransferExperiment:
         """``transfer:``: the transfer experiment; its sides name entries of ``algos`` (their settings apply)."""

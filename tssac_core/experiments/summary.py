@@ -2,7 +2,8 @@
 guidance controller's, and the transfer figures; :meth:`Summary.to_json` writes them.
 
 Figures per algorithm are mean ± sample standard deviation over its finished seeds (:class:`OverSeeds`). The tail
-evaluations (``evaluation.tail_episodes``) are pooled over an algorithm's seeds into one sample of missions
+evaluations (``evaluation.tail_episodes``, ``evaluation.generalization_tail_episodes``) are each pooled over an
+algorithm's seeds into one sample of missions
 (:func:`pooled_tail`, :mod:`tssac_core.common.stats`): success with its 95% Wilson interval, the mean hazard cost
 per UAV with its 95% bootstrap interval over missions, the within-C fraction and the tail; with the monitor, the
 fraction of flight time under the backup. The transfer speed-up compares, for the detect and strike roles, the learner
@@ -22,7 +23,14 @@ from typing import Any
 import numpy as np
 
 from tssac_core.common.stats import bootstrap_mean_interval, cvar, wilson_interval, within_fraction
-from tssac_core.experiments.evaluations import EvalLabel, Evaluations, LayoutRule, TeamEvaluation, eval_specs
+from tssac_core.experiments.evaluations import (
+    TAIL_LABELS,
+    EvalLabel,
+    Evaluations,
+    LayoutRule,
+    TeamEvaluation,
+    eval_specs,
+)
 from tssac_core.experiments.grid import AlgoEntry, Grid, Job
 from tssac_core.experiments.learning_curves import mean_task_success, read_metrics, steps_to_threshold
 from tssac_core.sim.pilots import GUIDANCE
@@ -319,12 +327,21 @@ class AlgorithmSummary:
     generalization: EvalRow | None = None
     tail: TailRow | None = None
     tail_monitor: TailRow | None = None
+    generalization_tail: TailRow | None = None
+
+    def tail_of(self, label: EvalLabel) -> TailRow | None:
+        """The row of the tail evaluation ``label`` (None: the grid does not fly it)."""
+        return {
+            EvalLabel.TAIL: self.tail,
+            EvalLabel.TAIL_MONITOR: self.tail_monitor,
+            EvalLabel.GENERALIZATION_TAIL: self.generalization_tail,
+        }[label]
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "algo": self.algo, "penalty": self.penalty, "seeds": self.seeds}
-        for key, tail in (("tail", self.tail), ("tail_monitor", self.tail_monitor)):
-            if tail is not None:
-                out[key] = tail.to_json()
+        for label in TAIL_LABELS:
+            if (tail := self.tail_of(label)) is not None:
+                out[label.value] = tail.to_json()
         out["random"] = self.random.to_json()
         if self.generalization is not None:
             out["generalization"] = self.generalization.to_json()
@@ -351,14 +368,23 @@ class GuidanceSummary:
     generalization: GuidanceRow | None = None
     tail: TailPool | None = None
     tail_monitor: TailPool | None = None
+    generalization_tail: TailPool | None = None
+
+    def tail_of(self, label: EvalLabel) -> TailPool | None:
+        """The tail evaluation ``label`` (None: the grid does not fly it)."""
+        return {
+            EvalLabel.TAIL: self.tail,
+            EvalLabel.TAIL_MONITOR: self.tail_monitor,
+            EvalLabel.GENERALIZATION_TAIL: self.generalization_tail,
+        }[label]
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"random": dataclasses.asdict(self.random)}
         if self.generalization is not None:
             out["generalization"] = dataclasses.asdict(self.generalization)
-        for key, tail in (("tail", self.tail), ("tail_monitor", self.tail_monitor)):
-            if tail is not None:
-                out[key] = tail.to_json()
+        for label in TAIL_LABELS:
+            if (tail := self.tail_of(label)) is not None:
+                out[label.value] = tail.to_json()
         return out
 
 
@@ -381,6 +407,7 @@ def algorithm_summary(
         generalization=rows.get(EvalLabel.GENERALIZATION),
         tail=tails.get(EvalLabel.TAIL),
         tail_monitor=tails.get(EvalLabel.TAIL_MONITOR),
+        generalization_tail=tails.get(EvalLabel.GENERALIZATION_TAIL),
     )
 
 
@@ -405,6 +432,7 @@ def guidance_summary(labels: Sequence[EvalLabel], evaluations: Evaluations) -> G
         generalization=row(EvalLabel.GENERALIZATION),
         tail=tail(EvalLabel.TAIL),
         tail_monitor=tail(EvalLabel.TAIL_MONITOR),
+        generalization_tail=tail(EvalLabel.GENERALIZATION_TAIL),
     )
 
 
@@ -583,7 +611,11 @@ class EvaluationInfo:
     tail_seed: int | None
     tail_monitor: bool | None
     layouts: str
+    """How the 50-layout evaluations draw their layouts (LayoutRule.IN_TURN)."""
     tail_layouts: str | None
+    """How the tails draw theirs (LayoutRule.PER_MISSION); None without a tail."""
+    generalization_tail_episodes: int | None
+    generalization_tail_seed: int | None
 
 
 @dataclass(frozen=True)
@@ -651,7 +683,9 @@ def summarise(
             tail_seed=ev.tail_seed if ev.tail_episodes else None,
             tail_monitor=ev.tail_monitor if ev.tail_episodes else None,
             layouts=LayoutRule.IN_TURN.value,
-            tail_layouts=LayoutRule.PER_MISSION.value if ev.tail_episodes else None,
+            tail_layouts=LayoutRule.PER_MISSION.value if ev.tail_episodes or ev.generalization_tail_episodes else None,
+            generalization_tail_episodes=ev.generalization_tail_episodes,
+            generalization_tail_seed=ev.generalization_tail_seed if ev.generalization_tail_episodes else None,
         ),
         training=TrainingBudget(
             epochs_per_role=grid.train.epochs,

@@ -1,13 +1,16 @@
 """``table4.md``: Table 4 beside the paper's, the tail and monitor columns, the mean cost against the limit, the
-generalisation figures and the transfer speed-up, written from a :class:`~tssac_core.experiments.summary.Summary`;
-and :func:`write_report`, which writes it with ``experiments.json``."""
+generalisation figures (and the generalisation tail's section) and the transfer speed-up, written from a
+:class:`~tssac_core.experiments.summary.Summary`; and :func:`write_report`, which writes it with
+``experiments.json``."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from tssac_core.common.cli import write_json
 from tssac_core.common.stats import wilson_interval
+from tssac_core.experiments.evaluations import EvalLabel
 from tssac_core.experiments.summary import (
     TRANSFER_ROLES,
     AlgorithmSummary,
@@ -91,22 +94,38 @@ def _largest(values: list[float]) -> str:
     return ", ".join(f"{v:,.0f}" for v in values if v > 0) or "—"
 
 
-def _tail_rows(summary: Summary) -> list[tuple[str, TailPool | None, TailPool | None, int | None, TailRow | None]]:
-    """Per row of the tail columns: name, the tail and the tail with the monitor, the finished seeds (None: the
-    guidance controller), and the algorithm's tail row (its seeds)."""
-    rows: list[tuple[str, TailPool | None, TailPool | None, int | None, TailRow | None]] = [
-        (
-            a.name,
-            a.tail.pool if a.tail is not None else None,
-            a.tail_monitor.pool if a.tail_monitor is not None else None,
-            len(a.seeds),
-            a.tail,
-        )
-        for a in summary.algorithms.values()
-    ]
-    g = summary.guidance
-    rows.append((GUIDANCE_NAME, g.tail, g.tail_monitor, None, None))
-    return rows
+@dataclass(frozen=True)
+class TailLine:
+    """One row's figures of a tail evaluation: an algorithm's seeds pooled, or the guidance controller's."""
+
+    name: str
+    pool: TailPool | None
+    """The pooled sample (None: the grid does not fly this tail)."""
+    seeds: int | None
+    """The algorithm's finished seeds (None: the guidance controller)."""
+    row: TailRow | None
+    """The algorithm's tail row, which seeds it pools and their figures (None: the guidance controller)."""
+
+
+def tail_lines(summary: Summary, label: EvalLabel) -> list[TailLine]:
+    """The lines of the tail evaluation ``label``: every algorithm's, then the guidance controller's."""
+    lines = []
+    for a in summary.algorithms.values():
+        row = a.tail_of(label)
+        lines.append(TailLine(a.name, row.pool if row is not None else None, len(a.seeds), row))
+    lines.append(TailLine(GUIDANCE_NAME, summary.guidance.tail_of(label), None, None))
+    return lines
+
+
+def _pooled_cells(line: TailLine) -> list[str]:
+    """Pooled success and mean cost per UAV, each with its 95% interval (the success cell says how many of the
+    finished seeds it pools, if not all)."""
+    assert line.pool is not None, "a grid flies the tails it names"
+    return [_tail_rate(line.pool, line.seeds), _tail_cost(line.pool)]
+
+
+def _within(t: TailPool) -> str:
+    return _percent(t.figures.within_cost_limit if t.figures is not None else None)
 
 
 def tail_columns(summary: Summary) -> tuple[list[str], dict[str, list[str]]]:
@@ -127,40 +146,88 @@ def tail_columns(summary: Summary) -> tuple[list[str], dict[str, list[str]]]:
             "with monitor: time under backup",
         ]
     rows = {}
-    for name, tail, on, seeds, _ in _tail_rows(summary):
-        assert tail is not None, "a grid with tail_episodes flies the tail"
-        cells = [
-            _tail_rate(tail, seeds),
-            _tail_cost(tail),
-            _percent(tail.figures.within_cost_limit if tail.figures is not None else None),
-        ]
+    for line, on in zip(tail_lines(summary, EvalLabel.TAIL), tail_lines(summary, EvalLabel.TAIL_MONITOR)):
+        assert line.pool is not None, "a grid with tail_episodes flies the tail"
+        cells = [*_pooled_cells(line), _within(line.pool)]
         if ev.tail_monitor:
-            assert on is not None, "a grid with tail_monitor flies it"
-            cells += [
-                _tail_rate(on, seeds),
-                _tail_cost(on),
-                _percent(on.monitor.backup_time_fraction if on.monitor is not None else None),
-            ]
-        rows[name] = cells
+            assert on.pool is not None, "a grid with tail_monitor flies it"
+            backup = on.pool.monitor.backup_time_fraction if on.pool.monitor is not None else None
+            cells += [*_pooled_cells(on), _percent(backup)]
+        rows[line.name] = cells
     return headers, rows
+
+
+DETAIL_HEADER = (
+    "seeds flown | per seed: success, cost | UAV-missions over C | CVaR95 | largest | UAVs that left the area |"
+)
+"""The columns of :func:`_detail_cells`."""
+
+
+def _detail_cells(line: TailLine) -> list[str]:
+    """Which seeds a tail pools and each seed's success and cost, then the pooled sample's tail: the UAV-missions
+    over C, their costs' CVaR95, the largest costs (the worst UAV-missions) and the UAVs that left the area."""
+    tail, row = line.pool, line.row
+    assert tail is not None, "a grid flies the tails it names"
+    f = tail.figures
+    flown = ", ".join(map(str, row.flown_seeds)) if row is not None else ""
+    if f is None:
+        return [flown or "none", "—", "—", "—", "—", "—"]
+    per_seed = "; ".join(
+        f"{s}: {100 * x.success_rate:.1f}%, {x.mean_cost:.2f}"
+        for s, x in (row.per_seed.items() if row is not None else ())
+    )
+    return [
+        "—" if row is None else flown,
+        per_seed or "—",
+        f"{f.over_limit} of {3 * tail.missions}",
+        f"{f.cvar95_cost:.1f}",
+        _largest(f.largest),
+        str(f.left_area),
+    ]
+
+
+def _layouts_text(scenario: str, n: int, seed: int, episodes: int) -> str:
+    """Which layouts a tail flies (after "every team flies N [more] ")."""
+    return (
+        f"layouts of `{scenario}`, mission k on the layout of seed {seed} + k, as `tssac_core.evaluate` draws them "
+        f"(layout seeds {seed}-{seed + n - 1}: never used in training, in epoch selection or in the {episodes} layouts "
+        "above), the same layouts for every team"
+    )
+
+
+def _pooled_text(n: int) -> str:
+    """How a tail's figures are pooled over an algorithm's seeds."""
+    return (
+        f"An algorithm's seeds are pooled into one sample ({n} missions per seed): success with its 95% Wilson "
+        "interval, the mean hazard cost per UAV with its 95% bootstrap interval over missions (a mission's three UAVs "
+        "resampled together; `tssac_core.common.stats`), and the share of UAV-missions within C. Where a row pools "
+        "fewer seeds than it has, the success cell says so."
+    )
+
+
+def _fly_again_text(caches: list[str], scenario: str, n: int, seed: int, monitor: bool) -> str:
+    """Where a tail's evaluations are cached and how to fly one run's again, or one of its missions."""
+    return (
+        f"Each run's evaluation{'s are' if len(caches) > 1 else ' is'} cached beside it (`runs/<run>/{caches[0]}`"
+        + "".join(f", `{c}`" for c in caches[1:])
+        + "; the guidance controller's in `guidance/`), with the worst missions' layout seeds; one run again: "
+        f"`python -m tssac_core.evaluate --models runs/<run> --scenario {scenario} --episodes {n} --seed {seed}"
+        f"{' [--shield]' if monitor else ''}`, one mission of it `--seed {seed} --mission K`."
+    )
 
 
 def tail_markdown(summary: Summary) -> list[str]:
     """The section on the tail evaluation: what its columns are, how to fly one again, and its tail figures."""
     ev = summary.evaluation
-    n, seed, monitor = ev.tail_episodes, ev.tail_seed, ev.tail_monitor
+    n, seed, monitor = ev.tail_episodes, ev.tail_seed, bool(ev.tail_monitor)
     assert n is not None and seed is not None, "only for a grid with tail_episodes"
+    labels = [EvalLabel.TAIL, *([EvalLabel.TAIL_MONITOR] if monitor else [])]
     lines = [
         "",
         f"## {n} layouts per team, with intervals{', and with the runtime-assurance monitor' if monitor else ''}",
         "",
-        f'The columns "{n} layouts": every team flies {n} more layouts of `{ev.scenario}`, mission k on the '
-        f"layout of seed {seed} + k, as `tssac_core.evaluate` draws them (layout seeds {seed}-{seed + n - 1}: never "
-        f"used in training, in epoch selection or in the {ev.episodes} layouts above), the same layouts for every "
-        f"team. An algorithm's seeds are pooled into one sample ({n} missions per seed): success with its 95% Wilson "
-        "interval, the mean hazard cost per UAV with its 95% bootstrap interval over missions (a mission's three UAVs "
-        "resampled together; `tssac_core.common.stats`), and the share of UAV-missions within C. Where a row pools "
-        "fewer seeds than it has, the success cell says so.",
+        f'The columns "{n} layouts": every team flies {n} more {_layouts_text(ev.scenario, n, seed, ev.episodes)}. '
+        + _pooled_text(n),
     ]
     if monitor:
         lines += [
@@ -172,15 +239,9 @@ def tail_markdown(summary: Summary) -> list[str]:
         ]
     lines += [
         "",
-        "Each run's evaluations are cached beside it (`runs/<run>/eval_tail.json`"
-        + (", `eval_tail_monitor.json`" if monitor else "")
-        + "; "
-        "the guidance controller's in `guidance/`), with the worst missions' layout seeds; one run again: `python -m "
-        f"tssac_core.evaluate --models runs/<run> --scenario {ev.scenario} --episodes {n} --seed {seed}"
-        f"{' [--shield]' if monitor else ''}`, one mission of it `--seed {seed} --mission K`.",
+        _fly_again_text([f"eval_{label.value}.json" for label in labels], ev.scenario, n, seed, monitor),
         "",
-        "| algorithm | seeds flown | per seed: success, cost | UAV-missions over C | CVaR95 | largest | "
-        "UAVs that left the area |"
+        f"| algorithm | {DETAIL_HEADER}"
         + (
             " with monitor: over C | with monitor: UAVs that left the area | "
             "with monitor: interventions per UAV-mission |"
@@ -189,36 +250,48 @@ def tail_markdown(summary: Summary) -> list[str]:
         ),
         "| --- | --- | --- | --- | --- | --- | --- |" + (" --- | --- | --- |" if monitor else ""),
     ]
-    for name, tail, on, _, row in _tail_rows(summary):
-        assert tail is not None
-        f = tail.figures
-        flown = ", ".join(map(str, row.flown_seeds)) if row is not None else ""
-        if f is None:
-            cells = [flown or "none", "—", "—", "—", "—", "—"]
-        else:
-            per_seed = "; ".join(
-                f"{s}: {100 * x.success_rate:.1f}%, {x.mean_cost:.2f}"
-                for s, x in (row.per_seed.items() if row is not None else ())
-            )
-            cells = [
-                "—" if row is None else flown,
-                per_seed or "—",
-                f"{f.over_limit} of {3 * tail.missions}",
-                f"{f.cvar95_cost:.1f}",
-                _largest(f.largest),
-                str(f.left_area),
-            ]
+    for line, on in zip(tail_lines(summary, EvalLabel.TAIL), tail_lines(summary, EvalLabel.TAIL_MONITOR)):
+        cells = _detail_cells(line)
         if monitor:
-            assert on is not None
-            if on.figures is not None and on.monitor is not None:
+            assert on.pool is not None
+            if on.pool.figures is not None and on.pool.monitor is not None:
                 cells += [
-                    f"{on.figures.over_limit} of {3 * on.missions}",
-                    str(on.figures.left_area),
-                    f"{on.monitor.interventions_per_uav_mission:.2f}",
+                    f"{on.pool.figures.over_limit} of {3 * on.pool.missions}",
+                    str(on.pool.figures.left_area),
+                    f"{on.pool.monitor.interventions_per_uav_mission:.2f}",
                 ]
             else:
                 cells += ["—", "—", "—"]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(f"| {line.name} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def generalization_tail_markdown(summary: Summary) -> list[str]:
+    """The section on the generalisation tail: its layouts, how to fly one again, and per row the pooled success and
+    cost with their intervals, the within-C share and the tail figures of :func:`_detail_cells`."""
+    ev = summary.evaluation
+    n, seed, scenario = ev.generalization_tail_episodes, ev.generalization_tail_seed, ev.generalization_scenario
+    assert n is not None and seed is not None and scenario is not None, "only for a grid with a generalization tail"
+    label = EvalLabel.GENERALIZATION_TAIL
+    lines = [
+        "",
+        f"## {n} layouts of the generalisation scenario per team, with intervals",
+        "",
+        f"Every team flies {n} {_layouts_text(scenario, n, seed, ev.episodes)}, without the monitor. "
+        + _pooled_text(n)
+        + " The further columns: which seeds a row pools and each seed's success and cost, the UAV-missions over C, "
+        "the CVaR95 of their costs, the largest costs (the worst UAV-missions, in steps of 0.1 s inside a radar) and "
+        "the UAVs that left the area.",
+        "",
+        _fly_again_text([f"eval_{label.value}.json"], scenario, n, seed, monitor=False),
+        "",
+        f"| algorithm | success rate (95% interval) | average cost (95% interval) | within C | {DETAIL_HEADER}",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for line in tail_lines(summary, label):
+        assert line.pool is not None, "a grid with generalization_tail_episodes flies it"
+        cells = [*_pooled_cells(line), _within(line.pool), *_detail_cells(line)]
+        lines.append(f"| {line.name} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -252,7 +325,7 @@ def cascade_markdown(summary: Summary) -> list[str]:
         "| algorithm | decoy's task | detect's, given the decoy's | strike's, given the detect's | mission success |",
         "| --- | --- | --- | --- | --- |",
     ]
-    lines += [cascade_row(name, tail) for name, tail, _, _, _ in _tail_rows(summary)]
+    lines += [cascade_row(line.name, line.pool) for line in tail_lines(summary, EvalLabel.TAIL)]
     return lines
 
 
@@ -369,6 +442,8 @@ def table_markdown(summary: Summary) -> str:
             f"| {GUIDANCE_NAME} | — | {100 * gg.success_rate:.1f}% | {gg.mean_cost:.2f} | "
             f"{100 * gg.within_cost_limit:.1f}% |"
         )
+    if ev.generalization_tail_episodes:
+        lines += generalization_tail_markdown(summary)
     t = summary.transfer_speedup
     lines += [
         "",
