@@ -52,7 +52,15 @@ from tssac_core.wire.signing import companion_link_id
 
 _log = logging.getLogger("mavlink_bridge.companion")
 
-LEAN_OFF = ("GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "SYS_STATUS", "GPS_RAW_INT", "HOME_POSITION", "EXTENDED_SYS_STATE")
+LEAN_OFF = (
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE",
+    "VFR_HUD",
+    "SYS_STATUS",
+    "GPS_RAW_INT",
+    "HOME_POSITION",
+    "EXTENDED_SYS_STATE",
+)
 """The vehicle streams a companion with ``lean_telemetry`` switches off: those it does not read (it keeps the
 heartbeat, the local position, the flags and the texts, and every lockstep tick)."""
 TIMED_TYPES = frozenset({"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYSTEM_TIME", "NAMED_VALUE_INT"})
