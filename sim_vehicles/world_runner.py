@@ -39,8 +39,10 @@ All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step 
 The link models (latency, reordering hold) run on the *link clock*: wall time times ``speedup``
 (simulated seconds while the simulation keeps up) in real-time mode; under lockstep simulated time
 while the world steps in lockstep, and wall time times ``speedup`` while it holds at the start, runs
-paced (nobody in the loop) or lingers — so a lockstep mission with a lossy, slow link stays repeatable
-and runs at lockstep speed.
+paced (nobody in the loop) or lingers — so a lockstep mission with a lossy, slow link runs at lockstep speed,
+and what it draws is keyed by the frame. It is repeatable from the start gate on only: what crosses a slow link
+while the world holds at the start runs on the wall clock and can differ between runs (fly's degraded mission 0 of
+seed 7001 flew 3,054 steps in one run of four and 3,055 in the others).
 
 Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
 MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
