@@ -116,13 +116,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulated seconds to keep serving after the mission ends (default 1.0)",
     )
     p.add_argument(
-        "--linger-speedup",
-        type=float,
-        default=None,
-        metavar="X",
-        help="run the linger X times faster than real time, its link models too (default: --speedup's, 1 in lockstep)",
-    )
-    p.add_argument(
         "--serve",
         action="store_true",
         help=(
@@ -159,7 +152,6 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         tlog_dir=args.tlog_dir,
         setpoint_timeout_s=args.setpoint_timeout_s,
         linger_s=args.linger_s,
-        linger_speedup=args.linger_speedup,
         outputs=tuple(parse_output(o) for o in args.out),
     )
 

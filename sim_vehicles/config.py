@@ -69,9 +69,6 @@ class SitlConfig:
     """Failsafe after this long without a setpoint while armed in GUIDED (sim s; wall s at a lockstep barrier)."""
     linger_s: float = 1.0
     """After the mission ends, keep serving this many simulated seconds (paced in real time under lockstep)."""
-    linger_speedup: float | None = None
-    """How fast the linger runs (times real time, the link models with it); None: ``speedup``. Nothing of the mission
-    depends on it: its world is frozen, only the end's announcement still travels."""
     outputs: tuple[tuple[str, int], ...] = ()
     """Ground-station addresses (``--out udpout:HOST:PORT``): every vehicle streams to each from the start and
     takes commands from it, as ArduPilot SITL's ``--out`` (a listening ground station sees all three)."""
@@ -81,8 +78,6 @@ class SitlConfig:
             raise ValueError(f"speedup must be a positive number, got {self.speedup}")
         if not (self.setpoint_timeout_s > 0.0 and self.setpoint_timeout_s < float("inf")):
             raise ValueError(f"setpoint timeout must be a positive number of seconds, got {self.setpoint_timeout_s}")
-        if self.linger_speedup is not None and not (0.0 < self.linger_speedup < float("inf")):
-            raise ValueError(f"linger speedup must be a positive number, got {self.linger_speedup}")
         if not (0.0 <= self.linger_s < float("inf")):
             raise ValueError(f"linger must be >= 0 s, got {self.linger_s}")
         if self.base_port != 0 and not (1 <= self.base_port <= 65535 - 2 * PORT_STRIDE):

@@ -46,8 +46,8 @@ seed 7001 flew 3,054 steps in one run of four and 3,055 in the others).
 
 Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
 MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
-real time times ``linger_speedup``, by default ``speedup``), then the run ends; :meth:`WorldRunner.run` returns and
-the truth log gets its summary. :meth:`WorldRunner.request_stop` (SIGINT / SIGTERM in the CLI) ends the run early.
+real time times ``speedup``), then the run ends; :meth:`WorldRunner.run` returns and the truth log
+gets its summary. :meth:`WorldRunner.request_stop` (SIGINT / SIGTERM in the CLI) ends the run early.
 """
 
 from __future__ import annotations
@@ -347,16 +347,9 @@ class WorldRunner:
         """Lockstep steps drive the link clock (it stands still while the world waits at the barrier)."""
         return self.lockstep and self._phase is _Phase.RUN and not self._paced
 
-    @property
-    def _pace(self) -> float:
-        """Simulated (and link) seconds per wall second when the world is paced or holds: ``speedup``, in the linger
-        ``linger_speedup`` if set."""
-        linger = self.config.linger_speedup
-        return linger if linger is not None and self._phase is _Phase.LINGER else self.config.speedup
-
     def _tick_clock(self, now_wall: float) -> None:
         if not self._link_on_sim_time:
-            self.clock.link_s += (now_wall - self.clock.wall_s) * self._pace
+            self.clock.link_s += (now_wall - self.clock.wall_s) * self.config.speedup
         self.clock.wall_s = now_wall
 
     def _wait_s(self, now_wall: float, deadline_wall: float | None) -> float:
@@ -367,7 +360,7 @@ class WorldRunner:
             for link in self.links:
                 due = link.next_link_due_s()
                 if due is not None:
-                    waits.append((due - self.clock.link_s) / self._pace)
+                    waits.append((due - self.clock.link_s) / self.config.speedup)
         return max(0.0, min(waits))
 
     # --------------------------------------------------------------------------- advancing
@@ -400,7 +393,7 @@ class WorldRunner:
         self._pace_sim0 = self.clock.sim_s
 
     def _step_due(self, now: float) -> bool:
-        target = self._pace_sim0 + (now - self._pace_wall0) * self._pace
+        target = self._pace_sim0 + (now - self._pace_wall0) * self.config.speedup
         if target - self.clock.sim_s > MAX_LAG_S + self.dt_s:
             _log.warning("simulation is %.2f s behind its clock; re-anchoring the schedule", target - self.clock.sim_s)
             self._anchor(now)
@@ -408,7 +401,7 @@ class WorldRunner:
         return self.clock.sim_s + self.dt_s <= target + _EPS
 
     def _next_step_wall(self) -> float:
-        return self._pace_wall0 + (self.clock.sim_s + self.dt_s - self._pace_sim0) / self._pace
+        return self._pace_wall0 + (self.clock.sim_s + self.dt_s - self._pace_sim0) / self.config.speedup
 
     def _advance_paced(self, now: float) -> float:
         n = 0

@@ -939,28 +939,6 @@ def test_mission_events_truth_log_and_tlog(tmp_path: Path) -> None:
     assert {"HEARTBEAT", "ATTITUDE", "COMMAND_LONG", "COMMAND_ACK", "SET_POSITION_TARGET_LOCAL_NED"} <= types
 
 
-@pytest.mark.timeout(30)
-def test_the_linger_runs_at_its_own_speedup() -> None:
-    """A lockstep world lingers 4 simulated seconds after the end: at ``linger_speedup`` 40 that is 0.1 s of wall
-    time, not the 4 s of real time; the mission's end and its step count are the same."""
-    with sitl(_quick_mission(), linger_s=4.0, linger_speedup=40.0, **lockstep()) as s, Client(s.ports[1]) as c:
-        c.connect()
-        c.arm()
-        c.set_mode(GUIDED)
-        ended = None
-        for _ in range(40):
-            _lockstep_round(c, 0.0, 0.0)
-            ended = next((m for m in c.log if m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END"), None)
-            if ended is not None:
-                break
-        assert ended is not None
-        t0 = time.monotonic()
-        assert wait_until(lambda: not s.thread.is_alive(), 3.0), "the linger took real time"
-        assert time.monotonic() - t0 < 2.0
-        result = s.runner.result
-    assert result.end == "success" and result.steps <= 40
-
-
 def test_random_scenario_layout_is_seeded_and_written(tmp_path: Path) -> None:
     scen = load(REPO / "scenarios" / "random.yaml")
     out = tmp_path / "layout.yaml"

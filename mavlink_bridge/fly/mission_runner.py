@@ -32,12 +32,6 @@ _log = logging.getLogger("mavlink_bridge.fly")
 LOCKSTEP_SETPOINT_TIMEOUT_S = 5.0
 """Under lockstep the vehicles' setpoint failsafe counts wall seconds at the step barrier: 5 s keeps a
 companion that a loaded machine paused for a moment in the loop (failsafes are still counted)."""
-LINGER_S = 0.2
-"""Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
-link with up to this much latency."""
-LOCKSTEP_LINGER_SPEEDUP = 20.0
-"""Under lockstep the linger runs at 20 x real time (10 ms of wall time), its link models with it: nothing of the
-mission depends on its pace, and at real time it was a tenth of a campaign's mission."""
 
 
 class ChildFailed(Exception):
@@ -205,11 +199,10 @@ class MissionRunner:
             "--truth-log",
             str(truth),
             "--linger-s",
-            repr(LINGER_S),
+            "0.2",
         ]
         if cfg.lockstep:
             argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
-            argv += ["--linger-speedup", repr(LOCKSTEP_LINGER_SPEEDUP)]
         else:  # the world waits for all three companions, as in lockstep, then runs at real time x speedup
             argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
         if cfg.signing_key_path is not None:
