@@ -87,6 +87,9 @@ class VehicleLink:
         """Frames sent per message id at time _sent_step_ms: the occurrence part of their link-model key."""
         self._rx_setpoints: dict[int, int] = {}
         """Datagrams holding a setpoint, per stamp: the occurrence part of their link-model key."""
+        self._rx_step_ms = -1
+        self._rx_in_step: dict[int, int] = {}
+        """Other messages received per message id at time _rx_step_ms: the occurrence part of their datagram's key."""
         vehicle.radio = self
 
     @property
@@ -165,7 +168,21 @@ class VehicleLink:
                         self._rx_setpoints.clear()
                     n = self._rx_setpoints[stamp] = self._rx_setpoints.get(stamp, -1) + 1
                     key = hash((msg.get_msgId(), stamp, n))
-            self.rx.push(self.clock.link_s, (parsed, addr), key)
+            self.rx.push(self.clock.link_s, (parsed, addr), self._rx_key(parsed) if key is None else key)
+
+    def _rx_key(self, parsed: Parsed) -> int:
+        """The link model's key of a datagram without a setpoint: the step, and its messages' ids with their
+        occurrence in this step (as outgoing frames are keyed), so that whether a command is lost does not depend on
+        how many heartbeats the wall clock let through before it."""
+        now_ms = self.clock.time_boot_ms
+        if now_ms != self._rx_step_ms:
+            self._rx_step_ms, self._rx_in_step = now_ms, {}
+        seen = []
+        for msg in parsed.messages:
+            mid = msg.get_msgId()
+            n = self._rx_in_step[mid] = self._rx_in_step.get(mid, 0) + 1
+            seen.append((mid, n))
+        return hash((now_ms, *seen))
 
     def process_incoming(self) -> None:
         """Handle the datagrams the incoming channel delivers now."""

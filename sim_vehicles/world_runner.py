@@ -38,11 +38,12 @@ All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step 
 
 The link models (latency, reordering hold) run on the *link clock*: wall time times ``speedup``
 (simulated seconds while the simulation keeps up) in real-time mode; under lockstep simulated time
-while the world steps in lockstep, and wall time times ``speedup`` while it holds at the start, runs
-paced (nobody in the loop) or lingers — so a lockstep mission with a lossy, slow link runs at lockstep speed,
-and what it draws is keyed by the frame. It is repeatable from the start gate on only: what crosses a slow link
-while the world holds at the start runs on the wall clock and can differ between runs (fly's degraded mission 0 of
-seed 7001 flew 3,054 steps in one run of four and 3,055 in the others).
+while the world steps in lockstep, and wall time times ``speedup`` while it runs paced (nobody in the loop) or
+lingers. While a lockstep world holds at the start no simulated time passes, and what the links carry crosses at
+once, in order (each frame still lost as the link model draws it): the clients' handshake costs no wall time for
+the link's latency. So a lockstep mission with a lossy, slow link runs at lockstep speed and repeats: what it
+draws is keyed by the frame, and nothing of its start depends on the wall clock but a client's retry of a command
+the link lost.
 
 Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
 MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
@@ -347,8 +348,22 @@ class WorldRunner:
         """Lockstep steps drive the link clock (it stands still while the world waits at the barrier)."""
         return self.lockstep and self._phase is _Phase.RUN and not self._paced
 
+    @property
+    def _link_fast_forward(self) -> bool:
+        """A lockstep world holding at the start: no simulated time passes, and what the links carry crosses at once
+        (in order, lost as the link model draws it), so that the handshake costs no wall time and its frames reach
+        the clients the same way in every run."""
+        return self.lockstep and self._phase is _Phase.HOLD
+
+    def _fast_forward_link(self) -> None:
+        """The link clock to the last delivery the links hold: everything in flight arrives now."""
+        due = [d for d in (link.next_link_due_s() for link in self.links) if d is not None]
+        self.clock.link_s = max([self.clock.link_s, *due])
+
     def _tick_clock(self, now_wall: float) -> None:
-        if not self._link_on_sim_time:
+        if self._link_fast_forward:
+            self._fast_forward_link()
+        elif not self._link_on_sim_time:
             self.clock.link_s += (now_wall - self.clock.wall_s) * self.config.speedup
         self.clock.wall_s = now_wall
 
@@ -356,7 +371,10 @@ class WorldRunner:
         waits = [MAX_SELECT_S]
         if deadline_wall is not None:
             waits.append(deadline_wall - now_wall)
-        if not self._link_on_sim_time:  # on simulated time, only steps bring link deliveries closer
+        if self._link_fast_forward:  # the next iteration delivers what the links carry
+            if any(link.next_link_due_s() is not None for link in self.links):
+                waits.append(0.0)
+        elif not self._link_on_sim_time:  # on simulated time, only steps bring link deliveries closer
             for link in self.links:
                 due = link.next_link_due_s()
                 if due is not None:
@@ -371,6 +389,13 @@ class WorldRunner:
             if not self._start_gate_open():
                 return self._keepalive(now)
             _log.info("start gate open, the world starts")
+            if self.lockstep:
+                # The last client's answer reached the socket only now: it crosses the link before the first step,
+                # as the others' did (which answer comes last is the wall clock's choice; the mission must not be).
+                self._fast_forward_link()
+                for link in self.links:
+                    link.process_incoming()
+                    link.flush()
             self._phase = _Phase.RUN
             self._barrier_wall = now
             self._anchor(now)  # real time: the schedule starts now, not when the world was created

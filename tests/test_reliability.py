@@ -27,6 +27,7 @@ from mavlink_bridge.fly.mission_runner import child_failure
 from mavlink_bridge.link import MavLink
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
+from sim_vehicles.config import ClockMode
 from sim_vehicles.link_model import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
@@ -381,6 +382,57 @@ def test_lockstep_over_a_lossy_slow_link_runs_in_simulated_time_and_repeats(tmp_
     # The link acted: some commands flown late or never (a step flown on the previous command).
     omegas = [t[3] for t in tracks[0]]
     assert sum(1 for a, b in zip(omegas, omegas[1:]) if a == b) > 10
+
+
+def _fly_three_engaging_in_turn(order: tuple[int, ...], steps: int, truth_log: Path) -> None:
+    """Three clients over a 30%-loss, 200 ms link engage one after the other in ``order`` (the last one's answer to
+    tick 0 opens the start gate), then answer every tick of their vehicle with a setpoint of its own."""
+    link = LinkModel(gps_position_sigma_m=0.0, gps_velocity_sigma_m_s=0.0, packet_loss=0.3, latency_ms=200.0)
+    with sitl(scenario(link), seed=4, setpoint_timeout_s=2.0, truth_log=truth_log, clock=ClockMode.LOCKSTEP) as s:
+        clients = [Client(port) for port in s.ports]
+        try:
+            newest = [-1, -1, -1]
+
+            def answer(i: int, msg: mavlink2.MAVLink_message | None) -> None:
+                if msg is not None and msg.get_type() == "SYSTEM_TIME" and msg.time_boot_ms > newest[i]:
+                    newest[i] = msg.time_boot_ms
+                    clients[i].setpoint(0.02 * (i + 1) * math.sin(newest[i] / 3000.0), 1.0, stamp_ms=newest[i])
+
+            for i in order:
+                c = clients[i]
+                c.connect(timeout_s=10.0)
+                assert c.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout_s=0.3, retries=30) is not None
+                ack = c.command(
+                    M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, timeout_s=0.3, retries=30
+                )
+                assert ack is not None
+                ticks = [m for m in c.log if m.get_type() == "SYSTEM_TIME"]
+                assert ticks, "no tick before the mode change"
+                answer(i, ticks[-1])
+                time.sleep(0.3)  # the next client engages clearly later
+            deadline = time.monotonic() + 30.0
+            while s.runner.world.steps[0] < steps and time.monotonic() < deadline:
+                for i, c in enumerate(clients):
+                    answer(i, c.poll(0.002))
+            assert s.runner.world.steps[0] >= steps
+            s.stop()
+        finally:
+            for c in clients:
+                c.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_lossy_slow_lockstep_start_does_not_depend_on_which_client_answers_last(tmp_path: Path) -> None:
+    """The start gate opens on the last client's answer, which reaches the socket at a time the wall clock chose:
+    it crosses the link before the first step, as the earlier answers did, so the flight is the same whoever came
+    last."""
+    steps = 60
+    runs = []
+    for k, order in enumerate([(0, 1, 2), (2, 1, 0)]):
+        _fly_three_engaging_in_turn(order, steps, tmp_path / f"truth{k}.jsonl")
+        rows = [r for r in read_truth_log(tmp_path / f"truth{k}.jsonl") if r["type"] == "step" and r["step"] <= steps]
+        runs.append([(r["step"], r["vehicles"]) for r in rows])
+    assert len(runs[0]) == steps and runs[0] == runs[1]
 
 
 # ------------------------------------------------------------------------------- the companion
