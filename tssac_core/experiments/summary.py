@@ -18,7 +18,7 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -309,6 +309,14 @@ class PaperFigures:
     mean_cost: float
 
 
+TAIL_FIELDS = {
+    EvalLabel.TAIL: "tail",
+    EvalLabel.TAIL_MONITOR: "tail_monitor",
+    EvalLabel.GENERALIZATION_TAIL: "generalization_tail",
+}
+"""The field of :class:`AlgorithmSummary` and :class:`GuidanceSummary` that holds each tail evaluation."""
+
+
 @dataclass(frozen=True)
 class AlgorithmSummary:
     """One grid entry's row: its finished seeds and their figures."""
@@ -331,11 +339,7 @@ class AlgorithmSummary:
 
     def tail_of(self, label: EvalLabel) -> TailRow | None:
         """The row of the tail evaluation ``label`` (None: the grid does not fly it)."""
-        return {
-            EvalLabel.TAIL: self.tail,
-            EvalLabel.TAIL_MONITOR: self.tail_monitor,
-            EvalLabel.GENERALIZATION_TAIL: self.generalization_tail,
-        }[label]
+        return cast(TailRow | None, getattr(self, TAIL_FIELDS[label]))
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "algo": self.algo, "penalty": self.penalty, "seeds": self.seeds}
@@ -372,11 +376,7 @@ class GuidanceSummary:
 
     def tail_of(self, label: EvalLabel) -> TailPool | None:
         """The tail evaluation ``label`` (None: the grid does not fly it)."""
-        return {
-            EvalLabel.TAIL: self.tail,
-            EvalLabel.TAIL_MONITOR: self.tail_monitor,
-            EvalLabel.GENERALIZATION_TAIL: self.generalization_tail,
-        }[label]
+        return cast(TailPool | None, getattr(self, TAIL_FIELDS[label]))
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"random": dataclasses.asdict(self.random)}
