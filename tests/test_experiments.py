@@ -1080,6 +1080,7 @@ def test_pooled_tail_pools_the_seeds_missions_with_wilson_and_bootstrap_interval
         and t["mean_cost_interval95"][0] == 0.0 < 3.0 < t["mean_cost_interval95"][1]
     )
     assert t["within_cost_limit"] == 23 / 24 and t["over_limit"] == 1 and t["largest"] == [812.0, 3.0, 0.0]
+    assert t["within_cost_limit_per_role"] == {"decoy": 1.0, "detect": 1.0, "strike": 7 / 8}  # 3.0 is within C
     assert t["cvar95_cost"] == (812 + 3) / 2 and t["left_area"] == 1  # CVaR95: the mean of the worst ceil(5% of 24) = 2
     assert "backup_time_fraction" not in t and pool.monitor is None
     assert pooled_tail([]).to_json() == {"missions": 0, "seeds": 0} and _tail_rate(pooled_tail([]), 3) == "—"

@@ -34,7 +34,7 @@ from tssac_core.experiments.evaluations import (
 from tssac_core.experiments.grid import AlgoEntry, Grid, Job
 from tssac_core.experiments.learning_curves import mean_task_success, read_metrics, steps_to_threshold
 from tssac_core.sim.pilots import GUIDANCE
-from tssac_core.sim.scenario import load
+from tssac_core.sim.scenario import ROLES, load
 from tssac_core.train.wall_time import training_wall_s
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {
@@ -146,6 +146,8 @@ class TailFigures:
     """95% bootstrap interval over missions."""
     within_cost_limit: float
     """Share of UAV-missions whose cost is at most C."""
+    within_cost_limit_per_role: dict[str, float]
+    """Per role (in the order of ``ROLES``), the share of its UAV-missions whose cost is at most C."""
     over_limit: int
     cvar95_cost: float
     largest: list[float]
@@ -188,9 +190,9 @@ class TailPool:
 def pooled_tail(evaluations: list[TeamEvaluation]) -> TailPool:
     """The tail evaluations of an algorithm's seeds pooled into one sample of missions (:mod:`tssac_core.common.stats`):
     success k of n with its 95% Wilson interval; the mean hazard cost per UAV with its 95% bootstrap interval over
-    missions (a mission's three UAVs resampled together); the within-C fraction of the UAV-missions, how many are
-    over C, their CVaR at 95% and the largest costs; the UAVs that left the area; and, for evaluations flown with
-    the monitor, the fraction of flight time under the backup and the interventions per UAV-mission."""
+    missions (a mission's three UAVs resampled together); the within-C fraction of the UAV-missions, all and per role,
+    how many are over C, their CVaR at 95% and the largest costs; the UAVs that left the area; and, for evaluations
+    flown with the monitor, the fraction of flight time under the backup and the interventions per UAV-mission."""
     if not evaluations:
         return TailPool(missions=0, seeds=0, figures=None, monitor=None)
     per = [e.per_episode for e in evaluations]
@@ -209,6 +211,7 @@ def pooled_tail(evaluations: list[TeamEvaluation]) -> TailPool:
         mean_cost=mean.value,
         mean_cost_interval95=(mean.low, mean.high),
         within_cost_limit=within_fraction(cost, limit),
+        within_cost_limit_per_role={role.value: within_fraction(cost[:, j], limit) for j, role in enumerate(ROLES)},
         over_limit=int((cost > limit).sum()),
         cvar95_cost=cvar(cost),
         largest=sorted(cost.ravel().tolist(), reverse=True)[:3],

@@ -158,20 +158,23 @@ def tail_columns(summary: Summary) -> tuple[list[str], dict[str, list[str]]]:
 
 
 DETAIL_HEADER = (
-    "seeds flown | per seed: success, cost | UAV-missions over C | CVaR95 | largest | UAVs that left the area |"
+    "seeds flown | per seed: success, cost | within C per role: "
+    + ", ".join(role.value for role in ROLES)
+    + " | UAV-missions over C | CVaR95 | largest | UAVs that left the area |"
 )
 """The columns of :func:`_detail_cells`."""
 
 
 def _detail_cells(line: TailLine) -> list[str]:
-    """Which seeds a tail pools and each seed's success and cost, then the pooled sample's tail: the UAV-missions
-    over C, their costs' CVaR95, the largest costs (the worst UAV-missions) and the UAVs that left the area."""
+    """Which seeds a tail pools and each seed's success and cost, then the pooled sample's tail: each role's share of
+    UAV-missions within C, the UAV-missions over C, their costs' CVaR95, the largest costs (the worst UAV-missions)
+    and the UAVs that left the area."""
     tail, row = line.pool, line.row
     assert tail is not None, "a grid flies the tails it names"
     f = tail.figures
     flown = ", ".join(map(str, row.flown_seeds)) if row is not None else ""
     if f is None:
-        return [flown or "none", "—", "—", "—", "—", "—"]
+        return [flown or "none", "—", "—", "—", "—", "—", "—"]
     per_seed = "; ".join(
         f"{s}: {100 * x.success_rate:.1f}%, {x.mean_cost:.2f}"
         for s, x in (row.per_seed.items() if row is not None else ())
@@ -179,6 +182,7 @@ def _detail_cells(line: TailLine) -> list[str]:
     return [
         "—" if row is None else flown,
         per_seed or "—",
+        ", ".join(_percent(f.within_cost_limit_per_role[role.value]) for role in ROLES),
         f"{f.over_limit} of {3 * tail.missions}",
         f"{f.cvar95_cost:.1f}",
         _largest(f.largest),
@@ -248,7 +252,7 @@ def tail_markdown(summary: Summary) -> list[str]:
             if monitor
             else ""
         ),
-        "| --- | --- | --- | --- | --- | --- | --- |" + (" --- | --- | --- |" if monitor else ""),
+        "| --- | --- | --- | --- | --- | --- | --- | --- |" + (" --- | --- | --- |" if monitor else ""),
     ]
     for line, on in zip(tail_lines(summary, EvalLabel.TAIL), tail_lines(summary, EvalLabel.TAIL_MONITOR)):
         cells = _detail_cells(line)
@@ -279,14 +283,15 @@ def generalization_tail_markdown(summary: Summary) -> list[str]:
         "",
         f"Every team flies {n} {_layouts_text(scenario, n, seed, ev.episodes)}, without the monitor. "
         + _pooled_text(n)
-        + " The further columns: which seeds a row pools and each seed's success and cost, the UAV-missions over C, "
+        + " The further columns: which seeds a row pools and each seed's success and cost, each role's share of its "
+        "UAV-missions within C, the UAV-missions over C, "
         "the CVaR95 of their costs, the largest costs (the worst UAV-missions, in steps of 0.1 s inside a radar) and "
         "the UAVs that left the area.",
         "",
         _fly_again_text([f"eval_{label.value}.json"], scenario, n, seed, monitor=False),
         "",
         f"| algorithm | success rate (95% interval) | average cost (95% interval) | within C | {DETAIL_HEADER}",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for line in tail_lines(summary, label):
         assert line.pool is not None, "a grid with generalization_tail_episodes flies it"
