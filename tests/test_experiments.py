@@ -1015,7 +1015,7 @@ def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_p
     assert not (run_dir / "eval_generalization_tail.json").exists()  # a tail too
     table = (results / "table4.md").read_text()
     gen_rows = table.split("## 3 layouts of the generalisation scenario")[1].splitlines()
-    assert "| tssac | — | — | — | none | — | — | — | — | — |" in gen_rows and any(
+    assert "| tssac | — | — | — | none | — | — | — | — | — | — |" in gen_rows and any(
         row.startswith("| sac_lag | ") and "| 0 | 0: " in row for row in gen_rows
     )
     rows = [line for line in (results / "table4.md").read_text().splitlines() if line.startswith("| tssac | ")]
