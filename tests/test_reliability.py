@@ -27,7 +27,7 @@ from mavlink_bridge.fly.mission_runner import child_failure
 from mavlink_bridge.link import MavLink
 from mavlink_bridge.processes import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
-from sim_vehicles.config import ClockMode
+from sim_vehicles.config import ClockMode, LockstepStart
 from sim_vehicles.link_model import LinkChannel, keyed_uniforms
 from sim_vehicles.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
@@ -471,11 +471,14 @@ def test_unsigned_companion_flies_on_through_a_mission_end_spoofed_from_the_vehi
     HIT, MSN_END and both texts, and even a POWEROFF heartbeat. The vehicle keeps reporting ACTIVE, so the
     companion keeps flying it to its own end; and a genuine end (the vehicle's POWEROFF, then silence) ends it."""
     scen_file = _scenario_file(tmp_path)
-    # Real time at 5x: 20 s of flight last 4 wall seconds, longer than the companion's 2 s POWEROFF confirmation.
-    # The setpoint timeout (10 s, 2 wall seconds) is what "controlled throughout" below is measured against: a gap
-    # that long is a companion that stopped, not a loaded machine's scheduling (5 s, one wall second, tripped once
-    # with three test workers and two training jobs on two cores).
-    with sitl(load(scen_file), setpoint_timeout_s=10.0, speedup=5.0) as s, UdpRelay(s.ports[0]) as relay:
+    # Real time at 5x: 20 s of flight last 4 wall seconds, longer than the companion's 2 s POWEROFF confirmation. The
+    # world holds at its start until the companion has engaged (hold_start): a companion slow to start on a loaded
+    # machine must not find its 20 s almost spent when the forger sends (it once did, and flew to its end before the
+    # 0.5 s grace could refute the claim). The setpoint timeout (10 s, 2 wall seconds) is what "controlled throughout"
+    # below is measured against: a gap that long is a companion that stopped, not a loaded machine's scheduling (5 s,
+    # one wall second, tripped once with three test workers and two training jobs on two cores).
+    hold = {"hold_start": True, "lockstep_start": LockstepStart.ANY}
+    with sitl(load(scen_file), setpoint_timeout_s=10.0, speedup=5.0, **hold) as s, UdpRelay(s.ports[0]) as relay:
         v = s.vehicle(0)
         with CompanionProcess(tmp_path, relay.port, scen_file, "--duration-s", "20") as comp:
             _flying(s)
