@@ -94,6 +94,11 @@ def _largest(values: list[float]) -> str:
     return ", ".join(f"{v:,.0f}" for v in values if v > 0) or "—"
 
 
+def _with_rule(header: str) -> list[str]:
+    """A markdown table's header line and the rule under it, one ``---`` per column of the header."""
+    return [header, "|" + " --- |" * (header.count("|") - 1)]
+
+
 @dataclass(frozen=True)
 class TailLine:
     """One row's figures of a tail evaluation: an algorithm's seeds pooled, or the guidance controller's."""
@@ -245,14 +250,15 @@ def tail_markdown(summary: Summary) -> list[str]:
         "",
         _fly_again_text([f"eval_{label.value}.json" for label in labels], ev.scenario, n, seed, monitor),
         "",
-        f"| algorithm | {DETAIL_HEADER}"
-        + (
-            " with monitor: over C | with monitor: UAVs that left the area | "
-            "with monitor: interventions per UAV-mission |"
-            if monitor
-            else ""
+        *_with_rule(
+            f"| algorithm | {DETAIL_HEADER}"
+            + (
+                " with monitor: over C | with monitor: UAVs that left the area | "
+                "with monitor: interventions per UAV-mission |"
+                if monitor
+                else ""
+            )
         ),
-        "| --- | --- | --- | --- | --- | --- | --- | --- |" + (" --- | --- | --- |" if monitor else ""),
     ]
     for line, on in zip(tail_lines(summary, EvalLabel.TAIL), tail_lines(summary, EvalLabel.TAIL_MONITOR)):
         cells = _detail_cells(line)
@@ -290,8 +296,9 @@ def generalization_tail_markdown(summary: Summary) -> list[str]:
         "",
         _fly_again_text([f"eval_{label.value}.json"], scenario, n, seed, monitor=False),
         "",
-        f"| algorithm | success rate (95% interval) | average cost (95% interval) | within C | {DETAIL_HEADER}",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        *_with_rule(
+            f"| algorithm | success rate (95% interval) | average cost (95% interval) | within C | {DETAIL_HEADER}"
+        ),
     ]
     for line in tail_lines(summary, label):
         assert line.pool is not None, "a grid with generalization_tail_episodes flies it"
@@ -327,8 +334,10 @@ def cascade_markdown(summary: Summary) -> list[str]:
         "third, and the column where a row is low is where its missions stop. Each share with its 95% Wilson interval "
         "and its count.",
         "",
-        "| algorithm | decoy's task | detect's, given the decoy's | strike's, given the detect's | mission success |",
-        "| --- | --- | --- | --- | --- |",
+        *_with_rule(
+            "| algorithm | decoy's task | detect's, given the decoy's | strike's, given the detect's | "
+            "mission success |"
+        ),
     ]
     lines += [cascade_row(line.name, line.pool) for line in tail_lines(summary, EvalLabel.TAIL)]
     return lines
@@ -379,10 +388,10 @@ def table_markdown(summary: Summary) -> str:
         "",
         _budget(summary.training),
         "",
-        "| algorithm | seeds | success rate | average cost | within C | paper: success rate | paper: average cost | "
-        + "".join(f"{h} | " for h in tail_headers)
-        + "training wall time per seed |",
-        "| --- | --- | --- | --- | --- | --- | --- | " + "--- | " * len(tail_headers) + "--- |",
+        *_with_rule(
+            "| algorithm | seeds | success rate | average cost | within C | paper: success rate | "
+            "paper: average cost | " + "".join(f"{h} | " for h in tail_headers) + "training wall time per seed |"
+        ),
     ]
     for a in summary.algorithms.values():
         lines.append(_main_row(a, tail_cells.get(a.name, [])))
@@ -408,8 +417,7 @@ def table_markdown(summary: Summary) -> str:
         "side of "
         "the limit the algorithm is.",
         "",
-        "| algorithm | UAV-missions | mean cost | 95% interval | over C | largest |",
-        "| --- | --- | --- | --- | --- | --- |",
+        *_with_rule("| algorithm | UAV-missions | mean cost | 95% interval | over C | largest |"),
     ]
     for a in summary.algorithms.values():
         c = a.random.pooled_cost
@@ -432,8 +440,7 @@ def table_markdown(summary: Summary) -> str:
             "",
             f"The same teams on `{ev.generalization_scenario}` ({ev.episodes} layouts, seed {ev.seed}).",
             "",
-            "| algorithm | seeds | success rate | average cost | within C |",
-            "| --- | --- | --- | --- | --- |",
+            *_with_rule("| algorithm | seeds | success rate | average cost | within C |"),
         ]
         for a in summary.algorithms.values():
             gen = a.generalization
@@ -465,8 +472,7 @@ def table_markdown(summary: Summary) -> str:
             else ""
         ),
         "",
-        "| role | tssac | sac_lag | speed-up (sac_lag / tssac) |",
-        "| --- | --- | --- | --- |",
+        *_with_rule("| role | tssac | sac_lag | speed-up (sac_lag / tssac) |"),
     ]
     for role in TRANSFER_ROLES:
         r = t.roles[role]
@@ -476,8 +482,7 @@ def table_markdown(summary: Summary) -> str:
         "Task success in training averaged over the role's epochs (the area under its learning curve; mean ± "
         "standard deviation over seeds): with transfer, the role starts from the previous role's networks.",
         "",
-        "| role | tssac (transfer) | sac_lag (from scratch) |",
-        "| --- | --- | --- |",
+        *_with_rule("| role | tssac (transfer) | sac_lag (from scratch) |"),
     ]
     for role in TRANSFER_ROLES:
         r = t.roles[role]
@@ -507,9 +512,10 @@ def transfer_experiment_markdown(x: TransferFigures) -> list[str]:
         f"`{without_name}` starts from scratch. Per seed, then the mean; a seed that never got there counts with its "
         f"{cap:,} decisions, so such a mean is a lower bound (>=).",
         "",
-        f"| role | {with_name} (transfer): per seed | mean | {without_name} (from scratch): per seed | mean | speed-up "
-        f"|",
-        "| --- | --- | --- | --- | --- | --- |",
+        *_with_rule(
+            f"| role | {with_name} (transfer): per seed | mean | {without_name} (from scratch): per seed | mean | "
+            "speed-up |"
+        ),
     ]
     for role in x.roles:
         r = x.per_role[role]
