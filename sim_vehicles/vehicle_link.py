@@ -56,6 +56,22 @@ class LockstepCredit:
     """``answered_ms`` when the vehicle last came under companion control (it holds the world once that grows)."""
 
 
+class _StepOccurrences:
+    """How many times each message id has come up at the current step time (``time_boot_ms``): the occurrence part
+    of a frame's link-model key, which names the frame instead of counting the traffic before it."""
+
+    def __init__(self) -> None:
+        self._step_ms = -1
+        self._counts: dict[int, int] = {}
+
+    def occurrence(self, now_ms: int, mid: int) -> int:
+        """Count one more message ``mid`` at ``now_ms`` and return its occurrence (1 for the first of the step)."""
+        if now_ms != self._step_ms:
+            self._step_ms, self._counts = now_ms, {}
+        n = self._counts[mid] = self._counts.get(mid, 0) + 1
+        return n
+
+
 class VehicleLink:
     """The MAVLink side of one vehicle (see the module docstring)."""
 
@@ -82,14 +98,13 @@ class VehicleLink:
         self.handler: MessageHandler | None = None
         """What handles incoming messages (:class:`sim_vehicles.commands.CommandHandler`, attached by the runner)."""
         self._tlog = tlog
-        self._sent_step_ms = -1
-        self._sent_in_step: dict[int, int] = {}
-        """Frames sent per message id at time _sent_step_ms: the occurrence part of their link-model key."""
+        self._sent_in_step = _StepOccurrences()
+        """Frames sent per message id at the current step time: the occurrence part of their link-model key."""
         self._rx_setpoints: dict[int, int] = {}
         """Datagrams holding a setpoint, per stamp: the occurrence part of their link-model key."""
-        self._rx_step_ms = -1
-        self._rx_in_step: dict[int, int] = {}
-        """Other messages received per message id at time _rx_step_ms: the occurrence part of their datagram's key."""
+        self._rx_in_step = _StepOccurrences()
+        """Other messages received per message id at the current step time: the occurrence part of their datagram's
+        key."""
         vehicle.radio = self
 
     @property
@@ -175,13 +190,7 @@ class VehicleLink:
         occurrence in this step (as outgoing frames are keyed), so that whether a command is lost does not depend on
         how many heartbeats the wall clock let through before it."""
         now_ms = self.clock.time_boot_ms
-        if now_ms != self._rx_step_ms:
-            self._rx_step_ms, self._rx_in_step = now_ms, {}
-        seen = []
-        for msg in parsed.messages:
-            mid = msg.get_msgId()
-            n = self._rx_in_step[mid] = self._rx_in_step.get(mid, 0) + 1
-            seen.append((mid, n))
+        seen = [(mid, self._rx_in_step.occurrence(now_ms, mid)) for mid in (msg.get_msgId() for msg in parsed.messages)]
         return hash((now_ms, *seen))
 
     def process_incoming(self) -> None:
@@ -211,9 +220,7 @@ class VehicleLink:
         # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
         mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
         tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
-        if now_ms != self._sent_step_ms:
-            self._sent_step_ms, self._sent_in_step = now_ms, {}
-        n = self._sent_in_step[mid] = self._sent_in_step.get(mid, 0) + 1
+        n = self._sent_in_step.occurrence(now_ms, mid)
         lossless = self.clock.lockstep and tick_ms >= 0
         for i, to in enumerate(dests):
             buf = self.endpoint.encode(msg, to)

@@ -32,6 +32,9 @@ _log = logging.getLogger("mavlink_bridge.fly")
 LOCKSTEP_SETPOINT_TIMEOUT_S = 5.0
 """Under lockstep the vehicles' setpoint failsafe counts wall seconds at the step barrier: 5 s keeps a
 companion that a loaded machine paused for a moment in the loop (failsafes are still counted)."""
+LINGER_S = 0.2
+"""Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
+link with up to this much latency."""
 
 
 class ChildFailed(Exception):
@@ -199,7 +202,7 @@ class MissionRunner:
             "--truth-log",
             str(truth),
             "--linger-s",
-            "0.2",
+            repr(LINGER_S),
         ]
         if cfg.lockstep:
             argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
