@@ -26,7 +26,7 @@ from __future__ import annotations
 import hashlib
 import operator
 import struct
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -191,7 +191,7 @@ class SigningState(Protocol):
 
 
 class FramePacker:
-    """Packs message objects of a pymavlink dialect into MAVLink 2 frames, byte for byte as pymavlink does.
+    """Packs messages of a pymavlink dialect into MAVLink 2 frames, byte for byte as pymavlink does.
 
     Reads per message class what pymavlink's generated ``pack`` reads: ``unpacker`` (the payload's struct, fields in
     wire order), ``ordered_fieldnames`` with their ``lengths`` (numeric arrays are spread, one struct item per element;
@@ -199,11 +199,14 @@ class FramePacker:
     least one byte stays), the checksum covers the header after its start byte, the payload and CRC_EXTRA, and a signed
     frame ends in link id, 6-byte timestamp and ``SHA-256(key + frame so far)[:6]``, after which the timestamp advances
     by one (``MAVLinkSigning.sign_packet``).
+
+    A message is given either as a pymavlink object (:meth:`pack`) or, for a class whose fields are all scalars, as its
+    class and field values (:meth:`pack_fields`), so that a sender of many small frames need not build the object.
     """
 
     def __init__(self, crc16: Callable[[bytes], int]) -> None:
         self._crc16 = crc16
-        self._getters: dict[type, Callable[[Any], Any]] = {}
+        self._layouts: dict[type, _Layout] = {}
         self._key: bytes | None = None
         self._keyed: Any = None
         """SHA-256 with the key already absorbed (copied for every frame)."""
@@ -211,32 +214,83 @@ class FramePacker:
     def pack(self, msg: Any, seq: int, sysid: int, compid: int, signing: SigningState | None = None) -> bytes:
         """One frame of ``msg`` from (``sysid``, ``compid``) with sequence number ``seq``; signed if ``signing`` says
         ``sign_outgoing``."""
-        cls = type(msg)
-        getter = self._getters.get(cls)
-        if getter is None:
-            getter = self._getters[cls] = _field_getter(cls)
-        payload = cls.unpacker.pack(*getter(msg))
+        layout = self._layouts.get(type(msg)) or self._layout(type(msg))
+        return self._frame(layout, layout.items_of(msg), seq, sysid, compid, signing)
+
+    def pack_fields(
+        self, cls: type, fields: Sequence[Any], seq: int, sysid: int, compid: int, signing: SigningState | None = None
+    ) -> bytes:
+        """The frame :meth:`pack` makes of ``cls(*fields)``: ``fields`` in the constructor's order (the arguments of
+        pymavlink's ``<message>_encode``). Only for classes without strings and arrays (ValueError otherwise)."""
+        layout = self._layouts.get(cls) or self._layout(cls)
+        order = layout.wire_order
+        if order is None:
+            raise ValueError(f"{getattr(cls, 'msgname', cls)} has string or array fields: pack the message object")
+        items = fields if order == () else [fields[k] for k in order]
+        return self._frame(layout, items, seq, sysid, compid, signing)
+
+    def _layout(self, cls: Any) -> _Layout:
+        layout = self._layouts[cls] = _Layout.of_class(cls)
+        return layout
+
+    def _frame(
+        self, layout: _Layout, items: Sequence[Any], seq: int, sysid: int, compid: int, signing: SigningState | None
+    ) -> bytes:
+        payload = layout.payload.pack(*items)
         payload = payload.rstrip(b"\x00") or payload[:1]
         signed = signing is not None and signing.sign_outgoing
-        msg_id = cls.id
         frame = _HEADER_V2.pack(
-            MAGIC_V2, len(payload), IFLAG_SIGNED if signed else 0, 0, seq, sysid, compid, msg_id & 0xFFFF, msg_id >> 16
+            MAGIC_V2, len(payload), IFLAG_SIGNED if signed else 0, 0, seq, sysid, compid, layout.id_low, layout.id_high
         )
         frame += payload
-        frame += _CRC.pack(self._crc16(frame[1:] + bytes((cls.crc_extra,))))
+        frame += _CRC.pack(self._crc16(frame[1:] + layout.crc_extra))
         if not signed:
             return frame
         assert signing is not None and signing.secret_key is not None
         frame += _SIGNATURE_HEAD.pack(signing.link_id, signing.timestamp)[:7]
         signing.timestamp += 1
-        return frame + self._digest(signing.secret_key, frame)[:6]
-
-    def _digest(self, key: bytes, data: bytes) -> bytes:
-        if key != self._key:
-            self._key, self._keyed = key, hashlib.sha256(key)
+        if signing.secret_key != self._key:
+            self._key, self._keyed = signing.secret_key, hashlib.sha256(signing.secret_key)
         h = self._keyed.copy()
-        h.update(data)
-        return h.digest()
+        h.update(frame)
+        return frame + h.digest()[:6]
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """What :class:`FramePacker` reads of one message class, read once."""
+
+    payload: struct.Struct
+    crc_extra: bytes
+    """CRC_EXTRA as the one byte the checksum ends with."""
+    id_low: int
+    """The message id's low 16 bits (header bytes 7 and 8)."""
+    id_high: int
+    """The message id's high byte (header byte 9)."""
+    items_of: Callable[[Any], Sequence[Any]]
+    """A message object's struct items in wire order (:func:`_field_getter`)."""
+    wire_order: tuple[int, ...] | None
+    """For each wire field, the index of its constructor argument (``()``: the same order); None if the class has
+    strings or arrays."""
+
+    @classmethod
+    def of_class(cls, msg_class: Any) -> _Layout:
+        flat = all(n == 1 for n in msg_class.lengths) and "char" not in msg_class.fieldtypes
+        order: tuple[int, ...] | None = None
+        if flat:
+            names = list(msg_class.fieldnames)
+            order = tuple(names.index(name) for name in msg_class.ordered_fieldnames)
+            if order == tuple(range(len(names))):
+                order = ()
+        msg_id = int(msg_class.id)
+        return cls(
+            payload=msg_class.unpacker,
+            crc_extra=bytes((msg_class.crc_extra,)),
+            id_low=msg_id & 0xFFFF,
+            id_high=msg_id >> 16,
+            items_of=_field_getter(msg_class),
+            wire_order=order,
+        )
 
 
 def _field_getter(cls: Any) -> Callable[[Any], Any]:

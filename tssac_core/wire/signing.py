@@ -138,7 +138,9 @@ def refresh_outgoing_timestamp(signing: _SigningState) -> None:
     frames per second a sender's stream falls more than a minute behind real time, and a receiver
     that joins then refuses it as a stale new stream.
     """
-    signing.timestamp = max(int(signing.timestamp), now_10us())
+    now = now_10us()
+    if signing.timestamp < now:
+        signing.timestamp = now
 
 
 def is_signed(frame: bytes | bytearray) -> bool:
