@@ -81,19 +81,34 @@ def encode_step(step: int, t_s: float, flags: dict[str, bool], rows: list[Vehicl
     {role: row.as_dict()}}``, written without building the dicts (one line per world step, on the lockstep's
     critical path)."""
     head = f'{{"type":"{STEP}","step":{_scalar(step)},"t_s":{_scalar(round(t_s, 6))}'
-    flag_items = "".join(f",{_quoted(k)}:{_scalar(v)}" for k, v in flags.items())
-    vehicles = ",".join(f"{_quoted(r.role)}:{_row_json(r)}" for r in rows)
+    flag_items = "".join([f",{_quoted(k)}:{_scalar(v)}" for k, v in flags.items()])
+    vehicles = ",".join([f"{_quoted(r.role)}:{_row_json(r)}" for r in rows])
     return f'{head}{flag_items},"{VEHICLES_KEY}":{{{vehicles}}}}}\n'
+
+
+_ROW = (
+    '{"x_m":%s,"y_m":%s,"v_m_s":%s,"phi_rad":%s,"cost":%s,"cost_total":%s,"omega_cmd":%s,"u_cmd":%s,'
+    '"armed":%s,"mode":%s,"failsafe":%s}'
+)
+_EIGHT_FLOATS = (float,) * 8
 
 
 def _row_json(r: VehicleRow) -> str:
     """``json.dumps(r.as_dict(), separators=(",", ":"))``, key for key."""
-    return (
-        f'{{"x_m":{_scalar(round(r.x_m, 4))},"y_m":{_scalar(round(r.y_m, 4))},"v_m_s":{_scalar(round(r.v_m_s, 5))},'
-        f'"phi_rad":{_scalar(round(r.phi_rad, 7))},"cost":{_scalar(r.cost)},"cost_total":{_scalar(r.cost_total)},'
-        f'"omega_cmd":{_scalar(round(r.omega_cmd, 7))},"u_cmd":{_scalar(round(r.u_cmd, 7))},'
-        f'"armed":{_scalar(r.armed)},"mode":{_quoted(r.mode)},"failsafe":{_scalar(r.failsafe)}}}'
+    numbers = (
+        round(r.x_m, 4),
+        round(r.y_m, 4),
+        round(r.v_m_s, 5),
+        round(r.phi_rad, 7),
+        r.cost,
+        r.cost_total,
+        round(r.omega_cmd, 7),
+        round(r.u_cmd, 7),
     )
+    # Plain finite floats (the usual row) are written as json writes them, float.__repr__, without a call per value.
+    plain = tuple(map(type, numbers)) == _EIGHT_FLOATS and math.isfinite(sum(numbers))
+    texts = map(float.__repr__ if plain else _scalar, numbers)
+    return _ROW % (*texts, _scalar(r.armed), _quoted(r.mode), _scalar(r.failsafe))
 
 
 def _scalar(value: object) -> str:
