@@ -58,8 +58,8 @@ class CommandHandler:
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
             "SET_MODE": self._on_set_mode,
-            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
-            "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_setpoint,
+            "SET_ATTITUDE_TARGET": self._on_setpoint,
             "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
             "PARAM_REQUEST_LIST": self._on_param_request_list,
             "PARAM_REQUEST_READ": self._on_param_request_read,
@@ -213,11 +213,8 @@ class CommandHandler:
 
     # ----------------------------------------------------------------------------- setpoints
 
-    def _on_position_target(self, msg: Msg, addr: Address) -> None:
-        self._setpoint(setpoints.parse_position_target(msg))
-
-    def _on_attitude_target(self, msg: Msg, addr: Address) -> None:
-        self._setpoint(setpoints.parse_attitude_target(msg))
+    def _on_setpoint(self, msg: Msg, addr: Address) -> None:
+        self._setpoint(self.link.setpoint(msg))
 
     def _on_global_target(self, msg: Msg, addr: Address) -> None:
         self.v.reject(setpoints.GLOBAL_REFUSAL)

@@ -173,10 +173,12 @@ class LinkChannel(Generic[D]):
 
     def pop_due(self, now_s: float) -> list[D]:
         """Items whose delivery time has come, in delivery order."""
-        out: list[D] = []
-        if self._ready:
-            out.extend(self._ready)
+        if self._ideal:
+            ready = list(self._ready)
             self._ready.clear()
+            self.counters.delivered += len(ready)
+            return ready
+        out: list[D] = []
         if self._held is not None and now_s + _EPS_S >= self._held[1]:
             heapq.heappush(self._heap, self._held[0])
             self._held = None

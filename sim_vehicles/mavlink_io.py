@@ -37,7 +37,9 @@ import errno
 import logging
 import socket
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -320,6 +322,17 @@ class MavEndpoint:
 
     def expire_peers(self, now_wall_s: float, timeout_s: float = PEER_TIMEOUT_S) -> None:
         """Forget clients and monitors that sent nothing accepted for ``timeout_s`` wall seconds."""
+        if self.peers and now_wall_s - min(self.peers.values()) > timeout_s:
+            self._expire_clients(now_wall_s, timeout_s)
+        if self.monitors:
+            for addr, monitor in list(self.monitors.items()):
+                if now_wall_s - monitor.last_seen_s > timeout_s:
+                    del self.monitors[addr]
+        if not self._tx_seq.keys() <= self.peers.keys():  # a link of a client or monitor that is gone
+            for addr in [a for a in self._tx_seq if a not in self.peers and a not in self.monitors]:
+                del self._tx_seq[addr]
+
+    def _expire_clients(self, now_wall_s: float, timeout_s: float) -> None:
         for addr, last in list(self.peers.items()):
             if now_wall_s - last > timeout_s:
                 del self.peers[addr]
@@ -330,11 +343,6 @@ class MavEndpoint:
                     addr[1],
                     now_wall_s - last,
                 )
-        for addr, monitor in list(self.monitors.items()):
-            if now_wall_s - monitor.last_seen_s > timeout_s:
-                del self.monitors[addr]
-        for addr in [a for a in self._tx_seq if a not in self.peers and a not in self.monitors]:
-            del self._tx_seq[addr]
 
     def new_session(self) -> None:
         """After a mission reset (a reboot): drop what the socket holds, forget every client and monitor, number
@@ -362,18 +370,33 @@ class MavEndpoint:
         are packed (ArduPilot numbers per channel): a client that gets only its own replies and the telemetry
         sees no gap for the replies that went to another client, so a lossless link shows no loss."""
         mav = self.mav
-        if self.signing:
-            refresh_outgoing_timestamp(mav.signing)
-        seq = self._tx_seq.get(dest, 0)
-        mav.seq = seq
-        buf = self._packer.pack(msg, seq, mav.srcSystem, mav.srcComponent, mav.signing)
-        self._tx_seq[dest] = (seq + 1) % 256
-        self.mav.total_packets_sent += 1
-        self.mav.total_bytes_sent += len(buf)
+        buf = self._packer.pack(msg, self._next_seq(dest), mav.srcSystem, mav.srcComponent, mav.signing)
+        mav.total_packets_sent += 1
+        mav.total_bytes_sent += len(buf)
         return buf
+
+    def encode_fields(self, cls: type[mavlink2.MAVLink_message], fields: Sequence[Any], dest: Address) -> bytes:
+        """:meth:`encode` of ``cls(*fields)`` without the message object (a class without strings and arrays)."""
+        mav = self.mav
+        buf = self._packer.pack_fields(cls, fields, self._next_seq(dest), mav.srcSystem, mav.srcComponent, mav.signing)
+        mav.total_packets_sent += 1
+        mav.total_bytes_sent += len(buf)
+        return buf
+
+    def _next_seq(self, dest: Address) -> int:
+        """Take ``dest``'s next sequence number (pymavlink's ``seq`` follows it) and, signing, bring the signing
+        timestamp up to the wall clock: what comes before packing a frame."""
+        if self.signing:
+            refresh_outgoing_timestamp(self.mav.signing)
+        seq = self._tx_seq.get(dest, 0)
+        self.mav.seq = seq
+        self._tx_seq[dest] = (seq + 1) % 256
+        return seq
 
     def destinations(self) -> list[Address]:
         """Everyone telemetry goes to: the clients, then the monitors that are not clients."""
+        if not self.monitors:
+            return list(self.peers)
         return list(self.peers) + [a for a in self.monitors if a not in self.peers]
 
     def parse(self, data: bytes, addr: Address) -> Parsed:

@@ -101,7 +101,7 @@ class Refusal:
 
 
 def _finite(*values: float) -> bool:
-    return all(math.isfinite(v) for v in values)
+    return all(map(math.isfinite, values))
 
 
 def parse_position_target(msg: mavlink2.MAVLink_message) -> Demand | Refusal:

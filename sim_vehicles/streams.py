@@ -9,7 +9,9 @@ one id from a vehicle's state with the builders of :mod:`sim_vehicles.telemetry`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -106,9 +108,37 @@ class StreamTable:
         return -1 if stream.interval_s is None else min(MAX_INTERVAL_US, units.us_from_s(stream.interval_s))
 
 
+Fields: TypeAlias = tuple[Any, ...]
+"""A message's field values in its class's constructor order."""
+
+
+def _local_position_ned(v: Vehicle) -> Fields | None:
+    fix = v.gps.last_fix
+    return None if fix is None else telemetry.local_position_ned_fields(fix)
+
+
+def system_time_fields(v: Vehicle) -> Fields:
+    """SYSTEM_TIME's fields now (the lockstep's step tick)."""
+    return telemetry.system_time_fields(v.clock.unix_start_s, v.clock.sim_s)
+
+
+FIELD_BUILDERS: dict[int, Callable[[Vehicle], Fields | None]] = {
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: _local_position_ned,
+    M.MAVLINK_MSG_ID_SYSTEM_TIME: system_time_fields,
+}
+"""The streams a lockstep vehicle sends at every step, as their message's fields for the vehicle's current state (the
+arguments of pymavlink's ``<message>_encode``; None: nothing to say yet), so that they can be packed without building
+message objects (:meth:`sim_vehicles.mavlink_io.MavEndpoint.encode_fields`). :func:`build` makes their messages from
+the same fields."""
+
+
 def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list[mavlink2.MAVLink_message]:
     """The message(s) of one id for the vehicle's current state ([] if there is nothing to say, e.g. no fix yet);
     ``errors_comm``: SYS_STATUS's count of rejected frames."""
+    build_fields = FIELD_BUILDERS.get(mid)
+    if build_fields is not None:
+        fields = build_fields(v)
+        return [] if fields is None else [mavlink2.mavlink_map[mid](*fields)]
     now, t, o = v.clock.sim_s, v.truth, v.setup.origin
     ms = v.clock.time_boot_ms
     fix: GpsFix | None = v.gps.last_fix
@@ -118,8 +148,6 @@ def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list
         return [telemetry.sys_status(mav, v.gps.has_fix(now), not v.fence_breached, errors_comm)]
     if mid == M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
         return [telemetry.extended_sys_state(mav)]
-    if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME:
-        return [telemetry.system_time(mav, v.clock.unix_start_s, now)]
     if mid == M.MAVLINK_MSG_ID_GPS_RAW_INT:
         lk = v.setup.link
         return [
@@ -129,8 +157,6 @@ def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list
         ]
     if mid == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
         return [] if fix is None else [telemetry.global_position_int(mav, o, fix, t.phi_rad)]
-    if mid == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-        return [] if fix is None else [telemetry.local_position_ned(mav, fix)]
     if mid == M.MAVLINK_MSG_ID_ATTITUDE:
         return [telemetry.attitude(mav, t, ms)]
     if mid == M.MAVLINK_MSG_ID_VFR_HUD:

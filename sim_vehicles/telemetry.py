@@ -96,10 +96,16 @@ def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -
 
 
 def local_position_ned(mav: MAV, fix: GpsFix) -> Msg:
-    """LOCAL_POSITION_NED of a GPS fix: x north = world y, y east = world x, z 0 (flight altitude)."""
+    """LOCAL_POSITION_NED of a GPS fix (:func:`local_position_ned_fields`)."""
+    return mav.local_position_ned_encode(*local_position_ned_fields(fix))
+
+
+def local_position_ned_fields(fix: GpsFix) -> tuple[int, float, float, float, float, float, float]:
+    """LOCAL_POSITION_NED's fields (``local_position_ned_encode``'s arguments) of a GPS fix: x north = world y,
+    y east = world x, z 0 (flight altitude)."""
     x, y = units.ned_from_world(fix.east_m, fix.north_m)
     vx, vy = units.ned_from_world(fix.vel_east_m_s, fix.vel_north_m_s)
-    return mav.local_position_ned_encode(units.ms_from_s(fix.time_s), x, y, 0.0, vx, vy, 0.0)
+    return units.ms_from_s(fix.time_s), x, y, 0.0, vx, vy, 0.0
 
 
 def gps_raw_int(
@@ -215,8 +221,14 @@ def extended_sys_state(mav: MAV) -> Msg:
 
 
 def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
-    """SYSTEM_TIME: both clocks follow simulated time (unix time = start of the run + simulated time)."""
-    return mav.system_time_encode(units.us_from_s(unix_start_s + time_s), units.ms_from_s(time_s))
+    """SYSTEM_TIME (:func:`system_time_fields`)."""
+    return mav.system_time_encode(*system_time_fields(unix_start_s, time_s))
+
+
+def system_time_fields(unix_start_s: float, time_s: float) -> tuple[int, int]:
+    """SYSTEM_TIME's fields (``system_time_encode``'s arguments): both clocks follow simulated time (unix time = start
+    of the run + simulated time)."""
+    return units.us_from_s(unix_start_s + time_s), units.ms_from_s(time_s)
 
 
 def home_position(mav: MAV, origin: Origin, home_east_m: float, home_north_m: float, time_s: float) -> Msg:

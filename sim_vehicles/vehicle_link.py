@@ -19,6 +19,7 @@ have seen. A vehicle in the loop holds the world once its client has answered a 
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import BinaryIO, Protocol
 
@@ -29,11 +30,18 @@ from sim_vehicles import streams, telemetry
 from sim_vehicles.events import MissionEvent
 from sim_vehicles.link_model import LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
-from sim_vehicles.setpoints import Refusal, parse_attitude_target, parse_position_target
+from sim_vehicles.setpoints import Demand, Refusal, parse_attitude_target, parse_position_target
 from sim_vehicles.vehicle import Vehicle
 from tssac_core.wire import units
 
 M = mavlink2  # message ids and enums
+_SYSTEM_TIME_MS = mavlink2.MAVLink_system_time_message.fieldnames.index("time_boot_ms")
+"""Where SYSTEM_TIME's fields hold the step (a tick's ``time_boot_ms``)."""
+_SETPOINT_PARSERS: dict[int, Callable[[mavlink2.MAVLink_message], Demand | Refusal]] = {
+    M.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: parse_position_target,
+    M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: parse_attitude_target,
+}
+"""The setpoints a vehicle flies (and that credit the lockstep barrier), by message id."""
 COALESCE_BYTES = 1200
 """Largest datagram :meth:`VehicleLink.flush` builds from several frames (below any path MTU on a LAN)."""
 
@@ -105,6 +113,8 @@ class VehicleLink:
         self._rx_in_step = _StepOccurrences()
         """Other messages received per message id at the current step time: the occurrence part of their datagram's
         key."""
+        self._last_setpoint: tuple[mavlink2.MAVLink_message, Demand | Refusal] | None = None
+        """The setpoint message parsed last, and what it asks for (:meth:`setpoint`)."""
         vehicle.radio = self
 
     @property
@@ -132,13 +142,9 @@ class VehicleLink:
 
     def _credit(self, msg: mavlink2.MAVLink_message) -> bool:
         """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now)."""
-        mtype = msg.get_type()
-        if mtype == "SET_POSITION_TARGET_LOCAL_NED":
-            parsed = parse_position_target(msg)
-        elif mtype == "SET_ATTITUDE_TARGET":
-            parsed = parse_attitude_target(msg)
-        else:
+        if msg.get_msgId() not in _SETPOINT_PARSERS:
             return False
+        parsed = self.setpoint(msg)
         if isinstance(parsed, Refusal):
             return False
         v = self.vehicle
@@ -148,6 +154,16 @@ class VehicleLink:
         c = self.credit
         c.answered_ms = max(c.answered_ms, c.tick_seen_ms if stamp == 0 else min(stamp, self.clock.time_boot_ms))
         return True
+
+    def setpoint(self, msg: mavlink2.MAVLink_message) -> Demand | Refusal:
+        """What a SET_POSITION_TARGET_LOCAL_NED or SET_ATTITUDE_TARGET asks for: parsed once when it reaches the socket
+        (:meth:`_credit`) and read again when the handler flies it."""
+        last = self._last_setpoint
+        if last is not None and last[0] is msg:
+            return last[1]
+        parsed = _SETPOINT_PARSERS[msg.get_msgId()](msg)
+        self._last_setpoint = (msg, parsed)
+        return parsed
 
     # ------------------------------------------------------------------------------- incoming
 
@@ -177,13 +193,15 @@ class VehicleLink:
                 continue  # nothing accepted: it never reaches the vehicle, and its sender is nobody
             key = None
             for msg in parsed.messages:
-                if self._credit(msg):
+                if self._credit(msg) and not self.rx.ideal:
                     stamp = int(msg.time_boot_ms)
                     if len(self._rx_setpoints) > 256:  # only recent stamps matter; clients may send any
                         self._rx_setpoints.clear()
                     n = self._rx_setpoints[stamp] = self._rx_setpoints.get(stamp, -1) + 1
                     key = hash((msg.get_msgId(), stamp, n))
-            self.rx.push(self.clock.link_s, (parsed, addr), self._rx_key(parsed) if key is None else key)
+            if key is None and not self.rx.ideal:
+                key = self._rx_key(parsed)
+            self.rx.push(self.clock.link_s, (parsed, addr), key)  # an ideal channel draws nothing: no key
 
     def _rx_key(self, parsed: Parsed) -> int:
         """The link model's key of a datagram without a setpoint: the step, and its messages' ids with their
@@ -214,19 +232,37 @@ class VehicleLink:
 
         Each destination is a link of its own with its own sequence numbers (:meth:`MavEndpoint.encode`), taken
         in the order the frames are queued: a client never sees a gap for a frame that went to another one."""
-        dests = [dest] if dest is not None else self.endpoint.destinations()
+        mid = msg.get_msgId()
+        tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
+        endpoint = self.endpoint
+        self._queue(mid, tick_ms, dest, lambda to: endpoint.encode(msg, to))
+
+    def send_fields(self, mid: int, fields: streams.Fields, dest: Address | None = None) -> None:
+        """:meth:`send` of message ``mid`` given by its fields (:data:`sim_vehicles.streams.FIELD_BUILDERS`), packed
+        without building the message object."""
+        cls = mavlink2.mavlink_map[mid]
+        tick_ms = int(fields[_SYSTEM_TIME_MS]) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
+        endpoint = self.endpoint
+        self._queue(mid, tick_ms, dest, lambda to: endpoint.encode_fields(cls, fields, to))
+
+    def _queue(self, mid: int, tick_ms: int, dest: Address | None, encode: Callable[[Address], bytes]) -> None:
+        """Encode message ``mid`` (``tick_ms``: a SYSTEM_TIME's step, else -1) for each destination and push the frames
+        into the outgoing channel, the first into the tlog."""
+        dests = (dest,) if dest is not None else self.endpoint.destinations()
         if not dests:
             return
         # The link model's key names the frame (id, step, occurrence): its fate does not depend on other traffic.
-        mid, now_ms = msg.get_msgId(), self.clock.time_boot_ms
-        tick_ms = int(msg.time_boot_ms) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
-        n = self._sent_in_step.occurrence(now_ms, mid)
-        lossless = self.clock.lockstep and tick_ms >= 0
+        clock = self.clock
+        key = None  # an ideal channel draws nothing: no key
+        if not self.tx.ideal:
+            now_ms = clock.time_boot_ms
+            key = hash((mid, now_ms, self._sent_in_step.occurrence(now_ms, mid)))
+        lossless = clock.lockstep and tick_ms >= 0
         for i, to in enumerate(dests):
-            buf = self.endpoint.encode(msg, to)
+            buf = encode(to)
             if i == 0 and self._tlog is not None:
                 self._write_tlog(buf)  # one copy per message, as the vehicle sent it
-            self.tx.push(self.clock.link_s, (buf, to, tick_ms), hash((mid, now_ms, n)), lossless)
+            self.tx.push(clock.link_s, (buf, to, tick_ms), key, lossless)
 
     def flush(self) -> None:
         """Send the frames the outgoing channel delivers now, packed into datagrams per destination.
@@ -235,9 +271,14 @@ class VehicleLink:
         COALESCE_BYTES), as a flight controller's UDP output does: one system call per destination and
         step instead of one per message. Loss, duplication and latency still act on every frame.
         """
+        due = self.tx.pop_due(self.clock.link_s)
+        if not due:
+            return
+        credit = self.credit
         batches: dict[Address, list[bytes]] = {}
-        for data, dest, tick_ms in self.tx.pop_due(self.clock.link_s):
-            self.credit.tick_seen_ms = max(self.credit.tick_seen_ms, tick_ms)
+        for data, dest, tick_ms in due:
+            if tick_ms > credit.tick_seen_ms:
+                credit.tick_seen_ms = tick_ms
             frames = batches.setdefault(dest, [])
             if frames and len(frames[-1]) + len(data) <= COALESCE_BYTES:
                 frames[-1] += data
@@ -268,15 +309,21 @@ class VehicleLink:
 
         ``tick`` (lockstep): also send SYSTEM_TIME now if its stream did not, so clients see every step.
         """
-        self.vehicle.sample_gps()
-        now = self.clock.sim_s
-        due = self.streams.take_due(now, self.vehicle.gps.last_fix)
+        v = self.vehicle
+        v.sample_gps()
+        due = self.streams.take_due(self.clock.sim_s, v.gps.last_fix)
         if self.endpoint.has_clients:
             for mid in due:
-                for msg in self.build(mid):
-                    self.send(msg)
+                build_fields = streams.FIELD_BUILDERS.get(mid)
+                if build_fields is None:
+                    for msg in self.build(mid):
+                        self.send(msg)
+                else:
+                    fields = build_fields(v)
+                    if fields is not None:
+                        self.send_fields(mid, fields)
         if tick and M.MAVLINK_MSG_ID_SYSTEM_TIME not in due:
-            self.send(telemetry.system_time(self.mav, self.clock.unix_start_s, now))
+            self.send_fields(M.MAVLINK_MSG_ID_SYSTEM_TIME, streams.system_time_fields(v))
 
     def send_snapshot(self, dest: Address | None = None) -> None:
         """The current state at once (a new peer; a lockstep world holding still): heartbeat, status, flags,
