@@ -24,7 +24,6 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from tssac_core.sim.scenario import ROLES
@@ -126,10 +125,12 @@ def events_from_step(result: StepResult, radar_on: bool, step: int, time_s: floa
         add(EventKind.RADAR, int(radar_on))
     if result.identified_now[0]:
         add(EventKind.IDENTIFIED, 1)
-    for i in np.flatnonzero(result.hazard_entered[0]):
-        add(EventKind.HAZARD, int(i))
-    for i in np.flatnonzero(result.out_of_area[0]):
-        add(EventKind.GEOFENCE, int(i))
+    for i, entered in enumerate(result.hazard_entered[0].tolist()):
+        if entered:
+            add(EventKind.HAZARD, i)
+    for i, out_of_area in enumerate(result.out_of_area[0].tolist()):
+        if out_of_area:
+            add(EventKind.GEOFENCE, i)
     if result.hit_now[0]:
         add(EventKind.HIT, 1)
     if result.terminated[0] or result.truncated[0]:

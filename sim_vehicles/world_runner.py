@@ -99,6 +99,61 @@ def _clip_unit(x: float) -> float:
     return -1.0 if x < -1.0 else 1.0 if x > 1.0 else x
 
 
+@dataclass(frozen=True)
+class _WorldState:
+    """World 0's per-vehicle state after a step, as Python numbers (one conversion per array, not per value)."""
+
+    x_m: list[float]
+    y_m: list[float]
+    v_m_s: list[float]
+    phi_rad: list[float]
+    active: list[bool]
+    cost_total: list[float]
+    turn_rate_max_rad_s: list[float]
+
+    @classmethod
+    def of(cls, w: World) -> _WorldState:
+        return cls(
+            x_m=w.x_m[0].tolist(),
+            y_m=w.y_m[0].tolist(),
+            v_m_s=w.v_m_s[0].tolist(),
+            phi_rad=w.phi_rad[0].tolist(),
+            active=w.active[0].tolist(),
+            cost_total=w.cost_total[0].tolist(),
+            turn_rate_max_rad_s=w.c.turn_rate_max_rad_s.tolist(),
+        )
+
+    def truth(self, i: int, turn: float, v_before_m_s: float, dt_s: float) -> VehicleTruth:
+        """Vehicle ``i``'s true state, given the turn it was commanded (in [-1, 1] before clipping) and its speed
+        before the step."""
+        return VehicleTruth(
+            east_m=self.x_m[i],
+            north_m=self.y_m[i],
+            speed_m_s=self.v_m_s[i],
+            phi_rad=self.phi_rad[i],
+            turn_rate_rad_s=_clip_unit(turn) * self.turn_rate_max_rad_s[i] if self.active[i] else 0.0,
+            accel_m_s2=(self.v_m_s[i] - v_before_m_s) / dt_s,
+        )
+
+    def row(self, v: Vehicle, cost: float) -> VehicleRow:
+        """Vehicle ``v``'s truth-log row, with the cost of this step."""
+        i = v.index
+        return VehicleRow(
+            role=v.role,
+            x_m=self.x_m[i],
+            y_m=self.y_m[i],
+            v_m_s=self.v_m_s[i],
+            phi_rad=self.phi_rad[i],
+            cost=cost,
+            cost_total=self.cost_total[i],
+            omega_cmd=v.last_action[0],
+            u_cmd=v.last_action[1],
+            armed=v.armed,
+            mode=v.mode.name,
+            failsafe=v.failsafe,
+        )
+
+
 class SitlError(Exception):
     """The SITL cannot start (port in use, unwritable log, ...); ``str()`` is one line."""
 
@@ -263,7 +318,7 @@ class WorldRunner:
             link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
             link.add_outputs(config.outputs)
             link.handler = CommandHandler(vehicle, link)
-            vehicle.observe(self._truth_of(i, np.zeros(2), float(self.world.v_m_s[0, i])))
+            vehicle.observe(_WorldState.of(self.world).truth(i, 0.0, float(self.world.v_m_s[0, i]), s.dt_s))
             self.vehicles.append(vehicle)
             self.links.append(link)
         if config.truth_log is not None:
@@ -508,10 +563,11 @@ class WorldRunner:
         w = self.world
         if self._first_step_cpu_s is None:
             self._first_step_cpu_s = time.process_time()
-        actions = np.zeros((1, len(ROLES), 2))
+        commands = [(0.0, 0.0)] * len(ROLES)
         for v in self.vehicles:
-            actions[0, v.index] = v.action()
-        v_before = w.v_m_s[0].copy()
+            commands[v.index] = v.action()
+        actions = np.array([commands], dtype=np.float64)
+        v_before = w.v_m_s[0].tolist()
         result = w.step(actions)
         step = int(w.steps[0])
         if self._link_on_sim_time:
@@ -521,8 +577,10 @@ class WorldRunner:
         self.flags.radar_on = bool(w.radar_on[0])
         self.flags.identified = bool(w.identified[0])
         self.flags.hit = bool(w.hit[0])
+        state = _WorldState.of(w)
+        turn = actions[0, :, 0].tolist()
         for v, link in zip(self.vehicles, self.links, strict=True):
-            v.observe(self._truth_of(v.index, actions[0, v.index], float(v_before[v.index])))
+            v.observe(state.truth(v.index, turn[v.index], v_before[v.index], self.dt_s))
             # Each vehicle's telemetry leaves before the next vehicle's is built and before the
             # bookkeeping below: its client starts on the step while the world finishes it.
             link.publish(tick=self.lockstep)
@@ -530,9 +588,8 @@ class WorldRunner:
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
         if self._truth is not None:
             flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
-            self._truth.step(
-                step, self.clock.sim_s, flags, [self._row(v, float(result.cost[0, v.index])) for v in self.vehicles]
-            )
+            cost = result.cost[0].tolist()
+            self._truth.step(step, self.clock.sim_s, flags, [state.row(v, cost[v.index]) for v in self.vehicles])
         for event in events:
             _log.info("t=%.1f s: %s", event.time_s, event.statustext()[1])
             if event.kind is EventKind.MISSION_END:
@@ -547,35 +604,6 @@ class WorldRunner:
             self._phase = _Phase.LINGER
             self._end_sim_s = self.clock.sim_s
             self._anchor(self.clock.wall_s)
-
-    def _truth_of(self, i: int, action: np.ndarray, v_before: float) -> VehicleTruth:
-        w, c = self.world, self.world.c
-        moving = bool(w.active[0, i])
-        return VehicleTruth(
-            east_m=float(w.x_m[0, i]),
-            north_m=float(w.y_m[0, i]),
-            speed_m_s=float(w.v_m_s[0, i]),
-            phi_rad=float(w.phi_rad[0, i]),
-            turn_rate_rad_s=_clip_unit(float(action[0])) * float(c.turn_rate_max_rad_s[i]) if moving else 0.0,
-            accel_m_s2=(float(w.v_m_s[0, i]) - v_before) / self.dt_s,
-        )
-
-    def _row(self, v: Vehicle, cost: float) -> VehicleRow:
-        w, i = self.world, v.index
-        return VehicleRow(
-            role=v.role,
-            x_m=float(w.x_m[0, i]),
-            y_m=float(w.y_m[0, i]),
-            v_m_s=float(w.v_m_s[0, i]),
-            phi_rad=float(w.phi_rad[0, i]),
-            cost=cost,
-            cost_total=float(w.cost_total[0, i]),
-            omega_cmd=v.last_action[0],
-            u_cmd=v.last_action[1],
-            armed=v.armed,
-            mode=v.mode.name,
-            failsafe=v.failsafe,
-        )
 
     def _vehicle_event(self, role: str, name: str, value: int, text: str | None = None) -> None:
         if self._truth is not None:
