@@ -80,7 +80,7 @@ class GpsReceiver:
             return None
         # Fixes due since the last step collapse into one, taken now (the world has no state in between).
         self._next_index = int(math.floor(time_s / self._period_s + _EPS_S)) + 1
-        u, n = self._rng.random(), self._rng.standard_normal(4)
+        u, n = self._rng.random(), self._rng.standard_normal(4).tolist()
         if u < self._dropout:
             self.dropouts += 1
             return None

@@ -382,13 +382,14 @@ class WorldRunner:
         self._paced = not self.lockstep
         self._barrier_wall = self._wall0
         self._last_output_wall = self._wall0
-        sockets = [link.endpoint for link in self.links]
-        readable: list[MavEndpoint] = sockets  # the first pass reads every socket, then those select saw readable
+        fds = [(link, link.endpoint.fileno()) for link in self.links]
+        sockets = [fd for _, fd in fds]
+        readable: list[int] = sockets  # the first pass reads every socket, then those select saw readable
         while not self._stop.is_set() and self._phase is not _Phase.DONE:
             now = time.monotonic()
             self._tick_clock(now)
-            for link in self.links:
-                link.poll_socket(receive=link.endpoint in readable)
+            for link, fd in fds:
+                link.poll_socket(receive=fd in readable)
             for link in self.links:
                 link.process_incoming()
             deadline = self._advance(now)
