@@ -220,11 +220,6 @@ def extended_sys_state(mav: MAV) -> Msg:
     return mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_IN_AIR)
 
 
-def system_time(mav: MAV, unix_start_s: float, time_s: float) -> Msg:
-    """SYSTEM_TIME (:func:`system_time_fields`)."""
-    return mav.system_time_encode(*system_time_fields(unix_start_s, time_s))
-
-
 def system_time_fields(unix_start_s: float, time_s: float) -> tuple[int, int]:
     """SYSTEM_TIME's fields (``system_time_encode``'s arguments): both clocks follow simulated time (unix time = start
     of the run + simulated time)."""
