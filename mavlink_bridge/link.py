@@ -376,11 +376,13 @@ class MavLink:
         self.counters.truncated_rx += scan.truncated
         self.counters.bad_data_rx += scan.bad_crc + scan.unknown_id
         accepted: list[Message] = []
+        verifier, decode = self._verifier, self._rx.decode
         for frame in scan.frames:
-            if self._verifier is not None and not self._signature_accepted(frame):
+            if verifier is not None and (verdict := verifier.check(frame)) is not Verdict.OK:
+                self._count_refused(verdict)
                 continue
             try:
-                msg = self._rx.decode(frame)
+                msg = decode(frame)
             except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
                 self.counters.bad_data_rx += 1
                 _log.debug("pymavlink failed on a frame: %r", exc)
@@ -388,11 +390,8 @@ class MavLink:
             accepted.append(msg)
         return accepted
 
-    def _signature_accepted(self, frame: bytes) -> bool:
-        assert self._verifier is not None
-        verdict = self._verifier.check(frame)
-        if verdict is Verdict.OK:
-            return True
+    def _count_refused(self, verdict: Verdict) -> None:
+        """Count a frame the verifier refused, by its verdict."""
         self.counters.signature_rejected += 1
         if verdict is Verdict.UNSIGNED:
             self.counters.unsigned_rx += 1
@@ -400,7 +399,6 @@ class MavLink:
             self.counters.bad_signature_rx += 1
         else:
             self.counters.replayed_rx += 1
-        return False
 
     # ------------------------------------------------------------------------------- send
 
