@@ -298,7 +298,7 @@ class MavLink:
         while not self._closed:
             # poll first (it returns at once if a datagram waits): an empty socket costs no failed recvfrom.
             try:
-                readable = self._poll.poll(remaining * 1000.0)  # milliseconds, rounded up
+                readable = self._poll.poll(remaining * units.MS_PER_S)  # milliseconds, rounded up
             except InterruptedError:  # a signal: let the caller look at its stop flag
                 return None
             if readable:
