@@ -23,7 +23,9 @@ Each hand-over is said to the vehicle in a STATUSTEXT (``"<role>: shield on, bac
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 
@@ -41,6 +43,10 @@ from tssac_core.sim.world_state import WorldState
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
 _TURN_NAMES = ("left", "right", "left braking", "right braking")
+
+Estimate: TypeAlias = tuple[tuple[float, float, float, float], tuple[float, float, float]]
+"""The filter's (x, y, v, phi) at a tick and its standard deviations of position (major axis, m), heading (rad) and
+speed (m/s)."""
 
 
 @dataclass
@@ -80,7 +86,7 @@ class CompanionShield:
         self.engaged = False
         self._unprotected = False
         self._held = np.zeros(2)
-        self._sent: deque[np.ndarray] = deque(maxlen=2000)
+        self._sent: deque[tuple[float, float]] = deque(maxlen=2000)
 
     def reset(self) -> None:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""
@@ -114,16 +120,16 @@ class CompanionShield:
         decision: bool,
         steps: int,
         proposed: np.ndarray,
-        state: tuple[float, float, float, float],
-        sigmas: tuple[float, float, float],
+        estimate: Callable[[], Estimate],
     ) -> tuple[np.ndarray, str | None]:
         """The action to send this tick and a STATUSTEXT to say (a hand-over), or None.
 
         ``decision``: a decision tick (the choice holds for ``steps`` ticks); otherwise the monitor's last choice
         is held. ``proposed``: the pilot's action, non-finite when there is none (it never passes).
-        ``sigmas``: the filter's standard deviations of position (major axis, m), heading (rad) and speed (m/s)."""
+        ``estimate()``: the filter's state and standard deviations (:data:`Estimate`), asked at decisions only."""
         text = None
         if decision:
+            state, sigmas = estimate()
             margin = companion_margin_m(self.cfg, self.speed_max_m_s, self.off_lockstep)
             lim = self.monitor.limits
             error = companion_error(self.cfg, lim, self.dt_s, *sigmas, lossy=self.lossy)
@@ -151,6 +157,7 @@ class CompanionShield:
                 self.counters.unprotected_steps += 1
         return self._held, text
 
-    def sent(self, action: np.ndarray) -> None:
-        """Record the command sent this tick, whatever sent it (the queue that ``pending`` is taken from)."""
-        self._sent.append(np.asarray(action, dtype=np.float64).copy())
+    def sent(self, action: tuple[float, float] | np.ndarray) -> None:
+        """Record the command [omega, u] sent this tick, whatever sent it (the queue that ``pending`` is taken
+        from)."""
+        self._sent.append((float(action[0]), float(action[1])))

@@ -19,16 +19,16 @@ axis and sign below is converted by :mod:`tssac_core.wire.units`, the functions 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from tssac_core.sim.scenario import Origin, VehicleSpec
 from tssac_core.wire import units
 from tssac_core.wire.geodetic import geodetic_to_local
 
 
-@dataclass(frozen=True)
-class Measurement:
-    """One position/velocity fix in the world frame, stamped with the vehicle's clock."""
+class Measurement(NamedTuple):
+    """One position/velocity fix in the world frame, stamped with the vehicle's clock (a named tuple: one is made
+    per step)."""
 
     t_s: float
     east_m: float
@@ -53,9 +53,8 @@ def from_global_position_int(
     return Measurement(units.s_from_ms(time_boot_ms), east, north, vel_east, vel_north)
 
 
-@dataclass(frozen=True)
-class Setpoint:
-    """What goes into SET_POSITION_TARGET_LOCAL_NED (BODY_FRD)."""
+class Setpoint(NamedTuple):
+    """What goes into SET_POSITION_TARGET_LOCAL_NED (BODY_FRD) (a named tuple: one is made per step)."""
 
     yaw_rate_rad_s: float
     """Clockwise-positive (NED)."""

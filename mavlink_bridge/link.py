@@ -208,9 +208,17 @@ class MavLink:
             self._sock.close()
             raise LinkError(f"connection {self.spec}: cannot open UDP socket ({exc.strerror or exc})") from None
         self._sock.setblocking(False)
+        self._poll = select.poll()
+        """Tells whether a datagram waits: cheaper than ``select.select`` and than a ``recvfrom`` that fails."""
+        self._poll.register(self._sock, select.POLLIN)
         self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         """Builds what we send and holds our identity, sequence and signing state."""
+        self._setpoint = self.mav.set_position_target_local_ned_encode(
+            0, 0, 0, SETPOINT_FRAME, SETPOINT_TYPE_MASK, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        )
+        """The one SET_POSITION_TARGET_LOCAL_NED :meth:`send_setpoint` fills in and packs (no object per step); the
+        fields it does not set stay as made here: frame, type mask, and 0.0 for what the mask ignores."""
         self._packer = FramePacker(DIALECT.crc16)
         """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
         self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
@@ -285,12 +293,12 @@ class MavLink:
         """The next message, waiting up to ``timeout_s`` (wall clock) for one; None if none came."""
         if self._backlog:
             return self._pop()
-        deadline = time.monotonic() + max(0.0, timeout_s)
         remaining = max(0.0, timeout_s)
+        deadline = time.monotonic() + remaining
         while not self._closed:
-            # select first (it returns at once if a datagram waits): an empty socket costs no failed recvfrom.
+            # poll first (it returns at once if a datagram waits): an empty socket costs no failed recvfrom.
             try:
-                readable = select.select([self._sock], [], [], remaining)[0]
+                readable = self._poll.poll(remaining * units.MS_PER_S)  # milliseconds, rounded up
             except InterruptedError:  # a signal: let the caller look at its stop flag
                 return None
             if readable:
@@ -321,7 +329,9 @@ class MavLink:
         """Read and parse every waiting datagram (non-blocking)."""
         if self._closed:
             return
-        for _ in range(max_datagrams):
+        for n in range(max_datagrams):
+            if n and not self._poll.poll(0):  # the socket is empty: no recvfrom to fail
+                return
             try:
                 data, addr = self._sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
@@ -335,7 +345,7 @@ class MavLink:
                 self._warn_rate_limited("recvfrom", self.counters.socket_errors_rx, exc)
                 return
             now = time.monotonic()
-            sender = (str(addr[0]), int(addr[1]))
+            sender: tuple[str, int] = addr  # (host, port): an AF_INET socket's address
             if self.spec.kind == "udpout" and sender != self._peer:
                 self.counters.foreign_rx += 1
                 continue
@@ -366,11 +376,13 @@ class MavLink:
         self.counters.truncated_rx += scan.truncated
         self.counters.bad_data_rx += scan.bad_crc + scan.unknown_id
         accepted: list[Message] = []
+        verifier, decode = self._verifier, self._rx.decode
         for frame in scan.frames:
-            if self._verifier is not None and not self._signature_accepted(frame):
+            if verifier is not None and (verdict := verifier.check(frame)) is not Verdict.OK:
+                self._count_refused(verdict)
                 continue
             try:
-                msg = self._rx.decode(frame)
+                msg = decode(frame)
             except Exception as exc:  # a pymavlink bug on hostile input must not take the companion down
                 self.counters.bad_data_rx += 1
                 _log.debug("pymavlink failed on a frame: %r", exc)
@@ -378,11 +390,8 @@ class MavLink:
             accepted.append(msg)
         return accepted
 
-    def _signature_accepted(self, frame: bytes) -> bool:
-        assert self._verifier is not None
-        verdict = self._verifier.check(frame)
-        if verdict is Verdict.OK:
-            return True
+    def _count_refused(self, verdict: Verdict) -> None:
+        """Count a frame the verifier refused, by its verdict."""
         self.counters.signature_rejected += 1
         if verdict is Verdict.UNSIGNED:
             self.counters.unsigned_rx += 1
@@ -390,7 +399,6 @@ class MavLink:
             self.counters.bad_signature_rx += 1
         else:
             self.counters.replayed_rx += 1
-        return False
 
     # ------------------------------------------------------------------------------- send
 
@@ -433,17 +441,12 @@ class MavLink:
         ``time_boot_ms`` echoes the newest vehicle time we acted on (a lockstep vehicle steps once
         every vehicle in the loop has a setpoint stamped for the current step).
         """
-        msg = self.mav.set_position_target_local_ned_encode(
-            int(time_boot_ms) & 0xFFFFFFFF,
-            self.target_system,
-            self.target_component,
-            SETPOINT_FRAME,
-            SETPOINT_TYPE_MASK,
-            0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0,
-            float(accel_m_s2), 0.0, 0.0,
-            0.0, float(yaw_rate_rad_s),
-        )  # fmt: skip
+        msg = self._setpoint
+        msg.time_boot_ms = int(time_boot_ms) & 0xFFFFFFFF
+        msg.target_system = self.target_system
+        msg.target_component = self.target_component
+        msg.afx = float(accel_m_s2)
+        msg.yaw_rate = float(yaw_rate_rad_s)
         return self.send(msg)
 
     # ------------------------------------------------------------------------------ waits

@@ -764,3 +764,29 @@ def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect
             header = vars(got).pop("_header")
             assert vars(header) == vars(vars(expected).pop("_header"))
             assert vars(got) == vars(expected), cls.msgname
+
+
+def test_frame_decoder_reads_a_payload_longer_than_its_message_as_pymavlink_does() -> None:
+    """A frame from a dialect with more extension fields than ours: its payload is longer than the message's struct;
+    both decoders read the struct's bytes and keep the whole payload in ``_payload``."""
+    from mavlink_bridge.link import DIALECT
+    from tssac_core.wire.framing import FrameDecoder, scan_frames
+
+    decoder = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+    for msg in (
+        M.MAVLink_local_position_ned_message(1500, 1.0, -2.0, 3.0, 4.0, -5.0, 6.0),
+        M.MAVLink_heartbeat_message(1, 3, 4, 5, 6, 3),
+    ):
+        frame = bytearray(msg.pack(M.MAVLink(None, srcSystem=2, srcComponent=1)))
+        payload = frame[10:-2] + bytes((7, 8, 9))  # three bytes of fields we do not know
+        header = bytes((frame[0], len(payload))) + frame[2:10]
+        crc = DIALECT.crc16(header[1:] + payload + bytes((type(msg).crc_extra,)))
+        longer = bytes(header + payload + crc.to_bytes(2, "little"))
+        assert scan_frames(longer, DIALECT).frames == [longer]
+        expected = M.MAVLink(None, srcSystem=255, srcComponent=191).decode(bytearray(longer))
+        got = decoder.decode(longer)
+        assert vars(vars(got).pop("_header")) == vars(vars(expected).pop("_header"))
+        assert vars(got) == vars(expected)
+        assert [getattr(got, name) for name in msg.get_fieldnames()] == [
+            getattr(msg, name) for name in msg.get_fieldnames()
+        ]

@@ -24,7 +24,7 @@ from mavlink_bridge.companion.config import (
 )
 from mavlink_bridge.companion.held_pilot import DecisionClock, HeldPilot, make_pilot
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
-from mavlink_bridge.companion_shield import CompanionShield
+from mavlink_bridge.companion_shield import CompanionShield, Estimate
 from mavlink_bridge.frames import (
     HOLD,
     Measurement,
@@ -536,7 +536,7 @@ class Companion:
         link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2)
         self.counters.setpoints_sent += 1
         if self.shield is not None:
-            self.shield.sent(np.array(setpoint_to_action(setpoint, self.spec)))
+            self.shield.sent(setpoint_to_action(setpoint, self.spec))
         if trigger_rx_s is not None:
             self.latencies_s.append(time.monotonic() - trigger_rx_s)
         if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
@@ -597,17 +597,19 @@ class Companion:
         ``repeat``; a tick skipped by a slow companion moves the decision to the next tick seen), whether or not
         the pilot was asked this tick."""
         assert self.shield is not None
-        f = self.filter
         decision = self._decisions.due(step)
-        x_m, y_m = f.pos_m
-        state = (x_m, y_m, f.speed_m_s, f.heading_rad)
-        action, text = self.shield.action(
-            decision, self.pilot.repeat, proposed, state, (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
-        )
+        action, text = self.shield.action(decision, self.pilot.repeat, proposed, self._monitor_estimate)
         if text is not None:
             _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
             self._say(M.MAV_SEVERITY_NOTICE, text)
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec)
+
+    def _monitor_estimate(self) -> Estimate:
+        """What the monitor decides on: the filter's (x, y, v, phi) and its sigmas of position (major axis), heading
+        and speed."""
+        f = self.filter
+        x_m, y_m = f.pos_m
+        return (x_m, y_m, f.speed_m_s, f.heading_rad), (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
 
     def _hold_reason(self, why: str) -> None:
         """Count and say (once per spell) what is amiss: the hold flies without the monitor, its backup with it."""

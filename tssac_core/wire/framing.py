@@ -38,6 +38,9 @@ HEADER_LEN_V1, HEADER_LEN_V2 = 6, 10
 SIGNATURE_LEN = 13
 IFLAG_SIGNED = 0x01
 _START_BYTES = (bytes((MAGIC_V2,)), bytes((MAGIC_V1,)))
+_MAGICS = frozenset((MAGIC_V2, MAGIC_V1))
+_ONE_BYTE = tuple(bytes((b,)) for b in range(256))
+"""``bytes((b,))`` for every byte value, made once."""
 
 
 def _crc16_table() -> tuple[int, ...]:
@@ -105,9 +108,10 @@ class Scan:
 def scan_frames(data: bytes, dialect: Dialect) -> Scan:
     """Every frame in ``data`` whose header, message id and CRC check out (module docstring)."""
     out = Scan()
+    crc_extras = dialect.crc_extras
     i, n = 0, len(data)
     while i < n:
-        if data[i] not in (MAGIC_V2, MAGIC_V1):
+        if data[i] not in _MAGICS:
             j = _next_start(data, i + 1)
             out.garbage_bytes += j - i
             i = j
@@ -122,7 +126,7 @@ def scan_frames(data: bytes, dialect: Dialect) -> Scan:
             i += 1  # it may be garbage that happens to hold a start byte: rescan past it
             continue
         frame = data[i : i + size]
-        crc_extra = dialect.crc_extras.get(message_id(frame))
+        crc_extra = crc_extras.get(message_id(frame))
         if crc_extra is None:
             out.unknown_id += 1
             i += 1
@@ -165,9 +169,8 @@ def source(frame: bytes) -> tuple[int, int]:
 
 def _crc_ok(frame: bytes, crc_extra: int, dialect: Dialect) -> bool:
     """The frame's checksum (header after the start byte, payload, CRC_EXTRA) matches."""
-    signed = frame[0] == MAGIC_V2 and bool(frame[2] & IFLAG_SIGNED)
-    end = len(frame) - (SIGNATURE_LEN if signed else 0)
-    return dialect.crc16(bytes(frame[1 : end - 2]) + bytes((crc_extra,))) == struct.unpack_from("<H", frame, end - 2)[0]
+    end = len(frame) - (SIGNATURE_LEN if frame[0] == MAGIC_V2 and frame[2] & IFLAG_SIGNED else 0)
+    return dialect.crc16(bytes(frame[1 : end - 2]) + _ONE_BYTE[crc_extra]) == frame[end - 2] | (frame[end - 1] << 8)
 
 
 def _next_start(data: bytes, start: int) -> int:
@@ -333,7 +336,8 @@ class FrameDecoder:
     def __init__(self, message_map: Mapping[int, Any], header: Callable[..., Any]) -> None:
         self._map = message_map
         self._header = header
-        self._arguments: dict[type, Callable[[tuple[Any, ...]], list[Any]]] = {}
+        self._arguments: dict[type, Callable[[tuple[Any, ...]], list[Any]] | None] = {}
+        """Per message class, what makes its constructor's arguments of the unpacked items; None: the items are."""
 
     def decode(self, frame: bytes) -> Any:
         if frame[0] == MAGIC_V2:
@@ -345,14 +349,17 @@ class FrameDecoder:
             seq, sysid, compid, msg_id = frame[2], frame[3], frame[4], frame[5]
         cls = self._map[msg_id]
         end = len(frame) - 2 - (SIGNATURE_LEN if incompat & IFLAG_SIGNED else 0)
-        payload = bytes(frame[header_len:end])
-        size = cls.unpacker.size
-        if len(payload) < size:
-            payload += bytes(size - len(payload))
-        arguments = self._arguments.get(cls)
-        if arguments is None:
+        unpacker = cls.unpacker
+        missing = unpacker.size - (end - header_len)
+        if missing > 0:  # MAVLink 2 cut the payload's trailing zeros: put them back
+            items = unpacker.unpack(frame[header_len:end] + bytes(missing))
+        else:
+            items = unpacker.unpack_from(frame, header_len)
+        try:
+            arguments = self._arguments[cls]
+        except KeyError:
             arguments = self._arguments[cls] = _constructor_arguments(cls)
-        msg = cls(*arguments(cls.unpacker.unpack(payload[:size])))
+        msg = cls(*items) if arguments is None else cls(*arguments(items))
         buf = bytearray(frame)
         msg._msgbuf = buf
         msg._payload = buf[6:end]  # pymavlink's offset, for MAVLink 1 and 2 alike
@@ -361,11 +368,14 @@ class FrameDecoder:
         return msg
 
 
-def _constructor_arguments(cls: Any) -> Callable[[tuple[Any, ...]], list[Any]]:
+def _constructor_arguments(cls: Any) -> Callable[[tuple[Any, ...]], list[Any]] | None:
     """Unpacked payload (wire order) -> constructor arguments: ``orders`` maps each argument to its wire field, numeric
-    arrays become lists, strings lose their trailing NULs."""
+    arrays become lists, strings lose their trailing NULs. None for a message of single numbers in wire order (the
+    step-rate SYSTEM_TIME and LOCAL_POSITION_NED among them): its items are its arguments."""
     orders, lengths = list(cls.orders), list(cls.lengths)
     strings = [i for i, t in enumerate(cls.fieldtypes) if t == "char"]
+    if not strings and orders == list(range(len(orders))) and sum(lengths) == len(lengths):
+        return None
     if sum(lengths) == len(lengths):  # no arrays: one wire item per field
         picks = [(o, 1) for o in orders]
     else:

@@ -166,6 +166,8 @@ class SignatureVerifier:
         if len(key) != KEY_LEN:
             raise ValueError(f"signing key must be {KEY_LEN} bytes, got {len(key)}")
         self._key = bytes(key)
+        self._keyed = hashlib.sha256(self._key)
+        """SHA-256 with the key already absorbed (copied for every frame)."""
         self.streams: dict[StreamKey, int] = {}
         """Newest verified timestamp per stream."""
         self.shared = shared
@@ -174,17 +176,22 @@ class SignatureVerifier:
 
     def signature_ok(self, frame: bytes | bytearray) -> bool:
         """The frame is signed and its signature is this key's (no state is read or changed)."""
-        if not is_signed(frame) or len(frame) < _HEADER_LEN_V2 + 2 + SIGNATURE_BLOCK_LEN:
+        return is_signed(frame) and self._signed_by_key(frame)
+
+    def _signed_by_key(self, frame: bytes | bytearray) -> bool:
+        """A frame flagged as signed carries this key's signature, ``SHA-256(key + frame[:-6])[:6]``."""
+        if len(frame) < _HEADER_LEN_V2 + 2 + SIGNATURE_BLOCK_LEN:
             return False
-        expected = hashlib.sha256(self._key + bytes(frame[:-6])).digest()[:6]
-        return hmac.compare_digest(expected, bytes(frame[-6:]))
+        h = self._keyed.copy()
+        h.update(frame[:-6])
+        return hmac.compare_digest(h.digest()[:6], frame[-6:])
 
     def check(self, frame: bytes | bytearray, now_unix_s: float | None = None) -> Verdict:
         """Verify one whole frame (CRC already checked); on OK the stream's timestamp moves forward."""
         if not is_signed(frame):
             self.counters.unsigned += 1
             return Verdict.UNSIGNED
-        if not self.signature_ok(frame):
+        if not self._signed_by_key(frame):  # one is_signed per frame: signature_ok would ask again
             self.counters.bad_signature += 1
             return Verdict.BAD_SIGNATURE
         # Only now, with the signature verified, is the timestamp worth anything.
