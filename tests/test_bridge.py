@@ -676,6 +676,18 @@ def _random_fields(cls: type, rng: np.random.Generator) -> list[object]:
     return args
 
 
+def _protocol_pair(sysid: int, link_id: int, signed: bool) -> tuple[M.MAVLink, M.MAVLink]:
+    """Two pymavlink protocol objects of system ``sysid`` in the same signing state: one whose signing state our packer
+    advances, one that packs the expected bytes."""
+    pair = (M.MAVLink(None, srcSystem=sysid, srcComponent=1), M.MAVLink(None, srcSystem=sysid, srcComponent=1))
+    if signed:
+        stamp = now_10us()
+        for mav in pair:
+            mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = bytes(range(32)), True, link_id
+            mav.signing.timestamp = stamp
+    return pair
+
+
 @pytest.mark.parametrize("signed", [False, True])
 def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(signed: bool) -> None:
     from mavlink_bridge.link import DIALECT
@@ -683,13 +695,7 @@ def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(si
 
     rng = np.random.default_rng(7)
     packer = FramePacker(DIALECT.crc16)
-    ours = M.MAVLink(None, srcSystem=3, srcComponent=1)
-    theirs = M.MAVLink(None, srcSystem=3, srcComponent=1)
-    if signed:
-        stamp = now_10us()
-        for mav in (ours, theirs):
-            mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = bytes(range(32)), True, 203
-            mav.signing.timestamp = stamp
+    ours, theirs = _protocol_pair(3, 203, signed)
     for _ in range(3):
         for cls in M.mavlink_map.values():
             msg = cls(*_random_fields(cls, rng))
@@ -711,13 +717,7 @@ def test_frame_packer_packs_fields_as_pymavlink_packs_the_message(signed: bool) 
 
     rng = np.random.default_rng(11)
     packer = FramePacker(DIALECT.crc16)
-    ours = M.MAVLink(None, srcSystem=2, srcComponent=1)
-    theirs = M.MAVLink(None, srcSystem=2, srcComponent=1)
-    if signed:
-        stamp = now_10us()
-        for mav in (ours, theirs):
-            mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = bytes(range(32)), True, 0
-            mav.signing.timestamp = stamp
+    ours, theirs = _protocol_pair(2, 0, signed)
     flat = [c for c in M.mavlink_map.values() if set(c.lengths) == {1} and "char" not in c.fieldtypes]
     assert any(c.orders != sorted(c.orders) for c in flat)  # reordering is exercised
     for _ in range(3):
