@@ -624,6 +624,21 @@ def test_companion_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.C
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "--layout-out" in proc.stderr
 
 
+def test_companion_waits_a_quarter_second_per_command_in_lockstep_and_a_second_otherwise() -> None:
+    """A lockstep world holding at its start answers a command at once, so a missing COMMAND_ACK was lost: the
+    companion asks again after 0.25 s instead of 1 s; an explicit --command-timeout-s wins either way."""
+    base = ["--connect", "udpout:127.0.0.1:9", "--role", "strike", "--pilot", "guidance", "--scenario", str(STRIKE)]
+
+    def timeout_s(*extra: str) -> float:
+        args = companion_cli.build_parser().parse_args([*base, *extra])
+        return companion_cli.config_from_args(args).command_timeout_s
+
+    assert timeout_s() == 1.0
+    assert timeout_s("--lockstep") == 0.25
+    assert timeout_s("--lockstep", "--command-timeout-s", "2") == 2.0
+    assert timeout_s("--command-timeout-s", "0.5") == 0.5
+
+
 @pytest.mark.timeout(60)
 def test_companion_without_a_vehicle_gives_up_with_exit_3(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

@@ -13,7 +13,13 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, NoReturn
 
-from mavlink_bridge.companion.config import EXIT_BAD_INPUT, PILOT_NAMES, CompanionConfig
+from mavlink_bridge.companion.config import (
+    COMMAND_TIMEOUT_S,
+    EXIT_BAD_INPUT,
+    LOCKSTEP_COMMAND_TIMEOUT_S,
+    PILOT_NAMES,
+    CompanionConfig,
+)
 from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.filter_model import FilterModel
 from mavlink_bridge.signing_key import read_signing_key
@@ -80,9 +86,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--command-timeout-s",
         type=float,
-        default=1.0,
         metavar="S",
-        help="wall seconds per COMMAND_ACK wait (default 1)",
+        help=f"wall seconds per COMMAND_ACK wait (default {COMMAND_TIMEOUT_S:g}, with --lockstep "
+        f"{LOCKSTEP_COMMAND_TIMEOUT_S:g}: a lockstep world holding at its start answers at once)",
     )
     p.add_argument("--command-retries", type=int, default=10, metavar="N", help="attempts per command (default 10)")
     p.add_argument(
@@ -135,6 +141,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _command_timeout_s(given: float | None, lockstep: bool) -> float:
+    """``--command-timeout-s``, else its default (:data:`LOCKSTEP_COMMAND_TIMEOUT_S` with ``--lockstep``)."""
+    if given is not None:
+        return given
+    return LOCKSTEP_COMMAND_TIMEOUT_S if lockstep else COMMAND_TIMEOUT_S
+
+
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     scenario = load(args.scenario)
     if scenario.layout is None:
@@ -156,7 +169,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         status_json=args.status_json,
         lockstep=args.lockstep,
         connect_timeout_s=args.timeout_s,
-        command_timeout_s=args.command_timeout_s,
+        command_timeout_s=_command_timeout_s(args.command_timeout_s, args.lockstep),
         command_retries=args.command_retries,
         hold_after_s=args.hold_after_s,
         silence_hold_s=args.silence_hold_s,

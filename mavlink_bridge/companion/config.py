@@ -28,6 +28,13 @@ END_SILENCE_S = 0.5
 END_CONFIRM_S = 2.0
 """... or once it has reported nothing but POWEROFF heartbeats for this long since the announcement (wall s)."""
 
+COMMAND_TIMEOUT_S = 1.0
+"""Wall seconds a command waits for its COMMAND_ACK before it is sent again (``--command-timeout-s``)."""
+LOCKSTEP_COMMAND_TIMEOUT_S = 0.25
+"""The same with ``--lockstep``: a lockstep world holding at its start carries every frame across its link at once
+(only a lost one does not arrive), so an answer that has not come in a quarter second was lost. An answer that is only
+late still counts for the next attempt's wait."""
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3
@@ -53,7 +60,7 @@ class CompanionConfig:
     """The vehicle runs in lockstep: never extrapolate its clock."""
     connect_timeout_s: float = 30.0
     """Wall seconds to wait for the first heartbeat."""
-    command_timeout_s: float = 1.0
+    command_timeout_s: float = COMMAND_TIMEOUT_S
     """Wall seconds to wait for each COMMAND_ACK."""
     command_retries: int = 10
     """Attempts per command. A 10% lossy link (degraded.yaml, each way) loses 19% of command round
