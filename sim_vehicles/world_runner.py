@@ -287,6 +287,7 @@ class WorldRunner:
                 raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         c = self.world.c
+        initial = _WorldState.of(self.world)
         for i, role in enumerate(ROLES):
             endpoint = self._endpoints[i]
             start = self.layout.starts[role.value]
@@ -318,7 +319,7 @@ class WorldRunner:
             link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
             link.add_outputs(config.outputs)
             link.handler = CommandHandler(vehicle, link)
-            vehicle.observe(_WorldState.of(self.world).truth(i, 0.0, float(self.world.v_m_s[0, i]), s.dt_s))
+            vehicle.observe(initial.truth(i, 0.0, initial.v_m_s[i], s.dt_s))
             self.vehicles.append(vehicle)
             self.links.append(link)
         if config.truth_log is not None:
