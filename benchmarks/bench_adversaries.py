@@ -105,7 +105,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
     p.add_argument("--adversaries", default=",".join(ADVERSARY_NAMES), help="comma-separated (default: all)")
     p.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="batched missions per adversary/scenario")
     p.add_argument("--sitl-missions", type=int, default=DEFAULT_SITL_MISSIONS, help="SITL missions per ... (0: none)")
-    p.add_argument("--workers", type=int, default=2, help="Ray workers for the batched and the SITL missions")
+    p.add_argument("--workers", type=int, default=2, help="Ray workers (batched) and crews (SITL)")
     p.add_argument("--seed", type=int, default=SEED, help=f"start of the seed range (default {SEED:,})")
     p.add_argument("--episode-steps", type=int, help="cap every mission at N steps (default: the scenario's)")
     p.add_argument(

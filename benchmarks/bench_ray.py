@@ -296,9 +296,9 @@ def bench_evaluate_warm(layouts: int, rounds: int) -> dict[str, Any]:
 
 
 def bench_fly(work: Path, missions: int, speedup: float | None = None) -> dict[str, Any]:
-    """Serial against ``--workers 2``: lockstep (``speedup`` None: each mission as fast as the CPUs allow, the
-    same missions both ways) or real time times ``speedup`` (each mission paced by the clock, so its figures may
-    vary with timing: ``same_missions`` is then a finding, not a requirement)."""
+    """Serial against ``--workers 2 --executor ray``: lockstep (``speedup`` None: each mission as fast as the CPUs
+    allow, the same missions both ways) or real time times ``speedup`` (each mission paced by the clock, so its
+    figures may vary with timing: ``same_missions`` is then a finding, not a requirement)."""
     clock = ["--speedup", f"{speedup:g}"] if speedup is not None else []
     base = [
         PYTHON,
@@ -316,7 +316,7 @@ def bench_fly(work: Path, missions: int, speedup: float | None = None) -> dict[s
         *clock,
     ]
     runs: dict[str, float] = {}
-    for name, extra in (("serial", []), ("workers2", ["--workers", "2"])):
+    for name, extra in (("serial", []), ("workers2", ["--workers", "2", "--executor", "ray"])):
         print(f"  {name} (load {load()})", flush=True)
         runs[name], _ = timed([*base, *extra, "--json", str(work / f"fly-{name}.json")])
         print(f"    {runs[name]:.1f} s, {missions / runs[name]:.3f} missions/s", flush=True)

@@ -13,13 +13,14 @@ from __future__ import annotations
 import atexit
 import ctypes
 import ctypes.util
+import functools
 import logging
 import os
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -29,15 +30,27 @@ _log = logging.getLogger(__name__)
 _PR_SET_PDEATHSIG = 1
 
 
-def _die_with_parent() -> None:
-    """preexec_fn: SIGTERM this child when the parent dies (Linux); a no-op elsewhere."""
+@functools.cache
+def _libc() -> ctypes.CDLL | None:
+    """The C library, for ``prctl`` (Linux; None elsewhere or when it cannot be loaded). Loaded in the parent, once:
+    finding it runs ``ldconfig``, which a child between fork and exec must not (nor anything that takes a lock
+    another thread of the parent may hold)."""
     if not sys.platform.startswith("linux"):
-        return
+        return None
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
     except OSError:
-        pass
+        return None
+
+
+def _die_with_parent(libc: ctypes.CDLL) -> Callable[[], None]:
+    """A preexec_fn: SIGTERM this child when the parent thread that started it ends (Linux's parent-death signal
+    follows the thread; fly's threads stop their children before they end)."""
+
+    def preexec() -> None:
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+
+    return preexec
 
 
 @dataclass
@@ -77,6 +90,7 @@ class ChildProcesses:
     ) -> Child:
         """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``; stdin is piped
         (``stdin_pipe``) or empty."""
+        libc = _libc()
         log: IO[bytes] | None = None
         if log_path is not None:
             log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -90,7 +104,7 @@ class ChildProcesses:
                 cwd=cwd,
                 env=env,
                 start_new_session=True,
-                preexec_fn=_die_with_parent,
+                preexec_fn=None if libc is None else _die_with_parent(libc),
             )
         finally:
             if log is not None:

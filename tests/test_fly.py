@@ -330,6 +330,87 @@ def test_a_killed_fly_leaves_no_orphans(tmp_path: Path) -> None:
     assert not [pid for pid in pids if _alive(pid)]
 
 
+# ------------------------------------------------------------------- crews side by side
+
+
+def _truth_steps(log: Path) -> list[str]:
+    return [line for line in log.read_text().splitlines() if line.startswith('{"type":"step"')]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_two_crews_side_by_side_fly_the_serial_missions(tmp_path: Path) -> None:
+    """``fly --workers 2``: two crews of this process, each taking the next mission as it ends; the rows and every
+    truth log's steps are the serial run's, mission by mission."""
+    args = ["--scenario", str(RANDOM), "--models", str(DEFAULT_MODELS), "--episodes", "3", "--seed", "41"]
+    args += ["--no-progress"]
+    runs = {}
+    for name, extra in (("serial", []), ("side", ["--workers", "2"])):
+        assert fly.main([*args, *extra, "--json", str(tmp_path / f"{name}.json"), "--logs", str(tmp_path / name)]) == 0
+        runs[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    keys = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_done")
+    serial, side = ([{k: m[k] for k in keys} for m in runs[name]["missions"]] for name in ("serial", "side"))
+    assert side == serial and [m["seed"] for m in serial] == [41, 42, 43]
+    assert len({m["steps"] for m in serial}) == 3  # three different missions, not one three times
+    for i in range(3):
+        truth = [_truth_steps(tmp_path / name / f"mission-{i:03d}" / "truth.jsonl") for name in ("serial", "side")]
+        assert truth[0] and truth[0] == truth[1], i
+    worlds = [m["pids"]["sitl"] for m in runs["side"]["missions"]]
+    assert len(set(worlds)) == 2  # two crews, one of which flew two missions
+    assert runs["side"]["missions"][0]["cpu_s"] is not None  # a kept crew's CPU is read per process
+    assert not [pid for pid in _pids(runs["side"]) if _alive(pid)]
+
+
+def _two_crews_flying(tmp_path: Path, out: Path) -> tuple[subprocess.Popen[bytes], list[list[int]]]:
+    """``fly --workers 2`` of eight short guidance missions, once both crews fly: the process and each crew's
+    pids (world, decoy, detect, strike)."""
+    proc = _start_fly(
+        ["--scenario", str(_quick_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance", "--episodes", "8"]
+        + ["--workers", "2", "--json", str(out), "--no-progress"]
+    )
+    started = r"mission \d+: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)"
+    log, _ = _read_until(proc, f"{started}[\\s\\S]*{started}", 150)
+    crews = [[int(p) for p in m.groups()] for m in re.finditer(started, log)]
+    time.sleep(1.0)  # both in flight
+    return proc, crews
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_sigterm_stops_both_crews_and_writes_the_finished_missions(tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc, crews = _two_crews_flying(tmp_path, out)
+    try:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    assert proc.returncode == 130, err.decode()[-2000:]
+    results = json.loads(out.read_text())
+    assert results["interrupted"] is True and results["episodes"] < 8 and results["episodes_requested"] == 8
+    assert all(m["success"] for m in results["missions"])
+    assert len(crews) == 2 and not [pid for crew in crews for pid in crew if _alive(pid)]
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(240)
+def test_a_crash_in_one_crew_stops_both(tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc, crews = _two_crews_flying(tmp_path, out)
+    try:
+        os.kill(crews[1][3], signal.SIGKILL)  # the second crew's strike companion dies
+        _, err_b = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    err = err_b.decode()
+    assert proc.returncode == 1, err[-2000:]
+    errors = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "companion strike" in errors[0] and "signal 9 (SIGKILL)" in errors[0], errors
+    results = json.loads(out.read_text())
+    assert "companion strike" in results["error"] and results["episodes"] < 8
+    assert not [pid for crew in crews for pid in crew if _alive(pid)]
+
+
 # ----------------------------------------------------------------------------- bad input
 
 
@@ -395,6 +476,7 @@ def test_fly_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.Capture
         ),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--signing-key", str(bad)], "signing key"),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--speedup", "2", "--lockstep"], "not allowed"),
+        (["--scenario", str(STRIKE), "--pilot", "guidance", "--executor", "local", "--address", "h:1"], "executor ray"),
         (["--scenario", str(STRIKE), "--pilot", "guidance", "--no-signing", "--signing-key", str(STRIKE)], "signing"),
         (["--scenario", str(REPO / "scenarios" / "signed.yaml"), "--pilot", "guidance", "--no-signing"], "signing"),
     ]

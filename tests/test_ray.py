@@ -112,13 +112,14 @@ def test_sharded_evaluation_equals_the_serial_one(local_ray, tmp_path):
 
 @pytest.mark.sitl
 def test_fly_on_workers_flies_the_serial_missions(local_ray, tmp_path):
-    """``fly --workers 2``: each SITL mission a Ray task on its own ports; the rows, in index order, those of the
-    serial run (lockstep: the same steps, end, cost), from processes of their own."""
+    """``fly --workers 2 --executor ray``: each SITL mission a Ray task on its own ports; the rows, in index order,
+    those of the serial run (lockstep: the same steps, end, cost), from processes of their own."""
     from mavlink_bridge.fly.cli import main as fly_main
 
     args = ["--scenario", "scenarios/random.yaml", "--pilot", "guidance", "--episodes", "2", "--seed", "41"]
     assert fly_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
-    assert fly_main([*args, "--no-progress", "--workers", "2", "--json", str(tmp_path / "workers.json")]) == 0
+    argv = [*args, "--no-progress", "--workers", "2", "--executor", "ray", "--json", str(tmp_path / "workers.json")]
+    assert fly_main(argv) == 0
     serial, workers = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("serial", "workers"))
     keys = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_done")
     rows = [[{k: m[k] for k in keys} for m in run["missions"]] for run in (serial, workers)]
@@ -147,13 +148,14 @@ def _descendants(pid: int) -> set[int]:
 
 @pytest.mark.sitl
 def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
-    """SIGTERM to ``fly --workers 2`` (its own Ray) ends it as Ctrl-C does: exit 130, the JSON of the missions
-    finished so far, and every process it started gone, its crews' and Ray's (``ray.init`` had put Ray's own
-    SIGTERM handler, ``sys.exit``, in place of fly's: no JSON, and Ray's node agent orphaned)."""
+    """SIGTERM to ``fly --workers 2 --executor ray`` (its own Ray) ends it as Ctrl-C does: exit 130, the JSON of the
+    missions finished so far, and every process it started gone, its crews' and Ray's (``ray.init`` had put Ray's
+    own SIGTERM handler, ``sys.exit``, in place of fly's: no JSON, and Ray's node agent orphaned)."""
     out = tmp_path / "fly.json"
     args = ["--scenario", "scenarios/random.yaml", "--pilot", "guidance", "--episodes", "40", "--seed", "41"]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "mavlink_bridge.fly", *args, "--workers", "2", "--no-progress", "--json", str(out)],
+        [sys.executable, "-m", "mavlink_bridge.fly", *args, "--workers", "2", "--executor", "ray", "--no-progress"]
+        + ["--json", str(out)],
         cwd=ROOT,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

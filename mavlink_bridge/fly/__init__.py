@@ -31,7 +31,11 @@ outcome comes from the companions (the vehicles' HIT / MSN_END notices) and the 
 Exit status: 0 when every mission was flown (whatever its outcome), 2 on bad input (one line), 1
 when a child crashed or a mission timed out, 130 when interrupted.
 
-Modules: ``config`` (FlyConfig, the command line's arguments) · ``missions`` (starts and watches one
-mission's processes) · ``scoring`` (a mission's outcome and the results JSON) · ``report`` (the printed
-summary and the plot) · ``cli`` (``python -m mavlink_bridge.fly``).
+``--workers N`` flies N missions at once: N crews side by side in the fly process (``side_by_side``), or with
+``--executor ray`` / ``--address`` N Ray tasks (``workers``); either way the rows are the serial run's.
+
+Modules: ``config`` (FlyConfig, the command line's arguments) · ``mission_runner`` (starts and watches one
+mission's processes) · ``crew`` (the processes kept across a campaign) · ``side_by_side`` and ``workers``
+(missions at once) · ``scoring`` (a mission's outcome and the results JSON) · ``report`` (the printed
+summary and the plot) · ``pool`` (campaigns pooled) · ``cli`` (``python -m mavlink_bridge.fly``).
 """

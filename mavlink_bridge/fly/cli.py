@@ -20,6 +20,7 @@ from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
+from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.common.cli import BAD_INPUT, EXIT_BAD_INPUT, EXIT_INTERRUPTED, bad_input_line, write_json
@@ -83,6 +84,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             if cfg.on_ray:
                 fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
+            elif cfg.workers > 1:
+                fly_side_by_side(cfg, cfg.workers, work, record)
             else:
                 runner = MissionRunner(cfg, children, work)
                 try:

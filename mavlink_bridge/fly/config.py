@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import enum
 import math
 import os
 from collections.abc import Sequence
@@ -22,6 +23,17 @@ from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Scenario, load
 
 PROG = "python -m mavlink_bridge.fly"
+
+
+class Executor(enum.Enum):
+    """Where ``--workers N`` flies its missions side by side."""
+
+    LOCAL = "local"
+    """N crews in the fly process, one thread each (:mod:`mavlink_bridge.fly.side_by_side`): no Ray to start."""
+    RAY = "ray"
+    """N Ray tasks at once (:mod:`mavlink_bridge.fly.workers`): on a Ray fly starts, or the cluster of ``--address``."""
+
+
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MODELS = REPO / "models" / "tssac"
 PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
@@ -70,9 +82,11 @@ class FlyConfig:
         return range(self.mission, self.mission + 1) if self.mission is not None else range(self.episodes)
 
     workers: int = 1
-    """Missions at once, each a Ray task (1: one after the other, here, without Ray)."""
+    """Missions at once (1: one after the other, here)."""
+    executor: Executor = Executor.LOCAL
+    """Where the missions fly side by side: crews in this process, or Ray tasks."""
     ray_address: str | None = None
-    """An existing Ray cluster for the missions (None: a Ray started inside the command when workers > 1)."""
+    """An existing Ray cluster for the missions (None: with the Ray executor, a Ray started inside the command)."""
     animate_path: Path | None = None
     """``--animate``: each mission as a .gif or .mp4 film (tssac_core.reporting.mission_animation)."""
     persistent: bool = True
@@ -81,7 +95,7 @@ class FlyConfig:
 
     @property
     def on_ray(self) -> bool:
-        return self.workers > 1 or self.ray_address is not None
+        return self.executor is Executor.RAY
 
 
 class _Parser(argparse.ArgumentParser):
@@ -212,14 +226,20 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=1,
         metavar="N",
-        help="fly N missions at once, each a Ray task on its own ports (default 1: one after the other, without "
-        "Ray); the same results as one after the other",
+        help="fly N missions at once, each with its own world and companions on their own ports (default 1: one "
+        "after the other); the same results as one after the other",
+    )
+    p.add_argument(
+        "--executor",
+        choices=[e.value for e in Executor],
+        help="where --workers flies: local (the default: N crews of processes side by side, started by this "
+        "command) or ray (N Ray tasks, on a Ray this command starts, or the cluster of --address)",
     )
     p.add_argument(
         "--address",
         metavar="HOST:PORT",
-        help="fly the missions on this existing Ray cluster (default with --workers: a Ray started inside the "
-        "command); --models, --logs, --tlog and --plot must be on a filesystem every node sees",
+        help="fly the missions on this existing Ray cluster (implies --executor ray); --models, --logs, --tlog and "
+        "--plot must be on a filesystem every node sees",
     )
     p.add_argument(
         "--fresh-processes",
@@ -270,8 +290,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
                 raise UsageError(str(exc)) from None
         if a.episodes != 1:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
-        if a.workers != 1 or a.address is not None:
-            raise UsageError("--connect flies the running vehicles from here: no --workers or --address")
+        if a.workers != 1 or a.address is not None or a.executor is not None:
+            raise UsageError("--connect flies the running vehicles from here: no --workers, --executor or --address")
         if scenario.layout is None:
             raise UsageError(
                 f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
@@ -283,6 +303,9 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
                 "(not with --connect)"
             )
         connect = (a.connect[0], a.connect[1], a.connect[2])
+    if a.address is not None and a.executor == Executor.LOCAL.value:
+        raise UsageError("--address is a Ray cluster: it flies with --executor ray, not local")
+    executor = Executor.RAY if a.address is not None else Executor(a.executor or Executor.LOCAL.value)
     # A world fly starts runs in lockstep unless --speedup; vehicles it did not start are taken to run in
     # real time unless --lockstep says otherwise (a companion must not extrapolate a lockstep clock).
     lockstep = a.lockstep or (a.speedup is None and connect is None)
@@ -310,6 +333,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         shield=a.shield,
         signing=not a.no_signing,
         workers=a.workers,
+        executor=executor,
         ray_address=a.address,
         persistent=not a.fresh_processes,
     )

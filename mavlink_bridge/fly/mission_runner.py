@@ -93,10 +93,13 @@ def child_failure(what: str, child: Child, rc: int, when: str = "") -> str:
 class MissionRunner:
     """Starts and watches the processes of each mission (see the module docstring)."""
 
-    def __init__(self, cfg: FlyConfig, children: ChildProcesses, work_dir: Path) -> None:
+    def __init__(self, cfg: FlyConfig, children: ChildProcesses, work_dir: Path, children_cpu: bool = True) -> None:
+        """``children_cpu`` False: other runners' children end in this process too, so the CPU of a mission of fresh
+        processes (taken from every reaped child's usage) is not known (None); a kept crew's is read per process."""
         self.cfg = cfg
         self.children = children
         self.work_dir = work_dir
+        self.children_cpu = children_cpu
         self.env = _child_env()
         self.crew: Crew | None = None
         """The processes kept alive across missions (``cfg.persistent``), None until the first or after a failure."""
@@ -145,7 +148,7 @@ class MissionRunner:
             pids.update({c.name: c.pid for c in companions})
             _log.info("mission %d: started %s", index, " ".join(f"{k}={v}" for k, v in pids.items()))
             timed_out = self._watch(index, sitl, companions, t0)
-            cpu_s = _children_cpu_s() - cpu0
+            cpu_s = _children_cpu_s() - cpu0 if self.children_cpu else None
         wall_s = time.monotonic() - t0
         statuses = {c.name: self._companion_status(c, mdir) for c in companions}
         row: dict[str, Any] = {
