@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from mavlink_bridge.fly.config import config_from_args
+from mavlink_bridge.fly.config import DEFAULT_MODELS, config_from_args
 from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError
@@ -153,7 +153,7 @@ def _steps(record: Path) -> list[dict[str, Any]]:
 
 def _fly_json(tmp_path: Path, name: str, *extra: str) -> dict[str, Any]:
     out = tmp_path / f"{name}.json"
-    argv = ["--scenario", str(RANDOM), "--pilot", "guidance", "--episodes", "2", "--seed", "31"]
+    argv = ["--scenario", str(RANDOM), "--models", str(DEFAULT_MODELS), "--episodes", "2", "--seed", "31"]
     argv += ["--logs", str(tmp_path / name), "--json", str(out), "--no-progress", *extra]
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv], cwd=REPO, capture_output=True, text=True, timeout=400

@@ -116,7 +116,7 @@ def test_fly_on_workers_flies_the_serial_missions(local_ray, tmp_path):
     those of the serial run (lockstep: the same steps, end, cost), from processes of their own."""
     from mavlink_bridge.fly.cli import main as fly_main
 
-    args = ["--scenario", "scenarios/random.yaml", "--pilot", "guidance", "--episodes", "2", "--seed", "41"]
+    args = ["--scenario", "scenarios/random.yaml", "--models", "models/tssac", "--episodes", "2", "--seed", "41"]
     assert fly_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
     argv = [*args, "--no-progress", "--workers", "2", "--executor", "ray", "--json", str(tmp_path / "workers.json")]
     assert fly_main(argv) == 0
