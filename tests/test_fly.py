@@ -283,6 +283,21 @@ def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_pat
     assert len(running) == 4 and not [pid for pid in running if _alive(pid)]  # one crew flew both missions
 
 
+def _error_after_killing(proc: subprocess.Popen[bytes], pid: int, role: str) -> str:
+    """SIGKILL ``role``'s companion ``pid`` of a running ``fly``: fly exits 1 with one error line, which names the
+    companion and the signal (returned)."""
+    try:
+        os.kill(pid, signal.SIGKILL)
+        _, err_b = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    err = err_b.decode()
+    assert proc.returncode == 1, err[-2000:]
+    errors = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and f"companion {role}" in errors[0] and "killed by signal 9 (SIGKILL)" in errors[0], errors
+    return errors[0]
+
+
 @pytest.mark.sitl
 @pytest.mark.timeout(240)
 def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
@@ -292,15 +307,11 @@ def test_fly_stops_everything_when_a_companion_crashes(tmp_path: Path) -> None:
         _, match = _read_until(proc, r"mission 0: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)", 120)
         pids = [int(p) for p in match.groups()]
         time.sleep(2.0)  # in flight
-        os.kill(pids[2], signal.SIGKILL)  # the detect UAV's companion dies
-        _, err_b = proc.communicate(timeout=60)
-    finally:
+    except BaseException:
         _stop(proc)
-    err = err_b.decode()
-    assert proc.returncode == 1, err[-2000:]
-    errors = [ln for ln in err.splitlines() if "error:" in ln]
-    assert len(errors) == 1 and "companion detect" in errors[0] and "killed by signal 9 (SIGKILL)" in errors[0], errors
-    assert "its last log line: " in errors[0] or errors[0].endswith("its log is empty")
+        raise
+    error = _error_after_killing(proc, pids[2], "detect")  # the detect UAV's companion dies
+    assert "its last log line: " in error or error.endswith("its log is empty")
     results = json.loads(out.read_text())
     assert results["error"] and "companion detect" in results["error"]
     # The crew is kept across missions, so the kill may land in a later mission than the first (a lockstep mission
@@ -369,7 +380,11 @@ def _two_crews_flying(tmp_path: Path, out: Path) -> tuple[subprocess.Popen[bytes
         + ["--workers", "2", "--json", str(out), "--no-progress"]
     )
     started = r"mission \d+: started sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)"
-    log, _ = _read_until(proc, f"{started}[\\s\\S]*{started}", 150)
+    try:
+        log, _ = _read_until(proc, f"{started}[\\s\\S]*{started}", 150)
+    except BaseException:
+        _stop(proc)
+        raise
     crews = [[int(p) for p in m.groups()] for m in re.finditer(started, log)]
     time.sleep(1.0)  # both in flight
     return proc, crews
@@ -397,15 +412,7 @@ def test_sigterm_stops_both_crews_and_writes_the_finished_missions(tmp_path: Pat
 def test_a_crash_in_one_crew_stops_both(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"
     proc, crews = _two_crews_flying(tmp_path, out)
-    try:
-        os.kill(crews[1][3], signal.SIGKILL)  # the second crew's strike companion dies
-        _, err_b = proc.communicate(timeout=60)
-    finally:
-        _stop(proc)
-    err = err_b.decode()
-    assert proc.returncode == 1, err[-2000:]
-    errors = [ln for ln in err.splitlines() if "error:" in ln]
-    assert len(errors) == 1 and "companion strike" in errors[0] and "signal 9 (SIGKILL)" in errors[0], errors
+    _error_after_killing(proc, crews[1][3], "strike")  # the second crew's strike companion dies
     results = json.loads(out.read_text())
     assert "companion strike" in results["error"] and results["episodes"] < 8
     assert not [pid for crew in crews for pid in crew if _alive(pid)]
