@@ -12,6 +12,10 @@ trees alternate, so that a machine's noise hits them alike. Per run it reports:
 
 and, with ``--compare-truth``, whether every mission's truth log has the same step rows in every tree.
 
+With ``--repeats K`` each tree flies K times per worker count, the trees in turn and in the reverse order every
+other time (this machine gave the third slot of a run the slowest figure twice), and each figure is the median over
+the repeats (``missions_per_hour_each`` keeps every run's).
+
     git worktree add --detach /tmp/main-tree main
     python benchmarks/bench_campaign.py --tree main=/tmp/main-tree --tree new=. --missions 20 \\
         --json benchmarks/results/campaign.json
@@ -77,6 +81,27 @@ def figures(result: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+MEDIAN_KEYS = (
+    "command_wall_s",
+    "missions_per_hour",
+    "mission_wall_s_mean",
+    "cpu_s_per_sim_s",
+    "speed_x_in_flight_median",
+    "latency_p50_ms",
+    "latency_p99_ms",
+)
+
+
+def median_figures(repeats: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several runs of one tree as one row: the median of each figure, every run's missions per hour."""
+    out = dict(repeats[0])
+    for key in MEDIAN_KEYS:
+        values = [r[key] for r in repeats if r[key] is not None]
+        out[key] = round(float(np.median(values)), 5) if values else None
+    out["missions_per_hour_each"] = [r["missions_per_hour"] for r in repeats]
+    return out
+
+
 def truth_steps(logs: Path) -> dict[str, list[str]]:
     """Every mission's step rows (as written), by mission directory."""
     out = {}
@@ -96,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=5000)
     p.add_argument("--fly-arg", action="append", default=[], help="one more fly argument for every tree")
     p.add_argument("--compare-truth", action="store_true", help="check the truth logs' step rows across trees")
+    p.add_argument("--repeats", type=int, default=1, help="runs per tree and worker count, in alternating order")
     p.add_argument("--timeout-s", type=float, default=7200.0)
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
@@ -110,38 +136,45 @@ def main(argv: list[str] | None = None) -> int:
         "missions": args.missions,
         "scenario": str(args.scenario),
         "seed": args.seed,
+        "repeats": args.repeats,
         "runs": {},
     }
     with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
         for workers in [int(w) for w in args.workers.split(",")]:
-            runs = {}
-            steps = {}
-            for name, tree in trees.items():
-                out = Path(tmp) / f"{name}-w{workers}"
-                out.mkdir()
-                runs[name] = figures(fly(tree, args, workers, out))
-                if args.compare_truth:
-                    steps[name] = truth_steps(out / "logs")
-                print(f"workers={workers} {name}: {json.dumps({k: v for k, v in runs[name].items() if k != 'steps'})}")
+            each: dict[str, list[dict[str, Any]]] = {name: [] for name in trees}
+            steps: dict[str, list[dict[str, list[str]]]] = {name: [] for name in trees}
+            for repeat in range(args.repeats):
+                order = list(trees) if repeat % 2 == 0 else list(reversed(trees))
+                for name in order:
+                    out = Path(tmp) / f"{name}-w{workers}-r{repeat}"
+                    out.mkdir()
+                    each[name].append(figures(fly(trees[name], args, workers, out)))
+                    if args.compare_truth:
+                        steps[name].append(truth_steps(out / "logs"))
+                    shown = {k: v for k, v in each[name][-1].items() if k != "steps"}
+                    print(f"workers={workers} {name} (run {repeat + 1}): {json.dumps(shown)}", flush=True)
+            runs = {name: median_figures(each[name]) for name in trees}
             first = next(iter(trees))
             for name in trees:
                 runs[name]["missions_per_hour_ratio"] = round(
                     runs[name]["missions_per_hour"] / runs[first]["missions_per_hour"], 2
                 )
                 if args.compare_truth:
-                    runs[name]["truth_steps_equal_to_" + first] = steps[name] == steps[first]
+                    runs[name]["truth_steps_equal_to_" + first] = all(s == steps[first][0] for s in steps[name])
             report["runs"][f"workers={workers}"] = runs
     print()
     print(
-        "| workers | tree | missions/h | x first | mission wall s | CPU s per sim s | x real time | p50 ms | p99 ms |"
+        "| workers | tree | missions/h | each run | x first | mission wall s | CPU s per sim s | x real time | p50 ms "
+        "| p99 ms |"
     )
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for key, runs in report["runs"].items():
         for name, f in runs.items():
+            each = ", ".join(f"{m:g}" for m in f["missions_per_hour_each"])
             print(
-                f"| {key.split('=')[1]} | {name} | {f['missions_per_hour']} | {f['missions_per_hour_ratio']} | "
-                f"{f['mission_wall_s_mean']} | {f['cpu_s_per_sim_s']} | {f['speed_x_in_flight_median']} | "
-                f"{f['latency_p50_ms']} | {f['latency_p99_ms']} |"
+                f"| {key.split('=')[1]} | {name} | {f['missions_per_hour']:g} | {each} | "
+                f"{f['missions_per_hour_ratio']} | {f['mission_wall_s_mean']} | {f['cpu_s_per_sim_s']} | "
+                f"{f['speed_x_in_flight_median']} | {f['latency_p50_ms']} | {f['latency_p99_ms']} |"
             )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
