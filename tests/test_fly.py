@@ -352,11 +352,11 @@ def _truth_steps(log: Path) -> list[str]:
 @pytest.mark.timeout(240)
 def test_two_crews_side_by_side_fly_the_serial_missions(tmp_path: Path) -> None:
     """``fly --workers 2``: two crews of this process, each taking the next mission as it ends; the rows and every
-    truth log's steps are the serial run's, mission by mission."""
+    truth log's steps are the serial run's, mission by mission, and each mission's plot is drawn."""
     args = ["--scenario", str(RANDOM), "--models", str(DEFAULT_MODELS), "--episodes", "3", "--seed", "41"]
     args += ["--no-progress"]
     runs = {}
-    for name, extra in (("serial", []), ("side", ["--workers", "2"])):
+    for name, extra in (("serial", []), ("side", ["--workers", "2", "--plot", str(tmp_path / "side.png")])):
         assert fly.main([*args, *extra, "--json", str(tmp_path / f"{name}.json"), "--logs", str(tmp_path / name)]) == 0
         runs[name] = json.loads((tmp_path / f"{name}.json").read_text())
     keys = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_done")
@@ -368,6 +368,8 @@ def test_two_crews_side_by_side_fly_the_serial_missions(tmp_path: Path) -> None:
         assert truth[0] and truth[0] == truth[1], i
     worlds = [m["pids"]["sitl"] for m in runs["side"]["missions"]]
     assert len(set(worlds)) == 2  # two crews, one of which flew two missions
+    assert [Path(m["plot"]).name for m in runs["side"]["missions"]] == [f"side-{i:03d}.png" for i in range(3)]
+    assert all(Path(m["plot"]).stat().st_size > 10_000 for m in runs["side"]["missions"])  # drawn one at a time
     assert runs["side"]["missions"][0]["cpu_s"] is not None  # a kept crew's CPU is read per process
     assert not [pid for pid in _pids(runs["side"]) if _alive(pid)]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +81,10 @@ def mission_title(cfg: FlyConfig, index: int, record: MissionRecord) -> str:
     return f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}"
 
 
+PYPLOT_LOCK = threading.Lock()
+"""pyplot keeps its figures in global state: crews side by side (threads of one fly process) draw one at a time."""
+
+
 def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: MissionRecord) -> Path:
     """Draw one mission's trajectories and events (``--plot``: FILE, or FILE-NNN.ext when there are several);
     returns the file written."""
@@ -88,16 +93,17 @@ def plot_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: Miss
     assert cfg.plot_path is not None
     path = mission_file(cfg, cfg.plot_path, index, ".png")
     r = cfg.scenario.ranges
-    plot_mission(
-        path,
-        layout,
-        record.tracks_km(),
-        (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
-        record.event_markers_km(),
-        title=mission_title(cfg, index, record),
-        area_km=cfg.scenario.area_km,
-        backup_km=record.backup_segments_km(),
-    )
+    with PYPLOT_LOCK:
+        plot_mission(
+            path,
+            layout,
+            record.tracks_km(),
+            (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km),
+            record.event_markers_km(),
+            title=mission_title(cfg, index, record),
+            area_km=cfg.scenario.area_km,
+            backup_km=record.backup_segments_km(),
+        )
     return path
 
 
@@ -120,4 +126,5 @@ def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: M
         },
         title=mission_title(cfg, index, record),
     )
-    return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix))
+    with PYPLOT_LOCK:
+        return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix))
