@@ -95,11 +95,6 @@ def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -
     )
 
 
-def local_position_ned(mav: MAV, fix: GpsFix) -> Msg:
-    """LOCAL_POSITION_NED of a GPS fix (:func:`local_position_ned_fields`)."""
-    return mav.local_position_ned_encode(*local_position_ned_fields(fix))
-
-
 def local_position_ned_fields(fix: GpsFix) -> tuple[int, float, float, float, float, float, float]:
     """LOCAL_POSITION_NED's fields (``local_position_ned_encode``'s arguments) of a GPS fix: x north = world y,
     y east = world x, z 0 (flight altitude)."""

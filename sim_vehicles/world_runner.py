@@ -109,7 +109,6 @@ class _WorldState:
     phi_rad: list[float]
     active: list[bool]
     cost_total: list[float]
-    turn_rate_max_rad_s: list[float]
 
     @classmethod
     def of(cls, w: World) -> _WorldState:
@@ -120,18 +119,17 @@ class _WorldState:
             phi_rad=w.phi_rad[0].tolist(),
             active=w.active[0].tolist(),
             cost_total=w.cost_total[0].tolist(),
-            turn_rate_max_rad_s=w.c.turn_rate_max_rad_s.tolist(),
         )
 
-    def truth(self, i: int, turn: float, v_before_m_s: float, dt_s: float) -> VehicleTruth:
-        """Vehicle ``i``'s true state, given the turn it was commanded (in [-1, 1] before clipping) and its speed
-        before the step."""
+    def truth(self, i: int, turn: float, turn_rate_max_rad_s: float, v_before_m_s: float, dt_s: float) -> VehicleTruth:
+        """Vehicle ``i``'s true state, given the turn it was commanded (in [-1, 1] before clipping), its turn-rate
+        limit and its speed before the step."""
         return VehicleTruth(
             east_m=self.x_m[i],
             north_m=self.y_m[i],
             speed_m_s=self.v_m_s[i],
             phi_rad=self.phi_rad[i],
-            turn_rate_rad_s=_clip_unit(turn) * self.turn_rate_max_rad_s[i] if self.active[i] else 0.0,
+            turn_rate_rad_s=_clip_unit(turn) * turn_rate_max_rad_s if self.active[i] else 0.0,
             accel_m_s2=(self.v_m_s[i] - v_before_m_s) / dt_s,
         )
 
@@ -288,6 +286,7 @@ class WorldRunner:
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         c = self.world.c
         initial = _WorldState.of(self.world)
+        self._turn_rate_max_rad_s: list[float] = c.turn_rate_max_rad_s.tolist()  # the vehicles' limits, per mission
         for i, role in enumerate(ROLES):
             endpoint = self._endpoints[i]
             start = self.layout.starts[role.value]
@@ -319,7 +318,7 @@ class WorldRunner:
             link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
             link.add_outputs(config.outputs)
             link.handler = CommandHandler(vehicle, link)
-            vehicle.observe(initial.truth(i, 0.0, initial.v_m_s[i], s.dt_s))
+            vehicle.observe(initial.truth(i, 0.0, self._turn_rate_max_rad_s[i], initial.v_m_s[i], s.dt_s))
             self.vehicles.append(vehicle)
             self.links.append(link)
         if config.truth_log is not None:
@@ -582,7 +581,8 @@ class WorldRunner:
         state = _WorldState.of(w)
         turn = actions[0, :, 0].tolist()
         for v, link in zip(self.vehicles, self.links, strict=True):
-            v.observe(state.truth(v.index, turn[v.index], v_before[v.index], self.dt_s))
+            i = v.index
+            v.observe(state.truth(i, turn[i], self._turn_rate_max_rad_s[i], v_before[i], self.dt_s))
             # Each vehicle's telemetry leaves before the next vehicle's is built and before the
             # bookkeeping below: its client starts on the step while the world finishes it.
             link.publish(tick=self.lockstep)
