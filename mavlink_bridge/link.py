@@ -53,6 +53,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from tssac_core.wire import units
 from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames
+from tssac_core.wire.lockstep import GRANT_NAME
 from tssac_core.wire.signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
 
 __all__ = [
@@ -219,6 +220,8 @@ class MavLink:
         )
         """The one SET_POSITION_TARGET_LOCAL_NED :meth:`send_setpoint` fills in and packs (no object per step); the
         fields it does not set stay as made here: frame, type mask, and 0.0 for what the mask ignores."""
+        self._grant = self.mav.named_value_int_encode(0, GRANT_NAME.encode(), 0)
+        """The one lockstep grant :meth:`send_setpoint` fills in and sends beside a setpoint."""
         self._packer = FramePacker(DIALECT.crc16)
         """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
         self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
@@ -406,12 +409,20 @@ class MavLink:
         """Pack (and sign) one message and send it; False if the socket refused it (counted, logged)."""
         if self._closed:
             return False
+        return self._send_frames(self._pack(msg))
+
+    def _pack(self, msg: Message) -> bytes:
+        """One frame of ``msg``, packed (and signed) with our next sequence number, into the tlog if we keep one."""
         mav = self.mav
         if self._verifier is not None:
             refresh_outgoing_timestamp(mav.signing)
         buf = self._packer.pack(msg, mav.seq, mav.srcSystem, mav.srcComponent, mav.signing)
         mav.seq = (mav.seq + 1) % 256
         self._log_frame(buf)
+        return buf
+
+    def _send_frames(self, buf: bytes, frames: int = 1) -> bool:
+        """Send ``frames`` packed frames in one datagram; False if the socket refused it (counted, logged)."""
         if self._peer is None:  # udpin before anyone has spoken to us
             return False
         try:
@@ -420,7 +431,7 @@ class MavLink:
             self.counters.socket_errors_tx += 1
             self._warn_rate_limited("sendto", self.counters.socket_errors_tx, exc)
             return False
-        self.counters.messages_tx += 1
+        self.counters.messages_tx += frames
         self.counters.bytes_tx += len(buf)
         return True
 
@@ -434,20 +445,31 @@ class MavLink:
         """STATUSTEXT (cut to one 50-character chunk)."""
         return self.send(self.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
 
-    def send_setpoint(self, time_boot_ms: int, yaw_rate_rad_s: float, accel_m_s2: float) -> bool:
+    def send_setpoint(
+        self, time_boot_ms: int, yaw_rate_rad_s: float, accel_m_s2: float, granted_through_ms: int | None = None
+    ) -> bool:
         """SET_POSITION_TARGET_LOCAL_NED: forward acceleration ``afx`` (m/s^2) and ``yaw_rate`` (rad/s,
         clockwise-positive, NED), frame BODY_FRD, type mask :data:`SETPOINT_TYPE_MASK`.
 
         ``time_boot_ms`` echoes the newest vehicle time we acted on (a lockstep vehicle steps once
-        every vehicle in the loop has a setpoint stamped for the current step).
+        every vehicle in the loop has a setpoint stamped for the current step). ``granted_through_ms``: a lockstep
+        grant (:mod:`tssac_core.wire.lockstep`) in the same datagram, the ticks up to it answered by this setpoint.
         """
+        if self._closed:
+            return False
         msg = self._setpoint
-        msg.time_boot_ms = int(time_boot_ms) & 0xFFFFFFFF
+        msg.time_boot_ms = stamp = int(time_boot_ms) & 0xFFFFFFFF
         msg.target_system = self.target_system
         msg.target_component = self.target_component
         msg.afx = float(accel_m_s2)
         msg.yaw_rate = float(yaw_rate_rad_s)
-        return self.send(msg)
+        buf = self._pack(msg)
+        if granted_through_ms is None:
+            return self._send_frames(buf)
+        grant = self._grant
+        grant.time_boot_ms = stamp
+        grant.value = int(granted_through_ms)
+        return self._send_frames(buf + self._pack(grant), frames=2)
 
     # ------------------------------------------------------------------------------ waits
 

@@ -13,7 +13,8 @@ Lockstep credit: a setpoint that reaches the socket credits the barrier with the
 ``time_boot_ms``); the newest step tick (SYSTEM_TIME) the outgoing channel has delivered is the step a client can
 have seen. A vehicle in the loop holds the world once its client has answered a tick since it took control
 (:attr:`VehicleLink.holds_world`), and the world steps when every such client has answered the newest tick
-(:meth:`VehicleLink.answered`).
+(:meth:`VehicleLink.answered`). A client may also grant the ticks up to a later one beside its setpoint
+(:mod:`tssac_core.wire.lockstep`): they count as answered, and the setpoint is flown through them.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
 from sim_vehicles.setpoints import Demand, Refusal, parse_attitude_target, parse_position_target
 from sim_vehicles.vehicle import Vehicle
 from tssac_core.wire import units
+from tssac_core.wire.lockstep import GRANT_NAME
 
 M = mavlink2  # message ids and enums
 _SYSTEM_TIME_MS = mavlink2.MAVLink_system_time_message.fieldnames.index("time_boot_ms")
@@ -62,6 +64,9 @@ class LockstepCredit:
     """Newest step tick (SYSTEM_TIME) the datalink has delivered to the clients."""
     entry_ms: int = -1
     """``answered_ms`` when the vehicle last came under companion control (it holds the world once that grows)."""
+    granted_ms: int = -1
+    """Last tick a client's grant counts as answered (:mod:`tssac_core.wire.lockstep`); forgotten when the vehicle
+    comes under control again."""
 
 
 class _StepOccurrences:
@@ -126,6 +131,7 @@ class VehicleLink:
     def took_control(self) -> None:
         """The vehicle has come under companion control (:class:`sim_vehicles.vehicle.Radio`)."""
         self.credit.entry_ms = self.credit.answered_ms
+        self.credit.granted_ms = -1
 
     @property
     def holds_world(self) -> bool:
@@ -138,7 +144,18 @@ class VehicleLink:
 
     def answered(self) -> bool:
         """Lockstep: a client has answered the newest step tick the datalink delivered (see :meth:`poll_socket`)."""
-        return self.credit.answered_ms >= self.credit.tick_seen_ms
+        c = self.credit
+        return max(c.answered_ms, c.granted_ms) >= c.tick_seen_ms
+
+    def _grant(self, msg: mavlink2.MAVLink_message, stamp_ms: int) -> None:
+        """A client's lockstep grant beside a setpoint stamped ``stamp_ms`` in the same datagram: the ticks after the
+        stamp up to the grant's ``value`` count as answered."""
+        if msg.get_msgId() != M.MAVLINK_MSG_ID_NAMED_VALUE_INT or msg.name != GRANT_NAME:
+            return
+        if int(msg.time_boot_ms) != stamp_ms or msg.value <= stamp_ms:
+            return
+        c = self.credit
+        c.granted_ms = max(c.granted_ms, int(msg.value))
 
     def _credit(self, msg: mavlink2.MAVLink_message) -> bool:
         """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now)."""
@@ -192,9 +209,14 @@ class VehicleLink:
             if parsed.sender is None:
                 continue  # nothing accepted: it never reaches the vehicle, and its sender is nobody
             key = None
+            credited: int | None = None  # the stamp of a setpoint that credited a tick: a grant beside it may follow
             for msg in parsed.messages:
-                if self._credit(msg) and not self.rx.ideal:
-                    stamp = int(msg.time_boot_ms)
+                if credited is not None and parsed.sender is Sender.CLIENT:
+                    self._grant(msg, credited)
+                if self._credit(msg):
+                    stamp = credited = int(msg.time_boot_ms)
+                    if self.rx.ideal:
+                        continue
                     if len(self._rx_setpoints) > 256:  # only recent stamps matter; clients may send any
                         self._rx_setpoints.clear()
                     n = self._rx_setpoints[stamp] = self._rx_setpoints.get(stamp, -1) + 1

@@ -215,6 +215,14 @@ class Client:
             stamp, target, 0, frame, mask, 0, 0, 0, 0, 0, 0, accel_m_s2, 0, 0, 0, yaw_rate_rad_s
         )
 
+    def send_together(self, *msgs: mavlink2.MAVLink_message) -> None:
+        """Several messages in one datagram, each packed (and signed) with its own sequence number."""
+        frames = []
+        for msg in msgs:
+            frames.append(msg.pack(self.mav))
+            self.mav.seq = (self.mav.seq + 1) % 256
+        self.conn.write(b"".join(frames))
+
     def collect(self, duration_s: float) -> list[mavlink2.MAVLink_message]:
         """Everything received in the next ``duration_s`` seconds."""
         out = []

@@ -34,6 +34,7 @@ from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
 from tssac_core.wire.geodetic import local_to_geodetic
+from tssac_core.wire.lockstep import GRANT_NAME
 from tssac_core.wire.signing import now_10us
 from tssac_core.wire.truth_log_schema import read_truth_log
 from tssac_core.wire.units import deg_e7
@@ -533,25 +534,36 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.timeout(180)
-def test_companion_flies_a_trained_checkpoint_holding_its_actions(tmp_path: Path, tiny_checkpoint: Path) -> None:
+@pytest.mark.parametrize("grant_s", ["0", "1"])
+def test_companion_flies_a_trained_checkpoint_holding_its_actions(
+    tmp_path: Path, tiny_checkpoint: Path, grant_s: str
+) -> None:
+    """action_repeat 5: one decision every 5 ticks, held in between; answered at every tick (``--lockstep-grant-s
+    0``), or once per decision with a lockstep grant of the 4 ticks to the next one (tssac_core.wire.lockstep)."""
     model = tiny_checkpoint
     scen_file = _scenario_file(tmp_path)
+    argv = ("--model", str(model), "--lockstep", "--duration-s", "3", "--lockstep-grant-s", grant_s)
     with sitl(load(scen_file), **lockstep()) as s, UdpRelay(s.ports[0]) as relay:
-        with CompanionProcess(
-            tmp_path, relay.port, scen_file, "--model", str(model), "--lockstep", "--duration-s", "3"
-        ) as comp:
+        with CompanionProcess(tmp_path, relay.port, scen_file, *argv) as comp:
             code, text = comp.wait(90)
             assert code == 0 and "status=duration" in text, comp.log()
         s.stop()
     setpoints = {m.time_boot_ms: (m.yaw_rate, m.afx) for _, m in relay.sent("SET_POSITION_TARGET_LOCAL_NED")}
-    assert sorted(setpoints) == [100 * k for k in range(31)]
+    grants = {m.time_boot_ms: m.value for _, m in relay.sent("NAMED_VALUE_INT") if m.name == GRANT_NAME}
+    status = json.loads((tmp_path / "decoy.status.json").read_text())
+    if grant_s == "0":
+        assert sorted(setpoints) == [100 * k for k in range(31)] and grants == {}
+        for k in range(31):
+            assert setpoints[100 * k] == setpoints[100 * (k - k % 5)]
+    else:
+        assert sorted(setpoints) == [500 * k for k in range(7)]
+        assert grants == {500 * k: 500 * k + 400 for k in range(6)}  # none with the flight's last answer
+        assert status["counters"]["ticks_granted"] == 24
+    assert status["counters"]["control_steps"] == 31
     spec = scenario().vehicle(Role.DECOY)
     for yaw_rate, afx in setpoints.values():
         assert math.isfinite(yaw_rate) and abs(yaw_rate) <= math.radians(spec.turn_rate_max_deg_s) + 1e-6
         assert abs(afx) <= spec.accel_max_m_s2 + 1e-6
-    # action_repeat 5: one decision every 5 ticks, held in between.
-    for k in range(31):
-        assert setpoints[100 * k] == setpoints[100 * (k - k % 5)]
     decisions = {setpoints[100 * k] for k in range(0, 31, 5)}
     assert len(decisions) > 1
     # The first decision is the policy's action on the observation training builds for the start state

@@ -17,6 +17,7 @@ from mavlink_bridge.companion.config import (
     COMMAND_TIMEOUT_S,
     EXIT_BAD_INPUT,
     LOCKSTEP_COMMAND_TIMEOUT_S,
+    LOCKSTEP_GRANT_S,
     PILOT_NAMES,
     CompanionConfig,
 )
@@ -76,6 +77,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tlog", type=Path, metavar="FILE", help="write every message received and sent to this .tlog")
     p.add_argument("--status-json", type=Path, metavar="FILE", help="write the final status here")
     p.add_argument("--lockstep", action="store_true", help="the vehicle runs in lockstep: never extrapolate its clock")
+    p.add_argument(
+        "--lockstep-grant-s",
+        type=float,
+        default=LOCKSTEP_GRANT_S,
+        metavar="S",
+        help=f"lockstep over a link that loses nothing: answer only when the setpoint may change, granting the vehicle "
+        f"up to S seconds of ticks in between (default {LOCKSTEP_GRANT_S:g}; 0: answer every tick)",
+    )
     p.add_argument(
         "--timeout-s",
         type=float,
@@ -168,6 +177,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         tlog=args.tlog,
         status_json=args.status_json,
         lockstep=args.lockstep,
+        lockstep_grant_s=args.lockstep_grant_s,
         connect_timeout_s=args.timeout_s,
         command_timeout_s=_command_timeout_s(args.command_timeout_s, args.lockstep),
         command_retries=args.command_retries,

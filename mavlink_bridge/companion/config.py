@@ -35,6 +35,10 @@ LOCKSTEP_COMMAND_TIMEOUT_S = 0.25
 (only a lost one does not arrive), so an answer that has not come in a quarter second was lost. An answer that is only
 late still counts for the next attempt's wait."""
 
+LOCKSTEP_GRANT_S = 1.0
+"""Under lockstep, the most vehicle time a setpoint answers for ahead (:mod:`tssac_core.wire.lockstep`): a trained
+pilot holds each action for 10 ticks (1 s), and the vehicle's setpoint timeout is at least 1 s."""
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3
@@ -58,6 +62,10 @@ class CompanionConfig:
     """Write the final status (counters, latencies) here."""
     lockstep: bool = False
     """The vehicle runs in lockstep: never extrapolate its clock."""
+    lockstep_grant_s: float = LOCKSTEP_GRANT_S
+    """Under lockstep over a link that loses and reorders nothing, answer a tick only when the setpoint may change,
+    granting the vehicle the ticks up to this many seconds ahead in between (:mod:`tssac_core.wire.lockstep`);
+    0: answer every tick."""
     connect_timeout_s: float = 30.0
     """Wall seconds to wait for the first heartbeat."""
     command_timeout_s: float = COMMAND_TIMEOUT_S
@@ -111,6 +119,8 @@ class CompanionConfig:
             raise UsageError("--lost-after-s must be longer than --silence-hold-s")
         if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
+        if not (math.isfinite(self.lockstep_grant_s) and self.lockstep_grant_s >= 0):
+            raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {self.lockstep_grant_s:g}")
         if self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
         if self.pilot and self.pilot not in PILOT_NAMES:

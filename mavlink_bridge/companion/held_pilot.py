@@ -34,6 +34,11 @@ class DecisionClock:
     def reset(self) -> None:
         self._next = 0
 
+    @property
+    def next_step(self) -> int:
+        """The next decision tick on the grid (after the ticks seen so far)."""
+        return self._next
+
     def due(self, step: int, force: bool = False) -> bool:
         """Whether ``step`` is a decision tick (``force``: it is, whatever the grid says); moves the grid on."""
         if force or step >= self._next:
@@ -69,6 +74,13 @@ class HeldPilot:
             self._held = np.asarray(self.pilot.actions(state(), role_index)[0], dtype=np.float64).reshape(2)
         assert self._held is not None
         return self._held
+
+    def next_decision_step(self, step: int) -> int:
+        """The first tick after ``step`` (asked already) at which the action may change: the next one for a pilot that
+        decides every tick or holds nothing, else its next decision tick."""
+        if self.repeat == 1 or self._held is None:
+            return step + 1
+        return max(step + 1, self._clock.next_step)
 
 
 def policy_pilot(path: Path, role: Role) -> PolicyPilot:

@@ -38,6 +38,7 @@ from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.sim.world_state import WorldState, initial_state
+from tssac_core.wire.lockstep import granted_through_ms
 from tssac_core.wire.mission_events import (
     FLAGS,
     HIT_TEXT,
@@ -130,6 +131,14 @@ class Companion:
             max_accel_m_s2=self.spec.accel_max_m_s2,
             max_turn_rate_rad_s=math.radians(self.spec.turn_rate_max_deg_s),
         )
+        lossless = link_model.packet_loss == 0 and link_model.reordering == 0
+        self._grants = config.lockstep and config.lockstep_grant_s > 0 and lossless
+        """Answer only when the setpoint may change (:mod:`tssac_core.wire.lockstep`): lockstep over a link that loses
+        and reorders nothing, where an answer at every tick would repeat the one before."""
+        self._max_grant_ms = int(config.lockstep_grant_s * 1000.0)
+        self._fixes_every_tick = link_model.gps_dropout_prob == 0 and link_model.gps_rate_hz * s.dt_s >= 1.0 - 1e-9
+        """A position fix comes with every tick (no GPS dropout, a fix per step): the telemetry-gap hold cannot fire
+        while a grant runs."""
         self.counters = CompanionCounters()
         self.latencies_s: list[float] = []
         self._first_control_wall_s: float | None = None
@@ -168,6 +177,8 @@ class Companion:
         self.rate: float | None = None  # vehicle seconds per wall second
         self._holding: str | None = None  # why we hold, while we do
         self._gap_seen = False  # a gap happened since the last fix: re-engage a disarmed vehicle
+        self._sent: Setpoint | None = None  # the setpoint sent last
+        self._granted_ms: int | None = None  # the last tick it answers for (a lockstep grant), None: its own tick
         self.pilot.reset()
 
     def run(self, link: MavLink | None = None) -> CompanionResult:
@@ -230,6 +241,10 @@ class Companion:
                 self._engage()
             msg = link.recv(self._wait_s())
             while msg is not None:
+                if self._grants and self._tick_due() and getattr(msg, "time_boot_ms", -1) > (self.vt_ms or 0):
+                    # A world running through granted ticks sends them back to back: each tick is controlled before
+                    # anything of a later one is read, as if the world had waited for its answer.
+                    self._maybe_control(time.monotonic())
                 self._handle(msg)
                 msg = link.recv(0.0)
             now = time.monotonic()
@@ -533,14 +548,57 @@ class Companion:
                 self._holding = None
         else:
             self._hold_reason(why)
-        link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2)
-        self.counters.setpoints_sent += 1
+        if self._granted_ms is not None and t_ms <= self._granted_ms and setpoint == self._sent:
+            self.counters.ticks_granted += 1  # answered by the setpoint sent with the grant
+        else:
+            self._send_setpoint(t_ms, setpoint, None if why is not None else self._grant_ms(t_ms))
+            if trigger_rx_s is not None:
+                self.latencies_s.append(time.monotonic() - trigger_rx_s)
         if self.shield is not None:
             self.shield.sent(setpoint_to_action(setpoint, self.spec))
-        if trigger_rx_s is not None:
-            self.latencies_s.append(time.monotonic() - trigger_rx_s)
-        if self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s:
+        if self._duration_over(t_ms):
             raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
+
+    def _send_setpoint(self, t_ms: int, setpoint: Setpoint, granted_through_ms: int | None) -> None:
+        link = self._link
+        assert link is not None
+        link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2, granted_through_ms)
+        self.counters.setpoints_sent += 1
+        self._sent = setpoint
+        self._granted_ms = granted_through_ms
+
+    def _grant_ms(self, t_ms: int) -> int | None:
+        """The last tick a setpoint sent at tick ``t_ms`` answers for (None: only its own): up to the pilot's and
+        the monitor's next decision, no further than ``lockstep_grant_s``, and no tick at which the telemetry-gap
+        hold could fire or the flight's duration ends."""
+        if not self._grants:
+            return None
+        step = t_ms // self.dt_ms
+        next_step = self.pilot.next_decision_step(step)
+        if self.shield is not None:
+            next_step = min(next_step, max(step + 1, self._decisions.next_step))
+        last_ms = granted_through_ms(t_ms, self.dt_ms, next_step * self.dt_ms, self._max_grant_ms)
+        if last_ms is None or (self._fixes_every_tick and self.cfg.duration_s is None):
+            return last_ms
+        if self._duration_over(t_ms):
+            return None  # this tick's answer is the flight's last
+        granted_ms = t_ms
+        for tick_ms in range(t_ms + self.dt_ms, last_ms + 1, self.dt_ms):
+            if not self._fixes_every_tick and self._gap_s(tick_ms) > self.cfg.hold_after_s:
+                break  # the gap hold could fire here if no fix comes
+            granted_ms = tick_ms
+            if self._duration_over(tick_ms):
+                break  # the flight ends with this tick's answer
+        return granted_ms if granted_ms > t_ms else None
+
+    def _gap_s(self, t_ms: int) -> float:
+        """Vehicle seconds from the last position fix to tick ``t_ms``, if no fix came in between."""
+        return t_ms / 1000.0 - self.filter.last_measurement_t_s
+
+    def _duration_over(self, t_ms: int) -> bool:
+        """``--duration-s`` of flight is over at tick ``t_ms``."""
+        assert self.fly_start_ms is not None
+        return self.cfg.duration_s is not None and (t_ms - self.fly_start_ms) / 1000.0 >= self.cfg.duration_s
 
     def _decide(self, t_ms: int) -> tuple[Setpoint, str | None]:
         """The setpoint for vehicle time t_ms, and what is amiss (None if nothing is).
@@ -550,10 +608,9 @@ class Companion:
         never passes, so the remembered backup flies (as in the batched world)."""
         if not self.filter.initialised:
             return HOLD, "no position fix yet"
-        t_s = t_ms / 1000.0
-        self.filter.predict_to(t_s)
+        self.filter.predict_to(t_ms / 1000.0)
         step = int(t_ms // self.dt_ms)
-        gap_s = t_s - self.filter.last_measurement_t_s
+        gap_s = self._gap_s(t_ms)
         if gap_s > self.cfg.hold_after_s:
             self._gap_seen = True
             gap = f"telemetry gap {gap_s:.1f} s"
@@ -638,8 +695,7 @@ class Companion:
             # With the monitor the vehicle is sent again the command the monitor chose for this tick (a new one
             # could start nowhere the monitor checked); without it, the hold.
             sp = HOLD if self.shield is None else action_to_setpoint(tuple(self.shield.held), self.spec)
-            link.send_setpoint(self.vt_ms or 0, sp.yaw_rate_rad_s, sp.accel_m_s2)
-            self.counters.setpoints_sent += 1
+            self._send_setpoint(self.vt_ms or 0, sp, None)
 
     def _say(self, severity: int, text: str) -> None:
         if self._link is not None:

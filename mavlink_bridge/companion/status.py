@@ -11,6 +11,8 @@ from mavlink_bridge.companion.config import EXIT_OK, EXIT_VEHICLE
 class CompanionCounters:
     control_steps: int = 0
     setpoints_sent: int = 0
+    ticks_granted: int = 0
+    """Lockstep ticks answered by a grant sent with an earlier setpoint (no setpoint of their own)."""
     extrapolated_steps: int = 0
     """Control steps on an extrapolated vehicle clock (no telemetry)."""
     holds: int = 0

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
+from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.common.cli import UsageError
@@ -62,6 +63,8 @@ class FlyConfig:
     progress: bool
     lean_telemetry: bool = False
     """The companions stop the streams they do not read (:func:`lean_telemetry`)."""
+    lockstep_grant_s: float = LOCKSTEP_GRANT_S
+    """Under lockstep, the companions' ``--lockstep-grant-s`` (0: they answer every tick)."""
     pilot: str = GUIDANCE
     """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
@@ -199,6 +202,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)",
     )
+    p.add_argument(
+        "--lockstep-grant-s",
+        type=float,
+        default=LOCKSTEP_GRANT_S,
+        metavar="S",
+        help=f"lockstep over a link that loses nothing: each companion answers only when its setpoint may change, "
+        f"granting its vehicle up to S seconds of ticks in between (default {LOCKSTEP_GRANT_S:g}; 0: every tick)",
+    )
     streams = p.add_mutually_exclusive_group()
     streams.add_argument(
         "--lean-telemetry",
@@ -265,6 +276,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
         raise UsageError("--mission-timeout-s must be positive")
+    if not (math.isfinite(a.lockstep_grant_s) and a.lockstep_grant_s >= 0):
+        raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {a.lockstep_grant_s:g}")
     if a.animate is not None:
         try:
             check_target(a.animate)
@@ -329,6 +342,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         startup_timeout_s=60.0,
         progress=not a.no_progress,
         lean_telemetry=lean_telemetry(a.lean_telemetry, a.full_telemetry, lockstep, connect is None),
+        lockstep_grant_s=a.lockstep_grant_s,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
         signing=not a.no_signing,

@@ -273,7 +273,7 @@ class MissionRunner:
             if cfg.shield:
                 argv += ["--shield"]
             if cfg.lockstep:
-                argv += ["--lockstep"]
+                argv += ["--lockstep", "--lockstep-grant-s", repr(cfg.lockstep_grant_s)]
             if cfg.lean_telemetry:
                 argv += ["--lean-telemetry"]
             if cfg.tlog_dir is not None:
@@ -448,6 +448,8 @@ class MissionRunner:
                 "flight_wall_s": data.get("flight_wall_s"),
                 "flight_cpu_s": data.get("flight_cpu_s"),
                 "control_steps": counters.get("control_steps"),
+                "setpoints_sent": counters.get("setpoints_sent"),
+                "ticks_granted": counters.get("ticks_granted"),
                 "holds": counters.get("holds"),
                 "restarts": counters.get("restarts"),
                 "latency_p50_ms": lat.get("p50"),
