@@ -118,6 +118,8 @@ class VehicleLink:
         self._rx_in_step = _StepOccurrences()
         """Other messages received per message id at the current step time: the occurrence part of their datagram's
         key."""
+        self._keeps_order_when_batched = link.reordering == 0
+        """Frames released later leave in the order they would have left one by one (no reordering holds)."""
         self._last_setpoint: tuple[mavlink2.MAVLink_message, Demand | Refusal] | None = None
         """The setpoint message parsed last, and what it asks for (:meth:`setpoint`)."""
         vehicle.radio = self
@@ -146,6 +148,11 @@ class VehicleLink:
         """Lockstep: a client has answered the newest step tick the datalink delivered (see :meth:`poll_socket`)."""
         c = self.credit
         return max(c.answered_ms, c.granted_ms) >= c.tick_seen_ms
+
+    def granted(self, tick_ms: int) -> bool:
+        """Lockstep: the client's grant answers the tick at ``tick_ms`` (the world will not wait for it there), so the
+        tick's telemetry may leave with the telemetry of the tick the world waits at (see :meth:`flush`)."""
+        return self.credit.granted_ms >= tick_ms and self.clock.lockstep and self._keeps_order_when_batched
 
     def _grant(self, msg: mavlink2.MAVLink_message, stamp_ms: int) -> None:
         """A client's lockstep grant beside a setpoint stamped ``stamp_ms`` in the same datagram: the ticks after the

@@ -580,13 +580,17 @@ class WorldRunner:
         self.flags.hit = bool(w.hit[0])
         state = _WorldState.of(w)
         turn = actions[0, :, 0].tolist()
+        tick_ms = self.clock.time_boot_ms
         for v, link in zip(self.vehicles, self.links, strict=True):
             i = v.index
             v.observe(state.truth(i, turn[i], self._turn_rate_max_rad_s[i], v_before[i], self.dt_s))
             # Each vehicle's telemetry leaves before the next vehicle's is built and before the
-            # bookkeeping below: its client starts on the step while the world finishes it.
+            # bookkeeping below: its client starts on the step while the world finishes it. A tick its
+            # client has granted leaves with the next one it has not (one datagram, one wake-up for many
+            # ticks; the loop sends whatever is left after its steps).
             link.publish(tick=self.lockstep)
-            link.flush()
+            if not link.granted(tick_ms):
+                link.flush()
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
         if self._truth is not None:
             flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}

@@ -58,9 +58,12 @@ def test_a_lockstep_world_steps_through_the_ticks_a_setpoint_grants_and_waits_af
         c.set_mode(GUIDED)
         vehicle = s.vehicle(0)
         # A setpoint for tick 0 granting the ticks up to 0.4 s: five steps (to the tick 0.5 s), then the world waits.
+        # The granted ticks' telemetry leaves with the tick's it waits at: one datagram (COALESCE_BYTES permitting).
+        datagrams = s.endpoint(0).tx.packets
         c.send_together(_setpoint(c, 0), _grant(c, 0, 400))
         assert _ticks_until_quiet(c, 0.5) == [100, 200, 300, 400, 500]
         assert int(s.runner.world.steps[0]) == 5
+        assert s.endpoint(0).tx.packets - datagrams <= 2
         # A grant on its own, or beside a setpoint stamped otherwise, answers nothing: the setpoint alone steps once.
         c.send_together(_grant(c, 500, 900))
         assert _ticks_until_quiet(c, 0.4) == []
