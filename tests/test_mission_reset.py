@@ -151,9 +151,13 @@ def _steps(record: Path) -> list[dict[str, Any]]:
     return [r for r in map(json.loads, record.read_text().splitlines()) if r["type"] == STEP]
 
 
-def _fly_json(tmp_path: Path, name: str, *extra: str) -> dict[str, Any]:
+def _fly_json(
+    tmp_path: Path, name: str, *extra: str, scenario: Path = RANDOM, episodes: int = 2, seed: int = 31
+) -> dict[str, Any]:
+    """``fly`` the shipped team (logs in ``tmp_path/name``); its JSON."""
     out = tmp_path / f"{name}.json"
-    argv = ["--scenario", str(RANDOM), "--models", str(DEFAULT_MODELS), "--episodes", "2", "--seed", "31"]
+    argv = ["--scenario", str(scenario), "--models", str(DEFAULT_MODELS), "--episodes", str(episodes)]
+    argv += ["--seed", str(seed)]
     argv += ["--logs", str(tmp_path / name), "--json", str(out), "--no-progress", *extra]
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv], cwd=REPO, capture_output=True, text=True, timeout=400
