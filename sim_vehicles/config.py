@@ -68,7 +68,8 @@ class SitlConfig:
     setpoint_timeout_s: float = 1.0
     """Failsafe after this long without a setpoint while armed in GUIDED (sim s; wall s at a lockstep barrier)."""
     linger_s: float = 1.0
-    """After the mission ends, keep serving this many simulated seconds (paced in real time under lockstep)."""
+    """After the mission ends, keep serving this many simulated seconds (under lockstep at once, the link on simulated
+    time)."""
     outputs: tuple[tuple[str, int], ...] = ()
     """Ground-station addresses (``--out udpout:HOST:PORT``): every vehicle streams to each from the start and
     takes commands from it, as ArduPilot SITL's ``--out`` (a listening ground station sees all three)."""

@@ -38,17 +38,18 @@ All MAVLink timestamps (``time_boot_ms``, SYSTEM_TIME) are simulated time: step 
 
 The link models (latency, reordering hold) run on the *link clock*: wall time times ``speedup``
 (simulated seconds while the simulation keeps up) in real-time mode; under lockstep simulated time
-while the world steps in lockstep, and wall time times ``speedup`` while it runs paced (nobody in the loop) or
-lingers. While a lockstep world holds at the start no simulated time passes, and what the links carry crosses at
+while the world steps in lockstep or lingers, and wall time times ``speedup`` while it runs paced (nobody in the
+loop). While a lockstep world holds at the start no simulated time passes, and what the links carry crosses at
 once, in order (each frame still lost as the link model draws it): the clients' handshake costs no wall time for
 the link's latency. So a lockstep mission with a lossy, slow link runs at lockstep speed and repeats: what it
 draws is keyed by the frame, and nothing of its start depends on the wall clock but a client's retry of a command
 the link lost.
 
 Mission end (world terminated or truncated): the end is announced (STATUSTEXT + NAMED_VALUE_INT
-MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen, paced at
-real time times ``speedup``), then the run ends; :meth:`WorldRunner.run` returns and the truth log
-gets its summary. :meth:`WorldRunner.request_stop` (SIGINT / SIGTERM in the CLI) ends the run early.
+MSN_END), the vehicles keep serving ``linger_s`` more simulated seconds (world frozen; paced at
+real time times ``speedup``, under lockstep at once), then the run ends; :meth:`WorldRunner.run` returns
+and the truth log gets its summary. :meth:`WorldRunner.request_stop` (SIGINT / SIGTERM in the CLI) ends
+the run early.
 """
 
 from __future__ import annotations
@@ -401,8 +402,9 @@ class WorldRunner:
 
     @property
     def _link_on_sim_time(self) -> bool:
-        """Lockstep steps drive the link clock (it stands still while the world waits at the barrier)."""
-        return self.lockstep and self._phase is _Phase.RUN and not self._paced
+        """Lockstep steps drive the link clock (it stands still while the world waits at the barrier), and so do a
+        lockstep world's linger steps."""
+        return self.lockstep and (self._phase is _Phase.LINGER or (self._phase is _Phase.RUN and not self._paced))
 
     @property
     def _link_fast_forward(self) -> bool:
@@ -538,18 +540,24 @@ class WorldRunner:
         return now if n == MAX_CATCHUP_STEPS else now + min(v.setpoint_timeout_s for v in self.vehicles)
 
     def _advance_linger(self, now: float) -> float | None:
+        """Serve ``linger_s`` more simulated seconds, the world frozen: paced in real time; under lockstep at once, the
+        link on simulated time (what was sent with less latency than the linger is delivered, as at real time, and no
+        wall time is spent waiting for nothing)."""
         end_s = self._end_sim_s + self.config.linger_s
         n = 0
-        while self.clock.sim_s + _EPS < end_s and n < MAX_CATCHUP_STEPS and self._step_due(now):
+        while self.clock.sim_s + _EPS < end_s and n < MAX_CATCHUP_STEPS and (self.lockstep or self._step_due(now)):
             self._linger_steps += 1
-            self.clock.sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
+            sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
+            if self._link_on_sim_time:
+                self.clock.link_s += sim_s - self.clock.sim_s
+            self.clock.sim_s = sim_s
             for link in self.links:
                 link.publish(tick=self.lockstep)
             n += 1
         if self.clock.sim_s + _EPS >= end_s:
             self._phase = _Phase.DONE
             return None
-        return self._next_step_wall()
+        return now if self.lockstep else self._next_step_wall()
 
     def _keepalive(self, now: float) -> float:
         if now - self._last_output_wall >= KEEPALIVE_S:

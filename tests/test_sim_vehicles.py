@@ -939,6 +939,29 @@ def test_mission_events_truth_log_and_tlog(tmp_path: Path) -> None:
     assert {"HEARTBEAT", "ATTITUDE", "COMMAND_LONG", "COMMAND_ACK", "SET_POSITION_TARGET_LOCAL_NED"} <= types
 
 
+@pytest.mark.timeout(30)
+def test_a_lockstep_linger_serves_its_simulated_seconds_without_waiting_for_them() -> None:
+    """Under lockstep the linger's steps run back to back on the link's simulated clock: a minute of linger reaches the
+    client (its ticks, and a POWEROFF heartbeat each simulated second) and the run ends long before a minute of wall
+    time (paced, as in real-time mode, it would take the minute)."""
+    linger_s = 60.0
+    with sitl(_quick_mission(), linger_s=linger_s, **lockstep()) as s, Client(s.ports[1]) as c:
+        c.connect()
+        c.arm()
+        c.set_mode(GUIDED)
+        for _ in range(40):
+            _lockstep_round(c, 0.0, 0.0)
+            if any(m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END" for m in c.log):
+                break
+        end_ms = c.latest_ms
+        assert wait_until(lambda: not s.thread.is_alive(), linger_s / 4), "the linger waited for wall time"
+        c.collect(0.3)
+    ticks = [m.time_boot_ms for m in c.log if m.get_type() == "SYSTEM_TIME"]
+    assert max(ticks) >= end_ms + linger_s * 1000 - 100  # its last tick, one step short of the linger's end at most
+    poweroff = [m for m in c.log if m.get_type() == "HEARTBEAT" and m.system_status == mavlink2.MAV_STATE_POWEROFF]
+    assert len(poweroff) >= linger_s - 1
+
+
 def test_random_scenario_layout_is_seeded_and_written(tmp_path: Path) -> None:
     scen = load(REPO / "scenarios" / "random.yaml")
     out = tmp_path / "layout.yaml"

@@ -246,6 +246,8 @@ class Companion:
                     # anything of a later one is read, as if the world had waited for its answer.
                     self._maybe_control(time.monotonic())
                 self._handle(msg)
+                if self._end_believed():
+                    break  # nothing after a signed end is flown (the world's linger arrives right behind it)
                 msg = link.recv(0.0)
             now = time.monotonic()
             self._maybe_control(now)
@@ -474,13 +476,17 @@ class Companion:
             self.counters.ends_refuted += 1
             self._claimed_end = None
 
+    def _end_believed(self) -> bool:
+        """A mission end is claimed in a frame signed with the run's key: it came from the vehicle itself."""
+        return self._claimed_end is not None and self._link is not None and self._link.signing
+
     def _check_end(self, now: float) -> None:
         """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it. With signing
         the claim came in a frame signed with the run's key, from the vehicle itself: it is confirmed at once."""
         claim = self._claimed_end
         if claim is None:
             return
-        if self._link is not None and self._link.signing:
+        if self._end_believed():
             raise _Stop(claim.status, claim.message)
         silent = now - max(self.last_rx_s, claim.since_s) >= END_SILENCE_S
         powered_off = claim.poweroff_since_s is not None and now - claim.since_s >= END_CONFIRM_S
