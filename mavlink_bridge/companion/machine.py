@@ -241,9 +241,10 @@ class Companion:
                 self._engage()
             msg = link.recv(self._wait_s())
             while msg is not None:
-                if self._grants and self._tick_due() and getattr(msg, "time_boot_ms", -1) > (self.vt_ms or 0):
-                    # A world running through granted ticks sends them back to back: each tick is controlled before
-                    # anything of a later one is read, as if the world had waited for its answer.
+                if self.cfg.lockstep and self._tick_due() and getattr(msg, "time_boot_ms", -1) > (self.vt_ms or 0):
+                    # A lockstep world sends ticks back to back through a grant and after the mission's end (its
+                    # linger): each tick is controlled before anything of a later one is read, as if the world had
+                    # waited for its answer, however fast the next ticks come.
                     self._maybe_control(time.monotonic())
                 self._handle(msg)
                 if self._end_believed():
