@@ -11,8 +11,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
 
 # Two test processes share the two cores (pyproject: pytest-xdist -n 2). Each runs torch on one thread, as does
-# every process a test starts (they inherit the variable): a second OpenMP thread per process would only spin
-# against the other test process. Set before any test module imports torch.
+# every process a test starts unless it sets its own count (they inherit the variable): a second OpenMP thread per
+# process would only spin against the other test process. Set before any test module imports torch.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
