@@ -10,6 +10,9 @@ import pytest
 from sitl_helpers import GUIDED, REPO, Client, lockstep, mavlink2, sitl
 from test_mission_reset import _fly_json, _steps
 
+from mavlink_bridge.companion.cli import main as companion_main
+from mavlink_bridge.fly.config import config_from_args
+from tssac_core.common.cli import UsageError
 from tssac_core.sim.scenario import dump, load
 from tssac_core.wire.lockstep import GRANT_NAME, granted_through_ms
 
@@ -93,3 +96,14 @@ def test_grants_fly_the_missions_of_an_answer_at_every_tick_also_with_gps_dropou
         assert counters["setpoints_sent"] + counters["ticks_granted"] == counters["control_steps"], role
         # ... and the dropouts cut grants short: more answers than the decisions (one in 10 ticks)
         assert counters["setpoints_sent"] > counters["control_steps"] // 10 + 1, role
+
+
+@pytest.mark.parametrize("value", ["-0.1", "nan", "inf"])
+def test_a_bad_grant_is_one_clear_line_in_both_commands(value: str, capsys: pytest.CaptureFixture[str]) -> None:
+    says = f"--lockstep-grant-s must be 0 or more seconds, got {float(value):g}"
+    strike = str(REPO / "scenarios" / "strike.yaml")
+    with pytest.raises(UsageError, match=says):
+        config_from_args(["--scenario", strike, "--lockstep-grant-s", value])
+    argv = ["--connect", "udpout:127.0.0.1:9", "--role", "strike", "--scenario", strike, "--pilot", "guidance"]
+    assert companion_main([*argv, "--lockstep-grant-s", value]) == 2
+    assert capsys.readouterr().err.strip().endswith(says)

@@ -39,6 +39,13 @@ LOCKSTEP_GRANT_S = 1.0
 """Under lockstep, the most vehicle time a setpoint answers for ahead (:mod:`tssac_core.wire.lockstep`): a trained
 pilot holds each action for 10 ticks (1 s), and the vehicle's setpoint timeout is at least 1 s."""
 
+
+def check_lockstep_grant_s(value: float) -> None:
+    """``--lockstep-grant-s`` is 0 (answer every tick) or a finite number of seconds; else one clear line."""
+    if not (math.isfinite(value) and value >= 0):
+        raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {value:g}")
+
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3
@@ -119,8 +126,7 @@ class CompanionConfig:
             raise UsageError("--lost-after-s must be longer than --silence-hold-s")
         if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
-        if not (math.isfinite(self.lockstep_grant_s) and self.lockstep_grant_s >= 0):
-            raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {self.lockstep_grant_s:g}")
+        check_lockstep_grant_s(self.lockstep_grant_s)
         if self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
         if self.pilot and self.pilot not in PILOT_NAMES:

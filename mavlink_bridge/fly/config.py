@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
-from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S
+from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
 from mavlink_bridge.link import parse_connection
 from mavlink_bridge.signing_key import read_signing_key
 from tssac_core.common.cli import UsageError
@@ -276,8 +276,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
         raise UsageError("--mission-timeout-s must be positive")
-    if not (math.isfinite(a.lockstep_grant_s) and a.lockstep_grant_s >= 0):
-        raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {a.lockstep_grant_s:g}")
+    check_lockstep_grant_s(a.lockstep_grant_s)
     if a.animate is not None:
         try:
             check_target(a.animate)
