@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Protocol
 
 _log = logging.getLogger(__name__)
 
@@ -53,12 +53,32 @@ def _die_with_parent(libc: ctypes.CDLL) -> Callable[[], None]:
     return preexec
 
 
+class ProcessHandle(Protocol):
+    """What a parent holds of a running program: a :class:`subprocess.Popen`, or a
+    :class:`mavlink_bridge.fork_server.ForkedProcess`."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def stdin(self) -> IO[bytes] | None: ...
+
+    @property
+    def stdout(self) -> IO[bytes] | None: ...
+
+    def poll(self) -> int | None: ...
+
+    def wait(self, timeout: float | None = None) -> int:
+        """The exit status; raises :class:`subprocess.TimeoutExpired` after ``timeout`` seconds."""
+        ...
+
+
 @dataclass
 class Child:
     """One started child process."""
 
     name: str
-    process: subprocess.Popen[bytes]
+    process: ProcessHandle
     log_path: Path | None
 
     @property
@@ -87,9 +107,10 @@ class ChildProcesses:
         stdin_pipe: bool = False,
         cwd: Path | None = None,
         env: dict[str, str] | None = None,
+        pass_fds: Sequence[int] = (),
     ) -> Child:
         """Start ``argv`` in a new session; stderr (and stdout unless piped) go to ``log_path``; stdin is piped
-        (``stdin_pipe``) or empty."""
+        (``stdin_pipe``) or empty; ``pass_fds`` stay open in the child."""
         libc = _libc()
         log: IO[bytes] | None = None
         if log_path is not None:
@@ -104,14 +125,19 @@ class ChildProcesses:
                 cwd=cwd,
                 env=env,
                 start_new_session=True,
+                pass_fds=tuple(pass_fds),
                 preexec_fn=None if libc is None else _die_with_parent(libc),
             )
         finally:
             if log is not None:
                 log.close()  # the child holds its own descriptor
-        child = Child(name, proc, log_path)
-        self.children.append(child)
         _log.debug("started %s (pid %d): %s", name, proc.pid, " ".join(argv))
+        return self.adopt(name, proc, log_path)
+
+    def adopt(self, name: str, process: ProcessHandle, log_path: Path | None) -> Child:
+        """Take a program started elsewhere (in its own session, as :meth:`start` starts one) into the children."""
+        child = Child(name, process, log_path)
+        self.children.append(child)
         return child
 
     def alive(self) -> list[Child]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -195,19 +196,37 @@ def _timing(status: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.sitl
 @pytest.mark.timeout(300)
 def test_a_crew_process_that_died_between_missions_is_replaced(tmp_path: Path) -> None:
-    cfg = config_from_args(["--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--episodes", "2"])
+    """A companion killed between missions, then the fork server the crew came from: each time the next mission
+    flies with a new crew (and a new server), and nothing is left running."""
+    cfg = config_from_args(["--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--episodes", "3"])
     children = ChildProcesses()
     runner = MissionRunner(cfg, children, tmp_path / "work")
+    servers = []
     try:
         first = runner.fly(0)
-        assert first["success"] and runner.crew is not None
+        assert first["success"] and runner.crew is not None and runner.forks is not None
+        servers.append(runner.forks.child.pid)
         detect = next(c for c in runner.crew.children if c.name == "detect")
+        assert _parent(detect.pid) == runner.forks.child.pid  # the crew is forked from the server
         detect.process.kill()
         detect.process.wait(10)
         second = runner.fly(1)
+        assert runner.forks.child.pid == servers[0]  # the server lives on
+        os.kill(servers[0], signal.SIGKILL)  # the crew dies with it (SIGTERM)
+        runner.forks.child.process.wait(10)
+        third = runner.fly(2)
+        servers.append(runner.forks.child.pid)
     finally:
         runner.close()
         children.stop_all()
-    assert second["success"]
+    assert second["success"] and third["success"]
     assert not set(first["pids"].values()) & set(second["pids"].values())  # a new crew flew it
-    assert not [pid for pid in list(first["pids"].values()) + list(second["pids"].values()) if _alive(pid)]
+    assert not set(second["pids"].values()) & set(third["pids"].values())
+    assert servers[0] != servers[1]
+    flown = [pid for row in (first, second, third) for pid in row["pids"].values()]
+    assert not [pid for pid in flown + servers if _alive(pid)]
+
+
+def _parent(pid: int) -> int:
+    with open(f"/proc/{pid}/stat") as fh:
+        return int(fh.read().rsplit(")", 1)[1].split()[1])

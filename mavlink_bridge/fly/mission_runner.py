@@ -21,6 +21,7 @@ from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
+from mavlink_bridge.fork_server import ForkServer, ForkServerError
 from mavlink_bridge.mission_log import TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
 from tssac_core.deploy.numpy_actor import pilot_file
@@ -35,6 +36,9 @@ companion that a loaded machine paused for a moment in the loop (failsafes are s
 LINGER_S = 0.2
 """Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
 link with up to this much latency."""
+CREW_IMPORTS = ("sim_vehicles.__main__", "mavlink_bridge.companion.cli", "mavlink_bridge.companion.machine")
+"""What a crew's fork server imports once for the world and the three companions it forks (their start-up is
+mostly imports: filterpy with scipy.stats, pymavlink, numpy)."""
 
 
 class ChildFailed(Exception):
@@ -103,9 +107,20 @@ class MissionRunner:
         self.env = _child_env()
         self.crew: Crew | None = None
         """The processes kept alive across missions (``cfg.persistent``), None until the first or after a failure."""
+        self.forks: ForkServer | None = None
+        """The server that forks each crew's processes, started with the first crew."""
 
     def close(self) -> None:
-        """Let the crew's processes quit (they exit on their own; the caller's stop_all reaps what does not)."""
+        """Let the crew's processes quit (they exit on their own; the caller's stop_all reaps what does not), then
+        the fork server."""
+        try:
+            self._close_crew()
+        finally:
+            forks, self.forks = self.forks, None
+            if forks is not None:
+                forks.close()
+
+    def _close_crew(self) -> None:
         crew, self.crew = self.crew, None
         if crew is None:
             return
@@ -193,9 +208,6 @@ class MissionRunner:
         """The world (the reader of its output) and its vehicles' connection strings."""
         cfg = self.cfg
         argv = [
-            sys.executable,
-            "-m",
-            "sim_vehicles",
             "--scenario",
             str(scenario_file),
             "--seed",
@@ -216,7 +228,7 @@ class MissionRunner:
         if serve:
             argv += ["--serve"]
         log = mdir / "sitl.log"
-        sitl = self.children.start("sitl", argv, log_path=log, stdout_pipe=True, stdin_pipe=serve, env=self.env)
+        sitl = self._launch("sitl", "sim_vehicles", argv, log, stdout_pipe=True, serve=serve)
         reader = LineReader(sitl)
         return reader, self._read_endpoints(reader, log)
 
@@ -257,9 +269,6 @@ class MissionRunner:
         for role in ROLES:
             name = role.value
             argv = [
-                sys.executable,
-                "-m",
-                "mavlink_bridge.companion",
                 "--connect",
                 endpoints[name],
                 "--role",
@@ -282,12 +291,34 @@ class MissionRunner:
                 argv += ["--signing-key", str(cfg.signing_key_path)]
             if serve:
                 argv += ["--serve"]
-            out.append(
-                self.children.start(
-                    name, argv, log_path=mdir / f"{name}.log", stdout_pipe=serve, stdin_pipe=serve, env=self.env
-                )
-            )
+            out.append(self._launch(name, "mavlink_bridge.companion", argv, mdir / f"{name}.log", serve, serve))
         return out
+
+    def _launch(self, name: str, module: str, args: list[str], log: Path, stdout_pipe: bool, serve: bool) -> Child:
+        """``python -m module args``: a crew's process (``serve``: it reads its next missions on standard input) is
+        forked from the crew's fork server; a mission's own process starts afresh, as a user's would."""
+        if not serve:
+            argv = [sys.executable, "-m", module, *args]
+            return self.children.start(name, argv, log_path=log, stdout_pipe=stdout_pipe, env=self.env)
+        if self.forks is None or not self.forks.alive:
+            if self.forks is not None:
+                _log.warning("the fork server (pid %d) has ended: starting a new one", self.forks.child.pid)
+                self.forks.close()
+            self.forks = ForkServer(
+                self.children, CREW_IMPORTS, log_path=self.work_dir / "fork-server.log", env=self.env
+            )
+        try:
+            return self.forks.start(
+                name,
+                module,
+                args,
+                log_path=log,
+                stdin_pipe=True,
+                stdout_pipe=stdout_pipe,
+                timeout_s=self.cfg.startup_timeout_s,
+            )
+        except ForkServerError as exc:
+            raise ChildFailed(f"cannot start {name}: {exc}") from None
 
     # ------------------------------------------------------------------------- persistent processes
 
@@ -316,6 +347,9 @@ class MissionRunner:
         """The crew, told mission ``index`` (or started with it), and its CPU seconds before the mission."""
         if self.crew is not None and any(c.poll() is not None for c in self.crew.children):
             _log.warning("mission %d: a process of the last mission's crew has exited: starting a new crew", index)
+            self._drop_crew()
+        elif self.crew is not None and self.forks is not None and not self.forks.alive:
+            _log.warning("mission %d: the crew's fork server has ended (its crew with it): starting a new crew", index)
             self._drop_crew()
         if self.crew is None:
             world, endpoints = self._start_world(mdir, scenario_file, truth, seed, serve=True)

@@ -1,0 +1,116 @@
+"""The fork server: a program forked from a warm interpreter behaves as ``python -m`` started afresh would (its output,
+its exit status, its session), is stopped like any child, and never outlives its server
+(mavlink_bridge.fork_server)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from mavlink_bridge.fork_server import ForkServer, ForkServerError
+from mavlink_bridge.processes import ChildProcesses
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sitl_helpers import running  # noqa: E402
+
+DOCUMENT = {"b": [1, 2.5, None], "a": "ü", "c": {"z": True}}
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[ForkServer]:
+    children = ChildProcesses(grace_s=5.0)
+    forks = ForkServer(children, ["json.tool"], log_path=tmp_path / "server.log", env=dict(os.environ))
+    try:
+        yield forks
+    finally:
+        forks.close()
+        children.stop_all()
+
+
+def _alive(pid: int) -> bool:
+    return running(pid)
+
+
+def _ppid(pid: int) -> int:
+    with open(f"/proc/{pid}/stat") as fh:
+        return int(fh.read().rsplit(")", 1)[1].split()[1])
+
+
+def test_a_forked_program_prints_and_exits_as_python_m_does(server: ForkServer, tmp_path: Path) -> None:
+    text = json.dumps(DOCUMENT).encode()
+    fresh = subprocess.run(
+        [sys.executable, "-m", "json.tool", "--sort-keys"], input=text, capture_output=True, timeout=60
+    )
+    child = server.start(
+        "tool", "json.tool", ["--sort-keys"], log_path=tmp_path / "tool.log", stdin_pipe=True, stdout_pipe=True
+    )
+    assert child.process.stdin is not None and child.process.stdout is not None
+    assert os.getsid(child.pid) == child.pid  # it leads its own session: stopped by process group
+    assert _ppid(child.pid) == server.child.pid
+    child.process.stdin.write(text)
+    child.process.stdin.close()
+    assert child.process.stdout.read() == fresh.stdout
+    assert child.process.wait(30) == fresh.returncode == 0
+    assert child.poll() == 0
+    # Bad input: the same exit status, and the message that python -m prints on stderr goes to the log.
+    bad = subprocess.run([sys.executable, "-m", "json.tool"], input=b"{nope", capture_output=True, timeout=60)
+    child = server.start("bad", "json.tool", [], log_path=tmp_path / "bad.log", stdin_pipe=True)
+    assert child.process.stdin is not None
+    child.process.stdin.write(b"{nope")
+    child.process.stdin.close()
+    assert child.process.wait(30) == bad.returncode == 1
+    assert (tmp_path / "bad.log").read_bytes() == bad.stderr
+
+
+def test_a_program_that_cannot_run_exits_1_with_the_reason_in_its_log(server: ForkServer, tmp_path: Path) -> None:
+    child = server.start("none", "no_such_module_here", [], log_path=tmp_path / "none.log")
+    assert child.process.wait(30) == 1
+    assert "No module named" in (tmp_path / "none.log").read_text()
+    (tmp_path / "a-file").write_text("")
+    with pytest.raises(ForkServerError, match="cannot start"):  # its log cannot be opened: nothing was forked
+        server.start("nolog", "json.tool", [], log_path=tmp_path / "a-file" / "x.log", timeout_s=30)
+    assert server.alive
+
+
+def test_a_running_program_times_out_then_reports_the_signal_that_stopped_it(
+    server: ForkServer, tmp_path: Path
+) -> None:
+    child = server.start("waits", "json.tool", [], log_path=None, stdin_pipe=True)  # reads until its input ends
+    with pytest.raises(subprocess.TimeoutExpired):
+        child.process.wait(0.3)
+    assert child.poll() is None and _alive(child.pid)
+    server.children.stop([child], grace_s=5.0)  # SIGTERM to its process group, as every child is stopped
+    assert child.poll() == -signal.SIGTERM
+    assert not _alive(child.pid)
+
+
+def test_programs_die_with_their_server_and_a_closed_server_stops_them(tmp_path: Path) -> None:
+    for ending in ("killed", "closed"):
+        children = ChildProcesses(grace_s=5.0)
+        forks = ForkServer(children, [], log_path=tmp_path / f"{ending}.log", env=dict(os.environ))
+        try:
+            child = forks.start("waits", "json.tool", [], log_path=None, stdin_pipe=True)
+            assert child.poll() is None
+            if ending == "killed":
+                os.kill(forks.child.pid, signal.SIGKILL)  # no clean-up at all: the parent-death signal
+            else:
+                forks.close()
+            deadline = time.monotonic() + 10.0
+            while _alive(child.pid) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert not _alive(child.pid), ending
+            assert child.process.wait(10) == -signal.SIGTERM
+            assert not forks.alive
+            with pytest.raises(ForkServerError):
+                forks.start("late", "json.tool", [], log_path=None, timeout_s=5)
+        finally:
+            forks.close()
+            children.stop_all()
