@@ -124,6 +124,9 @@ class ForkServer:
             theirs.close()
         self._sock = mine
         self._lock = threading.Lock()
+        """Held to read or write the socket."""
+        self._starting = threading.Lock()
+        """Held from a request to its answer (answers come in the order of the requests)."""
         self._exited: dict[int, int] = {}
         self._started: list[dict[str, Any]] = []
         self._gone = False
@@ -145,7 +148,6 @@ class ForkServer:
     ) -> Child:
         """Fork ``python -m module argv`` as a child of the server's :class:`ChildProcesses` (stopped as its other
         children are); waits up to ``timeout_s`` for the server (for its imports, the first time)."""
-        ours: list[int] = []
         theirs: list[int] = []
         stdin: IO[bytes] | None = None
         stdout: IO[bytes] | None = None
@@ -153,11 +155,9 @@ class ForkServer:
             if stdin_pipe:
                 r, w = os.pipe()
                 theirs.append(r)
-                ours.append(w)
                 stdin = open(w, "wb")
             if stdout_pipe:
                 r, w = os.pipe()
-                ours.append(r)
                 theirs.append(w)
                 stdout = open(r, "rb")
             request = {
@@ -168,20 +168,18 @@ class ForkServer:
                 "stdin": stdin_pipe,
                 "stdout": stdout_pipe,
             }
-            with self._lock:
-                try:
-                    socket.send_fds(self._sock, [json.dumps(request).encode()], theirs)
-                except OSError as exc:
-                    self._gone = True
-                    raise ForkServerError(f"the fork server (pid {self.child.pid}) is gone: {exc}") from None
-            reply = self._reply(timeout_s)
+            with self._starting:
+                with self._lock:
+                    try:
+                        socket.send_fds(self._sock, [json.dumps(request).encode()], theirs)
+                    except OSError as exc:
+                        self._gone = True
+                        raise ForkServerError(f"the fork server (pid {self.child.pid}) is gone: {exc}") from None
+                reply = self._reply(timeout_s)
         except BaseException:
             for f in (stdin, stdout):
                 if f is not None:
                     f.close()
-            for fd in ours:
-                if (stdin is None or fd != stdin.fileno()) and (stdout is None or fd != stdout.fileno()):
-                    _close(fd)
             raise
         finally:
             for fd in theirs:
@@ -229,6 +227,7 @@ class ForkServer:
                     raise ForkServerError(f"the fork server (pid {self.child.pid}) ended before it answered")
             remaining = deadline - time.monotonic()
             if remaining <= 0:
+                self._gone = True  # its late answer would answer the next request: use a new server
                 raise ForkServerError(f"the fork server (pid {self.child.pid}) did not answer within {timeout_s:g} s")
             _wait_readable(self._sock, min(remaining, 0.2))
 

@@ -537,7 +537,9 @@ class WorldRunner:
                 link.holds_world for link in self.links
             ):
                 break
-        return now if n == MAX_CATCHUP_STEPS else now + min(v.setpoint_timeout_s for v in self.vehicles)
+        if n == MAX_CATCHUP_STEPS or self._phase is not _Phase.RUN:
+            return now  # more steps are due, or the mission ended and its linger runs at once: no waiting
+        return now + min(v.setpoint_timeout_s for v in self.vehicles)
 
     def _advance_linger(self, now: float) -> float | None:
         """Serve ``linger_s`` more simulated seconds, the world frozen: paced in real time; under lockstep at once, the

@@ -962,6 +962,32 @@ def test_a_lockstep_linger_serves_its_simulated_seconds_without_waiting_for_them
     assert len(poweroff) >= linger_s - 1
 
 
+def test_a_lockstep_world_lingers_straight_after_its_last_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Once the mission has ended under lockstep the world does not wait on its sockets before the linger (it used
+    to wait its 50 ms select timeout: about a twentieth of a kept crew's mission)."""
+    waits: list[tuple[str, float]] = []
+    real_wait_s = WorldRunner._wait_s
+
+    def watched_wait_s(self: WorldRunner, now_wall: float, deadline_wall: float | None) -> float:
+        wait = real_wait_s(self, now_wall, deadline_wall)
+        waits.append((self._phase.value, wait))
+        return wait
+
+    monkeypatch.setattr(WorldRunner, "_wait_s", watched_wait_s)
+    with sitl(_quick_mission(), linger_s=1.0, **lockstep()) as running, Client(running.ports[1]) as c:
+        c.connect()
+        c.arm()
+        c.set_mode(GUIDED)
+        for _ in range(40):
+            _lockstep_round(c, 0.0, 0.0)
+            if any(m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END" for m in c.log):
+                break
+        assert wait_until(lambda: not running.thread.is_alive(), 5.0)
+    after_end = [timeout for phase, timeout in waits if phase in ("linger", "done")]
+    assert after_end == [0.0] * len(after_end)
+    assert any(phase == "run" and timeout > 0 for phase, timeout in waits)  # it did wait for the client while flying
+
+
 def test_random_scenario_layout_is_seeded_and_written(tmp_path: Path) -> None:
     scen = load(REPO / "scenarios" / "random.yaml")
     out = tmp_path / "layout.yaml"
