@@ -940,19 +940,24 @@ def test_mission_events_truth_log_and_tlog(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(30)
+def _fly_to_the_mission_end(c: Client) -> None:
+    """Engage the client's vehicle and answer lockstep rounds until the world announces the mission's end."""
+    c.connect()
+    c.arm()
+    c.set_mode(GUIDED)
+    for _ in range(40):
+        _lockstep_round(c, 0.0, 0.0)
+        if any(m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END" for m in c.log):
+            return
+
+
 def test_a_lockstep_linger_serves_its_simulated_seconds_without_waiting_for_them() -> None:
     """Under lockstep the linger's steps run back to back on the link's simulated clock: a minute of linger reaches the
     client (its ticks, and a POWEROFF heartbeat each simulated second) and the run ends long before a minute of wall
     time (paced, as in real-time mode, it would take the minute)."""
     linger_s = 60.0
     with sitl(_quick_mission(), linger_s=linger_s, **lockstep()) as s, Client(s.ports[1]) as c:
-        c.connect()
-        c.arm()
-        c.set_mode(GUIDED)
-        for _ in range(40):
-            _lockstep_round(c, 0.0, 0.0)
-            if any(m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END" for m in c.log):
-                break
+        _fly_to_the_mission_end(c)
         end_ms = c.latest_ms
         assert wait_until(lambda: not s.thread.is_alive(), linger_s / 4), "the linger waited for wall time"
         c.collect(0.3)
@@ -975,13 +980,7 @@ def test_a_lockstep_world_lingers_straight_after_its_last_step(monkeypatch: pyte
 
     monkeypatch.setattr(WorldRunner, "_wait_s", watched_wait_s)
     with sitl(_quick_mission(), linger_s=1.0, **lockstep()) as running, Client(running.ports[1]) as c:
-        c.connect()
-        c.arm()
-        c.set_mode(GUIDED)
-        for _ in range(40):
-            _lockstep_round(c, 0.0, 0.0)
-            if any(m.get_type() == "NAMED_VALUE_INT" and m.name == "MSN_END" for m in c.log):
-                break
+        _fly_to_the_mission_end(c)
         assert wait_until(lambda: not running.thread.is_alive(), 5.0)
     after_end = [timeout for phase, timeout in waits if phase in ("linger", "done")]
     assert after_end == [0.0] * len(after_end)
