@@ -174,7 +174,7 @@ class ForkServer:
                         socket.send_fds(self._sock, [json.dumps(request).encode()], theirs)
                     except OSError as exc:
                         self._gone = True
-                        raise ForkServerError(f"the fork server (pid {self.child.pid}) is gone: {exc}") from None
+                        raise ForkServerError(f"the fork server (pid {self.child.pid}) has ended ({exc})") from None
                 reply = self._reply(timeout_s)
         except BaseException:
             for f in (stdin, stdout):

@@ -5,7 +5,8 @@ only the parent, which then stops the children in order), asks Linux to send it 
 parent dies without cleaning up (``PR_SET_PDEATHSIG``, so even a ``kill -9`` of the parent leaves
 no orphan), and stops children by process group: SIGTERM, a grace period, then SIGKILL, then
 ``wait()`` so that no zombie is left either. :meth:`ChildProcesses.stop_all` is idempotent and
-registered with ``atexit``.
+registered with ``atexit``. A program started in its own session by someone else, a fork server's
+(:mod:`mavlink_bridge.fork_server`), is adopted (:meth:`ChildProcesses.adopt`) and stopped the same way.
 """
 
 from __future__ import annotations

@@ -114,3 +114,16 @@ def test_programs_die_with_their_server_and_a_closed_server_stops_them(tmp_path:
         finally:
             forks.close()
             children.stop_all()
+
+
+def test_a_server_that_cannot_import_its_preload_is_one_clear_error(tmp_path: Path) -> None:
+    children = ChildProcesses(grace_s=5.0)
+    forks = ForkServer(children, ["no_such_module_here"], log_path=tmp_path / "server.log", env=dict(os.environ))
+    try:
+        with pytest.raises(ForkServerError, match=r"the fork server \(pid \d+\) (has )?ended"):
+            forks.start("world", "json.tool", [], log_path=None, timeout_s=60)
+        assert not forks.alive
+        assert "No module named 'no_such_module_here'" in (tmp_path / "server.log").read_text()
+    finally:
+        forks.close()
+        children.stop_all()

@@ -318,7 +318,9 @@ class MissionRunner:
                 timeout_s=self.cfg.startup_timeout_s,
             )
         except ForkServerError as exc:
-            raise ChildFailed(f"cannot start {name}: {exc}") from None
+            last = last_meaningful_line(self.forks.child.log_path)
+            said = f'; its last log line: "{last}"' if last else ""
+            raise ChildFailed(f"cannot start {name}: {exc}{said}") from None
 
     # ------------------------------------------------------------------------- persistent processes
 
