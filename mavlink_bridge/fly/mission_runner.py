@@ -304,9 +304,8 @@ class MissionRunner:
             if self.forks is not None:
                 _log.warning("the fork server (pid %d) has ended: starting a new one", self.forks.child.pid)
                 self.forks.close()
-            self.forks = ForkServer(
-                self.children, CREW_IMPORTS, log_path=self.work_dir / "fork-server.log", env=self.env
-            )
+            # Its log goes beside the crew's first logs, in the directory of the mission the crew starts with.
+            self.forks = ForkServer(self.children, CREW_IMPORTS, log_path=log.parent / "fork-server.log", env=self.env)
         try:
             return self.forks.start(
                 name,
