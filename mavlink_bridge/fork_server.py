@@ -289,9 +289,8 @@ class _Server:
         os.set_blocking(self.wake_r, False)
         os.set_blocking(self.wake_w, False)
         self.stop_requested = False
-        self.libc = ctypes.CDLL(
-            None, use_errno=True
-        )  # for prctl in the forks (loaded before, not between fork and run)
+        # The C library for the forks' prctl calls, loaded once here rather than in every fork
+        self.libc = ctypes.CDLL(None, use_errno=True)
 
     def serve(self) -> None:
         signal.set_wakeup_fd(self.wake_w)
