@@ -54,6 +54,11 @@ STOP_GRACE_S = 5.0
 """How long the server gives its programs after SIGTERM when it is told to end, before SIGKILL."""
 
 
+AVAILABLE = sys.platform.startswith("linux")
+"""The server needs Linux: ``PR_SET_PDEATHSIG`` ties each fork's life to the server's, and fly passes the pipes over an
+``AF_UNIX`` ``SOCK_SEQPACKET`` socket. Elsewhere fly starts every process afresh."""
+
+
 class ForkServerError(Exception):
     """The server could not start a program (or is gone); ``str()`` is one line."""
 

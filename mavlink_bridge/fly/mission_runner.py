@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from mavlink_bridge import fork_server
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
@@ -297,9 +298,11 @@ class MissionRunner:
     def _launch(self, name: str, module: str, args: list[str], log: Path, stdout_pipe: bool, serve: bool) -> Child:
         """``python -m module args``: a crew's process (``serve``: it reads its next missions on standard input) is
         forked from the crew's fork server; a mission's own process starts afresh, as a user's would."""
-        if not serve:
+        if not serve or not fork_server.AVAILABLE:
             argv = [sys.executable, "-m", module, *args]
-            return self.children.start(name, argv, log_path=log, stdout_pipe=stdout_pipe, env=self.env)
+            return self.children.start(
+                name, argv, log_path=log, stdout_pipe=stdout_pipe, stdin_pipe=serve, env=self.env
+            )
         if self.forks is None or not self.forks.alive:
             if self.forks is not None:
                 _log.warning("the fork server (pid %d) has ended: starting a new one", self.forks.child.pid)
