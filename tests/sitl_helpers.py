@@ -251,6 +251,11 @@ def cmdline(pid: int) -> bytes:
         return b""
 
 
+def parent_pid(pid: int) -> int:
+    """A running process's parent's pid (/proc)."""
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
 def running(pid: int) -> bool:
     """The process is alive and not a zombie (/proc)."""
     try:

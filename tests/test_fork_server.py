@@ -19,7 +19,7 @@ from mavlink_bridge.fork_server import ForkServer, ForkServerError
 from mavlink_bridge.processes import ChildProcesses
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sitl_helpers import running  # noqa: E402
+from sitl_helpers import parent_pid, running  # noqa: E402
 
 DOCUMENT = {"b": [1, 2.5, None], "a": "ü", "c": {"z": True}}
 
@@ -35,15 +35,6 @@ def server(tmp_path: Path) -> Iterator[ForkServer]:
         children.stop_all()
 
 
-def _alive(pid: int) -> bool:
-    return running(pid)
-
-
-def _ppid(pid: int) -> int:
-    with open(f"/proc/{pid}/stat") as fh:
-        return int(fh.read().rsplit(")", 1)[1].split()[1])
-
-
 def test_a_forked_program_prints_and_exits_as_python_m_does(server: ForkServer, tmp_path: Path) -> None:
     text = json.dumps(DOCUMENT).encode()
     fresh = subprocess.run(
@@ -54,7 +45,7 @@ def test_a_forked_program_prints_and_exits_as_python_m_does(server: ForkServer, 
     )
     assert child.process.stdin is not None and child.process.stdout is not None
     assert os.getsid(child.pid) == child.pid  # it leads its own session: stopped by process group
-    assert _ppid(child.pid) == server.child.pid
+    assert parent_pid(child.pid) == server.child.pid
     child.process.stdin.write(text)
     child.process.stdin.close()
     assert child.process.stdout.read() == fresh.stdout
@@ -86,10 +77,10 @@ def test_a_running_program_times_out_then_reports_the_signal_that_stopped_it(
     child = server.start("waits", "json.tool", [], log_path=None, stdin_pipe=True)  # reads until its input ends
     with pytest.raises(subprocess.TimeoutExpired):
         child.process.wait(0.3)
-    assert child.poll() is None and _alive(child.pid)
+    assert child.poll() is None and running(child.pid)
     server.children.stop([child], grace_s=5.0)  # SIGTERM to its process group, as every child is stopped
     assert child.poll() == -signal.SIGTERM
-    assert not _alive(child.pid)
+    assert not running(child.pid)
 
 
 def test_programs_die_with_their_server_and_a_closed_server_stops_them(tmp_path: Path) -> None:
@@ -104,9 +95,9 @@ def test_programs_die_with_their_server_and_a_closed_server_stops_them(tmp_path:
             else:
                 forks.close()
             deadline = time.monotonic() + 10.0
-            while _alive(child.pid) and time.monotonic() < deadline:
+            while running(child.pid) and time.monotonic() < deadline:
                 time.sleep(0.02)
-            assert not _alive(child.pid), ending
+            assert not running(child.pid), ending
             assert child.process.wait(10) == -signal.SIGTERM
             assert not forks.alive
             with pytest.raises(ForkServerError):

@@ -24,6 +24,7 @@ from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
 REPO = Path(__file__).resolve().parents[1]
 RANDOM = REPO / "scenarios" / "random.yaml"
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sitl_helpers import parent_pid  # noqa: E402
 from test_fly import _alive, _quick_scenario  # noqa: E402
 
 # ------------------------------------------------------------------------------ the lines
@@ -207,7 +208,7 @@ def test_a_crew_process_that_died_between_missions_is_replaced(tmp_path: Path) -
         assert first["success"] and runner.crew is not None and runner.forks is not None
         servers.append(runner.forks.child.pid)
         detect = next(c for c in runner.crew.children if c.name == "detect")
-        assert _parent(detect.pid) == runner.forks.child.pid  # the crew is forked from the server
+        assert parent_pid(detect.pid) == runner.forks.child.pid  # the crew is forked from the server
         detect.process.kill()
         detect.process.wait(10)
         second = runner.fly(1)
@@ -225,8 +226,3 @@ def test_a_crew_process_that_died_between_missions_is_replaced(tmp_path: Path) -
     assert servers[0] != servers[1]
     flown = [pid for row in (first, second, third) for pid in row["pids"].values()]
     assert not [pid for pid in flown + servers if _alive(pid)]
-
-
-def _parent(pid: int) -> int:
-    with open(f"/proc/{pid}/stat") as fh:
-        return int(fh.read().rsplit(")", 1)[1].split()[1])
