@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge import fork_server
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
+from mavlink_bridge.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
 from mavlink_bridge.fork_server import ForkServer, ForkServerError
 from mavlink_bridge.mission_log import TruthLogError, read_mission
 from mavlink_bridge.processes import Child, ChildProcesses
@@ -298,7 +298,7 @@ class MissionRunner:
     def _launch(self, name: str, module: str, args: list[str], log: Path, stdout_pipe: bool, serve: bool) -> Child:
         """``python -m module args``: a crew's process (``serve``: it reads its next missions on standard input) is
         forked from the crew's fork server; a mission's own process starts afresh, as a user's would."""
-        if not serve or not fork_server.AVAILABLE:
+        if not serve or not FORK_SERVER_AVAILABLE:
             argv = [sys.executable, "-m", module, *args]
             return self.children.start(
                 name, argv, log_path=log, stdout_pipe=stdout_pipe, stdin_pipe=serve, env=self.env
