@@ -16,7 +16,8 @@ from typing import Any
 import pytest
 
 from mavlink_bridge.fly.config import DEFAULT_MODELS, config_from_args
-from mavlink_bridge.fly.mission_runner import MissionRunner
+from mavlink_bridge.fly.crew import Crew, LineReader
+from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
 from mavlink_bridge.processes import ChildProcesses
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError
 from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
@@ -192,6 +193,40 @@ def _timing(status: dict[str, Any]) -> dict[str, Any]:
     """The fields of a companion's status that measure the machine, not the mission."""
     keys = ("flight_wall_s", "flight_cpu_s", "latency_p50_ms", "latency_p99_ms")
     return {k: status[k] for k in keys}
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(300)
+def test_a_crew_process_whose_death_fly_learns_by_a_broken_pipe_is_named_with_its_signal(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A companion dies just as fly tells it the next mission: its exit status has not reached fly yet (the check
+    before telling sees it running), the pipe breaks, and the mission's error still says what killed it. The
+    companions already told the mission stop at fly's SIGTERM, though it came while they set the mission up."""
+    cfg = config_from_args(["--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--episodes", "2"])
+    children = ChildProcesses()
+    runner = MissionRunner(cfg, children, tmp_path / "work")
+    try:
+        assert runner.fly(0)["success"] and runner.crew is not None
+        detect = next(c for c in runner.crew.children if c.name == "detect")
+        os.kill(detect.pid, signal.SIGKILL)
+        assert detect.process.wait(10) == -signal.SIGKILL
+        told: list[str] = []  # its exit status is not known until fly has tried to tell it the next mission
+        real_tell = Crew.tell
+
+        def tell(crew: Crew, reader: LineReader, mission: NextMission | None) -> None:
+            told.append(reader.child.name)
+            real_tell(crew, reader, mission)
+
+        monkeypatch.setattr(Crew, "tell", tell)
+        monkeypatch.setattr(detect, "poll", lambda: -signal.SIGKILL if "detect" in told else None)
+        with pytest.raises(ChildFailed, match=r"mission 1: companion detect \(pid \d+\) was killed by signal 9"):
+            runner.fly(1)
+        assert runner.crew is None
+        assert not [r.message for r in caplog.records if "did not stop" in r.message]
+    finally:
+        runner.close()
+        children.stop_all()
 
 
 @pytest.mark.sitl

@@ -250,6 +250,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     redirect_stderr(mission.log)
                 config = next_mission_config(config, mission)
                 companion = build_companion(config)
+                if stopped:  # a signal before the line above stopped the last mission's companion, not this one
+                    break
                 result = companion.run(link)
                 _print_end(result)
         except bad_input_errors() as exc:

@@ -25,6 +25,10 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 class CrewError(Exception):
     """A process of the crew cannot be told the next mission (it died); ``str()`` is one line."""
 
+    def __init__(self, message: str, child: Child) -> None:
+        super().__init__(message)
+        self.child = child
+
 
 class LineReader:
     """The lines a child prints on its standard output, read without blocking."""
@@ -112,7 +116,7 @@ class Crew:
             stdin.flush()
         except (BrokenPipeError, OSError) as exc:
             raise CrewError(
-                f"{reader.child.name} (pid {reader.child.pid}) cannot take the next mission: {exc}"
+                f"{reader.child.name} (pid {reader.child.pid}) cannot take the next mission: {exc}", reader.child
             ) from None
 
     def cpu_s(self) -> float | None:

@@ -37,6 +37,8 @@ companion that a loaded machine paused for a moment in the loop (failsafes are s
 LINGER_S = 0.2
 """Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
 link with up to this much latency."""
+CREW_DEATH_WAIT_S = 2.0
+"""How long fly waits for the exit status of a crew process whose standard input broke."""
 CREW_IMPORTS = ("sim_vehicles.__main__", "mavlink_bridge.companion.cli", "mavlink_bridge.companion.machine")
 """What a crew's fork server imports once for the world and the three companions it forks (their start-up is
 mostly imports: filterpy with scipy.stats, pymavlink, numpy)."""
@@ -335,10 +337,20 @@ class MissionRunner:
         try:
             crew, cpu0 = self._crew_for(index, mdir, scenario_file, truth, seed)
             timed_out = self._watch_crew(index, crew, t0)
-        except (ChildFailed, CrewError) as exc:
+        except CrewError as exc:
+            # Its standard input broke: it has died, and how it died is the error (its exit status may reach us a
+            # moment after the broken pipe, from a fork server's notice or the kernel's reaping).
+            try:
+                exc.child.process.wait(CREW_DEATH_WAIT_S)
+                if self.crew is not None:
+                    self._check_crew_alive(index, self.crew)
+            except subprocess.TimeoutExpired:
+                pass
+            finally:
+                self._drop_crew()
+            raise ChildFailed(f"mission {index}: {exc}") from None
+        except ChildFailed:
             self._drop_crew()
-            if isinstance(exc, CrewError):
-                raise ChildFailed(f"mission {index}: {exc}") from None
             raise
         cpu1 = crew.cpu_s()
         if timed_out:
