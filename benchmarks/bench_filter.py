@@ -1,4 +1,4 @@
-"""Measure mavlink_bridge.state_filter's models on noisy simulated tracks (seeded).
+"""Measure mavlink_bridge.estimation.state_filter's models on noisy simulated tracks (seeded).
 
 Figures per model: RMS position / speed / heading / turn-rate error after convergence, the raw
 measurement's RMS position error, the position error at the end of a 2 s measurement gap (the
@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mavlink_bridge.state_filter import FilterModel, FilterNoise, VehicleStateFilter  # noqa: E402
+from mavlink_bridge.estimation.state_filter import FilterModel, FilterNoise, VehicleStateFilter  # noqa: E402
 
 _log = logging.getLogger("bench_filter")
 

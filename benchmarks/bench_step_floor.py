@@ -9,7 +9,7 @@ This script measures the parts of that round no implementation of the architectu
   datagrams of the size a lean lockstep step sends (``--datagram-bytes``), three companion processes each
   answer with a setpoint-sized datagram, and the world waits (``select``) for the three answers. CPU of all four
   processes (user + system, from ``/proc``) per round.
-* ``filter``: one companion's :class:`mavlink_bridge.state_filter.VehicleStateFilter` (the default
+* ``filter``: one companion's :class:`mavlink_bridge.estimation.state_filter.VehicleStateFilter` (the default
   constant-turn EKF, filterpy's ``ExtendedKalmanFilter``) predicting 0.1 s and taking one position/velocity fix,
   per step, on a turning track.
 * ``policy``: one role's shipped actor (``--models``, the numpy forward pass the companion flies) on one
@@ -134,7 +134,7 @@ def _round(sock: socket.socket, peers: Sequence[tuple[str, int]], payload: bytes
 
 def measure_filter(steps: int) -> dict[str, float]:
     """CPU per step of the companion's default filter: predict 0.1 s, then one position/velocity fix."""
-    from mavlink_bridge.state_filter import VehicleStateFilter
+    from mavlink_bridge.estimation.state_filter import VehicleStateFilter
 
     rng = np.random.default_rng(0)
     speed, turn = 250.0, math.radians(3.0)

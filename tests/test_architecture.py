@@ -103,6 +103,35 @@ def test_who_may_import_whom(package: str, forbidden: tuple[str, ...]):
     assert not offenders, offenders
 
 
+BRIDGE_ROOMS = ("link", "estimation", "processes", "companion", "fly")
+"""``mavlink_bridge``'s rooms, lowest first: each imports only the rooms before it."""
+
+
+def room_edges(package: str, rooms: tuple[str, ...]) -> set[tuple[str, str]]:
+    """(room, room it imports) for every import between two rooms of ``package``."""
+    graph = project_graph()
+    return {
+        (a.split(".")[1], b.split(".")[1])
+        for a, targets in graph.items()
+        if a.startswith(package + ".") and a.split(".")[1] in rooms
+        for b in targets
+        if b.startswith(package + ".") and b.split(".")[1] != a.split(".")[1]
+    }
+
+
+def test_the_bridge_is_in_rooms_with_no_upward_arrow():
+    """Every module of ``mavlink_bridge`` lives in one of its rooms (no loose top-level module), and a room imports
+    only the rooms below it: no upward arrow, so no circle between rooms."""
+    loose = sorted(p.name for p in (ROOT / "mavlink_bridge").glob("*.py") if p.name != "__init__.py")
+    assert not loose, loose
+    rooms = sorted(p.name for p in (ROOT / "mavlink_bridge").iterdir() if (p / "__init__.py").is_file())
+    assert rooms == sorted(BRIDGE_ROOMS)
+    edges = room_edges("mavlink_bridge", BRIDGE_ROOMS)
+    assert ("fly", "companion") in edges and ("companion", "link") in edges  # the walk sees the rooms' imports
+    upward = sorted((a, b) for a, b in edges if BRIDGE_ROOMS.index(b) >= BRIDGE_ROOMS.index(a))
+    assert not upward, upward
+
+
 def modules_after(statement: str) -> set[str]:
     code = f"import sys\n{statement}\nprint(' '.join(sorted(m.split('.')[0] for m in sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
@@ -222,8 +251,8 @@ def test_ray_workers_import_this_checkout():
 
 
 WIRE_FIELD_MODULES = (
-    "mavlink_bridge/frames.py",
-    "mavlink_bridge/link.py",
+    "mavlink_bridge/link/frames.py",
+    "mavlink_bridge/link/connection.py",
     "sim_vehicles/clock.py",
     "sim_vehicles/commands.py",
     "sim_vehicles/setpoints.py",
@@ -303,7 +332,7 @@ def test_both_ends_convert_through_the_wire(monkeypatch: pytest.MonkeyPatch):
     import numpy as np
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
+    from mavlink_bridge.link.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
     from sim_vehicles import setpoints, telemetry
     from sim_vehicles.clock import Clock
     from sim_vehicles.events import WorldFlags

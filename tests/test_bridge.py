@@ -28,8 +28,15 @@ import pytest
 from sitl_helpers import EXACT_LINK, REPO, STRIKE, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
 
 from mavlink_bridge.companion import cli as companion_cli
-from mavlink_bridge.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
-from mavlink_bridge.link import SETPOINT_FRAME, SETPOINT_TYPE_MASK, CommandError, LinkError, MavLink, parse_connection
+from mavlink_bridge.link.connection import (
+    SETPOINT_FRAME,
+    SETPOINT_TYPE_MASK,
+    CommandError,
+    LinkError,
+    MavLink,
+    parse_connection,
+)
+from mavlink_bridge.link.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
 from tssac_core.sim.scenario import LinkModel, Role, dump, load
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
@@ -717,7 +724,7 @@ def _protocol_pair(sysid: int, link_id: int, signed: bool) -> tuple[M.MAVLink, M
 
 @pytest.mark.parametrize("signed", [False, True])
 def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(signed: bool) -> None:
-    from mavlink_bridge.link import DIALECT
+    from mavlink_bridge.link.connection import DIALECT
     from tssac_core.wire.framing import FramePacker, scan_frames
 
     rng = np.random.default_rng(7)
@@ -739,7 +746,7 @@ def test_frame_packer_makes_pymavlinks_bytes_for_every_message_of_the_dialect(si
 def test_frame_packer_packs_fields_as_pymavlink_packs_the_message(signed: bool) -> None:
     """pack_fields (class + constructor arguments, no message object) against pymavlink's own pack, for every message
     without strings and arrays: those whose wire order differs from the constructor's included."""
-    from mavlink_bridge.link import DIALECT
+    from mavlink_bridge.link.connection import DIALECT
     from tssac_core.wire.framing import FramePacker
 
     rng = np.random.default_rng(11)
@@ -771,7 +778,7 @@ def test_crc16_is_mavlinks_x25_checksum_with_or_without_fastcrc() -> None:
 
 @pytest.mark.parametrize("signed", [False, True])
 def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect(signed: bool) -> None:
-    from mavlink_bridge.link import DIALECT
+    from mavlink_bridge.link.connection import DIALECT
     from tssac_core.wire.framing import FrameDecoder, scan_frames
 
     rng = np.random.default_rng(5)
@@ -796,7 +803,7 @@ def test_frame_decoder_makes_pymavlinks_objects_for_every_message_of_the_dialect
 def test_frame_decoder_reads_a_payload_longer_than_its_message_as_pymavlink_does() -> None:
     """A frame from a dialect with more extension fields than ours: its payload is longer than the message's struct;
     both decoders read the struct's bytes and keep the whole payload in ``_payload``."""
-    from mavlink_bridge.link import DIALECT
+    from mavlink_bridge.link.connection import DIALECT
     from tssac_core.wire.framing import FrameDecoder, scan_frames
 
     decoder = FrameDecoder(M.mavlink_map, M.MAVLink_header)

@@ -1,6 +1,6 @@
 """The fork server: a program forked from a warm interpreter behaves as ``python -m`` started afresh would (its output,
 its exit status, its session), is stopped like any child, and never outlives its server
-(mavlink_bridge.fork_server)."""
+(mavlink_bridge.processes.fork_server)."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from mavlink_bridge.fork_server import ForkServer, ForkServerError
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.processes.children import ChildProcesses
+from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from sitl_helpers import parent_pid, running  # noqa: E402

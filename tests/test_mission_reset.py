@@ -18,7 +18,7 @@ import pytest
 from mavlink_bridge.fly.config import DEFAULT_MODELS, config_from_args
 from mavlink_bridge.fly.crew import Crew, LineReader
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.processes.children import ChildProcesses
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError
 from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
 

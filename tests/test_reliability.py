@@ -24,8 +24,8 @@ from sitl_helpers import GUIDED, STRIKE, Client, RunningSitl, lockstep, mavlink2
 from test_bridge import CompanionProcess, UdpRelay, _scenario_file
 
 from mavlink_bridge.fly.mission_runner import child_failure
-from mavlink_bridge.link import MavLink
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.link.connection import MavLink
+from mavlink_bridge.processes.children import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
 from sim_vehicles.config import ClockMode, LockstepStart
 from sim_vehicles.link_model import LinkChannel, keyed_uniforms

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from mavlink_bridge.companion_shield import CompanionShield
-from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
+from mavlink_bridge.companion.shield import CompanionShield
+from mavlink_bridge.estimation.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.assurance.monitor import (
     Hazards,
     Limits,

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mavlink_bridge.mission_log import read_mission
+from mavlink_bridge.fly.mission_log import read_mission
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import dump, load
 

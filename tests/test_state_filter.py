@@ -1,4 +1,4 @@
-"""Tests of mavlink_bridge.state_filter on simulated noisy constant-turn tracks (eq. 5 frame)."""
+"""Tests of mavlink_bridge.estimation.state_filter on simulated noisy constant-turn tracks (eq. 5 frame)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mavlink_bridge.state_filter import FilterModel, FilterNoise, VehicleStateFilter
+from mavlink_bridge.estimation.state_filter import FilterModel, FilterNoise, VehicleStateFilter
 
 RATE_HZ = 10.0
 POS_SIGMA_M = 10.0
@@ -281,7 +281,7 @@ def test_from_sensor_takes_plain_numbers() -> None:
 
 def test_clock_jump_back_is_logged(caplog: pytest.LogCaptureFixture) -> None:
     f, meas = _converged_filter(FilterModel.CONSTANT_TURN)
-    with caplog.at_level(logging.WARNING, logger="mavlink_bridge.state_filter"):
+    with caplog.at_level(logging.WARNING, logger="mavlink_bridge.estimation.state_filter"):
         assert not f.update(float(meas.t_s[-1]) - 60.0, meas.pos_m[-1], meas.vel_m_s[-1])
     assert "reset()" in caplog.text
 
@@ -290,7 +290,7 @@ def test_clock_jump_back_is_logged(caplog: pytest.LogCaptureFixture) -> None:
 def test_extended_filter_jacobian_is_the_derivative_of_eq5(omega: float) -> None:
     # The extended filter linearises eq. 5 (constant v and omega) with analytic Jacobians; they must
     # be the derivatives of the transition and measurement functions (central differences).
-    from mavlink_bridge.state_filter import _ct_fx, _ct_h_jacobian, _ct_hx, _ct_jacobian
+    from mavlink_bridge.estimation.state_filter import _ct_fx, _ct_h_jacobian, _ct_hx, _ct_jacobian
 
     state = np.array([1200.0, -300.0, 240.0, 2.5, omega])
     dt = 0.7

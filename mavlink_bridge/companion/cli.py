@@ -22,8 +22,8 @@ from mavlink_bridge.companion.config import (
     CompanionConfig,
 )
 from mavlink_bridge.companion.status import CompanionResult
-from mavlink_bridge.filter_model import FilterModel
-from mavlink_bridge.signing_key import read_signing_key
+from mavlink_bridge.estimation.filter_model import FilterModel
+from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
@@ -202,7 +202,7 @@ def build_companion(config: CompanionConfig) -> Companion:
 
 def bad_input_errors() -> tuple[type[Exception], ...]:
     """Exceptions that mean bad input: one line and exit code 2."""
-    from mavlink_bridge.link import LinkError
+    from mavlink_bridge.link.connection import LinkError
 
     return (UsageError, ScenarioError, LinkError, CheckpointError, ResetError)
 

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from mavlink_bridge.filter_model import FilterModel
+from mavlink_bridge.estimation.filter_model import FilterModel
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
@@ -99,7 +99,7 @@ class CompanionConfig:
     pilot: str = ""
     """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
-    """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion_shield`); None: the pilot alone."""
+    """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion.shield`); None: the pilot alone."""
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
     VFR_HUD): less work on both sides when no ground station shares the vehicle (fly's own worlds)."""

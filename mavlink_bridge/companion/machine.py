@@ -23,9 +23,11 @@ from mavlink_bridge.companion.config import (
     CompanionConfig,
 )
 from mavlink_bridge.companion.held_pilot import DecisionClock, HeldPilot, make_pilot
+from mavlink_bridge.companion.shield import CompanionShield, Estimate
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
-from mavlink_bridge.companion_shield import CompanionShield, Estimate
-from mavlink_bridge.frames import (
+from mavlink_bridge.estimation.state_filter import FilterNoise, VehicleStateFilter
+from mavlink_bridge.link.connection import CommandError, LinkError, M, MavLink, Message
+from mavlink_bridge.link.frames import (
     HOLD,
     Measurement,
     Setpoint,
@@ -34,8 +36,6 @@ from mavlink_bridge.frames import (
     from_local_position_ned,
     setpoint_to_action,
 )
-from mavlink_bridge.link import CommandError, LinkError, M, MavLink, Message
-from mavlink_bridge.state_filter import FilterNoise, VehicleStateFilter
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.lockstep import granted_through_ms

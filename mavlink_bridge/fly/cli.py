@@ -22,7 +22,7 @@ from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
 from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.processes.children import ChildProcesses
 from tssac_core.common.cli import BAD_INPUT, EXIT_BAD_INPUT, EXIT_INTERRUPTED, bad_input_line, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import TaskFailed

@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
-from mavlink_bridge.link import parse_connection
-from mavlink_bridge.signing_key import read_signing_key
+from mavlink_bridge.link.connection import parse_connection
+from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_models as check_manifest

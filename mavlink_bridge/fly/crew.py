@@ -15,7 +15,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 
-from mavlink_bridge.processes import Child
+from mavlink_bridge.processes.children import Child
 from tssac_core.wire.mission_reset import QUIT, NextMission
 
 QUIT_LINE = json.dumps(QUIT) + "\n"

@@ -19,12 +19,12 @@ import numpy as np
 
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
+from mavlink_bridge.fly.mission_log import TruthLogError, read_mission
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
-from mavlink_bridge.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
-from mavlink_bridge.fork_server import ForkServer, ForkServerError
-from mavlink_bridge.mission_log import TruthLogError, read_mission
-from mavlink_bridge.processes import Child, ChildProcesses
+from mavlink_bridge.processes.children import Child, ChildProcesses
+from mavlink_bridge.processes.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
+from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
 from tssac_core.wire.mission_reset import NextMission

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
-from mavlink_bridge.mission_log import MissionRecord
+from mavlink_bridge.fly.mission_log import MissionRecord
 from tssac_core.sim.scenario import Layout
 
 

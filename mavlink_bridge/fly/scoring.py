@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from mavlink_bridge.fly.config import FlyConfig
-from mavlink_bridge.mission_log import MissionRecord
+from mavlink_bridge.fly.mission_log import MissionRecord
 from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,

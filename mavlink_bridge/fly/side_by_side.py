@@ -26,7 +26,7 @@ from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_runner import MissionRunner
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.processes.children import ChildProcesses
 
 _log = logging.getLogger("mavlink_bridge.fly")
 

@@ -21,7 +21,7 @@ from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_runner import MissionRunner
-from mavlink_bridge.processes import ChildProcesses
+from mavlink_bridge.processes.children import ChildProcesses
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import map_on_ray
 

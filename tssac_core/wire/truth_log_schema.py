@@ -1,5 +1,5 @@
 """The truth log's format, shared by its writer (:mod:`sim_vehicles.truth_log`) and its reader
-(:mod:`mavlink_bridge.mission_log`), which never import each other: JSON Lines, one object per line,
+(:mod:`mavlink_bridge.fly.mission_log`), which never import each other: JSON Lines, one object per line,
 written as the mission runs.
 
 Line types (key ``type``):

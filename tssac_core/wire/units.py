@@ -5,7 +5,7 @@ phi counter-clockwise from east, turn rate omega counter-clockwise-positive, and
 scaled by the vehicle's limits. MAVLink's fields are in other units (``time_boot_ms``, microseconds, millimetres,
 cm/s, degE7, centidegrees) and another frame (NED: x north, y east; yaw and yaw rate clockwise-positive about the
 down axis). The SITL (:mod:`sim_vehicles.telemetry`, :mod:`sim_vehicles.setpoints`, :mod:`sim_vehicles.vehicle`)
-writes telemetry and reads setpoints with these functions, the companion (:mod:`mavlink_bridge.frames`) reads
+writes telemetry and reads setpoints with these functions, the companion (:mod:`mavlink_bridge.link.frames`) reads
 telemetry and writes setpoints with the same ones, so each conversion is written once
 (``tests/test_architecture.py`` checks that neither side spells a scale itself).
 

@@ -2,12 +2,12 @@
 
 A companion's imports (numpy, pymavlink, filterpy with ``scipy.stats``) cost about 0.7-1 s of CPU, the world's about
 0.2 s, and a campaign's crews start eight of them on two cores. :class:`ForkServer` starts one server process
-(``python -m mavlink_bridge.fork_server --socket-fd N MODULE ...``) that imports the modules it is given once; each
-:meth:`ForkServer.start` then forks the server and runs the program in the fork exactly as ``python -m`` would
-(:func:`runpy.run_module` as ``__main__``, ``sys.argv`` set, ``SystemExit`` taken as the exit status), so what the
+(``python -m mavlink_bridge.processes.fork_server --socket-fd N MODULE ...``) that imports the modules it is given
+once; each :meth:`ForkServer.start` then forks the server and runs the program in the fork exactly as ``python -m``
+would (:func:`runpy.run_module` as ``__main__``, ``sys.argv`` set, ``SystemExit`` taken as the exit status), so what the
 program does and prints is the same as a fresh interpreter's; only the imports are already done.
 
-Each forked program is a child as :mod:`mavlink_bridge.processes` wants one: it leads a session of its own (a
+Each forked program is a child as :mod:`mavlink_bridge.processes.children` wants one: it leads a session of its own (a
 terminal's Ctrl-C reaches only the parent, which stops it; it is stopped by process group), and it receives SIGTERM
 when the server dies, as the server does when the thread of fly that started it ends, so nothing outlives fly. Its
 standard input and output are pipes to fly (passed over the server's Unix socket) or empty, its standard error goes
@@ -42,11 +42,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
-from mavlink_bridge.processes import Child, ChildProcesses
+from mavlink_bridge.processes.children import Child, ChildProcesses
 
 _log = logging.getLogger(__name__)
 
-PROG = "python -m mavlink_bridge.fork_server"
+PROG = "python -m mavlink_bridge.processes.fork_server"
 _MAX_PACKET = 1 << 16
 _PR_SET_PDEATHSIG = 1
 _PR_SET_NAME = 15
@@ -120,7 +120,14 @@ class ForkServer:
         self.children = children
         mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         try:
-            argv = [sys.executable, "-m", "mavlink_bridge.fork_server", "--socket-fd", str(theirs.fileno()), *preload]
+            argv = [
+                sys.executable,
+                "-m",
+                "mavlink_bridge.processes.fork_server",
+                "--socket-fd",
+                str(theirs.fileno()),
+                *preload,
+            ]
             self.child = children.start("fork-server", argv, log_path=log_path, env=env, pass_fds=(theirs.fileno(),))
         except BaseException:
             mine.close()

@@ -6,7 +6,7 @@ parent dies without cleaning up (``PR_SET_PDEATHSIG``, so even a ``kill -9`` of 
 no orphan), and stops children by process group: SIGTERM, a grace period, then SIGKILL, then
 ``wait()`` so that no zombie is left either. :meth:`ChildProcesses.stop_all` is idempotent and
 registered with ``atexit``. A program started in its own session by someone else, a fork server's
-(:mod:`mavlink_bridge.fork_server`), is adopted (:meth:`ChildProcesses.adopt`) and stopped the same way.
+(:mod:`mavlink_bridge.processes.fork_server`), is adopted (:meth:`ChildProcesses.adopt`) and stopped the same way.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _die_with_parent(libc: ctypes.CDLL) -> Callable[[], None]:
 
 class ProcessHandle(Protocol):
     """What a parent holds of a running program: a :class:`subprocess.Popen`, or a
-    :class:`mavlink_bridge.fork_server.ForkedProcess`."""
+    :class:`mavlink_bridge.processes.fork_server.ForkedProcess`."""
 
     @property
     def pid(self) -> int: ...

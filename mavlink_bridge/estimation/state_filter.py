@@ -78,7 +78,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import NDArray
 
-from mavlink_bridge.filter_model import FilterModel
+from mavlink_bridge.estimation.filter_model import FilterModel
 
 __all__ = ["FilterModel", "FilterNoise", "VehicleStateFilter"]
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mavlink_bridge.companion_shield import ENGAGED_TEXT, RELEASED_TEXT
+from mavlink_bridge.companion.shield import ENGAGED_TEXT, RELEASED_TEXT
 from tssac_core.sim.scenario import ROLES
 from tssac_core.wire.mission_events import EventName
 from tssac_core.wire.truth_log_schema import (

@@ -1,4 +1,4 @@
-"""Which motion model the companion's state filter runs (:mod:`mavlink_bridge.state_filter`): a name, without
+"""Which motion model the companion's state filter runs (:mod:`mavlink_bridge.estimation.state_filter`): a name, without
 filterpy, so that the companion's configuration and ``--help`` do not load filterpy and scipy."""
 
 from __future__ import annotations
