@@ -1,6 +1,8 @@
-"""SITL campaigns side by side: the same lockstep missions flown by ``fly`` from two (or more) checkouts.
+"""SITL campaigns side by side: the same lockstep missions flown by ``fly`` from two (or more) checkouts, or from this
+checkout with different ``fly`` arguments.
 
-Each checkout (``--tree NAME=DIR``, e.g. today's main in a ``git worktree`` and this tree) flies the same
+Each checkout (``--tree NAME=DIR``, e.g. today's main in a ``git worktree`` and this tree) or variant of this one
+(``--variant NAME=ARGS``, e.g. ``jsbsim="--dynamics jsbsim"``: the physics backends side by side) flies the same
 missions (``--scenario``, ``--models``, ``--seed``, ``--missions``) with ``--workers`` 1 and 2; the runs of the
 trees alternate, so that a machine's noise hits them alike. Per run it reports:
 
@@ -19,6 +21,8 @@ the repeats (``missions_per_hour_each`` keeps every run's).
     git worktree add --detach /tmp/main-tree main
     python benchmarks/bench_campaign.py --tree main=/tmp/main-tree --tree new=. --missions 20 \\
         --json benchmarks/results/campaign.json
+    python benchmarks/bench_campaign.py --variant kinematic="--dynamics kinematic" \\
+        --variant jsbsim="--dynamics jsbsim" --missions 100 --workers 2 --json /tmp/dynamics.json
 
 Ratios are quoted against the first tree.
 """
@@ -41,12 +45,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def fly(tree: Path, args: argparse.Namespace, workers: int, out: Path) -> dict[str, Any]:
-    """One campaign from ``tree``; the fly JSON plus the command's wall time."""
+def fly(tree: Path, args: argparse.Namespace, workers: int, out: Path, extra: list[str]) -> dict[str, Any]:
+    """One campaign from ``tree`` (with the variant's ``extra`` fly arguments); the fly JSON plus the command's wall
+    time."""
     argv = [sys.executable, "-m", "mavlink_bridge.fly", "--scenario", str(args.scenario.resolve())]
     argv += ["--models", str(args.models.resolve()), "--episodes", str(args.missions), "--seed", str(args.seed)]
     argv += ["--lockstep", "--workers", str(workers), "--json", str(out / "fly.json"), "--logs", str(out / "logs")]
-    argv += ["--no-progress", *args.fly_arg]
+    argv += ["--no-progress", *args.fly_arg, *extra]
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.monotonic()
     proc = subprocess.run(argv, cwd=tree, env=env, capture_output=True, text=True, timeout=args.timeout_s)
@@ -113,7 +118,10 @@ def truth_steps(logs: Path) -> dict[str, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--tree", action="append", required=True, metavar="NAME=DIR", help="a checkout to fly from")
+    p.add_argument("--tree", action="append", default=[], metavar="NAME=DIR", help="a checkout to fly from")
+    p.add_argument(
+        "--variant", action="append", default=[], metavar="NAME=ARGS", help="this checkout with these fly arguments"
+    )
     p.add_argument("--missions", type=int, default=20, help="missions per run (default 20)")
     p.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     p.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "random.yaml")
@@ -125,18 +133,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--timeout-s", type=float, default=7200.0)
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
-    trees = {}
+    trees: dict[str, Path] = {}
+    extras: dict[str, list[str]] = {}
     for spec in args.tree:
         name, sep, path = spec.partition("=")
         if not sep or not Path(path).is_dir():
             p.error(f"--tree {spec!r}: expected NAME=DIR with an existing DIR")
-        trees[name] = Path(path).resolve()
+        trees[name], extras[name] = Path(path).resolve(), []
+    for spec in args.variant:
+        name, sep, fly_args = spec.partition("=")
+        if not sep or name in trees:
+            p.error(f"--variant {spec!r}: expected NAME=ARGS with a name of its own")
+        trees[name], extras[name] = ROOT, fly_args.split()
+    if len(trees) < 1:
+        p.error("give at least one --tree or --variant")
     report: dict[str, Any] = {
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "missions": args.missions,
         "scenario": str(args.scenario),
         "seed": args.seed,
         "repeats": args.repeats,
+        "variants": {name: " ".join(extra) for name, extra in extras.items() if extra},
         "runs": {},
     }
     with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
@@ -148,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
                 for name in order:
                     out = Path(tmp) / f"{name}-w{workers}-r{repeat}"
                     out.mkdir()
-                    each[name].append(figures(fly(trees[name], args, workers, out)))
+                    each[name].append(figures(fly(trees[name], args, workers, out, extras[name])))
                     if args.compare_truth:
                         steps[name].append(truth_steps(out / "logs"))
                     shown = {k: v for k, v in each[name][-1].items() if k != "steps"}

@@ -31,7 +31,7 @@ from typing import NoReturn
 
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
-from tssac_core.sim.scenario import ScenarioError, load
+from tssac_core.sim.scenario import DynamicsModel, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, ResetError, redirect_stderr
 from tssac_core.wire.signing import SigningKeyError, load_key
 
@@ -53,6 +53,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
     p.add_argument(
         "--seed", type=int, default=0, help="seed of the random layout, GPS noise and link model (default 0)"
+    )
+    p.add_argument(
+        "--dynamics",
+        choices=[m.value for m in DynamicsModel],
+        default=None,
+        help=(
+            "the vehicles' physics: kinematic (eq. 5-6, the training world's) or jsbsim (a JSBSim flight model per "
+            "vehicle under an inner-loop autopilot); default: the scenario's dynamics section, else kinematic"
+        ),
+    )
+    p.add_argument(
+        "--aircraft",
+        default=None,
+        metavar="NAME|FILE",
+        help="the JSBSim airframe: a bundled one (f16) or an airframe file; default: the scenario's, else f16",
     )
     p.add_argument("--host", default="127.0.0.1", help="address the vehicles bind (default 127.0.0.1)")
     p.add_argument(
@@ -153,6 +168,8 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         setpoint_timeout_s=args.setpoint_timeout_s,
         linger_s=args.linger_s,
         outputs=tuple(parse_output(o) for o in args.out),
+        dynamics_model=None if args.dynamics is None else DynamicsModel(args.dynamics),
+        aircraft=args.aircraft,
     )
 
 
@@ -192,7 +209,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for ep in runner.endpoints:
             print(f"{ep.role} sysid={ep.sysid} {ep.connection_string}")
         speed = "lockstep" if config.clock is ClockMode.LOCKSTEP else f"realtime speedup={config.speedup:g}"
-        print(f"ready scenario={config.scenario.name} seed={config.seed} clock={speed}", flush=True)
+        dynamics = config.dynamics.model.value
+        print(f"ready scenario={config.scenario.name} seed={config.seed} clock={speed} dynamics={dynamics}", flush=True)
         _print_end(runner.run_mission())
         missions = MissionInput(0)  # standard input, read only by a serving world
         while args.serve and not runner.stop_requested:

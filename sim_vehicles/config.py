@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass
 from pathlib import Path
 
-from tssac_core.sim.scenario import Scenario
+from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario
 
 DEFAULT_BASE_PORT = 14560
 """Vehicle i binds base + PORT_STRIDE * i (decoy 14560, detect 14570, strike 14580)."""
@@ -73,6 +73,19 @@ class SitlConfig:
     outputs: tuple[tuple[str, int], ...] = ()
     """Ground-station addresses (``--out udpout:HOST:PORT``): every vehicle streams to each from the start and
     takes commands from it, as ArduPilot SITL's ``--out`` (a listening ground station sees all three)."""
+    dynamics_model: DynamicsModel | None = None
+    """``--dynamics``: the physics every mission flies, over the scenario's ``dynamics:`` section (None: the
+    scenario's, kinematic without one)."""
+    aircraft: str | None = None
+    """``--aircraft``: the JSBSim airframe, over the scenario's (None: the scenario's, f16 without one)."""
+
+    @property
+    def dynamics(self) -> Dynamics:
+        """The physics this mission flies: the command line's choices over the scenario's section."""
+        d = self.scenario.dynamics or Dynamics()
+        return Dynamics(
+            model=self.dynamics_model or d.model, aircraft=d.aircraft if self.aircraft is None else self.aircraft
+        )
 
     def __post_init__(self) -> None:
         if not (self.speedup > 0.0 and self.speedup < float("inf")):

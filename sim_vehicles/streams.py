@@ -34,6 +34,7 @@ DEFAULT_INTERVALS_S: dict[int, float | None] = {
     M.MAVLINK_MSG_ID_NAMED_VALUE_INT: 1.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 1.0,
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    M.MAVLINK_MSG_ID_WIND: 1.0,
 }
 """Default stream intervals in simulated seconds (None = off); SET_MESSAGE_INTERVAL changes them."""
 MAX_INTERVAL_US = 2**31 - 1
@@ -156,11 +157,14 @@ def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list
             )
         ]
     if mid == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-        return [] if fix is None else [telemetry.global_position_int(mav, o, fix, t.phi_rad)]
+        return [] if fix is None else [telemetry.global_position_int(mav, o, fix, t)]
     if mid == M.MAVLINK_MSG_ID_ATTITUDE:
         return [telemetry.attitude(mav, t, ms)]
     if mid == M.MAVLINK_MSG_ID_VFR_HUD:
         return [telemetry.vfr_hud(mav, t, o.alt_m, v.last_action[1])]
+    if mid == M.MAVLINK_MSG_ID_WIND:
+        msg = telemetry.wind(mav, t)
+        return [] if msg is None else [msg]
     if mid == M.MAVLINK_MSG_ID_NAMED_VALUE_INT:
         return [telemetry.named_value_int(mav, ms, name, value) for name, value in v.flags.named_values()]
     if mid == M.MAVLINK_MSG_ID_HOME_POSITION:

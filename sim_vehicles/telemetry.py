@@ -39,18 +39,49 @@ Msg: TypeAlias = mavlink2.MAVLink_message
 
 
 @dataclass(frozen=True)
+class AirData:
+    """What the airframe does in the air, when the dynamics model it (JSBSim; the kinematic model in wind)."""
+
+    airspeed_m_s: float
+    """True airspeed."""
+    heading_rad: float
+    """Where the nose points, CCW from east (the world's frame; ATTITUDE's yaw is pi/2 minus it)."""
+    roll_rad: float
+    """Bank, right wing down positive (MAVLink's ATTITUDE)."""
+    pitch_rad: float
+    """Nose up positive."""
+    roll_rate_rad_s: float
+    pitch_rate_rad_s: float
+    yaw_rate_rad_s: float
+    """Body rates p, q, r (forward-right-down axes, as ATTITUDE reports them)."""
+    alt_m: float
+    """Altitude above mean sea level."""
+    climb_m_s: float
+    """Up positive."""
+    wind_east_m_s: float
+    wind_north_m_s: float
+    """The air mass's velocity at the vehicle (the world's frame)."""
+    throttle: float
+    """0..1."""
+
+
+@dataclass(frozen=True)
 class VehicleTruth:
     """A vehicle's true state after a world step."""
 
     east_m: float
     north_m: float
     speed_m_s: float
+    """Ground speed."""
     phi_rad: float
-    """Heading, CCW from east (eq. 5)."""
+    """Course over the ground, CCW from east (eq. 5's heading in calm air)."""
     turn_rate_rad_s: float
-    """omega flown in the last step, CCW-positive."""
+    """The course's turn rate over the last step, CCW-positive (the kinematic model: omega as flown)."""
     accel_m_s2: float
-    """Speed change over the last step / dt (after the speed bounds)."""
+    """Ground speed change over the last step / dt (after the speed bounds)."""
+    air: AirData | None = None
+    """The airframe's own state; None in the kinematic model in calm air, where it follows from the path
+    (airspeed = ground speed, coordinated-turn bank, the flight altitude)."""
 
     @property
     def vel_east_m_s(self) -> float:
@@ -77,10 +108,13 @@ def heartbeat(mav: MAV, armed: bool, custom_mode: int, guided: bool, system_stat
     )
 
 
-def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, phi_rad: float) -> Msg:
-    """GLOBAL_POSITION_INT of a GPS fix (time_boot_ms = the fix's time); hdg from the true heading."""
+def global_position_int(mav: MAV, origin: Origin, fix: GpsFix, truth: VehicleTruth) -> Msg:
+    """GLOBAL_POSITION_INT of a GPS fix (time_boot_ms = the fix's time); hdg from the true heading (the nose's, where
+    the dynamics model it), altitude the true one (the flight altitude in the kinematic model)."""
     lat, lon = local_to_geodetic(origin, fix.east_m, fix.north_m)
-    alt_mm = units.mm_from_m(origin.alt_m)
+    air = truth.air
+    alt_mm = units.mm_from_m(origin.alt_m if air is None else air.alt_m)
+    phi_rad = truth.phi_rad if air is None else air.heading_rad
     vx, vy = units.ned_from_world(fix.vel_east_m_s, fix.vel_north_m_s)
     return mav.global_position_int_encode(
         units.ms_from_s(fix.time_s),
@@ -150,17 +184,50 @@ def gps_raw_int(
 
 
 def attitude(mav: MAV, truth: VehicleTruth, time_boot_ms: int) -> Msg:
-    """ATTITUDE: yaw = pi/2 - phi (wrapped), yawspeed = -omega; roll is the coordinated-turn bank angle."""
+    """ATTITUDE: the airframe's own where the dynamics model it; in the kinematic model in calm air yaw = pi/2 - phi
+    (wrapped), yawspeed = -omega and roll the coordinated-turn bank angle."""
+    air = truth.air
+    if air is not None:
+        yaw = yaw_ned_from_phi(air.heading_rad)
+        return mav.attitude_encode(
+            time_boot_ms,
+            air.roll_rad,
+            air.pitch_rad,
+            yaw,
+            air.roll_rate_rad_s,
+            air.pitch_rate_rad_s,
+            air.yaw_rate_rad_s,
+        )
     yawspeed = units.yaw_rate_from_omega(truth.turn_rate_rad_s)
     roll = math.atan(truth.speed_m_s * yawspeed / GRAVITY_M_S2)
     return mav.attitude_encode(time_boot_ms, roll, 0.0, yaw_ned_from_phi(truth.phi_rad), 0.0, 0.0, yawspeed)
 
 
 def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Msg:
-    """VFR_HUD: air = ground speed (no wind); throttle = 50 + 50 * the acceleration command in [-1, 1]."""
+    """VFR_HUD: airspeed apart from ground speed, the nose's heading, throttle, altitude and climb where the dynamics
+    model them; in the kinematic model in calm air air = ground speed and throttle = 50 + 50 * the acceleration
+    command in [-1, 1]."""
+    air = truth.air
+    if air is not None:
+        heading_deg = units.deg_from_cdeg(heading_cdeg(air.heading_rad))
+        throttle = units.percent_from_fraction(air.throttle)
+        return mav.vfr_hud_encode(air.airspeed_m_s, truth.speed_m_s, heading_deg, throttle, air.alt_m, air.climb_m_s)
     heading_deg = units.deg_from_cdeg(heading_cdeg(truth.phi_rad))
     throttle = int(round(50.0 + 50.0 * max(-1.0, min(1.0, accel_cmd))))
     return mav.vfr_hud_encode(truth.speed_m_s, truth.speed_m_s, heading_deg, throttle, alt_m, 0.0)
+
+
+def wind(mav: MAV, truth: VehicleTruth) -> Msg | None:
+    """ArduPilot's WIND (ardupilotmega): the direction the wind blows from (deg, clockwise from north, 0..360) and its
+    speed, as ArduPlane reports its wind estimate; None in calm air or where the dynamics know no air."""
+    air = truth.air
+    if air is None:
+        return None
+    speed = math.hypot(air.wind_east_m_s, air.wind_north_m_s)
+    if speed == 0.0:
+        return None
+    from_deg = math.degrees(math.atan2(-air.wind_east_m_s, -air.wind_north_m_s)) % 360.0
+    return mav.wind_encode(from_deg, speed, 0.0)
 
 
 INERTIAL_SENSORS = (

@@ -336,13 +336,18 @@ class VehicleLink:
     def publish(self, tick: bool = False) -> None:
         """After a step: take a GPS fix if one is due and send every stream that is due.
 
-        ``tick`` (lockstep): also send SYSTEM_TIME now if its stream did not, so clients see every step.
+        ``tick`` (lockstep): also send SYSTEM_TIME, the step's tick, so clients see every step; it leaves last, after
+        the step's other telemetry, so a client that answers the tick has read everything of its step whichever
+        datagram each frame went in (a client that decided on a tick before the step's fix had arrived would fly
+        the wall clock's choice, not the mission's).
         """
         v = self.vehicle
         v.sample_gps()
         due = self.streams.take_due(self.clock.sim_s, v.gps.last_fix)
         if self.endpoint.has_clients:
             for mid in due:
+                if tick and mid == M.MAVLINK_MSG_ID_SYSTEM_TIME:
+                    continue
                 build_fields = streams.FIELD_BUILDERS.get(mid)
                 if build_fields is None:
                     for msg in self.build(mid):
@@ -351,7 +356,7 @@ class VehicleLink:
                     fields = build_fields(v)
                     if fields is not None:
                         self.send_fields(mid, fields)
-        if tick and M.MAVLINK_MSG_ID_SYSTEM_TIME not in due:
+        if tick:
             self.send_fields(M.MAVLINK_MSG_ID_SYSTEM_TIME, streams.system_time_fields(v))
 
     def send_snapshot(self, dest: Address | None = None) -> None:

@@ -69,6 +69,7 @@ import numpy as np
 from sim_vehicles.clock import Clock
 from sim_vehicles.commands import CommandHandler
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
+from sim_vehicles.dynamics.backend import DynamicsError, VehicleDynamics, make_dynamics
 from sim_vehicles.events import EventKind, WorldFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.modes import FlightMode
@@ -80,7 +81,7 @@ from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
 from tssac_core.wire.signing import StreamKey
-from tssac_core.wire.truth_log_schema import VehicleRow
+from tssac_core.wire.truth_log_schema import SCHEMA_VERSION, AirRow, VehicleRow
 
 _log = logging.getLogger(__name__)
 
@@ -95,62 +96,26 @@ MAX_SELECT_S = 0.05
 _EPS = 1e-9
 
 
-def _clip_unit(x: float) -> float:
-    """``np.clip(x, -1, 1)`` for one float (NaN stays NaN), without numpy's per-call overhead."""
-    return -1.0 if x < -1.0 else 1.0 if x > 1.0 else x
-
-
-@dataclass(frozen=True)
-class _WorldState:
-    """World 0's per-vehicle state after a step, as Python numbers (one conversion per array, not per value)."""
-
-    x_m: list[float]
-    y_m: list[float]
-    v_m_s: list[float]
-    phi_rad: list[float]
-    active: list[bool]
-    cost_total: list[float]
-
-    @classmethod
-    def of(cls, w: World) -> _WorldState:
-        return cls(
-            x_m=w.x_m[0].tolist(),
-            y_m=w.y_m[0].tolist(),
-            v_m_s=w.v_m_s[0].tolist(),
-            phi_rad=w.phi_rad[0].tolist(),
-            active=w.active[0].tolist(),
-            cost_total=w.cost_total[0].tolist(),
-        )
-
-    def truth(self, i: int, turn: float, turn_rate_max_rad_s: float, v_before_m_s: float, dt_s: float) -> VehicleTruth:
-        """Vehicle ``i``'s true state, given the turn it was commanded (in [-1, 1] before clipping), its turn-rate
-        limit and its speed before the step."""
-        return VehicleTruth(
-            east_m=self.x_m[i],
-            north_m=self.y_m[i],
-            speed_m_s=self.v_m_s[i],
-            phi_rad=self.phi_rad[i],
-            turn_rate_rad_s=_clip_unit(turn) * turn_rate_max_rad_s if self.active[i] else 0.0,
-            accel_m_s2=(self.v_m_s[i] - v_before_m_s) / dt_s,
-        )
-
-    def row(self, v: Vehicle, cost: float) -> VehicleRow:
-        """Vehicle ``v``'s truth-log row, with the cost of this step."""
-        i = v.index
-        return VehicleRow(
-            role=v.role,
-            x_m=self.x_m[i],
-            y_m=self.y_m[i],
-            v_m_s=self.v_m_s[i],
-            phi_rad=self.phi_rad[i],
-            cost=cost,
-            cost_total=self.cost_total[i],
-            omega_cmd=v.last_action[0],
-            u_cmd=v.last_action[1],
-            armed=v.armed,
-            mode=v.mode.name,
-            failsafe=v.failsafe,
-        )
+def _row(v: Vehicle, truth: VehicleTruth, cost: float, cost_total: float) -> VehicleRow:
+    """Vehicle ``v``'s truth-log row after a step, with the step's cost and its total."""
+    air = truth.air
+    return VehicleRow(
+        role=v.role,
+        x_m=truth.east_m,
+        y_m=truth.north_m,
+        v_m_s=truth.speed_m_s,
+        phi_rad=truth.phi_rad,
+        cost=cost,
+        cost_total=cost_total,
+        omega_cmd=v.last_action[0],
+        u_cmd=v.last_action[1],
+        armed=v.armed,
+        mode=v.mode.name,
+        failsafe=v.failsafe,
+        turn_rate_rad_s=truth.turn_rate_rad_s,
+        accel_m_s2=truth.accel_m_s2,
+        air=None if air is None else AirRow(air.airspeed_m_s, air.alt_m, air.roll_rad, air.pitch_rad, air.heading_rad),
+    )
 
 
 class SitlError(Exception):
@@ -203,6 +168,8 @@ class WorldRunner:
         self._endpoints: list[MavEndpoint] = []
         self._truth: TruthLog | None = None
         self._tlogs: list[BinaryIO] = []
+        self.dynamics: VehicleDynamics | None = None
+        """The physics backend of the mission (a new one each mission)."""
         self.vehicles: list[Vehicle] = []
         self.links: list[VehicleLink] = []
         """links[i] is vehicles[i]'s MAVLink side."""
@@ -262,6 +229,11 @@ class WorldRunner:
         self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
+        self._close_dynamics()
+        try:
+            self.dynamics = make_dynamics(config.dynamics, self.world, config.seed)
+        except DynamicsError as exc:
+            raise SitlError(f"cannot fly {config.dynamics.model.value} dynamics: {exc}") from None
         self.flags = WorldFlags()
         self.clock = Clock(unix_start_s=time.time(), lockstep=self.lockstep)
         self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
@@ -286,8 +258,7 @@ class WorldRunner:
                 raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         c = self.world.c
-        initial = _WorldState.of(self.world)
-        self._turn_rate_max_rad_s: list[float] = c.turn_rate_max_rad_s.tolist()  # the vehicles' limits, per mission
+        initial = self.dynamics.truths()
         for i, role in enumerate(ROLES):
             endpoint = self._endpoints[i]
             start = self.layout.starts[role.value]
@@ -319,17 +290,19 @@ class WorldRunner:
             link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
             link.add_outputs(config.outputs)
             link.handler = CommandHandler(vehicle, link)
-            vehicle.observe(initial.truth(i, 0.0, self._turn_rate_max_rad_s[i], initial.v_m_s[i], s.dt_s))
+            vehicle.observe(initial[i])
             self.vehicles.append(vehicle)
             self.links.append(link)
         if config.truth_log is not None:
             header = {
+                "schema": SCHEMA_VERSION,
                 "scenario": s.name,
                 "digest": s.digest(),
                 "seed": config.seed,
                 "dt_s": s.dt_s,
                 "clock": config.clock.value,
                 "speedup": config.speedup,
+                "dynamics": {"model": config.dynamics.model.value, "name": self.dynamics.name},
                 "roles": [r.value for r in ROLES],
                 "sysids": [v.sysid for v in self.vehicles],
                 "ports": [link.endpoint.port for link in self.links],
@@ -578,8 +551,9 @@ class WorldRunner:
         for v in self.vehicles:
             commands[v.index] = v.action()
         actions = np.array([commands], dtype=np.float64)
-        v_before = w.v_m_s[0].tolist()
-        result = w.step(actions)
+        assert self.dynamics is not None
+        truths = self.dynamics.advance(actions)  # the physics, then the mission on the states it flew
+        result = w.mission_step()
         step = int(w.steps[0])
         if self._link_on_sim_time:
             self.clock.link_s += step * self.dt_s - self.clock.sim_s
@@ -588,24 +562,12 @@ class WorldRunner:
         self.flags.radar_on = bool(w.radar_on[0])
         self.flags.identified = bool(w.identified[0])
         self.flags.hit = bool(w.hit[0])
-        state = _WorldState.of(w)
-        turn = actions[0, :, 0].tolist()
         tick_ms = self.clock.time_boot_ms
-        for v, link in zip(self.vehicles, self.links, strict=True):
-            i = v.index
-            v.observe(state.truth(i, turn[i], self._turn_rate_max_rad_s[i], v_before[i], self.dt_s))
-            # Each vehicle's telemetry leaves before the next vehicle's is built and before the
-            # bookkeeping below: its client starts on the step while the world finishes it. A tick its
-            # client has granted leaves with the next one it has not (one datagram, one wake-up for many
-            # ticks; the loop sends whatever is left after its steps).
-            link.publish(tick=self.lockstep)
-            if not link.granted(tick_ms):
-                link.flush()
+        for v in self.vehicles:
+            v.observe(truths[v.index])
+        # The step's events leave before its telemetry and its tick: a client that answers the tick knows them (the
+        # radar's switch is part of what a companion decides on).
         events = events_from_step(result, self.flags.radar_on, step, self.clock.sim_s)
-        if self._truth is not None:
-            flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
-            cost = result.cost[0].tolist()
-            self._truth.step(step, self.clock.sim_s, flags, [state.row(v, cost[v.index]) for v in self.vehicles])
         for event in events:
             _log.info("t=%.1f s: %s", event.time_s, event.statustext()[1])
             if event.kind is EventKind.MISSION_END:
@@ -614,7 +576,20 @@ class WorldRunner:
             for v, link in zip(self.vehicles, self.links, strict=True):
                 v.mission_event(event)
                 link.announce(event)
-            if self._truth is not None:
+        for link in self.links:
+            # Each vehicle's telemetry leaves before the next vehicle's is built and before the
+            # bookkeeping below: its client starts on the step while the world finishes it. A tick its
+            # client has granted leaves with the next one it has not (one datagram, one wake-up for many
+            # ticks; the loop sends whatever is left after its steps).
+            link.publish(tick=self.lockstep)
+            if not link.granted(tick_ms):
+                link.flush()
+        if self._truth is not None:
+            flags = {"radar_on": self.flags.radar_on, "identified": self.flags.identified, "hit": self.flags.hit}
+            cost, total = result.cost[0].tolist(), w.cost_total[0].tolist()
+            rows = [_row(v, truths[v.index], cost[v.index], total[v.index]) for v in self.vehicles]
+            self._truth.step(step, self.clock.sim_s, flags, rows)
+            for event in events:
                 self._truth.event(event.as_dict())
         if result.terminated[0] or result.truncated[0]:
             self._phase = _Phase.LINGER
@@ -687,11 +662,17 @@ class WorldRunner:
                 _log.error("closing the truth log failed: %s", exc)
             self._truth = None
 
+    def _close_dynamics(self) -> None:
+        if self.dynamics is not None:
+            self.dynamics.close()
+            self.dynamics = None
+
     def close(self) -> None:
-        """Close sockets and logs (idempotent)."""
+        """Close sockets, logs and the physics backend (idempotent)."""
         if self._closed:
             return
         self._closed = True
         for endpoint in self._endpoints:
             endpoint.close()
         self._close_mission_files()
+        self._close_dynamics()

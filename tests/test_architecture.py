@@ -399,8 +399,9 @@ def test_both_ends_convert_through_the_wire(monkeypatch: pytest.MonkeyPatch):
     # The SITL writes a fix as LOCAL_POSITION_NED and GLOBAL_POSITION_INT; the companion reads it back.
     fix = GpsFix(time_s=12.3, east_m=40_000.0, north_m=25_000.0, vel_east_m_s=-120.0, vel_north_m_s=200.0)
     local = mav.local_position_ned_encode(*telemetry.local_position_ned_fields(fix))
-    glob = telemetry.global_position_int(mav, scen.origin, fix, 1.0)
-    att = telemetry.attitude(mav, telemetry.VehicleTruth(0.0, 0.0, 200.0, 1.0, 0.05, 0.0), 0)
+    truth = telemetry.VehicleTruth(0.0, 0.0, 200.0, 1.0, 0.05, 0.0)
+    glob = telemetry.global_position_int(mav, scen.origin, fix, truth)
+    att = telemetry.attitude(mav, truth, 0)
     assert took("ned_from_world", "ms_from_s", "cm_from_m", "mm_from_m", "deg_e7", "yaw_rate_from_omega")
     assert att.yawspeed == pytest.approx(-0.05)
     m = from_local_position_ned(local.time_boot_ms, local.x, local.y, local.vx, local.vy)

@@ -21,6 +21,7 @@ import pytest
 from sitl_helpers import REPO, STRIKE, sitl
 
 from sim_vehicles.modes import FlightMode
+from tssac_core.sim.scenario import DynamicsModel
 
 mavsdk = pytest.importorskip("mavsdk", minversion="4.0")
 from mavsdk import ComponentType, Configuration, Mavsdk  # noqa: E402
@@ -96,8 +97,9 @@ class _Console:
 
 @pytest.mark.skipif(not MAVPROXY.exists(), reason="MAVProxy is a dev dependency (pip install -e .[dev])")
 @pytest.mark.timeout(180)
-def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path: Path) -> None:
-    with sitl(speedup=1.0) as s:
+@pytest.mark.parametrize("dynamics", [DynamicsModel.KINEMATIC, DynamicsModel.JSBSIM])
+def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path: Path, dynamics: DynamicsModel) -> None:
+    with sitl(speedup=1.0, dynamics_model=dynamics) as s:
         console = _Console(s.ports[0], tmp_path)
         try:
             detected = console.wait_line("Detected vehicle 1:1", 60.0)
@@ -119,6 +121,47 @@ def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path:
         finally:
             console.close()
         s.stop()
+
+
+@pytest.mark.timeout(90)
+def test_mavsdk_flies_a_jsbsim_f16_health_offboard_turn_and_rtl() -> None:
+    """MAVSDK against a JSBSim F-16: healthy, an offboard 5 deg/s turn the airframe reaches after its roll-in (its
+    bank then about atan(V omega / g), as ATTITUDE reports it), and RTL that it flies home."""
+    with sitl(speedup=5.0, dynamics_model=DynamicsModel.JSBSIM) as s:
+        sdk = _mavsdk_connect(f"udpout://127.0.0.1:{s.ports[2]}")
+        try:
+            system = sdk.first_autopilot(5.0)
+            assert system is not None
+            telemetry = Telemetry(system)
+            assert _wait(telemetry.health_all_ok, 10.0), telemetry.health()
+            Action(system).arm()
+            offboard = Offboard(system)
+            turn = VelocityBodyYawspeed(250.0, 0.0, 0.0, 5.0)
+            offboard.set_velocity_body(turn)
+            samples: list[tuple[float, float, float]] = []
+            handle = telemetry.subscribe_attitude_euler(
+                lambda e, *_: samples.append((e.timestamp_us * 1e-6, e.yaw_deg, e.roll_deg))
+            )
+            offboard.start()
+            started = time.monotonic()
+            while time.monotonic() - started < 4.0:  # 20 s simulated, MAVSDK's setpoints sent again (ArduPlane GUIDED)
+                time.sleep(0.1)
+                offboard.set_velocity_body(turn)
+            telemetry.unsubscribe_attitude_euler(handle)
+            Action(system).return_to_launch()
+            assert _wait(lambda: telemetry.flight_mode() == SdkFlightMode.RETURN_TO_LAUNCH, 5.0)
+            assert s.vehicle(2).mode is FlightMode.RTL
+        finally:
+            sdk.destroy()
+        s.stop()
+    steady = [x for x in samples if x[0] - samples[0][0] > 8.0]  # after the roll-in
+    assert len(steady) > 50
+    turned = sum(((b[1] - a[1] + 180) % 360) - 180 for a, b in zip(steady, steady[1:]))
+    rate = turned / (steady[-1][0] - steady[0][0])
+    bank = sum(x[2] for x in steady) / len(steady)
+    print(f"MAVSDK on a JSBSim F-16: yaw rate {rate:.2f} deg/s, bank {bank:.1f} deg after the roll-in")
+    assert rate == pytest.approx(5.0, rel=0.1)
+    assert bank == pytest.approx(math.degrees(math.atan(250.0 * math.radians(5.0) / 9.80665)), abs=8.0)
 
 
 def _mavsdk_connect(url: str) -> Mavsdk:

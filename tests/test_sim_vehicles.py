@@ -1104,7 +1104,7 @@ def test_cli_sigterm_stops_cleanly(tmp_path: Path) -> None:
 
 
 def test_truth_log_step_lines_are_the_bytes_json_dumps_writes() -> None:
-    from tssac_core.wire.truth_log_schema import STEP, VEHICLES_KEY, VehicleRow, encode, encode_step
+    from tssac_core.wire.truth_log_schema import STEP, VEHICLES_KEY, AirRow, VehicleRow, encode, encode_step
 
     rng = np.random.default_rng(11)
     odd = [0.0, -0.0, 1e-9, 123456789.123456789, math.nan, math.inf, -math.inf, 5e-324, 1e300]
@@ -1127,6 +1127,9 @@ def test_truth_log_step_lines_are_the_bytes_json_dumps_writes() -> None:
                 armed=bool(rng.integers(0, 2)),
                 mode=str(rng.choice(["MANUAL", "GUIDED", "RTL"])),
                 failsafe=bool(rng.integers(0, 2)),
+                turn_rate_rad_s=number(),
+                accel_m_s2=number(),
+                air=AirRow(number(), number(), number(), number(), number()) if rng.random() < 0.5 else None,
             )
             for role in ("decoy", "detect", "strike")
         ]

@@ -35,7 +35,7 @@ from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.pilots import GUIDANCE, PilotSpec
-from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load_for_batched_world
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -124,7 +124,7 @@ def compare_shield(
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    scenario = load(args.scenario)
+    scenario = load_for_batched_world(args.scenario)
     controller = args.controller or GUIDANCE
     pilots = load_pilots(args.models, controller)
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None

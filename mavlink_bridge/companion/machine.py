@@ -313,7 +313,9 @@ class Companion:
         rx_s = link.last_rx_s
         self.last_rx_s = max(self.last_rx_s, rx_s)
         mtype = msg.get_type()
-        if mtype in TIMED_TYPES:
+        # Under lockstep the step's tick (SYSTEM_TIME, sent after the rest of the step) says a step is there: a frame of
+        # a step read before its tick may have come without the step's fix (the rest in a datagram not yet read).
+        if mtype in TIMED_TYPES and (mtype == "SYSTEM_TIME" or not self.cfg.lockstep):
             self._vehicle_time(int(msg.time_boot_ms), rx_s)
         if mtype == "HEARTBEAT":
             self._on_heartbeat(msg, rx_s)

@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
-from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
+from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
 from mavlink_bridge.fly.side_by_side import fly_side_by_side
@@ -101,6 +101,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         interrupted = True
         code = EXIT_INTERRUPTED
+    except WorldRefused as exc:  # before any mission flew: bad input, and no JSON of a campaign that never began
+        error = str(exc)
+        code = EXIT_BAD_INPUT
     except ChildFailed as exc:
         error = str(exc)
         code = EXIT_FAILED
@@ -119,7 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary["interrupted"] = interrupted
         summary["error"] = error
         summary["wall_time_s"] = round(time.monotonic() - started, 3)
-        if cfg.json_path is not None:
+        if cfg.json_path is not None and not (code == EXIT_BAD_INPUT and not rows):
             write_json(cfg.json_path, summary)
         if tmp is not None:
             tmp.cleanup()

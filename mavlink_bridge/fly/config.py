@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import enum
 import math
 import os
@@ -21,7 +22,7 @@ from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
-from tssac_core.sim.scenario import ROLES, Scenario, load
+from tssac_core.sim.scenario import ROLES, Dynamics, DynamicsModel, Scenario, load
 
 PROG = "python -m mavlink_bridge.fly"
 
@@ -134,6 +135,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--shield",
         action="store_true",
         help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
+    )
+    p.add_argument(
+        "--dynamics",
+        choices=[m.value for m in DynamicsModel],
+        help=(
+            "the SITL vehicles' physics: kinematic (eq. 5-6, the training world's) or jsbsim (a JSBSim flight model "
+            "per vehicle under an inner-loop autopilot); default: the scenario's dynamics section, else kinematic"
+        ),
+    )
+    p.add_argument(
+        "--aircraft",
+        metavar="NAME|FILE",
+        help="with jsbsim: a bundled airframe (f16) or an airframe file; default: the scenario's, else f16",
     )
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
     p.add_argument(
@@ -282,7 +296,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
             check_target(a.animate)
         except AnimationFormatError as exc:
             raise UsageError(str(exc)) from None
-    scenario = load(a.scenario)
+    scenario = with_dynamics(load(a.scenario), a.dynamics, a.aircraft)
     models: Path | None = None
     if a.pilot is None:
         models = (a.models if a.models is not None else DEFAULT_MODELS).resolve()
@@ -304,6 +318,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
         if a.workers != 1 or a.address is not None or a.executor is not None:
             raise UsageError("--connect flies the running vehicles from here: no --workers, --executor or --address")
+        if a.dynamics is not None or a.aircraft is not None:
+            raise UsageError("--dynamics and --aircraft set the physics of the world fly starts: not with --connect")
         if scenario.layout is None:
             raise UsageError(
                 f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
@@ -349,6 +365,38 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         executor=executor,
         ray_address=a.address,
         persistent=not a.fresh_processes,
+    )
+
+
+def with_dynamics(scenario: Scenario, model: str | None, aircraft: str | None) -> Scenario:
+    """The scenario with the command line's physics over its ``dynamics:`` section (the file fly writes for each
+    mission carries them to the world)."""
+    if model is None and aircraft is None:
+        return scenario
+    d = scenario.dynamics or Dynamics()
+    chosen = Dynamics(
+        model=d.model if model is None else DynamicsModel(model), aircraft=d.aircraft if aircraft is None else aircraft
+    )
+    if chosen.model is DynamicsModel.KINEMATIC and aircraft is not None:
+        raise UsageError("--aircraft names a JSBSim airframe: fly it with --dynamics jsbsim")
+    return dataclasses.replace(scenario, dynamics=chosen)
+
+
+def monitor_scope(scenario: Scenario) -> str | None:
+    """Why the runtime-assurance monitor's proof does not cover this scenario's flight (None: it does). The proof
+    predicts with eq. 5 in still air (docs/runtime_assurance.md): a JSBSim airframe lags its commands and cannot brake
+    as hard, and a wind carries the vehicles off the predicted paths."""
+    dynamics = scenario.dynamics or Dynamics()
+    reasons = []
+    if dynamics.model is not DynamicsModel.KINEMATIC:
+        reasons.append(f"{dynamics.model.value} {dynamics.aircraft} dynamics")
+    if scenario.wind is not None and scenario.wind.promised_max_m_s > 0.0:
+        reasons.append(f"a {scenario.wind.promised_max_m_s:g} m/s wind")
+    if not reasons:
+        return None
+    return (
+        f"the monitor's guarantee covers the kinematic model (eq. 5) in still air, not {' and '.join(reasons)}: "
+        "it flies as a best effort here"
     )
 
 

@@ -24,6 +24,7 @@ from tssac_core.wire.truth_log_schema import (
     FLAGS,
     HEADER,
     ROLES_KEY,
+    SCHEMA_VERSION,
     STEP,
     SUMMARY,
     VEHICLES_KEY,
@@ -171,6 +172,11 @@ def read_mission(path: Path) -> MissionRecord:
         if header is None:
             if kind != HEADER:
                 raise TruthLogError(f"{path}: first line is not a header")
+            schema = row.get("schema", 1)  # version 1 logs have no schema key
+            if type(schema) is not int or not 1 <= schema <= SCHEMA_VERSION:
+                raise TruthLogError(
+                    f"{path}: truth log schema {schema!r} is not one this reader knows (1-{SCHEMA_VERSION})"
+                )
             header = row
             record = MissionRecord(header=row, summary=None, tracks_m={role: [] for role in row.get(ROLES_KEY, [])})
             continue

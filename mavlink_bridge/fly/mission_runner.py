@@ -48,6 +48,15 @@ class ChildFailed(Exception):
     """A child process crashed or a mission hung; ``str()`` is one line."""
 
 
+class WorldRefused(ChildFailed):
+    """The SITL world refused its configuration before it was ready (its exit code 2: an airframe that does not load,
+    a scenario it cannot fly); ``str()`` is the world's own one line. Bad input, not a crash."""
+
+
+EXIT_BAD_INPUT = 2
+"""The exit code of a command that refused its input (tssac_core.common.cli.EXIT_BAD_INPUT)."""
+
+
 def mission_layout(scenario: Scenario, seed: int, index: int) -> Layout:
     """The layout of mission ``index``: the fixed one, or ``sample_layout`` with ``default_rng(seed + index)``."""
     return sample_layout(scenario, np.random.default_rng(seed + index))
@@ -250,6 +259,9 @@ class MissionRunner:
                 except subprocess.TimeoutExpired:
                     rc = 0
                 printed = "" if last_meaningful_line(log) else f"; it printed {' | '.join(seen)!r}"
+                said = last_meaningful_line(log)
+                if rc == EXIT_BAD_INPUT and said:
+                    raise WorldRefused(f"the SITL world refused the mission: {said.partition(': error: ')[2] or said}")
                 raise ChildFailed(child_failure("the SITL world", sitl, rc, "before it was ready") + printed)
             remaining = deadline - time.monotonic()
             if remaining <= 0:

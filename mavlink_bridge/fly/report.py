@@ -8,7 +8,7 @@ from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_log import MissionRecord
-from tssac_core.sim.scenario import Layout
+from tssac_core.sim.scenario import Dynamics, DynamicsModel, Layout, Scenario
 
 
 def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
@@ -37,7 +37,11 @@ def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
         if "latency_p50_ms" in fig:
             parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
         print("  ".join(parts))
+    if cfg.connect is None:
+        print(f"dynamics: {physics_text(cfg.scenario)}")
     sh = summary.get("shield")
+    if sh and sh.get("scope"):
+        print(f"shield: {sh['scope']}")
     if sh and sh.get("uav_missions"):
         print(
             f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission "
@@ -75,10 +79,20 @@ def mission_file(cfg: FlyConfig, path: Path, index: int, default_suffix: str) ->
     return path
 
 
+def physics_text(scenario: Scenario) -> str:
+    """Which dynamics flew, in which air: "kinematic, still air", "jsbsim f16, wind 10 m/s from 270 deg"."""
+    d, w = scenario.dynamics or Dynamics(), scenario.wind
+    physics = d.model.value if d.model is DynamicsModel.KINEMATIC else f"{d.model.value} {d.aircraft}"
+    return f"{physics}, " + ("still air" if w is None else f"wind {w.speed_m_s:g} m/s from {w.from_deg:g} deg")
+
+
 def mission_title(cfg: FlyConfig, index: int, record: MissionRecord) -> str:
     verdict = "success" if record.success else record.end
     cost = ", ".join(f"{k} {v:g}" for k, v in record.cost.items())
-    return f"{cfg.scenario.name} #{index} (SITL): {verdict}, {record.sim_time_s:.0f} s, cost {cost}"
+    return (
+        f"{cfg.scenario.name} #{index} (SITL, {physics_text(cfg.scenario)}): {verdict}, {record.sim_time_s:.0f} s, "
+        f"cost {cost}"
+    )
 
 
 PYPLOT_LOCK = threading.Lock()

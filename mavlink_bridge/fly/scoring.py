@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge.fly.config import FlyConfig
+from mavlink_bridge.fly.config import FlyConfig, monitor_scope
 from mavlink_bridge.fly.mission_log import MissionRecord
 from tssac_core.common.stats import (
     bootstrap_mean_interval,
@@ -14,7 +14,7 @@ from tssac_core.common.stats import (
     wilson_interval,
     worst_missions,
 )
-from tssac_core.sim.scenario import ROLES
+from tssac_core.sim.scenario import ROLES, Dynamics
 
 WORST_MISSIONS = 10
 """How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""
@@ -128,10 +128,22 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
         out["roles"][name] = fig
     if cfg.shield:
         out["shield"] = shield_summary(rows)
+        scope = monitor_scope(cfg.scenario)
+        out["shield"]["guarantee"] = scope is None
+        out["shield"]["scope"] = scope
+    dynamics = cfg.scenario.dynamics or Dynamics()
+    wind = cfg.scenario.wind
     out.update(
         {
             "pilot": str(cfg.models) if cfg.models is not None else cfg.pilot,
             "scenario": str(cfg.scenario_path),
+            # The vehicles of --connect fly whatever physics they fly: unknown here.
+            "dynamics": None
+            if cfg.connect is not None
+            else {"model": dynamics.model.value, "aircraft": dynamics.aircraft},
+            "wind": None
+            if wind is None
+            else {"speed_m_s": wind.speed_m_s, "from_deg": wind.from_deg, "turbulence": wind.turbulence.value},
             "seed": cfg.seed,
             "clock": ("connected, lockstep" if cfg.lockstep else "connected")
             if cfg.connect is not None

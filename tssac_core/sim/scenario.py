@@ -204,6 +204,60 @@ class Origin:
     """Flight altitude above mean sea level."""
 
 
+class Turbulence(enum.Enum):
+    """Turbulence on top of a scenario's wind (JSBSim's MIL-spec model; the kinematic world flies the mean wind)."""
+
+    NONE = "none"
+    LIGHT = "light"
+    MODERATE = "moderate"
+
+
+MAX_WIND_M_S = 50.0
+"""Winds above this are a typo (a jet stream at flight level is about 50 m/s)."""
+
+
+@dataclass(frozen=True)
+class Wind:
+    """A constant wind over the whole area, at the flight altitude (DESIGN.md section 7). Absent: calm air."""
+
+    speed_m_s: float = 0.0
+    """Mean wind speed."""
+    from_deg: float = 270.0
+    """The direction it blows from, clockwise from north, as pilots say it (270: a west wind, blowing east)."""
+    turbulence: Turbulence = Turbulence.NONE
+    """Gusts on top of the mean wind (JSBSim only)."""
+    max_m_s: float | None = None
+    """The largest wind the scenario promises (for the runtime-assurance monitor's bound); None: ``speed_m_s``."""
+
+    @property
+    def promised_max_m_s(self) -> float:
+        return self.speed_m_s if self.max_m_s is None else self.max_m_s
+
+    def velocity_m_s(self) -> tuple[float, float]:
+        """(east, north) velocity of the air mass, in the world's frame: a wind from 270 deg moves the air east."""
+        to_rad = math.radians(self.from_deg + 180.0)  # the direction it blows towards, clockwise from north
+        return self.speed_m_s * math.sin(to_rad), self.speed_m_s * math.cos(to_rad)
+
+
+class DynamicsModel(enum.Enum):
+    """What integrates the vehicles' motion in the SITL (the batched world is always kinematic)."""
+
+    KINEMATIC = "kinematic"
+    """Eq. 5-6, the training world's own model (tssac_core.sim.world)."""
+    JSBSIM = "jsbsim"
+    """A JSBSim flight model per vehicle, flown by an inner-loop autopilot (sim_vehicles.dynamics)."""
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Which physics the SITL vehicles fly (``--dynamics`` on the command line overrides ``model``)."""
+
+    model: DynamicsModel = DynamicsModel.KINEMATIC
+    """kinematic or jsbsim."""
+    aircraft: str = "f16"
+    """JSBSim: a bundled airframe's name (sim_vehicles/dynamics/airframes/NAME.yaml) or the path of an airframe file."""
+
+
 @dataclass(frozen=True)
 class Expect:
     """What the SITL regression tests require of the shipped models on this scenario."""
@@ -254,6 +308,10 @@ class Scenario:
     """Geodetic origin for the SITL."""
     expect: Expect | None = None
     """Regression expectations (optional)."""
+    wind: Wind | None = None
+    """A constant wind (optional; absent: calm air, as every figure before wind was flown)."""
+    dynamics: Dynamics | None = None
+    """The SITL's physics (optional; absent: kinematic)."""
 
     def vehicle(self, role: Role) -> VehicleSpec:
         return self.vehicles[role.value]
@@ -274,6 +332,8 @@ def _plain(value: Any) -> Any:
             for f in dataclasses.fields(value)
             if getattr(value, f.name) is not None
         }
+    if isinstance(value, enum.Enum):
+        return value.value
     if isinstance(value, tuple):
         return [_plain(v) for v in value]
     if isinstance(value, dict):
@@ -296,6 +356,20 @@ def from_dict(data: Any, source: str = "<scenario>") -> Scenario:
 def load(path: str | Path) -> Scenario:
     """Load and validate a scenario file; raises ScenarioError (one line) on any problem."""
     return from_dict(read_yaml(path, ScenarioError), str(path))
+
+
+def load_for_batched_world(path: str | Path) -> Scenario:
+    """:func:`load` for the commands that fly the batched world (training, evaluation): it integrates eq. 5-6, so a
+    scenario that asks for other physics is refused in one line rather than flown as something it is not."""
+    s = load(path)
+    if s.dynamics is not None and s.dynamics.model is not DynamicsModel.KINEMATIC:
+        raise ScenarioError(
+            str(path),
+            "dynamics.model",
+            f"{s.dynamics.model.value} flies only in the SITL (python -m mavlink_bridge.fly); the batched world is "
+            "kinematic: remove the section, or set it to kinematic",
+        )
+    return s
 
 
 def dump(scenario: Scenario, path: str | Path) -> None:
@@ -366,6 +440,8 @@ def validate(s: Scenario, source: str) -> None:
     check(0 < lk.gps_rate_hz <= 100, "link.gps_rate_hz", "must be in (0, 100] Hz")
     check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
     check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
+    if s.wind is not None:
+        _validate_wind(s, s.wind, source)
     if s.expect is not None:
         check(
             0 < s.expect.episodes <= MAX_EXPECT_EPISODES,
@@ -382,6 +458,26 @@ def validate(s: Scenario, source: str) -> None:
             s.expect.speedup is None or 0 < s.expect.speedup <= 1000,
             "expect.speedup",
             "must be positive and at most 1000",
+        )
+
+
+def _validate_wind(s: Scenario, w: Wind, source: str) -> None:
+    """A wind every vehicle can fly in: below its slowest airspeed (else it cannot make headway), within the promise."""
+    slowest = min(v.speed_min_m_s for v in s.vehicles.values())
+    if not 0.0 <= w.speed_m_s <= MAX_WIND_M_S:
+        raise ScenarioError(source, "wind.speed_m_s", f"must be in [0, {MAX_WIND_M_S:g}] m/s, got {w.speed_m_s}")
+    if not 0.0 <= w.from_deg < 360.0:
+        raise ScenarioError(source, "wind.from_deg", f"must be in [0, 360) deg, got {w.from_deg}")
+    if not w.speed_m_s <= w.promised_max_m_s <= MAX_WIND_M_S:
+        raise ScenarioError(
+            source, "wind.max_m_s", f"must be in [speed_m_s, {MAX_WIND_M_S:g}] = [{w.speed_m_s}, {MAX_WIND_M_S:g}] m/s"
+        )
+    if w.promised_max_m_s >= 0.5 * slowest:
+        raise ScenarioError(
+            source,
+            "wind.max_m_s" if w.max_m_s is not None else "wind.speed_m_s",
+            f"{w.promised_max_m_s:g} m/s is too strong to fly in: a wind must stay below half the slowest vehicle's "
+            f"speed_min_m_s ({slowest:g} m/s), so that every vehicle makes headway and can turn into it",
         )
 
 

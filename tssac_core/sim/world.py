@@ -18,6 +18,10 @@ the step's mean speed), so a constant-rate circle closes on itself and a straigh
 
 (sinc(a) = sin(a) / a: the chord of the arc; exact for omega = 0 too).
 
+With a scenario ``wind:`` the air mass moves every vehicle by the wind's velocity as well (v and phi are then the
+airspeed and the heading); calm air is eq. 5 exactly. :meth:`World.step` is :meth:`World.integrate` followed by
+:meth:`World.mission_step`: the SITL swaps the first half for another dynamics model (:meth:`World.set_states`).
+
 Mission logic (DESIGN.md section 2, eq. 9 read as simultaneous conditions), D_i = distance of UAV i
 from the SAM:
     SAM radar on     <=> R3 < D1 <= R4                    (decoy holds its ring; not latched)
@@ -198,6 +202,9 @@ class World:
         self.zone_dist_m = np.zeros((n, N_ROLES))
         self.sam_dist_m = np.zeros((n, N_ROLES))
         self._small_turns = float(self.c.turn_rate_max_rad_s.max()) * self.c.dt_s / 2 < 0.05
+        wind = scenario.wind.velocity_m_s() if scenario.wind is not None else (0.0, 0.0)
+        self._wind_xy = None if wind == (0.0, 0.0) else np.array(wind)[:, None, None]
+        """The wind's (east, north) velocity as (2, 1, 1), or None in calm air (no drift: eq. 5 exactly)."""
         self.layout_id = np.full(n, -1, dtype=np.int64)
         """Changes whenever a world gets a new layout (lets controllers cache per-layout work)."""
         self._resets = 0
@@ -342,6 +349,7 @@ class World:
     def __setstate__(self, state: dict) -> None:
         if "_xy" not in state:  # pickled before positions were stacked: separate x_m and y_m arrays
             state["_xy"] = np.stack([state.pop("x_m"), state.pop("y_m")])
+        state.setdefault("_wind_xy", None)  # pickled before wind existed: calm air
         self.__dict__.update(state)
         self._build_constants()
 
@@ -399,9 +407,33 @@ class World:
 
     def step(self, action: np.ndarray) -> StepResult:
         """Advance every running world by dt; ``action`` is (N, 3, 2) in [-1, 1]: [omega, u] scaled to the limits
-        (eq. 8)."""
-        moving = self._moving
+        (eq. 8). The two halves of the seam: :meth:`integrate` (eq. 5-6), then :meth:`mission_step`."""
+        self.integrate(action)
+        return self.mission_step()
+
+    def integrate(self, action: np.ndarray) -> None:
+        """Eq. 5-6 for every moving vehicle over dt (``action`` as in :meth:`step`), and the scenario's wind drift;
+        the mission is not judged until :meth:`mission_step`."""
         self._move(action, self._dt_moving)
+        if self._wind_xy is not None:
+            self._xy += self._wind_xy * self._dt_moving  # the air mass carries the vehicles (x' = v cos phi + w_x)
+
+    def set_states(self, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray, phi_rad: np.ndarray) -> None:
+        """Vehicle states after dt from another dynamics model (the SITL's JSBSim airframes), (N, 3) each: the ground
+        position, the ground speed and the course (eq. 5's v and phi of the path flown). Parked vehicles and finished
+        worlds keep theirs. Call :meth:`mission_step` next."""
+        moving = self._moving
+        self._xy[0] = np.where(moving, x_m, self._xy[0])
+        self._xy[1] = np.where(moving, y_m, self._xy[1])
+        self.v_m_s = np.where(moving, v_m_s, self.v_m_s)
+        phi = np.where(moving, phi_rad, self.phi_rad)
+        phi += _WRAP_SHIFT.take(_WRAP_EDGES.searchsorted(phi, side="right"))  # eq. 6 heading bounds, x itself inside
+        self.phi_rad = phi
+
+    def mission_step(self) -> StepResult:
+        """Mission logic (eq. 9) and cost (eq. 11) on the vehicles' states after a move (:meth:`integrate` or
+        :meth:`set_states`); counts the step and ends the worlds that ended."""
+        moving = self._moving
         zone_dist_prev = self.zone_dist_m
         in_zone = self._measure_zones(moving)
         flags = self._mission_logic(in_zone)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import codecs
 import dataclasses
+import enum
 import math
 import types
 import typing
@@ -74,9 +75,10 @@ def _type_name(tp: Any) -> str:
 
 
 def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError) -> Any:
-    """``value`` (plain YAML data) as type ``tp`` (a dataclass, tuple, dict, optional, float, int, bool or str),
-    checked all the way down; the first problem raises ``error(source, field path, problem)``. Scenario files, preset
-    files and grid files are read with it, so a value is judged, and its problem worded, the same in each."""
+    """``value`` (plain YAML data) as type ``tp`` (a dataclass, an enum by its values, tuple, dict, optional, float,
+    int, bool or str), checked all the way down; the first problem raises ``error(source, field path, problem)``.
+    Scenario files, preset files and grid files are read with it, so a value is judged, and its problem worded, the
+    same in each."""
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
@@ -84,6 +86,11 @@ def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError) 
             return None
         (inner,) = [a for a in args if a is not type(None)]
         return typed_value(inner, value, where, source, error)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        allowed = [str(member.value) for member in tp]
+        if not isinstance(value, str) or value not in allowed:
+            raise error(source, where, f"expected one of {', '.join(allowed)}, got {_short(value)}")
+        return tp(value)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise error(source, where, f"expected a mapping, got {type(value).__name__}")

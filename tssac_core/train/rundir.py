@@ -34,7 +34,7 @@ from tssac_core.deploy.policy import (
     save_role_checkpoint,
 )
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.sim.scenario import ROLES, Role, Scenario, load
+from tssac_core.sim.scenario import ROLES, Role, Scenario, load_for_batched_world
 from tssac_core.train.config import (
     TrainConfig,
     check_learner_settings,
@@ -201,7 +201,7 @@ def prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[TrainConfig,
         raise UsageError(f"{out} already holds a run; use --resume to continue it or choose another --out")
     else:
         cfg = with_recorded_defaults(cfg)
-    scenario = load(cfg.scenario)
+    scenario = load_for_batched_world(cfg.scenario)
     check_learner_settings(cfg, scenario)
     if cfg.init_from:
         check_init_from(cfg, scenario)

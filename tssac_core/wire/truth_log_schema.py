@@ -4,15 +4,21 @@ written as the mission runs.
 
 Line types (key ``type``):
 
-``header``  (first line) ``scenario`` name, ``digest`` (Scenario.digest()), ``seed``, ``dt_s``,
-            ``clock`` ("realtime" / "lockstep"), ``speedup``, ``roles`` (["decoy", "detect", "strike"]),
-            ``sysids``, ``ports``, ``layout`` (the layout flown, in scenario-file form).
+``header``  (first line) ``schema`` (:data:`SCHEMA_VERSION`; absent in version 1 logs), ``scenario`` name,
+            ``digest`` (Scenario.digest()), ``seed``, ``dt_s``, ``clock`` ("realtime" / "lockstep"), ``speedup``,
+            ``dynamics`` ("kinematic" / "jsbsim", with ``aircraft``; absent in version 1: kinematic), ``roles``
+            (["decoy", "detect", "strike"]), ``sysids``, ``ports``, ``layout`` (the layout flown, in scenario-file
+            form).
 ``step``    one per world step: ``step`` (1, 2, ...), ``t_s`` (simulated time after the step),
             ``radar_on``, ``identified``, ``hit`` (mission flags after the step) and ``vehicles``:
-            {role: {``x_m``, ``y_m`` (east / north of the area's SW corner), ``v_m_s``, ``phi_rad``
-            (CCW from east), ``cost`` (eq. 11 cost of this step, 0/1), ``cost_total``,
-            ``omega_cmd``, ``u_cmd`` (the action flown, in [-1, 1]), ``armed``, ``mode``
-            ("MANUAL"/"GUIDED"), ``failsafe``}} — true states, no sensor noise.
+            {role: {``x_m``, ``y_m`` (east / north of the area's SW corner), ``v_m_s`` (ground speed),
+            ``phi_rad`` (course over the ground, CCW from east), ``cost`` (eq. 11 cost of this step, 0/1),
+            ``cost_total``, ``omega_cmd``, ``u_cmd`` (the action flown, in [-1, 1]), ``armed``, ``mode``
+            ("MANUAL"/"GUIDED"), ``failsafe``, and from version 2 ``turn_rate_rad_s`` and ``accel_m_s2`` (the
+            course's turn rate, CCW-positive, and the ground speed's change, measured over the step: under the
+            kinematic model the commanded ones, under JSBSim what the airframe did), and ``air`` when the dynamics
+            model the air (JSBSim, or wind): {``airspeed_m_s``, ``alt_m``, ``roll_rad`` (right wing down
+            positive), ``pitch_rad``, ``heading_rad`` (the nose, CCW from east)}}} — true states, no sensor noise.
 ``event``   ``step``, ``t_s``, ``event`` (RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END — see
             ``sim_vehicles.events``), ``value``, ``vehicle`` (role or null); and STATUSTEXT: a client's
             STATUSTEXT to the vehicle (e.g. the runtime-assurance monitor's hand-overs), ``value`` its
@@ -31,6 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+SCHEMA_VERSION = 2
+"""Version 2 added the header's ``schema`` and ``dynamics`` and each row's ``turn_rate_rad_s``, ``accel_m_s2`` and
+``air``; version 1 logs (no ``schema`` key) read as before."""
 HEADER, STEP, EVENT, SUMMARY = "header", "step", "event", "summary"
 """The line types (key ``type``)."""
 ROLES_KEY, VEHICLES_KEY = "roles", "vehicles"
@@ -54,9 +63,12 @@ class VehicleRow:
     armed: bool
     mode: str
     failsafe: bool
+    turn_rate_rad_s: float = 0.0
+    accel_m_s2: float = 0.0
+    air: AirRow | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        return {
+        row = {
             "x_m": round(self.x_m, 4),
             "y_m": round(self.y_m, 4),
             "v_m_s": round(self.v_m_s, 5),
@@ -68,6 +80,31 @@ class VehicleRow:
             "armed": self.armed,
             "mode": self.mode,
             "failsafe": self.failsafe,
+            "turn_rate_rad_s": round(self.turn_rate_rad_s, 7),
+            "accel_m_s2": round(self.accel_m_s2, 5),
+        }
+        if self.air is not None:
+            row["air"] = self.air.as_dict()
+        return row
+
+
+@dataclass(frozen=True)
+class AirRow:
+    """What the airframe does, in a row of a log whose dynamics model the air (units as the names say)."""
+
+    airspeed_m_s: float
+    alt_m: float
+    roll_rad: float
+    pitch_rad: float
+    heading_rad: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {
+            "airspeed_m_s": round(self.airspeed_m_s, 4),
+            "alt_m": round(self.alt_m, 3),
+            "roll_rad": round(self.roll_rad, 6),
+            "pitch_rad": round(self.pitch_rad, 6),
+            "heading_rad": round(self.heading_rad, 6),
         }
 
 
@@ -88,9 +125,9 @@ def encode_step(step: int, t_s: float, flags: dict[str, bool], rows: list[Vehicl
 
 _ROW = (
     '{"x_m":%s,"y_m":%s,"v_m_s":%s,"phi_rad":%s,"cost":%s,"cost_total":%s,"omega_cmd":%s,"u_cmd":%s,'
-    '"armed":%s,"mode":%s,"failsafe":%s}'
+    '"armed":%s,"mode":%s,"failsafe":%s,"turn_rate_rad_s":%s,"accel_m_s2":%s%s}'
 )
-_EIGHT_FLOATS = (float,) * 8
+_TEN_FLOATS = (float,) * 10
 
 
 def _row_json(r: VehicleRow) -> str:
@@ -104,11 +141,14 @@ def _row_json(r: VehicleRow) -> str:
         r.cost_total,
         round(r.omega_cmd, 7),
         round(r.u_cmd, 7),
+        round(r.turn_rate_rad_s, 7),
+        round(r.accel_m_s2, 5),
     )
     # Plain finite floats (the usual row) are written as json writes them, float.__repr__, without a call per value.
-    plain = tuple(map(type, numbers)) == _EIGHT_FLOATS and math.isfinite(sum(numbers))
-    texts = map(float.__repr__ if plain else _scalar, numbers)
-    return _ROW % (*texts, _scalar(r.armed), _quoted(r.mode), _scalar(r.failsafe))
+    plain = tuple(map(type, numbers)) == _TEN_FLOATS and math.isfinite(sum(numbers))
+    texts = list(map(float.__repr__ if plain else _scalar, numbers))
+    air = "" if r.air is None else ',"air":' + encode(r.air.as_dict())[:-1]
+    return _ROW % (*texts[:8], _scalar(r.armed), _quoted(r.mode), _scalar(r.failsafe), *texts[8:], air)
 
 
 def _scalar(value: object) -> str:

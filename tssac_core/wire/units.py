@@ -107,6 +107,11 @@ def deg_from_cdeg(value_cdeg: int) -> int:
 # ------------------------------------------------------------------------------- NED frame
 
 
+def percent_from_fraction(fraction: float) -> int:
+    """A fraction in [0, 1] as a whole percentage (VFR_HUD's throttle), clipped to 0-100."""
+    return int(round(100.0 * max(0.0, min(1.0, fraction))))
+
+
 def ned_from_world(east: float, north: float) -> tuple[float, float]:
     """A horizontal position or velocity in the world's (east, north) as NED's (x north, y east)."""
     return north, east

@@ -1,0 +1,56 @@
+"""The seam between the SITL's vehicles and their physics (DESIGN.md section 7), as ArduPilot's SITL keeps its
+physics backends behind one aircraft interface: each backend moves world 0's three vehicles through one step (the
+world's :meth:`~tssac_core.sim.world.World.integrate`, or :meth:`~tssac_core.sim.world.World.set_states` from another
+model) and says what each vehicle's true state is; the world then judges the mission on those states
+(:meth:`~tssac_core.sim.world.World.mission_step`). The MAVLink side sees only the truths.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from sim_vehicles.dynamics.kinematic import KinematicDynamics
+from sim_vehicles.telemetry import VehicleTruth
+from tssac_core.sim.scenario import Dynamics, DynamicsModel
+from tssac_core.sim.world import World
+
+
+class DynamicsError(Exception):
+    """A backend that cannot fly this scenario (an unknown airframe, a model directory that does not load);
+    ``str()`` is one line."""
+
+
+class VehicleDynamics(Protocol):
+    """What the world runner asks of a physics backend."""
+
+    name: str
+    """What flies, for logs and reports ("kinematic", "jsbsim f16")."""
+
+    def truths(self) -> list[VehicleTruth]:
+        """The vehicles' true states now (after the last step, or at the start)."""
+        ...
+
+    def advance(self, actions: np.ndarray) -> list[VehicleTruth]:
+        """Move the running vehicles through one world step under ``actions`` (1, 3, 2), [omega, u] in [-1, 1];
+        return their truths."""
+        ...
+
+    def close(self) -> None:
+        """Release what the backend holds (idempotent)."""
+        ...
+
+
+def make_dynamics(dynamics: Dynamics, world: World, seed: int) -> VehicleDynamics:
+    """The backend ``dynamics`` names, for ``world`` (reset to its layout); raises :class:`DynamicsError`."""
+    if dynamics.model is DynamicsModel.KINEMATIC:
+        return KinematicDynamics(world)
+    # JSBSim is imported only when it flies: the kinematic world and its fork server never load it.
+    from sim_vehicles.dynamics.jsbsim_airframe import AirframeError, load_airframe
+    from sim_vehicles.dynamics.jsbsim_dynamics import JsbsimDynamics
+
+    try:
+        return JsbsimDynamics(world, load_airframe(dynamics.aircraft), seed)
+    except AirframeError as exc:
+        raise DynamicsError(str(exc)) from None
