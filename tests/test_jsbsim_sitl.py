@@ -127,18 +127,27 @@ def test_wind_shows_in_the_telemetry_and_the_monitor_says_it_is_no_guarantee(tmp
 
 
 def test_an_unknown_airframe_is_one_line_and_nothing_written(tmp_path: Path) -> None:
+    """An unknown airframe, a model directory JSBSim cannot load, and --aircraft without JSBSim: one line, exit 2, no
+    JSON, from the world and from fly."""
+    models = tmp_path / "models"
+    models.mkdir()
+    airframe = tmp_path / "jet.yaml"
+    f16 = (REPO / "sim_vehicles" / "dynamics" / "airframes" / "f16.yaml").read_text()
+    airframe.write_text(f16.replace("model: f16", f"model: f16\nroot_dir: {models}", 1))
     for argv in (
         ["-m", "sim_vehicles", "--scenario", str(STRIKE), "--dynamics", "jsbsim", "--aircraft", "nosuch"],
         ["-m", "mavlink_bridge.fly", "--scenario", str(STRIKE), "--dynamics", "jsbsim", "--aircraft", "nosuch"]
         + ["--no-progress", "--json", str(tmp_path / "out.json")],
         ["-m", "mavlink_bridge.fly", "--scenario", str(STRIKE), "--aircraft", "f16", "--json", str(tmp_path / "o")],
+        ["-m", "mavlink_bridge.fly", "--scenario", str(STRIKE), "--dynamics", "jsbsim", "--aircraft", str(airframe)]
+        + ["--no-progress", "--json", str(tmp_path / "out.json")],
     ):
         proc = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=60, cwd=REPO)
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and "error:" in lines[0] and "Traceback" not in proc.stderr, proc.stderr
-        assert ("unknown airframe 'nosuch'" in lines[0]) or ("--dynamics jsbsim" in lines[0])
-    assert not list(tmp_path.iterdir())
+        assert any(said in lines[0] for said in ("unknown airframe 'nosuch'", "--dynamics jsbsim", str(models)))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["jet.yaml", "models"]
 
 
 def test_a_jsbsim_world_keeps_the_banner_off_its_stdout() -> None:
