@@ -20,7 +20,7 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import modes, setpoints
+from sim_vehicles import guided_slew, modes, setpoints
 from sim_vehicles.mavlink_io import Address
 from sim_vehicles.modes import FlightMode
 from sim_vehicles.vehicle import Vehicle
@@ -85,6 +85,9 @@ class CommandHandler:
             M.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
             M.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
             M.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
+            M.MAV_CMD_GUIDED_CHANGE_HEADING: self._cmd_change_heading,
+            M.MAV_CMD_GUIDED_CHANGE_SPEED: self._cmd_change_speed,
+            M.MAV_CMD_GUIDED_CHANGE_ALTITUDE: self._cmd_change_altitude,
         }
 
     # ------------------------------------------------------------------------------ dispatch
@@ -173,6 +176,47 @@ class CommandHandler:
         self.link.statustext(M.MAV_SEVERITY_WARNING, GOTO_REFUSAL)
         v.undo_guided_switch("goto refused")
         return M.MAV_RESULT_UNSUPPORTED, []
+
+    # ------------------------------------------------------------ ArduPlane's GUIDED slew commands
+
+    def _cmd_change_heading(self, p: tuple[float, ...]) -> CommandResult:
+        if not self.v.guided:
+            return M.MAV_RESULT_FAILED, []
+        parsed = guided_slew.parse_change_heading(p)
+        if isinstance(parsed, guided_slew.SlewRefusal):
+            return self._slew_refused(parsed)
+        return self._slew_flown(self.v.fly_heading(parsed))
+
+    def _cmd_change_speed(self, p: tuple[float, ...]) -> CommandResult:
+        v = self.v
+        if not v.guided:
+            return M.MAV_RESULT_FAILED, []
+        parsed = guided_slew.parse_change_speed(p, v.setup.speed_min_m_s, v.setup.speed_max_m_s)
+        if isinstance(parsed, guided_slew.SlewRefusal):
+            return self._slew_refused(parsed)
+        return self._slew_flown(v.fly_speed(parsed))
+
+    def _cmd_change_altitude(self, p: tuple[float, ...]) -> CommandResult:
+        """The vehicles fly level at the flight altitude: a CHANGE_ALTITUDE to it is accepted (nothing to change), any
+        other refused with a STATUSTEXT that says so."""
+        v = self.v
+        if not v.guided:
+            return M.MAV_RESULT_FAILED, []
+        flight_alt_m = v.setup.origin.alt_m
+        if math.isfinite(p[6]) and abs(p[6] - flight_alt_m) <= guided_slew.LEVEL_TOLERANCE_M:
+            return M.MAV_RESULT_ACCEPTED, []
+        return self._slew_refused(
+            guided_slew.SlewRefusal(M.MAV_RESULT_DENIED, f"Alt cmd: level flight at {flight_alt_m:.0f} m only")
+        )
+
+    def _slew_refused(self, refusal: guided_slew.SlewRefusal) -> CommandResult:
+        self.v.refuse("slew", refusal.text)
+        return refusal.result, []
+
+    @staticmethod
+    def _slew_flown(flown: bool) -> CommandResult:
+        # Armed in GUIDED: flown. In GUIDED but disarmed, the vehicle said why (fly_demand's refusal).
+        return (M.MAV_RESULT_ACCEPTED if flown else M.MAV_RESULT_FAILED), []
 
     def _on_set_mode(self, msg: Msg, addr: Address) -> None:
         # ArduPilot answers the SET_MODE message with a COMMAND_ACK whose command is the message id (11).

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from sim_vehicles.guided_slew import HeadingTarget, SpeedTarget
 from tssac_core.wire import units
 
 M = mavlink2
@@ -70,6 +71,8 @@ class SetpointForm(enum.Enum):
     VELOCITY_YAW_RATE = "velocity"
     THRUST_YAW_RATE = "thrust"
     VELOCITY_NED = "velocity_ned"
+    GUIDED_SLEW = "guided_slew"
+    """ArduPlane's GUIDED_CHANGE_HEADING / _SPEED (COMMAND_INT or COMMAND_LONG; sim_vehicles.guided_slew)."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,10 @@ class Demand:
     """[0, 1] (THRUST_YAW_RATE)."""
     course_rad: float | None = None
     """Course to fly, counter-clockwise from east like the world's heading (VELOCITY_NED)."""
+    heading_target: HeadingTarget | None = None
+    """GUIDED_SLEW: the CHANGE_HEADING in force (None: none, fly straight)."""
+    speed_target: SpeedTarget | None = None
+    """GUIDED_SLEW: the CHANGE_SPEED in force (None: none, hold the speed)."""
 
 
 @dataclass(frozen=True)

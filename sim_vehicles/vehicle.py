@@ -27,6 +27,7 @@ only through the methods here (:meth:`Vehicle.set_mode`, :meth:`Vehicle.set_arme
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable
@@ -36,13 +37,14 @@ from typing import Protocol
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import navigation
+from sim_vehicles import guided_slew, navigation
 from sim_vehicles.clock import Clock
 from sim_vehicles.events import EventKind, MissionEvent, WorldFlags
+from sim_vehicles.guided_slew import HeadingTarget, SpeedTarget
 from sim_vehicles.link_model import GpsReceiver
 from sim_vehicles.modes import AUTONOMOUS, FlightMode
 from sim_vehicles.params import ParamTable, vehicle_params
-from sim_vehicles.setpoints import Demand, Refusal, accel_command
+from sim_vehicles.setpoints import Demand, Refusal, SetpointForm, accel_command
 from sim_vehicles.telemetry import VehicleTruth
 from tssac_core.sim.scenario import LinkModel, Origin
 from tssac_core.wire import units
@@ -272,6 +274,8 @@ class Vehicle:
         """(omega CCW-positive rad/s, forward acceleration m/s^2) within the limits, for the current mode."""
         su, t = self.setup, self.truth
         sp = self.setpoint
+        if self.in_loop and sp is not None and sp.demand.form is SetpointForm.GUIDED_SLEW:
+            return self._slew_command(sp.demand)
         if self.in_loop and sp is not None:
             if sp.demand.course_rad is not None:
                 omega = navigation.course_turn_rate(t.phi_rad, sp.demand.course_rad, su.turn_rate_max_rad_s)
@@ -298,6 +302,37 @@ class Vehicle:
             )
             return omega, 0.0
         return 0.0, 0.0
+
+    def _slew_command(self, demand: Demand) -> tuple[float, float]:
+        """ArduPlane's GUIDED under CHANGE_HEADING / CHANGE_SPEED (:mod:`sim_vehicles.guided_slew`): the turn toward
+        the heading target, the speed toward the speed target, each at its commanded rate."""
+        su, t = self.setup, self.truth
+        air = t.air
+        omega = 0.0
+        heading = demand.heading_target
+        if heading is not None:
+            now = t.phi_rad if heading.over_ground or air is None else air.heading_rad
+            omega = guided_slew.heading_turn_rate(heading, now, t.speed_m_s, su.turn_rate_max_rad_s)
+        accel = 0.0
+        if demand.speed_target is not None:
+            airspeed = t.speed_m_s if air is None else air.airspeed_m_s
+            accel = guided_slew.speed_accel(demand.speed_target, airspeed, su.accel_max_m_s2, su.dt_s)
+        return omega, accel
+
+    def fly_heading(self, target: HeadingTarget | None) -> bool:
+        """A CHANGE_HEADING (None: back to GUIDED's own navigation, straight on here), beside the CHANGE_SPEED in
+        force; flown if armed in GUIDED (True)."""
+        return self.fly_demand(dataclasses.replace(self._slew_in_force(), heading_target=target))
+
+    def fly_speed(self, target: SpeedTarget) -> bool:
+        """A CHANGE_SPEED, beside the CHANGE_HEADING in force; flown if armed in GUIDED (True)."""
+        return self.fly_demand(dataclasses.replace(self._slew_in_force(), speed_target=target))
+
+    def _slew_in_force(self) -> Demand:
+        sp = self.setpoint
+        if sp is not None and sp.demand.form is SetpointForm.GUIDED_SLEW:
+            return sp.demand
+        return Demand(SetpointForm.GUIDED_SLEW, 0.0)
 
     def observe(self, truth: VehicleTruth) -> None:
         """The true state after a world step (or at reset)."""

@@ -27,7 +27,7 @@ from typing import BinaryIO, Protocol
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import streams, telemetry
+from sim_vehicles import guided_slew, streams, telemetry
 from sim_vehicles.events import MissionEvent
 from sim_vehicles.link_model import LinkChannel
 from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
@@ -44,6 +44,7 @@ _SETPOINT_PARSERS: dict[int, Callable[[mavlink2.MAVLink_message], Demand | Refus
     M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: parse_attitude_target,
 }
 """The setpoints a vehicle flies (and that credit the lockstep barrier), by message id."""
+_COMMANDS = frozenset({M.MAVLINK_MSG_ID_COMMAND_INT, M.MAVLINK_MSG_ID_COMMAND_LONG})
 COALESCE_BYTES = 1200
 """Largest datagram :meth:`VehicleLink.flush` builds from several frames (below any path MTU on a LAN)."""
 
@@ -164,20 +165,37 @@ class VehicleLink:
         c = self.credit
         c.granted_ms = max(c.granted_ms, int(msg.value))
 
-    def _credit(self, msg: mavlink2.MAVLink_message) -> bool:
-        """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now)."""
-        if msg.get_msgId() not in _SETPOINT_PARSERS:
-            return False
-        parsed = self.setpoint(msg)
-        if isinstance(parsed, Refusal):
-            return False
+    def _credit(self, msg: mavlink2.MAVLink_message) -> int | None:
+        """A flyable setpoint for us credits the lockstep barrier with the step it answers (its stamp; 0 = now), and
+        so does a flyable GUIDED slew command (ArduPlane's dialect: no stamp, so the step the datalink delivered);
+        returns the answer's stamp (a grant beside it must carry it), None if nothing was credited."""
         v = self.vehicle
+        mid = msg.get_msgId()
+        if mid in _SETPOINT_PARSERS:
+            if isinstance(self.setpoint(msg), Refusal):
+                return None
+            stamp = int(msg.time_boot_ms)
+        elif mid in _COMMANDS and msg.command in guided_slew.SLEW_COMMANDS:
+            if not self._flyable_slew(msg):
+                return None
+            stamp = 0
+        else:
+            return None
         if msg.target_system not in (0, v.sysid) or msg.target_component not in (0, v.compid):
-            return False
-        stamp = int(msg.time_boot_ms)
+            return None
         c = self.credit
         c.answered_ms = max(c.answered_ms, c.tick_seen_ms if stamp == 0 else min(stamp, self.clock.time_boot_ms))
-        return True
+        return stamp if mid in _SETPOINT_PARSERS else c.tick_seen_ms
+
+    def _flyable_slew(self, msg: mavlink2.MAVLink_message) -> bool:
+        """A CHANGE_HEADING or CHANGE_SPEED the vehicle would accept (judged again when it is handled)."""
+        su = self.vehicle.setup
+        params = (msg.param1, msg.param2, msg.param3)
+        if msg.command == M.MAV_CMD_GUIDED_CHANGE_HEADING:
+            parsed: object = guided_slew.parse_change_heading(params)
+        else:
+            parsed = guided_slew.parse_change_speed(params, su.speed_min_m_s, su.speed_max_m_s)
+        return not isinstance(parsed, guided_slew.SlewRefusal)
 
     def setpoint(self, msg: mavlink2.MAVLink_message) -> Demand | Refusal:
         """What a SET_POSITION_TARGET_LOCAL_NED or SET_ATTITUDE_TARGET asks for: parsed once when it reaches the socket
@@ -220,8 +238,9 @@ class VehicleLink:
             for msg in parsed.messages:
                 if credited is not None and parsed.sender is Sender.CLIENT:
                     self._grant(msg, credited)
-                if self._credit(msg):
-                    stamp = credited = int(msg.time_boot_ms)
+                stamp = self._credit(msg)
+                if stamp is not None:
+                    credited = stamp
                     if self.rx.ideal:
                         continue
                     if len(self._rx_setpoints) > 256:  # only recent stamps matter; clients may send any

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mavlink_bridge.estimation.filter_model import FilterModel
+from mavlink_bridge.link.guided_commands import SetpointDialect
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
@@ -15,6 +16,8 @@ from tssac_core.sim.scenario import Role, Scenario
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
+LOITER_MODE = 12
+"""ArduPlane's LOITER: where a companion leaves a vehicle it cannot fly (as a failsafe would)."""
 PILOT_NAMES = (GUIDANCE, STRAIGHT, *ADVERSARY_NAMES)
 """``--pilot``: the guidance controller, the straight test pilot or an adversary (tssac_core.sim.adversaries)."""
 MIN_POS_SIGMA_M = 0.1
@@ -103,6 +106,9 @@ class CompanionConfig:
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
     VFR_HUD): less work on both sides when no ground station shares the vehicle (fly's own worlds)."""
+    setpoints: SetpointDialect = SetpointDialect.BODY_RATES
+    """How GUIDED is commanded: body rates, or ArduPlane's GUIDED_CHANGE_HEADING / _SPEED
+    (:mod:`mavlink_bridge.link.guided_commands`)."""
 
     def __post_init__(self) -> None:
         if self.scenario.layout is None:

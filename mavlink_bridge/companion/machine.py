@@ -18,6 +18,7 @@ from mavlink_bridge.companion.config import (
     END_GRACE_S,
     END_SILENCE_S,
     GUIDED_MODE,
+    LOITER_MODE,
     MIN_POS_SIGMA_M,
     MIN_VEL_SIGMA_M_S,
     CompanionConfig,
@@ -36,6 +37,7 @@ from mavlink_bridge.link.frames import (
     from_local_position_ned,
     setpoint_to_action,
 )
+from mavlink_bridge.link.guided_commands import SLEW_COMMANDS, SetpointDialect, slew_from_setpoint
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.lockstep import granted_through_ms
@@ -334,6 +336,27 @@ class Companion:
             self._on_named_value(str(msg.name).rstrip("\x00"), int(msg.value), int(msg.time_boot_ms))
         elif mtype == "STATUSTEXT":
             self._on_statustext(str(msg.text).rstrip("\x00"))
+        elif mtype == "COMMAND_ACK" and msg.command in SLEW_COMMANDS:
+            self._on_slew_ack(int(msg.command), int(msg.result))
+
+    def _on_slew_ack(self, command: int, result: int) -> None:
+        """A GUIDED slew command's answer. Refused, the vehicle cannot be flown in this dialect: it is left in LOITER,
+        as a failsafe would, and the companion ends with one line that says which command and why."""
+        if result == M.MAV_RESULT_ACCEPTED:
+            self.counters.slew_acks += 1
+            return
+        name = M.enums["MAV_CMD"][command].name
+        why = M.enums["MAV_RESULT"][result].name if result in M.enums["MAV_RESULT"] else str(result)
+        link = self._link
+        assert link is not None
+        try:
+            link.set_mode(LOITER_MODE, self.cfg.command_timeout_s, self.cfg.command_retries)
+            left = "left in LOITER"
+        except CommandError as exc:
+            left = f"LOITER refused too ({exc})"
+        said = f"the vehicle refused {name} ({why}): it cannot be flown with --setpoints arduplane; {left}"
+        _log.error("%s: %s", self.cfg.role.value, said)
+        raise _Stop("refused", said)
 
     def _vehicle_time(self, t_ms: int, rx_s: float) -> None:
         if self.vt_ms is not None and t_ms < self.vt_ms - self.cfg.restart_jump_s * 1000.0:
@@ -571,7 +594,12 @@ class Companion:
     def _send_setpoint(self, t_ms: int, setpoint: Setpoint, granted_through_ms: int | None) -> None:
         link = self._link
         assert link is not None
-        link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2, granted_through_ms)
+        if self.cfg.setpoints is SetpointDialect.ARDUPLANE:
+            f = self.filter
+            course, speed = (f.heading_rad, f.speed_m_s) if f.initialised else (None, None)
+            link.send_guided_slew(slew_from_setpoint(setpoint, course, speed, self.spec), t_ms, granted_through_ms)
+        else:
+            link.send_setpoint(t_ms, setpoint.yaw_rate_rad_s, setpoint.accel_m_s2, granted_through_ms)
         self.counters.setpoints_sent += 1
         self._sent = setpoint
         self._granted_ms = granted_through_ms

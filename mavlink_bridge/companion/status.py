@@ -29,6 +29,8 @@ class CompanionCounters:
     """Vehicle ticks that passed without a control step (the companion fell behind)."""
     ends_refuted: int = 0
     """Mission ends (HIT, MSN_END, their texts) that the vehicle's own heartbeats contradicted: ignored."""
+    slew_acks: int = 0
+    """GUIDED_CHANGE_HEADING / _SPEED commands the vehicle accepted (``--setpoints arduplane``)."""
 
 
 @dataclass

@@ -14,6 +14,7 @@ from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
 from mavlink_bridge.link.connection import parse_connection
+from mavlink_bridge.link.guided_commands import SetpointDialect
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
@@ -70,6 +71,8 @@ class FlyConfig:
     """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
+    setpoints: SetpointDialect = SetpointDialect.BODY_RATES
+    """How the companions command GUIDED (``--setpoints``: body rates, or ArduPlane's GUIDED_CHANGE_* commands)."""
     mission: int | None = None
     """Fly only this mission index of ``seed`` (its layout and noise are those of mission ``mission`` of a full run)."""
     signing: bool = True
@@ -135,6 +138,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--shield",
         action="store_true",
         help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
+    )
+    p.add_argument(
+        "--setpoints",
+        choices=[d.value for d in SetpointDialect],
+        default=SetpointDialect.BODY_RATES.value,
+        help=(
+            "how the companions command GUIDED: body-rates (SET_POSITION_TARGET_LOCAL_NED, the default) or arduplane "
+            "(ArduPlane's GUIDED_CHANGE_HEADING and GUIDED_CHANGE_SPEED, which a stock ArduPlane flies)"
+        ),
     )
     p.add_argument(
         "--dynamics",
@@ -360,6 +372,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         lockstep_grant_s=a.lockstep_grant_s,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
+        setpoints=SetpointDialect(a.setpoints),
         signing=not a.no_signing,
         workers=a.workers,
         executor=executor,

@@ -22,6 +22,7 @@ from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.mission_log import TruthLogError, read_mission
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
+from mavlink_bridge.link.guided_commands import SetpointDialect
 from mavlink_bridge.processes.children import Child, ChildProcesses
 from mavlink_bridge.processes.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
 from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
@@ -296,6 +297,8 @@ class MissionRunner:
             argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", cfg.pilot]
             if cfg.shield:
                 argv += ["--shield"]
+            if cfg.setpoints is not SetpointDialect.BODY_RATES:
+                argv += ["--setpoints", cfg.setpoints.value]
             if cfg.lockstep:
                 argv += ["--lockstep", "--lockstep-grant-s", repr(cfg.lockstep_grant_s)]
             if cfg.lean_telemetry:

@@ -136,6 +136,7 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
     out.update(
         {
             "pilot": str(cfg.models) if cfg.models is not None else cfg.pilot,
+            "setpoints": cfg.setpoints.value,
             "scenario": str(cfg.scenario_path),
             # The vehicles of --connect fly whatever physics they fly: unknown here.
             "dynamics": None

@@ -51,6 +51,7 @@ from typing import BinaryIO, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from mavlink_bridge.link.guided_commands import GuidedSlew
 from tssac_core.wire import units
 from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames
 from tssac_core.wire.lockstep import GRANT_NAME
@@ -470,6 +471,50 @@ class MavLink:
         grant.time_boot_ms = stamp
         grant.value = int(granted_through_ms)
         return self._send_frames(buf + self._pack(grant), frames=2)
+
+    def send_guided_slew(self, slew: GuidedSlew, answered_ms: int, granted_through_ms: int | None = None) -> bool:
+        """ArduPlane's dialect (:mod:`mavlink_bridge.link.guided_commands`): COMMAND_INT GUIDED_CHANGE_HEADING (course
+        over ground, or back to the autopilot without a course estimate) and GUIDED_CHANGE_SPEED (airspeed), in one
+        datagram; their COMMAND_ACKs arrive with the telemetry (the caller checks them, without waiting).
+
+        Under lockstep they answer the tick the vehicle last sent (``answered_ms``; commands carry no stamp); a grant
+        after them (``granted_through_ms``) answers the ticks up to it, as beside a setpoint."""
+        if self._closed:
+            return False
+        heading_type = M.HEADING_TYPE_DEFAULT if slew.heading_deg is None else M.HEADING_TYPE_COURSE_OVER_GROUND
+        frames = [
+            self._command_int(
+                M.MAV_CMD_GUIDED_CHANGE_HEADING, heading_type, slew.heading_deg or 0.0, slew.centripetal_m_s2
+            )
+        ]
+        if slew.speed_m_s is not None:
+            frames.append(
+                self._command_int(M.MAV_CMD_GUIDED_CHANGE_SPEED, M.SPEED_TYPE_AIRSPEED, slew.speed_m_s, slew.slew_m_s2)
+            )
+        if granted_through_ms is not None:
+            grant = self._grant
+            grant.time_boot_ms = int(answered_ms) & 0xFFFFFFFF
+            grant.value = int(granted_through_ms)
+            frames.append(self._pack(grant))
+        return self._send_frames(b"".join(frames), frames=len(frames))
+
+    def _command_int(self, command: int, param1: float, param2: float, param3: float) -> bytes:
+        msg = self.mav.command_int_encode(
+            self.target_system,
+            self.target_component,
+            M.MAV_FRAME_GLOBAL,
+            command,
+            0,
+            0,
+            param1,
+            param2,
+            param3,
+            0.0,
+            0,
+            0,
+            0.0,
+        )
+        return self._pack(msg)
 
     # ------------------------------------------------------------------------------ waits
 
