@@ -13,7 +13,7 @@ its 95% bootstrap interval over missions, per-role figures with the tail (the fr
 the cost limit C, the worst cost, CVaR_0.95) and the costliest UAV-missions; ``--json`` writes them with the
 keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interval95``, ``episodes``, one
 entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
-Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.missions), so
+Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.sim.missions), so
 ``--seed S --mission k`` flies any one of them again alone. ``--shield`` flies every UAV through the
 runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`, ``docs/runtime_assurance.md``) and adds its counts
 under ``shield``: interventions per UAV-mission and the fraction of flight time under the backup. Off by

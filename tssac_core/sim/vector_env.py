@@ -6,7 +6,7 @@ It is N copies of :class:`tssac_core.sim.env.UavRoleEnv` put side by side, to th
 env reset with ``seed + i`` (gymnasium's rule for vector seeds), and finished worlds reset in the same step
 (``autoreset_mode`` SAME_STEP): ``obs`` holds the new episode's first observation, ``info["final_obs"]`` and
 ``info["final_info"]`` (masked by ``info["_final_obs"]``) the last of the old one. Each info key comes with its
-``_key`` mask, as ``SyncVectorEnv`` builds them. tests/test_vector_env.py holds it equal to
+``_key`` mask, as ``SyncVectorEnv`` builds them. tests/test_gym_faces.py holds it equal to
 ``SyncVectorEnv(..., autoreset_mode=SAME_STEP)`` of the single env, step for step.
 """
 

@@ -6,7 +6,7 @@ Examples::
     python -m tssac_core.train --algo sac_lag --seed 1 --epochs 20 --out runs/sac_lag-1
     python -m tssac_core.train --out runs/tssac-0 --resume        # after a crash or kill -9
     python -m tssac_core.train --algo tssac --seeds 0,1,2 --out runs/tssac   # one job per seed: runs/tssac/seed<N>/
-    python -m tssac_core.train --preset configs/shipped.yaml --out runs/t --tensorboard runs/tb   # live curves
+    python -m tssac_core.train --preset configs/safe.yaml --out runs/t --tensorboard runs/tb   # live curves
 
 The run directory's contents: :mod:`tssac_core.train.rundir`. ``--tensorboard DIR`` also writes every epoch's
 scalars as TensorBoard events (:mod:`tssac_core.train.tensorboard`; the ``tensorboard`` extra). Ctrl-C stops the

@@ -2,10 +2,10 @@
 
 Each epoch collects ``cfg.steps_per_epoch`` decisions from ``cfg.envs`` worlds, with the learner's hooks
 around every step and at the epoch's end (`RoleLearner`): the off-policy learners (the SAC family,
-:mod:`tssac_core.train.offpolicy`) store each transition and take their gradient steps as they go, the
-on-policy ones (:mod:`tssac_core.train.onpolicy`) store the rollout and update after it. Then the epoch's
-checkpoint is validated (:mod:`tssac_core.train.validation`), its row appended to ``metrics.csv``, and the
-resume state written (:mod:`tssac_core.train.resume`); at the end the best epoch ships as ``<role>.pt``.
+:class:`tssac_core.train.learners.OffPolicyLearner`) store each transition and take their gradient steps as they
+go, the on-policy ones (:class:`tssac_core.train.learners.OnPolicyLearner`) store the rollout and update after it.
+Then the epoch's checkpoint is validated (:mod:`tssac_core.train.validation`), its row appended to ``metrics.csv``,
+and the resume state written (:mod:`tssac_core.train.resume`); at the end the best epoch ships as ``<role>.pt``.
 
 The curriculum trains decoy, then detect (with the trained decoy flying), then strike (with both
 flying). TSSAC initialises each role from the previous role's networks (transfer N1 -> N2 -> N3);
