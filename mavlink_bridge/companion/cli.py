@@ -23,7 +23,7 @@ from mavlink_bridge.companion.config import (
 )
 from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.estimation.filter_model import FilterModel
-from mavlink_bridge.link.guided_commands import SetpointDialect
+from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
@@ -69,16 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
     )
-    p.add_argument(
-        "--setpoints",
-        choices=[d.value for d in SetpointDialect],
-        default=SetpointDialect.BODY_RATES.value,
-        help=(
-            "how GUIDED is commanded: body-rates (SET_POSITION_TARGET_LOCAL_NED, BODY_FRD, afx and yaw rate; the "
-            "default) or arduplane (ArduPlane's GUIDED_CHANGE_HEADING and GUIDED_CHANGE_SPEED, which a stock "
-            "ArduPlane flies)"
-        ),
-    )
+    add_setpoints_argument(p)
     p.add_argument(
         "--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies"
     )

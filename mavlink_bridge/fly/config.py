@@ -14,7 +14,7 @@ from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
 from mavlink_bridge.link.connection import parse_connection
-from mavlink_bridge.link.guided_commands import SetpointDialect
+from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
@@ -139,15 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
     )
-    p.add_argument(
-        "--setpoints",
-        choices=[d.value for d in SetpointDialect],
-        default=SetpointDialect.BODY_RATES.value,
-        help=(
-            "how the companions command GUIDED: body-rates (SET_POSITION_TARGET_LOCAL_NED, the default) or arduplane "
-            "(ArduPlane's GUIDED_CHANGE_HEADING and GUIDED_CHANGE_SPEED, which a stock ArduPlane flies)"
-        ),
-    )
+    add_setpoints_argument(p)
     p.add_argument(
         "--dynamics",
         choices=[m.value for m in DynamicsModel],

@@ -16,6 +16,7 @@ heading command with no turn asks for the current course at the smallest acceler
 
 from __future__ import annotations
 
+import argparse
 import enum
 import math
 from dataclasses import dataclass
@@ -44,7 +45,7 @@ def compass_deg(course_rad: float) -> float:
 
 
 class SetpointDialect(enum.Enum):
-    """How the companion's setpoints reach the vehicle (``--setpoints``)."""
+    """How the companion's setpoints reach the vehicle (``--setpoints``: :func:`add_setpoints_argument`)."""
 
     BODY_RATES = "body-rates"
     """SET_POSITION_TARGET_LOCAL_NED, BODY_FRD, mask 1087 (afx, yaw_rate)."""
@@ -90,3 +91,17 @@ def slew_from_setpoint(
         return GuidedSlew(heading_deg, centripetal, spec.speed_min_m_s, -a)
     held = min(spec.speed_max_m_s, max(spec.speed_min_m_s, speed_m_s))
     return GuidedSlew(heading_deg, centripetal, held, HOLD_SLEW_M_S2)
+
+
+def add_setpoints_argument(parser: argparse.ArgumentParser) -> None:
+    """``--setpoints body-rates|arduplane``, as the companion and ``fly`` take it."""
+    parser.add_argument(
+        "--setpoints",
+        choices=[d.value for d in SetpointDialect],
+        default=SetpointDialect.BODY_RATES.value,
+        help=(
+            "how GUIDED is commanded: body-rates (SET_POSITION_TARGET_LOCAL_NED in BODY_FRD: forward acceleration and "
+            "yaw rate; the default) or arduplane (ArduPlane's GUIDED_CHANGE_HEADING and GUIDED_CHANGE_SPEED, which a "
+            "stock ArduPlane flies)"
+        ),
+    )
