@@ -1,5 +1,5 @@
-"""Every command answers ``--help`` before it loads torch, gymnasium, Ray, matplotlib or the filter's scipy: the
-heavy imports come after argparse (issue 42). Checked on what the process imported, not on a clock."""
+"""Every command answers ``--help`` before it loads torch, gymnasium, Ray, matplotlib, onnxruntime or the filter's
+scipy: the heavy imports come after argparse (issue 42). Checked on what the process imported, not on a clock."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-HEAVY = ("torch", "gymnasium", "ray", "matplotlib", "filterpy", "scipy", "tensorboard")
+HEAVY = ("torch", "gymnasium", "ray", "matplotlib", "filterpy", "scipy", "tensorboard", "onnx", "onnxruntime")
 
 COMMANDS = [
     "tssac_core.train",

@@ -7,6 +7,7 @@ Examples::
     python -m tssac_core.evaluate --models models/tssac --seed 770001 --mission 417     # one mission again, alone
     python -m tssac_core.evaluate --models models/tssac --episodes 1000 --seed 9 --shield --json shielded.json
     python -m tssac_core.evaluate --controller at_radar --episodes 200 --seed 2100001 --shield  # an adversary
+    python -m tssac_core.evaluate --models onnx-team --episodes 50   # export --format onnx --out onnx-team's actors
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
@@ -48,7 +49,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
     who.add_argument(
-        "--models", type=Path, help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train)"
+        "--models",
+        type=Path,
+        help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train), or decoy.onnx, detect.onnx, "
+        "strike.onnx (made by tssac_core.deploy.export --format onnx; flown with onnxruntime)",
     )
     p.add_argument(
         "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default: scenarios/random.yaml)"
@@ -100,11 +104,16 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[PilotSpec]:
-    """The team's pilots: the actors in ``models``, else the ``controller`` (guidance or an adversary) for every UAV."""
+    """The team's pilots: the actors in ``models`` (its ``<role>.pt``, or its ``<role>.onnx`` in a directory of ONNX
+    actors), else the ``controller`` (guidance or an adversary) for every UAV."""
     if models is None:
         if controller in ADVERSARY_NAMES:
             return [AdversaryPilot(Adversary(controller))] * len(ROLES)
         return [GUIDANCE] * len(ROLES)
+    from tssac_core.deploy.numpy_actor import holds_onnx, load_policy
+
+    if holds_onnx(models):
+        return [load_policy(models, role) for role in ROLES]
     from tssac_core.deploy.policy import load_team
 
     return list(load_team(models))

@@ -58,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--model",
         type=Path,
         metavar="FILE",
-        help="the role's trained actor: models/tssac/<role>.npz (numpy only) or <role>.pt (needs torch)",
+        help="the role's trained actor: models/tssac/<role>.npz (numpy only), <role>.onnx (onnxruntime) or <role>.pt "
+        "(needs torch)",
     )
     who.add_argument(
         "--pilot",

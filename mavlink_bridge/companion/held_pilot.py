@@ -84,7 +84,8 @@ class HeldPilot:
 
 
 def policy_pilot(path: Path, role: Role) -> PolicyPilot:
-    """The trained policy in ``path`` (<role>.npz: numpy only; <role>.pt: imports torch), named by its path."""
+    """The trained policy in ``path`` (<role>.npz: numpy only; <role>.onnx: onnxruntime; <role>.pt: imports torch),
+    named by its path."""
     return PolicyPilot(load_actor(path, role), name=str(path))
 
 

@@ -126,7 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--models",
         type=Path,
         metavar="DIR",
-        help=f"directory with decoy.pt, detect.pt, strike.pt (default {DEFAULT_MODELS.relative_to(REPO)})",
+        help=f"directory with decoy.pt, detect.pt, strike.pt and their .npz exports (default "
+        f"{DEFAULT_MODELS.relative_to(REPO)}), or with decoy.onnx, detect.onnx, strike.onnx (export --format onnx)",
     )
     who.add_argument(
         "--pilot",

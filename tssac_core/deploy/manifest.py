@@ -2,8 +2,8 @@
 
 The format is the one ``sha256sum`` writes and checks (``cd DIR && sha256sum -c SHA256SUMS``): one line per
 file, ``<64 lowercase hex digits><two spaces><file name>``, sorted by name. The names are plain file names in
-the manifest's own directory. Listed: ``config.json``, ``<role>.pt`` and ``<role>.npz`` (whichever exist);
-not the metrics, logs, plots or ``resume/``, which no loader reads and training keeps appending to. A finished
+the manifest's own directory. Listed: ``config.json``, ``<role>.pt``, ``<role>.npz`` and ``<role>.onnx`` (whichever
+exist); not the metrics, logs, plots or ``resume/``, which no loader reads and training keeps appending to. A finished
 results row that is committed as a whole (a cross-check run: OmniSafe's ``actor.npz``, its checkpoint, configs and
 logs) lists every file in its directory instead (``write --all``).
 
@@ -35,7 +35,7 @@ from tssac_core.sim.scenario import ROLES
 
 MANIFEST = "SHA256SUMS"
 CONFIG = "config.json"
-MODEL_SUFFIXES = (".pt", ".npz")
+MODEL_SUFFIXES = (".pt", ".npz", ".onnx")
 
 _LINE = re.compile(r"([0-9a-f]{64}) [ *](.+)")  # sha256sum's text (two spaces) and binary (" *") forms
 
@@ -49,7 +49,7 @@ def sha256_of(path: Path) -> str:
 
 
 def model_files(directory: Path) -> list[str]:
-    """The files of ``directory`` a manifest lists: ``config.json`` and every ``<role>.pt`` / ``<role>.npz`` there."""
+    """The files of ``directory`` a manifest lists: ``config.json`` and every ``<role>`` .pt, .npz and .onnx there."""
     names = [CONFIG] + [role.value + suffix for role in ROLES for suffix in MODEL_SUFFIXES]
     return sorted(name for name in names if (directory / name).is_file())
 
@@ -162,7 +162,7 @@ def write_command(directory: Path, force: bool, every_file: bool = False) -> str
     else:
         names = all_files(directory) if every_file else model_files(directory)
     if not names:
-        wanted = "files" if every_file else "config.json, <role>.pt or <role>.npz"
+        wanted = "files" if every_file else "config.json, <role>.pt, <role>.npz or <role>.onnx"
         raise CheckpointError(f"{directory}: no {wanted} here")
     entries = read_manifest(directory)
     found = problems(directory, entries) if entries is not None else []

@@ -18,7 +18,8 @@ For a models directory made by an older version (or trained elsewhere), export b
     python -m tssac_core.deploy.export models/tssac [more dirs or .pt files]
 
 :func:`pilot_file` picks what a role flies from a models directory: the .npz when it was exported from
-the .pt beside it (or stands alone), else the .pt, so a retrained .pt is never shadowed by a stale export.
+the .pt beside it (or stands alone), else the .pt, so a retrained .pt is never shadowed by a stale export; in a
+directory of ONNX actors (``export --format onnx``, :mod:`tssac_core.deploy.onnx_actor`), the ``<role>.onnx``.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ import numpy as np
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.sim.scenario import Role
+from tssac_core.sim.scenario import ROLES, Role
 
 FORMAT = "tssac-actor-npz"
 FORMAT_VERSION = 1
@@ -45,7 +46,7 @@ logger = logging.getLogger(__name__)
 
 
 class Actor(Protocol):
-    """What a pilot needs of a trained policy (``Policy`` and ``NumpyPolicy`` both are one)."""
+    """What a pilot needs of a trained policy (``Policy``, ``NumpyPolicy`` and ``OnnxPolicy`` each are one)."""
 
     observation_mode: ObservationMode
     action_repeat: int
@@ -77,7 +78,7 @@ class NumpyPolicy:
     @staticmethod
     def load(path: str | Path, role: Role | str | None = None) -> NumpyPolicy:
         p = Path(path)
-        meta, layers = _read(p)
+        meta, layers = read_actor(p)
         if role is not None and Role(role) is not Role(meta["role"]):
             raise CheckpointError(f"{p}: exported actor is for the {meta['role']} UAV, not the {Role(role).value}")
         return NumpyPolicy(meta, layers)
@@ -102,7 +103,7 @@ class NumpyPolicy:
     """The action for ``obs`` (one (d,) or a batch (n, d)): what a gymnasium user calls."""
 
 
-def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
+def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
     """(meta, layers) of an exported actor; CheckpointError (one line) for anything wrong with the file."""
     if not p.is_file():
         raise CheckpointError(f"{p}: exported actor not found")
@@ -143,18 +144,32 @@ def _read(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]
     return meta, layers
 
 
+def holds_onnx(models: str | Path) -> bool:
+    """Whether ``models`` is a directory of ONNX actors: it holds a ``<role>.onnx``."""
+    return any((Path(models) / f"{role.value}.onnx").is_file() for role in ROLES)
+
+
 def pilot_file(models: str | Path, role: Role) -> Path:
     """The file ``role`` flies from a models directory: ``<role>.npz`` if it was exported from the
     ``<role>.pt`` beside it (or there is no .pt), otherwise ``<role>.pt`` (with a warning if a stale
-    export is being passed over)."""
+    export is being passed over); in a directory of ONNX actors, ``<role>.onnx`` (CheckpointError if
+    that directory holds the role's .pt or .npz too: which of them was meant to fly?)."""
     d = Path(models)
     pt, npz = d / f"{role.value}.pt", d / f"{role.value}.npz"
+    if holds_onnx(d):
+        beside = [p.name for p in (pt, npz) if p.is_file()]
+        if beside:
+            raise CheckpointError(
+                f"{d}: ONNX actors beside {beside[0]}: one format per models directory (export --format onnx --out "
+                f"writes a directory of its own)"
+            )
+        return d / f"{role.value}.onnx"
     if not npz.is_file():
         return pt
     if not pt.is_file():
         return npz
     try:
-        source = _read(npz)[0].get("source_sha256")
+        source = read_actor(npz)[0].get("source_sha256")
     except CheckpointError as exc:
         logger.warning("%s; flying %s instead", exc, pt)
         return pt
@@ -170,11 +185,17 @@ def pilot_file(models: str | Path, role: Role) -> Path:
 
 
 def load_actor(path: str | Path, role: Role | str | None = None) -> Actor:
-    """A deterministic role policy from ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch), after the
-    manifest of its directory is checked (tssac_core.deploy.manifest: CheckpointError for a changed file)."""
+    """A deterministic role policy from ``<role>.npz`` (numpy only), ``<role>.onnx`` (imports onnxruntime) or
+    ``<role>.pt`` (imports torch), after the manifest of its directory is checked (tssac_core.deploy.manifest:
+    CheckpointError for a changed file)."""
     unchecked = check_model_file(Path(path))
-    if Path(path).suffix == ".npz":
+    suffix = Path(path).suffix
+    if suffix == ".npz":
         actor: Actor = NumpyPolicy.load(path, role)
+    elif suffix == ".onnx":
+        from tssac_core.deploy.onnx_actor import OnnxPolicy
+
+        actor = OnnxPolicy.load(path, role)
     else:
         from tssac_core.deploy.policy import Policy
 
@@ -185,9 +206,10 @@ def load_actor(path: str | Path, role: Role | str | None = None) -> Actor:
 
 def load_policy(path: str | Path, role: Role | str | None = None) -> Actor:
     """A shipped or trained actor to fly in ``gym.make("tssac/<Role>-v0")``: ``load_policy(path).predict(obs)``
-    is the action for an observation. ``path``: a ``<role>.npz`` (numpy only) or ``<role>.pt`` (imports torch),
-    or a models directory with ``role`` (the file :func:`pilot_file` picks). Its ``observation_mode`` and
-    ``action_repeat`` say which env settings it was trained with (the env's defaults are the shipped team's)."""
+    is the action for an observation. ``path``: a ``<role>.npz`` (numpy only), ``<role>.onnx`` (onnxruntime) or
+    ``<role>.pt`` (imports torch), or a models directory with ``role`` (the file :func:`pilot_file` picks). Its
+    ``observation_mode`` and ``action_repeat`` say which env settings it was trained with (the env's defaults are the
+    shipped team's)."""
     p = Path(path)
     if p.is_dir():
         if role is None:
