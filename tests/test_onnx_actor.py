@@ -82,6 +82,22 @@ def test_onnx_and_numpy_actors_give_the_same_actions(exported: Path, role: Role)
         onnx_actor.act(obs[:, :-1])
 
 
+def test_a_graph_for_one_observation_at_a_time_flies_a_batch_row_by_row(team: Path):
+    """An exporter without a dynamic batch axis writes input (1, 24): the companion's call as it is, a batch (the
+    batched evaluation's) row by row."""
+
+    def batch_of_one(model: onnx.ModelProto) -> None:
+        for value in (model.graph.input[0], model.graph.output[0]):
+            value.type.tensor_type.shape.dim[0].dim_value = 1
+
+    rewrite(team / "decoy.onnx", batch_of_one)
+    actor = OnnxPolicy.load(team / "decoy.onnx", Role.DECOY)
+    obs = observations(20, seed=2)
+    expected = NumpyPolicy.load(SHIPPED / "decoy.npz").act(obs)
+    np.testing.assert_allclose(actor.act(obs), expected, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(actor.act(obs[3]), expected[3], rtol=0, atol=1e-5)
+
+
 def test_an_onnx_actor_pickles_as_its_file(exported: Path):
     """What ``evaluate --workers N`` sends to its Ray workers: the file's bytes, the session built again there."""
     actor = OnnxPolicy.load(exported / "detect.onnx")
