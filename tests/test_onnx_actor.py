@@ -336,3 +336,14 @@ def test_fly_flies_the_onnx_team_over_mavlink(exported: Path, tmp_path: Path):
     for role in ROLES:  # each companion was handed its .onnx
         assert str(exported / f"{role.value}.onnx") in flown, role
     print(f"ONNX team, strike mission: {time.monotonic() - t0:.1f} s wall, {mission['sim_time_s']:.0f} s simulated")
+
+
+def test_the_benchmark_runs_and_writes_its_json_where_asked(tmp_path: Path):
+    out = tmp_path / "bench.json"
+    argv = [sys.executable, str(REPO / "benchmarks" / "bench_onnx.py"), "--calls", "200", "--batch", "10"]
+    done = subprocess.run([*argv, "--json", str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert done.returncode == 0, done.stderr
+    figures = json.loads(out.read_text())
+    assert figures["calls"] == 200 and figures["numpy"]["median_us"] > 0 and figures["onnx"]["p99_us"] > 0
+    assert figures["max_abs_action_difference"] < 1e-5 and figures["threads_started_by_onnxruntime"] in (0, None)
+    assert "onnx / numpy: median" in done.stdout and sorted(p.name for p in tmp_path.iterdir()) == ["bench.json"]
