@@ -332,6 +332,7 @@ def test_fly_flies_the_onnx_team_over_mavlink(exported: Path, tmp_path: Path):
     mission = results["missions"][0]
     assert results["success_rate"] == 1.0 and results["pilot"] == str(exported) and mission["success"]
     assert all(c["status"] == "success" and c["exit_code"] == 0 for c in mission["companions"].values())
+    assert mission["steps"] == pytest.approx(2542, abs=30)  # the numpy actors fly this mission in 2,542 steps
     flown = "".join(p.read_text() for p in (tmp_path / "logs").rglob("*.log"))
     for role in ROLES:  # each companion was handed its .onnx
         assert str(exported / f"{role.value}.onnx") in flown, role
