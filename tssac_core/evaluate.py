@@ -131,6 +131,11 @@ def compare_shield(
     return {"off": off, "on": on}
 
 
+def console() -> int:
+    """``tssac-evaluate`` and ``python -m tssac_core.evaluate``: :func:`main` with known errors as one line (exit 2)."""
+    return run(main)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load_for_batched_world(args.scenario)
@@ -209,4 +214,4 @@ def print_summary(summary: dict[str, Any], cost_limit: float) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(run(main))
+    sys.exit(console())

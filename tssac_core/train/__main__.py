@@ -2,7 +2,6 @@
 
 import sys
 
-from tssac_core.common.cli import run
-from tssac_core.train.cli import main
+from tssac_core.train.cli import console
 
-sys.exit(run(main))
+sys.exit(console())

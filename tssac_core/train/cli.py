@@ -41,6 +41,11 @@ SEEDS_FILE = "seeds.json"
 """``--seeds`` writes the list of its seeds here, in --out, so that ``--out DIR --resume`` continues them all."""
 
 
+def console() -> int:
+    """``tssac-train`` and ``python -m tssac_core.train``: :func:`main` with known errors as one line (exit 2)."""
+    return run(main)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     cfg, out, resume, quiet, jobs, tensorboard = parse_cli(argv)
     try:
