@@ -14,6 +14,7 @@ from gymnasium.vector import AutoresetMode
 
 import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
 from tssac_core.deploy.numpy_actor import load_policy, team_pilots
+from tssac_core.sim.env import UavRoleEnv
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, load
 from tssac_core.sim.vector_env import RoleVectorEnv
@@ -52,6 +53,26 @@ def test_safe_step_returns_the_cost_in_the_tuple():
     env.reset(seed=0)
     obs, reward, cost, terminated, truncated, info = env.safe_step(np.zeros(2, dtype=np.float32))
     assert cost == info["cost"] and isinstance(cost, float) and obs.shape == env.observation_space.shape
+
+
+@pytest.mark.parametrize("role", ["Decoy", "Detect", "Strike"])
+def test_the_safety_gymnasium_ids_step_with_the_cost_in_the_tuple(role):
+    """tssac/Safe<Role>-v0 is the role's env, its step Safety-Gymnasium's 6-tuple: the plain env's items, cost third."""
+    safe = gym.make(f"tssac/Safe{role}-v0", action_repeat=5)
+    plain = gym.make(f"tssac/{role}-v0", action_repeat=5)
+    assert isinstance(safe.unwrapped, UavRoleEnv) and safe.unwrapped.role.value == role.lower()
+    assert safe.observation_space == plain.observation_space and safe.action_space == plain.action_space
+    with pytest.raises(Exception, match="reset"):
+        safe.step(np.zeros(2, dtype=np.float32))
+    assert data_equivalence(safe.reset(seed=5), plain.reset(seed=5))
+    rng = np.random.default_rng(1)
+    for _ in range(60):
+        action = rng.uniform(-1, 1, 2).astype(np.float32)
+        obs, reward, cost, terminated, truncated, info = safe.step(action)
+        assert data_equivalence((obs, reward, terminated, truncated, info), plain.step(action))
+        assert cost == info["cost"] and isinstance(cost, float)
+        if terminated or truncated:
+            assert data_equivalence(safe.reset(seed=6), plain.reset(seed=6))
 
 
 def test_the_shipped_decoy_flies_in_gym_make_as_in_evaluate():

@@ -1,10 +1,11 @@
 """The gymnasium face of one UAV role's constrained MDP: :class:`UavRoleEnv`, and the registered ids.
 
 Importing this module registers ``tssac/Decoy-v0``, ``tssac/Detect-v0`` and ``tssac/Strike-v0``
-(``gym.make("tssac_core.sim.env:tssac/Detect-v0", ...)`` imports it). Keyword arguments: ``scenario=``,
-``observation=`` (default ``route``), ``action_repeat=`` (default 10: one decision per simulated second),
-``teammates=``. The defaults are what the shipped team (``models/tssac/config.json``) was trained with, so a
-shipped actor flies here as it was trained. ``gym.make_vec(id, num_envs=N)`` builds the batched
+(``gym.make("tssac_core.sim.env:tssac/Detect-v0", ...)`` imports it), and their Safety-Gymnasium forms
+``tssac/SafeDecoy-v0``, ``tssac/SafeDetect-v0``, ``tssac/SafeStrike-v0`` (:class:`SafeUavRoleEnv`).
+Keyword arguments: ``scenario=``, ``observation=`` (default ``route``), ``action_repeat=`` (default 10: one decision
+per simulated second), ``teammates=``. The defaults are what the shipped team (``models/tssac/config.json``) was
+trained with, so a shipped actor flies here as it was trained. ``gym.make_vec(id, num_envs=N)`` builds the batched
 :class:`tssac_core.sim.vector_env.RoleVectorEnv` (one world array for all N) rather than N copies of this env.
 The batched task itself is :class:`tssac_core.sim.role_task.RoleTask` (re-exported here).
 """
@@ -24,7 +25,15 @@ from tssac_core.sim.role_task import RoleTask, TaskStep, Teammates, resolve_pilo
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
 from tssac_core.sim.world_state import snapshot
 
-__all__ = ["DEFAULT_ACTION_REPEAT", "RoleTask", "TaskStep", "Teammates", "UavRoleEnv", "resolve_pilots"]
+__all__ = [
+    "DEFAULT_ACTION_REPEAT",
+    "RoleTask",
+    "SafeUavRoleEnv",
+    "TaskStep",
+    "Teammates",
+    "UavRoleEnv",
+    "resolve_pilots",
+]
 
 DEFAULT_OBSERVATION = ObservationMode.ROUTE
 """The shipped team's observation (models/tssac/config.json)."""
@@ -151,9 +160,35 @@ class UavRoleEnv(gym.Env):
         return role_info(self.task, 0)
 
 
+class SafeUavRoleEnv(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
+    """Safety-Gymnasium's form of :class:`UavRoleEnv` (``tssac/Safe<Role>-v0``): ``step`` returns
+    ``obs, reward, cost, terminated, truncated, info``, as Safety-Gymnasium's envs do (its
+    ``safety_gymnasium.builder.Builder.step``); everything else is the wrapped env's. The keyword arguments are
+    :class:`UavRoleEnv`'s. The cost also stays in ``info["cost"]``.
+
+    gymnasium's own checker and wrappers expect the 5-tuple, so the ids are registered without the passive checker
+    (``disable_env_checker``); the wrapped env still refuses a step before ``reset``.
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(UavRoleEnv(**kwargs))
+
+    # tuple[Any, ...]: the one return type that both gymnasium's Env.step (a 5-tuple) admits and these six items
+    # fit; the items' types are UavRoleEnv.safe_step's.
+    def step(self, action: np.ndarray) -> tuple[Any, ...]:
+        env = self.env.unwrapped
+        assert isinstance(env, UavRoleEnv)
+        return env.safe_step(action)
+
+
 def env_id(role: Role | str) -> str:
     """The registered id of a role's env: ``tssac/Decoy-v0``, ``tssac/Detect-v0``, ``tssac/Strike-v0``."""
     return f"tssac/{Role(role).value.capitalize()}-v0"
+
+
+def safe_env_id(role: Role | str) -> str:
+    """The registered id of a role's Safety-Gymnasium form: ``tssac/SafeDecoy-v0`` and so on."""
+    return f"tssac/Safe{Role(role).value.capitalize()}-v0"
 
 
 for _role in ROLES:
@@ -163,4 +198,11 @@ for _role in ROLES:
             entry_point="tssac_core.sim.env:UavRoleEnv",
             vector_entry_point="tssac_core.sim.vector_env:RoleVectorEnv",
             kwargs={"role": _role.value},
+        )
+    if safe_env_id(_role) not in gym.envs.registry:
+        gym.register(
+            id=safe_env_id(_role),
+            entry_point="tssac_core.sim.env:SafeUavRoleEnv",
+            kwargs={"role": _role.value},
+            disable_env_checker=True,
         )
