@@ -101,27 +101,47 @@ def test_load_policy_needs_a_role_for_a_directory():
     assert load_policy(MODELS, "strike").role.value == "strike"
 
 
-def test_make_vec_is_the_batched_world_and_equals_sync_vector_env():
+@pytest.mark.parametrize("mode", [AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP])
+def test_make_vec_is_the_batched_world_and_equals_sync_vector_env(mode):
     n = 4
     # Guidance teammates: missions end (the target is hit), so autoreset is compared too.
-    vec = gym.make_vec("tssac/Decoy-v0", num_envs=n, vectorization_mode="vector_entry_point")
-    assert isinstance(vec, RoleVectorEnv) and vec.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
-    sync = gym.make_vec(
-        "tssac/Decoy-v0",
-        num_envs=n,
-        vectorization_mode="sync",
-        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
-    )
+    kwargs = {} if mode is AutoresetMode.SAME_STEP else {"autoreset_mode": mode}  # SAME_STEP: the default
+    vec = gym.make_vec("tssac/Decoy-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
+    assert isinstance(vec, RoleVectorEnv) and vec.metadata["autoreset_mode"] is mode
+    sync = gym.make_vec("tssac/Decoy-v0", num_envs=n, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode})
     assert vec.observation_space == sync.observation_space and vec.action_space == sync.action_space
     assert data_equivalence(vec.reset(seed=11), sync.reset(seed=11))
     rng = np.random.default_rng(0)
-    ended = 0
+    ended = restarted = 0
     for _ in range(450):
         actions = rng.uniform(-1, 1, (n, 2)).astype(np.float32)
         a, b = vec.step(actions), sync.step(actions)
         assert data_equivalence(a, b), "the vector env left SyncVectorEnv"
+        restarted += int(ended and mode is AutoresetMode.NEXT_STEP and (a[1] == 0).any())
         ended += int((a[2] | a[3]).sum())
     assert ended >= 1  # autoreset was compared too
+    assert restarted >= 1 or mode is AutoresetMode.SAME_STEP
+
+
+def test_next_step_mode_takes_gymnasiums_stateful_wrappers():
+    """NormalizeObservation (and NormalizeReward) refuse SAME_STEP; in NEXT_STEP mode they wrap the batched world."""
+    from gymnasium.wrappers.vector import NormalizeObservation, NormalizeReward
+
+    with pytest.raises(ValueError, match="NEXT_STEP"):
+        NormalizeObservation(gym.make_vec("tssac/Detect-v0", num_envs=2, vectorization_mode="vector_entry_point"))
+    vec = gym.make_vec(
+        "tssac/Detect-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.NEXT_STEP,
+    )
+    env = NormalizeReward(NormalizeObservation(vec))
+    env.reset(seed=0)
+    for _ in range(5):
+        obs, *_ = env.step(np.zeros((2, 2), dtype=np.float32))
+    assert obs.shape == (2, 24) and np.isfinite(obs).all()
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        RoleVectorEnv(num_envs=2, autoreset_mode=AutoresetMode.DISABLED)
 
 
 def test_make_vec_bad_num_envs():
