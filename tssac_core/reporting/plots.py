@@ -63,53 +63,11 @@ def plot_training(metrics: Path, out: Path, cost_limit: float) -> None:
     plt.close(fig)
 
 
-ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
+# The map's drawing lives with the world (the env draws its own frames with it): the mission figures here, the film
+# (tssac_core.reporting.mission_animation) and UavRoleEnv.render draw the same map.
+from tssac_core.sim.drawing import LEGEND_BESIDE, ROLE_COLOURS, draw_layout, ring_labels  # noqa: E402
 
-
-LEGEND_BESIDE: dict[str, Any] = {
-    "fontsize": 7,
-    "loc": "upper left",
-    "bbox_to_anchor": (1.02, 1.0),
-    "borderaxespad": 0.0,
-}
-"""The mission figures' legend: beside the map, where it hides no track."""
-
-
-def ring_labels(ranges_km: tuple[float, float, float, float]) -> tuple[str, str, str, str]:
-    """The legend's words for the paper's R1-R4 (Table 1), innermost first."""
-    r1, r2, r3, r4 = ranges_km
-    return (
-        f"strike UAV can launch within ({r1:g} km)",
-        f"detect UAV identifies the target within ({r2:g} km)",
-        f"SAM can fire within ({r3:g} km)",
-        f"SAM radar sees within ({r4:g} km)",
-    )
-
-
-def draw_layout(ax: Any, layout_: object, ranges_km: tuple[float, float, float, float], area_km: float) -> None:
-    """What does not move in a mission: the radar sites and their coverage (the hazards), the SAM site with its
-    rings, the target, the area; every kind once in the legend, in plain words."""
-    from tssac_core.sim.scenario import Layout
-
-    assert isinstance(layout_, Layout)
-    lay = layout_
-    r1, r2, r3, r4 = ranges_km
-    w1, w2, w3, w4 = ring_labels(ranges_km)
-    for k, radar in enumerate(lay.radars):
-        coverage = f"radar coverage, a hazard ({radar.radius_km:g} km)" if k == 0 else None
-        ax.add_patch(plt.Circle(radar.position_km, radar.radius_km, color="red", alpha=0.25, lw=0, label=coverage))
-        ax.plot(*radar.position_km, "r^", label="radar site" if k == 0 else None)
-    ax.add_patch(plt.Circle(lay.sam_km, r4, fill=False, color="tab:orange", ls="--", label=w4))
-    ax.add_patch(plt.Circle(lay.sam_km, r3, fill=False, color="tab:orange", ls="-", label=w3))
-    ax.add_patch(plt.Circle(lay.sam_km, r2, fill=False, color="tab:green", ls=":", label=w2))
-    ax.add_patch(plt.Circle(lay.sam_km, r1, fill=False, color="black", ls=":", label=w1))
-    ax.plot(*lay.sam_km, "s", color="tab:orange", label="SAM site")
-    ax.plot(*lay.target_km, "*", color="darkred", ms=12, label="target")
-    ax.set_xlim(0, area_km)
-    ax.set_ylim(0, area_km)
-    ax.set_aspect("equal")
-    ax.set_xlabel("east (km)")
-    ax.set_ylabel("north (km)")
+__all__ = ["LEGEND_BESIDE", "ROLE_COLOURS", "draw_layout", "plot_mission", "plot_training", "ring_labels"]
 
 
 def plot_mission(

@@ -22,7 +22,7 @@ from tssac_core.sim.observation import ObservationMode, observation_bounds, obse
 from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.role_task import RoleTask, TaskStep, Teammates, resolve_pilots
-from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Layout, Radar, Role, Scenario, load
 from tssac_core.sim.world_state import snapshot
 
 __all__ = [
@@ -92,11 +92,19 @@ class UavRoleEnv(gym.Env):
     ``tssac_core.deploy.numpy_actor.load_policy(path)``, or None to park that UAV); roles missing from a mapping
     are parked.
 
+    **Rendering** (``render_mode=``): ``"rgb_array"``: :meth:`render` returns the world now as an (H, W, 3) uint8
+    frame: the area, the radars' coverage, the SAM's rings, the target and each flying UAV's track since the reset,
+    drawn by :mod:`tssac_core.sim.drawing` with matplotlib's Agg into a buffer (matplotlib is imported at the first
+    frame). ``"human"``: the same frame shown in a pyplot window, without blocking, at every step; with a
+    non-interactive backend (Agg, e.g. a headless machine) nothing visible is drawn and nothing fails.
+    ``metadata["render_fps"]`` is one frame per decision in simulated time (1 at ``action_repeat`` 10).
+
     **Seeding**: ``reset(seed=S)`` flies the layout of ``evaluate --seed S``'s mission 0 (mission k of seed S is
     ``reset(seed=S + k)``), so an episode here and a mission there can be compared layout for layout.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 1}
+    """``render_fps`` here is the default's; an instance's is 1 / (dt_s * action_repeat)."""
 
     def __init__(
         self,
@@ -106,8 +114,12 @@ class UavRoleEnv(gym.Env):
         teammates: Teammates = GUIDANCE,
         reward_config: RewardConfig = RewardConfig(),
         action_repeat: int = DEFAULT_ACTION_REPEAT,
+        render_mode: str | None = None,
     ) -> None:
         super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
         self.scenario = scenario if isinstance(scenario, Scenario) else load(scenario)
         self.role = Role(role)
         self.mode = ObservationMode(observation)
@@ -116,7 +128,12 @@ class UavRoleEnv(gym.Env):
         low, high = observation_bounds(self.mode)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.metadata = {**self.metadata, "render_fps": 1.0 / (self.scenario.dt_s * self.action_repeat)}
         self._needs_reset = True
+        self._tracks_m: list[np.ndarray] | None = None
+        """With a render mode: every world step's positions since the reset, (2, 3) each."""
+        self._canvas: Any = None
+        self._window: Any = None
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -124,6 +141,9 @@ class UavRoleEnv(gym.Env):
         super().reset(seed=seed)
         obs = self.task.reset(rng=self.np_random)
         self._needs_reset = False
+        if self.render_mode is not None:
+            self._tracks_m = [self.task.world.xy_m[:, 0].copy()]
+            self._show()
         return obs[0], self._info()
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -134,6 +154,8 @@ class UavRoleEnv(gym.Env):
         total_r = total_c = 0.0
         for _ in range(self.action_repeat):
             result, r, cost = self.task.advance(held)
+            if self._tracks_m is not None:
+                self._tracks_m.append(self.task.world.xy_m[:, 0].copy())
             total_r += float(r[0])
             total_c += float(cost[0])
             terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
@@ -142,6 +164,7 @@ class UavRoleEnv(gym.Env):
         self._needs_reset = terminated or truncated
         info = self._info()
         info["cost"] = total_c
+        self._show()
         return (
             observe(snapshot(self.task.world), self.task.j, self.mode, self.task.obs_routes)[0],
             total_r,
@@ -155,6 +178,88 @@ class UavRoleEnv(gym.Env):
         ``info["cost"]``)."""
         obs, r, terminated, truncated, info = self.step(action)
         return obs, r, float(info["cost"]), terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the frame now (class docstring); ``human``: shows it, returns None; no render mode: a warning
+        (gymnasium's), None."""
+        if self.render_mode is None:
+            spec_id = self.spec.id if self.spec is not None else "tssac/Decoy-v0"
+            gym.logger.warn(
+                "You are calling render method without specifying any render mode. You can specify the render_mode at "
+                f'initialization, e.g. gym.make("{spec_id}", render_mode="rgb_array")'
+            )
+            return None
+        frame = self._frame()
+        if self.render_mode == "human":
+            self._show_in_window(frame)
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Release the frame's figure and the window."""
+        self._canvas = None
+        if self._window is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._window[0])
+            self._window = None
+        super().close()
+
+    def _show(self) -> None:
+        if self.render_mode == "human":
+            self.render()
+
+    def _frame(self) -> np.ndarray:
+        """The world now drawn with Agg into a buffer: (H, W, 3) uint8."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        from tssac_core.sim.drawing import LEGEND_BESIDE, draw_layout, draw_tracks
+
+        if self._canvas is None:  # no pyplot: the figure is this env's, whatever backend pyplot has
+            self._canvas = FigureCanvasAgg(Figure(figsize=(9.8, 5.3), dpi=80))
+        fig = self._canvas.figure
+        fig.clear()
+        ax = fig.add_subplot()
+        w, s = self.task.world, self.scenario
+        radars = tuple(
+            Radar((float(p[0]) / 1000, float(p[1]) / 1000), float(r) / 1000)
+            for p, r in zip(w.radar_m[0], w.radar_r_m[0])
+            if r > 0
+        )
+        layout = Layout(tuple(w.sam_m[0] / 1000), tuple(w.target_m[0] / 1000), radars, {})
+        r = s.ranges
+        draw_layout(ax, layout, (r.strike_launch_km, r.detect_km, r.sam_launch_km, r.sam_detect_km), s.area_km)
+        tracks = np.stack(self._tracks_m or [w.xy_m[:, 0]]) / 1000  # (T, 2, 3) km
+        draw_tracks(
+            ax,
+            {
+                role.value: list(zip(tracks[:, 0, k], tracks[:, 1, k]))
+                for k, role in enumerate(ROLES)
+                if self.task.active[k]
+            },
+        )
+        ax.set_title(f"{self.role.value} env: t = {(len(tracks) - 1) * s.dt_s:.0f} s")
+        ax.legend(**LEGEND_BESIDE)
+        fig.tight_layout()
+        self._canvas.draw()
+        return np.asarray(self._canvas.buffer_rgba())[..., :3].copy()
+
+    def _show_in_window(self, frame: np.ndarray) -> None:
+        import matplotlib.pyplot as plt
+        from matplotlib.backends import BackendFilter, backend_registry
+
+        if plt.get_backend().lower() not in backend_registry.list_builtin(BackendFilter.INTERACTIVE):
+            return  # Agg or another non-interactive backend (a headless machine): nothing to show, nothing fails
+        if self._window is None:
+            fig, ax = plt.subplots()
+            ax.set_axis_off()
+            self._window = (fig, ax.imshow(frame))
+            plt.show(block=False)
+        else:
+            self._window[1].set_data(frame)
+        self._window[0].canvas.draw_idle()
+        self._window[0].canvas.flush_events()
 
     def _info(self) -> dict[str, Any]:
         return role_info(self.task, 0)
