@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, run, write_json
+from tssac_core.common.cli import UsageError, run, seed_arg, write_json
 from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
@@ -56,7 +56,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--episodes", type=int, default=50, help="missions to fly (default 50)")
     p.add_argument(
         "--seed",
-        type=int,
+        type=seed_arg,
         default=12345,
         help="mission k flies the layout of seed S + k (default 12345, never used in training)",
     )

@@ -40,10 +40,15 @@ LOCKSTEP_GRANT_S = 1.0
 pilot holds each action for 10 ticks (1 s), and the vehicle's setpoint timeout is at least 1 s."""
 
 
+LOCKSTEP_GRANT_MAX_S = 60.0
+"""The longest ``--lockstep-grant-s``: the longest setpoint timeout a vehicle accepts (GUID_TIMEOUT, 0.1-60 s). The
+grant is counted in whole milliseconds of the vehicle's clock, which an unbounded one overflows."""
+
+
 def check_lockstep_grant_s(value: float) -> None:
-    """``--lockstep-grant-s`` is 0 (answer every tick) or a finite number of seconds; else one clear line."""
-    if not (math.isfinite(value) and value >= 0):
-        raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {value:g}")
+    """``--lockstep-grant-s`` is 0 (answer every tick) up to :data:`LOCKSTEP_GRANT_MAX_S`; else one clear line."""
+    if not (math.isfinite(value) and 0 <= value <= LOCKSTEP_GRANT_MAX_S):
+        raise UsageError(f"--lockstep-grant-s must be 0 to {LOCKSTEP_GRANT_MAX_S:g} seconds, got {value:g}")
 
 
 EXIT_OK = 0

@@ -110,6 +110,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BAD_INPUT as exc:
         error = bad_input_line(exc)
         code = EXIT_BAD_INPUT
+    except MemoryError:
+        error = "out of memory"
+        code = EXIT_FAILED
+    except Exception as exc:  # a defect: the JSON must not say that nothing went wrong, and the traceback follows
+        error = f"internal error: {type(exc).__name__}: {exc}"
+        code = EXIT_FAILED
+        raise
     finally:
         # No second signal may cut the clean-up short: the children are in their own sessions.
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

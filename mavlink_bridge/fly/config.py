@@ -15,7 +15,7 @@ from typing import NoReturn
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
 from mavlink_bridge.link.connection import parse_connection
 from mavlink_bridge.link.signing_key import read_signing_key
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
     p.add_argument(
         "--seed",
-        type=int,
+        type=seed_arg,
         default=0,
         metavar="S",
         help="mission i uses seed S + i for its random layout and sensor noise (default 0)",
@@ -280,6 +280,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     a = build_parser().parse_args(argv)
     if a.episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.seed + max(a.episodes - 1, a.mission or 0) > SEED_MAX:
+        raise UsageError(
+            f"--seed plus the last mission's index must stay within {SEED_MAX} (mission i flies seed S + i)"
+        )
     if a.workers <= 0:
         raise UsageError(f"--workers must be positive, got {a.workers}")
     if a.mission is not None and a.mission < 0:

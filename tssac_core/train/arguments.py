@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection
@@ -50,6 +50,9 @@ def parse_seeds(text: str) -> tuple[int, ...]:
         raise UsageError(f"--seeds: {text!r} is not a comma-separated list of integers") from None
     if not seeds or len(set(seeds)) != len(seeds):
         raise UsageError(f"--seeds: give one or more distinct seeds, got {text!r}")
+    for seed in seeds:
+        if not 0 <= seed <= SEED_MAX:
+            raise UsageError(f"--seeds: invalid seed {seed}: a whole number from 0 to {SEED_MAX}")
     return seeds
 
 
@@ -88,7 +91,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument(
         "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of networks, layouts and exploration")
     p.add_argument(
         "--seeds",
         help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
