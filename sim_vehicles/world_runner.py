@@ -77,6 +77,7 @@ from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Vehicle, VehicleSetup
 from sim_vehicles.vehicle_link import VehicleLink
+from tssac_core.common.files import create_exclusively
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
@@ -282,7 +283,7 @@ class WorldRunner:
             if config.tlog_dir is not None:
                 path = Path(config.tlog_dir) / f"{role.value}.tlog"
                 try:
-                    tlog = open(path, "wb")
+                    tlog = open(create_exclusively(path), "wb")  # ours, never a file or link planted there
                 except OSError as exc:
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)

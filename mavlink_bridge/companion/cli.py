@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, NoReturn
 from mavlink_bridge.companion.config import (
     COMMAND_TIMEOUT_S,
     EXIT_BAD_INPUT,
+    EXIT_WRITE_FAILED,
     LOCKSTEP_COMMAND_TIMEOUT_S,
     LOCKSTEP_GRANT_S,
     PILOT_NAMES,
@@ -25,7 +26,7 @@ from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import UsageError, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
@@ -257,6 +258,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except bad_input_errors() as exc:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT
+        except OSError as exc:  # the status file could not be written (a full disk): the run's record is lost
+            print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
+            return EXIT_WRITE_FAILED
     finally:
         if link is not None:
             link.close()

@@ -52,6 +52,8 @@ def check_lockstep_grant_s(value: float) -> None:
 
 
 EXIT_OK = 0
+EXIT_WRITE_FAILED = 1
+"""The flight ended, but what it was to write was not all written (a tlog cut by a full disk)."""
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3
 

@@ -220,11 +220,10 @@ class Companion:
         except _Stop as stop:
             self._status = (stop.args[0], stop.args[1])
         finally:
+            link.close_tlog()  # first: its last bytes are written now, and may be lost now
             result = self._result()
             if own_link:
                 link.close()
-            else:
-                link.close_tlog()
             if cfg.status_json is not None:
                 write_json(cfg.status_json, result.as_dict())
         return result
@@ -741,4 +740,5 @@ class Companion:
             flags=dict(self.flags.values),
             latency_samples_ms=[round(float(x), 4) for x in lat],
             shield=None if self.shield is None else asdict(self.shield.counters),
+            write_error=None if link is None else link.tlog_error,
         )

@@ -17,6 +17,7 @@ from mavlink_bridge.link.connection import parse_connection
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
 from tssac_core.common.errors import CheckpointError
+from tssac_core.common.files import create_exclusively
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
@@ -414,10 +415,10 @@ def lean_telemetry(lean: bool, full: bool, lockstep: bool, own_world: bool) -> b
 
 
 def make_signing_key(directory: Path) -> Path:
-    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only."""
+    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only: a new file of ours, whatever was at
+    its name (a key planted readable by all, or a link to a file of someone else's choice) removed, never used."""
     path = directory / "signing.key"
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as fh:
+    with os.fdopen(create_exclusively(path, 0o600), "wb") as fh:
         fh.write(os.urandom(32))
     return path
 

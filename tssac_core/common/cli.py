@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.errors import InputError
-from tssac_core.common.files import replace_durably
+from tssac_core.common.files import write_text_safely
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
@@ -63,9 +63,6 @@ def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None 
 
 
 def write_json(path: str | Path, data: Any) -> None:
-    """Write JSON atomically (a partial file is never left behind)."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    replace_durably(tmp, target)
+    """Write JSON: atomically to a regular file (a partial file is never left behind), in place to a named pipe or a
+    character device (``--json /dev/stdout``), through the user's own links (:func:`write_text_safely`)."""
+    write_text_safely(Path(path), json.dumps(data, indent=2) + "\n")
