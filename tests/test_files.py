@@ -207,3 +207,22 @@ def test_a_companions_tlog_is_a_new_file_never_a_planted_link(tmp_path: Path) ->
     with MavLink("udpout:127.0.0.1:9", tlog_path=tlog) as link:
         link.send_heartbeat()
     assert victim.read_text() == "precious" and not tlog.is_symlink() and tlog.stat().st_size > 0
+
+
+def test_json_to_a_descriptor_redirected_to_a_file_lands_in_order(tmp_path: Path) -> None:
+    """``--json /dev/stdout > out.txt``: the command's own lines, then the JSON, in the one file the shell opened.
+    (``/dev/fd/1`` here: the same descriptor by the name whose replacement fails harmlessly, in /proc, where a
+    command that replaced its ``--json`` path would replace the machine's /dev/stdout.)"""
+    out = tmp_path / "out.txt"
+    code = "from tssac_core.common.cli import write_json; print('before'); write_json('/dev/fd/1', {'a': 1})"
+    with out.open("w") as fh:
+        subprocess.run(
+            [sys.executable, "-c", code + "; print('after')"],
+            stdout=fh,
+            check=True,
+            cwd=REPO,
+            env=dict(os.environ, PYTHONPATH=str(REPO)),
+            timeout=60,
+        )
+    lines = out.read_text().splitlines()
+    assert lines[0] == "before" and lines[-1] == "after" and json.loads("\n".join(lines[1:-1])) == {"a": 1}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import os
 import stat
+import sys
 import tempfile
 from pathlib import Path
 
@@ -50,12 +51,41 @@ def _check_link_owner(path: Path) -> None:
         raise PermissionError(errno.EPERM, f"a link of another user (uid {st.st_uid}): not written through", str(path))
 
 
+def _descriptor(path: Path) -> tuple[int, int] | None:
+    """(pid, fd) when ``path`` leads through ``/proc/PID/fd/N`` (``/dev/stdout``, ``/dev/fd/1``): an open descriptor of
+    a process, whatever it is (a terminal, a pipe, the file a shell redirected to), not a name to replace."""
+    current = os.path.abspath(path)
+    for _ in range(40):
+        current = os.path.join(os.path.realpath(os.path.dirname(current)), os.path.basename(current))
+        parts = Path(current).parts
+        if len(parts) == 5 and parts[1] == "proc" and parts[3] == "fd" and parts[2].isdigit() and parts[4].isdigit():
+            return int(parts[2]), int(parts[4])
+        if not os.path.islink(current):
+            return None
+        current = os.path.join(os.path.dirname(current), os.readlink(current))
+    return None
+
+
+def _write_to_own_descriptor(fd: int, text: str) -> None:
+    """Write through one of this process's descriptors (``--json /dev/stdout``): after what Python has buffered for
+    it, and at its own offset, so that the JSON lands where the command's other output goes, in order."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            if stream is not None and stream.fileno() == fd:
+                stream.flush()
+        except (OSError, ValueError):  # a stream replaced by one with no descriptor (a test's capture)
+            pass
+    data = text.encode("utf-8")
+    while data:
+        data = data[os.write(fd, data) :]
+
+
 def write_text_safely(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` as a user means it: a named pipe or a character device (``/dev/stdout``) is written
-    in place and stays what it is; a regular file, or a name for a new one, is replaced atomically (a new file in
-    the same directory, renamed over it: a crash leaves the old text or the new, never a torn one), through any links
-    of the user's own to the file they name. A directory, a block device or a socket is refused (OSError), as is a
-    link another user made."""
+    """Write ``text`` to ``path`` as a user means it: a named pipe, a character device or an open descriptor
+    (``/dev/stdout``, even redirected to a file) is written in place, appended to what is there, and stays what it
+    is; a regular file, or a name for a new one, is replaced atomically (a new file in the same directory, renamed
+    over it: a crash leaves the old text or the new, never a torn one), through any links of the user's own to the
+    file they name. A directory, a block device or a socket is refused (OSError), as is a link another user made."""
     _check_link_owner(path)
     try:
         st: os.stat_result | None = os.stat(path)
@@ -63,8 +93,13 @@ def write_text_safely(path: Path, text: str) -> None:
         st = None
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise IsADirectoryError(errno.EISDIR, "is a directory", str(path))
-    if st is not None and (stat.S_ISFIFO(st.st_mode) or stat.S_ISCHR(st.st_mode)):
-        with open(path, "w", encoding="utf-8") as fh:
+    descriptor = _descriptor(path) if st is not None else None
+    if descriptor is not None and descriptor[0] == os.getpid():
+        _write_to_own_descriptor(descriptor[1], text)
+        return
+    special = st is not None and (stat.S_ISFIFO(st.st_mode) or stat.S_ISCHR(st.st_mode))
+    if special or descriptor is not None:
+        with open(path, "a", encoding="utf-8") as fh:
             fh.write(text)
         return
     if st is not None and not stat.S_ISREG(st.st_mode):
