@@ -100,7 +100,13 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"wall seconds per COMMAND_ACK wait (default {COMMAND_TIMEOUT_S:g}, with --lockstep "
         f"{LOCKSTEP_COMMAND_TIMEOUT_S:g}: a lockstep world holding at its start answers at once)",
     )
-    p.add_argument("--command-retries", type=int, default=10, metavar="N", help="attempts per command (default 10)")
+    p.add_argument(
+        "--command-retries",
+        type=int,
+        metavar="N",
+        help="attempts per command (default: 10, more over a lossy link: enough that a command fails with a chance "
+        "below one in a million)",
+    )
     p.add_argument(
         "--hold-after-s",
         type=float,

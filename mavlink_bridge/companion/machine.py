@@ -277,9 +277,9 @@ class Companion:
         assert link is not None
         role = cfg.role.value
         try:
-            link.arm(cfg.command_timeout_s, cfg.command_retries)
+            link.arm(cfg.command_timeout_s, cfg.attempts)
             _log.info("%s: armed", role)
-            link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.command_retries)
+            link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.attempts)
             _log.info("%s: GUIDED", role)
         except CommandError as exc:
             if self._stop_requested:
@@ -294,7 +294,7 @@ class Companion:
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
             try:
                 link.set_message_interval(
-                    getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.command_retries
+                    getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.attempts
                 )
             except CommandError as exc:
                 _log.warning("%s: %s (keeping the vehicle's default)", role, exc)

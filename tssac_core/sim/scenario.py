@@ -58,6 +58,10 @@ MAX_EPISODE_STEPS = 1_000_000
 """About 28 hours of flight at dt = 0.1 s: longer episodes are a typo, and buffers are sized by it."""
 MAX_SPEED_M_S = 1000.0
 MAX_LATENCY_MS = 60_000.0
+MAX_LINK_LOSS = 0.6
+"""The most of a link's datagrams, each way, that may fail to count (:attr:`LinkModel.frame_loss`): up to it a
+companion's commands go through with their attempts sized to the link (mavlink_bridge.companion.config) and the
+monitor was flown in SITL; beyond it a command round trip succeeds less than once in six tries."""
 MAX_EXPECT_EPISODES = 100_000
 
 
@@ -192,6 +196,13 @@ class LinkModel:
     signing: bool = False
     """Fly with MAVLink 2 message signing (``mavlink_bridge.fly`` makes a fresh key for each run
     unless ``--signing-key`` gives one)."""
+
+    @property
+    def frame_loss(self) -> float:
+        """The share of datagrams, each way, that do not count on a signed link: the lost ones, and the ones held back
+        behind a later one, which signing refuses as replays (their timestamp is older than one already accepted, as
+        MAVLink 2 requires). ``fly`` signs by default, so the scenario's link is judged signed."""
+        return 1.0 - (1.0 - self.packet_loss) * (1.0 - self.reordering)
 
 
 @dataclass(frozen=True)
@@ -434,6 +445,13 @@ def validate(s: Scenario, source: str) -> None:
         check(
             0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}"
         )
+    check(
+        lk.frame_loss <= MAX_LINK_LOSS,
+        "link",
+        f"packet_loss {lk.packet_loss:g} and reordering {lk.reordering:g} leave {1 - lk.frame_loss:.0%} of the frames "
+        f"each way (a frame held behind a later one is a replay to signing): at most {MAX_LINK_LOSS:.0%} may be lost, "
+        "or no command gets through reliably",
+    )
     for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s"):
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
     check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
@@ -486,33 +504,42 @@ def _max_radius_km(s: Scenario) -> float:
 
 
 def _validate_layout(s: Scenario, lay: Layout, source: str) -> None:
+    problem = layout_problem(s, lay, clearance_km=0.0)
+    if problem is not None:
+        raise ScenarioError(source, problem[0], problem[1])
+
+
+def layout_problem(
+    s: Scenario, lay: Layout, clearance_km: float, protected_starts: bool = True
+) -> tuple[str, str] | None:
+    """Why a layout cannot be flown, as (field, problem), or None: the one rule for a scenario file's fixed layout
+    and for every layout drawn from a random one (:func:`sample_layout`), so that a layout the batched world flies
+    is one a SITL world accepts. Every site and start inside the area, radii within bounds, one start per role,
+    then :func:`infeasibility`."""
+
     def inside(p: tuple[float, float]) -> bool:
         return 0 <= p[0] <= s.area_km and 0 <= p[1] <= s.area_km
 
     if not inside(lay.sam_km):
-        raise ScenarioError(source, "layout.sam_km", f"{lay.sam_km} is outside the {s.area_km} km area")
+        return "layout.sam_km", f"{lay.sam_km} is outside the {s.area_km} km area"
     if not inside(lay.target_km):
-        raise ScenarioError(source, "layout.target_km", f"{lay.target_km} is outside the {s.area_km} km area")
+        return "layout.target_km", f"{lay.target_km} is outside the {s.area_km} km area"
     for i, radar in enumerate(lay.radars):
         where = f"layout.radars[{i}]"
         if not 0 < radar.radius_km <= _max_radius_km(s):
-            raise ScenarioError(
-                source, f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)"
-            )
+            return f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)"
         if not inside(radar.position_km):
-            raise ScenarioError(source, f"{where}.position_km", f"{radar.position_km} is outside the area")
+            return f"{where}.position_km", f"{radar.position_km} is outside the area"
     names = [role.value for role in ROLES]
     for key in lay.starts:
         if key not in names:
-            raise ScenarioError(source, f"layout.starts.{key}", f"unknown role (allowed: {', '.join(names)})")
+            return f"layout.starts.{key}", f"unknown role (allowed: {', '.join(names)})"
     for name in names:
         if name not in lay.starts:
-            raise ScenarioError(source, f"layout.starts.{name}", "missing required start")
+            return f"layout.starts.{name}", "missing required start"
         if not inside(lay.starts[name].position_km):
-            raise ScenarioError(source, f"layout.starts.{name}.position_km", "outside the area")
-    problem = infeasibility(s, lay, clearance_km=0.0)
-    if problem is not None:
-        raise ScenarioError(source, problem[0], problem[1])
+            return f"layout.starts.{name}.position_km", "outside the area"
+    return infeasibility(s, lay, clearance_km, protected_starts)
 
 
 def _validate_random(s: Scenario, rnd: RandomLayout, source: str) -> None:
@@ -733,7 +760,6 @@ def sample_layout(
                     break
             starts[role.value] = Start(p, rng.uniform(*rnd.start_heading_deg))
         layout = Layout(sam, target, tuple(radars), starts)
-        inside = all(0 <= c <= s.area_km for c in (*sam, *target))
-        if inside and infeasibility(s, layout, rnd.clearance_km, protected_starts) is None:
+        if layout_problem(s, layout, rnd.clearance_km, protected_starts) is None:
             return layout
     raise RuntimeError(f"no feasible layout in {max_tries} draws: the random ranges leave no way to the zones")
