@@ -60,6 +60,7 @@ import logging
 import select
 import threading
 import time
+from collections.abc import Hashable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -188,7 +189,7 @@ class WorldRunner:
         # One key, one table of accepted signing streams for the three vehicles: a frame accepted by one is
         # a replay at another once its stream has moved on (docs/mavlink.md, Security).
         run_sysids = frozenset(range(1, len(ROLES) + 1))
-        shared_streams: dict[StreamKey, int] = {}
+        shared_streams: dict[StreamKey, tuple[int, Hashable]] = {}
         for i in range(len(ROLES)):
             try:
                 self._endpoints.append(
