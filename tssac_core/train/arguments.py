@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
+from tssac_core.common.errors import MAX_ACTION_REPEAT
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection
@@ -229,6 +230,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
             raise UsageError(f"--roles: unknown role {r!r}")
     if list(roles) != [x.value for x in ROLES if x.value in roles]:
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
+    if a.action_repeat > MAX_ACTION_REPEAT:
+        raise UsageError(f"--action-repeat must be at most {MAX_ACTION_REPEAT}, got {a.action_repeat}")
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:
