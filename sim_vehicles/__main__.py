@@ -31,6 +31,7 @@ from typing import NoReturn
 
 from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
+from tssac_core.common.cli import seed_arg
 from tssac_core.sim.scenario import DynamicsModel, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, ResetError, redirect_stderr
 from tssac_core.wire.signing import SigningKeyError, load_key
@@ -52,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
     p.add_argument(
-        "--seed", type=int, default=0, help="seed of the random layout, GPS noise and link model (default 0)"
+        "--seed", type=seed_arg, default=0, help="seed of the random layout, GPS noise and link model (default 0)"
     )
     p.add_argument(
         "--dynamics",

@@ -58,7 +58,8 @@ class SitlConfig:
     """32-byte MAVLink 2 signing key; None = signing off."""
     unsigned_monitors: bool = False
     """With signing: accept unsigned HEARTBEAT / RADIO_STATUS from passive monitors (at most 4, each with a
-    telemetry budget of 2,000 bytes/s; they can command nothing). Off: nobody without the key gets telemetry."""
+    telemetry budget of 2,000 bytes/s; they can command nothing). Off: only signed, fresh frames make a client
+    (docs/mavlink.md, Security)."""
     truth_log: Path | None = None
     """JSON Lines truth log (states, costs, events, summary); None = no log."""
     layout_out: Path | None = None

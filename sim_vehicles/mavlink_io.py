@@ -26,8 +26,10 @@ Who gets telemetry:
 * **monitors** (:attr:`MavEndpoint.monitors`, only with signing and ``unsigned_monitors``): senders of an
   *unsigned* HEARTBEAT or RADIO_STATUS, the passive displays and radios PX4 lets in. At most
   :data:`MAX_MONITORS`, each with a telemetry budget of :data:`MONITOR_BYTES_PER_S` (what does not fit
-  is not sent to it, counted). Off by default: with signing on and default settings, nobody without the
-  key gets a byte. A wrongly signed frame is never a monitor's: it is refused.
+  is not sent to it, counted). Off by default: with signing on and default settings, a client is made only
+  by a correctly signed, fresh frame from the address its stream's newest frame came from (a replay, to this
+  vehicle or another of the run, makes none: :class:`tssac_core.wire.signing.SignatureVerifier`). A wrongly
+  signed frame is never a monitor's: it is refused.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import errno
 import logging
 import socket
 import time
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -179,7 +181,7 @@ class MavEndpoint:
         signing_key: bytes | None = None,
         unsigned_monitors: bool = False,
         run_sysids: frozenset[int] = frozenset(),
-        shared_streams: dict[StreamKey, int] | None = None,
+        shared_streams: dict[StreamKey, tuple[int, Hashable]] | None = None,
     ) -> None:
         """``run_sysids``: the system ids of every vehicle of the run (this one's included); ``shared_streams``:
         one dict for all of them, the signing streams' newest accepted timestamps (see :class:`SignatureVerifier`)."""
@@ -409,7 +411,7 @@ class MavEndpoint:
         self.rx.unknown_id += scan.unknown_id
         self.rx.bad_crc += scan.bad_crc
         for frame in scan.frames:
-            verdict = self._check_signing(frame)
+            verdict = self._check_signing(frame, addr)
             if verdict is None:
                 continue
             msg = self._decode(frame)
@@ -421,7 +423,7 @@ class MavEndpoint:
         self.rx.messages += len(out.messages)
         return out
 
-    def _check_signing(self, frame: bytes) -> Sender | None:
+    def _check_signing(self, frame: bytes, addr: Address) -> Sender | None:
         """Whether a whole, CRC-checked frame vouches for a client or a monitor; None: refused (counted)."""
         sysid, compid = source(frame)
         if sysid in self.run_sysids and compid == self.compid:
@@ -432,7 +434,7 @@ class MavEndpoint:
         if is_signed(frame) and frame[-SIGNATURE_BLOCK_LEN] in self.foreign_links:
             self.rx.wrong_link += 1
             return None
-        verdict = self.verifier.check(frame)
+        verdict = self.verifier.check(frame, sender=addr)
         if verdict is Verdict.OK:
             return Sender.CLIENT
         if verdict is Verdict.UNSIGNED:

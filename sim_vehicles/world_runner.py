@@ -60,6 +60,7 @@ import logging
 import select
 import threading
 import time
+from collections.abc import Hashable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -77,6 +78,7 @@ from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Vehicle, VehicleSetup
 from sim_vehicles.vehicle_link import VehicleLink
+from tssac_core.common.files import create_exclusively
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
@@ -187,7 +189,7 @@ class WorldRunner:
         # One key, one table of accepted signing streams for the three vehicles: a frame accepted by one is
         # a replay at another once its stream has moved on (docs/mavlink.md, Security).
         run_sysids = frozenset(range(1, len(ROLES) + 1))
-        shared_streams: dict[StreamKey, int] = {}
+        shared_streams: dict[StreamKey, tuple[int, Hashable]] = {}
         for i in range(len(ROLES)):
             try:
                 self._endpoints.append(
@@ -282,7 +284,7 @@ class WorldRunner:
             if config.tlog_dir is not None:
                 path = Path(config.tlog_dir) / f"{role.value}.tlog"
                 try:
-                    tlog = open(path, "wb")
+                    tlog = open(create_exclusively(path), "wb")  # ours, never a file or link planted there
                 except OSError as exc:
                     raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
                 self._tlogs.append(tlog)

@@ -5,6 +5,7 @@ from which a pilot that flies straight at a radar never enters it."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -29,7 +30,15 @@ from tssac_core.assurance.monitor import (
 )
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.observation import ObservationMode
-from tssac_core.sim.scenario import ScenarioError, from_dict, load, sample_layout, to_dict, unprotected_start
+from tssac_core.sim.scenario import (
+    ScenarioError,
+    from_dict,
+    load,
+    sample_layout,
+    start_error,
+    to_dict,
+    unprotected_start,
+)
 
 DT = 0.1
 STEPS = 10
@@ -75,7 +84,7 @@ def test_the_error_bound_covers_a_state_that_far_off():
     rng = np.random.default_rng(370)
     m = 200
     state = states_near_radars(rng, m)
-    leads = lead_steps(CFG, DT, STEPS)
+    leads = lead_steps(CFG, DT)
     err = EstimateError(np.full(m, 45.0), np.full(m, 0.03), np.full(m, 4.5))
     nominal = clearance(state, leads)
     bound = backup_error_m(err, limits(m), DT, leads)
@@ -101,7 +110,7 @@ def test_the_handover_bound_covers_one_lost_setpoint():
     m = 200
     state = states_near_radars(rng, m)
     lim, hz = limits(m), hazards(m)
-    leads = lead_steps(CFG, DT, STEPS)
+    leads = lead_steps(CFG, DT)
     nominal = clearance(state, leads)
     bound = backup_error_m(handover_error(lim, DT, 1), lim, DT, leads)
     for previous in (np.array([1.0, 1.0]), np.array([-1.0, -1.0]), np.array([1.0, -1.0]), np.array([0.0, 1.0])):
@@ -211,8 +220,108 @@ def test_start_excess_is_the_first_decisions_finding():
     m = 300
     state = states_near_radars(rng, m)
     state[:, 0:2] = 50_000.0 + (state[:, 0:2] - 50_000.0) * 0.82  # nearer: some starts fail the check
-    excess = start_excess_m(state, hazards(m), limits(m), DT, STEPS, CFG, CFG.margin_m)
+    excess = start_excess_m(state, hazards(m), limits(m), DT, CFG, CFG.margin_m)
     nan = np.full((m, 2), np.nan)
     d = decide(state, nan, Memory.initial(m), hazards(m), limits(m), DT, STEPS, CFG.margin_m, CFG)
     assert 0.05 < (excess < 0).mean() < 0.95
     np.testing.assert_array_equal(d.memory.protected, excess >= 0)
+
+
+def corridor(strike_path: str) -> dict:
+    """``strike.yaml`` with the strike UAV starting in a corridor: the area's west edge 3 km to its left, a radar
+    whose edge is 2 km to its right, another 7.5 km ahead. No turn from where it starts keeps the margin; a straight
+    lead of 8-16 s first does (the start is admitted), and a lead of 40 s does not."""
+    data = to_dict(load(strike_path))
+    data["layout"]["radars"] += [
+        {"position_km": [10.0, 60.0], "radius_km": 5.0},
+        {"position_km": [3.0, 71.5], "radius_km": 4.0},
+    ]
+    data["layout"]["starts"]["strike"] = {"position_km": [3.0, 60.0], "heading_deg": 90.0}
+    return data
+
+
+@pytest.mark.parametrize("repeat", [1, 3, 7, 10, 37, 400])
+def test_any_decision_interval_is_protected_from_an_admitted_start(strike_path, repeat):
+    """The start check holds for every decision interval (the backups' leads are whole seconds, not multiples of the
+    interval): a straight pilot deciding every ``repeat`` steps is kept out of the corridor's radars, with no step
+    unprotected. Before, a pilot deciding every 400 steps (40 s) had only leads of 0 and 40 s, neither clear, and
+    spent 139 steps inside a radar."""
+
+    class Held(Straight):
+        action_repeat = repeat
+
+    s = dataclasses.replace(from_dict(corridor(strike_path)), episode_steps=1200)
+    alone = fly_missions(s, [Held()] * 3, episodes=1, seed=0)
+    assert alone.cost[0, 2] > 0  # the strike UAV flies into the radar ahead on its own
+    shielded = fly_missions(s, [Held()] * 3, episodes=1, seed=0, shield=CFG)
+    assert shielded.cost.max() == 0.0 and not shielded.out_of_area.any()
+    assert shielded.monitor is not None and shielded.monitor.unprotected_steps.sum() == 0
+
+
+def test_a_backups_turn_follows_its_lead_between_two_decisions():
+    """A backup whose lead ends inside a decision interval turns there: ``action_at`` flies its straight lead, then
+    its turn, at the step the lead ends (the monitor's prediction of the backup is what is flown)."""
+    m = 1
+    state = np.array([[50_000.0, 20_000.0, 250.0, math.pi / 2]])
+    backup = np.array([2 * len(TURNS) + 1])  # lead 8 s, right turn, 37 steps of its lead still to fly
+    memory = Memory(np.array([True]), np.array([True]), backup, np.array([37]), np.zeros(1, int))
+    d = decide(state, np.full((m, 2), np.nan), memory, hazards(m), limits(m), DT, 400, CFG.margin_m, CFG)
+    assert d.engaged[0] and d.straight_steps[0] == 37
+    assert d.action_at(36)[0].tolist() == [0.0, 0.0] and d.action_at(37)[0].tolist() == TURNS[1].tolist()
+    assert d.memory.lead_left[0] == 0
+
+
+def test_the_start_check_uses_the_monitors_margin():
+    """``evaluate --shield --shield-margin-m M``: the starts drawn are admitted with M, not with the default 100 m;
+    a fixed layout's start that M cannot protect is refused in one line."""
+    s = load("scenarios/random.yaml")
+    wide = ShieldConfig(margin_m=4000.0)
+    drawn = [sample_layout(s, np.random.default_rng(seed), shield=wide) for seed in range(40)]
+    assert all(unprotected_start(s, lay, wide) is None for lay in drawn)
+    default = [sample_layout(s, np.random.default_rng(seed)) for seed in range(40)]
+    assert any(unprotected_start(s, lay, wide) is not None for lay in default)  # what the old check let through
+    fixed = from_dict(head_on("scenarios/strike.yaml", "strike", 3.0))
+    with pytest.raises(ScenarioError, match=r"layout.starts.decoy: .*\(with the margin 4000 m\)"):
+        sample_layout(fixed, np.random.default_rng(0), shield=wide)
+
+
+@pytest.mark.parametrize(
+    "link, slips",
+    [
+        ({}, False),
+        ({"latency_ms": 200.0}, False),  # a round trip of 4 ticks exactly
+        ({"packet_loss": 0.1}, True),
+        ({"reordering": 0.1}, True),  # a setpoint held behind the next one
+        ({"latency_ms": 130.0}, True),  # 2.6 ticks: the commands in flight are counted by rounding
+    ],
+)
+def test_the_one_lost_setpoint_bound_is_on_wherever_a_setpoint_may_slip(link, slips):
+    s = load("scenarios/strike.yaml")
+    lossy = dataclasses.replace(s, link=dataclasses.replace(s.link, **link))
+    assert lossy.link.setpoints_may_slip(s.dt_s) is slips
+    speeds = np.full(3, 250.0)
+    error = start_error(lossy, speeds, CFG)
+    assert bool((error.heading_rad > start_error(s, speeds, CFG).heading_rad).all()) is slips
+
+
+def test_the_validator_bounds_what_the_monitor_cannot_protect(strike_path, tmp_path):
+    """GPS dropouts above 90% (a companion that flies its backup from the start, for want of fixes) are refused in one
+    line; so is an actor whose decision interval is not one (0 or negative was taken as 1, a huge one as it came)."""
+    data = to_dict(load(strike_path))
+    data["link"]["gps_dropout_prob"] = 0.95
+    path = tmp_path / "dropout.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ScenarioError, match=r"link.gps_dropout_prob: must be at most 0.9, got 0.95"):
+        load(path)
+    from tssac_core.common.errors import CheckpointError
+    from tssac_core.deploy.numpy_actor import load_actor
+
+    for repeat in (0, -3, 10_001):
+        with np.load("models/tssac/strike.npz") as arrays:
+            actor = dict(arrays)
+        meta = json.loads(str(actor["meta"]))
+        meta["action_repeat"] = repeat
+        actor["meta"] = np.array(json.dumps(meta))
+        np.savez(tmp_path / "strike.npz", **actor)
+        with pytest.raises(CheckpointError, match=f"action_repeat {repeat} is not a decision interval"):
+            load_actor(tmp_path / "strike.npz", "strike")

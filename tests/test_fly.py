@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -244,7 +245,9 @@ def test_fly_speedup_signed_random_layouts(tmp_path: Path) -> None:
     assert not [pid for pid in _pids(results) if _alive(pid)]
 
 
-def _start_guidance_fly(tmp_path: Path, out: Path, episodes: int) -> subprocess.Popen[bytes]:
+def _start_guidance_fly(
+    tmp_path: Path, out: Path, episodes: int, more: tuple[str, ...] = ()
+) -> subprocess.Popen[bytes]:
     """``fly`` of the guidance controller over ``episodes`` short missions, JSON to ``out``, in the background."""
     scenario = _quick_scenario(tmp_path, strike_km=25.0)
     return _start_fly(
@@ -258,6 +261,7 @@ def _start_guidance_fly(tmp_path: Path, out: Path, episodes: int) -> subprocess.
             "--json",
             str(out),
             "--no-progress",
+            *more,
         ]
     )
 
@@ -265,8 +269,10 @@ def _start_guidance_fly(tmp_path: Path, out: Path, episodes: int) -> subprocess.
 @pytest.mark.sitl
 @pytest.mark.timeout(240)
 def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
-    out = tmp_path / "fly.json"
-    proc = _start_guidance_fly(tmp_path, out, episodes=5)
+    """... and the tlogs of the mission it cut are marked so (an INCOMPLETE file beside them), those of the finished
+    missions not."""
+    out, tlogs = tmp_path / "fly.json", tmp_path / "tlogs"
+    proc = _start_guidance_fly(tmp_path, out, episodes=5, more=("--tlog", str(tlogs)))
     try:
         crew = r"mission \d+: (?:started|reset) sitl=(\d+) decoy=(\d+) detect=(\d+) strike=(\d+)"
         log, _ = _read_until(proc, crew.replace("\\d+:", "1:", 1), 150)
@@ -281,6 +287,49 @@ def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_pat
     assert results["interrupted"] is True and results["episodes"] >= 1 and results["episodes_requested"] == 5
     assert all(m["success"] for m in results["missions"])
     assert len(running) == 4 and not [pid for pid in running if _alive(pid)]  # one crew flew both missions
+    cut = results["episodes"]  # the mission in flight
+    marked = sorted(p.parent.name for p in tlogs.glob("mission-*/INCOMPLETE"))
+    assert marked == [f"mission-{cut:03d}"], marked
+    assert "did not end" in (tlogs / f"mission-{cut:03d}" / "INCOMPLETE").read_text()
+    assert all((tlogs / f"mission-{i:03d}" / "decoy.tlog").stat().st_size > 0 for i in range(cut + 1))
+
+
+@pytest.fixture
+def full_disk(tmp_path: Path) -> Iterator[Path]:
+    """A 64 KiB file system (tmpfs; root only): a disk that fills during a mission."""
+    tiny = tmp_path / "tiny"
+    tiny.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(tiny)]).returncode:
+        pytest.skip("needs root to mount a small tmpfs")
+    try:
+        yield tiny
+    finally:
+        subprocess.run(["umount", str(tiny)], check=True)
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(180)
+def test_tlogs_cut_by_a_full_disk_are_an_error_in_the_exit_code_the_json_and_beside_the_tlogs(
+    tmp_path: Path, full_disk: Path
+) -> None:
+    out = tmp_path / "fly.json"
+    argv = ["--scenario", str(_quick_scenario(tmp_path, 25.0)), "--pilot", "guidance", "--tlog", str(full_disk)]
+    proc = subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", *argv, "--json", str(out), "--no-progress"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=_env(),
+        timeout=170,
+    )
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    assert "No space left on device" in results["error"] and results["error"].startswith("mission 0: ")
+    errors = [ln for ln in proc.stderr.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "tlog" in errors[0] and "cut" in errors[0], errors
+    cut = [name for name, s in results["missions"][0]["companions"].items() if s.get("write_error")]
+    assert cut, results["missions"][0]["companions"]
+    assert "No space left on device" in (full_disk / "mission-000" / "INCOMPLETE").read_text()
 
 
 def _error_after_killing(proc: subprocess.Popen[bytes], pid: int, role: str) -> str:

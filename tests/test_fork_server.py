@@ -107,6 +107,40 @@ def test_programs_die_with_their_server_and_a_closed_server_stops_them(tmp_path:
             children.stop_all()
 
 
+SLOW_EXIT = """
+import signal, sys, time
+signal.signal(signal.SIGTERM, lambda *_: (time.sleep(0.5), sys.exit(0)))
+print("ready", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+def test_programs_of_a_killed_server_are_waited_for_not_reported_as_surviving_sigkill(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """``kill -9`` of the server: its programs take a moment to end (the parent-death SIGTERM); stopping them waits
+    for that, with no false "did not stop" or "survived SIGKILL" line."""
+    (tmp_path / "slow_exit.py").write_text(SLOW_EXIT)
+    children = ChildProcesses(grace_s=5.0)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+    forks = ForkServer(children, [], log_path=tmp_path / "server.log", env=env)
+    try:
+        programs = [forks.start(f"slow{i}", "slow_exit", [], log_path=None, stdout_pipe=True) for i in range(3)]
+        for program in programs:
+            assert program.process.stdout is not None and program.process.stdout.readline() == b"ready\n"
+        os.kill(forks.child.pid, signal.SIGKILL)
+        forks.child.process.wait(10)
+        with caplog.at_level("WARNING", logger="mavlink_bridge.processes.children"):
+            children.stop(programs)
+        assert not caplog.records, [r.getMessage() for r in caplog.records]
+        assert [p.poll() for p in programs] == [-signal.SIGTERM] * 3
+        assert not [p.pid for p in programs if running(p.pid)]
+    finally:
+        forks.close()
+        children.stop_all()
+
+
 def test_a_server_that_cannot_import_its_preload_is_one_clear_error(tmp_path: Path) -> None:
     children = ChildProcesses(grace_s=5.0)
     forks = ForkServer(children, ["no_such_module_here"], log_path=tmp_path / "server.log", env=dict(os.environ))

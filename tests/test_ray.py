@@ -242,6 +242,41 @@ def test_map_on_ray_names_the_item_whose_task_raised(local_ray, tasks_by_value):
     assert "item 13 is unlucky" in str(failed.value) and "\n" not in str(failed.value)
 
 
+class _Billion:
+    """A billion items, each made when read; reading beyond the first hundred fails the test (a copy of the items, a
+    list of their results, fill the memory before the first task runs)."""
+
+    def __init__(self) -> None:
+        self.read: list[int] = []
+
+    def __len__(self) -> int:
+        return 10**9
+
+    def __getitem__(self, index: int) -> int:
+        assert index < 100, f"item {index} read before its turn"
+        self.read.append(index)
+        return index
+
+
+def test_map_on_ray_reads_each_item_when_it_submits_it(local_ray, tasks_by_value):
+    """``fly --workers 2 --episodes 100000000`` on Ray: the items are read one by one as they are submitted, and
+    without ``collect`` no result is kept."""
+
+    class Enough(Exception):
+        pass
+
+    items, done = _Billion(), []
+
+    def on_result(index: int, result: int) -> None:
+        done.append(result)
+        if len(done) == 5:
+            raise Enough()
+
+    with pytest.raises(Enough):
+        map_on_ray(abs, items, 2, RAY, on_result=on_result, collect=False)
+    assert len(done) == 5 and set(done) <= set(range(7)) and len(items.read) <= 7
+
+
 def test_map_on_ray_runs_an_item_again_when_its_worker_dies(local_ray, tasks_by_value, tmp_path):
     """Submitted again by the driver: the retry's result arrives though it yields fewer times than the dead
     attempt did (Ray's own retry would drop it as already seen)."""

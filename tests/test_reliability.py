@@ -208,14 +208,45 @@ def test_client_table_is_bounded_and_the_first_client_keeps_its_service() -> Non
 
 
 def test_verifiers_sharing_a_table_refuse_a_frame_another_one_accepted_once_its_stream_moved_on() -> None:
-    shared: dict[tuple[int, int, int], int] = {}
+    shared: dict[tuple[int, int, int], tuple[int, object]] = {}
     decoy, detect = SignatureVerifier(KEY, shared), SignatureVerifier(KEY, shared)
     now = now_10us()
-    frames = [_signed(_heartbeat(), 255, 191, companion_link_id(1), KEY, now + i) for i in range(3)]
-    assert all(decoy.check(f) is Verdict.OK for f in frames)
-    assert detect.check(frames[0]) is Verdict.REPLAYED  # new at detect, but older than what decoy accepted
-    assert detect.check(frames[2]) is Verdict.OK  # the same frame at the same moment: a ground station's fan-out
+    station, spy = ("127.0.0.1", 14550), ("127.0.0.1", 40000)
+    frames = [_signed(_heartbeat(), 255, 190, 7, KEY, now + i) for i in range(3)]
+    assert all(decoy.check(f, sender=station) is Verdict.OK for f in frames)
+    assert detect.check(frames[0], sender=station) is Verdict.REPLAYED  # older than what decoy accepted
+    assert detect.check(frames[2], sender=spy) is Verdict.REPLAYED  # the same frame from another address: at once
+    assert detect.check(frames[2], sender=station) is Verdict.OK  # from its sender: the station's own fan-out
+    later = _signed(_heartbeat(), 255, 190, 7, KEY, now + 10)
+    assert detect.check(later, sender=spy) is Verdict.OK  # newer than anything: the station back on a new port
+    assert decoy.check(later, sender=station) is Verdict.REPLAYED  # ... which now owns its stream
     assert SignatureVerifier(KEY).check(frames[0]) is Verdict.OK  # an unshared table knows nothing of decoy's
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("delay_s", [0.0, 0.2, 3.0])
+def test_a_ground_stations_frame_replayed_to_another_vehicle_gives_a_keyless_spy_nothing(delay_s: float) -> None:
+    """Issue 61, item 4: one signed HEARTBEAT of a ground station (link id 7, bound to no vehicle) captured on its
+    way to the decoy and sent to the detect UAV at once, 0.2 s or 3 s later, the station sending nothing after it:
+    not a byte for the spy (before, it got telemetry: 204 positions in 10 s). The station's own fan-out of one frame
+    to all three vehicles, from its one socket, is served by each."""
+    with sitl(speedup=5.0, signing_key=KEY) as s:
+        station = _Raw(s.ports[0])
+        try:
+            frame = _signed(_heartbeat(), 255, 190, 7, KEY, now_10us())
+            station.send(frame)
+            assert station.received_bytes(0.5) > 0  # the decoy serves the station
+            time.sleep(delay_s)
+            assert _spy_bytes(s.ports[1], [frame]) == 0
+            assert s.endpoint(1).rx.replayed >= 1 and not s.endpoint(1).peers
+            fan_out = _signed(_heartbeat(), 255, 190, 7, KEY, now_10us())
+            for port in s.ports:
+                station.dest = ("127.0.0.1", port)
+                station.send(fan_out)
+            assert wait_until(lambda: all(len(s.endpoint(i).peers) == 1 for i in range(3)), 2.0)
+        finally:
+            station.close()
+        s.stop()
 
 
 def _spy_bytes(port: int, frames: list[bytes], duration_s: float = 2.0) -> int:

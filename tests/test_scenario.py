@@ -63,6 +63,25 @@ def test_random_layouts_are_feasible_and_seeded(random_path):
                 assert math.dist(start.position_km, radar.position_km) > radar.radius_km + s.random.clearance_km
 
 
+def test_every_drawn_layout_is_one_a_sitl_world_accepts(random_path, tmp_path):
+    """One rule for both worlds: a random scenario whose radars may lie beyond the area's edge (all around the SAM,
+    near the east edge) draws only layouts whose fixed-layout file a SITL world loads (fly writes each mission's
+    layout so: a radar centre outside the area was flown by the batched world and refused by the SITL's)."""
+    import dataclasses
+
+    s = load(random_path)
+    assert s.random is not None
+    edge = dataclasses.replace(
+        s, random=dataclasses.replace(s.random, sam_x_km=(70.0, 75.0), radar_bearing_spread_deg=180.0)
+    )
+    rng = np.random.default_rng(61)
+    for k in range(60):
+        lay = sample_layout(edge, rng)
+        assert all(0 <= c <= s.area_km for radar in lay.radars for c in radar.position_km), k
+        dump(dataclasses.replace(edge, layout=lay, random=None), tmp_path / "mission.yaml")
+        assert load(tmp_path / "mission.yaml").layout == lay
+
+
 def test_walled_in_start_is_infeasible(strike_path):
     s = load(strike_path)
     lay = s.layout

@@ -248,8 +248,8 @@ def test_companion_monitor_margin_and_pending(random_path):
     state = (world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0])
     for k in range(30):
         proposed = np.array([1.0 if k % 7 < 3 else -0.5, 0.3])
-        action, _ = lockstep.action(True, 10, proposed, lambda: (state, (0.0, 0.0, 0.0)))
-        lockstep.sent(action)
+        action, _ = lockstep.action(True, 10, proposed, lambda: (state, (0.0, 0.0, 0.0)), 10 * k)
+        lockstep.sent(action, 10 * k)
         d = reference.decide(*state, proposed, 10, cfg.margin_m)
         np.testing.assert_array_equal(action, d.action[0])
         xs, ys, vs, ps = constant_rollout(*(np.array([q]) for q in state), action[None], reference.limits, s.dt_s, 10)
@@ -258,7 +258,7 @@ def test_companion_monitor_margin_and_pending(random_path):
     slow = dataclasses.replace(s, link=dataclasses.replace(s.link, latency_ms=200.0))
     realtime = CompanionShield(snapshot(world), Role.DECOY, slow, cfg, lockstep=False)
     assert realtime.pending_ticks() == 4 and realtime.lossy and realtime.off_lockstep  # 2 x 0.2 s of 0.1 s ticks
-    realtime.sent(np.array([1.0, 1.0]))
+    realtime.sent(np.array([1.0, 1.0]), 0)
     pending = realtime._pending()
     assert pending is not None  # the hold flew before the first command: three holds, then the command sent
     np.testing.assert_array_equal(pending, [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])

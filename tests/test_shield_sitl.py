@@ -122,3 +122,68 @@ def test_a_nan_policy_is_flown_by_the_backup_over_sitl(tmp_path: Path) -> None:
     assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0
     assert shield["backup_time_fraction"] > 0.99  # the policy never flies: the backup does, from the first decision
     assert shield["interventions_per_uav_mission"] >= 1
+
+
+def held_team(out: Path, repeat: int) -> Path:
+    """Actors whose every action is [0, 0] (zero weights: straight on), deciding every ``repeat`` ticks."""
+    out.mkdir()
+    for role in ("decoy", "detect", "strike"):
+        with np.load(REPO / "models" / "tssac" / f"{role}.npz") as arrays:
+            actor = {k: (v if k == "meta" else np.zeros_like(v)) for k, v in arrays.items()}
+        meta = json.loads(str(actor["meta"]))
+        meta["action_repeat"] = repeat
+        actor["meta"] = np.array(json.dumps(meta))
+        np.savez(out / f"{role}.npz", **actor)
+    return out
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+def test_a_team_deciding_every_40_s_is_kept_out_from_an_admitted_start_over_sitl(tmp_path: Path) -> None:
+    """Issue 61, item 1, over MAVLink: a team whose actors decide every 400 ticks, from the corridor start that
+    only a backup with a straight lead of 8-16 s protects (tests/test_assurance.py): cost 0, no step unprotected.
+    Before, the leads were multiples of the decision interval (0 and 40 s: neither clear) and the strike UAV spent
+    about 140 steps inside the radar ahead."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_assurance import corridor
+
+    from tssac_core.sim.scenario import from_dict
+
+    scenario = dataclasses.replace(from_dict(corridor(str(REPO / "scenarios" / "strike.yaml"))), episode_steps=900)
+    path = tmp_path / "corridor.yaml"
+    dump(scenario, path)
+    out = tmp_path / "fly.json"
+    proc = fly(["--scenario", str(path), "--models", str(held_team(tmp_path / "held", 400)), "--json", str(out)])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    mission = results["missions"][0]
+    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
+    assert not any(mission["left_area"].values())
+    assert results["shield"]["unprotected_time_fraction"] == 0.0
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+def test_before_its_first_fix_a_shielded_companion_flies_the_monitor_over_sitl(tmp_path: Path) -> None:
+    """Issue 61, item 2: from the nearest admitted start heading at a radar, with 90% of the fixes lost (the first
+    one may come seconds late), a straight pilot behind the monitor never enters the radar: before its first fix the
+    companion asks the monitor too, from the start it knows flown through what it sent. Before, it sent the hold
+    around the monitor and the strike UAV spent 24-190 steps inside."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_assurance import head_on, nearest_admitted_gap_km
+
+    from tssac_core.sim.scenario import from_dict
+
+    strike = str(REPO / "scenarios" / "strike.yaml")
+    data = head_on(strike, "strike", nearest_admitted_gap_km(strike))
+    data["link"]["gps_dropout_prob"] = 0.9
+    scenario = dataclasses.replace(from_dict(data), episode_steps=600)
+    path = tmp_path / "dropout.yaml"
+    dump(scenario, path)
+    for seed in ("1", "2"):
+        out = tmp_path / f"fly-{seed}.json"
+        proc = fly(["--scenario", str(path), "--pilot", "straight", "--seed", seed, "--json", str(out)])
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        mission = json.loads(out.read_text())["missions"][0]
+        assert all(c == 0 for c in mission["cost"].values()), (seed, mission["cost"])
+        assert not any(mission["left_area"].values())

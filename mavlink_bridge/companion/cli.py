@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, NoReturn
 from mavlink_bridge.companion.config import (
     COMMAND_TIMEOUT_S,
     EXIT_BAD_INPUT,
+    EXIT_WRITE_FAILED,
     LOCKSTEP_COMMAND_TIMEOUT_S,
     LOCKSTEP_GRANT_S,
     PILOT_NAMES,
@@ -26,7 +27,7 @@ from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import UsageError, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
@@ -102,7 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"wall seconds per COMMAND_ACK wait (default {COMMAND_TIMEOUT_S:g}, with --lockstep "
         f"{LOCKSTEP_COMMAND_TIMEOUT_S:g}: a lockstep world holding at its start answers at once)",
     )
-    p.add_argument("--command-retries", type=int, default=10, metavar="N", help="attempts per command (default 10)")
+    p.add_argument(
+        "--command-retries",
+        type=int,
+        metavar="N",
+        help="attempts per command (default: 10, more over a lossy link: enough that a command fails with a chance "
+        "below one in a million)",
+    )
     p.add_argument(
         "--hold-after-s",
         type=float,
@@ -261,6 +268,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except bad_input_errors() as exc:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT
+        except OSError as exc:  # the status file could not be written (a full disk): the run's record is lost
+            print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
+            return EXIT_WRITE_FAILED
     finally:
         if link is not None:
             link.close()

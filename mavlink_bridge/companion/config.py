@@ -12,7 +12,7 @@ from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
-from tssac_core.sim.scenario import Role, Scenario
+from tssac_core.sim.scenario import LinkModel, Role, Scenario
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
@@ -43,13 +43,39 @@ LOCKSTEP_GRANT_S = 1.0
 pilot holds each action for 10 ticks (1 s), and the vehicle's setpoint timeout is at least 1 s."""
 
 
+LOCKSTEP_GRANT_MAX_S = 60.0
+"""The longest ``--lockstep-grant-s``: the longest setpoint timeout a vehicle accepts (GUID_TIMEOUT, 0.1-60 s). The
+grant is counted in whole milliseconds of the vehicle's clock, which an unbounded one overflows."""
+
+
 def check_lockstep_grant_s(value: float) -> None:
-    """``--lockstep-grant-s`` is 0 (answer every tick) or a finite number of seconds; else one clear line."""
-    if not (math.isfinite(value) and value >= 0):
-        raise UsageError(f"--lockstep-grant-s must be 0 or more seconds, got {value:g}")
+    """``--lockstep-grant-s`` is 0 (answer every tick) up to :data:`LOCKSTEP_GRANT_MAX_S`; else one clear line."""
+    if not (math.isfinite(value) and 0 <= value <= LOCKSTEP_GRANT_MAX_S):
+        raise UsageError(f"--lockstep-grant-s must be 0 to {LOCKSTEP_GRANT_MAX_S:g} seconds, got {value:g}")
+
+
+COMMAND_ATTEMPTS = 10
+"""The fewest attempts per command. A 10% lossy link (degraded.yaml, each way) loses 19% of command round trips:
+3 attempts failed 0.7% of commands, about one three-UAV mission in 25; 10 fail 1e-7."""
+COMMAND_FAILURE = 1e-6
+"""The chance, at most, that a command fails for want of attempts on the scenario's link."""
+
+
+def command_attempts(link: LinkModel) -> int:
+    """Attempts per command so that all of them fail with a chance below :data:`COMMAND_FAILURE`: a round trip (the
+    command there, its ACK back) succeeds with (1 - frame_loss)^2 (:attr:`LinkModel.frame_loss`); at least
+    :data:`COMMAND_ATTEMPTS`. At the validator's limit of 60% each way: 80 attempts (20 s in lockstep)."""
+    round_trip = (1.0 - link.frame_loss) ** 2
+    if round_trip >= 1.0:
+        return COMMAND_ATTEMPTS
+    if round_trip <= 0.0:
+        raise UsageError("the scenario's link delivers no frame: no command can get through")
+    return max(COMMAND_ATTEMPTS, math.ceil(math.log(COMMAND_FAILURE) / math.log(1.0 - round_trip)))
 
 
 EXIT_OK = 0
+EXIT_WRITE_FAILED = 1
+"""The flight ended, but what it was to write was not all written (a tlog cut by a full disk)."""
 EXIT_BAD_INPUT = 2
 EXIT_VEHICLE = 3
 
@@ -80,9 +106,9 @@ class CompanionConfig:
     """Wall seconds to wait for the first heartbeat."""
     command_timeout_s: float = COMMAND_TIMEOUT_S
     """Wall seconds to wait for each COMMAND_ACK."""
-    command_retries: int = 10
-    """Attempts per command. A 10% lossy link (degraded.yaml, each way) loses 19% of command round
-    trips: 3 attempts failed 0.7% of commands, about one three-UAV mission in 25; 10 fail 1e-7."""
+    command_retries: int | None = None
+    """Attempts per command; None: :func:`command_attempts` for the scenario's link (10 on a link that loses at most
+    10% each way, up to 80 at the 60% the validator allows)."""
     hold_after_s: float = 0.5
     """Vehicle seconds without a position fix after which the hold setpoint is flown."""
     silence_hold_s: float = 2.0
@@ -110,6 +136,11 @@ class CompanionConfig:
     """How GUIDED is commanded: body rates, or ArduPlane's GUIDED_CHANGE_HEADING / _SPEED
     (:mod:`mavlink_bridge.link.guided_commands`)."""
 
+    @property
+    def attempts(self) -> int:
+        """Attempts per command: ``command_retries``, else sized to the scenario's link (:func:`command_attempts`)."""
+        return self.command_retries if self.command_retries is not None else command_attempts(self.scenario.link)
+
     def __post_init__(self) -> None:
         if self.scenario.layout is None:
             raise UsageError(
@@ -133,7 +164,7 @@ class CompanionConfig:
         if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise UsageError(f"--duration-s must be positive, got {self.duration_s}")
         check_lockstep_grant_s(self.lockstep_grant_s)
-        if self.command_retries < 1:
+        if self.command_retries is not None and self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
         if self.pilot and self.pilot not in PILOT_NAMES:
             raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")

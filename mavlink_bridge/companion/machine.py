@@ -9,6 +9,7 @@ import enum
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -222,11 +223,10 @@ class Companion:
         except _Stop as stop:
             self._status = (stop.args[0], stop.args[1])
         finally:
+            link.close_tlog()  # first: its last bytes are written now, and may be lost now
             result = self._result()
             if own_link:
                 link.close()
-            else:
-                link.close_tlog()
             if cfg.status_json is not None:
                 write_json(cfg.status_json, result.as_dict())
         return result
@@ -280,9 +280,9 @@ class Companion:
         assert link is not None
         role = cfg.role.value
         try:
-            link.arm(cfg.command_timeout_s, cfg.command_retries)
+            link.arm(cfg.command_timeout_s, cfg.attempts)
             _log.info("%s: armed", role)
-            link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.command_retries)
+            link.set_mode(GUIDED_MODE, cfg.command_timeout_s, cfg.attempts)
             _log.info("%s: GUIDED", role)
         except CommandError as exc:
             if self._stop_requested:
@@ -297,7 +297,7 @@ class Companion:
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
             try:
                 link.set_message_interval(
-                    getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.command_retries
+                    getattr(M, f"MAVLINK_MSG_ID_{name}"), interval_s, cfg.command_timeout_s, cfg.attempts
                 )
             except CommandError as exc:
                 _log.warning("%s: %s (keeping the vehicle's default)", role, exc)
@@ -350,7 +350,7 @@ class Companion:
         link = self._link
         assert link is not None
         try:
-            link.set_mode(LOITER_MODE, self.cfg.command_timeout_s, self.cfg.command_retries)
+            link.set_mode(LOITER_MODE, self.cfg.command_timeout_s, self.cfg.attempts)
             left = "left in LOITER"
         except CommandError as exc:
             left = f"LOITER refused too ({exc})"
@@ -587,7 +587,7 @@ class Companion:
             if trigger_rx_s is not None:
                 self.latencies_s.append(time.monotonic() - trigger_rx_s)
         if self.shield is not None:
-            self.shield.sent(setpoint_to_action(setpoint, self.spec))
+            self.shield.sent(setpoint_to_action(setpoint, self.spec), t_ms // self.dt_ms, not self.filter.initialised)
         if self._duration_over(t_ms):
             raise _Stop("duration", f"flew {self.cfg.duration_s:g} s of vehicle time")
 
@@ -614,6 +614,9 @@ class Companion:
         next_step = self.pilot.next_decision_step(step)
         if self.shield is not None:
             next_step = min(next_step, max(step + 1, self._decisions.next_step))
+            turn = self.shield.next_change_step  # a backup's turn after its lead, before the next decision
+            if turn is not None:
+                next_step = min(next_step, max(step + 1, turn))
         last_ms = granted_through_ms(t_ms, self.dt_ms, next_step * self.dt_ms, self._max_grant_ms)
         if last_ms is None or (self._fixes_every_tick and self.cfg.duration_s is None):
             return last_ms
@@ -643,10 +646,14 @@ class Companion:
         Without the monitor, what is amiss is flown as the hold setpoint. With it, every tick after the first fix
         goes through the monitor: a non-finite action, or no action at all in a telemetry gap, is a proposal that
         never passes, so the remembered backup flies (as in the batched world)."""
-        if not self.filter.initialised:
-            return HOLD, "no position fix yet"
-        self.filter.predict_to(t_ms / 1000.0)
         step = int(t_ms // self.dt_ms)
+        if not self.filter.initialised:
+            if self.shield is None:
+                return HOLD, "no position fix yet"
+            # Nothing to propose from, but the start is known: the monitor flies its backup from where the vehicle
+            # is (the start flown through what was sent), as the start check admitted it to.
+            return self._shielded(np.full(2, np.nan), step, lambda: self._start_reckoned(step)), "no position fix yet"
+        self.filter.predict_to(t_ms / 1000.0)
         gap_s = self._gap_s(t_ms)
         if gap_s > self.cfg.hold_after_s:
             self._gap_seen = True
@@ -684,7 +691,14 @@ class Companion:
             step,
         )
 
-    def _shielded(self, proposed: np.ndarray, step: int) -> Setpoint:
+    def _start_reckoned(self, step: int) -> Estimate:
+        """Before the first fix: the scenario's start of this vehicle flown to tick ``step`` (its sigmas zero)."""
+        assert self.shield is not None
+        s, j = self.layout_state, self.role_index
+        start = (float(s.x_m[0, j]), float(s.y_m[0, j]), float(s.v_m_s[0, j]), float(s.phi_rad[0, j]))
+        return self.shield.dead_reckoned(start, step)
+
+    def _shielded(self, proposed: np.ndarray, step: int, estimate: Callable[[], Estimate] | None = None) -> Setpoint:
         """The monitor's choice at each decision tick (held between them); a STATUSTEXT at each hand-over.
 
         Decision ticks are the pilot's grid, ticks 0, k, 2k, ... of the vehicle's clock (k = the pilot's
@@ -692,7 +706,9 @@ class Companion:
         the pilot was asked this tick."""
         assert self.shield is not None
         decision = self._decisions.due(step)
-        action, text = self.shield.action(decision, self.pilot.repeat, proposed, self._monitor_estimate)
+        action, text = self.shield.action(
+            decision, self.pilot.repeat, proposed, estimate or self._monitor_estimate, step
+        )
         if text is not None:
             _log.info("%s at %.1f s", text, (self.last_control_ms or 0) / 1000.0)
             self._say(M.MAV_SEVERITY_NOTICE, text)
@@ -769,4 +785,5 @@ class Companion:
             flags=dict(self.flags.values),
             latency_samples_ms=[round(float(x), 4) for x in lat],
             shield=None if self.shield is None else asdict(self.shield.counters),
+            write_error=None if link is None else link.tlog_error,
         )

@@ -35,6 +35,7 @@ from tssac_core.assurance.monitor import (
     companion_error,
     companion_margin_m,
     largest_backup_error_m,
+    step_actions,
 )
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world_monitor import VehicleMonitor
@@ -80,20 +81,28 @@ class CompanionShield:
         self.dt_s = scenario.dt_s
         self.latency_s = scenario.link.latency_ms / 1000.0
         self.off_lockstep = not lockstep
-        self.lossy = not lockstep or scenario.link.packet_loss > 0
+        self.lossy = not lockstep or scenario.link.setpoints_may_slip(scenario.dt_s)
         self.speed_max_m_s = scenario.vehicle(role).speed_max_m_s
         self.counters = ShieldCounters()
         self.engaged = False
         self._unprotected = False
         self._held = np.zeros(2)
+        self._turn = np.zeros(2)
+        self._turn_step: int | None = None
+        """The tick at which a flying backup's turn follows its straight lead, before the next decision (None: none)."""
         self._sent: deque[tuple[float, float]] = deque(maxlen=2000)
+        self._before_fix: list[tuple[int, tuple[float, float]]] = []
+        """(tick, command) of every command sent before the first position fix: what the vehicle flies from its start,
+        for :meth:`dead_reckoned`."""
 
     def reset(self) -> None:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""
         self.monitor.reset()
         self.engaged = False
         self._unprotected = False
+        self._turn_step = None
         self._sent.clear()
+        self._before_fix.clear()
         self.counters.resets += 1
 
     def pending_ticks(self) -> int:
@@ -115,19 +124,28 @@ class CompanionShield:
         sent = list(self._sent)[-n:]
         return np.array([np.zeros(2)] * (n - len(sent)) + sent)
 
+    @property
+    def next_change_step(self) -> int | None:
+        """The tick before the next decision at which the command changes (a backup's turn after its lead), if any."""
+        return self._turn_step
+
     def action(
         self,
         decision: bool,
         steps: int,
         proposed: np.ndarray,
         estimate: Callable[[], Estimate],
+        step: int,
     ) -> tuple[np.ndarray, str | None]:
-        """The action to send this tick and a STATUSTEXT to say (a hand-over), or None.
+        """The action to send at tick ``step`` and a STATUSTEXT to say (a hand-over), or None.
 
-        ``decision``: a decision tick (the choice holds for ``steps`` ticks); otherwise the monitor's last choice
-        is held. ``proposed``: the pilot's action, non-finite when there is none (it never passes).
-        ``estimate()``: the filter's state and standard deviations (:data:`Estimate`), asked at decisions only."""
+        ``decision``: a decision tick (the choice holds for ``steps`` ticks, but for a backup whose straight lead ends
+        in between: its turn from that tick on); otherwise the monitor's last choice is held. ``proposed``: the
+        pilot's action, non-finite when there is none (it never passes). ``estimate()``: the filter's state and
+        standard deviations (:data:`Estimate`), asked at decisions only."""
         text = None
+        if not decision and self._turn_step is not None and step >= self._turn_step:
+            self._held, self._turn_step = self._turn.copy(), None
         if decision:
             state, sigmas = estimate()
             margin = companion_margin_m(self.cfg, self.speed_max_m_s, self.off_lockstep)
@@ -139,6 +157,9 @@ class CompanionShield:
                 *state, proposed=proposed, steps=steps, margin_m=margin, pending=self._pending(), error=error
             )
             self._held = d.action[0].copy()
+            self._turn = d.turn[0].copy()
+            straight = int(d.straight_steps[0])
+            self._turn_step = step + straight if 0 < straight < steps else None
             self.counters.decisions += 1
             need = margin + largest_backup_error_m(error, lim, self.dt_s, steps, self.cfg)
             self.counters.max_margin_m = max(self.counters.max_margin_m, need)
@@ -157,7 +178,26 @@ class CompanionShield:
                 self.counters.unprotected_steps += 1
         return self._held, text
 
-    def sent(self, action: tuple[float, float] | np.ndarray) -> None:
-        """Record the command [omega, u] sent this tick, whatever sent it (the queue that ``pending`` is taken
-        from)."""
-        self._sent.append((float(action[0]), float(action[1])))
+    def sent(self, action: tuple[float, float] | np.ndarray, step: int, before_fix: bool = False) -> None:
+        """Record the command [omega, u] sent at tick ``step``, whatever sent it (the queue that ``pending`` is taken
+        from; before the first fix, also what :meth:`dead_reckoned` flies)."""
+        command = (float(action[0]), float(action[1]))
+        self._sent.append(command)
+        if before_fix:
+            self._before_fix.append((step, command))
+
+    def dead_reckoned(self, start: tuple[float, float, float, float], step: int) -> Estimate:
+        """The vehicle's state at tick ``step`` before any position fix: its start (the scenario's: known exactly)
+        flown through what it flew since tick 0: the hold until the first command reached it, then each command
+        from its tick plus the link's round trip (the world's own integration, eq. 5-6). Its sigmas are zero; a
+        setpoint lost or late is the error bound's hand-over term, as after a fix."""
+        flown = np.zeros((max(step, 0), 2))
+        delay = self.pending_ticks()
+        for tick, command in self._before_fix:
+            if tick + delay < len(flown):
+                flown[tick + delay :] = command
+        lim = self.monitor.limits
+        x, y, v, phi = (np.array([value]) for value in start)
+        if len(flown):
+            x, y, v, phi = step_actions(x, y, v, phi, flown[None], lim, self.dt_s)
+        return (float(x[0]), float(y[0]), float(v[0]), float(phi[0])), (0.0, 0.0, 0.0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from mavlink_bridge.companion.config import EXIT_OK, EXIT_VEHICLE
+from mavlink_bridge.companion.config import EXIT_OK, EXIT_VEHICLE, EXIT_WRITE_FAILED
 
 
 @dataclass
@@ -72,12 +72,18 @@ class CompanionResult:
     """Every control step's latency (for benchmarks that pool several companions)."""
     shield: dict[str, float] | None = None
     """The runtime-assurance monitor's counts (``ShieldCounters`` of the companion's shield), when it flew."""
+    write_error: str | None = None
+    """What the run failed to write (its tlog cut by a full disk); None: nothing was lost. Not in the dict when None."""
 
     @property
     def exit_code(self) -> int:
-        return EXIT_VEHICLE if self.status in ("lost", "no_vehicle", "refused") else EXIT_OK
+        if self.status in ("lost", "no_vehicle", "refused"):
+            return EXIT_VEHICLE
+        return EXIT_WRITE_FAILED if self.write_error is not None else EXIT_OK
 
     def as_dict(self) -> dict[str, object]:
         d = asdict(self)
+        if self.write_error is None:
+            del d["write_error"]
         d["exit_code"] = self.exit_code
         return d

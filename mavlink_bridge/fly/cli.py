@@ -24,6 +24,7 @@ from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes.children import ChildProcesses
 from tssac_core.common.cli import BAD_INPUT, EXIT_BAD_INPUT, EXIT_INTERRUPTED, bad_input_line, write_json
+from tssac_core.common.files import private_directory
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import TaskFailed
 
@@ -32,6 +33,11 @@ EXIT_FAILED = 1
 
 class MissionTimedOut(Exception):
     """A mission did not end in --mission-timeout-s: no further mission is flown; ``str()`` is one line."""
+
+
+class WriteFailed(Exception):
+    """A mission's record was not all written (a tlog cut by a full disk): no further mission is flown, whose records
+    would be lost too; ``str()`` is one line."""
 
 
 class _Terminated(KeyboardInterrupt):
@@ -61,9 +67,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     tmp: tempfile.TemporaryDirectory[str] | None = None
     started = time.monotonic()
     try:
+        if cfg.tlog_dir is not None:
+            private_directory(cfg.tlog_dir, "--tlog")
         if cfg.logs_dir is not None:
-            work = cfg.logs_dir
-            work.mkdir(parents=True, exist_ok=True)
+            work = private_directory(cfg.logs_dir, "--logs")
         else:
             tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
             work = Path(tmp.name)
@@ -81,6 +88,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
                 if row.get("end") == "timeout":
                     raise MissionTimedOut(f"mission {row['index']} did not end within {cfg.mission_timeout_s:g} s")
+                lost = [f"{name}: {s['write_error']}" for name, s in row["companions"].items() if s.get("write_error")]
+                if lost:
+                    raise WriteFailed(f"mission {row['index']}: {'; '.join(lost)}")
 
             if cfg.on_ray:
                 fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
@@ -95,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         record(row)
                 finally:
                     runner.close()
-    except (MissionTimedOut, TaskFailed) as exc:
+    except (MissionTimedOut, WriteFailed, TaskFailed) as exc:
         error = str(exc)
         code = EXIT_FAILED
     except KeyboardInterrupt:
@@ -110,6 +120,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BAD_INPUT as exc:
         error = bad_input_line(exc)
         code = EXIT_BAD_INPUT
+    except MemoryError:
+        error = "out of memory"
+        code = EXIT_FAILED
+    except Exception as exc:  # a defect: the JSON must not say that nothing went wrong, and the traceback follows
+        error = f"internal error: {type(exc).__name__}: {exc}"
+        code = EXIT_FAILED
+        raise
     finally:
         # No second signal may cut the clean-up short: the children are in their own sessions.
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -123,7 +140,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary["error"] = error
         summary["wall_time_s"] = round(time.monotonic() - started, 3)
         if cfg.json_path is not None and not (code == EXIT_BAD_INPUT and not rows):
-            write_json(cfg.json_path, summary)
+            try:
+                write_json(cfg.json_path, summary)
+            except OSError as exc:  # the campaign's record is lost: said here, and not an exit 0
+                print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
+                code = code or EXIT_FAILED
+                cfg = dataclasses.replace(cfg, json_path=None)
         if tmp is not None:
             tmp.cleanup()
     print_report(summary, cfg)

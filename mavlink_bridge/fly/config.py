@@ -16,8 +16,9 @@ from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_gra
 from mavlink_bridge.link.connection import parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
 from tssac_core.common.errors import CheckpointError
+from tssac_core.common.files import create_exclusively
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
@@ -157,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
     p.add_argument(
         "--seed",
-        type=int,
+        type=seed_arg,
         default=0,
         metavar="S",
         help="mission i uses seed S + i for its random layout and sensor noise (default 0)",
@@ -285,6 +286,10 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     a = build_parser().parse_args(argv)
     if a.episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.seed + max(a.episodes - 1, a.mission or 0) > SEED_MAX:
+        raise UsageError(
+            f"--seed plus the last mission's index must stay within {SEED_MAX} (mission i flies seed S + i)"
+        )
     if a.workers <= 0:
         raise UsageError(f"--workers must be positive, got {a.workers}")
     if a.mission is not None and a.mission < 0:
@@ -416,10 +421,10 @@ def lean_telemetry(lean: bool, full: bool, lockstep: bool, own_world: bool) -> b
 
 
 def make_signing_key(directory: Path) -> Path:
-    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only."""
+    """A fresh random 32-byte MAVLink 2 signing key, readable by its owner only: a new file of ours, whatever was at
+    its name (a key planted readable by all, or a link to a file of someone else's choice) removed, never used."""
     path = directory / "signing.key"
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as fh:
+    with os.fdopen(create_exclusively(path, 0o600), "wb") as fh:
         fh.write(os.urandom(32))
     return path
 

@@ -26,6 +26,7 @@ from mavlink_bridge.link.guided_commands import SetpointDialect
 from mavlink_bridge.processes.children import Child, ChildProcesses
 from mavlink_bridge.processes.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
 from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
+from tssac_core.common.files import create_exclusively, private_directory
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
 from tssac_core.wire.mission_reset import NextMission
@@ -40,6 +41,11 @@ LINGER_S = 0.2
 link with up to this much latency."""
 CREW_DEATH_WAIT_S = 2.0
 """How long fly waits for the exit status of a crew process whose standard input broke."""
+TLOGS_INCOMPLETE = "INCOMPLETE"
+"""The file beside a mission's tlogs (``--tlog DIR/mission-NNN/``) while they are not the whole mission: written when
+the mission starts, removed when it has ended with every tlog whole. Left there (by an interruption, a failure, a
+kill), it says why in one line; a mission whose tlog could not all be written says which."""
+
 CREW_IMPORTS = ("sim_vehicles.__main__", "mavlink_bridge.companion.cli", "mavlink_bridge.companion.machine")
 """What a crew's fork server imports once for the world and the three companions it forks (their start-up is
 mostly imports: filterpy with scipy.stats, pymavlink, numpy)."""
@@ -107,6 +113,24 @@ def child_failure(what: str, child: Child, rc: int, when: str = "") -> str:
     return f"{what} (pid {child.pid}) {how}{said}"
 
 
+def _write_mark(path: Path, text: str) -> None:
+    with os.fdopen(create_exclusively(path), "w", encoding="utf-8") as fh:
+        fh.write(text)
+
+
+def _settle_tlog_mark(marker: Path, row: dict[str, Any]) -> None:
+    """A mission that ended: its tlogs are whole (the mark goes) unless one was cut or the mission timed out."""
+    lost = [f"{name}: {s['write_error']}" for name, s in row["companions"].items() if s.get("write_error")]
+    if lost:
+        try:  # the mark is ours, in a directory of ours: rewritten in place, its page reused on a full disk
+            with open(marker, "w", encoding="utf-8") as fh:
+                fh.write(f"mission {row['index']} (seed {row['seed']}): {'; '.join(lost)}\n")
+        except OSError as exc:  # the mark made at the start stays; the results JSON names the loss
+            _log.error("%s: %s", marker, exc.strerror or exc)
+    elif row.get("end") != "timeout":
+        marker.unlink(missing_ok=True)
+
+
 class MissionRunner:
     """Starts and watches the processes of each mission (see the module docstring)."""
 
@@ -150,8 +174,8 @@ class MissionRunner:
     def fly(self, index: int) -> dict[str, Any]:
         cfg = self.cfg
         seed = cfg.seed + index
-        mdir = self.work_dir / f"mission-{index:03d}"
-        mdir.mkdir(parents=True, exist_ok=True)
+        mdir = private_directory(self.work_dir / f"mission-{index:03d}", "--logs")
+        marker = self._mark_tlogs(index, seed)
         layout = mission_layout(cfg.scenario, cfg.seed, index)
         scenario_file = mdir / "scenario.yaml"
         dump(dataclasses.replace(cfg.scenario, layout=layout, random=None), scenario_file)
@@ -213,7 +237,18 @@ class MissionRunner:
         if timed_out:
             row["end"] = "timeout"
             row["success"] = False
+        if marker is not None:
+            _settle_tlog_mark(marker, row)
         return row
+
+    def _mark_tlogs(self, index: int, seed: int) -> Path | None:
+        """Mark mission ``index``'s tlogs incomplete until it ends (:data:`TLOGS_INCOMPLETE`); None without tlogs."""
+        if self.cfg.tlog_dir is None:
+            return None
+        folder = private_directory(self.cfg.tlog_dir / f"mission-{index:03d}", "--tlog")
+        marker = folder / TLOGS_INCOMPLETE
+        _write_mark(marker, f"mission {index} (seed {seed}) did not end: its tlogs stop where it was stopped\n")
+        return marker
 
     def _start_world(
         self, mdir: Path, scenario_file: Path, truth: Path, seed: int, serve: bool = False
@@ -522,4 +557,6 @@ class MissionRunner:
                 "shield": data.get("shield"),
             }
         )
+        if data.get("write_error") is not None:
+            out["write_error"] = str(data["write_error"])
         return out

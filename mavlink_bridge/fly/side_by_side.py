@@ -34,6 +34,21 @@ WAIT_S = 0.5
 """How long the main thread waits for a row at a time (a signal interrupts the wait at once anyway)."""
 
 
+class _Indices:
+    """The mission indices still to fly, handed out one at a time to the crews' threads: a cursor over the range, so
+    that the memory does not grow with ``--episodes`` (a queue of every index ran out of memory at 10^8 missions
+    before the first one flew)."""
+
+    def __init__(self, indices: range) -> None:
+        self._indices = iter(indices)
+        self._lock = threading.Lock()
+
+    def take(self) -> int | None:
+        """The next index, or None when every one has been handed out."""
+        with self._lock:
+            return next(self._indices, None)
+
+
 @dataclass
 class _Done:
     """A crew's thread has ended: its missions are flown, or it stopped (``error``: why, raised in the main thread)."""
@@ -53,9 +68,7 @@ class _Crew:
 def fly_side_by_side(cfg: FlyConfig, workers: int, work_dir: Path, on_row: Callable[[dict[str, Any]], None]) -> None:
     """Fly the missions of ``cfg.indices()`` with ``workers`` crews at once; ``on_row`` gets each row in the main
     thread as its mission ends (so an interruption keeps the finished ones). Raises what stopped a crew."""
-    todo: queue.SimpleQueue[int] = queue.SimpleQueue()
-    for index in cfg.indices():
-        todo.put(index)
+    todo = _Indices(cfg.indices())
     results: queue.SimpleQueue[dict[str, Any] | _Done] = queue.SimpleQueue()
     stop = threading.Event()
     # With fresh processes per mission the runner's CPU figure is the reaped children's: every crew's at once here.
@@ -90,15 +103,14 @@ def fly_side_by_side(cfg: FlyConfig, workers: int, work_dir: Path, on_row: Calla
 
 
 def _fly_crew(
-    crew: _Crew, todo: queue.SimpleQueue[int], results: queue.SimpleQueue[dict[str, Any] | _Done], stop: threading.Event
+    crew: _Crew, todo: _Indices, results: queue.SimpleQueue[dict[str, Any] | _Done], stop: threading.Event
 ) -> None:
     """One crew's thread: the next mission while there is one and nothing has stopped the run."""
     error: BaseException | None = None
     try:
         while not stop.is_set():
-            try:
-                index = todo.get_nowait()
-            except queue.Empty:
+            index = todo.take()
+            if index is None:
                 break
             row = crew.runner.fly(index)
             crew.children.forget_finished()

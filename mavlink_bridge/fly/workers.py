@@ -53,6 +53,21 @@ class _WorkerRun:
             self.tmp.cleanup()
 
 
+class _MissionTasks:
+    """The run's tasks, each made when it is submitted: their memory does not grow with ``--episodes``."""
+
+    def __init__(self, cfg: FlyConfig, signing_key: bytes | None) -> None:
+        self.cfg = cfg
+        self.signing_key = signing_key
+        self.indices = cfg.indices()
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, position: int) -> MissionTask:
+        return MissionTask(self.cfg, self.indices[position], self.signing_key)
+
+
 _kept: _WorkerRun | None = None
 """This worker process's run (one at a time: a task of another fly run replaces it)."""
 
@@ -100,5 +115,6 @@ def fly_on_workers(
     """Fly the missions of ``cfg.indices()``, ``workers`` at once; ``on_row`` gets each row as its mission ends (so an
     interruption keeps the finished ones). Raises TaskFailed for a mission whose processes failed."""
     key = made_key.read_bytes() if made_key is not None else None
-    tasks = [MissionTask(cfg, i, key) for i in cfg.indices()]
-    map_on_ray(fly_mission, tasks, workers, target, on_result=lambda index, row: on_row(row))
+    map_on_ray(
+        fly_mission, _MissionTasks(cfg, key), workers, target, on_result=lambda i, row: on_row(row), collect=False
+    )

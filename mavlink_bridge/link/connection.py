@@ -52,6 +52,7 @@ from typing import BinaryIO, TypeAlias
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from mavlink_bridge.link.guided_commands import GuidedSlew
+from tssac_core.common.files import create_exclusively
 from tssac_core.wire import units
 from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames
 from tssac_core.wire.lockstep import GRANT_NAME
@@ -196,7 +197,10 @@ class MavLink:
         """When the datagram of the message :meth:`recv` returned last was read (time.monotonic())."""
         self._peer: tuple[str, int] | None = None
         self._tlog: BinaryIO | None = None
+        self._tlog_path: Path | None = None
         self._tlog_flushed = time.monotonic()
+        self.tlog_error: str | None = None
+        """Why the tlog is incomplete (a write or its close failed: a full disk), None while every byte went in."""
         self._closed = False
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -232,11 +236,10 @@ class MavLink:
             self.setup_signing(signing_key, signing_link_id)
         if tlog_path is not None:
             try:
-                Path(tlog_path).parent.mkdir(parents=True, exist_ok=True)
-                self._tlog = open(tlog_path, "wb")
-            except OSError as exc:
+                self._open_tlog(Path(tlog_path))
+            except LinkError:
                 self._sock.close()
-                raise LinkError(f"cannot write tlog {tlog_path}: {exc.strerror or exc}") from None
+                raise
 
     # ----------------------------------------------------------------------------- set-up
 
@@ -277,12 +280,18 @@ class MavLink:
         self.target_system, self.target_component = self._targets
         self.counters = LinkCounters()
         self._close_tlog()
+        self.tlog_error = None
         if tlog_path is not None:
-            try:
-                Path(tlog_path).parent.mkdir(parents=True, exist_ok=True)
-                self._tlog = open(tlog_path, "wb")
-            except OSError as exc:
-                raise LinkError(f"cannot write tlog {tlog_path}: {exc.strerror or exc}") from None
+            self._open_tlog(Path(tlog_path))
+
+    def _open_tlog(self, path: Path) -> None:
+        """Start a new tlog at ``path``, made by us (never a file or link planted under its name)."""
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._tlog = open(create_exclusively(path), "wb")
+        except OSError as exc:
+            raise LinkError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
+        self._tlog_path = path
 
     def close_tlog(self) -> None:
         """Close the tlog, keeping the socket (the end of a mission of a persistent companion)."""
@@ -654,16 +663,22 @@ class MavLink:
                 self._tlog.flush()
                 self._tlog_flushed = now
         except OSError as exc:
-            _log.error("tlog write failed, tlog closed: %s", exc)
+            self._tlog_failed(exc)
             self._close_tlog()
 
     def _close_tlog(self) -> None:
         if self._tlog is not None:
+            tlog, self._tlog = self._tlog, None
             try:
-                self._tlog.close()
+                tlog.close()  # writes what is buffered: it fails too on a full disk
             except OSError as exc:
-                _log.error("closing the tlog failed: %s", exc)
-            self._tlog = None
+                self._tlog_failed(exc)
+
+    def _tlog_failed(self, exc: OSError) -> None:
+        """The tlog lost data: logged, and kept in :attr:`tlog_error` for the run's status (the flight goes on)."""
+        if self.tlog_error is None:
+            self.tlog_error = f"tlog {self._tlog_path} cut: {exc.strerror or exc}"
+            _log.error("%s; not written any more", self.tlog_error)
 
     @staticmethod
     def _warn_rate_limited(what: str, count: int, exc: OSError) -> None:

@@ -207,12 +207,20 @@ class ForkServer:
                 self._read(0.0)
                 if pid in self._exited:
                     return self._exited[pid]
-                if self._gone:
-                    return _status_without_server(pid)
+                gone = self._gone
+                if gone:
+                    status = _status_without_server(pid)
+                    if status is not None:
+                        return status
             remaining = 0.05 if deadline is None else min(0.05, deadline - time.monotonic())
             if remaining <= 0:
                 return None
-            _wait_readable(self._sock, remaining)
+            if gone:
+                # A socket at its end is always readable: waiting on it would spin, and a spinning parent starves
+                # the very programs whose exit it waits for on a busy machine.
+                time.sleep(min(remaining, 0.01))
+            else:
+                _wait_readable(self._sock, remaining)
 
     def close(self, grace_s: float = STOP_GRACE_S) -> None:
         """End the server (it stops what it still runs) and reap it."""

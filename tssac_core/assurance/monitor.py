@@ -202,6 +202,15 @@ class Decision:
     """No passing action and no clear backup: flying the best backup without a guarantee."""
     clearance_m: np.ndarray
     """The proposed action's clearance: min((a) its path's, (b) its best backup's), in metres."""
+    straight_steps: np.ndarray
+    """World steps of the interval to fly ``action`` before a flying backup's lead ends (the interval's ``steps``
+    when nothing changes in it): from then on the backup flies ``turn``."""
+    turn: np.ndarray
+    """(M, 2) the turn of the backup, flown after its lead."""
+
+    def action_at(self, step: int) -> np.ndarray:
+        """(M, 2) the command to fly ``step`` world steps after the decision (0: at it)."""
+        return np.where((step < self.straight_steps)[:, None], self.action, self.turn)
 
 
 # ------------------------------------------------------------------------------- kinematics
@@ -297,11 +306,11 @@ def segment_clearance(px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.nda
     return np.minimum(edge, radar.min(axis=1, initial=np.inf))
 
 
-def lead_steps(cfg: ShieldConfig, dt_s: float, steps: int) -> np.ndarray:
-    """Each straight lead in world steps, a multiple of the decision interval (so a backup's command changes
-    only at a decision), (L,)."""
-    interval_s = steps * dt_s
-    return np.array([steps * round(t / interval_s) for t in cfg.straight_leads_s], dtype=np.int64)
+def lead_steps(cfg: ShieldConfig, dt_s: float) -> np.ndarray:
+    """Each straight lead in world steps, (L,): the same whatever the decision interval, so that the backups a start
+    was admitted with are the ones the first decision has, for a pilot deciding every tick or every 40 s alike. A
+    lead may end between two decisions: the backup's command then changes there (:attr:`Decision.straight_steps`)."""
+    return np.array([round(t / dt_s) for t in cfg.straight_leads_s], dtype=np.int64)
 
 
 def _lead_ends(v: np.ndarray, u: float, lim: Limits, dt_s: float, leads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -463,7 +472,7 @@ def decide(
     raw = np.asarray(proposed, dtype=np.float64)
     finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
     proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
-    leads = lead_steps(cfg, dt_s, steps)
+    leads = lead_steps(cfg, dt_s)
     xs, ys, vs, ps = constant_rollout(x, y, v, phi, proposed, lim, dt_s, steps)
     # (a) the path's excess over the margin; err_end bounds the path's error over the whole interval.
     path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2 - margin - err_end.position_m
@@ -500,6 +509,7 @@ def decide(
         protected[lost] = here[np.arange(len(here)), pick] >= 0
     now_engaged = ~fly_proposed
     action = np.where(now_engaged[:, None], backup_action(backup, lead_left), proposed)
+    straight_steps = np.where(now_engaged, np.minimum(lead_left, steps), steps)
     lead_left = np.where(now_engaged, np.maximum(lead_left - steps, 0), leads[best_end // N_TURNS])
     new_memory = Memory(
         engaged=now_engaged,
@@ -516,6 +526,8 @@ def decide(
         released_now=release,
         unprotected=now_engaged & ~new_memory.protected,
         clearance_m=excess + margin,
+        straight_steps=straight_steps,
+        turn=TURNS[backup % N_TURNS],
     )
 
 
@@ -556,7 +568,6 @@ def start_excess_m(
     hz: Hazards,
     lim: Limits,
     dt_s: float,
-    steps: int,
     cfg: ShieldConfig,
     margin_m: np.ndarray | float,
     hold_steps: int = 0,
@@ -570,7 +581,8 @@ def start_excess_m(
     hold's path keeps the margin and some backup from its end keeps it for ever, both after the error bound:
     exactly what the first decision finds when the proposed action fails (the remembered backup is then the
     clearest of those). From an admitted start, the monitor keeps the UAV out of every radar and inside the area
-    whatever the policy proposes.
+    whatever the policy proposes, and whatever its decision interval: the backups' leads do not depend on it
+    (:func:`lead_steps`).
     """
     m = len(state)
     margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
@@ -586,7 +598,7 @@ def start_excess_m(
         x, y, v, phi = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
     else:
         here_err = err0
-    leads = lead_steps(cfg, dt_s, steps)
+    leads = lead_steps(cfg, dt_s)
     # The constant-speed backups first (circles: cheap); the braking ones (spirals) only where none of those do.
     best = (
         backup_clearance(x, y, v, phi, hz, lim, dt_s, leads, brake=np.zeros(m, bool))
@@ -639,4 +651,4 @@ def companion_error(
 
 def largest_backup_error_m(err: EstimateError, lim: Limits, dt_s: float, steps: int, cfg: ShieldConfig) -> float:
     """The most clearance the error bound takes from any backup at the end of a decision interval (a report)."""
-    return float(backup_error_m(err.after(steps * dt_s, lim), lim, dt_s, lead_steps(cfg, dt_s, steps)).max())
+    return float(backup_error_m(err.after(steps * dt_s, lim), lim, dt_s, lead_steps(cfg, dt_s)).max())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import sys
@@ -10,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.errors import InputError
-from tssac_core.common.files import replace_durably
+from tssac_core.common.files import write_text_safely
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
@@ -22,6 +23,23 @@ class UsageError(InputError):
 
 BAD_INPUT = (InputError, OSError)
 """What a command reports in one line with exit code 2: bad input, and files it cannot read or write."""
+
+
+SEED_MAX = 2**63 - 1
+"""The largest seed a command takes: numpy's generators take any non-negative integer, torch's ``manual_seed`` one
+below 2**64; a mission's seed is the first one plus its index, so the range leaves room for any campaign."""
+
+
+def seed_arg(text: str) -> int:
+    """argparse's ``type`` for ``--seed``: a whole number from 0 to :data:`SEED_MAX` (numpy refuses a negative seed
+    with a traceback deep in a mission, long after the command line was read)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid seed {text!r}: a whole number from 0 to {SEED_MAX}") from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"invalid seed {value}: a whole number from 0 to {SEED_MAX}")
+    return value
 
 
 def bad_input_line(exc: Exception) -> str:
@@ -45,9 +63,6 @@ def run(main: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None 
 
 
 def write_json(path: str | Path, data: Any) -> None:
-    """Write JSON atomically (a partial file is never left behind)."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    replace_durably(tmp, target)
+    """Write JSON: atomically to a regular file (a partial file is never left behind), in place to a named pipe or a
+    character device (``--json /dev/stdout``), through the user's own links (:func:`write_text_safely`)."""
+    write_text_safely(Path(path), json.dumps(data, indent=2) + "\n")

@@ -34,7 +34,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from tssac_core.common.errors import CheckpointError
+from tssac_core.common.errors import CheckpointError, check_action_repeat
 from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
@@ -126,7 +126,7 @@ def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarr
         mode = ObservationMode(meta["observation_mode"])
         Role(meta["role"])
         sizes = [int(meta["obs_dim"]), *(int(h) for h in meta["hidden_sizes"]), 2 * int(meta["act_dim"])]
-        int(meta["action_repeat"])
+        check_action_repeat(int(meta["action_repeat"]), str(p))
     except (KeyError, ValueError, TypeError) as exc:
         raise CheckpointError(f"{p}: exported actor metadata is damaged ({exc})") from None
     if sizes[0] != mode.size:

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.common.errors import CheckpointError
+from tssac_core.common.errors import CheckpointError, check_action_repeat
 from tssac_core.common.files import replace_durably
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.sim.observation import ObservationMode
@@ -142,7 +142,7 @@ def checkpoint_info(data: dict[str, Any], path: str | Path) -> CheckpointInfo:
             scenario_digest=str(data["scenario_digest"]),
             versions=dict(data["versions"]),
             metrics=dict(data.get("metrics") or {}),
-            action_repeat=int(data.get("action_repeat", 1)),
+            action_repeat=check_action_repeat(int(data.get("action_repeat", 1)), str(path)),
         )
     except (KeyError, ValueError, TypeError) as exc:
         raise CheckpointError(f"{path}: checkpoint metadata is damaged ({exc})") from None

@@ -19,15 +19,25 @@ progress and no one is polled).
 
 from __future__ import annotations
 
-from collections import deque
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 
 T = TypeVar("T")
 R = TypeVar("R")
+T_co = TypeVar("T_co", covariant=True)
+
+
+class Items(Protocol[T_co]):
+    """What :func:`map_on_ray` reads of its items: their number and each by its index, when it is submitted (a list,
+    or a view that makes each item on demand, so that a million missions cost no memory before they fly)."""
+
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, index: int, /) -> T_co: ...
+
 
 WORKER_RETRIES = 3
 """Times the driver submits an item again after its worker process died."""
@@ -84,33 +94,38 @@ def stream(fn: Callable[[T], R | Generator[Any, None, R]], item: T) -> Generator
 
 def map_on_ray(
     fn: Callable[[T], R | Generator[Any, None, R]],
-    items: Sequence[T],
+    items: Items[T],
     workers: int,
     target: RayTarget,
     on_result: Callable[[int, R], None] = lambda index, result: None,
     on_event: Callable[[Any], None] = lambda event: None,
+    collect: bool = True,
 ) -> list[R]:
     """The return values of ``fn(item)`` for every item, run as Ray tasks, at most ``workers`` at once
-    (module docstring)."""
+    (module docstring); ``collect`` False: only ``on_result`` gets them (the return value is empty), and the memory
+    used does not grow with the number of items."""
     results: dict[int, R] = {}
-    if not items:
+    if not len(items):
         return []
     with ray_session(target) as ray:
         task = ray.remote(num_cpus=1, max_retries=0)(stream)
-        todo = deque(enumerate(items))
+        next_index = 0
+        """The first item not submitted yet (one whose worker died is submitted again at once)."""
         running: dict[int, tuple[Any, int]] = {}
         """id(task's ObjectRefGenerator) -> (it, its item's index)."""
-        attempts = [0] * len(items)
+        attempts: dict[int, int] = {}
+        """Submissions of each running item (forgotten when it finishes)."""
 
         def submit(index: int) -> None:
-            attempts[index] += 1
+            attempts[index] = attempts.get(index, 0) + 1
             generator = task.remote(fn, items[index])
             running[id(generator)] = (generator, index)
 
         try:
-            while todo or running:
-                while todo and len(running) < workers:
-                    submit(todo.popleft()[0])
+            while next_index < len(items) or running:
+                while next_index < len(items) and len(running) < workers:
+                    submit(next_index)
+                    next_index += 1
                 ready, _ = ray.wait([g for g, _ in running.values()], num_returns=1, timeout=DRIVER_WAKE_S)
                 for generator in ready:
                     index = running[id(generator)][1]
@@ -124,14 +139,16 @@ def map_on_ray(
                         continue
                     if isinstance(value, Finished):
                         del running[id(generator)]
-                        results[index] = value.value
+                        del attempts[index]
+                        if collect:
+                            results[index] = value.value
                         on_result(index, value.value)
                     else:
                         on_event(value)
         finally:
             if running:
                 cancel(ray, [g for g, _ in running.values()])
-    return [results[i] for i in range(len(items))]
+    return [results[i] for i in range(len(items))] if collect else []
 
 
 def cancel(ray: Any, refs: list[Any]) -> None:

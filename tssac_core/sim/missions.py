@@ -40,9 +40,10 @@ def mission_seed(seed: int, index: int) -> int:
     return seed + index
 
 
-def mission_layout(scenario: Scenario, seed: int, index: int) -> Layout:
-    """The layout of mission ``index``: the scenario's fixed one, or a draw from its own seed (module docstring)."""
-    return sample_layout(scenario, np.random.default_rng(mission_seed(seed, index)))
+def mission_layout(scenario: Scenario, seed: int, index: int, shield: ShieldConfig | None = None) -> Layout:
+    """The layout of mission ``index``: the scenario's fixed one, or a draw from its own seed (module docstring), its
+    starts admitted by the monitor with ``shield``'s margins (default :class:`ShieldConfig`)."""
+    return sample_layout(scenario, np.random.default_rng(mission_seed(seed, index)), shield=shield)
 
 
 @dataclass
@@ -147,6 +148,7 @@ def fly_missions(
     indices: Sequence[int] | None = None,
     shield: ShieldConfig | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    start_check: ShieldConfig | None = None,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
@@ -155,8 +157,11 @@ def fly_missions(
     number of missions that finished since the last call, ``on_step`` after every step of the batch with the
     missions that flew it and those still flying (:class:`tssac_core.reporting.progress.TimeLeft`). ``shield``: fly
     every UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
+    ``start_check``: the margins the drawn starts are admitted with (default: ``shield``'s, else the default ones).
     """
-    missions = iter_missions(scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step)
+    missions = iter_missions(
+        scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step, start_check
+    )
     try:
         while True:
             finished = next(missions)
@@ -178,6 +183,7 @@ def iter_missions(
     indices: Sequence[int] | None = None,
     shield: ShieldConfig | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    start_check: ShieldConfig | None = None,
 ) -> Generator[int, None, MissionResults]:
     """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
     returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
@@ -186,7 +192,8 @@ def iter_missions(
     if layouts is None:
         index_list = list(range(episodes) if indices is None else indices)
         seeds = [mission_seed(seed, k) for k in index_list]
-        layouts = [mission_layout(scenario, seed, k) for k in index_list]
+        check = start_check if start_check is not None else shield
+        layouts = [mission_layout(scenario, seed, k, check) for k in index_list]
     world = World(scenario, len(layouts))
     active = tuple(p is not None for p in pilots)
     world.reset(np.arange(len(layouts)), layouts, active)

@@ -58,7 +58,14 @@ MAX_EPISODE_STEPS = 1_000_000
 """About 28 hours of flight at dt = 0.1 s: longer episodes are a typo, and buffers are sized by it."""
 MAX_SPEED_M_S = 1000.0
 MAX_LATENCY_MS = 60_000.0
+MAX_LINK_LOSS = 0.6
+"""The most of a link's datagrams, each way, that may fail to count (:attr:`LinkModel.frame_loss`): up to it a
+companion's commands go through with their attempts sized to the link (mavlink_bridge.companion.config) and the
+monitor was flown in SITL; beyond it a command round trip succeeds less than once in six tries."""
 MAX_EXPECT_EPISODES = 100_000
+MAX_GPS_DROPOUT = 0.9
+"""The most fixes a scenario may lose: beyond it a fix comes less than once a second at 10 Hz, and a companion flies
+the monitor's backup (before its first fix, from the known start) most of the time instead of its pilot."""
 
 
 class ScenarioError(InputError):
@@ -192,6 +199,20 @@ class LinkModel:
     signing: bool = False
     """Fly with MAVLink 2 message signing (``mavlink_bridge.fly`` makes a fresh key for each run
     unless ``--signing-key`` gives one)."""
+
+    def setpoints_may_slip(self, dt_s: float) -> bool:
+        """Whether a setpoint may reach the vehicle a tick later than the monitor predicts (so the vehicle flies the
+        previous command one tick longer at a hand-over): a lost one, one held behind the next (reordering), or a
+        round trip that is not a whole number of ticks (the monitor counts the commands in flight by rounding it)."""
+        ticks = 2.0 * self.latency_ms / 1000.0 / dt_s
+        return self.packet_loss > 0 or self.reordering > 0 or abs(ticks - round(ticks)) > 1e-9
+
+    @property
+    def frame_loss(self) -> float:
+        """The share of datagrams, each way, that do not count on a signed link: the lost ones, and the ones held back
+        behind a later one, which signing refuses as replays (their timestamp is older than one already accepted, as
+        MAVLink 2 requires). ``fly`` signs by default, so the scenario's link is judged signed."""
+        return 1.0 - (1.0 - self.packet_loss) * (1.0 - self.reordering)
 
 
 @dataclass(frozen=True)
@@ -434,6 +455,19 @@ def validate(s: Scenario, source: str) -> None:
         check(
             0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}"
         )
+    check(
+        lk.gps_dropout_prob <= MAX_GPS_DROPOUT,
+        "link.gps_dropout_prob",
+        f"must be at most {MAX_GPS_DROPOUT:g}, got {lk.gps_dropout_prob:g}: a companion that gets no fix flies the "
+        "monitor's backup from its start, and one that gets almost none, nowhere",
+    )
+    check(
+        lk.frame_loss <= MAX_LINK_LOSS,
+        "link",
+        f"packet_loss {lk.packet_loss:g} and reordering {lk.reordering:g} leave {1 - lk.frame_loss:.0%} of the frames "
+        f"each way (a frame held behind a later one is a replay to signing): at most {MAX_LINK_LOSS:.0%} may be lost, "
+        "or no command gets through reliably",
+    )
     for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s"):
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
     check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
@@ -486,33 +520,42 @@ def _max_radius_km(s: Scenario) -> float:
 
 
 def _validate_layout(s: Scenario, lay: Layout, source: str) -> None:
+    problem = layout_problem(s, lay, clearance_km=0.0)
+    if problem is not None:
+        raise ScenarioError(source, problem[0], problem[1])
+
+
+def layout_problem(
+    s: Scenario, lay: Layout, clearance_km: float, protected_starts: bool = True, shield: ShieldConfig | None = None
+) -> tuple[str, str] | None:
+    """Why a layout cannot be flown, as (field, problem), or None: the one rule for a scenario file's fixed layout
+    and for every layout drawn from a random one (:func:`sample_layout`), so that a layout the batched world flies
+    is one a SITL world accepts. Every site and start inside the area, radii within bounds, one start per role,
+    then :func:`infeasibility`."""
+
     def inside(p: tuple[float, float]) -> bool:
         return 0 <= p[0] <= s.area_km and 0 <= p[1] <= s.area_km
 
     if not inside(lay.sam_km):
-        raise ScenarioError(source, "layout.sam_km", f"{lay.sam_km} is outside the {s.area_km} km area")
+        return "layout.sam_km", f"{lay.sam_km} is outside the {s.area_km} km area"
     if not inside(lay.target_km):
-        raise ScenarioError(source, "layout.target_km", f"{lay.target_km} is outside the {s.area_km} km area")
+        return "layout.target_km", f"{lay.target_km} is outside the {s.area_km} km area"
     for i, radar in enumerate(lay.radars):
         where = f"layout.radars[{i}]"
         if not 0 < radar.radius_km <= _max_radius_km(s):
-            raise ScenarioError(
-                source, f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)"
-            )
+            return f"{where}.radius_km", f"out of range: {radar.radius_km} (allowed (0, {_max_radius_km(s)}] km)"
         if not inside(radar.position_km):
-            raise ScenarioError(source, f"{where}.position_km", f"{radar.position_km} is outside the area")
+            return f"{where}.position_km", f"{radar.position_km} is outside the area"
     names = [role.value for role in ROLES]
     for key in lay.starts:
         if key not in names:
-            raise ScenarioError(source, f"layout.starts.{key}", f"unknown role (allowed: {', '.join(names)})")
+            return f"layout.starts.{key}", f"unknown role (allowed: {', '.join(names)})"
     for name in names:
         if name not in lay.starts:
-            raise ScenarioError(source, f"layout.starts.{name}", "missing required start")
+            return f"layout.starts.{name}", "missing required start"
         if not inside(lay.starts[name].position_km):
-            raise ScenarioError(source, f"layout.starts.{name}.position_km", "outside the area")
-    problem = infeasibility(s, lay, clearance_km=0.0)
-    if problem is not None:
-        raise ScenarioError(source, problem[0], problem[1])
+            return f"layout.starts.{name}.position_km", "outside the area"
+    return infeasibility(s, lay, clearance_km, protected_starts, shield)
 
 
 def _validate_random(s: Scenario, rnd: RandomLayout, source: str) -> None:
@@ -547,7 +590,7 @@ GRID_KM = 1.0
 
 
 def infeasibility(
-    s: Scenario, lay: Layout, clearance_km: float, protected_starts: bool = True
+    s: Scenario, lay: Layout, clearance_km: float, protected_starts: bool = True, shield: ShieldConfig | None = None
 ) -> tuple[str, str] | None:
     """Why a layout is unusable, as (field, problem), or None if it is feasible.
 
@@ -564,7 +607,7 @@ def infeasibility(
                     f"layout.starts.{name}",
                     f"starts inside (or within {clearance_km} km of) radar {i} ({d:.1f} km from its centre)",
                 )
-    unprotected = unprotected_start(s, lay) if protected_starts else None
+    unprotected = unprotected_start(s, lay, shield) if protected_starts else None
     if unprotected is not None:
         return unprotected
     n = int(round(s.area_km / GRID_KM))
@@ -634,20 +677,19 @@ def _fill_runs(reach: np.ndarray, run_ids: np.ndarray, passable: np.ndarray) -> 
 
 SENSOR_SIGMA_FLOOR = (0.1, 0.01)
 """The least position (m) and velocity (m/s) sigma a companion's Kalman filter assumes, whatever the scenario says."""
-START_DECISION_STEPS = 10
-"""The decision interval the start check assumes (the backups' leads are whole seconds: the same for every pilot)."""
 
 
-def start_error(s: Scenario, speed_m_s: np.ndarray) -> EstimateError:
+def start_error(s: Scenario, speed_m_s: np.ndarray, cfg: ShieldConfig) -> EstimateError:
     """The monitor's error bound at a companion's first decision, from the scenario's sensors: ``sigma_k`` times
     the GPS's position sigma, its velocity sigma (speed) and that over the speed (heading), the Kalman filter's
-    covariance when it starts from one fix; and over a lossy link one setpoint lost at the first command."""
-    cfg = ShieldConfig()
+    covariance when it starts from one fix; and over a link where a setpoint may slip (:meth:`LinkModel.
+    setpoints_may_slip`) one setpoint lost or late at the first command."""
     pos = max(s.link.gps_position_sigma_m, SENSOR_SIGMA_FLOOR[0])
     vel = max(s.link.gps_velocity_sigma_m_s, SENSOR_SIGMA_FLOOR[1])
     k = cfg.sigma_k
     sensors = EstimateError(np.full(3, k * pos), k * vel / np.maximum(speed_m_s, 1.0), np.full(3, k * vel))
-    return sensors + handover_error(_limits(s), s.dt_s, cfg.handover_ticks if s.link.packet_loss > 0 else 0)
+    slips = s.link.setpoints_may_slip(s.dt_s)
+    return sensors + handover_error(_limits(s), s.dt_s, cfg.handover_ticks if slips else 0)
 
 
 def _limits(s: Scenario) -> Limits:
@@ -660,15 +702,16 @@ def _limits(s: Scenario) -> Limits:
     )
 
 
-def unprotected_start(s: Scenario, lay: Layout) -> tuple[str, str] | None:
+def unprotected_start(s: Scenario, lay: Layout, cfg: ShieldConfig | None = None) -> tuple[str, str] | None:
     """The first UAV whose start the runtime-assurance monitor cannot protect, as (field, problem), or None.
 
     The monitor's guarantee (docs/runtime_assurance.md) covers every state from which one of its backups keeps the
     margin for ever; the start is the one state it does not choose, so a layout is admitted only if every start is
     such a state, in both places the monitor runs: the batched world (the true state, margin
     :attr:`ShieldConfig.margin_m`) and a companion in lockstep (the same margin less the error bound of
-    :func:`start_error`, after the link's round trip of the hold). The default :class:`ShieldConfig` is assumed."""
-    cfg = ShieldConfig()
+    :func:`start_error`, after the link's round trip of the hold), with the margins of ``cfg`` (the monitor's that
+    flies: ``evaluate --shield-margin-m``; default :class:`ShieldConfig`). It holds for any decision interval."""
+    cfg = ShieldConfig() if cfg is None else cfg
     specs = [s.vehicle(role) for role in ROLES]
     state = np.array(
         [
@@ -682,12 +725,10 @@ def unprotected_start(s: Scenario, lay: Layout) -> tuple[str, str] | None:
     radii = np.array([r.radius_km for r in lay.radars], dtype=np.float64).reshape(1, k) * 1000.0
     hz = Hazards(np.repeat(centres, 3, axis=0), np.repeat(radii, 3, axis=0), s.area_km * 1000.0)
     lim = _limits(s)
-    batched = start_excess_m(state, hz, lim, s.dt_s, START_DECISION_STEPS, cfg, cfg.margin_m)
+    batched = start_excess_m(state, hz, lim, s.dt_s, cfg, cfg.margin_m)
     hold = round(2.0 * s.link.latency_ms / 1000.0 / s.dt_s)
-    error = start_error(s, state[:, 2])
-    companion = start_excess_m(
-        state, hz, lim, s.dt_s, START_DECISION_STEPS, cfg, cfg.margin_m, hold_steps=hold, error=error
-    )
+    error = start_error(s, state[:, 2], cfg)
+    companion = start_excess_m(state, hz, lim, s.dt_s, cfg, cfg.margin_m, hold_steps=hold, error=error)
     for role, excess in zip(ROLES, np.minimum(batched, companion), strict=True):
         if excess < 0:
             return (
@@ -699,16 +740,26 @@ def unprotected_start(s: Scenario, lay: Layout) -> tuple[str, str] | None:
 
 
 def sample_layout(
-    s: Scenario, rng: np.random.Generator, max_tries: int = 1000, protected_starts: bool = True
+    s: Scenario,
+    rng: np.random.Generator,
+    max_tries: int = 1000,
+    protected_starts: bool = True,
+    shield: ShieldConfig | None = None,
 ) -> Layout:
     """Draw one feasible layout from ``s.random`` (the fixed layout if the scenario has one).
 
     A draw with a start the runtime-assurance monitor cannot protect (:func:`unprotected_start`) is drawn again,
     so every mission flown or evaluated starts where the monitor's guarantee holds. ``protected_starts=False``
     (training and its validation, where no monitor flies) keeps the draws a recipe has always had, so that a run
-    trains again bit for bit; such a start is about one layout in 4,000 of ``scenarios/random.yaml``."""
+    trains again bit for bit; such a start is about one layout in 4,000 of ``scenarios/random.yaml``. ``shield``:
+    the monitor's margins the starts are checked with (default :class:`ShieldConfig`)."""
     if s.random is None:
         assert s.layout is not None
+        if protected_starts and shield is not None and shield != ShieldConfig():
+            # The file was checked with the default margins on load; a monitor with others checks them again.
+            problem = unprotected_start(s, s.layout, shield)
+            if problem is not None:
+                raise ScenarioError(s.name, problem[0], f"{problem[1]} (with the margin {shield.margin_m:g} m)")
         return s.layout
     rnd = s.random
     r4 = s.ranges.sam_detect_km
@@ -733,7 +784,6 @@ def sample_layout(
                     break
             starts[role.value] = Start(p, rng.uniform(*rnd.start_heading_deg))
         layout = Layout(sam, target, tuple(radars), starts)
-        inside = all(0 <= c <= s.area_km for c in (*sam, *target))
-        if inside and infeasibility(s, layout, rnd.clearance_km, protected_starts) is None:
+        if layout_problem(s, layout, rnd.clearance_km, protected_starts, shield) is None:
             return layout
     raise RuntimeError(f"no feasible layout in {max_tries} draws: the random ranges leave no way to the zones")

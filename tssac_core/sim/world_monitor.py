@@ -2,7 +2,8 @@
 
 Each vehicle is decided for at its pilot's decisions (every ``action_repeat`` world steps, every step for
 the guidance controller), with the world's exact state: no estimate error, no latency. Between decisions
-the action the monitor chose is held, as the pilots hold theirs.
+the action the monitor chose is held, as the pilots hold theirs, except where a flying backup's straight lead ends
+between two decisions: its turn starts there (the leads are whole seconds whatever the decision interval).
 """
 
 from __future__ import annotations
@@ -58,6 +59,9 @@ class WorldMonitor:
         )
         self.memory = Memory.initial(n * N_ROLES)
         self._flying = np.zeros((n, N_ROLES, 2))
+        self._turn = np.zeros((n, N_ROLES, 2))
+        self._turn_at = np.full((n, N_ROLES), -1, dtype=np.int64)
+        """The world step at which a flying backup's turn follows its lead (-1: none before the next decision)."""
         self._layout_version = -1
         self._hazards: Hazards | None = None
         zeros = np.zeros((n, N_ROLES), dtype=np.int64)
@@ -82,6 +86,8 @@ class WorldMonitor:
     def actions(self, world: World, proposed: np.ndarray) -> np.ndarray:
         """The actions (N, 3, 2) to step the world with, given the pilots' ``proposed`` ones."""
         moving = world.active & world.running[:, None]
+        turning = moving & (self._turn_at == world.steps[:, None])
+        self._flying[turning] = self._turn[turning]
         for repeat in np.unique(self.repeats):
             due = moving & (world.steps[:, None] % repeat == 0) & (self.repeats[None, :] == repeat)
             if due.any():
@@ -108,6 +114,8 @@ class WorldMonitor:
         self.memory = self.memory.merged(flat, d.memory)
         w, j = np.unravel_index(flat, due.shape)
         self._flying[w, j] = d.action
+        self._turn[w, j] = d.turn
+        self._turn_at[w, j] = np.where(d.straight_steps < steps, world.steps[w] + d.straight_steps, -1)
         self._engaged[w, j] = d.engaged
         self._unprotected[w, j] = d.unprotected
         self.counts.interventions[w, j] += d.engaged_now

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
+from tssac_core.common.errors import MAX_ACTION_REPEAT
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES
 from tssac_core.train.algorithms import ALGORITHMS, Algo, Selection
@@ -50,6 +51,9 @@ def parse_seeds(text: str) -> tuple[int, ...]:
         raise UsageError(f"--seeds: {text!r} is not a comma-separated list of integers") from None
     if not seeds or len(set(seeds)) != len(seeds):
         raise UsageError(f"--seeds: give one or more distinct seeds, got {text!r}")
+    for seed in seeds:
+        if not 0 <= seed <= SEED_MAX:
+            raise UsageError(f"--seeds: invalid seed {seed}: a whole number from 0 to {SEED_MAX}")
     return seeds
 
 
@@ -88,7 +92,7 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
     p.add_argument(
         "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default scenarios/random.yaml)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of networks, layouts and exploration")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of networks, layouts and exploration")
     p.add_argument(
         "--seeds",
         help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
@@ -226,6 +230,8 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
             raise UsageError(f"--roles: unknown role {r!r}")
     if list(roles) != [x.value for x in ROLES if x.value in roles]:
         raise UsageError("--roles must follow the curriculum order decoy, detect, strike")
+    if a.action_repeat > MAX_ACTION_REPEAT:
+        raise UsageError(f"--action-repeat must be at most {MAX_ACTION_REPEAT}, got {a.action_repeat}")
     if min(a.epochs, a.steps_per_epoch, a.envs, a.update_every, a.action_repeat) <= 0:
         raise UsageError("--epochs, --steps-per-epoch, --envs, --update-every and --action-repeat must be positive")
     if min(a.validation_episodes, a.route_margin_km, a.cost_margin_km) < 0:

@@ -18,12 +18,13 @@ constant). This module uses the wall clock for that (``time.time()``), and the s
 outgoing timestamps at or above the wall clock (:func:`refresh_outgoing_timestamp`), so a stream that
 has been sending for hours is still "new-stream fresh" for a client that joins late.
 
-Receivers that share a key and a process (the three vehicles of one SITL) share one table of the newest
-timestamp accepted per stream by any of them (``shared``): a stream new to one receiver is fresh only if it
-is not older than what another receiver has already accepted on it, so a frame captured on its way to one
-vehicle and sent to another after the stream has moved on is a replay. A frame replayed to the second
-vehicle *before* the stream moves on would still pass that check; what binds a companion's frames to its
-vehicle is its link id (:func:`companion_link_id`), which the other vehicles refuse.
+Receivers that share a key and a process (the three vehicles of one SITL) share one table (``shared``): per
+stream, the newest timestamp any of them accepted and the address it came from. A frame is fresh at a receiver
+only if it is not older than that, and a frame no newer than it must come from that same address: the sender's
+own fan-out of one frame to several vehicles (one socket, one address) passes, while the same frame from anyone
+else is a replay at every receiver, at once or later. A sender that comes back from a new address takes its stream
+with its next, newer frame. What binds a companion's frames to its vehicle besides is its link id
+(:func:`companion_link_id`), which the other vehicles refuse.
 
 Pure standard library (hashlib, hmac, struct): tssac_core imports no pymavlink, and both sides, which
 never import each other, share this one implementation.
@@ -36,6 +37,7 @@ import hashlib
 import hmac
 import struct
 import time
+from collections.abc import Hashable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -162,7 +164,7 @@ class SignatureVerifier:
     (at most 256 link ids x 255 x 255 ids, each an int: no bound is needed against outsiders).
     """
 
-    def __init__(self, key: bytes, shared: dict[StreamKey, int] | None = None) -> None:
+    def __init__(self, key: bytes, shared: dict[StreamKey, tuple[int, Hashable]] | None = None) -> None:
         if len(key) != KEY_LEN:
             raise ValueError(f"signing key must be {KEY_LEN} bytes, got {len(key)}")
         self._key = bytes(key)
@@ -171,7 +173,8 @@ class SignatureVerifier:
         self.streams: dict[StreamKey, int] = {}
         """Newest verified timestamp per stream."""
         self.shared = shared
-        """Newest timestamp per stream accepted by any verifier given the same dict (module docstring)."""
+        """Per stream, the newest timestamp accepted by any verifier given the same dict and the address it came from
+        (module docstring)."""
         self.counters = SigningCounters()
 
     def signature_ok(self, frame: bytes | bytearray) -> bool:
@@ -186,8 +189,9 @@ class SignatureVerifier:
         h.update(frame[:-6])
         return hmac.compare_digest(h.digest()[:6], frame[-6:])
 
-    def check(self, frame: bytes | bytearray, now_unix_s: float | None = None) -> Verdict:
-        """Verify one whole frame (CRC already checked); on OK the stream's timestamp moves forward."""
+    def check(self, frame: bytes | bytearray, now_unix_s: float | None = None, sender: Hashable = None) -> Verdict:
+        """Verify one whole frame (CRC already checked) that came from ``sender`` (its address; with a shared table,
+        a frame no newer than the stream's newest must come from where that did); on OK the stream moves forward."""
         if not is_signed(frame):
             self.counters.unsigned += 1
             return Verdict.UNSIGNED
@@ -196,12 +200,12 @@ class SignatureVerifier:
             return Verdict.BAD_SIGNATURE
         # Only now, with the signature verified, is the timestamp worth anything.
         stream, stamp = signature_stream(frame)
-        if not self._fresh(stream, stamp, now_unix_s):
+        if not (self._fresh(stream, stamp, now_unix_s) and self._from_its_sender(stream, stamp, sender)):
             self.counters.replayed += 1
             return Verdict.REPLAYED
         self.streams[stream] = stamp
-        if self.shared is not None:
-            self.shared[stream] = max(self.shared.get(stream, 0), stamp)
+        if self.shared is not None and stamp > self.shared.get(stream, (-1, None))[0]:
+            self.shared[stream] = (stamp, sender)
         self.counters.ok += 1
         return Verdict.OK
 
@@ -211,6 +215,15 @@ class SignatureVerifier:
         last = self.streams.get(stream)
         if last is not None:
             return stamp > last
-        if self.shared is not None and stamp < self.shared.get(stream, 0):
+        if self.shared is not None and stamp < self.shared.get(stream, (0, None))[0]:
             return False
         return stamp + NEW_STREAM_MAX_AGE_10US >= now_10us(now_unix_s)
+
+    def _from_its_sender(self, stream: StreamKey, stamp: int, sender: Hashable) -> bool:
+        """A frame no newer than the newest of its stream in the shared table comes from the address that one came
+        from: the same frame delivered by anyone else (captured on its way to one vehicle, sent to another) is a
+        replay, however soon."""
+        if self.shared is None or stream not in self.shared:
+            return True
+        newest, owner = self.shared[stream]
+        return stamp > newest or sender == owner
