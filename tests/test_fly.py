@@ -327,6 +327,7 @@ def test_tlogs_cut_by_a_full_disk_are_an_error_in_the_exit_code_the_json_and_bes
     assert "No space left on device" in results["error"] and results["error"].startswith("mission 0: ")
     errors = [ln for ln in proc.stderr.splitlines() if "error:" in ln]
     assert len(errors) == 1 and "tlog" in errors[0] and "cut" in errors[0], errors
+    assert results["missions"], (results["error"], proc.stderr[-3000:])
     cut = [name for name, s in results["missions"][0]["companions"].items() if s.get("write_error")]
     assert cut, results["missions"][0]["companions"]
     assert "No space left on device" in (full_disk / "mission-000" / "INCOMPLETE").read_text()

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, NoReturn
 from mavlink_bridge.companion.config import (
     COMMAND_TIMEOUT_S,
     EXIT_BAD_INPUT,
+    EXIT_OK,
     EXIT_WRITE_FAILED,
     LOCKSTEP_COMMAND_TIMEOUT_S,
     LOCKSTEP_GRANT_S,
@@ -253,7 +254,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             _print_end(result)
             # --serve: mission after mission over the same link (tssac_core.wire.mission_reset).
             missions = MissionInput(0)  # standard input, read only by a serving companion
-            while link is not None and result.exit_code == 0 and not stopped:
+            # A mission whose tlog a full disk cut was flown all the same: its status says so, and fly decides
+            # whether the campaign goes on (it does not); the process serves on, so fly reads that mission's end.
+            while link is not None and result.exit_code in (EXIT_OK, EXIT_WRITE_FAILED) and not stopped:
                 mission = missions.next(lambda: stopped)
                 if mission is None:
                     break
