@@ -1,7 +1,9 @@
 """The dynamics campaign: the same fresh layouts flown by ``fly`` over the kinematic backend, JSBSim F-16s in still air
 and JSBSim F-16s in a 10 m/s wind, each without and with ``--shield``, by the shipped team and by the guidance
 controller. It measures the gap between the world the team trained in and a real airframe (issue "Real flight
-dynamics"), as measured, whatever the figures are.
+dynamics"), as measured, whatever the figures are. Two more campaigns fly the shipped team over the kinematic backend in
+ArduPlane's GUIDED dialect (``--setpoints arduplane``, names ending ``-arduplane``) on the same layouts, to set beside
+the body-rate campaigns.
 
 Each campaign is one ``fly`` command writing its JSON into ``--out``; a campaign whose JSON is already there is not
 flown again, so an interrupted run resumes where it stopped (run the same command again). At the end the script
@@ -32,10 +34,13 @@ class Campaign:
     dynamics: str
     """"kinematic", "jsbsim" or "jsbsim-wind"."""
     shield: bool
+    setpoints: str = "body-rates"
+    """The companion's command dialect: "body-rates" or "arduplane"."""
 
     @property
     def name(self) -> str:
-        return f"{self.pilot}-{self.dynamics}-{'shield' if self.shield else 'alone'}"
+        name = f"{self.pilot}-{self.dynamics}-{'shield' if self.shield else 'alone'}"
+        return name if self.setpoints == "body-rates" else f"{name}-{self.setpoints}"
 
     def argv(self, args: argparse.Namespace, out: Path) -> list[str]:
         scenario = ROOT / "scenarios" / ("random-wind.yaml" if self.dynamics == "jsbsim-wind" else "random.yaml")
@@ -43,7 +48,7 @@ class Campaign:
         argv += ["--models", str(args.models)] if self.pilot == "team" else ["--pilot", "guidance"]
         argv += ["--dynamics", "kinematic" if self.dynamics == "kinematic" else "jsbsim"]
         argv += ["--episodes", str(args.episodes), "--seed", str(args.seed), "--workers", str(args.workers)]
-        argv += ["--no-progress", "--json", str(out)]
+        argv += ["--setpoints", self.setpoints, "--no-progress", "--json", str(out)]
         return argv + (["--shield"] if self.shield else [])
 
 
@@ -52,7 +57,7 @@ CAMPAIGNS = [
     for pilot in ("team", "guidance")
     for dynamics in ("kinematic", "jsbsim", "jsbsim-wind")
     for shield in (False, True)
-]
+] + [Campaign("team", "kinematic", shield, "arduplane") for shield in (False, True)]
 
 
 def row(campaign: Campaign, result: dict[str, Any]) -> dict[str, Any]:
@@ -63,6 +68,7 @@ def row(campaign: Campaign, result: dict[str, Any]) -> dict[str, Any]:
         "pilot": campaign.pilot,
         "dynamics": campaign.dynamics,
         "shield": campaign.shield,
+        "setpoints": campaign.setpoints,
         "episodes": result["episodes"],
         "success_rate": result["success_rate"],
         "success_interval95": result["success_interval95"],
@@ -106,14 +112,14 @@ def main(argv: list[str] | None = None) -> int:
         "campaigns": rows,
     }
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("| pilot | dynamics | monitor | success (95%) | mean cost (95%) | UAV-missions with cost |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print("| pilot | dynamics | setpoints | monitor | success (95%) | mean cost (95%) | UAV-missions with cost |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         lo, hi = r["success_interval95"]
         clo, chi = r["mean_cost_interval95"]
         costed = "" if r["uav_missions_with_cost"] is None else str(r["uav_missions_with_cost"])
         print(
-            f"| {r['pilot']} | {r['dynamics']} | {'on' if r['shield'] else 'off'} | {r['success_rate']:.1%} "
+            f"| {r['pilot']} | {r['dynamics']} | {r['setpoints']} | {'on' if r['shield'] else 'off'} | {r['success_rate']:.1%} "
             f"({lo:.1%}-{hi:.1%}) | {r['mean_cost']:.2f} ({clo:.2f}-{chi:.2f}) | {costed} |"
         )
     print(f"wrote {args.out / 'summary.json'}")

@@ -281,7 +281,7 @@ _D = TypeVar("_D", bound="DataclassInstance")
 def load_airframe(name_or_path: str | Path) -> AirframeSpec:
     """The airframe named ``name_or_path`` (a bundled file, e.g. ``f16``) or in that YAML file; a file that
     cannot be used raises :class:`AirframeError` naming the file and the key."""
-    path = _airframe_path(name_or_path)
+    path = airframe_path(name_or_path)
     raw = _read_mapping(path)
     source = str(path)
     limits = _build(AirframeLimits, _mapping(raw.get("limits"), source, "limits"), source, "limits.")
@@ -293,7 +293,8 @@ def load_airframe(name_or_path: str | Path) -> AirframeSpec:
     return spec
 
 
-def _airframe_path(name_or_path: str | Path) -> Path:
+def airframe_path(name_or_path: str | Path) -> Path:
+    """The airframe file named ``name_or_path`` (a bundled name or a path); :class:`AirframeError` if there is none."""
     text = str(name_or_path)
     if isinstance(name_or_path, Path) or "/" in text or text.endswith((".yaml", ".yml")):
         path = Path(name_or_path)
@@ -302,7 +303,7 @@ def _airframe_path(name_or_path: str | Path) -> Path:
         return path
     path = AIRFRAMES_DIR / f"{text}.yaml"
     if not text.isidentifier() or not path.is_file():
-        known = ", ".join(sorted(p.stem for p in AIRFRAMES_DIR.glob("*.yaml")))
+        known = ", ".join(sorted(p.stem for p in AIRFRAMES_DIR.glob("*.yaml") if "." not in p.stem))
         raise AirframeError(f"unknown airframe {text!r} (bundled: {known}; or give a path to a YAML file)")
     return path
 

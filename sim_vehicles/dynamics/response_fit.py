@@ -1,0 +1,286 @@
+"""Fit an airframe's response to the world's setpoints from JSBSim step responses, and write it as data beside the
+airframe's gains (the model and the file: :mod:`tssac_core.sim.airframe_response`).
+
+    python -m sim_vehicles.dynamics.response_fit --aircraft f16            # writes airframes/f16.response.yaml
+    python -m sim_vehicles.dynamics.response_fit --aircraft f16 --check    # fits again, compares with the file
+
+At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps of ``--dt-s``):
+
+* **Turn lag and residual.** Four runs under the airframe's inner loop, each held for two full circles: a
+  maximum-rate turn left, then right, entered from straight flight; and a reversal from a steady maximum-rate turn
+  one way to the other, both ways. The model is flown from each run's state at the step, and the delay (whole world
+  steps, up to ``MAX_DELAY_S``) and first-order time constant (every ``TAU_GRID_S`` up to ``MAX_TAU_S``) chosen
+  that make the largest distance between the two paths, over all four runs, smallest: that distance is the
+  residual, the error term a bound built on the model adds to its margin.
+* **Acceleration.** Full and no throttle (commands of +-``ACCEL_COMMAND_M_S2``) from the speed, the airspeed's mean
+  rate over ``--accel-window-s``; the inner loop's speed reference is not clipped during these runs.
+
+Everything is deterministic (JSBSim, calm air): ``--check`` refits and compares with the file at 1e-9.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import jsbsim
+import numpy as np
+
+from sim_vehicles.dynamics.jsbsim_airframe import (
+    AirframeError,
+    AirframeSpec,
+    JsbsimAirframe,
+    StartState,
+    airframe_path,
+    load_airframe,
+)
+from tssac_core.common.cli import UsageError, run
+from tssac_core.sim.airframe_response import (
+    RESPONSE_SCHEMA,
+    AirframeResponse,
+    ResponseFileError,
+    dump_response,
+    file_sha256,
+    load_response,
+)
+
+MAX_DELAY_S = 2.0
+MAX_TAU_S = 6.0
+TAU_GRID_S = 0.01
+REVERSAL_LEAD_S = 30.0
+"""A reversal starts from this long in a steady maximum-rate turn the other way."""
+ACCEL_COMMAND_M_S2 = 10.0
+"""The acceleration commanded to measure what the airframe achieves (more than it can: the throttle saturates)."""
+SPEED_REFERENCE_SPAN_M_S = (50.0, 500.0)
+"""The inner loop's speed limits during the acceleration runs (wide: the airframe, not the clip, sets the rate)."""
+
+
+@dataclass(frozen=True)
+class Turn:
+    """A recorded turn: the commands held per world step, and what the airframe did after each."""
+
+    omega_before_rad_s: float
+    """The steady turn rate when the step came (0 from straight flight)."""
+    command_rad_s: float
+    """The heading-rate command held from step 0 on."""
+    rates_rad_s: np.ndarray
+    """(K,) the course rate over each step."""
+    xy_m: np.ndarray
+    """(K + 1, 2) positions, from the step's start."""
+    course_rad: float
+    """Course at the step's start (counter-clockwise from east)."""
+    speed_m_s: float
+    """Groundspeed at the step's start."""
+
+
+def fly_turn(
+    spec: AirframeSpec,
+    speed_m_s: float,
+    altitude_m: float,
+    dt_s: float,
+    before_rad_s: float,
+    command_rad_s: float,
+    duration_s: float,
+) -> Turn:
+    """Fly ``REVERSAL_LEAD_S`` at ``before_rad_s`` if it is not 0, then ``command_rad_s`` for ``duration_s``."""
+    start = StartState(0.0, 0.0, altitude_m, speed_m_s, 0.0)
+    with JsbsimAirframe(spec, start, speed_min_m_s=min(speed_m_s, 150.0), speed_max_m_s=max(speed_m_s, 300.0)) as a:
+        if before_rad_s != 0.0:
+            for _ in range(round(REVERSAL_LEAD_S / dt_s)):
+                a.step(before_rad_s, 0.0, dt_s)
+        s0 = a.state
+        xy = [(s0.east_m, s0.north_m)]
+        rates = []
+        for _ in range(round(duration_s / dt_s)):
+            s = a.step(command_rad_s, 0.0, dt_s)
+            xy.append((s.east_m, s.north_m))
+            rates.append(s.turn_rate_rad_s)
+    origin = np.array(xy[0])
+    return Turn(before_rad_s, command_rad_s, np.array(rates), np.array(xy) - origin, s0.course_rad, s0.groundspeed_m_s)
+
+
+def lag_rates(before: float, command: float, steps: int, delay_steps: int, gains: np.ndarray) -> np.ndarray:
+    """The model's turn rate over each of ``steps`` steps of a command held from step 0, (G, steps) for G lag gains
+    g = 1 - exp(-dt / tau) at once: ``before`` for the delay, then the first-order lag toward the command,
+    omega_j = command + (before - command) (1 - g)^j after j steps of it (module docstring of airframe_response).
+    The rate over a step is the mean of the rates at its two ends."""
+    j = np.clip(np.arange(steps + 1) - delay_steps, 0, None)  # steps of the lag done at each step's end
+    ends = command + (before - command) * (1.0 - gains[:, None]) ** j[None, :]
+    return 0.5 * (ends[:, :-1] + ends[:, 1:])
+
+
+def fit_lag(turns: Sequence[Turn], dt_s: float) -> tuple[int, float, float]:
+    """The delay (world steps) and time constant (s) whose model path keeps closest to the airframe's over all the
+    turns (the smallest largest distance: the residual that a bound adds to its margin), and that residual (m).
+    An exhaustive grid (the largest distance is not smooth in the two: a coarse-to-fine search misses its minimum)."""
+    taus = np.arange(TAU_GRID_S, MAX_TAU_S + TAU_GRID_S / 2, TAU_GRID_S)
+    residual, delay, tau = min(_worst_distance(turns, d, taus, dt_s) for d in range(round(MAX_DELAY_S / dt_s) + 1))
+    return delay, tau, residual
+
+
+def _worst_distance(turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: float) -> tuple[float, int, float]:
+    """(largest distance over the turns, delay, tau) for the tau of ``taus`` that makes it smallest."""
+    gains = 1.0 - np.exp(-dt_s / taus)
+    worst = np.zeros(len(taus))
+    for t in turns:
+        error = t.xy_m[None] - model_paths(t, delay, gains, dt_s)
+        worst = np.maximum(worst, np.hypot(error[..., 0], error[..., 1]).max(axis=1))
+    i = int(np.argmin(worst))
+    return float(worst[i]), delay, round(float(taus[i]), 9)
+
+
+def model_paths(turn: Turn, delay_steps: int, gains: np.ndarray, dt_s: float) -> np.ndarray:
+    """(G, K + 1, 2) the model's positions over the turn for G lag gains: eq. 5's exact arcs at the start's speed
+    and the lagged rate."""
+    rates = lag_rates(turn.omega_before_rad_s, turn.command_rad_s, len(turn.rates_rad_s), delay_steps, gains)
+    heading = turn.course_rad + np.concatenate([np.zeros((len(gains), 1)), np.cumsum(rates * dt_s, axis=1)], axis=1)
+    half = rates * dt_s / 2.0
+    chord = turn.speed_m_s * dt_s * np.sinc(half / np.pi)  # np.sinc(x) = sin(pi x) / (pi x)
+    mid = heading[:, :-1] + half
+    steps = np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=2)
+    return np.concatenate([np.zeros((len(gains), 1, 2)), np.cumsum(steps, axis=1)], axis=1)
+
+
+def mean_accel(
+    spec: AirframeSpec, speed_m_s: float, altitude_m: float, dt_s: float, accel_cmd: float, window_s: float
+) -> float:
+    """The airspeed's mean rate over ``window_s`` of ``accel_cmd`` (m/s^2) from ``speed_m_s``."""
+    start = StartState(0.0, 0.0, altitude_m, speed_m_s, 0.0)
+    low, high = SPEED_REFERENCE_SPAN_M_S
+    with JsbsimAirframe(spec, start, speed_min_m_s=low, speed_max_m_s=high) as a:
+        v0 = a.state.airspeed_m_s
+        for _ in range(round(window_s / dt_s)):
+            a.step(0.0, accel_cmd, dt_s)
+        return (a.state.airspeed_m_s - v0) / window_s
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """What the fit flies."""
+
+    speeds_m_s: tuple[float, ...] = (150.0, 200.0, 250.0, 300.0)
+    turn_rate_max_deg_s: float = 5.0
+    altitude_m: float = 5000.0
+    dt_s: float = 0.1
+    accel_window_s: float = 15.0
+
+
+def fit_response(aircraft: str, settings: FitSettings, command: str) -> AirframeResponse:
+    """Fly the runs of the module docstring for ``aircraft`` (a bundled name or a file) and fit its response."""
+    path = airframe_path(aircraft)
+    spec = load_airframe(path)
+    w = math.radians(settings.turn_rate_max_deg_s)
+    circles_s = 2.0 * 2.0 * math.pi / w
+    table: dict[str, list[float]] = {k: [] for k in ("delay", "tau", "residual", "accel", "decel")}
+    for v in settings.speeds_m_s:
+        turns = [
+            fly_turn(spec, v, settings.altitude_m, settings.dt_s, before, after, circles_s)
+            for before, after in ((0.0, w), (0.0, -w), (-w, w), (w, -w))
+        ]
+        delay, tau, residual = fit_lag(turns, settings.dt_s)
+        table["delay"].append(round(delay * settings.dt_s, 9))
+        table["tau"].append(round(tau, 9))
+        table["residual"].append(round(residual, 3))
+        for key, sign in (("accel", 1.0), ("decel", -1.0)):
+            command_m_s2 = sign * ACCEL_COMMAND_M_S2
+            a = mean_accel(spec, v, settings.altitude_m, settings.dt_s, command_m_s2, settings.accel_window_s)
+            table[key].append(round(a, 4))
+    return AirframeResponse(
+        schema=RESPONSE_SCHEMA,
+        aircraft=path.stem,
+        airframe_sha256=file_sha256(path),
+        jsbsim_version=jsbsim.__version__,
+        command=command,
+        altitude_m=settings.altitude_m,
+        dt_s=settings.dt_s,
+        turn_rate_max_rad_s=w,
+        speeds_m_s=tuple(settings.speeds_m_s),
+        turn_delay_s=tuple(table["delay"]),
+        turn_tau_s=tuple(table["tau"]),
+        turn_residual_m=tuple(table["residual"]),
+        accel_max_m_s2=tuple(table["accel"]),
+        decel_max_m_s2=tuple(table["decel"]),
+        accel_window_s=settings.accel_window_s,
+    )
+
+
+def differences(fitted: AirframeResponse, stored: AirframeResponse, tolerance: float = 1e-9) -> list[str]:
+    """The fields where a fresh fit and a stored file differ (numbers beyond ``tolerance``; ``command`` ignored)."""
+    out = []
+    for f in fields(AirframeResponse):
+        a, b = getattr(fitted, f.name), getattr(stored, f.name)
+        if f.name == "command":
+            continue
+        if isinstance(a, tuple) and isinstance(b, tuple) and len(a) == len(b):
+            same = all(abs(x - y) <= tolerance * max(1.0, abs(y)) for x, y in zip(a, b))
+        elif isinstance(a, float) and isinstance(b, float):
+            same = abs(a - b) <= tolerance * max(1.0, abs(b))
+        else:
+            same = a == b
+        if not same:
+            out.append(f"{f.name}: fitted {a}, stored {b}")
+    return out
+
+
+def response_path(aircraft: str) -> Path:
+    """Where an airframe's response file lives: beside its airframe file."""
+    path = airframe_path(aircraft)
+    return path.with_name(f"{path.stem}.response.yaml")
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="python -m sim_vehicles.dynamics.response_fit",
+        description="Fit an airframe's turn lag and achievable acceleration from JSBSim step responses and write them "
+        "beside its airframe file (or, with --check, compare a fresh fit with that file).",
+    )
+    p.add_argument("--aircraft", default="f16", help="a bundled airframe (f16) or an airframe YAML file")
+    p.add_argument("--out", type=Path, help="where to write (default: <airframe>.response.yaml beside the airframe)")
+    p.add_argument("--check", action="store_true", help="fit and compare with the file instead of writing it")
+    p.add_argument("--speeds", type=float, nargs="+", default=list(FitSettings.speeds_m_s), help="speeds (m/s)")
+    p.add_argument("--turn-rate-deg-s", type=float, default=FitSettings.turn_rate_max_deg_s)
+    p.add_argument("--altitude-m", type=float, default=FitSettings.altitude_m)
+    p.add_argument("--accel-window-s", type=float, default=FitSettings.accel_window_s)
+    args = p.parse_args(argv)
+    speeds = args.speeds
+    if any(not (math.isfinite(v) and 0 < v < 1000) for v in speeds) or sorted(set(speeds)) != speeds:
+        raise UsageError("--speeds: give distinct speeds in ascending order, each in (0, 1000) m/s")
+    if not 0 < args.turn_rate_deg_s <= 30 or not 0 < args.altitude_m <= 20000 or not 1 <= args.accel_window_s <= 120:
+        raise UsageError(
+            "--turn-rate-deg-s must be in (0, 30], --altitude-m in (0, 20000], --accel-window-s in [1, 120]"
+        )
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    settings = FitSettings(tuple(args.speeds), args.turn_rate_deg_s, args.altitude_m, 0.1, args.accel_window_s)
+    try:
+        out = args.out or response_path(args.aircraft)
+        words = ["python -m sim_vehicles.dynamics.response_fit", "--aircraft", str(args.aircraft)]
+        if settings != FitSettings():
+            words += ["--speeds", *(f"{v:g}" for v in args.speeds), "--turn-rate-deg-s", f"{args.turn_rate_deg_s:g}"]
+            words += ["--altitude-m", f"{args.altitude_m:g}", "--accel-window-s", f"{args.accel_window_s:g}"]
+        stored = load_response(out, airframe_path(args.aircraft)) if args.check else None
+        fitted = fit_response(args.aircraft, settings, " ".join(words))
+        if stored is not None:
+            diff = differences(fitted, stored)
+            if diff:
+                print(f"{out}: differs from a fresh fit: " + "; ".join(diff), file=sys.stderr)
+                return 1
+            print(f"{out}: equal to a fresh fit")
+            return 0
+    except (AirframeError, ResponseFileError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out.write_text(dump_response(fitted))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))

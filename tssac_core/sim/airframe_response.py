@@ -1,0 +1,177 @@
+"""An airframe's measured response to the world's setpoints: the turn-rate lag and the achievable acceleration per
+speed, fitted from JSBSim step responses (``python -m sim_vehicles.dynamics.response_fit``) and kept as data beside
+the airframe's inner-loop gains (``sim_vehicles/dynamics/airframes/<name>.response.yaml``).
+
+The point-mass model of eq. 5-6 turns at the commanded rate at once and accelerates at +-a_max. A fixed wing under
+its inner loop does neither: it rolls in first, and its engine and drag set what it can gain or lose. The response
+file describes the difference in the world's own terms (a heading-rate command held for a world step of ``dt_s``):
+
+    omega_k+1 = omega_k + (1 - exp(-dt / tau(v))) (omega_cmd(k - d(v)) - omega_k)      (delay d steps, then first order)
+
+with ``d = round(delay_s / dt_s)``, and the forward acceleration bounded by
+``decel_max_m_s2(v) <= a <= accel_max_m_s2(v)``.
+The lag is scheduled on speed: one time constant does not fit 150 and 300 m/s.
+``turn_residual_m`` is the largest distance, per speed, between the airframe's path and this model's over a
+maximum-rate turn held for two full circles, entered from straight flight and from a maximum-rate turn the other
+way: an error term that a bound built on the model adds to its margin.
+
+Between two tabled speeds the worse neighbour counts (the longer delay and time constant, the larger residual, the
+smaller acceleration and deceleration), so a value read at any speed in the table's span is one the airframe was
+measured to do at least as well as; outside the span the file is refused (:meth:`AirframeResponse.at`).
+"""
+
+from __future__ import annotations
+
+import bisect
+import hashlib
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import yaml
+
+from tssac_core.common.errors import InputError
+from tssac_core.sim.yaml_file import read_yaml, typed_value
+
+RESPONSE_SCHEMA = 1
+"""The file format's version; a newer one is refused."""
+
+
+class ResponseFileError(InputError):
+    """A response file that cannot be used: unreadable, malformed, for another airframe, or asked outside its span."""
+
+
+@dataclass(frozen=True)
+class ResponseAt:
+    """The response at one speed (the worse of the two tabled neighbours)."""
+
+    delay_s: float
+    tau_s: float
+    turn_residual_m: float
+    accel_max_m_s2: float
+    decel_max_m_s2: float
+
+    def delay_steps(self, dt_s: float) -> int:
+        """The delay in whole world steps of ``dt_s``."""
+        return round(self.delay_s / dt_s)
+
+    def lag_gain(self, dt_s: float) -> float:
+        """The first-order lag's share of the gap closed per world step: 1 - exp(-dt / tau)."""
+        return 1.0 - math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 1.0
+
+
+@dataclass(frozen=True)
+class AirframeResponse:
+    """A response file, loaded (module docstring). Tuples are per entry of ``speeds_m_s``, ascending."""
+
+    schema: int
+    """The format's version (:data:`RESPONSE_SCHEMA`)."""
+    aircraft: str
+    """The airframe file's name (``f16``)."""
+    airframe_sha256: str
+    """SHA-256 of the airframe file the fit flew: the response belongs to those gains and limits only."""
+    jsbsim_version: str
+    """The JSBSim the fit flew."""
+    command: str
+    """The command that wrote the file."""
+    altitude_m: float
+    """Altitude of the fit (m)."""
+    dt_s: float
+    """The world step the model is written for (s)."""
+    turn_rate_max_rad_s: float
+    """The turn-rate step of the fit (rad/s): the scenarios' limit."""
+    speeds_m_s: tuple[float, ...]
+    turn_delay_s: tuple[float, ...]
+    turn_tau_s: tuple[float, ...]
+    turn_residual_m: tuple[float, ...]
+    accel_max_m_s2: tuple[float, ...]
+    """Mean acceleration over ``accel_window_s`` of full throttle from each speed (m/s^2, positive)."""
+    decel_max_m_s2: tuple[float, ...]
+    """Mean deceleration over ``accel_window_s`` at idle from each speed (m/s^2, negative)."""
+    accel_window_s: float
+    """The window of the acceleration figures (s)."""
+
+    def __post_init__(self) -> None:
+        n = len(self.speeds_m_s)
+        tables = (self.turn_delay_s, self.turn_tau_s, self.turn_residual_m, self.accel_max_m_s2, self.decel_max_m_s2)
+        if n < 1 or any(len(t) != n for t in tables):
+            raise ValueError(f"response of {self.aircraft}: every table needs one entry per speed ({n})")
+        if any(b <= a for a, b in zip(self.speeds_m_s, self.speeds_m_s[1:])) or self.speeds_m_s[0] <= 0.0:
+            raise ValueError(f"response of {self.aircraft}: speeds_m_s must be positive and ascending")
+        if min(self.turn_delay_s) < 0.0 or min(self.turn_tau_s) < 0.0 or min(self.turn_residual_m) < 0.0:
+            raise ValueError(f"response of {self.aircraft}: delays, time constants and residuals must be >= 0")
+        if min(self.accel_max_m_s2) <= 0.0 or max(self.decel_max_m_s2) >= 0.0:
+            raise ValueError(f"response of {self.aircraft}: accelerations must be > 0 and decelerations < 0")
+        if not (self.dt_s > 0.0 and self.turn_rate_max_rad_s > 0.0 and self.accel_window_s > 0.0):
+            raise ValueError(f"response of {self.aircraft}: dt_s, turn_rate_max_rad_s and accel_window_s must be > 0")
+
+    def at(self, speed_m_s: float) -> ResponseAt:
+        """The response at ``speed_m_s``: the worse of its tabled neighbours (a tabled speed: its own entry)."""
+        lo, hi = self.speeds_m_s[0], self.speeds_m_s[-1]
+        if not lo - 1e-9 <= speed_m_s <= hi + 1e-9:
+            raise ResponseFileError(
+                f"response of {self.aircraft}: speed {speed_m_s:g} m/s is outside the fitted span {lo:g}-{hi:g} m/s"
+            )
+        i = bisect.bisect_left(self.speeds_m_s, speed_m_s - 1e-9)
+        j = i if abs(self.speeds_m_s[i] - speed_m_s) <= 1e-9 else i - 1
+        pair = (i, j)
+        return ResponseAt(
+            delay_s=max(self.turn_delay_s[k] for k in pair),
+            tau_s=max(self.turn_tau_s[k] for k in pair),
+            turn_residual_m=max(self.turn_residual_m[k] for k in pair),
+            accel_max_m_s2=min(self.accel_max_m_s2[k] for k in pair),
+            decel_max_m_s2=max(self.decel_max_m_s2[k] for k in pair),
+        )
+
+    def worst(self, speed_min_m_s: float, speed_max_m_s: float) -> ResponseAt:
+        """The worst response anywhere in [speed_min, speed_max] (a bound for a vehicle flying that envelope)."""
+        inside = [self.at(speed_min_m_s), self.at(speed_max_m_s)]
+        inside += [self.at(v) for v in self.speeds_m_s if speed_min_m_s < v < speed_max_m_s]
+        return ResponseAt(
+            delay_s=max(r.delay_s for r in inside),
+            tau_s=max(r.tau_s for r in inside),
+            turn_residual_m=max(r.turn_residual_m for r in inside),
+            accel_max_m_s2=min(r.accel_max_m_s2 for r in inside),
+            decel_max_m_s2=max(r.decel_max_m_s2 for r in inside),
+        )
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (hex)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def load_response(path: str | Path, airframe_path: str | Path | None = None) -> AirframeResponse:
+    """Read a response file; with ``airframe_path``, refuse one fitted to another version of that airframe file.
+    Every problem is one :class:`ResponseFileError` line."""
+
+    def error(source: str, where: str, problem: str) -> ResponseFileError:
+        return ResponseFileError(f"{source}: {where + ': ' if where else ''}{problem}")
+
+    raw = read_yaml(path, error)
+    if isinstance(raw, dict) and isinstance(raw.get("schema"), int) and raw["schema"] > RESPONSE_SCHEMA:
+        raise error(str(path), "schema", f"version {raw['schema']} is newer than this program's ({RESPONSE_SCHEMA})")
+    response = typed_value(AirframeResponse, raw, "", str(path), error)
+    if airframe_path is not None:
+        actual = file_sha256(airframe_path)
+        if actual != response.airframe_sha256:
+            raise ResponseFileError(
+                f"{path}: fitted to another version of {airframe_path} (sha256 {response.airframe_sha256[:12]}..., "
+                f"the file's is {actual[:12]}...): fit it again with python -m sim_vehicles.dynamics.response_fit"
+            )
+    return response
+
+
+def dump_response(response: AirframeResponse) -> str:
+    """The file's text (:func:`load_response` reads it back equal)."""
+    header = (
+        f"# The response of airframe {response.aircraft} to the world's setpoints "
+        "(tssac_core/sim/airframe_response.py).\n"
+        f"# Written by: {response.command}\n"
+        "# Do not edit: fit again (a changed airframe file makes this one refused).\n"
+    )
+    data = asdict(response)
+    for key, value in data.items():
+        if isinstance(value, tuple):
+            data[key] = list(value)
+    return header + yaml.safe_dump(data, sort_keys=False, width=120)
