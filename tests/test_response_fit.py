@@ -36,29 +36,29 @@ W = math.radians(5.0)
 
 
 def lag_by_recursion(before: float, command: float, steps: int, delay: int, tau_s: float) -> np.ndarray:
-    """The response file's equation, one step at a time: omega_k+1 = omega_k + g (omega_cmd(k - d) - omega_k)."""
+    """The response file's equation, one step at a time: omega_k+1 = omega_k + g (omega_cmd(k - d) - omega_k), the
+    step flying the continuous lag's mean, integrated numerically here (1,000 points a step)."""
     g = 1.0 - math.exp(-DT_S / tau_s)
+    t = (np.arange(1000) + 0.5) / 1000 * DT_S
     omega, rates = before, []
     for k in range(steps):
         target = before if k < delay else command
-        nxt = omega + g * (target - omega)
-        rates.append(0.5 * (omega + nxt))
-        omega = nxt
+        rates.append(float(np.mean(target + (omega - target) * np.exp(-t / tau_s))))
+        omega = omega + g * (target - omega)
     return np.array(rates)
 
 
 @pytest.mark.parametrize("before, command, delay, tau_s", [(0.0, W, 0, 1.3), (-W, W, 3, 0.9), (W, -W, 7, 2.5)])
 def test_closed_form_lag_equals_the_recursion(before: float, command: float, delay: int, tau_s: float) -> None:
-    gains = np.array([1.0 - math.exp(-DT_S / tau_s)])
-    closed = lag_rates(before, command, 400, delay, gains)[0]
-    np.testing.assert_allclose(closed, lag_by_recursion(before, command, 400, delay, tau_s), rtol=0, atol=1e-15)
+    closed = lag_rates(before, command, 400, delay, np.array([tau_s]), DT_S)[0]
+    np.testing.assert_allclose(closed, lag_by_recursion(before, command, 400, delay, tau_s), rtol=0, atol=1e-9)
     assert np.all(closed[:delay] == before) and closed[-1] == pytest.approx(command, abs=1e-6)
 
 
 def synthetic_turn(before: float, command: float, delay: int, tau_s: float, speed: float = 250.0) -> Turn:
     """A turn flown by the model itself (what a perfect fit must recover with no residual)."""
     skeleton = Turn(before, command, np.zeros(300), np.zeros((301, 2)), 0.3, speed)
-    path = model_paths(skeleton, delay, np.array([1.0 - math.exp(-DT_S / tau_s)]), DT_S)[0]
+    path = model_paths(skeleton, delay, np.array([tau_s]), DT_S)[0]
     return dataclasses.replace(skeleton, xy_m=path)
 
 
@@ -70,7 +70,7 @@ def test_fit_recovers_a_known_delay_and_time_constant() -> None:
     # negative control: the model one step late, or with another time constant, is metres off
     late = [synthetic_turn(b, c, 5, 1.7) for b, c in ((0.0, W), (-W, W))]
     assert fit_lag(late, DT_S)[0] == 5
-    error = turns[0].xy_m - model_paths(turns[0], 4, np.array([1.0 - math.exp(-DT_S / 1.2)]), DT_S)[0]
+    error = turns[0].xy_m - model_paths(turns[0], 4, np.array([1.2]), DT_S)[0]
     assert np.hypot(*error.T).max() > 50.0
 
 
@@ -155,8 +155,8 @@ def test_committed_f16_response_is_what_jsbsim_flies_at_250_m_s(f16_response: Ai
     delay = round(f16_response.turn_delay_s[i] / DT_S)
 
     def largest_distance(delay_steps: int, tau_s: float) -> float:
-        gains = np.array([1.0 - math.exp(-DT_S / tau_s)])
-        return max(float(np.hypot(*(t.xy_m - model_paths(t, delay_steps, gains, DT_S)[0]).T).max()) for t in turns)
+        paths = [model_paths(t, delay_steps, np.array([tau_s]), DT_S)[0] for t in turns]
+        return max(float(np.hypot(*(t.xy_m - path).T).max()) for t, path in zip(turns, paths))
 
     assert largest_distance(delay, f16_response.turn_tau_s[i]) == pytest.approx(
         f16_response.turn_residual_m[i], abs=1e-3

@@ -10,8 +10,8 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
   maximum-rate turn left, then right, entered from straight flight; and a reversal from a steady maximum-rate turn
   one way to the other, both ways. The model is flown from each run's state at the step, and the delay (whole world
   steps, up to ``MAX_DELAY_S``) and first-order time constant (every ``TAU_GRID_S`` up to ``MAX_TAU_S``) chosen
-  that make the largest distance between the two paths, over all four runs, smallest: that distance is the
-  residual, the error term a bound built on the model adds to its margin.
+  that make the mean squared distance between the two paths, over all four runs, smallest; the largest distance
+  they leave is the residual, the error term a bound built on the model adds to its margin.
 * **Acceleration.** Full and no throttle (commands of +-``ACCEL_COMMAND_M_S2``) from the speed, the airspeed's mean
   rate over ``--accel-window-s``; the inner loop's speed reference is not clipped during these runs.
 
@@ -45,6 +45,7 @@ from tssac_core.sim.airframe_response import (
     ResponseFileError,
     dump_response,
     file_sha256,
+    lag_gains,
     load_response,
 )
 
@@ -103,46 +104,50 @@ def fly_turn(
     return Turn(before_rad_s, command_rad_s, np.array(rates), np.array(xy) - origin, s0.course_rad, s0.groundspeed_m_s)
 
 
-def lag_rates(before: float, command: float, steps: int, delay_steps: int, gains: np.ndarray) -> np.ndarray:
-    """The model's turn rate over each of ``steps`` steps of a command held from step 0, (G, steps) for G lag gains
-    g = 1 - exp(-dt / tau) at once: ``before`` for the delay, then the first-order lag toward the command,
-    omega_j = command + (before - command) (1 - g)^j after j steps of it (module docstring of airframe_response).
-    The rate over a step is the mean of the rates at its two ends."""
-    j = np.clip(np.arange(steps + 1) - delay_steps, 0, None)  # steps of the lag done at each step's end
-    ends = command + (before - command) * (1.0 - gains[:, None]) ** j[None, :]
-    return 0.5 * (ends[:, :-1] + ends[:, 1:])
+def lag_rates(before: float, command: float, steps: int, delay_steps: int, taus: np.ndarray, dt_s: float) -> np.ndarray:
+    """The model's mean turn rate over each of ``steps`` steps of a command held from step 0, (G, steps) for G time
+    constants at once (:func:`tssac_core.sim.airframe_response.lag_step_mean`'s model): ``before`` for the delay,
+    then the first-order lag toward the command, omega(t) = command + (before - command) exp(-t / tau), whose mean
+    over step j of it is command + (before - command) (1 - g)^j h, with g = 1 - exp(-dt / tau), h = tau g / dt."""
+    g, h = lag_gains(taus, dt_s)
+    j = np.arange(steps) - delay_steps
+    factor = np.where(j[None, :] >= 0, (1.0 - g[:, None]) ** np.maximum(j, 0)[None, :] * h[:, None], 1.0)
+    return command + (before - command) * factor
 
 
 def fit_lag(turns: Sequence[Turn], dt_s: float) -> tuple[int, float, float]:
-    """The delay (world steps) and time constant (s) whose model path keeps closest to the airframe's over all the
-    turns (the smallest largest distance: the residual that a bound adds to its margin), and that residual (m).
-    An exhaustive grid (the largest distance is not smooth in the two: a coarse-to-fine search misses its minimum)."""
+    """The delay (world steps) and time constant (s) whose model paths keep closest to the airframe's over all the
+    turns in the least-squares sense (the mean squared distance; the largest distance has several nearly equal minima
+    far apart in delay and time constant, the mean squared one does not), and the largest distance they leave: the
+    residual (m). An exhaustive grid."""
     taus = np.arange(TAU_GRID_S, MAX_TAU_S + TAU_GRID_S / 2, TAU_GRID_S)
-    residual, delay, tau = min(_worst_distance(turns, d, taus, dt_s) for d in range(round(MAX_DELAY_S / dt_s) + 1))
+    _, delay, tau, residual = min(_fit_at_delay(turns, d, taus, dt_s) for d in range(round(MAX_DELAY_S / dt_s) + 1))
     return delay, tau, residual
 
 
-def _worst_distance(turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: float) -> tuple[float, int, float]:
-    """(largest distance over the turns, delay, tau) for the tau of ``taus`` that makes it smallest."""
-    gains = 1.0 - np.exp(-dt_s / taus)
+def _fit_at_delay(turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: float) -> tuple[float, int, float, float]:
+    """(mean squared distance, delay, tau, largest distance) for the tau of ``taus`` with the least mean square."""
+    squares = np.zeros(len(taus))
     worst = np.zeros(len(taus))
     for t in turns:
-        error = t.xy_m[None] - model_paths(t, delay, gains, dt_s)
-        worst = np.maximum(worst, np.hypot(error[..., 0], error[..., 1]).max(axis=1))
-    i = int(np.argmin(worst))
-    return float(worst[i]), delay, round(float(taus[i]), 9)
+        error = t.xy_m[None] - model_paths(t, delay, taus, dt_s)
+        distance = np.hypot(error[..., 0], error[..., 1])
+        squares += (distance**2).mean(axis=1)
+        worst = np.maximum(worst, distance.max(axis=1))
+    i = int(np.argmin(squares))
+    return float(squares[i]), delay, round(float(taus[i]), 9), float(worst[i])
 
 
-def model_paths(turn: Turn, delay_steps: int, gains: np.ndarray, dt_s: float) -> np.ndarray:
-    """(G, K + 1, 2) the model's positions over the turn for G lag gains: eq. 5's exact arcs at the start's speed
-    and the lagged rate."""
-    rates = lag_rates(turn.omega_before_rad_s, turn.command_rad_s, len(turn.rates_rad_s), delay_steps, gains)
-    heading = turn.course_rad + np.concatenate([np.zeros((len(gains), 1)), np.cumsum(rates * dt_s, axis=1)], axis=1)
+def model_paths(turn: Turn, delay_steps: int, taus: np.ndarray, dt_s: float) -> np.ndarray:
+    """(G, K + 1, 2) the model's positions over the turn for G time constants: eq. 5's exact arcs at the start's
+    speed and the lagged rate's mean over each step."""
+    rates = lag_rates(turn.omega_before_rad_s, turn.command_rad_s, len(turn.rates_rad_s), delay_steps, taus, dt_s)
+    heading = turn.course_rad + np.concatenate([np.zeros((len(taus), 1)), np.cumsum(rates * dt_s, axis=1)], axis=1)
     half = rates * dt_s / 2.0
     chord = turn.speed_m_s * dt_s * np.sinc(half / np.pi)  # np.sinc(x) = sin(pi x) / (pi x)
     mid = heading[:, :-1] + half
     steps = np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=2)
-    return np.concatenate([np.zeros((len(gains), 1, 2)), np.cumsum(steps, axis=1)], axis=1)
+    return np.concatenate([np.zeros((len(taus), 1, 2)), np.cumsum(steps, axis=1)], axis=1)
 
 
 def mean_accel(

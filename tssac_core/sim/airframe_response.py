@@ -6,7 +6,10 @@ The point-mass model of eq. 5-6 turns at the commanded rate at once and accelera
 its inner loop does neither: it rolls in first, and its engine and drag set what it can gain or lose. The response
 file describes the difference in the world's own terms (a heading-rate command held for a world step of ``dt_s``):
 
-    omega_k+1 = omega_k + (1 - exp(-dt / tau(v))) (omega_cmd(k - d(v)) - omega_k)      (delay d steps, then first order)
+    omega_k+1 = omega_k + g (omega_cmd(k - d) - omega_k),   g = 1 - exp(-dt / tau)   (delay d steps, then first order)
+
+the continuous first-order lag sampled at the steps; the heading turns over step k by its exact mean,
+``omega_cmd(k - d) + (omega_k - omega_cmd(k - d)) h`` with ``h = tau g / dt`` (:func:`lag_step_mean`)
 
 with ``d = round(delay_s / dt_s)``, and the forward acceleration bounded by
 ``decel_max_m_s2(v) <= a <= accel_max_m_s2(v)``.
@@ -24,10 +27,10 @@ from __future__ import annotations
 
 import bisect
 import hashlib
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from tssac_core.common.errors import InputError
@@ -57,7 +60,25 @@ class ResponseAt:
 
     def lag_gain(self, dt_s: float) -> float:
         """The first-order lag's share of the gap closed per world step: 1 - exp(-dt / tau)."""
-        return 1.0 - math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 1.0
+        return float(lag_gains(np.array([self.tau_s]), dt_s)[0][0])
+
+
+def lag_gains(taus: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """For time constants ``taus`` (s, >= 0): g = 1 - exp(-dt / tau), the share of the gap to the command closed in a
+    step, and h = tau g / dt, the gap's share left in the step's mean rate (tau = 0: g = 1, h = 0, no lag)."""
+    taus = np.asarray(taus, dtype=np.float64)
+    safe = np.where(taus > 0.0, taus, 1.0)
+    g = np.where(taus > 0.0, -np.expm1(-dt_s / safe), 1.0)
+    h = np.where(taus > 0.0, safe * g / dt_s, 0.0)
+    return g, h
+
+
+def lag_step_mean(
+    omega: np.ndarray, command: np.ndarray, g: np.ndarray, h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the lag (module docstring): the rate's mean over the step and the rate at its end."""
+    gap = omega - command
+    return command + gap * h, command + gap * (1.0 - g)
 
 
 @dataclass(frozen=True)

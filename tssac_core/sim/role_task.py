@@ -21,6 +21,7 @@ from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.team import Team
+from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
 from tssac_core.sim.world import StepResult, World
 from tssac_core.sim.world_state import snapshot
 
@@ -94,6 +95,7 @@ class RoleTask:
         reward_config: RewardConfig = RewardConfig(),
         cost_margin_m: float = 0.0,
         hard_layouts: HardLayouts = HardLayouts(),
+        airframes: AirframeVariation | None = None,
     ) -> None:
         self.scenario = scenario
         self.layouts = LayoutSource(scenario, hard_layouts)
@@ -114,6 +116,8 @@ class RoleTask:
         self.world = World(scenario, n)
         self.team = Team(self.pilots, observation)
         self.rng = np.random.default_rng(seed)
+        self.airframes = VariedAirframes(airframes, self.world) if airframes is not None else None
+        """Varied airframes (tssac_core.sim.varied_airframes), or None: eq. 5-6 exactly."""
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
         self.detour_m = np.zeros(n)
@@ -136,9 +140,14 @@ class RoleTask:
         if rng is None or isinstance(rng, np.random.Generator):
             gen = rng if rng is not None else self.rng
             layouts = [self.layouts.draw(gen) for _ in idx]
+            self.world.reset(idx, layouts, self.active)
+            if self.airframes is not None:
+                self.airframes.reset(idx, gen)
         else:
             layouts = [self.layouts.draw(rng[int(i)]) for i in idx]
-        self.world.reset(idx, layouts, self.active)
+            self.world.reset(idx, layouts, self.active)
+            for i in idx if self.airframes is not None else ():
+                self.airframes.reset(np.array([i]), rng[int(i)])  # type: ignore[union-attr]
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
         self._measure_detours()
@@ -147,11 +156,13 @@ class RoleTask:
     def state(self) -> bytes:
         """The task's state (worlds, layout generator, running episode sums) for a resume file, as the learners'
         ``state()``."""
-        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost))
+        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost, self.airframes))
 
     def restore(self, state: bytes) -> None:
         """Continue from a :meth:`state` (the pilots stay those this task was built with)."""
-        self.world, self.rng, self.ep_return, self.ep_cost = pickle.loads(state)
+        saved = pickle.loads(state)
+        self.world, self.rng, self.ep_return, self.ep_cost = saved[:4]
+        self.airframes = saved[4] if len(saved) > 4 else None  # states written before varied airframes: none
         self._measure_detours()
 
     def _measure_detours(self) -> None:
@@ -162,6 +173,8 @@ class RoleTask:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
         actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
+        if self.airframes is not None:
+            actions = self.airframes.shape(actions, self.rng)
         detour_prev = self.detour_m
         result = self.world.step(actions)
         moving = result.moving

@@ -202,9 +202,10 @@ class World:
         self.zone_dist_m = np.zeros((n, N_ROLES))
         self.sam_dist_m = np.zeros((n, N_ROLES))
         self._small_turns = float(self.c.turn_rate_max_rad_s.max()) * self.c.dt_s / 2 < 0.05
-        wind = scenario.wind.velocity_m_s() if scenario.wind is not None else (0.0, 0.0)
-        self._wind_xy = None if wind == (0.0, 0.0) else np.array(wind)[:, None, None]
-        """The wind's (east, north) velocity as (2, 1, 1), or None in calm air (no drift: eq. 5 exactly)."""
+        self._wind_xy: np.ndarray | None = None
+        """The wind's (east, north) velocity as (2, 1, 1) or per world (2, N, 1), or None in calm air (no drift: eq.
+        5 exactly)."""
+        self.set_wind(None)
         self.layout_id = np.full(n, -1, dtype=np.int64)
         """Changes whenever a world gets a new layout (lets controllers cache per-layout work)."""
         self._resets = 0
@@ -417,6 +418,15 @@ class World:
         self._move(action, self._dt_moving)
         if self._wind_xy is not None:
             self._xy += self._wind_xy * self._dt_moving  # the air mass carries the vehicles (x' = v cos phi + w_x)
+
+    def set_wind(self, extra_m_s: np.ndarray | None) -> None:
+        """The wind the vehicles drift in: the scenario's, plus ``extra_m_s`` (2, N) per world (east, north; m/s), e.g.
+        a wind drawn per episode (:mod:`tssac_core.sim.varied_airframes`); None: the scenario's alone."""
+        wind = self.scenario.wind.velocity_m_s() if self.scenario.wind is not None else (0.0, 0.0)
+        if extra_m_s is None:
+            self._wind_xy = None if wind == (0.0, 0.0) else np.array(wind)[:, None, None]
+        else:
+            self._wind_xy = (np.asarray(extra_m_s, dtype=np.float64) + np.array(wind)[:, None])[:, :, None]
 
     def set_states(self, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray, phi_rad: np.ndarray) -> None:
         """Vehicle states after dt from another dynamics model (the SITL's JSBSim airframes), (N, 3) each: the ground

@@ -145,6 +145,26 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         help="the learner's cost counts steps within this distance of a radar (default 1; 0: eq. 11 exactly)",
     )
     p.add_argument(
+        "--airframe-response",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="train on airframes varied per episode within this fitted response's spans (turn lag, achievable "
+        "acceleration; e.g. sim_vehicles/dynamics/airframes/f16.response.yaml; default: eq. 5-6 exactly)",
+    )
+    p.add_argument(
+        "--vary-wind-m-s",
+        type=float,
+        default=0.0,
+        help="with --airframe-response: a constant wind per episode, up to this speed (m/s; default 0)",
+    )
+    p.add_argument(
+        "--vary-turn-noise-deg-s",
+        type=float,
+        default=0.0,
+        help="with --airframe-response: turbulence, a heading-rate disturbance of this standard deviation (default 0)",
+    )
+    p.add_argument(
         "--hard-layouts",
         type=float,
         default=0.0,
@@ -238,6 +258,10 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         raise UsageError("--validation-episodes, --route-margin-km and --cost-margin-km must be >= 0")
     if not (0.0 <= a.hard_layouts <= 1.0 and a.hard_detour_km >= 0):
         raise UsageError("--hard-layouts must be a fraction in [0, 1] and --hard-detour-km >= 0")
+    if a.airframe_response is None and (a.vary_wind_m_s or a.vary_turn_noise_deg_s):
+        raise UsageError("--vary-wind-m-s and --vary-turn-noise-deg-s vary the airframes of --airframe-response")
+    if not (0.0 <= a.vary_wind_m_s <= 50.0 and 0.0 <= a.vary_turn_noise_deg_s <= 90.0):
+        raise UsageError("--vary-wind-m-s must be in [0, 50] and --vary-turn-noise-deg-s in [0, 90]")
     if not 0.0 <= a.stop_at_task_success <= 1.0:
         raise UsageError(f"--stop-at-task-success must be a fraction in [0, 1], got {a.stop_at_task_success:g}")
     overrides: dict[str, Any] = dict(preset.learner_settings(a.algo)) if preset is not None else {}
@@ -271,6 +295,9 @@ def parse_cli(argv: Sequence[str] | None) -> tuple[TrainConfig, Path, bool, bool
         init_from=str(a.init_from) if a.init_from else "",
         teammates=str(a.teammates) if a.teammates else "",
         stop_at_task_success=a.stop_at_task_success,
+        airframe_response=str(a.airframe_response) if a.airframe_response else "",
+        vary_wind_m_s=a.vary_wind_m_s,
+        vary_turn_noise_deg_s=a.vary_turn_noise_deg_s,
         selection=a.selection,
     )
     if a.address is not None and a.executor != EXECUTORS[1]:

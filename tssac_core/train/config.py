@@ -73,6 +73,15 @@ class TrainConfig:
     stop_at_task_success: float = 0.0
     """End a role after the first epoch whose task success in training reaches this fraction (0: train every
     epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
+    airframe_response: str = ""
+    """Train on varied airframes (tssac_core.sim.varied_airframes): the turn lag and achievable acceleration drawn per
+    episode from the spans of this fitted response file (e.g. sim_vehicles/dynamics/airframes/f16.response.yaml). ""
+    (default): eq. 5-6 exactly. Validation and evaluation fly eq. 5-6 exactly either way."""
+    vary_wind_m_s: float = 0.0
+    """With ``airframe_response``: a constant wind per episode, its speed drawn up to this (m/s)."""
+    vary_turn_noise_deg_s: float = 0.0
+    """With ``airframe_response``: turbulence, a heading-rate disturbance per step of this standard deviation
+    (deg/s)."""
     selection: Selection | None = None
     """Which validated epoch a role ships (tssac_core.train.algorithms.Selection, tssac_core.train.validation);
     None: the algorithm's own (Algorithm.default_selection): within the limit for the learners that are given

@@ -18,11 +18,13 @@ from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import export_actor
 from tssac_core.deploy.manifest import record
 from tssac_core.deploy.policy import Policy, read_checkpoint
+from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.env import RoleTask, TaskStep
 from tssac_core.sim.hard_layouts import HardLayouts
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import ROLES, Role, Scenario
+from tssac_core.sim.varied_airframes import AirframeVariation
 from tssac_core.train.config import TrainConfig, reward_config
 from tssac_core.train.rundir import role_checkpoint
 from tssac_core.train.validation import EpochSelector
@@ -52,7 +54,16 @@ def make_task(
         reward_config=reward_config(cfg),
         cost_margin_m=cfg.cost_margin_km * 1000.0,
         hard_layouts=HardLayouts(cfg.hard_layouts, cfg.hard_detour_km),
+        airframes=airframe_variation(cfg),
     )
+
+
+def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
+    """The varied airframes the run trains on (TrainConfig.airframe_response), or None: eq. 5-6 exactly."""
+    if not cfg.airframe_response:
+        return None
+    response = load_response(cfg.airframe_response)
+    return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
 
 
 def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:

@@ -50,6 +50,8 @@ MINIMUM = {
     "route_margin_km": 0,
     "cost_margin_km": 0,
     "hard_detour_km": 0,
+    "vary_wind_m_s": 0,
+    "vary_turn_noise_deg_s": 0,
 }
 """The least value of a count or distance (what the training command accepts)."""
 FRACTIONS = ("hard_layouts", "stop_at_task_success")

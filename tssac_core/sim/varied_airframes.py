@@ -1,0 +1,142 @@
+"""Training worlds whose vehicles fly like a real airframe, varied per episode (off unless asked for).
+
+The point-mass model of eq. 5-6 turns at the commanded rate at once and accelerates at +-a_max in still air. A fixed
+wing under its inner loop (the SITL's JSBSim backend, or a real ArduPlane) does not: it rolls in first, its engine
+and drag set what it gains or loses, and the wind carries it. :class:`VariedAirframes` puts those effects into the
+batched world as a filter on the actions, so a team trained with it has met them; the world's own arithmetic is
+untouched (off, the world is eq. 5-6 exactly, bit for bit).
+
+Per world and vehicle, drawn at each reset from :class:`AirframeVariation`'s ranges (uniform):
+
+* turn lag: the heading rate flown follows the command after ``d`` world steps through a first-order lag
+  (``tssac_core/sim/airframe_response.py``'s model): ``omega_k+1 = omega_k + (1 - exp(-dt/tau)) (omega_cmd(k-d) -
+  omega_k)``, the heading turning over each step by the lag's exact mean rate;
+* achievable acceleration: the forward acceleration is clipped to ``[decel, accel]`` (below the scenario's +-a_max);
+* turbulence: a zero-mean normal heading-rate disturbance per step (``turn_noise_deg_s``, its standard deviation);
+
+and per world a constant wind (speed uniform in the range, direction uniform), carried by the world's own wind drift
+(:meth:`tssac_core.sim.world.World.set_wind`). Vehicles start each episode in straight flight (omega 0).
+
+:meth:`AirframeVariation.from_response` reads the ranges from an airframe's fitted response
+(``python -m sim_vehicles.dynamics.response_fit``): the spans of its table over the speeds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tssac_core.sim.airframe_response import AirframeResponse, lag_gains, lag_step_mean
+from tssac_core.sim.world import World
+
+Range = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class AirframeVariation:
+    """The ranges per-episode airframes are drawn from (each [low, high]; low == high: fixed)."""
+
+    turn_delay_s: Range = (0.0, 0.0)
+    turn_tau_s: Range = (0.0, 0.0)
+    accel_max_m_s2: Range | None = None
+    """Achievable forward acceleration (positive); None: the scenario's a_max."""
+    decel_max_m_s2: Range | None = None
+    """Achievable forward deceleration (negative); None: the scenario's -a_max."""
+    wind_m_s: Range = (0.0, 0.0)
+    """Wind speed per world (m/s), from a direction drawn uniformly."""
+    turn_noise_deg_s: float = 0.0
+    """Standard deviation of the heading-rate disturbance per step (deg/s)."""
+
+    def __post_init__(self) -> None:
+        ranges = {"turn_delay_s": self.turn_delay_s, "turn_tau_s": self.turn_tau_s, "wind_m_s": self.wind_m_s}
+        ranges |= {"accel_max_m_s2": self.accel_max_m_s2 or (1.0, 1.0)}
+        decel = self.decel_max_m_s2 or (-1.0, -1.0)
+        ranges |= {"decel_max_m_s2": (-decel[1], -decel[0])}  # magnitudes, low to high
+        for name, (low, high) in ranges.items():
+            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+                raise ValueError(f"airframe variation {name}: expected 0 <= low <= high, got {getattr(self, name)}")
+        if self.accel_max_m_s2 is not None and self.accel_max_m_s2[0] <= 0.0:
+            raise ValueError(f"airframe variation accel_max_m_s2 must be > 0, got {self.accel_max_m_s2}")
+        if self.decel_max_m_s2 is not None and self.decel_max_m_s2[1] >= 0.0:
+            raise ValueError(f"airframe variation decel_max_m_s2 must be < 0, got {self.decel_max_m_s2}")
+        if self.turn_delay_s[1] > 10.0:
+            raise ValueError(f"airframe variation turn_delay_s: at most 10 s, got {self.turn_delay_s}")
+        if not (math.isfinite(self.turn_noise_deg_s) and 0.0 <= self.turn_noise_deg_s <= 90.0):
+            raise ValueError(f"airframe variation turn_noise_deg_s must be in [0, 90], got {self.turn_noise_deg_s}")
+
+    @classmethod
+    def from_response(
+        cls, response: AirframeResponse, wind_max_m_s: float = 0.0, turn_noise_deg_s: float = 0.0
+    ) -> AirframeVariation:
+        """The spans of a fitted response's tables, a wind up to ``wind_max_m_s`` and the given turbulence."""
+        return cls(
+            turn_delay_s=(min(response.turn_delay_s), max(response.turn_delay_s)),
+            turn_tau_s=(min(response.turn_tau_s), max(response.turn_tau_s)),
+            accel_max_m_s2=(min(response.accel_max_m_s2), max(response.accel_max_m_s2)),
+            decel_max_m_s2=(min(response.decel_max_m_s2), max(response.decel_max_m_s2)),
+            wind_m_s=(0.0, wind_max_m_s),
+            turn_noise_deg_s=turn_noise_deg_s,
+        )
+
+
+class VariedAirframes:
+    """The per-episode airframes of N worlds and their turn-lag state (module docstring)."""
+
+    def __init__(self, variation: AirframeVariation, world: World) -> None:
+        self.variation = variation
+        self.world = world
+        n = world.n
+        dt = world.c.dt_s
+        self._dt = dt
+        self._max_delay = round(variation.turn_delay_s[1] / dt)
+        self._delay = np.zeros((n, 3), dtype=np.int64)
+        self._gain = np.ones((n, 3))
+        """g of :func:`tssac_core.sim.airframe_response.lag_gains` per vehicle (1: no lag)."""
+        self._hold = np.zeros((n, 3))
+        """h of the same (0: no lag)."""
+        self._low = np.full((n, 3), -1.0)
+        """Normalised action bounds of the forward acceleration (decel / a_max), (N, 3)."""
+        self._high = np.ones((n, 3))
+        self._omega = np.zeros((n, 3))
+        """The heading rate flown now, as a fraction of each vehicle's maximum, (N, 3)."""
+        self._history = np.zeros((self._max_delay + 1, n, 3))
+        """Normalised heading-rate commands of the last ``max_delay + 1`` steps (row k: k steps ago... after a
+        roll, row 0 is the newest)."""
+        self._wind = np.zeros((2, n))
+
+    def reset(self, index: np.ndarray, rng: np.random.Generator) -> None:
+        """Draw airframes for worlds ``index`` (after the world's own reset), straight flight, and their winds."""
+        v = self.variation
+        k = len(index)
+        idx = np.asarray(index, dtype=np.int64)
+        dt = self._dt
+        self._delay[idx] = np.rint(rng.uniform(*v.turn_delay_s, size=(k, 3)) / dt).astype(np.int64)
+        self._gain[idx], self._hold[idx] = lag_gains(rng.uniform(*v.turn_tau_s, size=(k, 3)), dt)
+        a_max = self.world.c.accel_max_m_s2[None, :]
+        if v.accel_max_m_s2 is not None:
+            self._high[idx] = np.minimum(rng.uniform(*v.accel_max_m_s2, size=(k, 3)) / a_max, 1.0)
+        if v.decel_max_m_s2 is not None:
+            self._low[idx] = np.maximum(rng.uniform(*v.decel_max_m_s2, size=(k, 3)) / a_max, -1.0)
+        self._omega[idx] = 0.0
+        self._history[:, idx] = 0.0
+        speed = rng.uniform(*v.wind_m_s, size=k)
+        towards = rng.uniform(0.0, 2.0 * math.pi, size=k)
+        self._wind[:, idx] = speed * np.stack([np.cos(towards), np.sin(towards)])
+        self.world.set_wind(self._wind if v.wind_m_s[1] > 0.0 else None)
+
+    def shape(self, action: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The actions (N, 3, 2) in [-1, 1] the airframes fly when commanded ``action``: the heading rate delayed,
+        lagged and disturbed, the acceleration clipped to what each achieves."""
+        out = np.clip(action, -1.0, 1.0)
+        self._history = np.roll(self._history, 1, axis=0)
+        self._history[0] = out[..., 0]
+        delayed = np.take_along_axis(self._history, self._delay[None], axis=0)[0]
+        flown, self._omega = lag_step_mean(self._omega, delayed, self._gain, self._hold)
+        if self.variation.turn_noise_deg_s > 0.0:
+            noise = rng.normal(0.0, math.radians(self.variation.turn_noise_deg_s), size=flown.shape)
+            flown = flown + noise / self.world.c.turn_rate_max_rad_s[None, :]
+        out[..., 0] = np.clip(flown, -1.0, 1.0)
+        out[..., 1] = np.clip(out[..., 1], self._low, self._high)
+        return out
