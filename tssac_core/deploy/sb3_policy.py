@@ -128,10 +128,10 @@ def policy_layers(policy: Any) -> tuple[Layer, ...] | None:
     (a CNN, gSDE, a recurrent policy)."""
     if getattr(policy, "use_sde", False):
         return None
-    if not flat_features(policy):
-        return None
     extractor = getattr(policy, "mlp_extractor", None)
     if extractor is not None and hasattr(policy, "action_net"):  # ActorCriticPolicy: PPO, A2C
+        if not flat_features(policy):
+            return None
         pi = torch_layers(extractor.policy_net)
         net = policy.action_net
         if pi is None or type(net).__name__ != "Linear" or getattr(policy, "squash_output", False):
