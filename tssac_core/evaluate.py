@@ -26,8 +26,9 @@ Stable-Baselines3 model file, ``onnx:`` an ONNX actor, ``torch:`` a whole ``torc
 (CleanRL's and OmniSafe's actors); one per role (``decoy=...``), or one for every UAV; the other roles fly ``--models``
 or ``--controller``. ``--observation`` and ``--decision-interval-s`` say what the env it was trained on gave it and
 how often it decided (the file's own word where it has one; they must agree). The policy is checked against the env's
-spaces before the first mission; a mismatch is one line and exit code 2. From Python, :func:`evaluate_policy` does the
-same and returns the JSON's dict.
+spaces before the first mission; a mismatch is one line and exit code 2. The JSON is the same, plus ``policies`` (per
+role: the policy, its observation and decision interval). From Python, :func:`evaluate_policy` does the same and
+returns the JSON's dict.
 """
 
 from __future__ import annotations

@@ -249,12 +249,18 @@ def from_callable(
         raise PolicyError(f"the policy must be callable (obs -> action), got {type(fn).__name__}")
     label = name or getattr(fn, "__name__", None) or type(fn).__name__
     own_mode, own_repeat, own_role = (getattr(fn, key, None) for key in ("observation_mode", "action_repeat", "role"))
-    file = Stated(
-        f"{label} itself",
-        None if own_mode is None else ObservationMode(own_mode),
-        None if own_repeat is None else float(own_repeat) * ACTOR_STEP_S,
-        own_role if isinstance(own_role, Role) else None,
-    )
+    try:
+        file = Stated(
+            f"{label} itself",
+            None if own_mode is None else ObservationMode(own_mode),
+            None if own_repeat is None else float(own_repeat) * ACTOR_STEP_S,
+            own_role if isinstance(own_role, Role) else None,
+        )
+    except (ValueError, TypeError):
+        raise PolicyError(
+            f"{label}: its observation_mode {own_mode!r} or action_repeat {own_repeat!r} is not one (route, extended "
+            "or paper; world steps of 0.1 s)"
+        ) from None
     said = resolve(label, observation, decision_interval_s, env, role, file)
     act = fn if batched else _row_by_row(fn)
     assert said.observation is not None and said.decision_interval_s is not None
