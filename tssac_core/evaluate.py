@@ -43,7 +43,7 @@ from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, run, seed_arg, write_json
-from tssac_core.deploy.any_policy import PolicyError, PolicySpec, check_policy
+from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import MissionResults, fly_missions

@@ -1,4 +1,4 @@
-"""A :class:`~tssac_core.deploy.any_policy.PolicySpec` written as an ONNX actor, and a team directory that ``fly`` and
+"""A :class:`~tssac_core.deploy.policy_spec.PolicySpec` written as an ONNX actor, and a team directory that ``fly`` and
 the companion fly (``fly --models DIR``).
 
 :func:`write_onnx_actor` writes ``DIR/<role>.onnx`` in :mod:`tssac_core.deploy.onnx_actor`'s form: the spec's own ONNX
@@ -22,8 +22,8 @@ import numpy as np
 
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import replace_durably
-from tssac_core.deploy.any_policy import ACTOR_STEP_S, PolicyError, PolicySpec, check_policy, steps_per_decision
 from tssac_core.deploy.manifest import record
+from tssac_core.deploy.policy_spec import ACTOR_STEP_S, PolicyError, PolicySpec, check_policy, steps_per_decision
 from tssac_core.sim.observation import observation_bounds
 from tssac_core.sim.scenario import ROLES, Role
 

@@ -1,11 +1,11 @@
-"""A Stable-Baselines3 model file as a :class:`~tssac_core.deploy.any_policy.PolicySpec`.
+"""A Stable-Baselines3 model file as a :class:`~tssac_core.deploy.policy_spec.PolicySpec`.
 
 ``from_sb3("model.zip", ...)`` reads what ``model.save("model.zip")`` wrote (any algorithm: PPO, A2C, SAC, TD3, ...)
 with Stable-Baselines3's own reader, rebuilds the policy network from its saved class, arguments and weights, and
 acts with ``policy.predict(obs, deterministic=True)``: the action SB3's ``model.predict(obs, deterministic=True)``
 gives (clipped to the action space, or squashed and rescaled). The saved observation space is the env's it was trained
 on: it names the observation (its shape and bounds are one mode's), and
-:func:`~tssac_core.deploy.any_policy.check_policy` checks it and the action space against the env's. The decision
+:func:`~tssac_core.deploy.policy_spec.check_policy` checks it and the action space against the env's. The decision
 interval is not in the file: state it (``decision_interval_s=``) or pass the env (``env=``).
 
 A model trained behind ``VecNormalize`` is refused: its observation statistics live in a file of their own, and the
@@ -23,15 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from tssac_core.deploy.any_policy import (
-    PolicyError,
-    PolicySpec,
-    SpaceBounds,
-    Stated,
-    first_line,
-    resolve,
-)
+from tssac_core.deploy.any_policy import Stated, resolve
 from tssac_core.deploy.mlp_graph import Layer, LayerKind, linear, torch_layers
+from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, SpaceBounds, first_line
 from tssac_core.sim.observation import ObservationMode, observation_bounds
 from tssac_core.sim.scenario import Role
 
