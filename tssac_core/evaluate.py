@@ -76,7 +76,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         metavar="[ROLE=]KIND:FILE",
         help="a policy trained anywhere, KIND sb3 (a Stable-Baselines3 model file), onnx (an ONNX actor) or torch (a "
         "torch.nn.Module saved whole); ROLE= for one role (repeat for others; the rest fly --models or --controller), "
-        "none for every UAV",
+        "without it for every UAV",
     )
     p.add_argument(
         "--observation",
