@@ -8,6 +8,7 @@ Examples::
     python -m tssac_core.evaluate --models models/tssac --episodes 1000 --seed 9 --shield --json shielded.json
     python -m tssac_core.evaluate --controller at_radar --episodes 200 --seed 2100001 --shield  # an adversary
     python -m tssac_core.evaluate --models onnx-team --episodes 50   # export --format onnx --out onnx-team's actors
+    python -m tssac_core.evaluate --policy decoy=sb3:ppo-decoy.zip --decision-interval-s 1 --models models/tssac
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
@@ -19,6 +20,15 @@ Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tss
 runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`, ``docs/runtime_assurance.md``) and adds its counts
 under ``shield``: interventions per UAV-mission and the fraction of flight time under the backup. Off by
 default: the learned policy is measured alone.
+
+``--policy [ROLE=]KIND:FILE`` flies a policy trained anywhere (:mod:`tssac_core.deploy.any_policy`): ``sb3:`` a
+Stable-Baselines3 model file, ``onnx:`` an ONNX actor, ``torch:`` a whole ``torch.nn.Module`` saved with ``torch.save``
+(CleanRL's and OmniSafe's actors); one per role (``decoy=...``), or one for every UAV; the other roles fly ``--models``
+or ``--controller``. ``--observation`` and ``--decision-interval-s`` say what the env it was trained on gave it and
+how often it decided (the file's own word where it has one; they must agree). The policy is checked against the env's
+spaces before the first mission; a mismatch is one line and exit code 2. The JSON is the same, plus ``policies`` (per
+role: the policy, its observation and decision interval). From Python, :func:`evaluate_policy` does the same and
+returns the JSON's dict.
 """
 
 from __future__ import annotations
@@ -27,17 +37,22 @@ import argparse
 import dataclasses
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, run, seed_arg, write_json
+from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
-from tssac_core.sim.missions import fly_missions
+from tssac_core.sim.missions import MissionResults, fly_missions
+from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import GUIDANCE, PilotSpec
-from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load_for_batched_world
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load_for_batched_world
+
+POLICY_KINDS = ("sb3", "onnx", "torch")
+"""``--policy KIND:FILE``: a Stable-Baselines3 model, an ONNX actor, a whole torch module."""
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -54,6 +69,27 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         type=Path,
         help="directory holding decoy.pt, detect.pt, strike.pt (made by tssac_core.train), or decoy.onnx, detect.onnx, "
         "strike.onnx (made by tssac_core.deploy.export --format onnx; flown with onnxruntime)",
+    )
+    p.add_argument(
+        "--policy",
+        action="append",
+        metavar="[ROLE=]KIND:FILE",
+        help="a policy trained anywhere, KIND sb3 (a Stable-Baselines3 model file), onnx (an ONNX actor) or torch (a "
+        "torch.nn.Module saved whole); ROLE= for one role (repeat for others; the rest fly --models or --controller), "
+        "without it for every UAV",
+    )
+    p.add_argument(
+        "--observation",
+        choices=[m.value for m in ObservationMode],
+        help="with --policy: the observation of the env it was trained on (the env's default: route); an sb3 or "
+        "TSSAC onnx file says its own",
+    )
+    p.add_argument(
+        "--decision-interval-s",
+        type=float,
+        metavar="S",
+        help="with --policy: seconds between its decisions in the env it was trained on (the env's default "
+        "action_repeat=10 is 1.0); a TSSAC onnx file says its own",
     )
     p.add_argument(
         "--scenario", type=Path, default=DEFAULT_SCENARIO, help="scenario file (default: scenarios/random.yaml)"
@@ -101,7 +137,50 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         raise UsageError(f"--workers must be positive, got {args.workers}")
     if not (math.isfinite(args.shield_margin_m) and args.shield_margin_m >= 0):
         raise UsageError(f"--shield-margin-m must be a finite number >= 0, got {args.shield_margin_m}")
+    if not args.policy and (args.observation is not None or args.decision_interval_s is not None):
+        raise UsageError("--observation and --decision-interval-s describe a --policy: give one")
+    if args.decision_interval_s is not None and not (
+        math.isfinite(args.decision_interval_s) and args.decision_interval_s > 0
+    ):
+        raise UsageError(f"--decision-interval-s must be a positive number of seconds, got {args.decision_interval_s}")
+    args.policy_sources = policy_sources(args.policy or [])
     return args
+
+
+def policy_sources(texts: Sequence[str]) -> dict[Role | None, tuple[str, Path]]:
+    """``--policy`` values as {role (None: every UAV): (kind, file)}; UsageError for a malformed or repeated one."""
+    found: dict[Role | None, tuple[str, Path]] = {}
+    for text in texts:
+        role_text, sep, source = text.partition("=")
+        if not sep:
+            role_text, source = "", text
+        kind, sep, file = source.partition(":")
+        if not sep or kind not in POLICY_KINDS or not file:
+            raise UsageError(f"--policy {text!r}: expected [ROLE=]KIND:FILE with KIND one of {', '.join(POLICY_KINDS)}")
+        try:
+            role = Role(role_text) if role_text else None
+        except ValueError:
+            raise UsageError(f"--policy {text!r}: {role_text!r} is not decoy, detect or strike") from None
+        if role in found or (found and (role is None or None in found)):
+            raise UsageError(f"--policy {text!r}: one policy per role (ROLE=), or one for every UAV alone")
+        found[role] = (kind, Path(file))
+    return found
+
+
+def load_policy_spec(
+    kind: str, path: Path, role: Role | None, observation: str | None, decision_interval_s: float | None
+) -> PolicySpec:
+    """The spec of a ``--policy`` file (:mod:`tssac_core.deploy.any_policy`)."""
+    from tssac_core.deploy import any_policy
+
+    if kind == "sb3":
+        from tssac_core.deploy.sb3_policy import from_sb3
+
+        return from_sb3(path, observation, decision_interval_s, role=role)
+    if kind == "onnx":
+        return any_policy.from_onnx(path, observation, decision_interval_s, role=role)
+    module = any_policy.load_torch_module(path)
+    return any_policy.from_torch(module, observation, decision_interval_s, role=role, name=str(path))
 
 
 def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[PilotSpec]:
@@ -133,6 +212,134 @@ def compare_shield(
     return {"off": off, "on": on}
 
 
+def fly_pilots(
+    policies: Mapping[Role | str, PolicySpec] | PolicySpec,
+    scenario: Scenario,
+    models: Path | None,
+    controller: str = GUIDANCE,
+) -> tuple[list[PilotSpec], dict[str, dict[str, Any]]]:
+    """The team's pilots with ``policies`` in their roles (one spec: every role), each checked against its role's env
+    before any mission (PolicyError, one line); the other roles fly ``models``' actors or ``controller``. Also the
+    JSON's ``policies`` entry: per role its name, observation and decision interval."""
+    given = {role: policies for role in ROLES} if isinstance(policies, PolicySpec) else dict(policies)
+    specs = {}
+    for role, spec in given.items():
+        try:
+            specs[Role(role)] = spec
+        except ValueError:
+            raise PolicyError(f"role {role!r} is not decoy, detect or strike") from None
+        if not isinstance(spec, PolicySpec):
+            raise PolicyError(
+                f"the {Role(role).value} policy is a {type(spec).__name__}, not a PolicySpec (from_callable, from_sb3, "
+                "from_onnx, from_torch)"
+            )
+    if not specs:
+        raise PolicyError("no policy given")
+    checked = {role: check_policy(spec, role, scenario.dt_s) for role, spec in specs.items()}
+    pilots: list[PilotSpec] = [None] * len(ROLES)
+    if len(checked) < len(ROLES):
+        pilots = load_pilots(models, controller)
+    for j, role in enumerate(ROLES):
+        if role in checked:
+            pilots[j] = checked[role]
+    described = {
+        role.value: {
+            "policy": spec.name,
+            "observation": spec.observation_mode.value,
+            "decision_interval_s": spec.decision_interval_s,
+        }
+        for role, spec in specs.items()
+    }
+    return pilots, described
+
+
+def fly_team(
+    scenario: Scenario,
+    pilots: Sequence[PilotSpec],
+    indices: Sequence[int],
+    seed: int,
+    shield: ShieldConfig | None,
+    workers: int = 1,
+    address: str | None = None,
+    progress: bool = True,
+) -> MissionResults:
+    """Missions ``indices`` of seed ``seed`` flown by ``pilots``: in one batch here, or in shards on Ray workers."""
+    if workers > 1 or address is not None:
+        from tqdm import tqdm
+
+        from tssac_core.parallel.mission_shards import fly_missions_sharded
+        from tssac_core.parallel.ray_cluster import RayTarget
+
+        with tqdm(total=len(indices), desc="missions", unit="mission", disable=not progress, file=sys.stderr) as bar:
+            return fly_missions_sharded(
+                scenario, pilots, list(indices), seed, workers, RayTarget(address), bar.update, shield=shield
+            )
+    with MissionBar(len(indices), scenario.episode_steps, disable=not progress) as bar:
+        return fly_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield, on_step=bar.step)
+
+
+def summarize(
+    results: MissionResults,
+    scenario: Scenario,
+    scenario_path: Path,
+    controller: str,
+    seed: int,
+    shield: ShieldConfig | None,
+) -> dict[str, Any]:
+    """The JSON: the results' figures (:meth:`MissionResults.summary`) and what flew them, where, with which seed."""
+    summary = results.summary(scenario.cost_limit)
+    summary.update(
+        {"controller": controller, "scenario": str(scenario_path), "seed": seed, "cost_limit": scenario.cost_limit}
+    )
+    if shield is not None:
+        summary["shield"]["config"] = dataclasses.asdict(shield)
+    return summary
+
+
+def evaluate_policy(
+    policies: Mapping[Role | str, PolicySpec] | PolicySpec,
+    scenario: str | Path = DEFAULT_SCENARIO,
+    episodes: int = 50,
+    seed: int = 12345,
+    *,
+    team: str | Path | None = None,
+    controller: str = GUIDANCE,
+    shield: bool | ShieldConfig = False,
+    mission: int | None = None,
+    json: str | Path | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Evaluate a policy trained anywhere as ``python -m tssac_core.evaluate --policy`` does, and return the JSON's
+    dict (the same figures, intervals and keys as for the shipped team, plus ``policies``).
+
+    ``policies``: a :class:`~tssac_core.deploy.any_policy.PolicySpec` for every UAV, or role -> spec (``from_sb3``,
+    ``from_onnx``, ``from_torch``, ``from_callable``: what it was trained on stated); the other roles fly the actors of
+    the models directory ``team`` (e.g. ``"models/tssac"``), else ``controller``. Each spec is checked against its
+    role's env before the first mission (PolicyError, one line). ``shield``: fly through the runtime-assurance monitor
+    (True: its default margins). ``json``: also write the dict there."""
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes <= 0:
+        raise PolicyError(f"episodes must be a positive whole number, got {episodes!r}")
+    path = Path(scenario)
+    world = load_for_batched_world(path)
+    pilots, described = fly_pilots(policies, world, None if team is None else Path(team), controller)
+    config = ShieldConfig() if shield is True else (shield or None)
+    indices = [mission] if mission is not None else list(range(episodes))
+    results = fly_team(world, pilots, indices, seed, config, progress=progress)
+    summary = summarize(results, world, path, policies_label(described, team, controller), seed, config)
+    summary["policies"] = described
+    if json is not None:
+        write_json(json, summary)
+    return summary
+
+
+def policies_label(described: Mapping[str, Mapping[str, Any]], models: Path | str | None, controller: str) -> str:
+    """The JSON's ``controller`` for a policy run: ``decoy=ppo.zip, others=models/tssac``."""
+    mine = ", ".join(f"{role}={d['policy']}" for role, d in described.items())
+    if len(described) == len(ROLES):
+        return mine
+    return f"{mine}, others={models if models is not None else controller}"
+
+
 def console() -> int:
     """``tssac-evaluate`` and ``python -m tssac_core.evaluate``: :func:`main` with known errors as one line (exit 2)."""
     return run(main)
@@ -142,43 +349,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     scenario = load_for_batched_world(args.scenario)
     controller = args.controller or GUIDANCE
-    pilots = load_pilots(args.models, controller)
+    who = str(args.models) if args.models else controller
+    described: dict[str, dict[str, Any]] = {}
+    if args.policy_sources:
+        specs = {
+            role: load_policy_spec(kind, path, role, args.observation, args.decision_interval_s)
+            for role, (kind, path) in args.policy_sources.items()
+        }
+        given = specs[None] if None in specs else {role: spec for role, spec in specs.items() if role is not None}
+        pilots, described = fly_pilots(given, scenario, args.models, controller)
+        who = policies_label(described, args.models, controller)
+    else:
+        pilots = load_pilots(args.models, controller)
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
-    if args.workers > 1 or args.address is not None:
-        from tqdm import tqdm
-
-        from tssac_core.parallel.mission_shards import fly_missions_sharded
-        from tssac_core.parallel.ray_cluster import RayTarget
-
-        with tqdm(
-            total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr
-        ) as bar:
-            results = fly_missions_sharded(
-                scenario, pilots, indices, args.seed, args.workers, RayTarget(args.address), bar.update, shield=shield
-            )
-    else:
-        with MissionBar(len(indices), scenario.episode_steps, disable=args.no_progress) as bar:
-            results = fly_missions(
-                scenario,
-                pilots,
-                len(indices),
-                args.seed,
-                indices=indices,
-                shield=shield,
-                on_step=bar.step,
-            )
-    summary = results.summary(scenario.cost_limit)
-    summary.update(
-        {
-            "controller": str(args.models) if args.models else controller,
-            "scenario": str(args.scenario),
-            "seed": args.seed,
-            "cost_limit": scenario.cost_limit,
-        }
-    )
-    if shield is not None:
-        summary["shield"]["config"] = dataclasses.asdict(shield)
+    results = fly_team(scenario, pilots, indices, args.seed, shield, args.workers, args.address, not args.no_progress)
+    summary = summarize(results, scenario, args.scenario, who, args.seed, shield)
+    if described:
+        summary["policies"] = described
     print_summary(summary, scenario.cost_limit)
     if args.json:
         write_json(args.json, summary)

@@ -183,15 +183,20 @@ def actor_model(meta: dict[str, Any], layers: Layers) -> Any:
     return model
 
 
-def export_onnx(models: Path, out: Path) -> list[tuple[Path, dict[str, Any]]]:
-    """Write the actor every role of ``models`` flies as ``out/<role>.onnx`` (each atomically) and record them in
-    ``out/SHA256SUMS``; ``out`` is made if missing and must hold no .pt or .npz (one format per directory).
-    Returns each file written with the metadata of the actor it was made from."""
+def export_onnx(models: Path, out: Path, only: Sequence[Role] | None = None) -> list[tuple[Path, dict[str, Any]]]:
+    """Write the actor every role of ``models`` flies (of the roles ``only``, if given) as ``out/<role>.onnx`` (each
+    atomically) and record them in ``out/SHA256SUMS``; ``out`` is made if missing and must hold no .pt or .npz (one
+    format per directory). Returns each file written with the metadata of the actor it was made from."""
     roles = [r for r in ROLES if (models / f"{r.value}.pt").is_file() or (models / f"{r.value}.npz").is_file()]
     if holds_onnx(models):
         raise CheckpointError(f"{models}: holds ONNX actors already; export the directory they came from")
     if not roles:
         raise CheckpointError(f"{models}: no <role>.pt or <role>.npz here")
+    if only is not None:
+        missing = [r.value for r in only if r not in roles]
+        if missing:
+            raise CheckpointError(f"{models}: no {missing[0]}.pt or {missing[0]}.npz here")
+        roles = [r for r in roles if r in only]
     _onnx_package()
     out.mkdir(parents=True, exist_ok=True)
     other = [p.name for r in ROLES for p in (out / f"{r.value}.pt", out / f"{r.value}.npz") if p.is_file()]

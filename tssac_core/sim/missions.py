@@ -153,10 +153,13 @@ def fly_missions(
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
 
-    ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`). ``progress`` is called with the
-    number of missions that finished since the last call, ``on_step`` after every step of the batch with the
-    missions that flew it and those still flying (:class:`tssac_core.reporting.progress.TimeLeft`). ``shield``: fly
-    every UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these margins.
+    ``pilots`` gives one pilot per role (see :mod:`tssac_core.sim.team`); a callable without ``observation_mode`` and
+    ``action_repeat`` attributes sees ``mode`` and decides every step: a policy trained elsewhere is stated and
+    checked first (:mod:`tssac_core.deploy.any_policy`, ``tssac_core.evaluate.evaluate_policy``). ``progress`` is
+    called with the number of missions that finished since the last call, ``on_step`` after every step of the batch
+    with the missions that flew it and those still flying (:class:`tssac_core.reporting.progress.TimeLeft`).
+    ``shield``: fly every UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these
+    margins.
     ``start_check``: the margins the drawn starts are admitted with (default: ``shield``'s, else the default ones).
     """
     missions = iter_missions(
