@@ -119,8 +119,8 @@ def main(argv: list[str] | None = None) -> int:
         clo, chi = r["mean_cost_interval95"]
         costed = "" if r["uav_missions_with_cost"] is None else str(r["uav_missions_with_cost"])
         print(
-            f"| {r['pilot']} | {r['dynamics']} | {r['setpoints']} | {'on' if r['shield'] else 'off'} | {r['success_rate']:.1%} "
-            f"({lo:.1%}-{hi:.1%}) | {r['mean_cost']:.2f} ({clo:.2f}-{chi:.2f}) | {costed} |"
+            f"| {r['pilot']} | {r['dynamics']} | {r['setpoints']} | {'on' if r['shield'] else 'off'} | "
+            f"{r['success_rate']:.1%} ({lo:.1%}-{hi:.1%}) | {r['mean_cost']:.2f} ({clo:.2f}-{chi:.2f}) | {costed} |"
         )
     print(f"wrote {args.out / 'summary.json'}")
     return 0
