@@ -8,6 +8,8 @@ from pathlib import Path
 
 from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect
+from mavlink_bridge.link.serial_port import is_serial, parse_serial
+from mavlink_bridge.link.telemetry_budget import LineBudget, check_line, companion_streams, line_budget
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
@@ -137,6 +139,19 @@ class CompanionConfig:
     (:mod:`mavlink_bridge.link.guided_commands`)."""
 
     @property
+    def line_budget(self) -> LineBudget | None:
+        """On a serial line: the companion's streams against the line (:mod:`mavlink_bridge.link.telemetry_budget`);
+        None on UDP."""
+        if not is_serial(self.connection):
+            return None
+        try:
+            baud = parse_serial(self.connection).baud
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        streams = companion_streams(self.scenario.dt_s, self.lockstep, self.setpoints)
+        return line_budget(baud, streams, self.signing_key is not None)
+
+    @property
     def attempts(self) -> int:
         """Attempts per command: ``command_retries``, else sized to the scenario's link (:func:`command_attempts`)."""
         return self.command_retries if self.command_retries is not None else command_attempts(self.scenario.link)
@@ -166,5 +181,9 @@ class CompanionConfig:
         check_lockstep_grant_s(self.lockstep_grant_s)
         if self.command_retries is not None and self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
+        budget = self.line_budget
+        too_slow = None if budget is None else check_line(budget)
+        if too_slow is not None:
+            raise UsageError(f"--connect {self.connection}: {too_slow}")
         if self.pilot and self.pilot not in PILOT_NAMES:
             raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")
