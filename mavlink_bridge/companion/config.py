@@ -126,7 +126,10 @@ class CompanionConfig:
     duration_s: float | None = None
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
-    source_system: int = 255
+    source_system: int | None = None
+    """Our MAVLink system id (``--source-system``); None: the vehicle's, as a companion computer on a real vehicle
+    has it (component 191, an onboard computer; 255 is left to the ground station). Until the vehicle's first
+    heartbeat names it, the system id the bundled SITL gives the role (decoy 1, detect 2, strike 3)."""
     pilot: str = ""
     """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
@@ -185,5 +188,7 @@ class CompanionConfig:
         too_slow = None if budget is None else check_line(budget)
         if too_slow is not None:
             raise UsageError(f"--connect {self.connection}: {too_slow}")
+        if self.source_system is not None and not 1 <= self.source_system <= 255:
+            raise UsageError(f"--source-system must be a MAVLink system id, 1 to 255, got {self.source_system}")
         if self.pilot and self.pilot not in PILOT_NAMES:
             raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")

@@ -100,7 +100,7 @@ def open_link(cfg: CompanionConfig) -> MavLink:
             # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
             signing_link_id=companion_link_id(cfg.role.index + 1),
             tlog_path=cfg.tlog,
-            source_system=cfg.source_system,
+            source_system=cfg.role.index + 1 if cfg.source_system is None else cfg.source_system,
         )
     except LinkError as exc:
         raise UsageError(str(exc)) from None
@@ -210,13 +210,17 @@ class Companion:
                     raise _Stop("stopped", "stopped before the vehicle answered") from None
                 raise _Stop("no_vehicle", str(exc)) from None
             _log.info(
-                "%s: vehicle sysid %d at %s (type %d, autopilot %d)",
+                "%s: vehicle sysid %d at %s (type %d, autopilot %d); we are %d:%d",
                 cfg.role.value,
                 hb.get_srcSystem(),
                 link.spec,
                 hb.type,
                 hb.autopilot,
+                cfg.source_system or hb.get_srcSystem(),
+                link.mav.srcComponent,
             )
+            if cfg.source_system is None:
+                link.mav.srcSystem = link.target_system  # the vehicle's system, our own component (191)
             budget = cfg.line_budget
             if budget is not None:
                 _log.info("%s: %s", cfg.role.value, budget.describe())
