@@ -215,6 +215,10 @@ def test_the_sitl_and_fly_refuse_a_rate_no_uart_runs_at(capsys: pytest.CaptureFi
     assert fly_cli.main(["--scenario", str(SHORT), "--pilot", "straight", "--serial", "57601"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--serial 57601 is not a rate a UART runs at" in err[0], err
+    missing = ["/dev/tssac-no-such-port,57600"] * 3
+    assert fly_cli.main(["--scenario", str(SHORT), "--pilot", "straight", "--connect", *missing]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "serial device /dev/tssac-no-such-port does not exist" in err[0], err
 
 
 # ------------------------------------------------------------------------------------------------- the budget

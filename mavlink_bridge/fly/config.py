@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
-from mavlink_bridge.link.connection import parse_connection
+from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
@@ -354,9 +354,11 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
             )
         for text in a.connect:
             try:
-                parse_connection(text)
+                spec = parse_connection(text)
             except ValueError as exc:
                 raise UsageError(str(exc)) from None
+            if isinstance(spec, SerialSpec) and not os.path.exists(spec.device):
+                raise UsageError(f"--connect {text}: serial device {spec.device} does not exist")
         if a.episodes != 1:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
         if a.workers != 1 or a.address is not None or a.executor is not None:
