@@ -7,6 +7,9 @@ Prints one line per vehicle with the connection string a client uses, then a rea
     strike sysid=3 udpout:127.0.0.1:14580
     ready scenario=strike seed=0 clock=realtime speedup=1
 
+With ``--serial BAUD`` each vehicle is also on a pseudo-terminal at BAUD (:mod:`sim_vehicles.serial_port`), and
+its line names that serial port (``decoy sysid=1 /dev/pts/5,57600``); the UDP ports stay open beside it.
+
 and, when the run ends, one ``end ...`` line (reason, success, steps, simulated time, cost per role).
 With ``--serve`` the process then reads the next mission from standard input and flies it on the same ports
 (the mission-reset protocol, :mod:`tssac_core.wire.mission_reset`): a ``ready mission=N ...`` line, the
@@ -125,6 +128,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="also stream every vehicle to this ground-station address and take its commands (repeatable)",
     )
     p.add_argument(
+        "--serial",
+        type=int,
+        default=None,
+        metavar="BAUD",
+        help=(
+            "also put every vehicle on a pseudo-terminal, a serial line at BAUD (57600, 921600, ...): its line reads "
+            "DEVICE,BAUD, what a companion passes to --connect; the UDP ports stay open for ground stations"
+        ),
+    )
+    p.add_argument(
+        "--serial-byte-loss",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="with --serial: the lines drop each byte, each way, with probability P (a noisy line; default 0)",
+    )
+    p.add_argument(
         "--linger-s",
         type=float,
         default=1.0,
@@ -171,6 +191,8 @@ def config_from_args(args: argparse.Namespace) -> SitlConfig:
         outputs=tuple(parse_output(o) for o in args.out),
         dynamics_model=None if args.dynamics is None else DynamicsModel(args.dynamics),
         aircraft=args.aircraft,
+        serial_baud=args.serial,
+        serial_byte_loss=args.serial_byte_loss,
     )
 
 

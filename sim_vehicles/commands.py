@@ -74,6 +74,7 @@ class CommandHandler:
             "FILE_TRANSFER_PROTOCOL": self._on_ftp,
             "TIMESYNC": self._on_timesync,
             "STATUSTEXT": self._on_statustext,
+            "HEARTBEAT": self._on_heartbeat,
         }
         self._commands: dict[int, Callable[[tuple[float, ...]], CommandResult]] = {
             M.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
@@ -99,6 +100,13 @@ class CommandHandler:
             else bytes(msg.text).rstrip(b"\x00").decode("ascii", "replace")
         )
         self.link.relay_statustext(int(msg.severity), text, addr)
+
+    def _on_heartbeat(self, msg: Msg, addr: Address) -> None:
+        """A component of this vehicle (its companion computer, on the vehicle's system id) is passed on to the other
+        clients and ground stations as it came, as ArduPilot's MAVLink routing forwards it: a ground station sees the
+        companion as component 191 of the vehicle. Others' heartbeats (a ground station's) stay here."""
+        if msg.get_srcSystem() == self.v.sysid and msg.get_srcComponent() != self.v.compid:
+            self.link.relay(msg, addr)
 
     def handle(self, msg: Msg, addr: Address) -> None:
         v = self.v

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario
+from tssac_core.wire.uart import check_baud
 
 DEFAULT_BASE_PORT = 14560
 """Vehicle i binds base + PORT_STRIDE * i (decoy 14560, detect 14570, strike 14580)."""
@@ -79,6 +80,11 @@ class SitlConfig:
     scenario's, kinematic without one)."""
     aircraft: str | None = None
     """``--aircraft``: the JSBSim airframe, over the scenario's (None: the scenario's, f16 without one)."""
+    serial_baud: int | None = None
+    """``--serial BAUD``: every vehicle also on a pseudo-terminal, a serial line at this baud rate
+    (:mod:`sim_vehicles.serial_port`); None: UDP only."""
+    serial_byte_loss: float = 0.0
+    """``--serial-byte-loss P``: the serial lines drop each byte, each way, with this probability (a noisy line)."""
 
     @property
     def dynamics(self) -> Dynamics:
@@ -100,6 +106,12 @@ class SitlConfig:
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError(f"signing key must be 32 bytes, got {len(self.signing_key)}")
 
+        if self.serial_baud is not None:
+            check_baud(self.serial_baud, "--serial")
+        if not 0.0 <= self.serial_byte_loss < 1.0:
+            raise ValueError(f"--serial-byte-loss must be in [0, 1), got {self.serial_byte_loss}")
+        if self.serial_byte_loss > 0.0 and self.serial_baud is None:
+            raise ValueError("--serial-byte-loss needs --serial BAUD (it is the serial line that drops bytes)")
         for host, port in self.outputs:
             if not (1 <= port <= 65535):
                 raise ValueError(f"--out port must be in 1..65535, got {port} for {host}")

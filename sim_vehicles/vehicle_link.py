@@ -396,6 +396,14 @@ class VehicleLink:
     def statustext(self, severity: int, text: str, dest: Address | None = None) -> None:
         self.send(telemetry.statustext(self.mav, severity, text), dest)
 
+    def relay(self, msg: mavlink2.MAVLink_message, source: Address) -> None:
+        """A client's frame passed on as it came (its ids, sequence number and signature) to every other client and
+        ground station (:meth:`sim_vehicles.commands.CommandHandler._on_heartbeat`); nothing when there is no other."""
+        frame = bytes(msg.get_msgbuf())
+        for peer in set(self.endpoint.peers) | set(self.outputs):
+            if peer != source:
+                self._queue(msg.get_msgId(), -1, peer, lambda _to: frame)
+
     def relay_statustext(self, severity: int, text: str, source: Address) -> None:
         """A client's STATUSTEXT (a companion's note) to every other client, into the tlog as sent, and into the
         truth log as a STATUSTEXT event with its text, as an autopilot forwards it to its ground stations."""

@@ -74,6 +74,7 @@ from sim_vehicles.dynamics.backend import DynamicsError, VehicleDynamics, make_d
 from sim_vehicles.events import EventKind, WorldFlags, events_from_step
 from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.modes import FlightMode
+from sim_vehicles.serial_port import PtySerialPort
 from sim_vehicles.telemetry import VehicleTruth
 from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Vehicle, VehicleSetup
@@ -139,11 +140,15 @@ class Endpoint:
     sysid: int
     host: str
     port: int
+    serial: str | None = None
+    """The vehicle's serial port (``--serial``): ``DEVICE,BAUD``."""
 
     @property
     def connection_string(self) -> str:
-        """pymavlink / MAVProxy connection string of a client (``udpout:HOST:PORT``; a wildcard bind reads as
-        loopback)."""
+        """pymavlink / MAVProxy connection string of a client: the serial port's ``DEVICE,BAUD`` with ``--serial``,
+        else ``udpout:HOST:PORT`` (a wildcard bind reads as loopback)."""
+        if self.serial is not None:
+            return self.serial
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
         return f"udpout:{host}:{self.port}"
 
@@ -168,6 +173,8 @@ class WorldRunner:
         self._stop = threading.Event()
         self._closed = False
         self._endpoints: list[MavEndpoint] = []
+        self.serial_ports: list[PtySerialPort] = []
+        """With ``--serial``: serial_ports[i] is vehicle i's serial line (:mod:`sim_vehicles.serial_port`)."""
         self._truth: TruthLog | None = None
         self._tlogs: list[BinaryIO] = []
         self.dynamics: VehicleDynamics | None = None
@@ -206,6 +213,21 @@ class WorldRunner:
                 )
             except EndpointError as exc:
                 raise SitlError(str(exc.strerror)) from None
+        if config.serial_baud is not None:
+            seeds = np.random.SeedSequence([config.seed, 59]).spawn(len(ROLES))  # the lines' byte loss
+            for endpoint, seed in zip(self._endpoints, seeds, strict=True):
+                try:
+                    self.serial_ports.append(
+                        PtySerialPort(
+                            (endpoint.host, endpoint.port),
+                            config.serial_baud,
+                            config.serial_byte_loss,
+                            np.random.default_rng(seed),
+                            time.monotonic(),
+                        )
+                    )
+                except OSError as exc:
+                    raise SitlError(f"cannot open a pseudo-terminal for --serial: {exc.strerror or exc}") from None
 
     def next_mission(self, scenario: Scenario, seed: int, truth_log: Path | None, tlog_dir: Path | None) -> None:
         """Reset for another mission, as an autopilot reboots: a new layout, world, clock and vehicles on the same
@@ -216,6 +238,8 @@ class WorldRunner:
         self._close_mission_files()
         for endpoint in self._endpoints:
             endpoint.new_session()
+        for port in self.serial_ports:
+            port.new_session()
         config = dataclasses.replace(
             self.config, scenario=scenario, seed=seed, truth_log=truth_log, tlog_dir=tlog_dir, layout_out=None
         )
@@ -317,9 +341,10 @@ class WorldRunner:
 
     @property
     def endpoints(self) -> list[Endpoint]:
+        serial: list[str | None] = [port.connection_string for port in self.serial_ports] or [None] * len(self.links)
         return [
-            Endpoint(v.role, v.sysid, link.endpoint.host, link.endpoint.port)
-            for v, link in zip(self.vehicles, self.links, strict=True)
+            Endpoint(v.role, v.sysid, link.endpoint.host, link.endpoint.port, device)
+            for v, link, device in zip(self.vehicles, self.links, serial, strict=True)
         ]
 
     def request_stop(self) -> None:
@@ -359,11 +384,13 @@ class WorldRunner:
         self._barrier_wall = self._wall0
         self._last_output_wall = self._wall0
         fds = [(link, link.endpoint.fileno()) for link in self.links]
-        sockets = [fd for _, fd in fds]
+        sockets = [fd for _, fd in fds] + [fd for port in self.serial_ports for fd in port.fds()]
         readable: list[int] = sockets  # the first pass reads every socket, then those select saw readable
         while not self._stop.is_set() and self._phase is not _Phase.DONE:
             now = time.monotonic()
             self._tick_clock(now)
+            for port in self.serial_ports:  # what the companions wrote on the lines, to the vehicles
+                port.pump(now)
             for link, fd in fds:
                 link.poll_socket(receive=fd in readable)
             for link in self.links:
@@ -371,6 +398,8 @@ class WorldRunner:
             deadline = self._advance(now)
             for link in self.links:
                 link.flush()
+            for port in self.serial_ports:  # and what the vehicles sent, onto the lines
+                port.pump(time.monotonic())
             if self._phase is _Phase.DONE:
                 break
             readable = select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))[0]
@@ -404,6 +433,10 @@ class WorldRunner:
         waits = [MAX_SELECT_S]
         if deadline_wall is not None:
             waits.append(deadline_wall - now_wall)
+        for port in self.serial_ports:  # bytes waiting for the line
+            due = port.next_due_s(now_wall)
+            if due is not None:
+                waits.append(due)
         if self._link_fast_forward:  # the next iteration delivers what the links carry
             if any(link.next_link_due_s() is not None for link in self.links):
                 waits.append(0.0)
@@ -626,7 +659,8 @@ class WorldRunner:
                     "identified": bool(w.identified[0]),
                     "hit": bool(w.hit[0]),
                     "counters": {
-                        v.role: self.counters_of(v, link) for v, link in zip(self.vehicles, self.links, strict=True)
+                        v.role: self.counters_of(v, link, self.serial_ports[i] if self.serial_ports else None)
+                        for i, (v, link) in enumerate(zip(self.vehicles, self.links, strict=True))
                     },
                     "flight_cpu_s": None
                     if self._first_step_cpu_s is None
@@ -636,8 +670,9 @@ class WorldRunner:
         self._close_mission_files()
 
     @staticmethod
-    def counters_of(v: Vehicle, link: VehicleLink) -> dict[str, Any]:
-        """Every counter of a vehicle (protocol, framing, signing, link, GPS) as plain data."""
+    def counters_of(v: Vehicle, link: VehicleLink, port: PtySerialPort | None = None) -> dict[str, Any]:
+        """Every counter of a vehicle (protocol, framing, signing, link, GPS; its serial line's) as plain data."""
+        serial = {} if port is None else {"serial": asdict(port.counters)}
         return {
             "protocol": asdict(v.counters),
             "rx": asdict(link.endpoint.rx),
@@ -647,6 +682,7 @@ class WorldRunner:
             "gps": {"fixes": v.gps.fixes, "dropouts": v.gps.dropouts},
             "peers": len(link.endpoint.peers),
             "monitors": len(link.endpoint.monitors),
+            **serial,
         }
 
     def _close_mission_files(self) -> None:
@@ -676,5 +712,7 @@ class WorldRunner:
         self._closed = True
         for endpoint in self._endpoints:
             endpoint.close()
+        for port in self.serial_ports:
+            port.close()
         self._close_mission_files()
         self._close_dynamics()

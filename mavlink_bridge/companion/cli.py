@@ -74,6 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_setpoints_argument(p)
     p.add_argument(
+        "--source-system",
+        type=int,
+        metavar="ID",
+        help="our MAVLink system id (default: the vehicle's, as on a real vehicle; our component is 191, an onboard "
+        "computer, and 255 is left to the ground station)",
+    )
+    p.add_argument(
         "--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies"
     )
     p.add_argument(
@@ -201,6 +208,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         pilot=args.pilot or "",
         shield=ShieldConfig() if args.shield else None,
         setpoints=SetpointDialect(args.setpoints),
+        source_system=args.source_system,
     )
 
 

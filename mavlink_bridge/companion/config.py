@@ -8,6 +8,8 @@ from pathlib import Path
 
 from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect
+from mavlink_bridge.link.serial_port import is_serial, parse_serial
+from mavlink_bridge.link.telemetry_budget import LineBudget, check_line, companion_streams, line_budget
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
@@ -124,7 +126,10 @@ class CompanionConfig:
     duration_s: float | None = None
     """Stop after this many vehicle seconds of flight (None: fly until the mission ends)."""
     filter_model: FilterModel = FilterModel.CONSTANT_TURN_EKF
-    source_system: int = 255
+    source_system: int | None = None
+    """Our MAVLink system id (``--source-system``); None: the vehicle's, as a companion computer on a real vehicle
+    has it (component 191, an onboard computer; 255 is left to the ground station). Until the vehicle's first
+    heartbeat names it, the system id the bundled SITL gives the role (decoy 1, detect 2, strike 3)."""
     pilot: str = ""
     """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
@@ -135,6 +140,19 @@ class CompanionConfig:
     setpoints: SetpointDialect = SetpointDialect.BODY_RATES
     """How GUIDED is commanded: body rates, or ArduPlane's GUIDED_CHANGE_HEADING / _SPEED
     (:mod:`mavlink_bridge.link.guided_commands`)."""
+
+    @property
+    def line_budget(self) -> LineBudget | None:
+        """On a serial line: the companion's streams against the line (:mod:`mavlink_bridge.link.telemetry_budget`);
+        None on UDP."""
+        if not is_serial(self.connection):
+            return None
+        try:
+            baud = parse_serial(self.connection).baud
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        streams = companion_streams(self.scenario.dt_s, self.lockstep, self.setpoints)
+        return line_budget(baud, streams, self.signing_key is not None)
 
     @property
     def attempts(self) -> int:
@@ -166,5 +184,11 @@ class CompanionConfig:
         check_lockstep_grant_s(self.lockstep_grant_s)
         if self.command_retries is not None and self.command_retries < 1:
             raise UsageError("--command-retries must be at least 1")
+        budget = self.line_budget
+        too_slow = None if budget is None else check_line(budget)
+        if too_slow is not None:
+            raise UsageError(f"--connect {self.connection}: {too_slow}")
+        if self.source_system is not None and not 1 <= self.source_system <= 255:
+            raise UsageError(f"--source-system must be a MAVLink system id, 1 to 255, got {self.source_system}")
         if self.pilot and self.pilot not in PILOT_NAMES:
             raise UsageError(f"--pilot must be one of {', '.join(PILOT_NAMES)}, got {self.pilot!r}")

@@ -57,10 +57,10 @@ from tssac_core.wire.signing import companion_link_id
 _log = logging.getLogger("mavlink_bridge.companion")
 
 LEAN_OFF = ("GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
-"""The vehicle streams a companion with ``lean_telemetry`` switches off: those at the step rate that it does not read.
-The once-a-second ones it does not read either (SYS_STATUS, GPS_RAW_INT, HOME_POSITION, EXTENDED_SYS_STATE) stay on:
-switching them off saved no CPU measurably, and cost four more command round trips at every engagement (0.4 s each
-over the degraded scenario's link)."""
+"""The vehicle streams a companion with ``lean_telemetry`` (or on a serial line, a port of its own) switches off: those
+at the step rate that it does not read. The once-a-second ones it does not read either (SYS_STATUS, GPS_RAW_INT,
+HOME_POSITION, EXTENDED_SYS_STATE) stay on: switching them off saved no CPU measurably, and cost four more command
+round trips at every engagement (0.4 s each over the degraded scenario's link)."""
 TIMED_TYPES = frozenset({"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "SYSTEM_TIME", "NAMED_VALUE_INT"})
 """Messages whose ``time_boot_ms`` is the vehicle's clock."""
 _LOCAL_FRESH_S = 2.0
@@ -100,7 +100,7 @@ def open_link(cfg: CompanionConfig) -> MavLink:
             # Binds our signed frames to our vehicle (the SITL's sysid of the role): the others refuse them.
             signing_link_id=companion_link_id(cfg.role.index + 1),
             tlog_path=cfg.tlog,
-            source_system=cfg.source_system,
+            source_system=cfg.role.index + 1 if cfg.source_system is None else cfg.source_system,
         )
     except LinkError as exc:
         raise UsageError(str(exc)) from None
@@ -210,13 +210,20 @@ class Companion:
                     raise _Stop("stopped", "stopped before the vehicle answered") from None
                 raise _Stop("no_vehicle", str(exc)) from None
             _log.info(
-                "%s: vehicle sysid %d at %s (type %d, autopilot %d)",
+                "%s: vehicle sysid %d at %s (type %d, autopilot %d); we are %d:%d",
                 cfg.role.value,
                 hb.get_srcSystem(),
                 link.spec,
                 hb.type,
                 hb.autopilot,
+                cfg.source_system or hb.get_srcSystem(),
+                link.mav.srcComponent,
             )
+            if cfg.source_system is None:
+                link.mav.srcSystem = link.target_system  # the vehicle's system, our own component (191)
+            budget = cfg.line_budget
+            if budget is not None:
+                _log.info("%s: %s", cfg.role.value, budget.describe())
             self.last_rx_s = time.monotonic()
             self.phase = Phase.ENGAGE
             self._loop()
@@ -291,7 +298,7 @@ class Companion:
         self._state_valid_after_s = link.last_rx_s  # when the GUIDED ACK was read
         self.armed, self.mode = True, GUIDED_MODE
         intervals = {"LOCAL_POSITION_NED": self.cfg.scenario.dt_s}
-        if cfg.lean_telemetry:
+        if cfg.lean_telemetry or link.baud is not None:  # a serial port is the companion's own: nobody else reads it
             intervals.update({name: -1.0 for name in LEAN_OFF})
         for name, interval_s in intervals.items():
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
-from mavlink_bridge.link.connection import parse_connection
+from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
@@ -25,6 +25,7 @@ from tssac_core.reporting.mission_animation import AnimationFormatError, check_t
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Dynamics, DynamicsModel, Scenario, load
+from tssac_core.wire.uart import BaudError, check_baud
 
 PROG = "python -m mavlink_bridge.fly"
 
@@ -97,6 +98,10 @@ class FlyConfig:
     """An existing Ray cluster for the missions (None: with the Ray executor, a Ray started inside the command)."""
     animate_path: Path | None = None
     """``--animate``: each mission as a .gif or .mp4 film (tssac_core.reporting.mission_animation)."""
+    serial_baud: int | None = None
+    """``--serial BAUD``: the world puts every vehicle on a pseudo-terminal at BAUD and the companions fly over it."""
+    serial_byte_loss: float = 0.0
+    """``--serial-byte-loss P``: the world's serial lines drop each byte with probability P."""
     persistent: bool = True
     """One world and three companions fly every mission of the run (of each worker), reset between missions
     (tssac_core.wire.mission_reset); False (``--fresh-processes``): four new processes per mission."""
@@ -278,6 +283,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="start a new world and new companions for every mission instead of resetting the running ones "
         "(slower; the same results)",
     )
+    p.add_argument(
+        "--serial",
+        type=int,
+        metavar="BAUD",
+        help="the companions fly over serial lines: the world puts every vehicle on a pseudo-terminal at BAUD "
+        "(57600, 921600, ...) and each companion connects to its vehicle's (docs/real_vehicles.md)",
+    )
+    p.add_argument(
+        "--serial-byte-loss",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="with --serial: the lines drop each byte, each way, with probability P (a noisy line; default 0)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -317,13 +336,29 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
             raise UsageError("--no-signing and --signing-key contradict each other: give one")
     if a.no_signing and scenario.link.signing:
         raise UsageError(f"{a.scenario}: the scenario asks for signing (link.signing: true): leave out --no-signing")
+    if a.serial is not None:
+        try:
+            check_baud(a.serial, "--serial")
+        except BaudError as exc:
+            raise UsageError(str(exc)) from None
+    if not (0.0 <= a.serial_byte_loss < 1.0):
+        raise UsageError(f"--serial-byte-loss must be in [0, 1), got {a.serial_byte_loss}")
+    if a.serial_byte_loss > 0.0 and a.serial is None:
+        raise UsageError("--serial-byte-loss needs --serial BAUD (it is the serial line that drops bytes)")
     connect: tuple[str, str, str] | None = None
     if a.connect is not None:
+        if a.serial is not None:
+            raise UsageError(
+                "--serial sets up the serial lines of the world fly starts: with --connect give the "
+                "serial devices themselves (--connect /dev/ttyUSB0,57600 ...)"
+            )
         for text in a.connect:
             try:
-                parse_connection(text)
+                spec = parse_connection(text)
             except ValueError as exc:
                 raise UsageError(str(exc)) from None
+            if isinstance(spec, SerialSpec) and not os.path.exists(spec.device):
+                raise UsageError(f"--connect {text}: serial device {spec.device} does not exist")
         if a.episodes != 1:
             raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
         if a.workers != 1 or a.address is not None or a.executor is not None:
@@ -376,6 +411,8 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         executor=executor,
         ray_address=a.address,
         persistent=not a.fresh_processes,
+        serial_baud=a.serial,
+        serial_byte_loss=a.serial_byte_loss,
     )
 
 

@@ -273,6 +273,8 @@ class MissionRunner:
             argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
         if cfg.signing_key_path is not None:
             argv += ["--signing-key", str(cfg.signing_key_path)]
+        if cfg.serial_baud is not None:
+            argv += ["--serial", str(cfg.serial_baud), "--serial-byte-loss", repr(cfg.serial_byte_loss)]
         if serve:
             argv += ["--serve"]
         log = mdir / "sitl.log"

@@ -1,10 +1,9 @@
-"""One MAVLink 2 link to one vehicle over UDP: a typed wrapper around pymavlink's protocol object.
+"""One MAVLink 2 link to one vehicle over UDP or a serial line: a typed wrapper around pymavlink's protocol object.
 
-:class:`MavLink` owns a UDP socket and a pymavlink ``MAVLink`` object (dialect ardupilotmega,
-MAVLink 2). It does not use ``mavutil.mavudp`` because that class swallows socket errors in
-``write`` and keeps state in module globals (``mavutil.global_link_id`` for signing): here socket
-errors are counted in :class:`LinkCounters` and logged (rate-limited), and every setting is an
-argument.
+:class:`MavLink` owns a UDP socket (or a serial device, :mod:`mavlink_bridge.link.serial_port`) and a pymavlink
+``MAVLink`` object (dialect ardupilotmega, MAVLink 2). It does not use ``mavutil.mavudp`` because that class
+swallows socket errors in ``write`` and keeps state in module globals (``mavutil.global_link_id`` for signing):
+here socket errors are counted in :class:`LinkCounters` and logged (rate-limited), and every setting is an argument.
 
 Connection strings follow pymavlink / MAVProxy:
 
@@ -12,6 +11,11 @@ Connection strings follow pymavlink / MAVProxy:
   bundled SITL prints). The vehicle learns us from our first datagram, so we send HEARTBEATs
   while waiting for it (:meth:`MavLink.wait_heartbeat`).
 * ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) — bind HOST:PORT and answer the vehicle (below).
+* ``DEVICE[,BAUD]`` (a path: ``/dev/ttyUSB0,57600``, MAVProxy's form; 57,600 baud without one) — a serial line,
+  the flight controller's telemetry port. Its bytes are framed by :class:`tssac_core.wire.stream_framing.StreamFramer`,
+  which keeps a frame still arriving between reads and resynchronises after garbage or a dropped byte; a frame still
+  incomplete when the line has been idle for :data:`SERIAL_IDLE_S` is cut. Everything heard on the line is the
+  vehicle's.
 
 Receiving keeps UDP's datagram boundaries: every datagram is split into frames on its own, by the scanner
 the SITL vehicles use (:mod:`tssac_core.wire.framing`), so a truncated frame never swallows the
@@ -31,6 +35,8 @@ wait is bounded on ``time.monotonic()``; no wait uses the vehicle's clock (a sil
 :attr:`MavLink.last_rx_s` is the time (``time.monotonic()``) at which the datagram of the message
 :meth:`MavLink.recv` returned last was read, for latency measurements.
 
+Frames the vehicle sent that never arrived are counted from its sequence numbers (``frames_lost_rx``).
+
 Optionally every message received and sent is appended to a ``.tlog`` (8-byte big-endian Unix time
 in microseconds, then the raw frame: the format MAVProxy writes and pymavlink's ``mavlogdump.py``
 reads).
@@ -39,6 +45,7 @@ reads).
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import select
 import socket
@@ -52,11 +59,14 @@ from typing import BinaryIO, TypeAlias
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from mavlink_bridge.link.guided_commands import GuidedSlew
+from mavlink_bridge.link.serial_port import SerialError, SerialPort, SerialSpec, is_serial, parse_serial
 from tssac_core.common.files import create_exclusively
 from tssac_core.wire import units
-from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames
+from tssac_core.wire.framing import Dialect, FrameDecoder, FramePacker, scan_frames, source
 from tssac_core.wire.lockstep import GRANT_NAME
 from tssac_core.wire.signing import SignatureVerifier, Verdict, now_10us, refresh_outgoing_timestamp
+from tssac_core.wire.stream_framing import SequenceGaps, StreamFramer
+from tssac_core.wire.uart import bytes_per_s
 
 __all__ = [
     "CommandError",
@@ -67,6 +77,7 @@ __all__ = [
     "Message",
     "parse_connection",
     "SETPOINT_TYPE_MASK",
+    "SerialSpec",
 ]
 
 _log = logging.getLogger(__name__)
@@ -75,6 +86,9 @@ Message: TypeAlias = mavlink2.MAVLink_message
 M = mavlink2
 
 MAX_DATAGRAM = 65535
+SERIAL_IDLE_S = 0.5
+"""A serial line silent this long (wall s) with a frame still incomplete has cut it: the bytes behind its start are
+scanned again. Ten times what a whole frame (280 bytes) takes at 57,600 baud, and more than it takes at 9,600."""
 _TLOG_FLUSH_S = 1.0
 DIALECT = Dialect.of_messages(M.mavlink_map)
 """ardupilotmega's message ids and CRC_EXTRAs, for :func:`tssac_core.wire.framing.scan_frames`."""
@@ -121,11 +135,16 @@ class ConnectionSpec:
         return f"{self.kind}:{self.host}:{self.port}"
 
 
-def parse_connection(text: str) -> ConnectionSpec:
-    """``udpout:HOST:PORT``, ``udpin:HOST:PORT`` or ``udp:HOST:PORT``; ValueError (one line) otherwise."""
+def parse_connection(text: str) -> ConnectionSpec | SerialSpec:
+    """``udpout:HOST:PORT``, ``udpin:HOST:PORT``, ``udp:HOST:PORT`` or a serial ``DEVICE[,BAUD]``; ValueError (one
+    line) otherwise."""
+    if is_serial(text):
+        return parse_serial(text)
     parts = text.strip().split(":")
     if len(parts) != 3 or parts[0] not in ("udpout", "udpin", "udp"):
-        raise ValueError(f"connection {text!r}: expected udpout:HOST:PORT or udpin:HOST:PORT")
+        raise ValueError(
+            f"connection {text!r}: expected udpout:HOST:PORT, udpin:HOST:PORT or a serial device DEVICE,BAUD"
+        )
     kind = "udpin" if parts[0] == "udp" else parts[0]
     host = parts[1]
     try:
@@ -142,6 +161,8 @@ class LinkCounters:
     """What went over the link, by outcome."""
 
     datagrams_rx: int = 0
+    """UDP datagrams, or serial reads that returned bytes."""
+    bytes_rx: int = 0
     messages_rx: int = 0
     bad_data_rx: int = 0
     """Candidate frames dropped: bad CRC, unknown message id, or not decodable."""
@@ -155,16 +176,19 @@ class LinkCounters:
     foreign_rx: int = 0
     """Datagrams from an address other than the vehicle's, dropped unread."""
     truncated_rx: int = 0
-    """Candidate frames cut off by the end of their datagram."""
+    """Candidate frames cut off by the end of their datagram (serial: by the line falling idle)."""
+    frames_lost_rx: int = 0
+    """Frames missing from the vehicle's sequence numbers (lost by the link, or dropped by its sender)."""
     socket_errors_rx: int = 0
     messages_tx: int = 0
     bytes_tx: int = 0
     socket_errors_tx: int = 0
+    """Sends the socket refused; serial: frames dropped because the line's buffer was full."""
     command_retries: int = 0
 
 
 class MavLink:
-    """A MAVLink 2 link to one vehicle over UDP (see the module docstring).
+    """A MAVLink 2 link to one vehicle over UDP or a serial line (see the module docstring).
 
     ``source_system`` / ``source_component`` identify us (default 255 / 191, an onboard computer);
     ``target_system`` / ``target_component`` are learned from the vehicle's first autopilot heartbeat
@@ -202,22 +226,40 @@ class MavLink:
         self.tlog_error: str | None = None
         """Why the tlog is incomplete (a write or its close failed: a full disk), None while every byte went in."""
         self._closed = False
+        self._seq_gaps = SequenceGaps()
+        self._serial: SerialPort | None = None
+        self._framer = StreamFramer(DIALECT)
+        """Frames out of a serial line's bytes (unused on UDP)."""
+        self._serial_rx_s = 0.0
+        """When the serial line last delivered bytes (time.monotonic())."""
+        self._serial_dead = False
+        """The serial line failed (unplugged, the far end closed): it is read no more."""
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._kind = "serial" if isinstance(self.spec, SerialSpec) else self.spec.kind
         try:
-            if self.spec.kind == "udpin":
+            if isinstance(self.spec, SerialSpec):
+                self._serial = SerialPort(self.spec)
+            elif self.spec.kind == "udpin":
                 self._sock.bind((self.spec.host, self.spec.port))
             else:
                 self._peer = (socket.gethostbyname(self.spec.host), self.spec.port)
                 # A loopback vehicle is answered from a loopback address; anything else from any interface.
                 self._sock.bind(("127.0.0.1" if self._peer[0].startswith("127.") else "0.0.0.0", 0))
+        except SerialError as exc:
+            self._sock.close()
+            raise LinkError(f"connection {self.spec}: {exc}") from None
         except OSError as exc:
             self._sock.close()
             raise LinkError(f"connection {self.spec}: cannot open UDP socket ({exc.strerror or exc})") from None
-        self._sock.setblocking(False)
+        if self._serial is not None:
+            self._sock.close()  # a serial link has no socket
+        else:
+            self._sock.setblocking(False)
         self._poll = select.poll()
-        """Tells whether a datagram waits: cheaper than ``select.select`` and than a ``recvfrom`` that fails."""
-        self._poll.register(self._sock, select.POLLIN)
-        self.local_address: tuple[str, int] = self._sock.getsockname()[:2]
+        """Tells whether a datagram (or serial bytes) waits: cheaper than ``select.select`` and than a read that
+        fails."""
+        self._poll.register(self.fileno(), select.POLLIN)
+        self.local_address: tuple[str, int] = ("", 0) if self._serial is not None else self._sock.getsockname()[:2]
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         """Builds what we send and holds our identity, sequence and signing state."""
         self._setpoint = self.mav.set_position_target_local_ned_encode(
@@ -238,7 +280,7 @@ class MavLink:
             try:
                 self._open_tlog(Path(tlog_path))
             except LinkError:
-                self._sock.close()
+                self._close_transport()
                 raise
 
     # ----------------------------------------------------------------------------- set-up
@@ -264,21 +306,39 @@ class MavLink:
     def signing(self) -> bool:
         return self.mav.signing.secret_key is not None
 
+    @property
+    def baud(self) -> int | None:
+        """The serial line's baud rate; None on UDP."""
+        return self.spec.baud if isinstance(self.spec, SerialSpec) else None
+
+    @property
+    def line_bytes_per_s(self) -> float | None:
+        """Bytes a second the serial line carries each way (8N1); None on UDP."""
+        return None if self.baud is None else bytes_per_s(self.baud)
+
     def new_mission(self, tlog_path: Path | None) -> None:
         """Start afresh on the same socket after a mission reset (:mod:`tssac_core.wire.mission_reset`): drop
         what is queued or waiting in the socket (all of it from the previous mission: a reset vehicle is silent
         until it hears from us), learn the vehicle again from its next heartbeat, count from 0, and write the
         mission's own tlog. The signing state is kept: our timestamps only grow."""
         self._backlog.clear()
-        while True:
+        if self._serial is not None:
             try:
-                self._sock.recvfrom(MAX_DATAGRAM)
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError:
-                continue
+                self._serial.discard_input()
+            except OSError as exc:
+                raise LinkError(f"connection {self.spec}: {exc}") from None
+            self._framer = StreamFramer(DIALECT)
+        else:
+            while True:
+                try:
+                    self._sock.recvfrom(MAX_DATAGRAM)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:
+                    continue
         self.target_system, self.target_component = self._targets
         self.counters = LinkCounters()
+        self._seq_gaps.reset()
         self._close_tlog()
         self.tlog_error = None
         if tlog_path is not None:
@@ -298,7 +358,7 @@ class MavLink:
         self._close_tlog()
 
     def fileno(self) -> int:
-        return self._sock.fileno()
+        return self._serial.fileno() if self._serial is not None else self._sock.fileno()
 
     # ---------------------------------------------------------------------------- receive
 
@@ -314,8 +374,8 @@ class MavLink:
                 readable = self._poll.poll(remaining * units.MS_PER_S)  # milliseconds, rounded up
             except InterruptedError:  # a signal: let the caller look at its stop flag
                 return None
-            if readable:
-                self._pump()
+            if readable or (self._serial is not None and self._framer.pending):
+                self._pump()  # serial: also a frame cut by a line fallen idle
                 if self._backlog:
                     return self._pop()
             remaining = deadline - time.monotonic()
@@ -342,6 +402,9 @@ class MavLink:
         """Read and parse every waiting datagram (non-blocking)."""
         if self._closed:
             return
+        if self._serial is not None:
+            self._pump_serial()
+            return
         for n in range(max_datagrams):
             if n and not self._poll.poll(0):  # the socket is empty: no recvfrom to fail
                 return
@@ -359,23 +422,59 @@ class MavLink:
                 return
             now = time.monotonic()
             sender: tuple[str, int] = addr  # (host, port): an AF_INET socket's address
-            if self.spec.kind == "udpout" and sender != self._peer:
+            if self._kind == "udpout" and sender != self._peer:
                 self.counters.foreign_rx += 1
                 continue
             self.counters.datagrams_rx += 1
+            self.counters.bytes_rx += len(data)
             msgs = self._parse_datagram(data)
-            if self.spec.kind == "udpin" and sender != self._peer:
+            if self._kind == "udpin" and sender != self._peer:
                 # udpin: the first sender of an accepted message is the vehicle; with signing, a vehicle
                 # that moved is followed to the address its correctly signed frames now come from.
                 if not msgs or (self._peer is not None and self._verifier is None):
                     self.counters.foreign_rx += 1
                     continue
                 self._peer = sender
-            for msg in msgs:
-                self.counters.messages_rx += 1
-                if self._tlog is not None:
-                    self._log_frame(bytes(msg.get_msgbuf()))
-                self._backlog.append((msg, now))
+            self._queue(msgs, now)
+
+    def _queue(self, msgs: list[Message], now: float) -> None:
+        """Accepted messages, read at ``now``, into the backlog (and the tlog)."""
+        for msg in msgs:
+            self.counters.messages_rx += 1
+            if self._tlog is not None:
+                self._log_frame(bytes(msg.get_msgbuf()))
+            self._backlog.append((msg, now))
+
+    def _pump_serial(self) -> None:
+        """Read what the serial line holds and frame it (a frame still arriving waits for its next bytes)."""
+        assert self._serial is not None
+        if self._serial_dead:
+            return
+        try:
+            data = self._serial.read()
+        except SerialError as exc:  # unplugged, or the far end closed: nothing more comes
+            self.counters.socket_errors_rx += 1
+            _log.error("%s; the vehicle is silent from now on", exc)
+            self._poll.unregister(self._serial.fileno())  # a dead line polls readable for ever: waits sleep instead
+            self._serial_dead = True
+            return
+        now = time.monotonic()
+        framer = self._framer
+        before = dataclasses.replace(framer.counters)
+        if data:
+            self._serial_rx_s = now
+            self.counters.datagrams_rx += 1
+            self.counters.bytes_rx += len(data)
+            frames = framer.feed(data)
+        elif framer.pending and now - self._serial_rx_s > SERIAL_IDLE_S:
+            frames = framer.flush()
+        else:
+            return
+        after = framer.counters
+        self.counters.garbage_bytes_rx += after.garbage_bytes - before.garbage_bytes
+        self.counters.truncated_rx += after.cut - before.cut
+        self.counters.bad_data_rx += after.bad_crc - before.bad_crc + after.unknown_id - before.unknown_id
+        self._queue(self._accept(frames), now)
 
     def _parse_datagram(self, data: bytes) -> list[Message]:
         """The accepted messages of one datagram (with signing: correctly signed and fresh).
@@ -388,9 +487,13 @@ class MavLink:
         self.counters.garbage_bytes_rx += scan.garbage_bytes
         self.counters.truncated_rx += scan.truncated
         self.counters.bad_data_rx += scan.bad_crc + scan.unknown_id
+        return self._accept(scan.frames)
+
+    def _accept(self, frames: list[bytes]) -> list[Message]:
+        """The frames (CRC-checked) that pass signing, decoded; the vehicle's sequence gaps counted."""
         accepted: list[Message] = []
         verifier, decode = self._verifier, self._rx.decode
-        for frame in scan.frames:
+        for frame in frames:
             if verifier is not None and (verdict := verifier.check(frame)) is not Verdict.OK:
                 self._count_refused(verdict)
                 continue
@@ -401,6 +504,8 @@ class MavLink:
                 _log.debug("pymavlink failed on a frame: %r", exc)
                 continue
             accepted.append(msg)
+            if self.target_system == 0 or source(frame) == (self.target_system, self.target_component):
+                self.counters.frames_lost_rx += self._seq_gaps.observe(frame)
         return accepted
 
     def _count_refused(self, verdict: Verdict) -> None:
@@ -433,6 +538,18 @@ class MavLink:
 
     def _send_frames(self, buf: bytes, frames: int = 1) -> bool:
         """Send ``frames`` packed frames in one datagram; False if the socket refused it (counted, logged)."""
+        if self._serial is not None:
+            try:
+                sent = self._serial.write(buf)
+            except SerialError as exc:
+                sent = False
+                self._warn_rate_limited("serial write", self.counters.socket_errors_tx + 1, exc)
+            if not sent:
+                self.counters.socket_errors_tx += 1
+                return False
+            self.counters.messages_tx += frames
+            self.counters.bytes_tx += len(buf)
+            return True
         if self._peer is None:  # udpin before anyone has spoken to us
             return False
         try:
@@ -690,8 +807,14 @@ class MavLink:
         if self._closed:
             return
         self._closed = True
-        self._sock.close()
+        self._close_transport()
         self._close_tlog()
+
+    def _close_transport(self) -> None:
+        if self._serial is not None:
+            self._serial.close()
+        else:
+            self._sock.close()
 
     def __enter__(self) -> MavLink:
         return self

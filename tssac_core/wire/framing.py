@@ -103,10 +103,16 @@ class Scan:
     unknown_id: int = 0
     """Candidate frames of a message id the dialect does not know."""
     bad_crc: int = 0
+    consumed: int = 0
+    """Bytes of ``data`` the scan is done with: all of them, or (``stream``) up to the frame still arriving."""
 
 
-def scan_frames(data: bytes, dialect: Dialect) -> Scan:
-    """Every frame in ``data`` whose header, message id and CRC check out (module docstring)."""
+def scan_frames(data: bytes, dialect: Dialect, *, stream: bool = False) -> Scan:
+    """Every frame in ``data`` whose header, message id and CRC check out (module docstring).
+
+    ``stream``: ``data`` is the start of a byte stream, not a datagram (:mod:`tssac_core.wire.stream_framing`): a
+    candidate frame cut off by its end is not dropped but ends the scan, and :attr:`Scan.consumed` says where it
+    starts (the rest of it may come with the next bytes)."""
     out = Scan()
     crc_extras = dialect.crc_extras
     i, n = 0, len(data)
@@ -122,6 +128,8 @@ def scan_frames(data: bytes, dialect: Dialect) -> Scan:
             i += 1
             continue
         if i + size > n:
+            if stream:
+                break
             out.truncated += 1
             i += 1  # it may be garbage that happens to hold a start byte: rescan past it
             continue
@@ -137,6 +145,7 @@ def scan_frames(data: bytes, dialect: Dialect) -> Scan:
             continue
         out.frames.append(frame)
         i += size
+    out.consumed = i
     return out
 
 
