@@ -33,7 +33,7 @@ from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, run, seed_arg, write_json
-from tssac_core.reporting.progress import MissionBar
+from tssac_core.reporting.progress import MissionBar, progress_bar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.pilots import GUIDANCE, PilotSpec
@@ -146,14 +146,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     if args.workers > 1 or args.address is not None:
-        from tqdm import tqdm
-
         from tssac_core.parallel.mission_shards import fly_missions_sharded
         from tssac_core.parallel.ray_cluster import RayTarget
 
-        with tqdm(
-            total=len(indices), desc="missions", unit="mission", disable=args.no_progress, file=sys.stderr
-        ) as bar:
+        with progress_bar(total=len(indices), desc="missions", unit="mission", disable=args.no_progress) as bar:
             results = fly_missions_sharded(
                 scenario, pilots, indices, args.seed, args.workers, RayTarget(args.address), bar.update, shield=shield
             )
