@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.common.cli import command_description
+
 REPO = Path(__file__).resolve().parents[1]
 TARGET_P99_MS = 5.0
 TARGET_SPEED_X = 50.0
@@ -141,7 +143,7 @@ def summarise(name: str, run: dict[str, Any]) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--episodes", type=int, default=3, help="missions per pilot (default 3)")
     p.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "strike.yaml")
     p.add_argument(

@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 import tssac_core.sim.env  # noqa: F401  (registers the environments)
+from tssac_core.common.cli import command_description
 from tssac_core.sim.scenario import load, sample_layout
 from tssac_core.sim.world import World
 
@@ -66,7 +67,7 @@ def world_steps_per_s(n: int, seconds: float) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "env.json")
     p.add_argument("--seconds", type=float, default=3.0)
     args = p.parse_args()

@@ -26,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mavlink_bridge.estimation.state_filter import FilterModel, FilterNoise, VehicleStateFilter  # noqa: E402
+from tssac_core.common.cli import command_description
 
 _log = logging.getLogger("bench_filter")
 
@@ -183,7 +184,7 @@ def evaluate(track: Track, noise: FilterNoise, model: FilterModel, runs: int, se
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=command_description(__doc__))
     parser.add_argument("--runs", type=int, default=20, help="noise draws per case (default 20)")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     parser.add_argument("--json", type=Path, default=Path("benchmarks/results/filter.json"), help="output JSON path")

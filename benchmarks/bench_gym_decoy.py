@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
+from tssac_core.common.cli import command_description
 from tssac_core.deploy.numpy_actor import load_policy, team_pilots
 from tssac_core.deploy.policy import load_team
 from tssac_core.sim.missions import fly_missions
@@ -42,7 +43,7 @@ def gym_task_success(episodes: int, seed: int, teammates: object) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed", type=int, default=800001)
     args = p.parse_args()

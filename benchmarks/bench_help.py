@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parent.parent
 COMMANDS = (
     "tssac_core.train",
@@ -42,7 +44,7 @@ def one_run(module: str) -> tuple[float, float]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--runs", type=int, default=3)
     args = p.parse_args()
     rows = {}

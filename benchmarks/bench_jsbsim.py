@@ -32,6 +32,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (  # noqa: E402
     Wind,
     load_airframe,
 )
+from tssac_core.common.cli import command_description  # noqa: E402
 
 _log = logging.getLogger("bench_jsbsim")
 
@@ -170,7 +171,7 @@ def bench(airframe: str, steps: int, repeats: int, creations: int) -> JsbsimBenc
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=command_description(__doc__))
     parser.add_argument("--airframe", default="f16", help="bundled airframe name or YAML path")
     parser.add_argument("--steps", type=int, default=400, help="world steps of 0.1 s per airframe (default 400)")
     parser.add_argument("--repeats", type=int, default=8, help="rounds the steps are split into (default 8)")

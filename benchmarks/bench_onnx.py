@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tssac_core.common.cli import write_json  # noqa: E402
+from tssac_core.common.cli import command_description, write_json  # noqa: E402
 from tssac_core.deploy.export import export_onnx  # noqa: E402
 from tssac_core.deploy.numpy_actor import NumpyPolicy  # noqa: E402
 from tssac_core.deploy.onnx_actor import OnnxPolicy  # noqa: E402
@@ -167,7 +167,7 @@ def report(r: Result) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--models", type=Path, default=REPO / "models" / "tssac", help="the numpy actors (default shipped)")
     p.add_argument("--role", choices=[r.value for r in Role], default=Role.STRIKE.value, help="default strike")
     p.add_argument("--calls", type=int, default=20_000, help="timed calls per actor (default 20000)")

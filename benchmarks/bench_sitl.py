@@ -27,6 +27,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from mavlink_bridge.fly.crew import process_cpu_s
+from tssac_core.common.cli import command_description
 
 ROOT = Path(__file__).resolve().parents[1]
 SETPOINT_MASK = 1087
@@ -190,7 +191,7 @@ def run(steps: int, warmup: int, scenario: Path, timeout_s: float) -> dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument(
         "--steps", type=int, default=3000, help="measured steps (default 3000; the strike scenario caps at 4000)"
     )

@@ -53,6 +53,7 @@ sys.path.insert(0, str(ROOT))
 import tssac_core.sim.env  # noqa: E402,F401  (registers tssac/Decoy-v0)
 from tssac_core.algos.replay import ReplayBuffer  # noqa: E402
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, Variant  # noqa: E402
+from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.sim.env import RoleTask  # noqa: E402
 from tssac_core.sim.observation import ObservationMode  # noqa: E402
 from tssac_core.sim.scenario import Role, load  # noqa: E402
@@ -303,7 +304,7 @@ def matmul_seconds(matmuls: Sequence[Matmul], threads: int, repeats: int = 5, ca
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "train.json")
     p.add_argument("--seconds", type=float, default=3.0, help="per figure and thread count")
     p.add_argument("--rounds", type=int, default=3)

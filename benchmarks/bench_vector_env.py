@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
+from tssac_core.common.cli import command_description
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "tssac/Detect-v0"
@@ -39,7 +40,7 @@ def env_steps_per_s(env: gym.vector.VectorEnv, seconds: float) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--envs", type=int, default=64)
     p.add_argument("--seconds", type=float, default=10.0, help="measuring time per variant")
     args = p.parse_args()

@@ -19,11 +19,13 @@ import sys
 import time
 from pathlib import Path
 
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--algo", default="PPOLag", help="an OmniSafe algorithm (PPOLag, CPO, SACLag, ...)")
     p.add_argument("--role", default="Detect", choices=["Decoy", "Detect", "Strike"])
     p.add_argument("--epochs", type=int, default=3)

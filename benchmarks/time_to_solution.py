@@ -29,6 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_MIN = 60.0
 TARGET_SUCCESS = 0.95
@@ -107,7 +109,7 @@ def time_to_solution(run: Path, wall_s: float | None = None) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument(
         "runs", nargs="*", type=Path, default=[ROOT / "models" / "tssac"], help="run directories (default models/tssac)"
     )

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, run, seed_arg, write_json
+from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.reporting.progress import MissionBar, progress_bar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import fly_missions
@@ -41,7 +41,7 @@ from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario, load_for_
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=command_description(__doc__))
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--controller",

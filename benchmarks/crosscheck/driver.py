@@ -42,7 +42,7 @@ from benchmarks.crosscheck.settings import (
     parse_override,
     shared_settings,
 )
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import UsageError, command_description
 from tssac_core.sim.scenario import load
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.wall_time import Ended, read_invocations
@@ -70,7 +70,7 @@ def seeds_of(text: str) -> list[int]:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="benchmarks/crosscheck_omnisafe.py", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="benchmarks/crosscheck_omnisafe.py", description=command_description(__doc__))
     p.add_argument("--report", action="store_true", help="pool the rows' seeds and print/write the markdown table")
     p.add_argument("--rows", type=Path, default=DEFAULT_ROWS, help="results file, one row per (impl, algo, seed)")
     p.add_argument("--report-out", type=Path, help="--report: the markdown file (default: --rows with .md)")

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.crosscheck.actor_file import OmniSafeActor, write_actor
+from tssac_core.common.cli import command_description
 
 EXPORT_TOLERANCE = 1e-4
 """Largest |numpy - torch| action difference accepted on the check's observations."""
@@ -107,7 +108,7 @@ def export(cfgs: Any, checkpoint: Path, out: Path) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--cfgs", type=Path, required=True, help="custom_cfgs JSON with 'algo' (settings.omnisafe_cfgs)")
     p.add_argument("--out", type=Path, required=True, help="run directory: actor.npz, train.json, OmniSafe's logs")
     args = p.parse_args(argv)
