@@ -1,8 +1,8 @@
 """OmniSafe trains one TSSAC role for a few epochs through the adapter (tssac_core.train.omnisafe_env): the
 README's snippet, run in OmniSafe's own environment (it pins gymnasium 0.28.1), not in the project's.
 
-    bash ../shared/tools/omnisafe_venv.sh /work/omnisafe-venv && /work/omnisafe-venv/bin/pip install --no-deps -e .
-    /work/omnisafe-venv/bin/python benchmarks/omnisafe_train.py [--algo PPOLag] [--role Detect] [--epochs 3]
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) benchmarks/omnisafe_train.py [--algo PPOLag] [--role Detect] \
+        [--epochs 3]
 
 Prints OmniSafe's per-epoch EpRet and EpCost and writes benchmarks/results/omnisafe_train.json. The detect role
 is trained with the shipped decoy flying (``teammates`` = models/tssac, ``teammate_roles`` = ["decoy"]), as the

@@ -42,13 +42,14 @@ from benchmarks.crosscheck.settings import (
     parse_override,
     shared_settings,
 )
+from benchmarks.omnisafe_env import location, python_of
 from tssac_core.common.cli import UsageError, command_description
 from tssac_core.sim.scenario import load
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.wall_time import Ended, read_invocations
 
 DEFAULT_ROWS = ROOT / "benchmarks" / "results" / "crosscheck_omnisafe.json"
-DEFAULT_OMNISAFE_PYTHON = "/work/omnisafe-venv/bin/python"
+DEFAULT_OMNISAFE_PYTHON = str(python_of(location()))  # benchmarks/omnisafe_env.py's environment
 
 
 def words(text: str, allowed: Sequence[str], what: str) -> list[str]:
@@ -174,7 +175,9 @@ def run_jobs(args: argparse.Namespace) -> int:
     seeds = seeds_of(args.seeds)
     overrides = dict(parse_override(o) for o in args.omnisafe_set)
     if "omnisafe" in impls and not Path(args.omnisafe_python).is_file():
-        raise UsageError(f"--omnisafe-python: no such file {args.omnisafe_python} (../shared/tools/omnisafe_venv.sh)")
+        raise UsageError(
+            f"--omnisafe-python: no such file {args.omnisafe_python} (python benchmarks/omnisafe_env.py builds it)"
+        )
     scenario = load(SCENARIO)
     shared = shared_settings(yaml.safe_load(PRESET.read_text()), scenario.cost_limit, TrainConfig.cost_margin_km)
     the_setting = setting(budget, args.episodes, args.eval_seed, scenario.cost_limit)

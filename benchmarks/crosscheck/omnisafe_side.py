@@ -2,7 +2,7 @@
 from a ``custom_cfgs`` JSON (settings.omnisafe_cfgs), then export the last saved actor to ``OUT/actor.npz``
 (actor_file) after checking that the numpy actor computes what OmniSafe's does, and write ``OUT/train.json``.
 
-    PYTHONPATH=. /work/omnisafe-venv/bin/python -m benchmarks.crosscheck.omnisafe_side --cfgs CFGS.json --out DIR
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) -m benchmarks.crosscheck.omnisafe_side --cfgs CFGS.json --out DIR
 
 The driver (benchmarks/crosscheck_omnisafe.py) writes CFGS.json and runs this; the algorithm is the cfgs' "algo".
 """
@@ -123,7 +123,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         import omnisafe.algorithms.algo_wrapper as wrapper
     except ImportError:
         print(
-            "error: omnisafe is not importable: run this with OmniSafe's python (/work/omnisafe-venv)", file=sys.stderr
+            "error: omnisafe is not importable: run this with OmniSafe's python "
+            "(python benchmarks/omnisafe_env.py prints it)",
+            file=sys.stderr,
         )
         return 2
     import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDetect-v0)
