@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from tssac_core.common.cli import command_description
 
 REPO = Path(__file__).resolve().parents[1]
@@ -149,7 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument(
         "--models", type=Path, default=REPO / "models" / "tssac", help="trained policies (skipped if missing)"
     )
-    p.add_argument("--json", type=Path, default=REPO / "benchmarks" / "results" / "bridge.json")
+    add_json_option(p, "bridge")
     p.add_argument(
         "--full-telemetry",
         action="store_true",
@@ -198,9 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "pilots": figures,
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "loadavg_after": os.getloadavg()},
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    write_figures(args.json, out)
     return 0
 
 

@@ -8,7 +8,8 @@ evaluation layouts (mission k: layout seed 2600001 + k).
 
 Runs in the project's environment; OmniSafe's side runs in OmniSafe's (``--omnisafe-python``, default
 the interpreter of benchmarks/omnisafe_env.py's environment, which that script builds). Every finished (impl, algo,
-seed) row is written to ``--rows`` at once (default benchmarks/results/crosscheck_omnisafe.json) and skipped on a
+seed) row is written to ``--rows`` at once (default outside the checkout, benchmarks/output.py; the committed rows are
+benchmarks/results/crosscheck_omnisafe.json) and skipped on a
 rerun; a run killed part-way resumes (ours with --resume) or starts again (OmniSafe). Run directories: ``--work``
 (default runs/crosscheck). What is aligned between the sides and what is not: benchmarks/crosscheck/README.md.
 """

@@ -29,6 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option  # noqa: E402
 from tssac_core.common.cli import command_description
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,7 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument(
         "--wall-s", type=float, help="the run's whole wall time, if its train.log is not there (one run only)"
     )
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "time_to_solution.json")
+    add_json_option(p, "time_to_solution")
     a = p.parse_args(argv)
     if a.wall_s is not None and len(a.runs) != 1:
         raise SystemExit("--wall-s applies to one run")

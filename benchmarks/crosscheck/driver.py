@@ -43,12 +43,13 @@ from benchmarks.crosscheck.settings import (
     shared_settings,
 )
 from benchmarks.omnisafe_env import location, python_of
+from benchmarks.output import default_json
 from tssac_core.common.cli import UsageError, command_description
 from tssac_core.sim.scenario import load
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.wall_time import Ended, read_invocations
 
-DEFAULT_ROWS = ROOT / "benchmarks" / "results" / "crosscheck_omnisafe.json"
+DEFAULT_ROWS = default_json("crosscheck_omnisafe")  # the committed rows: --rows benchmarks/results/...
 DEFAULT_OMNISAFE_PYTHON = str(python_of(location()))  # benchmarks/omnisafe_env.py's environment
 
 
