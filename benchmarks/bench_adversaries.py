@@ -41,7 +41,7 @@ from tqdm import tqdm
 
 import tssac_core
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, run, write_json
+from tssac_core.common.cli import UsageError, command_description, run, write_json
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -101,7 +101,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def parse_args(argv: Sequence[str] | None) -> BenchConfig:
-    p = _Parser(prog="python benchmarks/bench_adversaries.py", description=__doc__.split("\n")[0])
+    p = _Parser(prog="python benchmarks/bench_adversaries.py", description=command_description(__doc__))
     p.add_argument("--adversaries", default=",".join(ADVERSARY_NAMES), help="comma-separated (default: all)")
     p.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="batched missions per adversary/scenario")
     p.add_argument("--sitl-missions", type=int, default=DEFAULT_SITL_MISSIONS, help="SITL missions per ... (0: none)")

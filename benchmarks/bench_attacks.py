@@ -50,6 +50,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 import tssac_core  # noqa: E402
 from sim_vehicles.config import SitlConfig  # noqa: E402
 from sim_vehicles.world_runner import WorldRunner  # noqa: E402
+from tssac_core.common.cli import command_description
 from tssac_core.sim.scenario import LinkModel, dump, load  # noqa: E402
 
 M = mavlink2
@@ -367,7 +368,7 @@ CASES: dict[str, Callable[[], dict[str, Any]]] = {
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--cases", default=",".join(CASES), help="comma-separated case names (default: all)")
     args = p.parse_args()

@@ -34,6 +34,10 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description
+
 REPO = Path(__file__).resolve().parents[1]
 TARGET_P99_MS = 5.0
 TARGET_SPEED_X = 50.0
@@ -141,13 +145,13 @@ def summarise(name: str, run: dict[str, Any]) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--episodes", type=int, default=3, help="missions per pilot (default 3)")
     p.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "strike.yaml")
     p.add_argument(
         "--models", type=Path, default=REPO / "models" / "tssac", help="trained policies (skipped if missing)"
     )
-    p.add_argument("--json", type=Path, default=REPO / "benchmarks" / "results" / "bridge.json")
+    add_json_option(p, "bridge")
     p.add_argument(
         "--full-telemetry",
         action="store_true",
@@ -196,9 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "pilots": figures,
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "loadavg_after": os.getloadavg()},
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    write_figures(args.json, out)
     return 0
 
 

@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -117,7 +119,7 @@ def truth_steps(logs: Path) -> dict[str, list[str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--tree", action="append", default=[], metavar="NAME=DIR", help="a checkout to fly from")
     p.add_argument(
         "--variant", action="append", default=[], metavar="NAME=ARGS", help="this checkout with these fly arguments"

@@ -9,9 +9,9 @@ operations). The single env is the batched world with N = 1.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -19,6 +19,10 @@ import gymnasium as gym
 import numpy as np
 
 import tssac_core.sim.env  # noqa: F401  (registers the environments)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description
 from tssac_core.sim.scenario import load, sample_layout
 from tssac_core.sim.world import World
 
@@ -66,8 +70,8 @@ def world_steps_per_s(n: int, seconds: float) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "env.json")
+    p = argparse.ArgumentParser(description=command_description(__doc__))
+    add_json_option(p, "env")
     p.add_argument("--seconds", type=float, default=3.0)
     args = p.parse_args()
     figures = {
@@ -87,9 +91,7 @@ def main() -> None:
     for key, value in figures.items():
         if isinstance(value, float):
             print(f"{key:40s} {value:14,.0f}")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(figures, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    write_figures(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ update and per predict_to call (us).
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import sys
@@ -25,7 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from mavlink_bridge.estimation.state_filter import FilterModel, FilterNoise, VehicleStateFilter  # noqa: E402
+from tssac_core.common.cli import command_description
 
 _log = logging.getLogger("bench_filter")
 
@@ -183,10 +184,10 @@ def evaluate(track: Track, noise: FilterNoise, model: FilterModel, runs: int, se
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=command_description(__doc__))
     parser.add_argument("--runs", type=int, default=20, help="noise draws per case (default 20)")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    parser.add_argument("--json", type=Path, default=Path("benchmarks/results/filter.json"), help="output JSON path")
+    add_json_option(parser, "filter")
     args = parser.parse_args(argv)
     if args.runs < 1:
         parser.error("--runs must be >= 1")
@@ -230,9 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             per_case[case_name] = evaluate(track, noise, model, args.runs, args.seed)
             _log.info("%-28s %-34s %s", track_name, case_name, per_case[case_name])
         track_results[track_name] = per_case
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(results, indent=2) + "\n")
-    _log.info("wrote %s", args.json)
+    write_figures(args.json, results)
     return 0
 
 

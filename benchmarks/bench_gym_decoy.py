@@ -3,7 +3,7 @@
 Mission k of ``evaluate --seed S`` flies the layout of ``reset(seed=S + k)`` here, so both fly the same layouts.
 In ``evaluate`` the whole shipped team flies; here the decoy learns-role env flies with the guidance controller
 for the teammates (the env's default) and, second, with the shipped detect and strike actors. Prints the decoy's
-task success in each and writes benchmarks/results/gym_decoy.json.
+task success in each and writes them as JSON (``--json``, benchmarks/output.py).
 
     python benchmarks/bench_gym_decoy.py [--episodes 100] [--seed 800001]
 """
@@ -11,7 +11,7 @@ task success in each and writes benchmarks/results/gym_decoy.json.
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 import time
 from pathlib import Path
 
@@ -19,6 +19,10 @@ import gymnasium as gym
 import numpy as np
 
 import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description
 from tssac_core.deploy.numpy_actor import load_policy, team_pilots
 from tssac_core.deploy.policy import load_team
 from tssac_core.sim.missions import fly_missions
@@ -42,9 +46,10 @@ def gym_task_success(episodes: int, seed: int, teammates: object) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed", type=int, default=800001)
+    add_json_option(p, "gym_decoy")
     args = p.parse_args()
     scenario = load(ROOT / "scenarios" / "random.yaml")
     t0 = time.perf_counter()
@@ -67,9 +72,7 @@ def main() -> None:
     print(f"  evaluate (shipped team, batched world)        {evaluate_rate:.1%}")
     print(f"  gym.make, guidance teammates (env default)    {guidance:.1%}")
     print(f"  gym.make, shipped detect and strike actors    {shipped:.1%}")
-    out = ROOT / "benchmarks" / "results" / "gym_decoy.json"
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_figures(args.json, result)
     assert np.isfinite(evaluate_rate)
 
 

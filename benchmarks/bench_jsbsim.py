@@ -13,7 +13,6 @@ still varies with the load (twofold here): each figure is the minimum and the me
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import statistics
@@ -25,6 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from sim_vehicles.dynamics.jsbsim_airframe import (  # noqa: E402
     AirframeSpec,
     JsbsimAirframe,
@@ -32,6 +32,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (  # noqa: E402
     Wind,
     load_airframe,
 )
+from tssac_core.common.cli import command_description  # noqa: E402
 
 _log = logging.getLogger("bench_jsbsim")
 
@@ -170,12 +171,12 @@ def bench(airframe: str, steps: int, repeats: int, creations: int) -> JsbsimBenc
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=command_description(__doc__))
     parser.add_argument("--airframe", default="f16", help="bundled airframe name or YAML path")
     parser.add_argument("--steps", type=int, default=400, help="world steps of 0.1 s per airframe (default 400)")
     parser.add_argument("--repeats", type=int, default=8, help="rounds the steps are split into (default 8)")
     parser.add_argument("--creations", type=int, default=5, help="airframes created for the creation figure")
-    parser.add_argument("--json", type=Path, default=Path("/tmp/bench_jsbsim.json"), help="where the figures go")
+    add_json_option(parser, "jsbsim")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     result = bench(args.airframe, args.steps, args.repeats, args.creations)
@@ -196,9 +197,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     for speed, accel, decel in zip(result.limit_speeds_m_s, result.max_accel_m_s2, result.max_decel_m_s2):
         _log.info("from %.0f m/s: %+.2f m/s^2 at full throttle, %+.2f at none (15 s means)", speed, accel, decel)
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(asdict(result), indent=2) + "\n")
-    _log.info("wrote %s", args.json)
+    write_figures(args.json, asdict(result))
     return 0
 
 

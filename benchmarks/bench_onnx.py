@@ -6,7 +6,7 @@ machine does falls on both alike. Each call is timed alone (``time.perf_counter_
 the 99th percentile over the calls, and their ratio ONNX / numpy (target: within 2x). A batch of observations (the
 batched evaluation's call) is timed too, for reference.
 
-    python benchmarks/bench_onnx.py [--role strike] [--calls 20000] [--json /tmp/tssac-benchmarks/bench_onnx.json]
+    python benchmarks/bench_onnx.py [--role strike] [--calls 20000] [--json FILE]
 
 The JSON goes where ``--json`` says, by default under the system's temporary directory (never into the checkout).
 """
@@ -27,7 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tssac_core.common.cli import write_json  # noqa: E402
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.deploy.export import export_onnx  # noqa: E402
 from tssac_core.deploy.numpy_actor import NumpyPolicy  # noqa: E402
 from tssac_core.deploy.onnx_actor import OnnxPolicy  # noqa: E402
@@ -35,7 +36,6 @@ from tssac_core.sim.observation import observation_bounds  # noqa: E402
 from tssac_core.sim.scenario import Role  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_JSON = Path(tempfile.gettempdir()) / "tssac-benchmarks" / "bench_onnx.json"
 TARGET_RATIO = 2.0
 """The target: the ONNX actor's median decision time within this factor of the numpy actor's."""
 
@@ -167,13 +167,13 @@ def report(r: Result) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--models", type=Path, default=REPO / "models" / "tssac", help="the numpy actors (default shipped)")
     p.add_argument("--role", choices=[r.value for r in Role], default=Role.STRIKE.value, help="default strike")
     p.add_argument("--calls", type=int, default=20_000, help="timed calls per actor (default 20000)")
     p.add_argument("--batch", type=int, default=1000, help="observations in the batch call (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="the observations' seed (default 0)")
-    p.add_argument("--json", type=Path, default=DEFAULT_JSON, help=f"write the figures here (default {DEFAULT_JSON})")
+    add_json_option(p, "onnx")
     args = p.parse_args(argv)
     if args.calls < 100 or args.batch < 1:
         p.error("--calls must be >= 100 and --batch >= 1")
@@ -181,8 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         export_onnx(args.models, Path(tmp))
         result = measure(args.models, Path(tmp), Role(args.role), args.calls, min(args.batch, args.calls), args.seed)
     print(report(result))
-    write_json(args.json, dataclasses.asdict(result))
-    print(f"wrote {args.json}")
+    write_figures(args.json, dataclasses.asdict(result))
     return 0
 
 

@@ -51,6 +51,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.output import add_json_option  # noqa: E402
+from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.experiments.evaluations import team_digest  # noqa: E402
 from tssac_core.experiments.grid import load_grid  # noqa: E402
 from tssac_core.train.wall_time import training_wall_s  # noqa: E402
@@ -505,7 +507,7 @@ def grid_estimate(nodes: tuple[int, ...], cpus_per_node: int) -> dict[str, Any]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--parts", default="executor,idle,evaluate,evaluate_warm,fly,two_nodes,estimate")
     p.add_argument(
         "--steps", type=int, default=600, help="learner decisions per epoch of the two timed jobs (default 600)"
@@ -519,7 +521,7 @@ def main() -> None:
         default=None,
         help="fly: the SITL world in real time times X (default: lockstep); JSON key fly_realtime_<X>x",
     )
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "ray.json")
+    add_json_option(p, "ray")
     a = p.parse_args()
     parts = a.parts.split(",")
     started = time.strftime("%Y-%m-%d %H:%M")

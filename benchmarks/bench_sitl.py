@@ -14,7 +14,6 @@ Prints the steps per second (and the SITL process's CPU time per step) and write
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import select
@@ -26,7 +25,10 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from mavlink_bridge.fly.crew import process_cpu_s
+from tssac_core.common.cli import command_description
 
 ROOT = Path(__file__).resolve().parents[1]
 SETPOINT_MASK = 1087
@@ -190,16 +192,14 @@ def run(steps: int, warmup: int, scenario: Path, timeout_s: float) -> dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument(
         "--steps", type=int, default=3000, help="measured steps (default 3000; the strike scenario caps at 4000)"
     )
     p.add_argument("--warmup", type=int, default=100, help="steps before the clock starts (default 100)")
     p.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "strike.yaml")
     p.add_argument("--timeout-s", type=float, default=300.0, help="give up after this long")
-    p.add_argument(
-        "--json", type=Path, default=ROOT / "benchmarks" / "results" / "sitl.json", help="write the result here"
-    )
+    add_json_option(p, "sitl")
     args = p.parse_args(argv)
     try:
         result = run(args.steps, args.warmup, args.scenario, args.timeout_s)
@@ -210,8 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         f"lockstep, 3 vehicles: {result['steps_per_s']} world steps/s ({result['realtime_factor']}x real time), "
         f"SITL CPU {result['sitl_cpu_ms_per_step']} ms/step over {result['steps']} steps"
     )
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2) + "\n")
+    write_figures(args.json, result)
     return 0
 
 

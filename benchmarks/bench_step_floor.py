@@ -48,6 +48,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from tssac_core.common.cli import command_description  # noqa: E402
+
 COMPANIONS = 3
 SETPOINT_BYTES = 53  # one signed SET_POSITION_TARGET_LOCAL_NED frame carries about this much
 DT_S = 0.1
@@ -186,7 +188,7 @@ def measure_policy(models: Path, decisions: int) -> dict[str, dict[str, float]]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--rounds", type=int, default=20_000, help="bare lockstep rounds (and filter steps) to time")
     p.add_argument("--datagram-bytes", type=int, default=150, help="the world's datagram per companion and step")
     p.add_argument("--models", type=Path, default=REPO / "models" / "tssac", help="the actors to time")

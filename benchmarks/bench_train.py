@@ -32,7 +32,6 @@ On a shared machine, GNU OpenMP's spinning threads collapse when another process
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -51,8 +50,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import tssac_core.sim.env  # noqa: E402,F401  (registers tssac/Decoy-v0)
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from tssac_core.algos.replay import ReplayBuffer  # noqa: E402
 from tssac_core.algos.sac_lagrangian import SacConfig, SacLagrangian, Variant  # noqa: E402
+from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.sim.env import RoleTask  # noqa: E402
 from tssac_core.sim.observation import ObservationMode  # noqa: E402
 from tssac_core.sim.scenario import Role, load  # noqa: E402
@@ -303,8 +304,8 @@ def matmul_seconds(matmuls: Sequence[Matmul], threads: int, repeats: int = 5, ca
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "train.json")
+    p = argparse.ArgumentParser(description=command_description(__doc__))
+    add_json_option(p, "train")
     p.add_argument("--seconds", type=float, default=3.0, help="per figure and thread count")
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--threads", default="1,2")
@@ -396,9 +397,7 @@ def main() -> None:
         figures["machine"]["stable_baselines3"] = stable_baselines3.__version__
     if load_before[0] > 0.5:
         print(f"note: load average {load_before[0]:.1f} before the run; other processes shared the machine")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(figures, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    write_figures(args.json, figures)
 
 
 if __name__ == "__main__":

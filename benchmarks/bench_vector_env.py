@@ -3,7 +3,8 @@ against ``SyncVectorEnv`` of 64 single envs (issue 42's target: >= 10x).
 
 Both step the detect role with the guidance controller flying the teammates, the env's defaults (route
 observation, one decision per second = 10 world steps), random actions, autoreset in the same step. A step of
-the vector env is 64 env steps. Prints the figures and writes benchmarks/results/vector_env.json.
+the vector env is 64 env steps. Prints the figures and writes them as JSON
+(``--json``, benchmarks/output.py).
 
     python benchmarks/bench_vector_env.py [--envs 64] [--seconds 10]
 """
@@ -11,9 +12,9 @@ the vector env is 64 env steps. Prints the figures and writes benchmarks/results
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -22,6 +23,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 import tssac_core.sim.env  # noqa: F401  (registers tssac/<Role>-v0)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "tssac/Detect-v0"
@@ -39,9 +44,10 @@ def env_steps_per_s(env: gym.vector.VectorEnv, seconds: float) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--envs", type=int, default=64)
     p.add_argument("--seconds", type=float, default=10.0, help="measuring time per variant")
+    add_json_option(p, "vector_env")
     args = p.parse_args()
     vector = gym.make_vec(ENV_ID, num_envs=args.envs, vectorization_mode="vector_entry_point")
     sync = gym.make_vec(
@@ -63,9 +69,7 @@ def main() -> None:
     print(f"  make_vec (vector_entry_point, batched world)  {fast:10.0f} env steps/s")
     print(f"  SyncVectorEnv of {args.envs} single envs            {slow:10.0f} env steps/s")
     print(f"  speed-up {fast / slow:.1f}x   (1-minute load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
-    out = ROOT / "benchmarks" / "results" / "vector_env.json"
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_figures(args.json, result)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -83,7 +85,7 @@ def row(campaign: Campaign, result: dict[str, Any]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--out", type=Path, required=True, help="directory for the campaigns' JSON (resumes from it)")
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--seed", type=int, default=5700001)

@@ -7,9 +7,10 @@ evaluation layouts (mission k: layout seed 2600001 + k).
     python benchmarks/crosscheck_omnisafe.py --report          # pool the seeds: markdown table
 
 Runs in the project's environment; OmniSafe's side runs in OmniSafe's (``--omnisafe-python``, default
-/work/omnisafe-venv/bin/python, built by ../shared/tools/omnisafe_venv.sh). Every finished (impl, algo, seed) row is
-written to ``--rows`` at once (default benchmarks/results/crosscheck_omnisafe.json) and skipped on a rerun; a run
-killed part-way resumes (ours with --resume) or starts again (OmniSafe). Run directories: ``--work``
+the interpreter of benchmarks/omnisafe_env.py's environment, which that script builds). Every finished (impl, algo,
+seed) row is written to ``--rows`` at once (default outside the checkout, benchmarks/output.py; the committed rows are
+benchmarks/results/crosscheck_omnisafe.json) and skipped on a
+rerun; a run killed part-way resumes (ours with --resume) or starts again (OmniSafe). Run directories: ``--work``
 (default runs/crosscheck). What is aligned between the sides and what is not: benchmarks/crosscheck/README.md.
 """
 

@@ -1,10 +1,10 @@
 """OmniSafe trains one TSSAC role for a few epochs through the adapter (tssac_core.train.omnisafe_env): the
 README's snippet, run in OmniSafe's own environment (it pins gymnasium 0.28.1), not in the project's.
 
-    bash ../shared/tools/omnisafe_venv.sh /work/omnisafe-venv && /work/omnisafe-venv/bin/pip install --no-deps -e .
-    /work/omnisafe-venv/bin/python benchmarks/omnisafe_train.py [--algo PPOLag] [--role Detect] [--epochs 3]
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) benchmarks/omnisafe_train.py [--algo PPOLag] [--role Detect] \
+        [--epochs 3]
 
-Prints OmniSafe's per-epoch EpRet and EpCost and writes benchmarks/results/omnisafe_train.json. The detect role
+Prints OmniSafe's per-epoch EpRet and EpCost and writes them as JSON (``--json``, benchmarks/output.py). The detect role
 is trained with the shipped decoy flying (``teammates`` = models/tssac, ``teammate_roles`` = ["decoy"]), as the
 curriculum trains it; ``--teammates guidance`` flies the guidance controller instead.
 """
@@ -13,17 +13,20 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # benchmarks.*, and tssac_core in OmniSafe's environment (PYTHONPATH=. also does)
+
+from benchmarks.output import add_json_option, write_figures  # noqa: E402
+from tssac_core.common.cli import command_description  # noqa: E402
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--algo", default="PPOLag", help="an OmniSafe algorithm (PPOLag, CPO, SACLag, ...)")
     p.add_argument("--role", default="Detect", choices=["Decoy", "Detect", "Strike"])
     p.add_argument("--epochs", type=int, default=3)
@@ -31,14 +34,13 @@ def main() -> None:
     p.add_argument("--teammates", default=str(ROOT / "models" / "tssac"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=ROOT / "runs" / "omnisafe")
+    add_json_option(p, "omnisafe_train")
     args = p.parse_args()
 
     import omnisafe  # OmniSafe's own environment only
     import omnisafe.algorithms.algo_wrapper as wrapper
 
     import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDecoy-v0, TssacDetect-v0, TssacStrike-v0)
-
-    sys.path.insert(0, str(ROOT))
     from benchmarks.crosscheck.omnisafe_side import default_cfgs_with_env_section
 
     # OmniSafe 0.5.0's off-policy yamls (SACLag, ...) have no env_cfgs section, so it refuses ours without this.
@@ -84,9 +86,8 @@ def main() -> None:
         "wall_s": round(wall, 1),
         "progress_csv": str(progress.relative_to(ROOT)) if progress.is_relative_to(ROOT) else str(progress),
     }
-    out = ROOT / "benchmarks" / "results" / "omnisafe_train.json"
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"trained {args.algo} on Tssac{args.role}-v0 for {args.epochs} epochs in {wall:.0f} s; wrote {out}")
+    print(f"trained {args.algo} on Tssac{args.role}-v0 for {args.epochs} epochs in {wall:.0f} s")
+    write_figures(args.json, result)
 
 
 if __name__ == "__main__":

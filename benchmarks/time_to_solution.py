@@ -29,6 +29,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.output
+from benchmarks.output import add_json_option  # noqa: E402
+from tssac_core.common.cli import command_description
+
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_MIN = 60.0
 TARGET_SUCCESS = 0.95
@@ -107,14 +111,14 @@ def time_to_solution(run: Path, wall_s: float | None = None) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument(
         "runs", nargs="*", type=Path, default=[ROOT / "models" / "tssac"], help="run directories (default models/tssac)"
     )
     p.add_argument(
         "--wall-s", type=float, help="the run's whole wall time, if its train.log is not there (one run only)"
     )
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "time_to_solution.json")
+    add_json_option(p, "time_to_solution")
     a = p.parse_args(argv)
     if a.wall_s is not None and len(a.runs) != 1:
         raise SystemExit("--wall-s applies to one run")

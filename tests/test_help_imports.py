@@ -45,6 +45,33 @@ def test_help_loads_no_heavy_package(module):
     assert report["code"] in (0, None), done.stderr
     assert "usage:" in done.stdout
     assert report["heavy"] == [], f"{module} --help imported {report['heavy']}"
+    description = done.stdout.split("\n\n")[1]  # after the usage block, before the arguments
+    assert not description.rstrip().endswith(":"), f"{module} --help has no description"
+    assert description.rstrip().endswith("."), f"{module} --help's description is cut: {description!r}"
+    assert "``" not in description
+
+
+def test_every_description_taken_from_a_docstring_is_its_whole_first_paragraph():
+    """The scripts and commands whose ``--help`` says their docstring's first paragraph (command_description): it ends
+    a sentence. The first line alone cut ``experiments --help`` mid-sentence."""
+    import ast
+    from pathlib import Path
+
+    from tssac_core.common.cli import command_description
+
+    root = Path(__file__).resolve().parent.parent
+    users = [
+        path
+        for folder in ("tssac_core", "mavlink_bridge", "sim_vehicles", "benchmarks")
+        for path in sorted((root / folder).rglob("*.py"))
+        if "command_description(__doc__)" in path.read_text()
+    ]
+    assert len(users) >= 20
+    for path in users:
+        text = command_description(ast.get_docstring(ast.parse(path.read_text()), clean=False))
+        assert text.endswith((".", ".)")), f"{path.relative_to(root)}: {text!r}"
+    assert command_description("``x``: a first line\nand its second.\n\nMore.") == "x: a first line and its second."
+    assert "__doc__.split" not in "".join(p.read_text() for p in users)
 
 
 def test_the_probe_sees_a_heavy_import():

@@ -53,7 +53,7 @@ def test_the_plot_legend_names_every_kind_in_plain_words(tmp_path, monkeypatch):
     assert not any(w.startswith(("R1", "R2", "R3", "R4")) or " R" in w for w in words)
 
 
-def test_the_film_shows_what_happened_by_then(tmp_path):
+def test_the_film_shows_what_happened_by_then(tmp_path, capsys):
     steps = 48  # one frame per step (a longer mission is drawn at a stride: test_frame_steps_keep_the_last_step)
     film = MissionFilm(
         layout=layout(),
@@ -64,7 +64,9 @@ def test_the_film_shows_what_happened_by_then(tmp_path):
         backup_steps={"decoy": [(8, 16)]},
         title="test",
     )
-    out = write_film(film, tmp_path / "m.gif")
+    out = write_film(film, tmp_path / "m.gif", progress=True)
+    said = capsys.readouterr().err
+    assert "drawing m.gif" in said and f"/{len(frame_steps(steps))}" in said  # a bar of the frames while it draws
     with Image.open(out) as gif:
         # Pillow folds identical frames together: at most one frame per drawn step.
         assert 10 < gif.n_frames <= len(frame_steps(steps)) and gif.size[0] > gif.size[1]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from tssac_core.reporting.progress import StepCostModel, TimeLeft, format_seconds
+from tssac_core.reporting.progress import StepCostModel, TimeLeft, format_seconds, progress_bar
 
 
 def schedule(missions: int, cap: int, ends: list[int]) -> list[tuple[int, int]]:
@@ -50,3 +50,30 @@ def test_time_left_is_a_bound_that_tracks_a_bursty_batch():
 
 def test_format_seconds():
     assert [format_seconds(s) for s in (11.4, 185, 3723)] == ["11 s", "3:05", "1:02:03"]
+
+
+def test_log_lines_print_above_the_bar_not_on_its_line(capsys):
+    """A log line written while a bar is open (fly's "mission 0: started") gets a line of its own: after the bar's last
+    carriage return on each line of stderr comes either the bar or the log line, never the bar then the log line."""
+    import logging
+    import sys
+
+    root = logging.getLogger()
+    console = logging.StreamHandler(sys.stderr)  # what basicConfig makes, on the captured stderr
+    console.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root.addHandler(console)
+    old_level = root.level
+    root.setLevel(logging.INFO)
+    try:
+        with progress_bar(total=3, desc="missions", mininterval=0) as bar:
+            bar.update(1)
+            logging.getLogger("tssac.test").info("mission 1: started")
+            bar.update(2)
+    finally:
+        root.removeHandler(console)
+        root.setLevel(old_level)
+    lines = capsys.readouterr().err.split("\n")
+    shown = [line.split("\r")[-1] for line in lines]  # what a terminal shows of each line
+    assert "INFO tssac.test: mission 1: started" in shown
+    assert not any("missions" in line and "INFO" in line for line in shown)
+    assert any(line.startswith("missions: 100%") for line in shown)  # the bar is still drawn, and finished

@@ -27,7 +27,7 @@ from tssac_core.experiments.cli import train
 from tssac_core.experiments.grid import load_grid
 from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
 from tssac_core.parallel.mission_shards import fly_missions_sharded, shard
-from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RayTarget, import_ray
+from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RAY_ENVIRONMENT, RayTarget, import_ray
 from tssac_core.parallel.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.pilots import GUIDANCE
@@ -418,3 +418,32 @@ def test_train_seeds_run_as_ray_tasks(local_ray, tmp_path, capsys):
         assert (run_dir / "decoy.pt").is_file() and json.loads((run_dir / "config.json").read_text())["seed"] == seed
         assert worker_pids(run_dir), "not run by a Ray worker"
     assert "trained seeds 0, 1 with sac_lag" in capsys.readouterr().out
+
+
+QUIET_SESSION = """
+import sys, time
+from tssac_core.parallel.ray_cluster import RayTarget, ray_session
+with ray_session(RayTarget(cpus=1)) as ray:
+    print(ray.get(ray.remote(lambda: "task ran").remote()))
+    time.sleep(float(sys.argv[1]))
+"""
+
+
+def test_a_local_ray_says_nothing_on_the_console():
+    """Ray's own lines stay off the command's stderr: no "Set ray log level" line from its start, no FutureWarning,
+    none of its C++ core's errors (the missing metrics agent's comes some 30 s after the start, longer than this session
+    lives: RAY_BACKEND_LOG_LEVEL, which this session runs under as every command's does, is what keeps it off)."""
+    done = subprocess.run(
+        [sys.executable, "-c", QUIET_SESSION, "5"], capture_output=True, text=True, timeout=180, cwd=ROOT
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "task ran"
+    assert done.stderr.strip() == ""
+    assert "RAY_BACKEND_LOG_LEVEL" in RAY_ENVIRONMENT
+
+
+def test_without_ray_a_command_that_needs_it_says_so_in_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # what an install without the [ray] extra imports
+    code = run(evaluate_main, ["--controller", "guidance", "--episodes", "4", "--workers", "2", "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err == ["error: Ray is not installed: pip install -e '.[ray]' (in '.[dev]' too)"]

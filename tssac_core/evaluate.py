@@ -42,9 +42,9 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, run, seed_arg, write_json
+from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
-from tssac_core.reporting.progress import MissionBar
+from tssac_core.reporting.progress import MissionBar, progress_bar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.observation import ObservationMode
@@ -56,7 +56,7 @@ POLICY_KINDS = ("sb3", "onnx", "torch")
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=command_description(__doc__))
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--controller",
@@ -265,12 +265,10 @@ def fly_team(
 ) -> MissionResults:
     """Missions ``indices`` of seed ``seed`` flown by ``pilots``: in one batch here, or in shards on Ray workers."""
     if workers > 1 or address is not None:
-        from tqdm import tqdm
-
         from tssac_core.parallel.mission_shards import fly_missions_sharded
         from tssac_core.parallel.ray_cluster import RayTarget
 
-        with tqdm(total=len(indices), desc="missions", unit="mission", disable=not progress, file=sys.stderr) as bar:
+        with progress_bar(total=len(indices), desc="missions", unit="mission", disable=not progress) as bar:
             return fly_missions_sharded(
                 scenario, pilots, list(indices), seed, workers, RayTarget(address), bar.update, shield=shield
             )

@@ -42,13 +42,15 @@ from benchmarks.crosscheck.settings import (
     parse_override,
     shared_settings,
 )
-from tssac_core.common.cli import UsageError
+from benchmarks.omnisafe_env import location, python_of
+from benchmarks.output import default_json
+from tssac_core.common.cli import UsageError, command_description
 from tssac_core.sim.scenario import load
 from tssac_core.train.config import TrainConfig
 from tssac_core.train.wall_time import Ended, read_invocations
 
-DEFAULT_ROWS = ROOT / "benchmarks" / "results" / "crosscheck_omnisafe.json"
-DEFAULT_OMNISAFE_PYTHON = "/work/omnisafe-venv/bin/python"
+DEFAULT_ROWS = default_json("crosscheck_omnisafe")  # the committed rows: --rows benchmarks/results/...
+DEFAULT_OMNISAFE_PYTHON = str(python_of(location()))  # benchmarks/omnisafe_env.py's environment
 
 
 def words(text: str, allowed: Sequence[str], what: str) -> list[str]:
@@ -70,7 +72,7 @@ def seeds_of(text: str) -> list[int]:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="benchmarks/crosscheck_omnisafe.py", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="benchmarks/crosscheck_omnisafe.py", description=command_description(__doc__))
     p.add_argument("--report", action="store_true", help="pool the rows' seeds and print/write the markdown table")
     p.add_argument("--rows", type=Path, default=DEFAULT_ROWS, help="results file, one row per (impl, algo, seed)")
     p.add_argument("--report-out", type=Path, help="--report: the markdown file (default: --rows with .md)")
@@ -174,7 +176,9 @@ def run_jobs(args: argparse.Namespace) -> int:
     seeds = seeds_of(args.seeds)
     overrides = dict(parse_override(o) for o in args.omnisafe_set)
     if "omnisafe" in impls and not Path(args.omnisafe_python).is_file():
-        raise UsageError(f"--omnisafe-python: no such file {args.omnisafe_python} (../shared/tools/omnisafe_venv.sh)")
+        raise UsageError(
+            f"--omnisafe-python: no such file {args.omnisafe_python} (python benchmarks/omnisafe_env.py builds it)"
+        )
     scenario = load(SCENARIO)
     shared = shared_settings(yaml.safe_load(PRESET.read_text()), scenario.cost_limit, TrainConfig.cost_margin_km)
     the_setting = setting(budget, args.episodes, args.eval_seed, scenario.cost_limit)

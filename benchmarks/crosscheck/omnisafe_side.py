@@ -2,7 +2,7 @@
 from a ``custom_cfgs`` JSON (settings.omnisafe_cfgs), then export the last saved actor to ``OUT/actor.npz``
 (actor_file) after checking that the numpy actor computes what OmniSafe's does, and write ``OUT/train.json``.
 
-    PYTHONPATH=. /work/omnisafe-venv/bin/python -m benchmarks.crosscheck.omnisafe_side --cfgs CFGS.json --out DIR
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) -m benchmarks.crosscheck.omnisafe_side --cfgs CFGS.json --out DIR
 
 The driver (benchmarks/crosscheck_omnisafe.py) writes CFGS.json and runs this; the algorithm is the cfgs' "algo".
 """
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.crosscheck.actor_file import OmniSafeActor, write_actor
+from tssac_core.common.cli import command_description
 
 EXPORT_TOLERANCE = 1e-4
 """Largest |numpy - torch| action difference accepted on the check's observations."""
@@ -107,7 +108,7 @@ def export(cfgs: Any, checkpoint: Path, out: Path) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--cfgs", type=Path, required=True, help="custom_cfgs JSON with 'algo' (settings.omnisafe_cfgs)")
     p.add_argument("--out", type=Path, required=True, help="run directory: actor.npz, train.json, OmniSafe's logs")
     args = p.parse_args(argv)
@@ -122,7 +123,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         import omnisafe.algorithms.algo_wrapper as wrapper
     except ImportError:
         print(
-            "error: omnisafe is not importable: run this with OmniSafe's python (/work/omnisafe-venv)", file=sys.stderr
+            "error: omnisafe is not importable: run this with OmniSafe's python "
+            "(python benchmarks/omnisafe_env.py prints it)",
+            file=sys.stderr,
         )
         return 2
     import tssac_core.train.omnisafe_env  # noqa: F401  (registers TssacDetect-v0)

@@ -14,7 +14,6 @@ from types import FrameType
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
@@ -27,6 +26,7 @@ from tssac_core.common.cli import BAD_INPUT, EXIT_BAD_INPUT, EXIT_INTERRUPTED, b
 from tssac_core.common.files import private_directory
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import TaskFailed
+from tssac_core.reporting.progress import progress_bar
 
 EXIT_FAILED = 1
 
@@ -78,9 +78,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if cfg.makes_key:
             made_key = make_signing_key(work)
             cfg = dataclasses.replace(cfg, signing_key_path=made_key)
-        with tqdm(
-            total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress, file=sys.stderr
-        ) as bar:
+        with progress_bar(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress) as bar:
 
             def record(row: dict[str, Any]) -> None:
                 rows.append(row)

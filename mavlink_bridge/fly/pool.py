@@ -28,7 +28,7 @@ from typing import Any, NoReturn, TypeGuard
 
 import numpy as np
 
-from tssac_core.common.cli import bad_input_line, write_json
+from tssac_core.common.cli import bad_input_line, command_description, write_json
 from tssac_core.common.stats import mission_statistics
 from tssac_core.sim.scenario import ROLES
 
@@ -258,7 +258,7 @@ def _fail(message: str) -> NoReturn:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog=PROG, description=command_description(__doc__))
     parser.add_argument("campaigns", nargs="+", type=Path, help="fly --json results of one team on one scenario")
     parser.add_argument("--json", type=Path, help="write the pooled figures here")
     parser.add_argument(

@@ -141,4 +141,4 @@ def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: M
         title=mission_title(cfg, index, record),
     )
     with PYPLOT_LOCK:
-        return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix))
+        return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix), cfg.progress)

@@ -30,6 +30,13 @@ SEED_MAX = 2**63 - 1
 below 2**64; a mission's seed is the first one plus its index, so the range leaves room for any campaign."""
 
 
+def command_description(doc: str | None) -> str:
+    """A command's ``--help`` description from its module docstring: the whole first paragraph as one line, without
+    reST's double backquotes (the first line alone cut sentences in half)."""
+    first = (doc or "").strip().split("\n\n")[0]
+    return " ".join(first.replace("``", "").split())
+
+
 def seed_arg(text: str) -> int:
     """argparse's ``type`` for ``--seed``: a whole number from 0 to :data:`SEED_MAX` (numpy refuses a negative seed
     with a traceback deep in a mission, long after the command line was read)."""

@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from tssac_core.common.cli import UsageError, run
+from tssac_core.common.cli import UsageError, command_description, run
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
 from tssac_core.experiments.evaluations import EvalLabel, eval_specs, evaluate_all, fly_one
 from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
@@ -179,7 +179,7 @@ def compact(grid: Grid, results: Path, report: Say = say) -> None:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=command_description(__doc__))
     p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
     p.add_argument(
         "--results",

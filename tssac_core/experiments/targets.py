@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.common.cli import UsageError, run, seed_arg, write_json
+from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 
@@ -88,7 +88,9 @@ def line(row: dict[str, Any]) -> str:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tssac_core.experiments.targets", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m tssac_core.experiments.targets", description=command_description(__doc__)
+    )
     p.add_argument("teams", nargs="+", type=Path, help="directories holding decoy.pt, detect.pt, strike.pt")
     p.add_argument("--seed", type=seed_arg, required=True, help="the first layout seed (use one nothing else used)")
     p.add_argument("--json", type=Path, help="write every team's figures here")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -45,6 +46,11 @@ RAY_ENVIRONMENT = {
     "RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO": "0",  # CPU-only tasks: no accelerator variables touched, no warning about it
     # Ray without its [default] extra has no metrics agent; its processes say so once each: not worth a line
     "RAY_DEDUP_LOGS_SKIP_REGEX": "metrics exporter agent",
+    # ... and so does the command's own process, from Ray's C++ core (no Python logger, no dedup: "Failed to establish
+    # connection to the metrics exporter agent", some 30 s after the start): Ray's C++ logs on the console only for a
+    # fatal error. The logs in Ray's session directory stay as they are. RAY_enable_metrics_collection=0 does not stop
+    # the core from waiting for the agent (ray 2.52).
+    "RAY_BACKEND_LOG_LEVEL": "fatal",
 }
 """Set (unless the user set them) before Ray is imported."""
 
@@ -59,13 +65,39 @@ class RayTarget:
     """CPUs of the local Ray (default: the machine's); ignored with an address (the cluster has its own)."""
 
 
+RAY_MISSING = "Ray is not installed: pip install -e '.[ray]' (in '.[dev]' too)"
+"""The one line for a command that needs Ray (``--workers N``, ``--executor ray``, ``--address``) without it."""
+
+
 def import_ray() -> Any:
-    """``ray``, imported with :data:`RAY_ENVIRONMENT` set."""
+    """``ray``, imported with :data:`RAY_ENVIRONMENT` set; UsageError (:data:`RAY_MISSING`) without Ray."""
     for key, value in RAY_ENVIRONMENT.items():
         os.environ.setdefault(key, value)
-    import ray
-
+    try:
+        import ray
+    except ImportError:
+        raise UsageError(RAY_MISSING) from None
     return ray
+
+
+@contextmanager
+def _quiet_backend_start() -> Iterator[None]:
+    """The process's stderr to /dev/null for the block when Ray's C++ logs are ours (:data:`RAY_ENVIRONMENT`): setting
+    that log level prints a line of its own from ``ray.init`` ("Set ray log level from environment variable"). A failing
+    ``ray.init`` still raises: its one line is the command's."""
+    if os.environ.get("RAY_BACKEND_LOG_LEVEL") != RAY_ENVIRONMENT["RAY_BACKEND_LOG_LEVEL"]:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def worker_pythonpath() -> str:
@@ -85,21 +117,8 @@ def ray_session(target: RayTarget) -> Iterator[Any]:
     main_thread = threading.current_thread() is threading.main_thread()
     sigterm = signal.getsignal(signal.SIGTERM) if main_thread else None
     try:
-        if target.address is not None:
-            # Workers on other nodes do not inherit the driver's environment: point them at this checkout.
-            ray.init(
-                address=target.address,
-                runtime_env={"env_vars": {"PYTHONPATH": worker_pythonpath()}},
-                logging_level=logging.WARNING,
-            )
-        else:
-            # A local Ray's workers are the driver's children: they inherit its environment and directory.
-            ray.init(
-                num_cpus=target.cpus or os.cpu_count() or 1,
-                object_store_memory=OBJECT_STORE_BYTES,
-                include_dashboard=False,
-                logging_level=logging.WARNING,
-            )
+        with _quiet_backend_start():
+            _init(ray, target)
     except (ConnectionError, ValueError, RuntimeError) as exc:
         what = f"reach the Ray cluster at {target.address}" if target.address is not None else "start a local Ray"
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -114,6 +133,25 @@ def ray_session(target: RayTarget) -> Iterator[Any]:
         ray.shutdown()
         if sigterm is not None:
             signal.signal(signal.SIGTERM, sigterm)
+
+
+def _init(ray: Any, target: RayTarget) -> None:
+    """``ray.init`` as ``target`` says."""
+    if target.address is not None:
+        # Workers on other nodes do not inherit the driver's environment: point them at this checkout.
+        ray.init(
+            address=target.address,
+            runtime_env={"env_vars": {"PYTHONPATH": worker_pythonpath()}},
+            logging_level=logging.WARNING,
+        )
+    else:
+        # A local Ray's workers are the driver's children: they inherit its environment and directory.
+        ray.init(
+            num_cpus=target.cpus or os.cpu_count() or 1,
+            object_store_memory=OBJECT_STORE_BYTES,
+            include_dashboard=False,
+            logging_level=logging.WARNING,
+        )
 
 
 def _interrupt(signum: int, _frame: FrameType | None) -> None:

@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass
@@ -83,21 +86,32 @@ class TimeLeft:
         return max(0, self.cap - self.steps) * self.model.step_s(self.running)
 
 
+@contextmanager
+def progress_bar(**tqdm_args: Any) -> Iterator[Any]:
+    """A tqdm bar on stderr (``tqdm_args``: tqdm's) for the length of the block, with the console's log lines printed
+    above it rather than after it on its line (tqdm's ``logging_redirect_tqdm``)."""
+    from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    with logging_redirect_tqdm(), tqdm(file=sys.stderr, **tqdm_args) as bar:
+        yield bar
+
+
 class MissionBar:
     """A tqdm bar of finished missions whose time left is :class:`TimeLeft`'s, not tqdm's rate of missions;
-    ``step`` is ``fly_missions``' ``on_step``."""
+    ``step`` is ``fly_missions``' ``on_step``. Log lines print above it (:func:`progress_bar`)."""
 
     def __init__(self, missions: int, cap: int, disable: bool = False) -> None:
-        from tqdm import tqdm
-
         self.left = TimeLeft(missions, cap)
-        self.bar = tqdm(
-            total=missions,
-            desc="missions",
-            unit="mission",
-            disable=disable,
-            file=sys.stderr,
-            bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| [{elapsed}, {postfix}]",
+        self._stack = ExitStack()
+        self.bar = self._stack.enter_context(
+            progress_bar(
+                total=missions,
+                desc="missions",
+                unit="mission",
+                disable=disable,
+                bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| [{elapsed}, {postfix}]",
+            )
         )
         self.bar.set_postfix_str("time left ?", refresh=False)
         self._last = time.perf_counter()
@@ -118,7 +132,7 @@ class MissionBar:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.bar.close()
+        self._stack.close()
 
 
 def format_seconds(seconds: float) -> str:

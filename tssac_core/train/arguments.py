@@ -20,7 +20,7 @@ from tssac_core.train.config import DEFAULT_SCENARIO, TrainConfig
 from tssac_core.train.legacy import read_config
 from tssac_core.train.preset import load_preset
 
-DESCRIPTION = "``python -m tssac_core.train``: train the team, role by role (Algorithm 1)."
+DESCRIPTION = "python -m tssac_core.train: train the team, role by role (Algorithm 1)."
 EXECUTORS = ("local", "ray")
 """Where ``--seeds`` runs its jobs: tssac_core.experiments.executors.EXECUTORS (not imported: the experiments import
 this module; tests/test_ray.py holds the two equal)."""

@@ -70,8 +70,8 @@ def resume_hint(out: Path) -> str:
 def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboard: Path | None) -> int:
     """One run (``--seed``): every role of the curriculum in turn, into ``out``."""
     import torch  # here, not above: --help and bad input answer without loading torch
-    from tqdm import tqdm
 
+    from tssac_core.reporting.progress import progress_bar
     from tssac_core.train.loop import train_role
     from tssac_core.train.rundir import prepare_run, shipped, write_plots
     from tssac_core.train.tensorboard import EpochSink, open_sink
@@ -89,8 +89,8 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
             sink.write(row)
 
     with (
-        tqdm(
-            total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, file=sys.stderr, smoothing=0.05
+        progress_bar(
+            total=total, desc=f"{cfg.algo} seed {cfg.seed}", unit="step", disable=quiet, smoothing=0.05
         ) as bar,
         contextlib.closing(sink) if sink is not None else contextlib.nullcontext(),
     ):

@@ -3,8 +3,8 @@
 
 Importing this module registers the class with ``omnisafe.envs.core.env_register``; then
 ``omnisafe.Agent("PPOLag", "TssacDetect-v0", custom_cfgs=...)`` trains the role (README, "OmniSafe"). OmniSafe
-0.5.0 pins gymnasium 0.28.1, so it lives in its own environment (``../shared/tools/omnisafe_venv.sh``; install this
-package there with ``pip install --no-deps -e .``): this module uses nothing of gymnasium but ``spaces.Box`` and
+0.5.0 pins gymnasium 0.28.1, so it lives in its own environment (``python benchmarks/omnisafe_env.py`` builds it and
+prints its interpreter; this package on ``PYTHONPATH``): this module uses nothing of gymnasium but ``spaces.Box`` and
 nothing of the project's gymnasium env, and runs under both versions (benchmarks/omnisafe_train.py runs it there).
 
 What OmniSafe passes as ``env_cfgs`` (all optional; the defaults are the shipped team's settings):
