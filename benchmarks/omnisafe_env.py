@@ -2,9 +2,9 @@
 interpreter, building it first if it is not there yet.
 
 OmniSafe 0.5.0 pins gymnasium 0.28.1, and this project needs gymnasium >= 1.0: the adapter
-(tssac_core/train/omnisafe_env.py), the cross-check's OmniSafe side and their tests (tests/omnisafe/) run in an
-environment of their own. The test command builds it on first use (tests/test_omnisafe.py) and every later run reuses
-it. It is a virtual environment with torch 2.13.0 (CPU) and exactly the packages of
+(tssac_core/train/omnisafe_env.py), the cross-check's OmniSafe side and their tests (tests/test_omnisafe_env.py,
+tests/test_crosscheck_omnisafe.py, which the main environment skips) run in an environment of their own, built once
+and reused. It is a virtual environment with torch 2.13.0 (CPU) and exactly the packages of
 benchmarks/omnisafe-requirements.txt (``--no-deps``: no resolver, the same versions every time), installed without
 byte-compiling (about a third of the time), and safety-gymnasium 1.0.0's dataclasses made valid for Python 3.11
 (``np.array`` defaults become ``default_factory``). 1.4 GB; 1.4 min of CPU, 2.5 to 12 min of wall time here on a

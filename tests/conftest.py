@@ -15,10 +15,6 @@ SCENARIOS = ROOT / "scenarios"
 # process would only spin against the other test process. Set before any test module imports torch.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-# tests/omnisafe/ runs in OmniSafe's own environment (gymnasium 0.28.1): tests/test_omnisafe.py runs it there, and this
-# environment, which cannot import OmniSafe, does not collect it.
-collect_ignore = ["omnisafe"]
-
 
 @pytest.fixture(scope="session")
 def strike_path() -> Path:

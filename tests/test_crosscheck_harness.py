@@ -1,7 +1,7 @@
 """The OmniSafe cross-check's pure logic (benchmarks/crosscheck): the commands and OmniSafe's configuration, the
 numpy actor, the checkpointed rows (skip on a rerun, refuse a mixed setting), the pooled table, the command's
-one-line errors. Nothing here trains or imports OmniSafe (tests/omnisafe/test_crosscheck_omnisafe.py does, in
-OmniSafe's environment)."""
+one-line errors. Nothing here trains or imports OmniSafe (tests/test_crosscheck_omnisafe.py does, in OmniSafe's
+environment: benchmarks/omnisafe_env.py builds it)."""
 
 from __future__ import annotations
 
