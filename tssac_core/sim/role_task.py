@@ -156,7 +156,9 @@ class RoleTask:
     def state(self) -> bytes:
         """The task's state (worlds, layout generator, running episode sums) for a resume file, as the learners'
         ``state()``."""
-        return pickle.dumps((self.world, self.rng, self.ep_return, self.ep_cost, self.airframes))
+        state = (self.world, self.rng, self.ep_return, self.ep_cost)
+        # Varied airframes add their draws and lag state; without them the state is what it was before they existed.
+        return pickle.dumps(state if self.airframes is None else (*state, self.airframes))
 
     def restore(self, state: bytes) -> None:
         """Continue from a :meth:`state` (the pilots stay those this task was built with)."""
