@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -144,10 +144,7 @@ def actor_model(meta: dict[str, Any], layers: Layers) -> Any:
     """The ONNX model (``onnx.ModelProto``) of a numpy actor: obs (n, obs_dim) -> Gemm, Relu per hidden layer ->
     Gemm -> Slice of the mean half (the first act_dim outputs) -> Tanh -> action (n, act_dim), what
     :class:`~tssac_core.deploy.numpy_actor.NumpyPolicy` computes; checked by ``onnx.checker``."""
-    import onnx
-    from onnx import TensorProto, helper, numpy_helper
-
-    from tssac_core import __version__
+    from onnx import helper, numpy_helper
 
     obs_dim, act_dim = int(meta["obs_dim"]), int(meta["act_dim"])
     nodes, weights = [], []
@@ -163,11 +160,26 @@ def actor_model(meta: dict[str, Any], layers: Layers) -> Any:
         weights.append(numpy_helper.from_array(np.array([value], dtype=np.int64), name))
     nodes.append(helper.make_node("Slice", [x, "mean_start", "mean_end", "mean_axis"], ["mean"]))
     nodes.append(helper.make_node("Tanh", ["mean"], ["action"]))  # deterministic squashed Gaussian: a = tanh(mean)
+    name = f"tssac_{meta['role']}_actor"
+    doc = f"TSSAC {meta['role']} actor: observation -> action in [-1, 1] (tssac_core.deploy.onnx_actor)"
+    return checked_model(nodes, weights, name, (obs_dim, act_dim), doc, onnx_metadata(meta))
+
+
+def checked_model(
+    nodes: list[Any], weights: list[Any], name: str, dims: tuple[int, int], doc: str, props: Mapping[str, str]
+) -> Any:
+    """The ONNX model (``onnx.ModelProto``) of a graph from ``obs`` (n, dims[0]) to ``action`` (n, dims[1]), at this
+    project's opset and IR version, its ``metadata_props`` ``props``; checked by ``onnx.checker``."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    from tssac_core import __version__
+
     graph = helper.make_graph(
         nodes,
-        f"tssac_{meta['role']}_actor",
-        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", obs_dim])],
-        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["n", act_dim])],
+        name,
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", dims[0]])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["n", dims[1]])],
         weights,
     )
     model = helper.make_model(
@@ -176,9 +188,9 @@ def actor_model(meta: dict[str, Any], layers: Layers) -> Any:
         ir_version=IR_VERSION,
         producer_name="tssac",
         producer_version=__version__,
-        doc_string=f"TSSAC {meta['role']} actor: observation -> action in [-1, 1] (tssac_core.deploy.onnx_actor)",
+        doc_string=doc,
     )
-    helper.set_model_props(model, onnx_metadata(meta))
+    helper.set_model_props(model, dict(props))
     onnx.checker.check_model(model, full_check=True)
     return model
 

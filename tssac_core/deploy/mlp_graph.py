@@ -95,11 +95,9 @@ def sizes(layers: Sequence[Layer]) -> tuple[int, int]:
 def mlp_model(layers: Sequence[Layer], props: Mapping[str, str], name: str) -> Any:
     """The ONNX model (``onnx.ModelProto``) of ``layers`` (module docstring), its ``metadata_props`` ``props``; checked
     by ``onnx.checker``."""
-    import onnx
-    from onnx import TensorProto, helper, numpy_helper
+    from onnx import helper, numpy_helper
 
-    from tssac_core import __version__
-    from tssac_core.deploy.export import IR_VERSION, OPSET
+    from tssac_core.deploy.export import checked_model
 
     obs_dim, act_dim = sizes(layers)
     nodes, weights = [], []
@@ -118,21 +116,5 @@ def mlp_model(layers: Sequence[Layer], props: Mapping[str, str], name: str) -> A
         numpy_helper.from_array(np.array(1.0, dtype=np.float32), "action_max"),
     ]
     nodes.append(helper.make_node("Clip", [x, "action_min", "action_max"], ["action"]))  # as the world clips
-    graph = helper.make_graph(
-        nodes,
-        name,
-        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", obs_dim])],
-        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["n", act_dim])],
-        weights,
-    )
-    model = helper.make_model(
-        graph,
-        opset_imports=[helper.make_opsetid("", OPSET)],
-        ir_version=IR_VERSION,
-        producer_name="tssac",
-        producer_version=__version__,
-        doc_string=f"{name}: observation -> action in [-1, 1] (tssac_core.deploy.mlp_graph)",
-    )
-    helper.set_model_props(model, dict(props))
-    onnx.checker.check_model(model, full_check=True)
-    return model
+    doc = f"{name}: observation -> action in [-1, 1] (tssac_core.deploy.mlp_graph)"
+    return checked_model(nodes, weights, name, (obs_dim, act_dim), doc, props)
