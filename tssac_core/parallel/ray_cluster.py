@@ -44,8 +44,10 @@ RAY_ENVIRONMENT = {
     # lowers them by 15: a training job on a busy machine would wait behind everything else)
     "RAY_worker_niceness": "0",
     "RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO": "0",  # CPU-only tasks: no accelerator variables touched, no warning about it
-    # Ray without its [default] extra has no metrics agent; its processes say so once each: not worth a line
-    "RAY_DEDUP_LOGS_SKIP_REGEX": "metrics exporter agent",
+    # Lines Ray's log monitor forwards from its own processes (raylet, gcs_server) to the command's stderr, dropped:
+    # without its [default] extra Ray has no metrics agent and each process says so once; and each one announces the
+    # log level below ("Set ray log level from environment variable"), at any time after ``ray.init`` returns
+    "RAY_DEDUP_LOGS_SKIP_REGEX": "metrics exporter agent|Set ray log level",
     # ... and so does the command's own process, from Ray's C++ core (no Python logger, no dedup: "Failed to establish
     # connection to the metrics exporter agent", some 30 s after the start): Ray's C++ logs on the console only for a
     # fatal error. The logs in Ray's session directory stay as they are. RAY_enable_metrics_collection=0 does not stop
