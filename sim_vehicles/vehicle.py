@@ -19,7 +19,11 @@ only through the methods here (:meth:`Vehicle.set_mode`, :meth:`Vehicle.set_arme
   GUIDED. The world's action is (omega / turn_rate_max, u / accel_max) in [-1, 1], omega = -yaw_rate
   (:mod:`tssac_core.wire.units`: the companion scales its setpoints with the same functions).
 * Setpoint-timeout failsafe: armed in GUIDED with no setpoint for ``GUID_TIMEOUT`` simulated seconds,
-  hold heading and speed (STATUSTEXT, ``system_status`` CRITICAL) until the next setpoint.
+  hold heading and speed (STATUSTEXT, ``system_status`` CRITICAL) until the next setpoint. ArduPlane's
+  CHANGE_HEADING / CHANGE_SPEED targets have no such timeout (``mode_guided.cpp``): while they are in force the
+  vehicle flies them on, however long the companion is silent. Under lockstep a silent companion still stops
+  holding the world after ``GUID_TIMEOUT`` wall seconds (:mod:`sim_vehicles.world_runner`); with targets in force
+  that release changes nothing of what is flown (STATUSTEXT "... flying its GUIDED targets").
 * Datalink failsafe (ArduPlane's ``FS_GCS_ENABL``, ``FS_LONG_TIMEOUT``, ``FS_LONG_ACTN``): armed, with
   the failsafe enabled, and no valid message from any client for ``FS_LONG_TIMEOUT`` wall seconds
   after one was heard: RTL (from MANUAL always, from GUIDED when ``FS_LONG_ACTN`` is 1).
@@ -237,6 +241,12 @@ class Vehicle:
         return p.value
 
     @property
+    def targets_in_force(self) -> bool:
+        """Armed in GUIDED with ArduPlane's CHANGE_HEADING / CHANGE_SPEED targets in force (flown with no timeout)."""
+        sp = self.setpoint
+        return self.armed and self.guided and sp is not None and sp.demand.form is SetpointForm.GUIDED_SLEW
+
+    @property
     def in_loop(self) -> bool:
         """Under companion control: armed in GUIDED and not in failsafe (the lockstep barrier waits for it)."""
         return self.armed and self.guided and not self.failsafe
@@ -261,7 +271,7 @@ class Vehicle:
     def action(self) -> tuple[float, float]:
         """The world action [omega, u] in [-1, 1] for the next step (checks the failsafes first)."""
         now = self.clock.sim_s
-        if self.in_loop and now - self.last_setpoint_s > self.setpoint_timeout_s + EPS_S:
+        if self.in_loop and not self.targets_in_force and now - self.last_setpoint_s > self.setpoint_timeout_s + EPS_S:
             self.enter_failsafe(f"no setpoint for {self.setpoint_timeout_s:g} s")
         self.check_datalink()
         omega, accel = self._command_now()
@@ -274,8 +284,8 @@ class Vehicle:
         """(omega CCW-positive rad/s, forward acceleration m/s^2) within the limits, for the current mode."""
         su, t = self.setup, self.truth
         sp = self.setpoint
-        if self.in_loop and sp is not None and sp.demand.form is SetpointForm.GUIDED_SLEW:
-            return self._slew_command(sp.demand)
+        if self.targets_in_force and sp is not None:
+            return self._slew_command(sp.demand)  # in a (lockstep) failsafe too: they have no timeout
         if self.in_loop and sp is not None:
             if sp.demand.course_rad is not None:
                 omega = navigation.course_turn_rate(t.phi_rad, sp.demand.course_rad, su.turn_rate_max_rad_s)
@@ -440,13 +450,15 @@ class Vehicle:
     # ------------------------------------------------------------------------------ failsafes
 
     def enter_failsafe(self, reason: str) -> None:
-        """Hold heading and speed until the next setpoint; CRITICAL in the heartbeat."""
+        """Hold heading and speed until the next setpoint (with targets in force: fly them on, module docstring);
+        CRITICAL in the heartbeat."""
         if self.failsafe:
             return
         self.failsafe = True
         self.counters.failsafes += 1
-        _log.warning("%s: failsafe: %s", self.role, reason)
-        self.radio.statustext(M.MAV_SEVERITY_WARNING, f"Failsafe: {reason}, holding")
+        flies = "flying its GUIDED targets" if self.targets_in_force else "holding"
+        _log.warning("%s: failsafe: %s, %s", self.role, reason, flies)
+        self.radio.statustext(M.MAV_SEVERITY_WARNING, f"Failsafe: {reason}, {flies}")
         self.event("FAILSAFE", 1)
 
     def clear_failsafe(self) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
-from sitl_helpers import GUIDED, REPO, STRIKE, Client, sitl
+from sitl_helpers import GUIDED, REPO, STRIKE, Client, sitl, wait_until
 
 from mavlink_bridge.link import guided_commands
 from mavlink_bridge.link.connection import MavLink
@@ -143,6 +143,36 @@ def test_the_sitl_flies_the_commands_as_arduplanes_guided() -> None:
         assert v.setpoint is not None and v.setpoint.demand.heading_target is not None
         c.set_mode(LOITER)
         assert v.setpoint is None and v.mode is FlightMode.LOITER  # the commands are forgotten
+        c.close()
+        s.stop()
+
+
+def test_a_silent_companions_heading_target_is_flown_on_as_arduplane_does() -> None:
+    """ArduPlane's GUIDED has no timeout for a CHANGE_HEADING target (``mode_guided.cpp``): one command, then 15 s of
+    simulated silence (15 times GUID_TIMEOUT), and the vehicle is still turning toward the target at a / V, with no
+    failsafe and ACTIVE in its heartbeat. A setpoint of the other form, silent as long, is held straight (the
+    setpoint-timeout failsafe): what a companion that stops must expect of each."""
+    with sitl(speedup=10.0) as s:
+        c = Client(s.ports[0])
+        c.connect()
+        c.arm()
+        c.set_mode(GUIDED)
+        v = s.vehicle(0)
+        compass = (90.0 - math.degrees(v.truth.phi_rad)) % 360.0
+        ack = c.command(M.MAV_CMD_GUIDED_CHANGE_HEADING, 0, (compass - 90.0) % 360.0, 250.0 * math.radians(3.0))
+        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+        start = (s.runner.clock.sim_s, v.truth.phi_rad)
+        beats = [m for m in c.collect(1.5) if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1]
+        turned = math.degrees(math.remainder(v.truth.phi_rad - start[1], 2 * math.pi))
+        elapsed = s.runner.clock.sim_s - start[0]
+        assert elapsed > 10.0 and not v.failsafe
+        assert turned == pytest.approx(3.0 * elapsed * 250.0 / v.truth.speed_m_s, rel=0.1)  # still turning at a / V
+        assert beats and all(b.system_status == M.MAV_STATE_ACTIVE for b in beats)
+        c.setpoint(units.yaw_rate_from_omega(math.radians(3.0)), 0.0)  # a body-rate setpoint, then silence
+        assert wait_until(lambda: v.failsafe, 2.0)
+        held = v.truth.phi_rad
+        c.collect(0.5)
+        assert v.truth.phi_rad == pytest.approx(held)  # the failsafe holds heading
         c.close()
         s.stop()
 
