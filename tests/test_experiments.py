@@ -202,7 +202,7 @@ def test_paper_grid():
         (("  tail_episodes: 3\n", ""), "evaluation.tail_seed: needs evaluation.tail_episodes"),
         (("  tail_episodes: 3", "  tail_episodes: 0"), "evaluation.tail_episodes: must be >= 1"),
         (
-            ("  generalization_scenario: scenarios/generalization.yaml\n", ""),
+            ("  generalization_scenario: scenarios/short-random.yaml\n", ""),
             "evaluation.generalization_tail_episodes: needs evaluation.generalization_scenario",
         ),
         (
@@ -301,7 +301,7 @@ def test_the_generalization_tail_is_flown_only_when_the_grid_asks_for_it(tmp_pat
     ]
     gen = specs[EvalLabel.GENERALIZATION_TAIL]
     assert gen == EvalSpec(
-        EvalLabel.GENERALIZATION_TAIL, Path("scenarios/generalization.yaml"), 3, 991001, layouts=LayoutRule.PER_MISSION
+        EvalLabel.GENERALIZATION_TAIL, Path("scenarios/short-random.yaml"), 3, 991001, layouts=LayoutRule.PER_MISSION
     )
     assert gen.label.is_tail and not gen.monitor and gen.cache_name() == "eval_generalization_tail.json"
     own = smoke_text(
@@ -455,7 +455,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     ev = data["evaluation"]
     assert (ev["generalization_tail_episodes"], ev["generalization_tail_seed"]) == (3, 991001)
     flown = json.loads((smoke / "runs" / "tssac-seed0" / "eval_generalization_tail.json").read_text())
-    assert (flown["scenario"], flown["seed"], flown["episodes"]) == ("scenarios/generalization.yaml", 991001, 3)
+    assert (flown["scenario"], flown["seed"], flown["episodes"]) == ("scenarios/short-random.yaml", 991001, 3)
     assert flown["cache_key"]["layouts"].startswith("mission k") and "shield" not in flown
     assert len(flown["per_episode"]["out_of_area"]) == 3 and "return" not in flown["per_episode"]
     gen = tssac["generalization_tail"]
@@ -468,7 +468,7 @@ def test_report_writes_table4_json_and_figures(smoke):
     assert guide["missions"] == 3 and "generalization_tail" in data["algorithms"][1]
     section = table.split("\n## 3 layouts of the generalisation scenario per team, with intervals\n")[1]
     assert "layout seeds 991001-991003" in section and "`runs/<run>/eval_generalization_tail.json`" in section
-    assert "--models runs/<run> --scenario scenarios/generalization.yaml --episodes 3 --seed 991001`" in section
+    assert "--models runs/<run> --scenario scenarios/short-random.yaml --episodes 3 --seed 991001`" in section
     for name, g in (("tssac", gen), ("guidance controller", guide)):
         (lo, hi), (clo, chi) = g["success_interval95"], g["mean_cost_interval95"]
         cells = (

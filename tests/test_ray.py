@@ -91,13 +91,13 @@ def test_shards_cover_every_index_once():
 def test_sharded_evaluation_equals_the_serial_one(local_ray, tmp_path):
     """The same JSON, figure for figure, from one batched world or three shards on two workers; and, mission by
     mission, the same outcomes in the same order."""
-    args = ["--controller", "guidance", "--scenario", "scenarios/random.yaml", "--episodes", "9", "--seed", "31"]
+    args = ["--controller", "guidance", "--scenario", "scenarios/short-random.yaml", "--episodes", "9", "--seed", "31"]
     assert evaluate_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
     assert evaluate_main([*args, "--no-progress", "--workers", "3", "--json", str(tmp_path / "sharded.json")]) == 0
     serial, sharded = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("serial", "sharded"))
     assert sharded == serial
 
-    scenario = load_scenario(ROOT / "scenarios" / "random.yaml")
+    scenario = load_scenario(ROOT / "scenarios" / "short-random.yaml")
     one = fly_missions(scenario, [GUIDANCE] * 3, 5, 31, indices=[2, 3, 5, 7, 8])
     pieces = fly_missions_sharded(scenario, [GUIDANCE] * 3, [2, 3, 5, 7, 8], 31, 2, RAY)
     assert pieces.indices == one.indices and pieces.seeds == one.seeds == [33, 34, 36, 38, 39]
@@ -116,7 +116,7 @@ def test_fly_on_workers_flies_the_serial_missions(local_ray, tmp_path):
     those of the serial run (lockstep: the same steps, end, cost), from processes of their own."""
     from mavlink_bridge.fly.cli import main as fly_main
 
-    args = ["--scenario", "scenarios/random.yaml", "--models", "models/tssac", "--episodes", "2", "--seed", "41"]
+    args = ["--scenario", "scenarios/short-random.yaml", "--models", "models/tssac", "--episodes", "2", "--seed", "41"]
     assert fly_main([*args, "--no-progress", "--json", str(tmp_path / "serial.json")]) == 0
     argv = [*args, "--no-progress", "--workers", "2", "--executor", "ray", "--json", str(tmp_path / "workers.json")]
     assert fly_main(argv) == 0
