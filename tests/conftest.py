@@ -15,6 +15,14 @@ SCENARIOS = ROOT / "scenarios"
 # process would only spin against the other test process. Set before any test module imports torch.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+OMNISAFE_TESTS = ("test_omnisafe_env.py", "test_crosscheck_omnisafe.py")
+"""Tests that import OmniSafe: they run in OmniSafe's own environment (tests/test_omnisafe_side.py runs them there);
+in any other they are not collected, rather than skipped."""
+try:
+    import omnisafe  # noqa: F401
+except ImportError:
+    collect_ignore = list(OMNISAFE_TESTS)
+
 
 @pytest.fixture(scope="session")
 def strike_path() -> Path:

@@ -1,8 +1,7 @@
-"""The cross-check's OmniSafe side (benchmarks/crosscheck/omnisafe_side.py), opt-in: skipped unless omnisafe is
-importable, which it is only in OmniSafe's own environment (README, "OmniSafe"):
+"""The cross-check's OmniSafe side (benchmarks/crosscheck/omnisafe_side.py), in OmniSafe's own environment (README,
+"OmniSafe"): the test command runs this file there (tests/test_omnisafe_side.py); by hand:
 
-    PYTHONPATH=. /work/omnisafe-venv/bin/python -m pytest -q tests/test_crosscheck_omnisafe.py -p no:cacheprovider \
-        -o addopts=""
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) -m pytest -q -o addopts= tests/test_crosscheck_omnisafe.py
 
 OmniSafe accepts every configuration the driver builds (no key it does not know, the cost limit where its algorithm
 reads it), and the exported numpy actor is OmniSafe's deterministic actor behind its observation normaliser.

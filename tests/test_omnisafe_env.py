@@ -1,7 +1,7 @@
-"""The OmniSafe adapter (tssac_core.train.omnisafe_env), opt-in: skipped unless omnisafe is importable, which it is
-only in OmniSafe's own environment (gymnasium 0.28.1; README, "OmniSafe"):
+"""The OmniSafe adapter (tssac_core.train.omnisafe_env), in OmniSafe's own environment (gymnasium 0.28.1; README,
+"OmniSafe"): the test command runs this file there (tests/test_omnisafe_side.py); by hand:
 
-    /work/omnisafe-venv/bin/python -m pytest -q tests/test_omnisafe_env.py -p no:cacheprovider
+    PYTHONPATH=. $(python benchmarks/omnisafe_env.py) -m pytest -q -o addopts= tests/test_omnisafe_env.py
 """
 
 from __future__ import annotations
