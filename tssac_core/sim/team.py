@@ -47,7 +47,9 @@ class Team:
         for j, pilot in self._flown:
             if j == skip:
                 continue
-            due = world.steps % pilot.action_repeat == 0
+            # A finished mission's step count stands still: counting it would make a decision due at every step
+            # once one mission ended on a multiple of the repeat (a forward pass per step, not per decision).
+            due = (world.steps % pilot.action_repeat == 0) & world.running
             if due.any():  # between decisions nobody needs the pilot: skip its forward pass
                 self._held[:, j] = np.where(due[:, None], pilot.actions(state, j), self._held[:, j])
             actions[:, j] = self._held[:, j]
