@@ -165,7 +165,9 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
     if cfg.workers > 1:
         indices = list(range(cfg.episodes))
         target = RayTarget(None)
-        results = fly_missions_sharded(scenario, pilots, indices, seed, cfg.workers, target, bar.update, monitor)
+        results = fly_missions_sharded(
+            scenario, pilots, indices, seed, cfg.workers, target, lambda report: bar.update(report.finished), monitor
+        )
     else:
         results = fly_missions(scenario, pilots, cfg.episodes, seed, progress=bar.update, shield=monitor)
     counts = results.monitor

@@ -44,7 +44,7 @@ from typing import Any
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
-from tssac_core.reporting.progress import MissionBar, progress_bar
+from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.observation import ObservationMode
@@ -265,10 +265,11 @@ def fly_team(
 ) -> MissionResults:
     """Missions ``indices`` of seed ``seed`` flown by ``pilots``: in one batch here, or in shards on Ray workers."""
     if workers > 1 or address is not None:
-        from tssac_core.parallel.mission_shards import fly_missions_sharded
+        from tssac_core.parallel.mission_shards import SHARDS_PER_WORKER, fly_missions_sharded, shard
         from tssac_core.parallel.ray_cluster import RayTarget
 
-        with progress_bar(total=len(indices), desc="missions", unit="mission", disable=not progress) as bar:
+        shards = len(shard(indices, workers * SHARDS_PER_WORKER))
+        with ShardsBar(len(indices), shards, disable=not progress) as bar:
             return fly_missions_sharded(
                 scenario, pilots, list(indices), seed, workers, RayTarget(address), bar.update, shield=shield
             )

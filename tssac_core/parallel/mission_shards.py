@@ -18,13 +18,14 @@ import numpy as np
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import map_on_ray
+from tssac_core.reporting.progress import ShardProgress, TimeLeft
 from tssac_core.sim.missions import MissionResults, iter_missions
 from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import Scenario
 from tssac_core.sim.world_monitor import MonitorCounts
 
 PROGRESS_EVERY_S = 0.5
-"""How often a shard reports the missions it finished."""
+"""How often a shard reports the missions it finished and its time left."""
 SHARDS_PER_WORKER = 1
 """Shards per worker: one keeps each batch as large as it can be (the batched world's speed)."""
 
@@ -64,26 +65,35 @@ def merge_counts(parts: Sequence[MonitorCounts | None]) -> MonitorCounts:
     )
 
 
-Shard = tuple[Scenario, Sequence[PilotSpec], int, list[int], ShieldConfig | None]
-"""What a shard's task gets: the scenario, the pilots, the run's seed, its mission indices, the monitor's margins."""
+Shard = tuple[int, Scenario, Sequence[PilotSpec], int, list[int], ShieldConfig | None]
+"""What a shard's task gets: its number, the scenario, the pilots, the run's seed, its mission indices, the monitor's
+margins."""
 
 
-def fly_shard(piece: Shard) -> Generator[int, None, MissionResults]:
-    """The Ray task: fly one shard's missions in one batched world, yielding the number of missions finished
-    since its last yield at most every PROGRESS_EVERY_S; returns the results."""
-    scenario, pilots, seed, indices, shield = piece
-    missions = iter_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield)
+def fly_shard(piece: Shard) -> Generator[ShardProgress, None, MissionResults]:
+    """The Ray task: fly one shard's missions in one batched world, reporting the missions finished since its last
+    report and its time left (:class:`~tssac_core.reporting.progress.TimeLeft`) at most every PROGRESS_EVERY_S;
+    returns the results."""
+    number, scenario, pilots, seed, indices, shield = piece
+    left = TimeLeft(len(indices), scenario.episode_steps)
+    clock = [time.perf_counter()]
+
+    def timed(flying: int, still_flying: int) -> None:
+        now = time.perf_counter()
+        left.step(flying, still_flying, now - clock[0])
+        clock[0] = now
+
+    missions = iter_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield, on_step=timed)
     pending, since = 0, time.monotonic()
     try:
         while True:
             pending += next(missions)
             if time.monotonic() - since >= PROGRESS_EVERY_S:
-                yield pending
+                yield ShardProgress(number, pending, left.seconds)
                 pending, since = 0, time.monotonic()
     except StopIteration as end:
         results: MissionResults = end.value
-    if pending:
-        yield pending
+    yield ShardProgress(number, pending, 0.0)
     return results
 
 
@@ -94,13 +104,14 @@ def fly_missions_sharded(
     seed: int,
     workers: int,
     target: RayTarget,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[ShardProgress], None] | None = None,
     shield: ShieldConfig | None = None,
 ) -> MissionResults:
     """:func:`tssac_core.sim.missions.fly_missions` of missions ``indices`` (through the runtime-assurance monitor
     with ``shield``) over ``workers`` Ray workers: the same results."""
     shards: list[Shard] = [
-        (scenario, list(pilots), seed, piece, shield) for piece in shard(indices, workers * SHARDS_PER_WORKER)
+        (number, scenario, list(pilots), seed, piece, shield)
+        for number, piece in enumerate(shard(indices, workers * SHARDS_PER_WORKER))
     ]
     parts: list[MissionResults] = map_on_ray(fly_shard, shards, workers, target, on_event=progress or (lambda n: None))
     return merge(parts)
