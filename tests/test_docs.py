@@ -31,8 +31,14 @@ MODULE = re.compile(rf"(?<![\w./])((?:{'|'.join(PACKAGES)})(?:\.[a-z_]\w*)+)")
 """A dotted project module, possibly followed by an attribute or two (``tssac_core.sim.world.World.step``)."""
 LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
 PLACEHOLDER = re.compile(r"(?:^|[/_-])(?:N|K|NAME|FILE|DIR|X|ROLE|SEED)(?:[/._-]|$)")
+RELATIVE = re.compile(r"`((?:\.\./)*[\w.-]+(?:/[\w.-]+)+(?:\.(?:json|md|py|yaml|csv|png|txt|npz|pt|onnx)|/))`")
+"""A path written relative to its page (``full-budget/table4.md``, ``../../results/x/``): a file of the project's
+kinds, or a folder."""
+EXTERNAL = {"shared/seed/tssac-paper.txt", "safe_rl/pg/agents.py"}
+"""Files of other trees that pages cite: the paper's text beside the checkout, safety-starter-agents' source."""
 HISTORY = {"docs/journal.md"}
 """The journal tells what was: it names files that are gone on purpose."""
+FIGURE_PAGES = ("README.md", "models/tssac/README.md", "results/README.md", "benchmarks/RESULTS.md")
 
 
 def markdown_pages() -> list[Path]:
@@ -58,14 +64,20 @@ def module_exists(name: str) -> bool:
     return False
 
 
-def stale_names(text: str, here: Path = ROOT) -> list[str]:
-    """The paths and modules ``text`` names that do not exist (a path may be the repository's or ``here``'s)."""
+def stale_names(text: str, here: Path = ROOT, relative: bool = True) -> list[str]:
+    """The paths and modules ``text`` names that do not exist (a path may be the repository's or ``here``'s; with
+    ``relative``, a Markdown page's, paths relative to it too: in code, ``run_dir/config.json`` names a variable's)."""
     stale = []
     for path in PATH.findall(text):
         path = path.rstrip(".")
         if not PLACEHOLDER.search(path) and not (ROOT / path).exists() and not (here / path).exists():
             stale.append(path)
     stale += [m for m in MODULE.findall(text) if not module_exists(m.rstrip("."))]
+    for path in RELATIVE.findall(text) if relative else []:
+        if PATH.fullmatch(path) or path in EXTERNAL or PLACEHOLDER.search(path):
+            continue  # a repository path is checked above
+        if not (here / path).exists() and not (ROOT / path).exists():
+            stale.append(path)
     return stale
 
 
@@ -75,6 +87,11 @@ def test_the_checker_finds_a_stale_name() -> None:
     assert stale_names(text) == ["configs/shipped.yaml", "tssac_core/observation.py", "tssac_core.sim.routes_old.field"]
     fine = "`tssac_core/sim/world.py`, tssac_core.sim.world.World.step, results/runs/run{0,1}, scenarios/NAME.yaml"
     assert stale_names(fine) == []
+    here = ROOT / "results" / "shipped-team" / "grid-tssac-seed2"
+    gone = ["../../results/recipe-trials/hard50/", "half-budget-layouts/ppo_lag-seed0.json"]
+    relative = f"`{gone[0]}`, `{gone[1]}`, `../seeds/seed1_random_1000.json`"
+    assert stale_names(relative, here) == gone
+    assert stale_names("`full-budget/half-budget-layouts/ppo_lag-seed0.json`, `tssac/Decoy-v0`", ROOT / "results") == []
 
 
 @pytest.mark.parametrize("page", markdown_pages(), ids=lambda p: str(p.relative_to(ROOT)))
@@ -90,5 +107,18 @@ def test_a_page_names_only_what_exists(page: Path) -> None:
 
 
 def test_the_code_names_only_what_exists() -> None:
-    stale = {str(p.relative_to(ROOT)): s for p in code_files() if (s := stale_names(p.read_text(encoding="utf-8")))}
+    stale = {
+        str(p.relative_to(ROOT)): s
+        for p in code_files()
+        if (s := stale_names(p.read_text(encoding="utf-8"), relative=False))
+    }
     assert not stale, stale
+
+
+def test_the_index_lists_every_page() -> None:
+    """docs/README.md links every page in docs/ and every figure page."""
+    index = (ROOT / "docs" / "README.md").read_text(encoding="utf-8")
+    linked = {(ROOT / "docs" / link).resolve() for link in LINK.findall(index)}
+    pages = [p for p in (ROOT / "docs").glob("*.md") if p.name != "README.md"] + [ROOT / f for f in FIGURE_PAGES]
+    missing = [str(p.relative_to(ROOT)) for p in pages if p.resolve() not in linked]
+    assert not missing, missing
