@@ -26,7 +26,13 @@ from tssac_core.train.wall_time import Ended, Invocation, read_invocations
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_train")
 
+SHORT = str(Path(__file__).resolve().parent.parent / "scenarios" / "short.yaml")
+"""A 600-step mission (the UAVs start in their rings): what these runs assert does not depend on the mission's
+length, and their validation missions, flown to the end by untrained policies, cost a seventh of strike.yaml's."""
+
 TINY = [
+    "--scenario",
+    SHORT,
     "--epochs",
     "2",
     "--validation-episodes",
