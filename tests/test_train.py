@@ -121,7 +121,7 @@ def no_update_run(hidden: str, *extra: str) -> list[str]:
 def test_transfer_initialises_the_next_role(tmp_path):
     """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
     out = tmp_path / "t"
-    args = no_update_run("[16]")
+    args = no_update_run("[16]", "--roles", "decoy,detect")
     assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
     a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(out / "detect.pt", weights_only=False)["actor"]
