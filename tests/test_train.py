@@ -258,6 +258,8 @@ def test_evaluate_flies_trained_models(trained, tmp_path):
 def test_resume_after_kill_continues_identically(tmp_path):
     """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
     args = [
+        "--scenario",
+        SHORT,
         "--algo",
         "sac_lag",
         "--seed",
@@ -277,9 +279,9 @@ def test_resume_after_kill_continues_identically(tmp_path):
         "--envs",
         "2",
         "--set",
-        "hidden_sizes=[64,64]",
+        "hidden_sizes=[32,32]",
         "--set",
-        "batch_size=64",
+        "batch_size=32",
         "--threads",
         "1",
         "--no-progress",
