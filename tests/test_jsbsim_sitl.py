@@ -18,10 +18,14 @@ from pymavlink import mavutil
 from tssac_core.sim.scenario import Wind, dump, load
 from tssac_core.wire.truth_log_schema import SCHEMA_VERSION, read_truth_log
 
-pytestmark = pytest.mark.sitl
+# One test process runs this file: its module fixture (a JSBSim mission) is flown once.
+pytestmark = [pytest.mark.sitl, pytest.mark.xdist_group("jsbsim_sitl")]
 
 REPO = Path(__file__).resolve().parents[1]
 STRIKE = REPO / "scenarios" / "strike.yaml"
+SHORT = REPO / "scenarios" / "short.yaml"
+"""A mission of about 12 s (strike.yaml's 250 s with the UAVs started in their rings): for the claims that do not
+depend on the mission's length."""
 
 
 def fly(tmp: Path, name: str, scenario: Path, *extra: str) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:
@@ -154,7 +158,7 @@ def test_an_unknown_airframe_is_one_line_and_nothing_written(tmp_path: Path) -> 
 def test_a_jsbsim_world_keeps_the_banner_off_its_stdout() -> None:
     """The world speaks to fly on stdout (its endpoints, ready, end): JSBSim's banner must not reach it."""
     proc = subprocess.run(
-        [sys.executable, "-m", "sim_vehicles", "--scenario", str(STRIKE), "--dynamics", "jsbsim", "--base-port", "0"]
+        [sys.executable, "-m", "sim_vehicles", "--scenario", str(SHORT), "--dynamics", "jsbsim", "--base-port", "0"]
         + ["--speedup", "1000", "--linger-s", "0"],
         capture_output=True,
         text=True,

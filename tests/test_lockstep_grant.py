@@ -84,7 +84,9 @@ def test_grants_fly_the_missions_of_an_answer_at_every_tick_also_with_gps_dropou
     base = load(RANDOM)
     link = dataclasses.replace(base.link, gps_dropout_prob=0.3, latency_ms=50.0)
     scenario = tmp_path / "dropouts.yaml"
-    dump(dataclasses.replace(base, name="dropouts", link=link), scenario)
+    # Each mission cut at 60 s of flight (600 steps; a whole one is 250 s): the step-by-step comparison and the
+    # counters' proportions do not depend on its length.
+    dump(dataclasses.replace(base, name="dropouts", link=link, episode_steps=600), scenario)
     every = _fly_json(tmp_path, "every", "--shield", "--lockstep-grant-s", "0", scenario=scenario, episodes=1, seed=41)
     granted = _fly_json(tmp_path, "granted", "--shield", scenario=scenario, episodes=1, seed=41)
     steps = _steps(tmp_path / "granted" / "mission-000" / "truth.jsonl")

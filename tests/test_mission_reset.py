@@ -3,6 +3,7 @@ the same missions as processes started for each (tssac_core.wire.mission_reset, 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import select
@@ -19,6 +20,7 @@ from mavlink_bridge.fly.config import DEFAULT_MODELS, config_from_args
 from mavlink_bridge.fly.crew import Crew, LineReader
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner
 from mavlink_bridge.processes.children import ChildProcesses
+from tssac_core.sim.scenario import dump, load
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError
 from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
 
@@ -172,8 +174,12 @@ def _fly_json(
 @pytest.mark.sitl
 @pytest.mark.timeout(600)
 def test_one_crew_flies_a_campaign_with_the_missions_of_fresh_processes(tmp_path: Path) -> None:
-    kept = _fly_json(tmp_path, "kept")
-    fresh = _fly_json(tmp_path, "fresh", "--fresh-processes")
+    # random.yaml's layouts, each mission cut at 40 s of flight (400 steps): what is compared does not depend on how
+    # the missions end, and a whole mission there is 250 s.
+    scenario = tmp_path / "random-40s.yaml"
+    dump(dataclasses.replace(load(RANDOM), episode_steps=400), scenario)
+    kept = _fly_json(tmp_path, "kept", scenario=scenario)
+    fresh = _fly_json(tmp_path, "fresh", "--fresh-processes", scenario=scenario)
     assert len({tuple(m["pids"].values()) for m in kept["missions"]}) == 1  # one world, three companions
     assert len({tuple(m["pids"].values()) for m in fresh["missions"]}) == 2
     layouts = []

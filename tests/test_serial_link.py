@@ -266,6 +266,11 @@ def _fly(tmp: Path, name: str, *extra: str) -> dict[str, Any]:
     return {"mission": mission, "statuses": statuses, "serial": serial}
 
 
+# The tests of the flown missions share one test process, so that their module fixture flies them once, not once in
+# each process that runs one of them.
+flown_missions = pytest.mark.xdist_group("serial_link_missions")
+
+
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Any]]:
     """One mission at 57,600 baud in real time, one at 921,600 in lockstep, one at 57,600 over a line that drops one
@@ -279,6 +284,7 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Any]]
 
 
 @pytest.mark.sitl
+@flown_missions
 @pytest.mark.timeout(240)
 @pytest.mark.parametrize("run", ["57600", "921600"])
 def test_a_whole_mission_over_a_serial_line_loses_no_frame(flown: dict[str, dict[str, Any]], run: str) -> None:
@@ -299,6 +305,7 @@ def test_a_whole_mission_over_a_serial_line_loses_no_frame(flown: dict[str, dict
 
 
 @pytest.mark.sitl
+@flown_missions
 @pytest.mark.timeout(240)
 def test_the_telemetry_at_57600_stays_within_the_line(flown: dict[str, dict[str, Any]]) -> None:
     """In real time at 57,600 baud the companion received at most a quarter of what the line carries, and sent
@@ -313,6 +320,7 @@ def test_the_telemetry_at_57600_stays_within_the_line(flown: dict[str, dict[str,
 
 
 @pytest.mark.sitl
+@flown_missions
 @pytest.mark.timeout(240)
 def test_a_line_that_drops_bytes_is_survived(flown: dict[str, dict[str, Any]]) -> None:
     """One byte in 500 lost each way: frames are lost (counted by both framers and by the sequence numbers), none is

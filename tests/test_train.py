@@ -26,7 +26,13 @@ from tssac_core.train.wall_time import Ended, Invocation, read_invocations
 # One test process runs this file: its module fixture is built once.
 pytestmark = pytest.mark.xdist_group("test_train")
 
+SHORT = str(Path(__file__).resolve().parent.parent / "scenarios" / "short.yaml")
+"""A 600-step mission (the UAVs start in their rings): what these runs assert does not depend on the mission's
+length, and their validation missions, flown to the end by untrained policies, cost a seventh of strike.yaml's."""
+
 TINY = [
+    "--scenario",
+    SHORT,
     "--epochs",
     "2",
     "--validation-episodes",
@@ -115,7 +121,7 @@ def no_update_run(hidden: str, *extra: str) -> list[str]:
 def test_transfer_initialises_the_next_role(tmp_path):
     """With --epochs so short that no update happens, TSSAC's detect actor equals the decoy's (N1 -> N2)."""
     out = tmp_path / "t"
-    args = no_update_run("[16]")
+    args = no_update_run("[16]", "--roles", "decoy,detect")
     assert main(["--algo", "tssac", "--out", str(out), *args]) == 0
     a = torch.load(out / "decoy.pt", weights_only=False)["actor"]
     b = torch.load(out / "detect.pt", weights_only=False)["actor"]
@@ -252,6 +258,8 @@ def test_evaluate_flies_trained_models(trained, tmp_path):
 def test_resume_after_kill_continues_identically(tmp_path):
     """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
     args = [
+        "--scenario",
+        SHORT,
         "--algo",
         "sac_lag",
         "--seed",
@@ -271,9 +279,9 @@ def test_resume_after_kill_continues_identically(tmp_path):
         "--envs",
         "2",
         "--set",
-        "hidden_sizes=[64,64]",
+        "hidden_sizes=[32,32]",
         "--set",
-        "batch_size=64",
+        "batch_size=32",
         "--threads",
         "1",
         "--no-progress",

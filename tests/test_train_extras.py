@@ -46,9 +46,11 @@ def test_tensorboard_gets_every_epochs_row(tmp_path):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     out, board = tmp_path / "run", tmp_path / "tb"
-    # Decisions of 1 s (as the shipped team): every world's episode ends within an epoch of 400 decisions each.
+    # On scenarios/short.yaml with decisions of 1 s (as the shipped team): every world's 60-decision episode ends
+    # within an epoch of 100 decisions each.
+    short = str(Path(__file__).resolve().parent.parent / "scenarios" / "short.yaml")
     argv = ["--algo", "tssac", "--seed", "1", "--out", str(out), "--tensorboard", str(board), *TINY]
-    assert main([*argv, "--action-repeat", "10", "--steps-per-epoch", "800"]) == 0
+    assert main([*argv, "--scenario", short, "--action-repeat", "10", "--steps-per-epoch", "200"]) == 0
     events = EventAccumulator(str(board))
     events.Reload()
     tags = set(events.Tags()["scalars"])

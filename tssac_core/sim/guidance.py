@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.sim.routes import FieldCache, cell_centres, field_gradient, radar_depth, sam_disk, wavefront
+from tssac_core.sim.routes import FieldCache, cell_centres, field_gradient, radar_depth, sam_disk, wavefronts
 from tssac_core.sim.world import wrap_angle
 from tssac_core.sim.world_state import WorldState
 
@@ -71,8 +71,8 @@ class Guidance:
         self.cfg = cfg
         self._plans = FieldCache(self._plan)
 
-    def _plan(self, state: WorldState, k: int) -> np.ndarray:
-        return navigation_function(state, k, self.cfg)
+    def _plan(self, state: WorldState, worlds: np.ndarray) -> np.ndarray:
+        return navigation_functions(state, worlds, self.cfg)
 
     def actions(self, state: WorldState) -> np.ndarray:
         """Actions (N, 3, 2) in [-1, 1] for every vehicle of every state."""
@@ -121,19 +121,21 @@ class Guidance:
         return np.where(any_blocked, b + np.where(o >= 0, 1.0, -1.0) * h, course)
 
 
-def navigation_function(state: WorldState, k: int, cfg: GuidanceConfig) -> np.ndarray:
-    """Geodesic distance (in cells) from every cell to the SAM's detection disk, around inflated radars.
+def navigation_functions(state: WorldState, worlds: np.ndarray, cfg: GuidanceConfig) -> np.ndarray:
+    """Geodesic distance (in cells) from every cell to the SAM's detection disk, around inflated radars, of each
+    of the given worlds, (K, size, size).
 
-    8-neighbour wavefront (:func:`tssac_core.sim.routes.wavefront`); blocked cells get the largest free
+    8-neighbour wavefront (:func:`tssac_core.sim.routes.wavefronts`); blocked cells get the largest free
     value plus their depth into the obstacle, so the gradient also points out of a disk.
     """
     cx, cy = cell_centres(state.c.area_m, cfg.grid_m)
-    goal = sam_disk(state, k, cx, cy)
-    depth = np.maximum(radar_depth(state, k, cx, cy, cfg.plan_margin_m), 0.0)
+    goal = np.stack([sam_disk(state, int(k), cx, cy) for k in worlds])
+    depth = np.stack([np.maximum(radar_depth(state, int(k), cx, cy, cfg.plan_margin_m), 0.0) for k in worlds])
     free = depth <= 0
-    dist = wavefront(goal, np.where(free | goal, 1.0, np.inf))
+    dist = wavefronts(goal, np.where(free | goal, 1.0, np.inf))
     reachable = np.isfinite(dist)
-    reachable_max = dist[reachable].max(initial=0.0)
+    # Per world: the largest reachable value (0 when none is).
+    reachable_max = np.where(reachable, dist, 0.0).max(axis=(1, 2), initial=0.0)[:, None, None]
     # Unreachable free cells (boxed in) and obstacle cells: uphill away from the obstacles.
     fallback = reachable_max + 1.0 + depth / cfg.grid_m
     return np.where(reachable, dist, fallback).astype(np.float32)

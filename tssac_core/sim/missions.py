@@ -24,7 +24,6 @@ from tssac_core.common.stats import (
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import PilotSpec, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
-from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Team
 from tssac_core.sim.world import World
@@ -204,8 +203,9 @@ def iter_missions(
     out = np.zeros((world.n, len(ROLES)), dtype=bool)
     track: list[np.ndarray] = []
     cfg = RewardConfig()
-    routes = RouteMap()
     team = Team(pilots, mode)
+    # The reward's route fields are the route observation's (RouteConfig() both): one field per layout, not two.
+    routes = team.routes
     monitor = None if shield is None else WorldMonitor(world, [decision_interval(p) for p in pilots], shield)
     backup_track: list[np.ndarray] = []
     while world.running.any():

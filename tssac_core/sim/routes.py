@@ -5,8 +5,9 @@ Both need, per layout, the length of the shortest way from every point of the ar
 detection disk (which layouts keep free of radars), going around the radars rather than through them.
 :func:`wavefront` computes it on a square grid: a chamfer distance, relaxed to convergence, with a
 per-cell traversal cost (1 in free air, more or infinite inside a radar). :class:`FieldCache` keeps one
-field per world and recomputes it only when that world gets a new layout. :class:`RouteMap` turns a
-field into the *detour*: how much longer the way to the disk is than the straight line.
+field per world and recomputes it only when that world gets a new layout (the worlds reset together in one batch of
+:func:`wavefronts`). :class:`RouteMap` turns a field into the *detour*: how much longer the way to the disk is than
+the straight line.
 """
 
 from __future__ import annotations
@@ -36,7 +37,23 @@ def wavefront(
 
     A move from cell a to cell b of length L costs ``L * (step_cost[a] + step_cost[b]) / 2``; cells of
     infinite cost are impassable and cells that cannot reach the goal get ``inf``. Iterated to the
-    fixed point, so the result is exact for the move set.
+    fixed point, so the result is exact for the move set. One grid of :func:`wavefronts`.
+    """
+    return wavefronts(goal[None], np.asarray(step_cost)[None], moves)[0]
+
+
+WAVEFRONT_BATCH = 16
+"""Grids relaxed together by :func:`wavefronts`: the line sweeps' thousands of small numpy calls per grid are paid once
+per batch; a batch runs as many whole-grid sweeps as its slowest grid needs, so larger batches gain no more (100 x 100
+route fields: about 2.5x less time per field than one at a time, at 16)."""
+
+
+def wavefronts(
+    goals: np.ndarray, step_costs: np.ndarray, moves: list[tuple[tuple[int, int], float]] = KING_MOVES
+) -> np.ndarray:
+    """:func:`wavefront` of each of B grids, (B, size, size) goals and step costs: the same numbers, to the bit, as
+    one grid at a time (every grid is relaxed by the same operations in the same order, and further sweeps leave a
+    grid at its fixed point unchanged), in batches of :data:`WAVEFRONT_BATCH`.
 
     Every relaxation is ``d_b = min(d_b, (d_a + L c_a / 2) + L c_b / 2)``, in this order of operations.
     The order in which relaxations are applied does not change the result, to the bit: starting from
@@ -46,18 +63,33 @@ def wavefront(
     is chosen for speed: first :data:`LINE_SWEEP_ROUNDS` rounds of line sweeps (:func:`_line_sweeps`),
     which carry a distance across the whole grid in one pass, then whole-grid sweeps, each relaxing every
     move once (in place: a move sees what the moves before it in the same sweep found), until one changes
-    nothing (after the line sweeps, one to five).
+    nothing in any grid of the batch (after the line sweeps, one to five).
     """
-    size_i, size_j = goal.shape
+    goals = np.asarray(goals, dtype=bool)
+    step_costs = np.asarray(step_costs, dtype=np.float64)
+    out = np.empty(goals.shape)
+    for b in range(0, len(goals), WAVEFRONT_BATCH):
+        out[b : b + WAVEFRONT_BATCH] = _wavefront_batch(
+            goals[b : b + WAVEFRONT_BATCH], step_costs[b : b + WAVEFRONT_BATCH], tuple(moves)
+        )
+    return out
+
+
+def _wavefront_batch(
+    goal: np.ndarray, step_cost: np.ndarray, moves: tuple[tuple[tuple[int, int], float], ...]
+) -> np.ndarray:
+    """The grids of a batch, relaxed cell-major, (size_i, size_j, B): every gather then moves B numbers at once."""
+    n_grids, size_i, size_j = goal.shape
     pad = max(max(abs(a), abs(b)) for (a, b), _ in moves)  # the longest move's reach
-    half = np.full((size_i + 2 * pad, size_j + 2 * pad), np.inf)
+    half = np.full((size_i + 2 * pad, size_j + 2 * pad, n_grids), np.inf)
     inner = (slice(pad, pad + size_i), slice(pad, pad + size_j))
-    half[inner] = 0.5 * np.asarray(step_cost, dtype=np.float64)
+    half[inner] = 0.5 * step_cost.transpose(1, 2, 0)
     weighted = {length: length * half for _, length in moves}  # L c / 2, padded (the padding impassable)
     padded = np.full(half.shape, np.inf)
     dist = padded[inner]
-    dist[goal] = 0.0
-    _line_sweeps(padded, pad, weighted, tuple(moves))
+    at_goal = goal.transpose(1, 2, 0)
+    dist[at_goal] = 0.0
+    _line_sweeps(padded, pad, weighted, moves)
     relaxations = []  # per move: where from, where to, and the two halves of its cost there
     for (a, b), length in moves:
         src = (slice(max(a, 0), size_i + min(a, 0)), slice(max(b, 0), size_j + min(b, 0)))
@@ -70,9 +102,9 @@ def wavefront(
             via = dist[src] + cost_src
             via += cost_dst  # (d_a + L c_a / 2) + L c_b / 2, in this order
             np.minimum(dist[dst], via, out=dist[dst])
-        dist[goal] = 0.0
+        dist[at_goal] = 0.0
         if np.array_equal(before, dist):
-            return dist.copy()
+            return dist.transpose(2, 0, 1).copy()
 
 
 LINE_SWEEP_ROUNDS = 2
@@ -84,8 +116,9 @@ round: 1.4x, it leaves 10-50 passes; three: 1.8x, a round costs more than the pa
 def _line_sweeps(
     padded: np.ndarray, pad: int, weighted: dict[float, np.ndarray], moves: tuple[tuple[tuple[int, int], float], ...]
 ) -> None:
-    """Relax ``padded`` distances in line sweeps: the grid with ``pad`` cells (the longest move's reach) of
-    impassable padding round it, at +inf; ``weighted`` holds each move length's L c / 2, padded likewise.
+    """Relax the ``padded`` distances of a batch of grids (rows, cols, B) in line sweeps: each grid with ``pad``
+    cells (the longest move's reach) of impassable padding round it, at +inf; ``weighted`` holds each move length's
+    L c / 2, padded likewise.
 
     A whole-grid sweep applies each move to all cells at once, so a distance travels one move per sweep,
     and the fields take 40-80 sweeps. A line sweep goes through the rows (or columns) in order and
@@ -93,15 +126,17 @@ def _line_sweeps(
     that runs one way along the axis is found in one pass, however long. Four directions (rows up and
     down, columns up and down) make a round. Relaxations from the padding give +inf: no-ops.
     """
-    flat = padded.reshape(-1)
-    costs = np.stack([weighted[length].reshape(-1) for _, length in moves]).reshape(-1)  # (moves x cells)
+    n_grids = padded.shape[2]
+    flat = padded.reshape(-1, n_grids)
+    lengths = sorted(weighted)
+    costs = np.stack([weighted[length].reshape(-1, n_grids) for length in lengths]).reshape(-1, n_grids)
     inner = padded[pad:-pad, pad:-pad]
     for _ in range(LINE_SWEEP_ROUNDS):
-        for axis, lines, src, src_cost, dst_cost in _line_plan(padded.shape, pad, moves):
-            cost_src, cost_dst = costs.take(src_cost), costs.take(dst_cost)  # (lines, moves, cells)
-            view = inner if axis == 0 else inner.T
+        for axis, lines, src, src_cost, dst_cost in _line_plan(padded.shape[:2], pad, moves):
+            cost_src, cost_dst = costs.take(src_cost, axis=0), costs.take(dst_cost, axis=0)  # (lines, moves, cells, B)
+            view = inner if axis == 0 else inner.transpose(1, 0, 2)
             for n, line in enumerate(lines):
-                via = flat.take(src[n])
+                via = flat.take(src[n], axis=0)
                 via += cost_src[n]
                 via += cost_dst[n]  # (d_a + L c_a / 2) + L c_b / 2, as in the whole-grid sweeps
                 np.minimum(view[line], np.minimum.reduce(via, axis=0), out=view[line])
@@ -112,9 +147,10 @@ def _line_plan(
     padded_shape: tuple[int, int], pad: int, moves: tuple[tuple[tuple[int, int], float], ...]
 ) -> list[tuple]:
     """Per direction of a line sweep: (axis, line order, source cells (lines, moves, cells) as flat indices
-    into the padded grid, and the source's and destination's entries in the stacked per-move costs)."""
+    into one padded grid, and the source's and destination's entries in its costs stacked by move length)."""
     rows, cols = padded_shape
     size = rows * cols
+    lengths = sorted({length for _, length in moves})
     plan = []
     for axis in (0, 1):
         for step in (1, -1):
@@ -128,7 +164,8 @@ def _line_plan(
             i, j = (line, cell) if axis == 0 else (cell, line)
             dst = (i + pad) * cols + (j + pad)  # (lines, cells)
             src = np.stack([dst + moves[m][0][0] * cols + moves[m][0][1] for m in chosen], axis=1)
-            offset = (np.array(chosen) * size)[None, :, None]  # where each move's costs start in the stack
+            # where each move's length's costs start in the stack
+            offset = (np.array([lengths.index(moves[m][1]) for m in chosen]) * size)[None, :, None]
             order = range(n_lines) if step > 0 else range(n_lines - 1, -1, -1)
             plan.append(
                 (
@@ -172,8 +209,9 @@ class FieldCache:
     built afresh); the token is the fast path while the layouts stay the same.
     """
 
-    def __init__(self, build: Callable[[WorldState, int], np.ndarray]) -> None:
+    def __init__(self, build: Callable[[WorldState, np.ndarray], np.ndarray]) -> None:
         self.build = build
+        """The fields of the worlds of the given indices, (K, size, size): the changed worlds are built at once."""
         self._fields: np.ndarray | None = None
         self._keys: np.ndarray | None = None
         self._token: object = None
@@ -185,12 +223,15 @@ class FieldCache:
             return self._fields
         keys = np.concatenate([state.sam_m, state.radar_m.reshape(state.n, -1), state.radar_r_m], axis=1)
         if self._fields is None or self._keys is None or self._keys.shape != keys.shape:
-            first = self.build(state, 0)
-            self._fields = np.zeros((state.n, *first.shape), dtype=np.float32)
-            self._keys = np.full(keys.shape, np.nan)
-        for k in np.flatnonzero(np.any(self._keys != keys, axis=1)):
-            self._fields[k] = self.build(state, int(k))
-            self._keys[k] = keys[k]
+            self._fields, self._keys = None, np.full(keys.shape, np.nan)
+        changed = np.flatnonzero(np.any(self._keys != keys, axis=1))
+        if len(changed):
+            built = self.build(state, changed)
+            if self._fields is None:
+                self._fields = np.zeros((state.n, *built.shape[1:]), dtype=np.float32)
+            self._fields[changed] = built
+            self._keys[changed] = keys[changed]
+        assert self._fields is not None
         self._token = state.layout_token
         return self._fields
 
@@ -273,13 +314,12 @@ class RouteMap:
         self.cfg = cfg
         self.cache = FieldCache(self._build)
 
-    def _build(self, state: WorldState, k: int) -> np.ndarray:
+    def _build(self, state: WorldState, worlds: np.ndarray) -> np.ndarray:
         cfg = self.cfg
         cx, cy = cell_centres(state.c.area_m, cfg.grid_m)
-        inside = radar_depth(state, k, cx, cy, cfg.margin_m) > 0
-        return (
-            wavefront(sam_disk(state, k, cx, cy), np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
-        )
+        goals = np.stack([sam_disk(state, int(k), cx, cy) for k in worlds])
+        inside = np.stack([radar_depth(state, int(k), cx, cy, cfg.margin_m) > 0 for k in worlds])
+        return wavefronts(goals, np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
 
     def detour_m(self, state: WorldState, vehicle: int | None = None) -> np.ndarray:
         """Detour in metres of every vehicle, (N, 3), or of one vehicle index, (N,)."""

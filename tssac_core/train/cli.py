@@ -94,6 +94,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
         ) as bar,
         contextlib.closing(sink) if sink is not None else contextlib.nullcontext(),
     ):
+        plotted = False  # the figures drawn after the last role trained here are the final ones
         for role_name in cfg.roles:
             role = Role(role_name)
             if shipped(out, role):
@@ -101,7 +102,9 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
                 continue
             train_role(cfg, scenario, role, out, resume, bar, on_epoch=on_epoch)
             write_plots(out, scenario.cost_limit)
-    write_plots(out, scenario.cost_limit)
+            plotted = True
+    if not plotted:
+        write_plots(out, scenario.cost_limit)
     wall_s = time.perf_counter() - start
     record_invocation(out, wall_s, Ended.FINISHED)
     print(f"trained {', '.join(cfg.roles)} with {cfg.algo} (seed {cfg.seed}) in {wall_s:.0f} s; results in {out}")
