@@ -22,9 +22,10 @@ sys.path.insert(0, str(HERE.parent))
 from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.evaluate import load_pilots  # noqa: E402
-from tssac_core.reporting.progress import ShardProgress, ShardsBar, TimeLeft  # noqa: E402
+from tssac_core.reporting.progress import ShardsBar  # noqa: E402
 from tssac_core.sim.missions import fly_missions  # noqa: E402
 from tssac_core.sim.scenario import load  # noqa: E402
+from tssac_core.sim.time_left import ShardProgress, TimeLeft  # noqa: E402
 
 SHOWN_EVERY_S = 0.5
 """How often an estimate is recorded (the bars redraw about as often)."""

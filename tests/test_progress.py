@@ -1,5 +1,5 @@
-"""evaluate's time left (tssac_core.reporting.progress): the mean step after the first times the steps left to the
-cap, not the rate of finished missions; for shards flown at once, the largest of theirs."""
+"""evaluate's time left (tssac_core.sim.time_left; the bars: tssac_core.reporting.progress): the mean step after the
+first times the steps left to the cap, not the rate of finished missions; for shards flown at once, the largest."""
 
 from __future__ import annotations
 
@@ -7,14 +7,8 @@ import time
 
 import pytest
 
-from tssac_core.reporting.progress import (
-    MIN_TIMED_STEPS,
-    ShardProgress,
-    ShardsBar,
-    TimeLeft,
-    format_seconds,
-    progress_bar,
-)
+from tssac_core.reporting.progress import ShardsBar, format_seconds, progress_bar
+from tssac_core.sim.time_left import MIN_TIMED_STEPS, ShardProgress, TimeLeft
 
 
 def schedule(ends: list[int]) -> list[tuple[int, int]]:

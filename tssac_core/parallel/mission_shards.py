@@ -18,10 +18,10 @@ import numpy as np
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.parallel.ray_map import map_on_ray
-from tssac_core.reporting.progress import ShardProgress, TimeLeft
 from tssac_core.sim.missions import MissionResults, iter_missions
 from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import Scenario
+from tssac_core.sim.time_left import ShardProgress, TimeLeft
 from tssac_core.sim.world_monitor import MonitorCounts
 
 PROGRESS_EVERY_S = 0.5
