@@ -40,11 +40,11 @@ def estimates(
     shown: list[tuple[float, float]] = []
     start = time.perf_counter()
     if workers > 1:
-        from tssac_core.parallel.mission_shards import SHARDS_PER_WORKER, fly_missions_sharded, shard
+        from tssac_core.parallel.mission_shards import fly_missions_sharded, shard_count
         from tssac_core.parallel.ray_cluster import RayTarget
 
         indices = list(range(episodes))
-        bar = ShardsBar(episodes, len(shard(indices, workers * SHARDS_PER_WORKER)), disable=True)
+        bar = ShardsBar(episodes, shard_count(episodes, workers), disable=True)
 
         def report(progress: ShardProgress) -> None:
             bar.update(progress)
@@ -55,15 +55,14 @@ def estimates(
 
         fly_missions_sharded(world, pilots, indices, seed, workers, RayTarget(None), report)
     else:
-        left_now = TimeLeft(episodes, world.episode_steps)
-        clock = [start, start]
+        left_now = TimeLeft(episodes, world.episode_steps, clock_s=start)
+        last_shown = [start]
 
         def step(flying: int, still: int) -> None:
-            now = time.perf_counter()
-            left_now.step(flying, still, now - clock[0])
-            clock[0] = now
-            if now - clock[1] >= SHOWN_EVERY_S and left_now.seconds is not None:
-                clock[1] = now
+            left_now.tick(flying, still)
+            now = left_now.clock_s
+            if now - last_shown[0] >= SHOWN_EVERY_S and left_now.seconds is not None:
+                last_shown[0] = now
                 shown.append((now - start, left_now.seconds))
 
         fly_missions(world, pilots, episodes, seed, on_step=step)

@@ -265,11 +265,10 @@ def fly_team(
 ) -> MissionResults:
     """Missions ``indices`` of seed ``seed`` flown by ``pilots``: in one batch here, or in shards on Ray workers."""
     if workers > 1 or address is not None:
-        from tssac_core.parallel.mission_shards import SHARDS_PER_WORKER, fly_missions_sharded, shard
+        from tssac_core.parallel.mission_shards import fly_missions_sharded, shard_count
         from tssac_core.parallel.ray_cluster import RayTarget
 
-        shards = len(shard(indices, workers * SHARDS_PER_WORKER))
-        with ShardsBar(len(indices), shards, disable=not progress) as bar:
+        with ShardsBar(len(indices), shard_count(len(indices), workers), disable=not progress) as bar:
             return fly_missions_sharded(
                 scenario, pilots, list(indices), seed, workers, RayTarget(address), bar.update, shield=shield
             )

@@ -38,6 +38,11 @@ def shard(indices: Sequence[int], shards: int) -> list[list[int]]:
     return [list(indices[a:b]) for a, b in zip(bounds, bounds[1:])]
 
 
+def shard_count(missions: int, workers: int) -> int:
+    """How many shards :func:`fly_missions_sharded` cuts ``missions`` missions into for ``workers`` workers."""
+    return len(shard(range(missions), workers * SHARDS_PER_WORKER))
+
+
 def merge(parts: Sequence[MissionResults]) -> MissionResults:
     """Shards' results, in index order, as one MissionResults."""
 
@@ -76,14 +81,7 @@ def fly_shard(piece: Shard) -> Generator[ShardProgress, None, MissionResults]:
     returns the results."""
     number, scenario, pilots, seed, indices, shield = piece
     left = TimeLeft(len(indices), scenario.episode_steps)
-    clock = [time.perf_counter()]
-
-    def timed(flying: int, still_flying: int) -> None:
-        now = time.perf_counter()
-        left.step(flying, still_flying, now - clock[0])
-        clock[0] = now
-
-    missions = iter_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield, on_step=timed)
+    missions = iter_missions(scenario, pilots, len(indices), seed, indices=indices, shield=shield, on_step=left.tick)
     pending, since = 0, time.monotonic()
     try:
         while True:

@@ -32,13 +32,11 @@ class MissionBar:
         self.left = TimeLeft(missions, cap)
         self._stack = ExitStack()
         self.bar = self._stack.enter_context(mission_bar(missions, disable))
-        self._last = time.perf_counter()
         self._shown = 0.0
 
     def step(self, flying: int, still_flying: int) -> None:
-        now = time.perf_counter()
-        self.left.step(flying, still_flying, now - self._last)
-        self._last = now
+        self.left.tick(flying, still_flying)
+        now = self.left.clock_s
         if flying != still_flying:
             self.bar.update(flying - still_flying)
         if now - self._shown >= 0.5 or still_flying == 0:

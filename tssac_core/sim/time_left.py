@@ -18,7 +18,8 @@ estimate; the shards fly at once, so what is left is the largest of them (``eval
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 MIN_TIMED_STEPS = 50
 """Steps after the first that are timed before there is an estimate (five decisions at the usual 10 steps)."""
@@ -34,6 +35,8 @@ class TimeLeft:
     running: int = -1
     timed_s: float = 0.0
     """Wall time of the steps after the first."""
+    clock_s: float = field(default_factory=time.perf_counter)
+    """When the last step ended (or the estimate was made): :meth:`tick` times a step from it."""
 
     def __post_init__(self) -> None:
         if self.running < 0:
@@ -45,6 +48,12 @@ class TimeLeft:
             self.timed_s += dt_s
         self.steps += 1
         self.running = still_flying
+
+    def tick(self, flying: int, still_flying: int) -> None:
+        """:meth:`step` timed on the wall clock since the last tick (``fly_missions``' ``on_step``)."""
+        now = time.perf_counter()
+        self.step(flying, still_flying, now - self.clock_s)
+        self.clock_s = now
 
     @property
     def seconds(self) -> float | None:
