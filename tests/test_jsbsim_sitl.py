@@ -116,17 +116,18 @@ def test_the_same_mission_twice_gives_the_same_truth_log(
 
 
 def test_wind_shows_in_the_telemetry_and_the_monitor_says_it_is_no_guarantee(tmp_path: Path) -> None:
-    """A 10 m/s west wind: ArduPilot's WIND message says so, VFR_HUD's airspeed and ground speed part, and a shielded
-    run says the monitor's guarantee does not cover JSBSim in wind (in the report and the JSON), never that it does."""
+    """A 10 m/s south wind on the short mission (the UAVs fly north): ArduPilot's WIND message says so, VFR_HUD's
+    airspeed and ground speed part, and a shielded run says the monitor's guarantee does not cover JSBSim in wind (in
+    the report and the JSON), never that it does."""
     windy = tmp_path / "windy.yaml"
-    dump(dataclasses.replace(load(STRIKE), wind=Wind(speed_m_s=10.0, from_deg=270.0)), windy)
+    dump(dataclasses.replace(load(SHORT), wind=Wind(speed_m_s=10.0, from_deg=180.0)), windy)
     proc, results = fly(tmp_path, "windy", windy, "--shield")
-    assert results["wind"] == {"speed_m_s": 10.0, "from_deg": 270.0, "turbulence": "none"}
+    assert results["wind"] == {"speed_m_s": 10.0, "from_deg": 180.0, "turbulence": "none"}
     assert results["shield"]["guarantee"] is False
     assert "covers the kinematic model (eq. 5) in still air, not jsbsim f16 dynamics and a 10 m/s wind" in proc.stdout
     winds = tlog_messages(tmp_path, "windy", "strike", ("WIND",))
-    assert winds and all(abs(w.direction - 270.0) < 1.0 and abs(w.speed - 10.0) < 0.2 for w in winds)
-    huds = tlog_messages(tmp_path, "windy", "strike", ("VFR_HUD",))
+    assert winds and all(abs(w.direction - 180.0) < 1.0 and abs(w.speed - 10.0) < 0.2 for w in winds)
+    huds = tlog_messages(tmp_path, "windy", "strike", ("VFR_HUD",))  # flying north, downwind
     assert max(abs(h.groundspeed - h.airspeed) for h in huds) > 5.0
 
 

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Protocol
 
+from tssac_core.common.sessions import in_new_session
+
 _log = logging.getLogger(__name__)
 
 _PR_SET_PDEATHSIG = 1
@@ -127,7 +129,7 @@ class ChildProcesses:
                 env=env,
                 start_new_session=True,
                 pass_fds=tuple(pass_fds),
-                preexec_fn=None if libc is None else _die_with_parent(libc),
+                preexec_fn=in_new_session(None if libc is None else _die_with_parent(libc)),
             )
         finally:
             if log is not None:

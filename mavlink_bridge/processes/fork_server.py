@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import IO, Any, NoReturn
 
 from mavlink_bridge.processes.children import Child, ChildProcesses
+from tssac_core.common.sessions import keep_nice_in_new_session
 
 _log = logging.getLogger(__name__)
 
@@ -449,6 +450,7 @@ def _run_program(
             signal.signal(sig, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.default_int_handler)
         os.setsid()
+        keep_nice_in_new_session()
         server.libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
         server.libc.prctl(_PR_SET_NAME, name.encode()[:15], 0, 0, 0)  # what ps and top show it as
         if os.getppid() != parent:  # the server died before the line above: so must we

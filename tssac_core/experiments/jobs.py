@@ -39,6 +39,7 @@ from typing import Any, Protocol, cast
 import tssac_core
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
+from tssac_core.common.sessions import in_new_session
 from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
@@ -199,7 +200,7 @@ def start(
             stderr=subprocess.STDOUT,
             env=child_environment(),
             start_new_session=True,
-            preexec_fn=preexec_fn,
+            preexec_fn=in_new_session(preexec_fn),
         )
     return proc, cmd
 
