@@ -19,9 +19,10 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 def pytest_configure(config: pytest.Config) -> None:
     """Byte-compile the project once, in the controlling process, before any test runs. Where the environment sets
-    PYTHONDONTWRITEBYTECODE (this project's machines do), no import writes a .pyc, so each of the several hundred
-    processes the tests start (worlds, companions, crews, training runs) would compile the project's source again:
-    about 0.2 s of CPU each. Python still reads the .pyc files compileall writes, and recompiles a stale one."""
+    PYTHONDONTWRITEBYTECODE (this project's machines do), no import writes a .pyc, so each of the about 250 Python
+    processes the tests start (fly, worlds, fork servers, training runs, Ray's) would compile the project's source
+    again: up to 0.85 s of CPU for all of it. Python still reads the .pyc files compileall writes, and recompiles a
+    stale one."""
     if hasattr(config, "workerinput"):  # an xdist worker: its controller has done it
         return
     for package in ("tssac_core", "mavlink_bridge", "sim_vehicles", "benchmarks"):
