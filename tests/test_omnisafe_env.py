@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,7 @@ torch = pytest.importorskip("torch")
 from omnisafe.envs.core import make, support_envs  # noqa: E402
 
 from tssac_core.sim.observation import ObservationMode  # noqa: E402
-from tssac_core.sim.scenario import Role  # noqa: E402
+from tssac_core.sim.scenario import Radar, Role, Start, dump, load  # noqa: E402
 from tssac_core.train.omnisafe_env import TssacRoleEnv  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -68,20 +69,32 @@ def test_bad_settings_are_refused():
         make("TssacDetect-v0", num_envs=1, teammates=str(ROOT / "models" / "tssac"), teammate_roles=["detect"])
 
 
-def test_cost_margin_is_the_tightened_cost_our_learners_constrain():
-    """cost_margin_km (the cross-check sets our TrainConfig's 1 km): the learner's cost counts steps near a radar
-    too, never fewer than eq. 11's inside it."""
-    exact, margin = make("TssacDetect-v0", num_envs=2), make("TssacDetect-v0", num_envs=2, cost_margin_km=1.0)
+def test_cost_margin_is_the_tightened_cost_our_learners_constrain(tmp_path: Path) -> None:
+    """cost_margin_km (the cross-check sets our TrainConfig's 1 km): the learner's cost counts the steps within 1 km
+    of a radar too, so it is eq. 11's inside the radar and more on a path through the band. The detect UAV flies
+    straight north at 250 m/s from 5 km south of a 5 km radar: the band from its 16th decision, the radar from its
+    20th."""
+    base = load(ROOT / "scenarios" / "strike.yaml")
+    layout = dataclasses.replace(
+        base.layout,
+        radars=(*base.layout.radars, Radar((82.0, 30.0), 5.0)),
+        starts={**base.layout.starts, "detect": Start((82.0, 20.0), 90.0)},
+    )
+    path = tmp_path / "radar-ahead.yaml"
+    dump(dataclasses.replace(base, layout=layout), path)
+    cfg = {"num_envs": 1, "teammates": "none", "scenario": str(path)}
+    exact, margin = make("TssacDetect-v0", **cfg), make("TssacDetect-v0", cost_margin_km=1.0, **cfg)
     assert exact.task.cost_margin_m == 0.0 and margin.task.cost_margin_m == 1000.0
-    for env in (exact, margin):
+    costs: list[list[float]] = [[], []]
+    for i, env in enumerate((exact, margin)):
         env.set_seed(5)
         env.reset()
-    totals = [0.0, 0.0]
-    for _ in range(300):
-        action = torch.tensor([[0.3, 1.0], [-0.2, 1.0]])
-        for i, env in enumerate((exact, margin)):
-            totals[i] += float(env.step(action)[2].sum())
-    assert totals[1] >= totals[0]
+        for _ in range(30):
+            costs[i].append(float(env.step(torch.zeros(2))[2]))
+    first = [next(k for k, c in enumerate(run) if c > 0) for run in costs]
+    assert first[1] < first[0] and first[0] in (19, 20, 21)  # the band before the radar
+    assert sum(costs[1]) > sum(costs[0]) > 0
+    assert all(m >= e for m, e in zip(costs[1], costs[0]))  # never fewer than eq. 11's
 
 
 def test_only_a_hit_terminates_unless_leaving_terminates():
