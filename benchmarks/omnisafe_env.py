@@ -6,7 +6,8 @@ OmniSafe 0.5.0 pins gymnasium 0.28.1, and this project needs gymnasium >= 1.0: t
 tests/test_crosscheck_omnisafe.py, which the main environment skips) run in an environment of their own, built once
 and reused. It is a virtual environment with torch 2.13.0 (CPU) and exactly the packages of
 benchmarks/omnisafe-requirements.txt (``--no-deps``: no resolver, the same versions every time), installed without
-byte-compiling (about a third of the time), and safety-gymnasium 1.0.0's dataclasses made valid for Python 3.11
+byte-compiling (about a third of the time; the build's import check then leaves the bytecode of what OmniSafe imports,
+`writing_bytecode`), and safety-gymnasium 1.0.0's dataclasses made valid for Python 3.11
 (``np.array`` defaults become ``default_factory``). 1.4 GB; 1.4 min of CPU, 2.5 to 12 min of wall time here on a
 machine shared with other builds and test runs (with byte-compiling: 2.3 min of CPU, 9 to 10 min).
 
@@ -101,11 +102,19 @@ def build(venv: Path) -> None:
         [str(python_of(work)), "-c", "import omnisafe, safety_gymnasium; print(omnisafe.__version__)"],
         capture_output=True,
         text=True,
+        env=writing_bytecode(),  # the check's imports leave their bytecode: the tests' imports do not compile again
     )
     if check.returncode != 0 or check.stdout.strip() != "0.5.0":
         last = (check.stderr.strip().splitlines() or ["no output"])[-1]
         raise BuildFailed(f"OmniSafe's environment in {work} does not import omnisafe 0.5.0: {last}")
     (work / "BUILT").write_text(f"omnisafe 0.5.0, {TORCH}, build {BUILD}\n")
+
+
+def writing_bytecode() -> dict[str, str]:
+    """The environment with bytecode writing on: a machine may set PYTHONDONTWRITEBYTECODE, and then every process
+    that imports torch and OmniSafe from this environment (built without byte-compiling) compiles them again (about
+    17 s of CPU here)."""
+    return {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
 
 
 def patch_dataclasses(venv: Path) -> int:

@@ -9,7 +9,6 @@ pass, none may be skipped.
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -22,7 +21,7 @@ sys.path.insert(0, str(ROOT))
 
 from conftest import OMNISAFE_TESTS  # noqa: E402
 
-from benchmarks.omnisafe_env import BuildFailed, omnisafe_python  # noqa: E402
+from benchmarks.omnisafe_env import BuildFailed, omnisafe_python, writing_bytecode  # noqa: E402
 
 # Its own group: the build is mostly downloads and unpacking, which overlap the other worker's tests.
 pytestmark = pytest.mark.xdist_group("omnisafe")
@@ -34,7 +33,8 @@ def test_omnisafe_tests_pass_in_omnisafes_environment() -> None:
         python = omnisafe_python()
     except BuildFailed as exc:
         pytest.fail(str(exc))
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    # Bytecode written: an environment built before its build kept the bytecode of its imports gets it on this run.
+    env = {**writing_bytecode(), "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     files = [str(ROOT / "tests" / name) for name in OMNISAFE_TESTS]
     done = subprocess.run(
         [str(python), "-m", "pytest", "-q", "-o", "addopts=", "-p", "no:cacheprovider", "-rs", *files],
