@@ -182,7 +182,7 @@ def test_paper_grid():
             ("  - sac_lag\n", "  - {algo: sac_lag, penalty: -10}\n"),
             "algos[1].penalty: only sac_penalty takes a penalty",
         ),
-        (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: unknown algorithm 'sarsa'"),
+        (("  - sac_lag\n", "  - sarsa\n"), "algos[1].algo: expected one of sac, "),
         (("  - sac_lag\n", "  - {algo: sac_lag, name: tssac}\n"), "algos[1].name: 'tssac' is used twice"),
         (
             ("  - sac_lag\n", "  - {algo: ppo, set: {alpha_init: 0.2}}\n"),

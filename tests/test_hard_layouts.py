@@ -91,4 +91,4 @@ def test_bad_arguments_are_one_line(tmp_path, capsys):
 
     assert run(main, ["--out", str(tmp_path / "x"), "--hard-layouts", "1.5"]) == 2
     err = capsys.readouterr().err
-    assert "--hard-layouts must be a fraction in [0, 1]" in err and "Traceback" not in err
+    assert "--hard-layouts: expected a fraction in [0, 1], got 1.5" in err and "Traceback" not in err

@@ -193,7 +193,7 @@ def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(t
     assert [int(x["epoch"]) for x in r] == [1] and float(r[0]["task_success"]) >= 0.5 and int(r[0]["episodes"]) >= 1
     assert (out / "strike.pt").is_file() and "reaches --stop-at-task-success" in caplog.text
     assert run(main, ["--out", str(tmp_path / "b"), "--stop-at-task-success", "1.5"]) == 2
-    assert "--stop-at-task-success must be a fraction" in capsys.readouterr().err
+    assert "--stop-at-task-success: expected a fraction in [0, 1], got 1.5" in capsys.readouterr().err
 
 
 def test_checkpoint_round_trip_and_team(trained):

@@ -133,8 +133,11 @@ def test_ranges_from_the_f16_response_and_bad_ranges() -> None:
 @pytest.mark.parametrize(
     "argv, words",
     [
-        (["--vary-wind-m-s", "5"], "vary the airframes of --airframe-response"),
-        (["--airframe-response", str(F16_RESPONSE), "--vary-wind-m-s", "nan"], "--vary-wind-m-s must be in [0, 50]"),
+        (["--vary-wind-m-s", "5"], "--vary-wind-m-s: varies the airframes of airframe_response"),
+        (
+            ["--airframe-response", str(F16_RESPONSE), "--vary-wind-m-s", "nan"],
+            "--vary-wind-m-s: expected a value in [0, 50], got nan",
+        ),
     ],
 )
 def test_train_refuses_variation_without_a_response(tmp_path: Path, argv: list[str], words: str) -> None:

@@ -56,6 +56,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.cli import UsageError
+from tssac_core.common.options import OptionError
 from tssac_core.sim.scenario import ROLES, Role
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.yaml_file import read_yaml, typed_value
@@ -262,7 +263,7 @@ def load_grid(path: str | Path) -> Grid:
         **r.generalization_tail(ev),
     )
     transfer = r.transfer(top["transfer"], {e.name: e for e in algos}) if top.get("transfer") is not None else None
-    grid = Grid(Path(path), algos, seeds, preset_config(train_layers), evaluation, transfer)
+    grid = Grid(Path(path), algos, seeds, r.config(train_layers, "train"), evaluation, transfer)
     check_jobs(grid)
     return grid
 
@@ -341,6 +342,14 @@ class _Reader:
         rest = {k: v for k, v in data.items() if k not in own}
         return read_settings(rest, self.source, where, GridError, also=own)
 
+    def config(self, layers: list[Preset], where: str, **fields: Any) -> TrainConfig:
+        """The TrainConfig of ``layers`` (`preset_config`); a rule between its fields that fails names the field
+        under ``where``."""
+        try:
+            return preset_config(layers, **fields)
+        except OptionError as exc:
+            raise self.fail(f"{where}.{exc.field}", exc.problem) from None
+
     def preset_file(self, data: dict[str, Any], where: str) -> list[Preset]:
         """``preset: FILE`` of a section or row: that file (its error named after this field), or nothing."""
         if "preset" not in data:
@@ -355,7 +364,7 @@ class _Reader:
         """``train:``: its preset file (if any), then its own settings; the scenario must be given and exist."""
         own = self.settings(data, "train", own=("preset",))
         layers = [*self.preset_file(data, "train"), own]
-        scenario = preset_config(layers).scenario if any("scenario" in p.values for p in layers) else None
+        scenario = self.config(layers, "train").scenario if any("scenario" in p.values for p in layers) else None
         if scenario is None:
             raise self.fail("train.scenario", "missing required field (in the grid file or its preset)")
         where = "train.scenario" if "scenario" in own.values else "train.preset"
@@ -472,7 +481,7 @@ class _Reader:
         if "seed" in row.values:
             raise self.fail(f"{where}.seed", "a row's seeds are the grid's (seeds:)")
         layers = [*(self.preset_file(data, where) or train), row]
-        config = preset_config(layers, seed=0)
+        config = self.config(layers, where, seed=0)
         if "algo" not in data and "preset" not in data:
             raise self.fail(f"{where}.algo", "missing required field")
         name = self.string(data.get("name", str(config.algo)), f"{where}.name")
@@ -480,6 +489,4 @@ class _Reader:
             raise self.fail(
                 f"{where}.name", f"{name!r} may hold only letters, digits, '_', '-' and '.' (it names directories)"
             )
-        if config.penalty != 0.0 and config.algo != "sac_penalty":
-            raise self.fail(f"{where}.penalty", f"only sac_penalty takes a penalty, not {config.algo}")
         return AlgoEntry(name=name, config=config)

@@ -6,95 +6,179 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from tssac_core.algos.onpolicy.config import OnPolicyConfig
 from tssac_core.algos.sac_config import SacConfig
-from tssac_core.common.cli import UsageError
+from tssac_core.common.cli import SEED_MAX, UsageError
+from tssac_core.common.errors import MAX_ACTION_REPEAT
+from tssac_core.common.options import OptionError, check_fields, option
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.reward import RewardConfig
 from tssac_core.sim.routes import RouteConfig
-from tssac_core.sim.scenario import DEFAULT_SCENARIO, Scenario
-from tssac_core.train.algorithms import Algo, Family, Selection, algorithm
+from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Scenario
+from tssac_core.train.algorithms import ALGORITHMS, Algo, Family, Selection, algorithm
+
+
+def _roles_problem(roles: tuple[str, ...]) -> str | None:
+    """The curriculum's roles, known and in order (Algorithm 1)."""
+    known = [r.value for r in ROLES]
+    for role in roles:
+        if role not in known:
+            return f"unknown role {role!r} (the roles: {', '.join(known)})"
+    if not roles:
+        return "name one or more roles"
+    if list(roles) != [r for r in known if r in roles]:
+        return f"must follow the curriculum order {', '.join(known)}"
+    return None
+
+
+def _roles(text: str) -> tuple[str, ...]:
+    """``--roles decoy,detect``: comma-separated."""
+    return tuple(r.strip() for r in text.split(",") if r.strip())
+
+
+def _path(text: str) -> str:
+    """A path as the command writes it ("" stays: none)."""
+    return str(Path(text)) if text else ""
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """One training run: an algorithm, a seed, the role curriculum."""
+    """One training run: an algorithm, a seed, the role curriculum. Each field's option (help, range, choices) is
+    its flag of ``python -m tssac_core.train``, its key in a preset, a grid row and a run's config.json
+    (tssac_core.common.options); the rules between fields are `__post_init__`'s."""
 
-    algo: Algo = Algo.TSSAC
-    """The algorithm (tssac_core.train.algorithms: its family, whether it is constrained, whether it transfers)."""
-    scenario: str = str(DEFAULT_SCENARIO)
-    """Scenario file (random layouts: every episode a new one, section 5.2.3)."""
-    seed: int = 0
-    epochs: int = 50
-    """Epochs per role (Table 3: 50)."""
-    steps_per_epoch: int = 4000
-    """Environment steps per epoch, summed over the parallel worlds (Table 3: 4,000)."""
-    roles: tuple[str, ...] = ("decoy", "detect", "strike")
-    """Roles to train, in curriculum order; earlier roles must already be in --out (or in ``teammates``)."""
-    envs: int = 4
-    """Parallel worlds collecting experience (one batched world)."""
-    update_every: int = 1
-    """Gradient updates happen once per this many environment steps (1: one update per step, as Algorithm 1)."""
-    start_steps: int = 4000
-    """From-scratch roles act uniformly at random for this many steps first (not after transfer)."""
-    update_after: int = 1000
-    """No updates before the buffer holds this many transitions."""
-    observation: ObservationMode = ObservationMode.ROUTE
-    """paper (eq. 7), extended, or route (extended + the way around the radars; tssac_core.sim.observation)."""
-    action_repeat: int = 1
-    """Decision interval: the learner's action is held for this many 0.1 s world steps (1: the paper)."""
-    penalty: float = 0.0
-    """sac_penalty: reward r + penalty * c."""
-    threads: int = 1
-    """torch threads. 1 by default, whatever the machine: at Table 3's sizes a second thread gains little
-    (benchmarks/RESULTS.md), and runs beside each other (the grid's jobs, ``--seeds``) each want one core."""
-    route_margin_km: float = 3.0
-    """Reward: the way around the radars keeps this far from them (tssac_core.sim.routes.RouteConfig)."""
-    cost_margin_km: float = 1.0
-    """The learner's cost counts steps within this distance of a radar, not only inside it: a tightened
-    constraint, so that the policy keeps clear of the radars' edges (docs/decisions.md). Evaluation,
+    algo: Algo = option(
+        Algo.TSSAC,
+        "learner; tssac: SAC-Lagrangian with the damped multiplier and transfer (tssac_core.train.algorithms)",
+        choices=tuple(ALGORITHMS),
+    )
+    scenario: str = option(
+        str(DEFAULT_SCENARIO), "scenario file (random layouts: every episode a new one, section 5.2.3)", parse=_path
+    )
+    seed: int = option(0, "seed of networks, layouts and exploration", minimum=0, maximum=SEED_MAX)
+    epochs: int = option(50, "epochs per role (Table 3: 50)", minimum=1)
+    steps_per_epoch: int = option(
+        4000, "learner decisions per epoch, summed over the parallel worlds (Table 3: 4000)", minimum=1
+    )
+    roles: tuple[str, ...] = option(
+        ("decoy", "detect", "strike"),
+        "comma-separated, in curriculum order; earlier roles must already be in --out (or in --teammates)",
+        rule=_roles_problem,
+        parse=_roles,
+    )
+    envs: int = option(4, "parallel worlds collecting experience (one batched world)", minimum=1)
+    update_every: int = option(1, "one gradient update per this many decisions (1: Algorithm 1)", minimum=1)
+    start_steps: int = option(
+        4000, "uniform random actions for this many decisions first (from-scratch roles, not after transfer)", minimum=0
+    )
+    update_after: int = option(1000, "no updates before the buffer holds this many transitions", minimum=0)
+    observation: ObservationMode = option(
+        ObservationMode.ROUTE,
+        "observation: paper (eq. 7), extended, or route (extended + the way around the radars)",
+        choices=tuple(m.value for m in ObservationMode),
+    )
+    action_repeat: int = option(
+        1,
+        "decision interval: hold each action for this many 0.1 s world steps (1: the paper)",
+        minimum=1,
+        maximum=MAX_ACTION_REPEAT,
+    )
+    penalty: float = option(0.0, "sac_penalty: reward r + penalty * c (e.g. -10)")
+    threads: int = option(1, "torch threads (whatever the machine: runs beside each other want a core each)", minimum=1)
+    """1 by default: at Table 3's sizes a second thread gains little (benchmarks/RESULTS.md), and runs beside each
+    other (the grid's jobs, ``--seeds``) each want one core."""
+    route_margin_km: float = option(
+        3.0, "reward and route observation: the way to the zone keeps this far from the radars", minimum=0
+    )
+    cost_margin_km: float = option(
+        1.0, "the learner's cost counts steps within this distance of a radar (0: eq. 11 exactly)", minimum=0
+    )
+    """A tightened constraint, so that the policy keeps clear of the radars' edges (docs/decisions.md). Evaluation,
     validation and the hazard_cost column count eq. 11 exactly."""
-    hard_layouts: float = 0.0
-    """Share of training episodes drawn from hard layouts only (tssac_core.sim.hard_layouts; 0: the scenario's
-    own draw). Validation and evaluation keep the scenario's own draw."""
-    hard_detour_km: float = 20.0
-    """A layout is hard when some UAV's way around the radars is at least this much longer than the straight line."""
-    validation_episodes: int = 30
-    """After every epoch, fly this many held-out missions with the greedy policy; the best epoch is shipped
-    (tssac_core.train.validation). 0: ship the last epoch."""
-    init_from: str = ""
-    """A role checkpoint whose networks initialise every trained role (fine-tuning; transfer() resets the rest)."""
-    teammates: str = ""
-    """A directory of trained role checkpoints (a run, or ``models/tssac``) for the earlier roles this run does
-    not train: they fly beside the trained roles and, for TSSAC, are transferred from. "" (default): this
-    run's own --out (the curriculum)."""
-    stop_at_task_success: float = 0.0
-    """End a role after the first epoch whose task success in training reaches this fraction (0: train every
-    epoch). For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
-    airframe_response: str = ""
-    """Train on varied airframes (tssac_core.sim.varied_airframes): the turn lag and achievable acceleration drawn per
-    episode from the spans of this fitted response file (e.g. sim_vehicles/dynamics/airframes/f16.response.yaml). ""
-    (default): eq. 5-6 exactly. Validation and evaluation fly eq. 5-6 exactly either way."""
-    vary_wind_m_s: float = 0.0
-    """With ``airframe_response``: a constant wind per episode, its speed drawn up to this (m/s)."""
-    vary_turn_noise_deg_s: float = 0.0
-    """With ``airframe_response``: turbulence, a heading-rate disturbance per step of this standard deviation
-    (deg/s)."""
-    selection: Selection | None = None
-    """Which validated epoch a role ships (tssac_core.train.algorithms.Selection, tssac_core.train.validation);
-    None: the algorithm's own (Algorithm.default_selection): within the limit for the learners that are given
-    it, by success for those that are not (sac, sac_penalty, ppo)."""
+    hard_layouts: float = option(
+        0.0,
+        "draw this share of training episodes from hard layouts only (0: the scenario's own draw; validation and "
+        "evaluation keep it)",
+        minimum=0,
+        maximum=1,
+        metavar="FRACTION",
+    )
+    hard_detour_km: float = option(
+        20.0,
+        "hard layout: some UAV's way around the radars is this much longer than the straight line",
+        minimum=0,
+    )
+    validation_episodes: int = option(
+        30, "held-out missions flown after every epoch to pick the shipped one (0: ship the last epoch)", minimum=0
+    )
+    init_from: str = option(
+        "",
+        "initialise the learner of every trained role from this role checkpoint (fine-tuning; the SAC family)",
+        parse=_path,
+    )
+    teammates: str = option(
+        "",
+        "directory whose trained earlier roles fly beside (and, for tssac, transfer to) the trained roles, e.g. "
+        "models/tssac with --roles strike (default: --out itself)",
+        parse=_path,
+    )
+    stop_at_task_success: float = option(
+        0.0,
+        "end a role after the first epoch whose task success in training reaches this (e.g. 0.9; 0: never)",
+        minimum=0,
+        maximum=1,
+        metavar="FRACTION",
+    )
+    """For measuring how many decisions a role needs to reach a level, as the transfer experiment does."""
+    airframe_response: str = option(
+        "",
+        "train on airframes varied per episode within this fitted response's spans (turn lag, achievable "
+        "acceleration; e.g. sim_vehicles/dynamics/airframes/f16.response.yaml; none: eq. 5-6 exactly)",
+        parse=_path,
+        metavar="FILE",
+    )
+    """tssac_core.sim.varied_airframes; validation and evaluation fly eq. 5-6 exactly either way."""
+    vary_wind_m_s: float = option(
+        0.0, "with --airframe-response: a constant wind per episode, up to this speed (m/s)", minimum=0, maximum=50
+    )
+    vary_turn_noise_deg_s: float = option(
+        0.0,
+        "with --airframe-response: turbulence, a heading-rate disturbance of this standard deviation (deg/s)",
+        minimum=0,
+        maximum=90,
+    )
+    selection: Selection | None = option(
+        None,
+        "which validated epoch a role ships: the best mission success among the epochs within the cost limit "
+        "(within_limit: default of tssac, sac_lag, ppo_lag, cpo), or whatever the cost (success: default of sac, "
+        "sac_penalty, ppo), or tail: screen every epoch on the upper bound of its cost and its within-C fraction, "
+        "and choose among the best three on more missions (tssac_core.train.validation)",
+        choices=tuple(Selection),
+    )
     learner: dict[str, Any] = field(default_factory=dict)
     """Overrides of the learner's settings (``--set``): SacConfig fields for the off-policy family (Table 3
     defaults), OnPolicyConfig fields for the on-policy one."""
 
     def __post_init__(self) -> None:
-        # Words from the command line or a config.json become their enums (ValueError for a word that is none).
+        check_fields(self)
+        # Words from the command line or a config.json become their enums.
         object.__setattr__(self, "algo", Algo(self.algo))
         object.__setattr__(self, "selection", Selection(self.selection) if self.selection else None)
         object.__setattr__(self, "observation", ObservationMode(self.observation))
+        object.__setattr__(self, "roles", tuple(self.roles))
+        # The rules between fields.
+        if (self.vary_wind_m_s or self.vary_turn_noise_deg_s) and not self.airframe_response:
+            varied = "vary_wind_m_s" if self.vary_wind_m_s else "vary_turn_noise_deg_s"
+            raise OptionError(varied, "varies the airframes of airframe_response (--airframe-response): give it too")
+        if self.penalty != 0.0 and self.algo != Algo.SAC_PENALTY:
+            raise OptionError("penalty", f"only sac_penalty takes a penalty, not {self.algo}")
+        if self.init_from and algorithm(self.algo).family is Family.ON_POLICY:
+            raise OptionError(
+                "init_from", f"{self.algo} trains every role from scratch (the SAC family can be initialised)"
+            )
 
 
 def has_multiplier_signal(algo: str) -> bool:
@@ -179,8 +263,6 @@ def onpolicy_config(cfg: TrainConfig, scenario: Scenario) -> OnPolicyConfig:
 
 def check_learner_settings(cfg: TrainConfig, scenario: Scenario) -> None:
     """Build the algorithm's config once, so that a bad --set fails before any work, in one line."""
-    if cfg.init_from and algorithm(cfg.algo).family is Family.ON_POLICY:
-        raise UsageError(f"--init-from: {cfg.algo} trains every role from scratch (the SAC family can be initialised)")
     try:
         if algorithm(cfg.algo).family is Family.ON_POLICY:
             check_override_kinds(cfg.learner, OnPolicyConfig)

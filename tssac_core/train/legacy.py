@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.cli import UsageError
-from tssac_core.train.algorithms import ALGORITHMS, Selection
+from tssac_core.common.options import OptionError
+from tssac_core.train.algorithms import ALGORITHMS
 from tssac_core.train.config import TrainConfig, has_multiplier_signal
 
 OLDER_RUN_SETTINGS = {"cost_margin_km": 0.0, "selection": "within_limit"}
@@ -49,9 +50,10 @@ def config_from_saved(saved: Any, source: str | Path = "config.json") -> TrainCo
     learner = full.get("learner")
     if has_multiplier_signal(full["algo"]) and isinstance(learner, dict) and "multiplier_signal" not in learner:
         full["learner"] = {**learner, "multiplier_signal": "q_c"}  # what their multiplier measured before the setting
-    if full["selection"] not in [None, "", *Selection]:
-        raise UsageError(f"{source}: selection: expected one of {', '.join(Selection)}, got {full['selection']!r}")
-    return TrainConfig(**{**full, "roles": tuple(full["roles"])})
+    try:
+        return TrainConfig(**{**full, "roles": tuple(full["roles"])})
+    except OptionError as exc:  # the options' checks, as the command line and presets make them
+        raise UsageError(f"{source}: {exc.field}: {exc.problem}") from None
 
 
 def read_config(path: Path, what: str) -> TrainConfig:

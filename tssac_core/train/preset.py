@@ -27,39 +27,14 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.cli import UsageError
-from tssac_core.sim.observation import ObservationMode
+from tssac_core.common.options import OptionError, check_field, options
 from tssac_core.sim.yaml_file import FileError, read_yaml, typed_value
-from tssac_core.train.algorithms import ALGORITHMS, Family, Selection, family_of
+from tssac_core.train.algorithms import Family, family_of
 from tssac_core.train.config import TrainConfig
 
 SET_KEYS = ("set", "sac_set", "onpolicy_set")
 NOT_IN_PRESET = ("learner",)
 """TrainConfig fields a preset does not set directly (its learner settings go under SET_KEYS)."""
-PATH_FIELDS = ("scenario", "init_from", "teammates")
-MINIMUM = {
-    "epochs": 1,
-    "steps_per_epoch": 1,
-    "envs": 1,
-    "update_every": 1,
-    "action_repeat": 1,
-    "threads": 1,
-    "start_steps": 0,
-    "update_after": 0,
-    "validation_episodes": 0,
-    "seed": 0,
-    "route_margin_km": 0,
-    "cost_margin_km": 0,
-    "hard_detour_km": 0,
-    "vary_wind_m_s": 0,
-    "vary_turn_noise_deg_s": 0,
-}
-"""The least value of a count or distance (what the training command accepts)."""
-FRACTIONS = ("hard_layouts", "stop_at_task_success")
-CHOICES: dict[str, tuple[str, ...]] = {
-    "algo": tuple(ALGORITHMS),  # unknown: named "unknown algorithm", as the grid always said
-    "observation": tuple(m.value for m in ObservationMode),
-    "selection": tuple(Selection),
-}
 FIELD_NAMES = tuple(f.name for f in dataclasses.fields(TrainConfig))
 
 
@@ -77,17 +52,6 @@ class Preset:
     source: str
     values: dict[str, Any] = field(default_factory=dict)
     sets: dict[str, dict[str, Any]] = field(default_factory=dict)
-
-    def argparse_defaults(self) -> dict[str, Any]:
-        """The values as the training command's parser holds them (roles comma-separated, paths as Path)."""
-        out: dict[str, Any] = {}
-        for key, value in self.values.items():
-            if key == "roles":
-                value = ",".join(value)
-            elif key in PATH_FIELDS:
-                value = Path(value)
-            out[key] = value
-        return out
 
     def learner_settings(self, algo: str) -> dict[str, Any]:
         """The ``--set`` values for ``algo``: ``set``, then its family's (``sac_set`` or ``onpolicy_set``)."""
@@ -136,6 +100,8 @@ def read_settings(
                 sets[key] = learner_settings(value)
             else:
                 values[key] = check_value(key, value)
+        except OptionError as exc:
+            raise error(source, at, exc.problem) from None
         except ValueError as exc:
             raise error(source, at, str(exc)) from None
     return Preset(source, values, sets)
@@ -153,36 +119,22 @@ def learner_settings(value: Any) -> dict[str, Any]:
 
 
 def check_value(key: str, value: Any) -> Any:
-    """One TrainConfig field's value as the training command would take it (ValueError: the problem)."""
+    """One TrainConfig field's value as the training command would take it (OptionError: the problem): its type as
+    YAML writes it, then the field's option (tssac_core.common.options)."""
+    opt = options(TrainConfig)[key]
+    if opt.parse is not None and isinstance(value, str):
+        value = opt.parse(value)  # roles as the command writes them, paths as the command writes them
+    elif key == "roles" and isinstance(value, list) and all(isinstance(r, str) for r in value):
+        value = tuple(value)
+    elif key == "roles":
+        raise OptionError(key, f"expected a list of roles, got {value!r}")
     default = getattr(TrainConfig, key, None)
-    if key == "roles":
-        if isinstance(value, str):
-            value = [r.strip() for r in value.split(",") if r.strip()]
-        if not isinstance(value, list) or not all(isinstance(r, str) for r in value):
-            raise ValueError(f"expected a list of roles, got {value!r}")
-        return tuple(value)
-    if key == "algo" and value not in ALGORITHMS:
-        raise ValueError(f"unknown algorithm {value!r} (choose from {', '.join(ALGORITHMS)})")
-    if key in CHOICES:
-        if value not in CHOICES[key]:
-            raise ValueError(f"expected one of {', '.join(CHOICES[key])}, got {value!r}")
-        return value
-    if isinstance(default, (bool, int, float, str)):
+    if not opt.choices and isinstance(default, (bool, int, float, str)):
         value = typed_value(type(default), value, key, "", _problem)  # the scenario's and the grid's checks
-    return checked_range(key, value)
+    return check_field(TrainConfig, key, value)
 
 
-def _problem(_source: str, _field: str, problem: str) -> ValueError:
-    """:func:`typed_value`'s error as :func:`check_value`'s ValueError: the problem alone (callers add the place)."""
-    return ValueError(problem)
-
-
-def checked_range(key: str, value: Any) -> Any:
-    """``value`` if it is in the range of ``key`` (MINIMUM, FRACTIONS); paths written as the command writes them."""
-    if key in MINIMUM and value < MINIMUM[key]:
-        raise ValueError(f"must be >= {MINIMUM[key]}, got {value}")
-    if key in FRACTIONS and not 0.0 <= value <= 1.0:
-        raise ValueError(f"expected a fraction in [0, 1], got {value:g}")
-    if key in PATH_FIELDS:
-        return str(Path(value)) if value else value
-    return value
+def _problem(source: str, field: str, problem: str) -> OptionError:
+    """:func:`typed_value`'s error as :func:`check_value`'s."""
+    del source
+    return OptionError(field, problem)
