@@ -167,8 +167,8 @@ def waiting_task(seconds: float, wake_s: float) -> Iterator[float]:
 def bench_idle(seconds: float) -> dict[str, Any]:
     """Ray's own CPU while two grid tasks wait on their training (a local Ray of 2 CPUs, generator tasks and a driver
     waking as the executor's do): what Ray takes from jobs that fill the machine."""
-    from tssac_core.experiments.ray_executor import DRIVER_WAKE_S, TASK_WAKE_S
     from tssac_core.parallel.ray_cluster import RayTarget, ray_session
+    from tssac_core.train.jobs.ray_executor import DRIVER_WAKE_S, TASK_WAKE_S
 
     with ray_session(RayTarget(cpus=2)) as ray:
         task = ray.remote(max_retries=0)(waiting_task)

@@ -30,7 +30,6 @@ from tssac_core.experiments.evaluations import (
 )
 from tssac_core.experiments.figures import clipped_error, penalty_entries
 from tssac_core.experiments.grid import load_grid
-from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
 from tssac_core.experiments.learning_curves import steps_to_threshold
 from tssac_core.experiments.summary import (
     AlgorithmSummary,
@@ -46,6 +45,7 @@ from tssac_core.experiments.summary import (
 )
 from tssac_core.experiments.table import _tail_rate, cascade_row
 from tssac_core.train.config import selects_within_limit
+from tssac_core.train.jobs.runner import LOG_NAME, Status, job_state
 from tssac_core.train.rundir import METRIC_FIELDS
 from tssac_core.train.wall_time import (
     WALL_TIME_FILE,
@@ -760,7 +760,7 @@ def test_finish_by_goes_by_a_run_that_finished_after_the_invocation_began(smoke,
 
 
 def test_a_job_the_deadline_refuses_is_reported_and_not_started(tmp_path):
-    from tssac_core.experiments.jobs import run_jobs
+    from tssac_core.train.jobs.runner import run_jobs
 
     grid = load_grid(write_grid(tmp_path / "one.yaml", smoke_text(("  - sac_lag\n", ""))))
     states = [job_state(job) for job in grid.jobs(tmp_path / "results")]

@@ -9,9 +9,9 @@ import pytest
 
 from tssac_core.common.cli import run
 from tssac_core.experiments.grid import load_grid
-from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.arguments import parse_args
 from tssac_core.train.cli import main
+from tssac_core.train.jobs.runner import config_difference
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -114,9 +114,9 @@ def test_any_preset_is_a_grid_row_whose_job_is_the_single_runs_config(
     """A row naming a preset trains exactly ``train --preset P --seed N`` (the grid's ``train:`` does not leak
     in), which is what the committed runs of that recipe recorded; and the file the runner hands the job holds
     that configuration, read back as the run will."""
-    from tssac_core.experiments.jobs import JOB_CONFIG, command
     from tssac_core.train.arguments import parse_cli
     from tssac_core.train.config import config_record, with_recorded_defaults
+    from tssac_core.train.jobs.runner import JOB_CONFIG, command
 
     monkeypatch.chdir(ROOT)
     text = (ROOT / "experiments" / "smoke.yaml").read_text().replace("  - sac_lag\n", f"  - {row}\n")

@@ -25,13 +25,13 @@ from tssac_core.common.cli import run
 from tssac_core.evaluate import main as evaluate_main
 from tssac_core.experiments.cli import train
 from tssac_core.experiments.grid import load_grid
-from tssac_core.experiments.jobs import LOG_NAME, Status, job_state
 from tssac_core.parallel.mission_shards import fly_missions_sharded, shard
 from tssac_core.parallel.ray_cluster import OBJECT_STORE_BYTES, RAY_ENVIRONMENT, RayTarget, import_ray
 from tssac_core.parallel.ray_map import TaskFailed, map_on_ray
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.scenario import load as load_scenario
+from tssac_core.train.jobs.runner import LOG_NAME, Status, job_state
 from tssac_core.train.wall_time import Ended, read_invocations
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -361,13 +361,6 @@ def test_ctrl_c_stops_every_job_and_leaves_each_resumable(local_ray, tmp_path):
         "sac_lag-seed0;",
         "tssac-seed0;",
     ]
-
-
-def test_train_offers_the_experiments_executors():
-    from tssac_core.experiments.executors import EXECUTORS
-    from tssac_core.train.arguments import EXECUTORS as TRAIN_EXECUTORS
-
-    assert TRAIN_EXECUTORS == EXECUTORS
 
 
 @pytest.mark.parametrize(

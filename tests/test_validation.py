@@ -9,10 +9,10 @@ import json
 import pytest
 
 from tssac_core.common.cli import UsageError
-from tssac_core.experiments.jobs import config_difference
 from tssac_core.train.algorithms import ALGORITHMS
 from tssac_core.train.arguments import parse_cli
 from tssac_core.train.config import TrainConfig, default_selection, selects_within_limit, with_recorded_defaults
+from tssac_core.train.jobs.runner import config_difference
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.validation import Score
 

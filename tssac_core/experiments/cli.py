@@ -16,7 +16,7 @@ The grid file's format is in :mod:`tssac_core.experiments.grid`. Each job is a
 ``python -m tssac_core.train --config`` process, handed the job's `TrainConfig` as JSON, writing
 ``<results>/runs/<name>-seed<S>/`` (its output in ``train.log`` there); a finished job is not run again and an
 interrupted one is continued with ``--resume``, so running the command again after a crash, Ctrl-C or reboot
-picks up where it stopped (:mod:`tssac_core.experiments.jobs`). Then every finished
+picks up where it stopped (:mod:`tssac_core.train.jobs.runner`). Then every finished
 team is evaluated (:mod:`tssac_core.experiments.evaluations`, cached beside it), summarised
 (:mod:`tssac_core.experiments.summary`), and ``<results>/table4.md`` (:mod:`tssac_core.experiments.table`),
 ``<results>/experiments.json`` and the figures (:mod:`tssac_core.experiments.figures`) are written.
@@ -35,15 +35,16 @@ from pathlib import Path
 from tssac_core.common.cli import UsageError, command_description, run
 from tssac_core.experiments.deadline import deadline_filter, parse_finish_by
 from tssac_core.experiments.evaluations import EvalLabel, eval_specs, evaluate_all, fly_one
-from tssac_core.experiments.executors import EXECUTORS, LOCAL, RAY, execute
-from tssac_core.experiments.grid import Grid, Job, load_grid
-from tssac_core.experiments.jobs import Launch, Status, command, is_finished, job_state
+from tssac_core.experiments.grid import Grid, load_grid
 from tssac_core.experiments.learning_curves import read_metrics
 from tssac_core.experiments.summary import summarise
 from tssac_core.experiments.table import write_report
 from tssac_core.parallel.ray_cluster import RayTarget
 from tssac_core.sim.missions import MissionResults
 from tssac_core.sim.scenario import Scenario, load
+from tssac_core.train.jobs.executors import EXECUTORS, LOCAL, RAY, execute
+from tssac_core.train.jobs.job import Job
+from tssac_core.train.jobs.runner import Launch, Status, command, is_finished, job_state
 
 Say = Callable[[str], None]
 

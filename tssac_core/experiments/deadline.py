@@ -18,9 +18,10 @@ import time
 from collections.abc import Callable
 
 from tssac_core.common.cli import UsageError
-from tssac_core.experiments.grid import Job, learner_family
-from tssac_core.experiments.jobs import JobState, Status, job_state
+from tssac_core.experiments.grid import learner_family
 from tssac_core.experiments.learning_curves import read_metrics
+from tssac_core.train.jobs.job import Job
+from tssac_core.train.jobs.runner import JobState, Status, job_state
 from tssac_core.train.wall_time import training_wall_s
 
 

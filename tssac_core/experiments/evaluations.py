@@ -33,10 +33,11 @@ import numpy as np
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import write_json
 from tssac_core.deploy.manifest import check_models, warn_once
-from tssac_core.experiments.grid import Grid, Job
+from tssac_core.experiments.grid import Grid
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.pilots import GUIDANCE, PilotSpec
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, load, sample_layout
+from tssac_core.train.jobs.job import Job
 
 
 class EvalLabel(enum.Enum):

@@ -62,6 +62,7 @@ from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.sim.yaml_file import read_yaml, typed_value
 from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, check_learner_settings
+from tssac_core.train.jobs.job import AlgoEntry, Job
 from tssac_core.train.preset import Preset, load_preset, preset_config, read_settings
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -72,25 +73,6 @@ class GridError(UsageError):
 
     def __init__(self, source: str, field_path: str, problem: str) -> None:
         super().__init__(f"{source}: {field_path}: {problem}" if field_path else f"{source}: {problem}")
-
-
-@dataclass(frozen=True)
-class AlgoEntry:
-    """One row of the tables: a name and the training configuration of its runs (every seed's but for the seed)."""
-
-    name: str
-    """Label in tables and figures, and the prefix of its run directories (default: the algorithm)."""
-    config: TrainConfig
-    """The row's runs' configuration (its seed: the preset's, replaced by each job's)."""
-
-    @property
-    def algo(self) -> str:
-        return self.config.algo
-
-    @property
-    def penalty(self) -> float:
-        """sac_penalty only: reward r + penalty * c."""
-        return self.config.penalty
 
 
 @dataclass(frozen=True)
@@ -141,37 +123,6 @@ class TransferExperiment:
     epochs: int = 25
     task_success: float = 0.9
     validation_episodes: int = 0
-
-
-@dataclass(frozen=True)
-class Job:
-    """One training run of the grid: a whole team, or one role of the transfer experiment."""
-
-    entry: AlgoEntry
-    config: TrainConfig
-    """What the run trains (its config.json: `tssac_core.train.config.config_record`); the seed is the job's."""
-    out: Path
-    role: str | None = None
-    """The transfer experiment's role (the run trains that role only); None: the whole curriculum."""
-    tensorboard: Path | None = None
-    """Where the run also writes TensorBoard events (``train --seeds --tensorboard``); None: nowhere."""
-
-    @property
-    def seed(self) -> int:
-        return self.config.seed
-
-    @property
-    def name(self) -> str:
-        return (
-            f"{self.entry.name}-seed{self.seed}"
-            if self.role is None
-            else f"transfer-{self.role}-{self.entry.name}-seed{self.seed}"
-        )
-
-    @property
-    def roles(self) -> tuple[str, ...]:
-        """The roles this run trains (and whose checkpoints mark it finished)."""
-        return self.config.roles if self.role is None else (self.role,)
 
 
 @dataclass(frozen=True)

@@ -31,10 +31,11 @@ from tssac_core.experiments.evaluations import (
     TeamEvaluation,
     eval_specs,
 )
-from tssac_core.experiments.grid import AlgoEntry, Grid, Job
+from tssac_core.experiments.grid import Grid
 from tssac_core.experiments.learning_curves import mean_task_success, read_metrics, steps_to_threshold
 from tssac_core.sim.pilots import GUIDANCE
 from tssac_core.sim.scenario import ROLES, load
+from tssac_core.train.jobs.job import AlgoEntry, Job
 from tssac_core.train.wall_time import training_wall_s
 
 PAPER_TABLE4: dict[str, tuple[float, float]] = {

@@ -15,15 +15,11 @@ from typing import Any
 from tssac_core.common.cli import SEED_MAX, UsageError
 from tssac_core.common.options import OptionError, add_flags, flag_name, flag_values
 from tssac_core.train.config import TrainConfig
+from tssac_core.train.jobs.executors import EXECUTORS
 from tssac_core.train.legacy import read_config
 from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "python -m tssac_core.train: train the team, role by role (Algorithm 1)."
-EXECUTORS = ("local", "ray")
-"""Where ``--seeds`` runs its jobs: tssac_core.experiments.executors.EXECUTORS (not imported: the experiments import
-this module; tests/test_ray.py holds the two equal)."""
-
-
 @dataclass(frozen=True)
 class SeedJobs:
     """``--seeds`` and where its jobs run."""
@@ -31,7 +27,7 @@ class SeedJobs:
     seeds: tuple[int, ...] | None
     """None: one run (``--seed``), or on --resume the seeds the run directory lists."""
     executor: str = EXECUTORS[0]
-    """An executor of tssac_core.experiments.executors: local processes or Ray tasks."""
+    """An executor of tssac_core.train.jobs.executors: local processes or Ray tasks."""
     address: str | None = None
     """``--executor ray``: an existing Ray cluster (None: a Ray started inside the command)."""
 
@@ -110,7 +106,7 @@ def add_command_flags(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--seeds",
-        help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.experiments.executors), into "
+        help="train these seeds (e.g. 0,1,2), one job per seed (tssac_core.train.jobs.executors), into "
         "--out/seed<N>/ (replaces --seed)",
     )
     p.add_argument(

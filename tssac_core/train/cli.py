@@ -130,9 +130,9 @@ def train_seeds(cfg: TrainConfig, where: SeedJobs, out: Path, resume: bool, tens
     once on the experiments' job executor (``--executor``: local processes or Ray tasks); on --resume the seeds
     of ``out/seeds.json``. With ``tensorboard``, seed N writes its events to ``tensorboard/seed<N>``. Exit 0 when
     every seed finished."""
-    from tssac_core.experiments.executors import execute
-    from tssac_core.experiments.grid import AlgoEntry, Job
-    from tssac_core.experiments.jobs import Status, job_state
+    from tssac_core.train.jobs.executors import execute
+    from tssac_core.train.jobs.job import AlgoEntry, Job
+    from tssac_core.train.jobs.runner import Status, job_state
 
     seeds = where.seeds
     seeds_path = out / SEEDS_FILE

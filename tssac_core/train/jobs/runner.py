@@ -40,10 +40,10 @@ import tssac_core
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.sessions import in_new_session
-from tssac_core.experiments.grid import Job
 from tssac_core.sim.scenario import ROLES, ScenarioError
 from tssac_core.sim.scenario import load as load_scenario
 from tssac_core.train.config import TrainConfig, config_record, with_recorded_defaults
+from tssac_core.train.jobs.job import Job
 from tssac_core.train.legacy import config_from_saved
 from tssac_core.train.wall_time import Ended, record_invocation
 
@@ -250,7 +250,7 @@ def interrupt_on_sigterm() -> Iterator[None]:
 
 class JobRunner(Protocol):
     """Where :func:`schedule` runs jobs: local processes (:class:`LocalProcesses`) or Ray tasks
-    (:mod:`tssac_core.experiments.ray_executor`). A handle is whatever the runner knows a running job by."""
+    (:mod:`tssac_core.train.jobs.ray_executor`). A handle is whatever the runner knows a running job by."""
 
     def start(self, job: Job, resume: bool) -> Hashable:
         """Start ``job`` (``--resume`` it if ``resume``); its handle."""

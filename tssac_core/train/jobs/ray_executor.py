@@ -32,8 +32,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tssac_core.experiments.grid import Job
-from tssac_core.experiments.jobs import (
+from tssac_core.parallel.ray_cluster import RayTarget, cluster_cpus, ray_session
+from tssac_core.parallel.ray_map import TaskError, cancel, next_yield
+from tssac_core.train.jobs.job import Job
+from tssac_core.train.jobs.runner import (
     LOG_NAME,
     JobState,
     Launch,
@@ -46,8 +48,6 @@ from tssac_core.experiments.jobs import (
     start,
     stop,
 )
-from tssac_core.parallel.ray_cluster import RayTarget, cluster_cpus, ray_session
-from tssac_core.parallel.ray_map import TaskError, cancel, next_yield
 
 WORKER_RETRIES = 3
 """Times the driver submits a job again after its worker process died (each run resumes the last)."""
@@ -143,7 +143,7 @@ def run_jobs_on_ray(
     """Run every new or partial job as a Ray task, at most ``parallel`` at once (None: as many as the
     cluster's CPUs hold); returns the launches, in start order (a failed task: returncode None).
 
-    :func:`tssac_core.experiments.jobs.schedule` with :class:`RayTasks`: the local executor's contract
+    :func:`tssac_core.train.jobs.runner.schedule` with :class:`RayTasks`: the local executor's contract
     (finished jobs skipped, ``may_start`` asked before each start, every running job stopped on
     KeyboardInterrupt, which is re-raised)."""
     if any(s.status is Status.CONFLICT for s in states):
@@ -159,7 +159,7 @@ def run_jobs_on_ray(
 
 
 class RayTasks:
-    """The Ray executor's :class:`tssac_core.experiments.jobs.JobRunner`: each job a Ray generator task
+    """The Ray executor's :class:`tssac_core.train.jobs.runner.JobRunner`: each job a Ray generator task
     (:func:`run_job`) asking for the job's threads as CPUs, run in the driver's working directory; a job's handle
     is its name, which stays while the driver submits it again after its worker died."""
 
