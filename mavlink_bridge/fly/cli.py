@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge.fly.config import PROG, config_from_args, make_signing_key
+from mavlink_bridge.fly.config import PROG, FlyConfig, config_from_args, make_signing_key
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import summarise
@@ -48,6 +48,52 @@ def _on_sigterm(signum: int, _frame: FrameType | None) -> None:
     raise _Terminated()
 
 
+def fly_campaign(
+    cfg: FlyConfig, children: ChildProcesses, work: Path, made_key: Path | None, rows: list[dict[str, Any]]
+) -> None:
+    """Fly the campaign's missions (one crew here, crews side by side, or Ray tasks), each mission's row appended to
+    ``rows`` as it ends; the first mission that did not end in time, or whose companion lost a write, ends the
+    campaign (MissionTimedOut, WriteFailed). ``made_key``: the signing key fly made for this run, if it made one."""
+    with progress_bar(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress) as bar:
+
+        def record(row: dict[str, Any]) -> None:
+            rows.append(row)
+            bar.update(1)
+            bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
+            if row.get("end") == "timeout":
+                raise MissionTimedOut(f"mission {row['index']} did not end within {cfg.mission_timeout_s:g} s")
+            lost = [f"{name}: {s['write_error']}" for name, s in row["companions"].items() if s.get("write_error")]
+            if lost:
+                raise WriteFailed(f"mission {row['index']}: {'; '.join(lost)}")
+
+        if cfg.on_ray:
+            fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
+        elif cfg.workers > 1:
+            fly_side_by_side(cfg, cfg.workers, work, record)
+        else:
+            runner = MissionRunner(cfg, children, work)
+            try:
+                for i in cfg.indices():
+                    row = runner.fly(i)
+                    children.forget_finished()
+                    record(row)
+            finally:
+                runner.close()
+
+
+def campaign_summary(
+    rows: list[dict[str, Any]], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float
+) -> dict[str, Any]:
+    """The results JSON of the missions flown (in mission order: missions flown side by side end in any order),
+    with how the campaign ended."""
+    rows.sort(key=lambda r: r["index"])
+    summary = summarise(rows, cfg)
+    summary["interrupted"] = interrupted
+    summary["error"] = error
+    summary["wall_time_s"] = round(wall_s, 3)
+    return summary
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
     try:
@@ -78,31 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if cfg.makes_key:
             made_key = make_signing_key(work)
             cfg = dataclasses.replace(cfg, signing_key_path=made_key)
-        with progress_bar(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress) as bar:
-
-            def record(row: dict[str, Any]) -> None:
-                rows.append(row)
-                bar.update(1)
-                bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
-                if row.get("end") == "timeout":
-                    raise MissionTimedOut(f"mission {row['index']} did not end within {cfg.mission_timeout_s:g} s")
-                lost = [f"{name}: {s['write_error']}" for name, s in row["companions"].items() if s.get("write_error")]
-                if lost:
-                    raise WriteFailed(f"mission {row['index']}: {'; '.join(lost)}")
-
-            if cfg.on_ray:
-                fly_on_workers(cfg, cfg.workers, RayTarget(cfg.ray_address), made_key, record)
-            elif cfg.workers > 1:
-                fly_side_by_side(cfg, cfg.workers, work, record)
-            else:
-                runner = MissionRunner(cfg, children, work)
-                try:
-                    for i in cfg.indices():
-                        row = runner.fly(i)
-                        children.forget_finished()
-                        record(row)
-                finally:
-                    runner.close()
+        fly_campaign(cfg, children, work, made_key, rows)
     except (MissionTimedOut, WriteFailed, TaskFailed) as exc:
         error = str(exc)
         code = EXIT_FAILED
@@ -132,11 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         children.stop_all()
         signal.signal(signal.SIGTERM, previous)
         signal.signal(signal.SIGINT, previous_int)
-        rows.sort(key=lambda r: r["index"])  # missions flown side by side end in any order
-        summary = summarise(rows, cfg)
-        summary["interrupted"] = interrupted
-        summary["error"] = error
-        summary["wall_time_s"] = round(time.monotonic() - started, 3)
+        summary = campaign_summary(rows, cfg, interrupted, error, time.monotonic() - started)
         if cfg.json_path is not None and not (code == EXIT_BAD_INPUT and not rows):
             try:
                 write_json(cfg.json_path, summary)

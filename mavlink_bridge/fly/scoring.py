@@ -68,6 +68,39 @@ def shield_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def role_figures(
+    rows: list[dict[str, Any]], costed: list[dict[str, Any]], name: str, cost_limit: float
+) -> dict[str, Any]:
+    """One role's figures: its cost tail and task success over the missions whose cost is known (``costed``), its
+    companions' control latency over all."""
+    fig: dict[str, Any] = {}
+    if costed:
+        costs = np.array([r["cost"][name] for r in costed])
+        fig.update(
+            {
+                "mean_cost": float(costs.mean()),
+                "max_cost": float(costs.max()),
+                "within_cost_limit": float((costs <= cost_limit).mean()),
+                "cvar95_cost": cvar(costs),
+            }
+        )
+        fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
+    p50 = [
+        r["companions"][name]["latency_p50_ms"]
+        for r in rows
+        if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None
+    ]
+    p99 = [
+        r["companions"][name]["latency_p99_ms"]
+        for r in rows
+        if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None
+    ]
+    if p50:
+        fig["latency_p50_ms"] = float(np.median(p50))
+        fig["latency_p99_ms"] = float(np.max(p99))
+    return fig
+
+
 def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
     """The results JSON: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
     tail (within C, worst, CVaR_0.95), the costliest UAV-missions and the missions: the keys of
@@ -99,33 +132,7 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
             w["mission"] = costed[w["mission"]]["index"]
         out["worst_missions"] = worst
     for role in ROLES:
-        name = role.value
-        fig: dict[str, Any] = {}
-        if costed:
-            costs = np.array([r["cost"][name] for r in costed])
-            fig.update(
-                {
-                    "mean_cost": float(costs.mean()),
-                    "max_cost": float(costs.max()),
-                    "within_cost_limit": float((costs <= cfg.scenario.cost_limit).mean()),
-                    "cvar95_cost": cvar(costs),
-                }
-            )
-            fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
-        p50 = [
-            r["companions"][name]["latency_p50_ms"]
-            for r in rows
-            if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None
-        ]
-        p99 = [
-            r["companions"][name]["latency_p99_ms"]
-            for r in rows
-            if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None
-        ]
-        if p50:
-            fig["latency_p50_ms"] = float(np.median(p50))
-            fig["latency_p99_ms"] = float(np.max(p99))
-        out["roles"][name] = fig
+        out["roles"][role.value] = role_figures(rows, costed, role.value, cfg.scenario.cost_limit)
     if cfg.shield:
         out["shield"] = shield_summary(rows)
         scope = monitor_scope(cfg.scenario)

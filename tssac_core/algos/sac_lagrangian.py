@@ -169,22 +169,18 @@ class SacLagrangian:
         action, _ = self.actor(obs_t.unsqueeze(0) if obs_t.ndim == 1 else obs_t, deterministic)
         return action.squeeze(0).numpy() if obs_t.ndim == 1 else action.numpy()
 
-    def update(
-        self, batch: ReplaySamples, recent: ReplaySamples | None = None, episode_cost: float | None = None
-    ) -> UpdateStats:
-        """One gradient step of every part (Algorithm 1, line 13).
-
-        The measurements of the multiplier's signal (eq. 15, 17; ``self.signal``, chosen from the configuration by
-        ``lagrange.choose_signal``): ``episode_cost``, the mean measured cost per recent episode, and ``recent``,
-        transitions drawn from the last ``self.signal.recent_window`` added to the buffer; the signal's own one must
-        be given (ValueError), the other is not read.
-        """
+    def _critic_step(
+        self,
+        obs: torch.Tensor,
+        actions: torch.Tensor,
+        rewards: torch.Tensor,
+        costs: torch.Tensor,
+        next_obs: torch.Tensor,
+        terminated: torch.Tensor,
+        alpha: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Eq. 13: the critics' targets and losses, one Adam step for them all; returns the reward and cost losses."""
         cfg = self.config
-        obs, actions, rewards, costs, next_obs, terminated = batch
-        if cfg.variant is Variant.SAC_PENALTY:
-            rewards = rewards + cfg.penalty * costs
-        alpha = self.alpha.detach().clone()  # the value used below, kept for the stats
-
         # Eq. 13, targets: soft value with the min of the twin target critics; no entropy in the cost.
         with torch.no_grad():
             next_actions, next_log_pi = self.actor(next_obs)
@@ -208,6 +204,25 @@ class SacLagrangian:
         self.critic_optim.zero_grad()
         (q_r_loss + q_c_loss).backward()
         self.critic_optim.step()
+        return q_r_loss, q_c_loss
+
+    def update(
+        self, batch: ReplaySamples, recent: ReplaySamples | None = None, episode_cost: float | None = None
+    ) -> UpdateStats:
+        """One gradient step of every part (Algorithm 1, line 13).
+
+        The measurements of the multiplier's signal (eq. 15, 17; ``self.signal``, chosen from the configuration by
+        ``lagrange.choose_signal``): ``episode_cost``, the mean measured cost per recent episode, and ``recent``,
+        transitions drawn from the last ``self.signal.recent_window`` added to the buffer; the signal's own one must
+        be given (ValueError), the other is not read.
+        """
+        cfg = self.config
+        obs, actions, rewards, costs, next_obs, terminated = batch
+        if cfg.variant is Variant.SAC_PENALTY:
+            rewards = rewards + cfg.penalty * costs
+        alpha = self.alpha.detach().clone()  # the value used below, kept for the stats
+
+        q_r_loss, q_c_loss = self._critic_step(obs, actions, rewards, costs, next_obs, terminated, alpha)
 
         # The policy's Q values at its own actions, the cost-to-go that eq. 4's g(pi) constrains (WCSAC's
         # saclag.py uses the replayed actions instead). Without a multiplier (SAC, SAC_PENALTY) Q^c is only

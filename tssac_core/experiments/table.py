@@ -371,6 +371,101 @@ def _speedup(r: RoleComparison, digits: int) -> str:
     return f"{'>= ' if r.speedup_is_lower_bound else ''}{r.speedup:.{digits}f}x"
 
 
+def cost_markdown(summary: Summary) -> list[str]:
+    """The mean cost against the limit: every seed's missions pooled, with intervals."""
+    ev = summary.evaluation
+    lines: list[str] = [
+        "",
+        "## The mean cost against the limit",
+        "",
+        f"Every seed's {ev.episodes} missions pooled: the mean cost per UAV per mission with a 95% bootstrap "
+        f"interval over "
+        "missions, how many UAV-missions cost more than C, and the largest single costs (steps of 0.1 s inside a "
+        "radar). A "
+        "few long stays inside a radar make the mean: where the interval spans C, these layouts cannot tell on which "
+        "side of "
+        "the limit the algorithm is.",
+        "",
+        *_with_rule("| algorithm | UAV-missions | mean cost | 95% interval | over C | largest |"),
+    ]
+    for a in summary.algorithms.values():
+        c = a.random.pooled_cost
+        if c.mean is not None and c.ci95 is not None:
+            largest = ", ".join(f"{v:.0f}" for v in c.largest if v > 0) or "—"
+            lines.append(
+                f"| {a.name} | {c.uav_missions} | {c.mean:.2f} | {c.ci95[0]:.2f}-{c.ci95[1]:.2f} "
+                f"| {c.over_limit} | {largest} |"
+            )
+    return lines
+
+
+def generalization_markdown(summary: Summary) -> list[str]:
+    """Figure 11's table: the same teams on the generalisation scenario (none without one)."""
+    ev = summary.evaluation
+    if summary.guidance.generalization is None:
+        return []
+    lines = [
+        "",
+        "## Generalisation (figure 11)",
+        "",
+        f"The same teams on `{ev.generalization_scenario}` ({ev.episodes} layouts, seed {ev.seed}).",
+        "",
+        *_with_rule("| algorithm | seeds | success rate | average cost | within C |"),
+    ]
+    for a in summary.algorithms.values():
+        gen = a.generalization
+        assert gen is not None, "every row has the grid's evaluations"
+        lines.append(
+            f"| {a.name} | {len(a.seeds)} | {_rate(gen.success_rate)} | {_cost(gen.mean_cost)} | "
+            f"{_rate(gen.within_cost_limit)} |"
+        )
+    gg = summary.guidance.generalization
+    lines.append(
+        f"| {GUIDANCE_NAME} | — | {100 * gg.success_rate:.1f}% | {gg.mean_cost:.2f} | "
+        f"{100 * gg.within_cost_limit:.1f}% |"
+    )
+    return lines
+
+
+def transfer_speedup_markdown(summary: Summary) -> list[str]:
+    """Transfer inside the grid's curricula: decisions to the task-success threshold, and the area under the
+    learning curves."""
+    t = summary.transfer_speedup
+    lines = [
+        "",
+        "## Transfer inside the grid's curricula",
+        "",
+        f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= "
+        f"{100 * t.threshold:.0f}%, "
+        "mean over the finished seeds, in the grid's own runs (each role beside that run's earlier roles). A seed that "
+        "never "
+        "got there counts with its role's total decisions, so such a mean is a lower bound (>=)."
+        + (
+            " The transfer experiment (last section) measures it beside the same trained earlier roles."
+            if summary.transfer_experiment is not None
+            else ""
+        ),
+        "",
+        *_with_rule("| role | tssac | sac_lag | speed-up (sac_lag / tssac) |"),
+    ]
+    for role in TRANSFER_ROLES:
+        r = t.roles[role]
+        lines.append(f"| {role} | {_steps(r.with_transfer)} | {_steps(r.without_transfer)} | {_speedup(r, 2)} |")
+    lines += [
+        "",
+        "Task success in training averaged over the role's epochs (the area under its learning curve; mean ± "
+        "standard deviation over seeds): with transfer, the role starts from the previous role's networks.",
+        "",
+        *_with_rule("| role | tssac (transfer) | sac_lag (from scratch) |"),
+    ]
+    for role in TRANSFER_ROLES:
+        r = t.roles[role]
+        lines.append(
+            f"| {role} | {_rate(r.with_transfer.mean_task_success)} | {_rate(r.without_transfer.mean_task_success)} |"
+        )
+    return lines
+
+
 def table_markdown(summary: Summary) -> str:
     """table4.md: Table 4 beside the paper's, the generalisation figures and the transfer speed-up."""
     ev = summary.evaluation
@@ -405,90 +500,17 @@ def table_markdown(summary: Summary) -> str:
     if tail_headers:
         lines += tail_markdown(summary)
         lines += cascade_markdown(summary)
-    lines += [
-        "",
-        "## The mean cost against the limit",
-        "",
-        f"Every seed's {ev.episodes} missions pooled: the mean cost per UAV per mission with a 95% bootstrap "
-        f"interval over "
-        "missions, how many UAV-missions cost more than C, and the largest single costs (steps of 0.1 s inside a "
-        "radar). A "
-        "few long stays inside a radar make the mean: where the interval spans C, these layouts cannot tell on which "
-        "side of "
-        "the limit the algorithm is.",
-        "",
-        *_with_rule("| algorithm | UAV-missions | mean cost | 95% interval | over C | largest |"),
-    ]
-    for a in summary.algorithms.values():
-        c = a.random.pooled_cost
-        if c.mean is not None and c.ci95 is not None:
-            largest = ", ".join(f"{v:.0f}" for v in c.largest if v > 0) or "—"
-            lines.append(
-                f"| {a.name} | {c.uav_missions} | {c.mean:.2f} | {c.ci95[0]:.2f}-{c.ci95[1]:.2f} "
-                f"| {c.over_limit} | {largest} |"
-            )
+    lines += cost_markdown(summary)
     if summary.left_out:
         lines += [
             "",
             f"Left out (not finished, or a run with other settings than the grid: see --dry-run): "
             f"{', '.join(summary.left_out)}.",
         ]
-    if summary.guidance.generalization is not None:
-        lines += [
-            "",
-            "## Generalisation (figure 11)",
-            "",
-            f"The same teams on `{ev.generalization_scenario}` ({ev.episodes} layouts, seed {ev.seed}).",
-            "",
-            *_with_rule("| algorithm | seeds | success rate | average cost | within C |"),
-        ]
-        for a in summary.algorithms.values():
-            gen = a.generalization
-            assert gen is not None, "every row has the grid's evaluations"
-            lines.append(
-                f"| {a.name} | {len(a.seeds)} | {_rate(gen.success_rate)} | {_cost(gen.mean_cost)} | "
-                f"{_rate(gen.within_cost_limit)} |"
-            )
-        gg = summary.guidance.generalization
-        lines.append(
-            f"| {GUIDANCE_NAME} | — | {100 * gg.success_rate:.1f}% | {gg.mean_cost:.2f} | "
-            f"{100 * gg.within_cost_limit:.1f}% |"
-        )
+    lines += generalization_markdown(summary)
     if ev.generalization_tail_episodes:
         lines += generalization_tail_markdown(summary)
-    t = summary.transfer_speedup
-    lines += [
-        "",
-        "## Transfer inside the grid's curricula",
-        "",
-        f"Learner decisions (`env_steps` in metrics.csv) until the first epoch with task success >= "
-        f"{100 * t.threshold:.0f}%, "
-        "mean over the finished seeds, in the grid's own runs (each role beside that run's earlier roles). A seed that "
-        "never "
-        "got there counts with its role's total decisions, so such a mean is a lower bound (>=)."
-        + (
-            " The transfer experiment (last section) measures it beside the same trained earlier roles."
-            if summary.transfer_experiment is not None
-            else ""
-        ),
-        "",
-        *_with_rule("| role | tssac | sac_lag | speed-up (sac_lag / tssac) |"),
-    ]
-    for role in TRANSFER_ROLES:
-        r = t.roles[role]
-        lines.append(f"| {role} | {_steps(r.with_transfer)} | {_steps(r.without_transfer)} | {_speedup(r, 2)} |")
-    lines += [
-        "",
-        "Task success in training averaged over the role's epochs (the area under its learning curve; mean ± "
-        "standard deviation over seeds): with transfer, the role starts from the previous role's networks.",
-        "",
-        *_with_rule("| role | tssac (transfer) | sac_lag (from scratch) |"),
-    ]
-    for role in TRANSFER_ROLES:
-        r = t.roles[role]
-        lines.append(
-            f"| {role} | {_rate(r.with_transfer.mean_task_success)} | {_rate(r.without_transfer.mean_task_success)} |"
-        )
+    lines += transfer_speedup_markdown(summary)
     if summary.transfer_experiment is not None:
         lines += transfer_experiment_markdown(summary.transfer_experiment)
     return "\n".join(lines) + "\n"

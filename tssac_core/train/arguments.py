@@ -20,6 +20,8 @@ from tssac_core.train.legacy import read_config
 from tssac_core.train.preset import load_preset
 
 DESCRIPTION = "python -m tssac_core.train: train the team, role by role (Algorithm 1)."
+
+
 @dataclass(frozen=True)
 class SeedJobs:
     """``--seeds`` and where its jobs run."""

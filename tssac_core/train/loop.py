@@ -21,20 +21,53 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
+from tssac_core.sim.env import RoleTask
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.train.algorithms import Selection
 from tssac_core.train.config import TrainConfig, selection_of, selects_within_limit
 from tssac_core.train.epoch import EpochLog, log_stop, make_task, reached_stop, ship_role, teammates_for
-from tssac_core.train.learners import make_role_learner, transfer_source
+from tssac_core.train.learners import RoleLearner, make_role_learner, transfer_source
 from tssac_core.train.resume import ResumeState, read_resume_state, write_resume_state
 from tssac_core.train.rundir import append_metrics, role_position, save_trained_role
 from tssac_core.train.validation import EpochSelector
 
 logger = logging.getLogger("tssac_core.train")
+
+
+def collect_epoch(
+    cfg: TrainConfig,
+    learner: RoleLearner,
+    task: RoleTask,
+    obs: np.ndarray,
+    env_steps: int,
+    updates: int,
+    iters: int,
+    log: EpochLog,
+    bar: tqdm,
+) -> tuple[np.ndarray, int, int]:
+    """One epoch's ``iters`` decisions in the parallel worlds (Algorithm 1, lines 4-13), the learner storing each and
+    updating as it is due; returns the last observations and the decision and update counts after it."""
+    learner.begin_epoch(iters)
+    for _ in range(iters):
+        t0 = time.perf_counter()
+        action = learner.act(obs, env_steps)
+        step = task.step(action, repeat=cfg.action_repeat)
+        ended = step.terminated | step.truncated
+        learner.store(obs, action, step, ended)
+        obs = step.obs
+        env_steps += cfg.envs
+        if ended.any():
+            log.record_episodes(step, ended)
+        t1 = time.perf_counter()
+        log.env_time += t1 - t0
+        updates += learner.after_step(env_steps, updates, log, t1)
+        bar.update(cfg.envs)
+    return obs, env_steps, updates
 
 
 def train_role(
@@ -90,21 +123,7 @@ def train_role(
     done = epoch
     for epoch in range(done + 1, cfg.epochs + 1):
         log = EpochLog()
-        learner.begin_epoch(iters)
-        for _ in range(iters):
-            t0 = time.perf_counter()
-            action = learner.act(obs, env_steps)
-            step = task.step(action, repeat=cfg.action_repeat)
-            ended = step.terminated | step.truncated
-            learner.store(obs, action, step, ended)
-            obs = step.obs
-            env_steps += cfg.envs
-            if ended.any():
-                log.record_episodes(step, ended)
-            t1 = time.perf_counter()
-            log.env_time += t1 - t0
-            updates += learner.after_step(env_steps, updates, log, t1)
-            bar.update(cfg.envs)
+        obs, env_steps, updates = collect_epoch(cfg, learner, task, obs, env_steps, updates, iters, log, bar)
         made, columns = learner.end_epoch(log)
         updates += made
         row = log.row(role, epoch, env_steps, updates, iters * cfg.envs)
