@@ -54,11 +54,20 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Start the SITL vehicles (decoy, detect, strike) of a scenario as MAVLink 2 systems on UDP.",
     )
-    p.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
-    p.add_argument(
+    _world_flags(p.add_argument_group("the world"))
+    _clock_flags(p.add_argument_group("the clock"))
+    _signing_flags(p.add_argument_group("signing"))
+    _output_flags(p.add_argument_group("outputs"))
+    return p
+
+
+def _world_flags(g: argparse._ActionsContainer) -> None:
+    """The world: its scenario and physics, where its vehicles listen."""
+    g.add_argument("--scenario", required=True, type=Path, metavar="FILE", help="scenario YAML file (scenarios/*.yaml)")
+    g.add_argument(
         "--seed", type=seed_arg, default=0, help="seed of the random layout, GPS noise and link model (default 0)"
     )
-    p.add_argument(
+    g.add_argument(
         "--dynamics",
         choices=[m.value for m in DynamicsModel],
         default=None,
@@ -67,67 +76,21 @@ def build_parser() -> argparse.ArgumentParser:
             "vehicle under an inner-loop autopilot); default: the scenario's dynamics section, else kinematic"
         ),
     )
-    p.add_argument(
+    g.add_argument(
         "--aircraft",
         default=None,
         metavar="NAME|FILE",
         help="the JSBSim airframe: a bundled one (f16) or an airframe file; default: the scenario's, else f16",
     )
-    p.add_argument("--host", default="127.0.0.1", help="address the vehicles bind (default 127.0.0.1)")
-    p.add_argument(
+    g.add_argument("--host", default="127.0.0.1", help="address the vehicles bind (default 127.0.0.1)")
+    g.add_argument(
         "--base-port",
         type=int,
         default=DEFAULT_BASE_PORT,
         metavar="P",
         help=f"UDP port of the decoy; detect P+10, strike P+20 (default {DEFAULT_BASE_PORT}); 0 = OS-assigned ports",
     )
-    clock = p.add_mutually_exclusive_group()
-    clock.add_argument(
-        "--speedup", type=float, default=None, metavar="X", help="run X times faster than real time (default 1)"
-    )
-    clock.add_argument(
-        "--lockstep", action="store_true", help="advance one step per round of setpoints from the armed GUIDED vehicles"
-    )
-    p.add_argument(
-        "--lockstep-start",
-        choices=[m.value for m in LockstepStart],
-        default=LockstepStart.ALL.value,
-        help="lockstep (or --hold-start): start once all (default) or any vehicle is armed in GUIDED",
-    )
-    p.add_argument(
-        "--hold-start",
-        action="store_true",
-        help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED",
-    )
-    p.add_argument(
-        "--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
-    )
-    p.add_argument(
-        "--unsigned-monitors",
-        action="store_true",
-        help=(
-            "with --signing-key: let passive monitors in with unsigned HEARTBEAT/RADIO_STATUS (4 at most, 2 kB/s of "
-            "telemetry each)"
-        ),
-    )
-    p.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
-    p.add_argument(
-        "--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here"
-    )
-    p.add_argument(
-        "--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here"
-    )
-    p.add_argument(
-        "--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)"
-    )
-    p.add_argument(
-        "--out",
-        action="append",
-        default=[],
-        metavar="udpout:HOST:PORT",
-        help="also stream every vehicle to this ground-station address and take its commands (repeatable)",
-    )
-    p.add_argument(
+    g.add_argument(
         "--serial",
         type=int,
         default=None,
@@ -137,21 +100,79 @@ def build_parser() -> argparse.ArgumentParser:
             "DEVICE,BAUD, what a companion passes to --connect; the UDP ports stay open for ground stations"
         ),
     )
-    p.add_argument(
+    g.add_argument(
         "--serial-byte-loss",
         type=float,
         default=0.0,
         metavar="P",
         help="with --serial: the lines drop each byte, each way, with probability P (a noisy line; default 0)",
     )
-    p.add_argument(
+
+
+def _clock_flags(g: argparse._ActionsContainer) -> None:
+    """How the world keeps time, starts and ends."""
+    clock = g.add_mutually_exclusive_group()
+    clock.add_argument(
+        "--speedup", type=float, default=None, metavar="X", help="run X times faster than real time (default 1)"
+    )
+    clock.add_argument(
+        "--lockstep", action="store_true", help="advance one step per round of setpoints from the armed GUIDED vehicles"
+    )
+    g.add_argument(
+        "--lockstep-start",
+        choices=[m.value for m in LockstepStart],
+        default=LockstepStart.ALL.value,
+        help="lockstep (or --hold-start): start once all (default) or any vehicle is armed in GUIDED",
+    )
+    g.add_argument(
+        "--hold-start",
+        action="store_true",
+        help="real time too: hold the world at t = 0 until the --lockstep-start vehicles are armed in GUIDED",
+    )
+    g.add_argument(
+        "--setpoint-timeout-s", type=float, default=1.0, metavar="S", help="setpoint-timeout failsafe (default 1.0 s)"
+    )
+    g.add_argument(
         "--linger-s",
         type=float,
         default=1.0,
         metavar="S",
         help="simulated seconds to keep serving after the mission ends (default 1.0)",
     )
-    p.add_argument(
+
+
+def _signing_flags(g: argparse._ActionsContainer) -> None:
+    """MAVLink 2 signing."""
+    g.add_argument(
+        "--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
+    )
+    g.add_argument(
+        "--unsigned-monitors",
+        action="store_true",
+        help=(
+            "with --signing-key: let passive monitors in with unsigned HEARTBEAT/RADIO_STATUS (4 at most, 2 kB/s of "
+            "telemetry each)"
+        ),
+    )
+
+
+def _output_flags(g: argparse._ActionsContainer) -> None:
+    """What the world writes and how it is run."""
+    g.add_argument("--truth-log", type=Path, metavar="FILE", help="write the truth log (JSON Lines) here")
+    g.add_argument(
+        "--layout-out", type=Path, metavar="FILE", help="write the layout flown as a fixed-layout scenario file here"
+    )
+    g.add_argument(
+        "--tlog-dir", type=Path, metavar="DIR", help="write <role>.tlog telemetry logs (mavlogdump-readable) here"
+    )
+    g.add_argument(
+        "--out",
+        action="append",
+        default=[],
+        metavar="udpout:HOST:PORT",
+        help="also stream every vehicle to this ground-station address and take its commands (repeatable)",
+    )
+    g.add_argument(
         "--serve",
         action="store_true",
         help=(
@@ -159,13 +180,12 @@ def build_parser() -> argparse.ArgumentParser:
             'truth_log, tlog_dir, log) and fly it on the same ports, until {"quit": true} or the end of the input'
         ),
     )
-    p.add_argument(
+    g.add_argument(
         "--log-level",
         choices=["debug", "info", "warning", "error"],
         default="warning",
         help="log level on stderr (default warning)",
     )
-    return p
 
 
 def config_from_args(args: argparse.Namespace) -> SitlConfig:

@@ -51,11 +51,20 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Fly one SITL (or real) UAV over MAVLink with a trained policy or the guidance controller.",
     )
-    p.add_argument(
+    _pilot_flags(p.add_argument_group("the pilot"))
+    _link_flags(p.add_argument_group("the link"))
+    _time_flags(p.add_argument_group("time and failsafes"))
+    _output_flags(p.add_argument_group("outputs"))
+    return p
+
+
+def _pilot_flags(g: argparse._ActionsContainer) -> None:
+    """The vehicle, the role and who flies it."""
+    g.add_argument(
         "--connect", required=True, metavar="CONN", help="the vehicle's connection string, e.g. udpout:127.0.0.1:14560"
     )
-    p.add_argument("--role", required=True, choices=[r.value for r in Role], help="which UAV this is")
-    who = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--role", required=True, choices=[r.value for r in Role], help="which UAV this is")
+    who = g.add_mutually_exclusive_group(required=True)
     who.add_argument(
         "--model",
         type=Path,
@@ -69,27 +78,58 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly the rule-based guidance controller, straight on (a test pilot that hits what lies ahead), or an "
         "adversary built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
-    p.add_argument(
+    g.add_argument(
         "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
     )
-    add_setpoints_argument(p)
-    p.add_argument(
+    g.add_argument(
         "--source-system",
         type=int,
         metavar="ID",
         help="our MAVLink system id (default: the vehicle's, as on a real vehicle; our component is 191, an onboard "
         "computer, and 255 is left to the ground station)",
     )
-    p.add_argument(
+    g.add_argument(
         "--scenario", required=True, type=Path, metavar="FILE", help="scenario with the fixed layout the vehicle flies"
     )
-    p.add_argument(
+    g.add_argument(
+        "--filter",
+        choices=[m.value for m in FilterModel],
+        default=FilterModel.CONSTANT_TURN_EKF.value,
+        help="Kalman filter model (default constant_turn_ekf)",
+    )
+
+
+def _link_flags(g: argparse._ActionsContainer) -> None:
+    """The MAVLink link to the vehicle: the dialect, signing, commands and their retries, telemetry."""
+    add_setpoints_argument(g)
+    g.add_argument(
         "--signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
     )
-    p.add_argument("--tlog", type=Path, metavar="FILE", help="write every message received and sent to this .tlog")
-    p.add_argument("--status-json", type=Path, metavar="FILE", help="write the final status here")
-    p.add_argument("--lockstep", action="store_true", help="the vehicle runs in lockstep: never extrapolate its clock")
-    p.add_argument(
+    g.add_argument(
+        "--command-timeout-s",
+        type=float,
+        metavar="S",
+        help=f"wall seconds per COMMAND_ACK wait (default {COMMAND_TIMEOUT_S:g}, with --lockstep "
+        f"{LOCKSTEP_COMMAND_TIMEOUT_S:g}: a lockstep world holding at its start answers at once)",
+    )
+    g.add_argument(
+        "--command-retries",
+        type=int,
+        metavar="N",
+        help="attempts per command (default: 10, more over a lossy link: enough that a command fails with a chance "
+        "below one in a million)",
+    )
+    g.add_argument(
+        "--lean-telemetry",
+        action="store_true",
+        help="stop the vehicle's streams the companion does not use (no ground station sharing it)",
+    )
+
+
+def _time_flags(g: argparse._ActionsContainer) -> None:
+    """The clock and the failsafes: lockstep, how long to wait for what, when to hold."""
+    g.add_argument("--lockstep", action="store_true", help="the vehicle runs in lockstep: never extrapolate its clock")
+    g.add_argument(
         "--lockstep-grant-s",
         type=float,
         default=LOCKSTEP_GRANT_S,
@@ -97,61 +137,42 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"lockstep over a link that loses nothing: answer only when the setpoint may change, granting the vehicle "
         f"up to S seconds of ticks in between (default {LOCKSTEP_GRANT_S:g}; 0: answer every tick)",
     )
-    p.add_argument(
+    g.add_argument(
         "--timeout-s",
         type=float,
         default=30.0,
         metavar="S",
         help="wall seconds to wait for the first heartbeat (default 30)",
     )
-    p.add_argument(
-        "--command-timeout-s",
-        type=float,
-        metavar="S",
-        help=f"wall seconds per COMMAND_ACK wait (default {COMMAND_TIMEOUT_S:g}, with --lockstep "
-        f"{LOCKSTEP_COMMAND_TIMEOUT_S:g}: a lockstep world holding at its start answers at once)",
-    )
-    p.add_argument(
-        "--command-retries",
-        type=int,
-        metavar="N",
-        help="attempts per command (default: 10, more over a lossy link: enough that a command fails with a chance "
-        "below one in a million)",
-    )
-    p.add_argument(
+    g.add_argument(
         "--hold-after-s",
         type=float,
         default=0.5,
         metavar="S",
         help="vehicle seconds without a fix before the hold setpoint (default 0.5)",
     )
-    p.add_argument(
+    g.add_argument(
         "--silence-hold-s",
         type=float,
         default=2.0,
         metavar="S",
         help="wall seconds of silence before the hold when the clock cannot be extrapolated (default 2)",
     )
-    p.add_argument(
+    g.add_argument(
         "--lost-after-s",
         type=float,
         default=10.0,
         metavar="S",
         help="wall seconds of silence before the vehicle is given up (default 10)",
     )
-    p.add_argument("--duration-s", type=float, metavar="S", help="stop after this many vehicle seconds of flight")
-    p.add_argument(
-        "--lean-telemetry",
-        action="store_true",
-        help="stop the vehicle's streams the companion does not use (no ground station sharing it)",
-    )
-    p.add_argument(
-        "--filter",
-        choices=[m.value for m in FilterModel],
-        default=FilterModel.CONSTANT_TURN_EKF.value,
-        help="Kalman filter model (default constant_turn_ekf)",
-    )
-    p.add_argument(
+    g.add_argument("--duration-s", type=float, metavar="S", help="stop after this many vehicle seconds of flight")
+
+
+def _output_flags(g: argparse._ActionsContainer) -> None:
+    """What the companion writes and how it is run."""
+    g.add_argument("--tlog", type=Path, metavar="FILE", help="write every message received and sent to this .tlog")
+    g.add_argument("--status-json", type=Path, metavar="FILE", help="write the final status here")
+    g.add_argument(
         "--serve",
         action="store_true",
         help=(
@@ -159,13 +180,12 @@ def build_parser() -> argparse.ArgumentParser:
             'tlog, log) and fly it over the same link, until {"quit": true} or the end of the input'
         ),
     )
-    p.add_argument(
+    g.add_argument(
         "--log-level",
         choices=["debug", "info", "warning", "error"],
         default="info",
         help="log level on stderr (default info)",
     )
-    return p
 
 
 def _command_timeout_s(given: float | None, lockstep: bool) -> float:

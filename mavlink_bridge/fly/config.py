@@ -120,14 +120,24 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog=PROG, description="Fly whole missions over MAVLink: a SITL world plus one companion process per UAV."
     )
-    p.add_argument(
+    _mission_flags(p.add_argument_group("the mission"))
+    _clock_flags(p.add_argument_group("the clock"))
+    _link_flags(p.add_argument_group("the link"))
+    _output_flags(p.add_argument_group("outputs"))
+    _side_by_side_flags(p.add_argument_group("side by side"))
+    return p
+
+
+def _mission_flags(g: argparse._ActionsContainer) -> None:
+    """What flies, where, and which missions."""
+    g.add_argument(
         "--scenario",
         required=True,
         type=Path,
         metavar="FILE",
         help="scenario file (scenarios/strike.yaml, scenarios/random.yaml)",
     )
-    who = p.add_mutually_exclusive_group()
+    who = g.add_mutually_exclusive_group()
     who.add_argument(
         "--models",
         type=Path,
@@ -141,13 +151,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly every UAV with the rule-based guidance controller, straight on (a test pilot), or an adversary "
         "built to break the monitor (docs/runtime_assurance.md, 'Adversarial pilots')",
     )
-    p.add_argument(
+    g.add_argument(
         "--shield",
         action="store_true",
         help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
     )
-    add_setpoints_argument(p)
-    p.add_argument(
+    g.add_argument(
         "--dynamics",
         choices=[m.value for m in DynamicsModel],
         help=(
@@ -155,26 +164,30 @@ def build_parser() -> argparse.ArgumentParser:
             "per vehicle under an inner-loop autopilot); default: the scenario's dynamics section, else kinematic"
         ),
     )
-    p.add_argument(
+    g.add_argument(
         "--aircraft",
         metavar="NAME|FILE",
         help="with jsbsim: a bundled airframe (f16) or an airframe file; default: the scenario's, else f16",
     )
-    p.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
-    p.add_argument(
+    g.add_argument("--episodes", type=int, default=1, metavar="N", help="missions to fly (default 1)")
+    g.add_argument(
         "--seed",
         type=seed_arg,
         default=0,
         metavar="S",
         help="mission i uses seed S + i for its random layout and sensor noise (default 0)",
     )
-    p.add_argument(
+    g.add_argument(
         "--mission",
         type=int,
         metavar="K",
         help="fly only mission K of --seed (e.g. one of the JSON's worst_missions; with --plot)",
     )
-    clock = p.add_mutually_exclusive_group()
+
+
+def _clock_flags(g: argparse._ActionsContainer) -> None:
+    """How the world keeps time, and how long a mission may take."""
+    clock = g.add_mutually_exclusive_group()
     clock.add_argument(
         "--lockstep",
         action="store_true",
@@ -185,49 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     clock.add_argument(
         "--speedup", type=float, metavar="X", help="run the world in real time times X instead of lockstep"
     )
-    p.add_argument(
-        "--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)"
-    )
-    p.add_argument(
-        "--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)"
-    )
-    p.add_argument(
-        "--plot",
-        type=Path,
-        metavar="FILE",
-        help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)",
-    )
-    p.add_argument(
-        "--animate",
-        type=Path,
-        metavar="FILE",
-        help="film each mission: trajectories, radar rings, events, backup stretches (FILE.gif with Pillow, or "
-        "FILE.mp4 with ffmpeg; FILE-NNN.ext per mission when there are several)",
-    )
-    p.add_argument(
-        "--signing-key",
-        type=Path,
-        metavar="FILE",
-        help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions",
-    )
-    p.add_argument(
-        "--no-signing",
-        action="store_true",
-        help="fly unsigned (default: every frame signed with a key made for the run, or --signing-key's)",
-    )
-    p.add_argument(
-        "--connect",
-        nargs=3,
-        metavar=("DECOY", "DETECT", "STRIKE"),
-        help="fly running vehicles at these connection strings instead of starting a world",
-    )
-    p.add_argument(
-        "--logs",
-        type=Path,
-        metavar="DIR",
-        help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)",
-    )
-    p.add_argument(
+    g.add_argument(
         "--lockstep-grant-s",
         type=float,
         default=LOCKSTEP_GRANT_S,
@@ -235,7 +206,36 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"lockstep over a link that loses nothing: each companion answers only when its setpoint may change, "
         f"granting its vehicle up to S seconds of ticks in between (default {LOCKSTEP_GRANT_S:g}; 0: every tick)",
     )
-    streams = p.add_mutually_exclusive_group()
+    g.add_argument(
+        "--mission-timeout-s",
+        type=float,
+        default=900.0,
+        metavar="S",
+        help="wall seconds a mission may take (default 900)",
+    )
+
+
+def _link_flags(g: argparse._ActionsContainer) -> None:
+    """The MAVLink link between the companions and their vehicles."""
+    add_setpoints_argument(g)
+    g.add_argument(
+        "--signing-key",
+        type=Path,
+        metavar="FILE",
+        help="MAVLink 2 signing key (32 raw bytes or 64 hex characters) for the world and the companions",
+    )
+    g.add_argument(
+        "--no-signing",
+        action="store_true",
+        help="fly unsigned (default: every frame signed with a key made for the run, or --signing-key's)",
+    )
+    g.add_argument(
+        "--connect",
+        nargs=3,
+        metavar=("DECOY", "DETECT", "STRIKE"),
+        help="fly running vehicles at these connection strings instead of starting a world",
+    )
+    streams = g.add_mutually_exclusive_group()
     streams.add_argument(
         "--lean-telemetry",
         action="store_true",
@@ -250,14 +250,55 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="keep every vehicle stream on at its default rate (the default with --speedup and --connect)",
     )
-    p.add_argument(
-        "--mission-timeout-s",
-        type=float,
-        default=900.0,
-        metavar="S",
-        help="wall seconds a mission may take (default 900)",
+    g.add_argument(
+        "--serial",
+        type=int,
+        metavar="BAUD",
+        help="the companions fly over serial lines: the world puts every vehicle on a pseudo-terminal at BAUD "
+        "(57600, 921600, ...) and each companion connects to its vehicle's (docs/real_vehicles.md)",
     )
-    p.add_argument(
+    g.add_argument(
+        "--serial-byte-loss",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="with --serial: the lines drop each byte, each way, with probability P (a noisy line; default 0)",
+    )
+
+
+def _output_flags(g: argparse._ActionsContainer) -> None:
+    """What the run writes and shows."""
+    g.add_argument(
+        "--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)"
+    )
+    g.add_argument(
+        "--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)"
+    )
+    g.add_argument(
+        "--plot",
+        type=Path,
+        metavar="FILE",
+        help="draw the trajectories (FILE, or FILE-NNN.ext per mission when there are several)",
+    )
+    g.add_argument(
+        "--animate",
+        type=Path,
+        metavar="FILE",
+        help="film each mission: trajectories, radar rings, events, backup stretches (FILE.gif with Pillow, or "
+        "FILE.mp4 with ffmpeg; FILE-NNN.ext per mission when there are several)",
+    )
+    g.add_argument(
+        "--logs",
+        type=Path,
+        metavar="DIR",
+        help="keep each mission's scenario, truth log and process logs here (default: a temporary directory)",
+    )
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _side_by_side_flags(g: argparse._ActionsContainer) -> None:
+    """Missions flown at once: crews side by side here, or Ray tasks."""
+    g.add_argument(
         "--workers",
         type=int,
         default=1,
@@ -265,40 +306,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly N missions at once, each with its own world and companions on their own ports (default 1: one "
         "after the other); the same results as one after the other",
     )
-    p.add_argument(
+    g.add_argument(
         "--executor",
         choices=[e.value for e in Executor],
         help="where --workers flies: local (the default: N crews of processes side by side, started by this "
         "command) or ray (N Ray tasks, on a Ray this command starts, or the cluster of --address)",
     )
-    p.add_argument(
+    g.add_argument(
         "--address",
         metavar="HOST:PORT",
         help="fly the missions on this existing Ray cluster (implies --executor ray); --models, --logs, --tlog and "
         "--plot must be on a filesystem every node sees",
     )
-    p.add_argument(
+    g.add_argument(
         "--fresh-processes",
         action="store_true",
         help="start a new world and new companions for every mission instead of resetting the running ones "
         "(slower; the same results)",
     )
-    p.add_argument(
-        "--serial",
-        type=int,
-        metavar="BAUD",
-        help="the companions fly over serial lines: the world puts every vehicle on a pseudo-terminal at BAUD "
-        "(57600, 921600, ...) and each companion connects to its vehicle's (docs/real_vehicles.md)",
-    )
-    p.add_argument(
-        "--serial-byte-loss",
-        type=float,
-        default=0.0,
-        metavar="P",
-        help="with --serial: the lines drop each byte, each way, with probability P (a noisy line; default 0)",
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p
 
 
 def config_from_args(argv: Sequence[str] | None) -> FlyConfig:

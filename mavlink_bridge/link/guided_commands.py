@@ -93,7 +93,7 @@ def slew_from_setpoint(
     return GuidedSlew(heading_deg, centripetal, held, HOLD_SLEW_M_S2)
 
 
-def add_setpoints_argument(parser: argparse.ArgumentParser) -> None:
+def add_setpoints_argument(parser: argparse._ActionsContainer) -> None:
     """``--setpoints body-rates|arduplane``, as the companion and ``fly`` take it."""
     parser.add_argument(
         "--setpoints",

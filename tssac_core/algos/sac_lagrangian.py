@@ -206,6 +206,26 @@ class SacLagrangian:
         self.critic_optim.step()
         return q_r_loss, q_c_loss
 
+    def _actor_alpha_step(
+        self,
+        log_pi: torch.Tensor,
+        q_r_pi: torch.Tensor,
+        cost_term: torch.Tensor,
+        alpha: torch.Tensor,
+        multiplier: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Eq. 12 / 16 and eq. 14: the actor's and alpha's losses and their steps; returns both losses."""
+        actor_loss = losses.actor_loss(log_pi, q_r_pi, cost_term, alpha, multiplier)
+        alpha_loss = losses.alpha_loss(self.alpha, log_pi, self.config.target_entropy)
+        self.actor_optim.zero_grad()
+        self.alpha_optim.zero_grad()
+        torch.autograd.backward([actor_loss, alpha_loss], inputs=[*self._actor_params, self.alpha])
+        self.actor_optim.step()
+        self.alpha_optim.step()
+        with torch.no_grad():
+            self.alpha.clamp_(min=0.0)
+        return actor_loss, alpha_loss
+
     def update(
         self, batch: ReplaySamples, recent: ReplaySamples | None = None, episode_cost: float | None = None
     ) -> UpdateStats:
@@ -257,15 +277,7 @@ class SacLagrangian:
         # Eq. 12 / 16, the actor loss, and eq. 14, alpha's loss (log_pi a constant there): one backward pass for
         # both (they share no parameter: the actor loss uses a detached alpha); inputs= keeps the critics' weights
         # out of it. Alpha is projected onto >= 0 after its step (SacConfig.alpha_init).
-        actor_loss = losses.actor_loss(log_pi, q_r_pi, cost_term, alpha, multiplier)
-        alpha_loss = losses.alpha_loss(self.alpha, log_pi, cfg.target_entropy)
-        self.actor_optim.zero_grad()
-        self.alpha_optim.zero_grad()
-        torch.autograd.backward([actor_loss, alpha_loss], inputs=[*self._actor_params, self.alpha])
-        self.actor_optim.step()
-        self.alpha_optim.step()
-        with torch.no_grad():
-            self.alpha.clamp_(min=0.0)
+        actor_loss, alpha_loss = self._actor_alpha_step(log_pi, q_r_pi, cost_term, alpha, multiplier)
 
         # Eq. 15, the multiplier's projected step (DampedLagrangeMultiplier.update), then Polyak averaging of the
         # targets: target <- polyak * target + (1 - polyak) * online.

@@ -70,6 +70,25 @@ def collect_epoch(
     return obs, env_steps, updates
 
 
+def start_or_resume(
+    cfg: TrainConfig, role: Role, out: Path, resume: bool, learner: RoleLearner, task: RoleTask, selector: EpochSelector
+) -> tuple[np.ndarray, int, int, int]:
+    """The role's start: its resume state restored into the learner, the worlds, torch's generator and the epoch
+    selector (``resume`` and one is there), or the learner started (from the previous role, for the algorithms that
+    transfer). Returns the observations, the last finished epoch, and the decision and update counts."""
+    obs = task.reset()
+    saved = read_resume_state(out, role) if resume else None
+    if saved is None:
+        learner.start(transfer_source(cfg, role, out))
+        return obs, 0, 0, 0
+    learner.restore(saved.learner)
+    task.restore(saved.task)
+    torch.set_rng_state(saved.torch_rng)
+    selector.load_state_dict(saved.selector)
+    logger.info("%s: resuming %s after epoch %d (%d env steps)", role.value, cfg.algo, saved.epoch, saved.env_steps)
+    return saved.obs, saved.epoch, saved.env_steps, saved.updates
+
+
 def train_role(
     cfg: TrainConfig,
     scenario: Scenario,
@@ -97,19 +116,7 @@ def train_role(
         selects_within_limit(cfg),
         tail=selection_of(cfg) is Selection.TAIL,
     )
-    obs = task.reset()
-    epoch, env_steps, updates = 0, 0, 0
-    saved = read_resume_state(out, role) if resume else None
-    if saved is not None:
-        learner.restore(saved.learner)
-        task.restore(saved.task)
-        obs = saved.obs
-        torch.set_rng_state(saved.torch_rng)
-        epoch, env_steps, updates = saved.epoch, saved.env_steps, saved.updates
-        selector.load_state_dict(saved.selector)
-        logger.info("%s: resuming %s after epoch %d (%d env steps)", role.value, cfg.algo, epoch, env_steps)
-    else:
-        learner.start(transfer_source(cfg, role, out))
+    obs, epoch, env_steps, updates = start_or_resume(cfg, role, out, resume, learner, task, selector)
     bar.n = (role_position(cfg, role) * cfg.epochs + epoch) * cfg.steps_per_epoch
     bar.refresh()
 
