@@ -80,7 +80,7 @@ from sim_vehicles.truth_log import TruthLog
 from sim_vehicles.vehicle import Vehicle, VehicleSetup
 from sim_vehicles.vehicle_link import VehicleLink
 from tssac_core.common.files import create_exclusively
-from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout, to_dict
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
 from tssac_core.wire.signing import StreamKey
@@ -283,61 +283,75 @@ class WorldRunner:
             except OSError as exc:
                 raise SitlError(f"cannot create tlog directory {config.tlog_dir}: {exc.strerror or exc}") from None
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
-        c = self.world.c
         initial = self.dynamics.truths()
         for i, role in enumerate(ROLES):
-            endpoint = self._endpoints[i]
-            start = self.layout.starts[role.value]
-            setup = VehicleSetup(
-                index=i,
-                role=role.value,
-                sysid=i + 1,
-                turn_rate_max_rad_s=float(c.turn_rate_max_rad_s[i]),
-                accel_max_m_s2=float(c.accel_max_m_s2[i]),
-                speed_min_m_s=float(c.speed_min_m_s[i]),
-                speed_max_m_s=float(c.speed_max_m_s[i]),
-                dt_s=s.dt_s,
-                origin=s.origin,
-                home_east_m=start.position_km[0] * 1000.0,
-                home_north_m=start.position_km[1] * 1000.0,
-                link=s.link,
-                setpoint_timeout_s=config.setpoint_timeout_s,
-            )
-            tx, rx, gps = (np.random.default_rng(q) for q in seeds[i].spawn(3))
-            tlog = None
-            if config.tlog_dir is not None:
-                path = Path(config.tlog_dir) / f"{role.value}.tlog"
-                try:
-                    tlog = open(create_exclusively(path), "wb")  # ours, never a file or link planted there
-                except OSError as exc:
-                    raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
-                self._tlogs.append(tlog)
-            vehicle = Vehicle(setup, self.clock, self.flags, gps, self._vehicle_event)
-            link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
-            link.add_outputs(config.outputs)
-            link.handler = CommandHandler(vehicle, link)
-            vehicle.observe(initial[i])
+            vehicle, link = self._make_vehicle(i, role, seeds[i], initial[i])
             self.vehicles.append(vehicle)
             self.links.append(link)
         if config.truth_log is not None:
-            header = {
-                "schema": SCHEMA_VERSION,
-                "scenario": s.name,
-                "digest": s.digest(),
-                "seed": config.seed,
-                "dt_s": s.dt_s,
-                "clock": config.clock.value,
-                "speedup": config.speedup,
-                "dynamics": {"model": config.dynamics.model.value, "name": self.dynamics.name},
-                "roles": [r.value for r in ROLES],
-                "sysids": [v.sysid for v in self.vehicles],
-                "ports": [link.endpoint.port for link in self.links],
-                "layout": to_dict(dataclasses.replace(s, layout=self.layout, random=None))["layout"],
-            }
+            self._open_truth_log(config, Path(config.truth_log), self.dynamics.name)
+
+    def _make_vehicle(
+        self, i: int, role: Role, seed: np.random.SeedSequence, truth: VehicleTruth
+    ) -> tuple[Vehicle, VehicleLink]:
+        """Vehicle ``i`` of the mission (:meth:`_begin`), at its start state ``truth``, with its link (its random
+        streams from ``seed``: what goes out, what comes in, its GPS) and its tlog."""
+        config, s, c = self.config, self.scenario, self.world.c
+        endpoint = self._endpoints[i]
+        start = self.layout.starts[role.value]
+        setup = VehicleSetup(
+            index=i,
+            role=role.value,
+            sysid=i + 1,
+            turn_rate_max_rad_s=float(c.turn_rate_max_rad_s[i]),
+            accel_max_m_s2=float(c.accel_max_m_s2[i]),
+            speed_min_m_s=float(c.speed_min_m_s[i]),
+            speed_max_m_s=float(c.speed_max_m_s[i]),
+            dt_s=s.dt_s,
+            origin=s.origin,
+            home_east_m=start.position_km[0] * 1000.0,
+            home_north_m=start.position_km[1] * 1000.0,
+            link=s.link,
+            setpoint_timeout_s=config.setpoint_timeout_s,
+        )
+        tx, rx, gps = (np.random.default_rng(q) for q in seed.spawn(3))
+        tlog = None
+        if config.tlog_dir is not None:
+            path = Path(config.tlog_dir) / f"{role.value}.tlog"
             try:
-                self._truth = TruthLog(Path(config.truth_log), header)
+                tlog = open(create_exclusively(path), "wb")  # ours, never a file or link planted there
             except OSError as exc:
-                raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
+                raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
+            self._tlogs.append(tlog)
+        vehicle = Vehicle(setup, self.clock, self.flags, gps, self._vehicle_event)
+        link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
+        link.add_outputs(config.outputs)
+        link.handler = CommandHandler(vehicle, link)
+        vehicle.observe(truth)
+        return vehicle, link
+
+    def _open_truth_log(self, config: SitlConfig, path: Path, dynamics: str) -> None:
+        """The mission's truth log at ``path``, its header saying what flies (SitlError, one line, if it cannot be
+        written)."""
+        s = self.scenario
+        header = {
+            "schema": SCHEMA_VERSION,
+            "scenario": s.name,
+            "digest": s.digest(),
+            "seed": config.seed,
+            "dt_s": s.dt_s,
+            "clock": config.clock.value,
+            "speedup": config.speedup,
+            "dynamics": {"model": config.dynamics.model.value, "name": dynamics},
+            "roles": [r.value for r in ROLES],
+            "sysids": [v.sysid for v in self.vehicles],
+            "ports": [link.endpoint.port for link in self.links],
+            "layout": to_dict(dataclasses.replace(s, layout=self.layout, random=None))["layout"],
+        }
+        try:
+            self._truth = TruthLog(path, header)
+        except OSError as exc:
+            raise SitlError(f"cannot write truth log {config.truth_log}: {exc.strerror or exc}") from None
 
     @property
     def endpoints(self) -> list[Endpoint]:

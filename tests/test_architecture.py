@@ -204,9 +204,7 @@ def test_rooms_import_downward_only():
         for a, targets in project_graph().items()
         if a.startswith("tssac_core.")
         for b in targets
-        if b.startswith("tssac_core.")
-        and room_of(a) != room_of(b)
-        and layer[room_of(b)] >= layer[room_of(a)]
+        if b.startswith("tssac_core.") and room_of(a) != room_of(b) and layer[room_of(b)] >= layer[room_of(a)]
     )
     assert not offenders, offenders
 
@@ -409,3 +407,38 @@ def test_both_ends_convert_through_the_wire(monkeypatch: pytest.MonkeyPatch):
         assert got.t_s == pytest.approx(12.3)
         assert (got.east_m, got.north_m) == pytest.approx((40_000.0, 25_000.0), abs=0.02)
         assert (got.vel_east_m_s, got.vel_north_m_s) == pytest.approx((-120.0, 200.0), abs=0.01)
+
+
+MAX_FUNCTION_LINES = 80
+"""Issue 60: no function of the three packages is longer; an exception says why on its ``def`` line (``# long:``)."""
+
+
+def long_functions(source: str) -> list[tuple[str, int]]:
+    """The functions of ``source`` over MAX_FUNCTION_LINES lines (decorators not counted) without a ``# long:`` reason
+    on their ``def`` line: (name, lines)."""
+    lines = source.splitlines()
+    return [
+        (node.name, node.end_lineno - node.lineno + 1)
+        for node in ast.walk(ast.parse(source))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        and node.end_lineno is not None
+        and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES
+        and "# long:" not in lines[node.lineno - 1]
+    ]
+
+
+def test_no_function_is_longer_than_80_lines():
+    offenders = sorted(
+        f"{module_name(p)}.{name}: {n} lines"
+        for package in PACKAGES
+        for p in (ROOT / package).rglob("*.py")
+        for name, n in long_functions(p.read_text(encoding="utf-8"))
+    )
+    assert not offenders, offenders
+
+
+def test_the_length_rule_sees_a_long_function_and_its_reason():
+    body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    assert long_functions(f"def f():\n{body}") == [("f", MAX_FUNCTION_LINES + 1)]
+    assert long_functions(f"def f():  # long: a table\n{body}") == []
+    assert long_functions(f"def f():\n{body[: -len(body.splitlines()[-1]) - 1]}") == []

@@ -56,6 +56,14 @@ POLICY_KINDS = ("sb3", "onnx", "torch")
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    """The command line, its values checked (UsageError, one line) and its policies read as sources."""
+    args = build_parser().parse_args(argv)
+    check_args(args)
+    args.policy_sources = policy_sources(args.policy or [])
+    return args
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m tssac_core.evaluate", description=command_description(__doc__))
     who = p.add_mutually_exclusive_group()
     who.add_argument(
@@ -128,7 +136,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
+    return p
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The values no flag's type checks: counts, margins, and what goes with --policy."""
     if args.episodes <= 0:
         raise UsageError("--episodes must be positive")
     if args.mission is not None and args.mission < 0:
@@ -143,8 +155,6 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         math.isfinite(args.decision_interval_s) and args.decision_interval_s > 0
     ):
         raise UsageError(f"--decision-interval-s must be a positive number of seconds, got {args.decision_interval_s}")
-    args.policy_sources = policy_sources(args.policy or [])
-    return args
 
 
 def policy_sources(texts: Sequence[str]) -> dict[Role | None, tuple[str, Path]]:

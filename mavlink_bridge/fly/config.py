@@ -328,79 +328,14 @@ def _side_by_side_flags(g: argparse._ActionsContainer) -> None:
 
 def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
     a = build_parser().parse_args(argv)
-    if a.episodes <= 0:
-        raise UsageError(f"--episodes must be positive, got {a.episodes}")
-    if a.seed + max(a.episodes - 1, a.mission or 0) > SEED_MAX:
-        raise UsageError(
-            f"--seed plus the last mission's index must stay within {SEED_MAX} (mission i flies seed S + i)"
-        )
-    if a.workers <= 0:
-        raise UsageError(f"--workers must be positive, got {a.workers}")
-    if a.mission is not None and a.mission < 0:
-        raise UsageError(f"--mission must be >= 0, got {a.mission}")
-    if a.mission is not None and a.episodes != 1:
-        raise UsageError("--mission flies one mission: leave --episodes out")
-    if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
-        raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
-    if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
-        raise UsageError("--mission-timeout-s must be positive")
-    check_lockstep_grant_s(a.lockstep_grant_s)
-    if a.animate is not None:
-        try:
-            check_target(a.animate)
-        except AnimationFormatError as exc:
-            raise UsageError(str(exc)) from None
+    check_numbers(a)
     scenario = with_dynamics(load(a.scenario), a.dynamics, a.aircraft)
     models: Path | None = None
     if a.pilot is None:
         models = (a.models if a.models is not None else DEFAULT_MODELS).resolve()
         check_models(models)
-    if a.signing_key is not None:
-        read_signing_key(a.signing_key)
-        if a.no_signing:
-            raise UsageError("--no-signing and --signing-key contradict each other: give one")
-    if a.no_signing and scenario.link.signing:
-        raise UsageError(f"{a.scenario}: the scenario asks for signing (link.signing: true): leave out --no-signing")
-    if a.serial is not None:
-        try:
-            check_baud(a.serial, "--serial")
-        except BaudError as exc:
-            raise UsageError(str(exc)) from None
-    if not (0.0 <= a.serial_byte_loss < 1.0):
-        raise UsageError(f"--serial-byte-loss must be in [0, 1), got {a.serial_byte_loss}")
-    if a.serial_byte_loss > 0.0 and a.serial is None:
-        raise UsageError("--serial-byte-loss needs --serial BAUD (it is the serial line that drops bytes)")
-    connect: tuple[str, str, str] | None = None
-    if a.connect is not None:
-        if a.serial is not None:
-            raise UsageError(
-                "--serial sets up the serial lines of the world fly starts: with --connect give the "
-                "serial devices themselves (--connect /dev/ttyUSB0,57600 ...)"
-            )
-        for text in a.connect:
-            try:
-                spec = parse_connection(text)
-            except ValueError as exc:
-                raise UsageError(str(exc)) from None
-            if isinstance(spec, SerialSpec) and not os.path.exists(spec.device):
-                raise UsageError(f"--connect {text}: serial device {spec.device} does not exist")
-        if a.episodes != 1:
-            raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
-        if a.workers != 1 or a.address is not None or a.executor is not None:
-            raise UsageError("--connect flies the running vehicles from here: no --workers, --executor or --address")
-        if a.dynamics is not None or a.aircraft is not None:
-            raise UsageError("--dynamics and --aircraft set the physics of the world fly starts: not with --connect")
-        if scenario.layout is None:
-            raise UsageError(
-                f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
-                "(python -m sim_vehicles --layout-out FILE writes it)"
-            )
-        if a.plot is not None or a.animate is not None:
-            raise UsageError(
-                "--plot and --animate draw from the world's truth log, which fly has only for the worlds it starts "
-                "(not with --connect)"
-            )
-        connect = (a.connect[0], a.connect[1], a.connect[2])
+    check_link(a, scenario)
+    connect = connect_of(a, scenario)
     if a.address is not None and a.executor == Executor.LOCAL.value:
         raise UsageError("--address is a Ray cluster: it flies with --executor ray, not local")
     executor = Executor.RAY if a.address is not None else Executor(a.executor or Executor.LOCAL.value)
@@ -439,6 +374,87 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         serial_baud=a.serial,
         serial_byte_loss=a.serial_byte_loss,
     )
+
+
+def check_numbers(a: argparse.Namespace) -> None:
+    """Counts, seeds, times and the film's format: UsageError (one line) for a value no flag's type refuses."""
+    if a.episodes <= 0:
+        raise UsageError(f"--episodes must be positive, got {a.episodes}")
+    if a.seed + max(a.episodes - 1, a.mission or 0) > SEED_MAX:
+        raise UsageError(
+            f"--seed plus the last mission's index must stay within {SEED_MAX} (mission i flies seed S + i)"
+        )
+    if a.workers <= 0:
+        raise UsageError(f"--workers must be positive, got {a.workers}")
+    if a.mission is not None and a.mission < 0:
+        raise UsageError(f"--mission must be >= 0, got {a.mission}")
+    if a.mission is not None and a.episodes != 1:
+        raise UsageError("--mission flies one mission: leave --episodes out")
+    if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
+        raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
+    if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):
+        raise UsageError("--mission-timeout-s must be positive")
+    check_lockstep_grant_s(a.lockstep_grant_s)
+    if a.animate is not None:
+        try:
+            check_target(a.animate)
+        except AnimationFormatError as exc:
+            raise UsageError(str(exc)) from None
+
+
+def check_link(a: argparse.Namespace, scenario: Scenario) -> None:
+    """Signing and the serial lines: a key that reads, flags that go together."""
+    if a.signing_key is not None:
+        read_signing_key(a.signing_key)
+        if a.no_signing:
+            raise UsageError("--no-signing and --signing-key contradict each other: give one")
+    if a.no_signing and scenario.link.signing:
+        raise UsageError(f"{a.scenario}: the scenario asks for signing (link.signing: true): leave out --no-signing")
+    if a.serial is not None:
+        try:
+            check_baud(a.serial, "--serial")
+        except BaudError as exc:
+            raise UsageError(str(exc)) from None
+    if not (0.0 <= a.serial_byte_loss < 1.0):
+        raise UsageError(f"--serial-byte-loss must be in [0, 1), got {a.serial_byte_loss}")
+    if a.serial_byte_loss > 0.0 and a.serial is None:
+        raise UsageError("--serial-byte-loss needs --serial BAUD (it is the serial line that drops bytes)")
+
+
+def connect_of(a: argparse.Namespace, scenario: Scenario) -> tuple[str, str, str] | None:
+    """``--connect``: the three running vehicles' connections, checked with what may go with them (None: fly starts
+    its world)."""
+    if a.connect is None:
+        return None
+    if a.serial is not None:
+        raise UsageError(
+            "--serial sets up the serial lines of the world fly starts: with --connect give the "
+            "serial devices themselves (--connect /dev/ttyUSB0,57600 ...)"
+        )
+    for text in a.connect:
+        try:
+            spec = parse_connection(text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        if isinstance(spec, SerialSpec) and not os.path.exists(spec.device):
+            raise UsageError(f"--connect {text}: serial device {spec.device} does not exist")
+    if a.episodes != 1:
+        raise UsageError("--connect flies the running vehicles once: --episodes must be 1")
+    if a.workers != 1 or a.address is not None or a.executor is not None:
+        raise UsageError("--connect flies the running vehicles from here: no --workers, --executor or --address")
+    if a.dynamics is not None or a.aircraft is not None:
+        raise UsageError("--dynamics and --aircraft set the physics of the world fly starts: not with --connect")
+    if scenario.layout is None:
+        raise UsageError(
+            f"{a.scenario}: with --connect the scenario must have the fixed layout the vehicles fly "
+            "(python -m sim_vehicles --layout-out FILE writes it)"
+        )
+    if a.plot is not None or a.animate is not None:
+        raise UsageError(
+            "--plot and --animate draw from the world's truth log, which fly has only for the worlds it starts "
+            "(not with --connect)"
+        )
+    return (a.connect[0], a.connect[1], a.connect[2])
 
 
 def with_dynamics(scenario: Scenario, model: str | None, aircraft: str | None) -> Scenario:

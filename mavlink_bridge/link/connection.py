@@ -234,6 +234,35 @@ class MavLink:
         """When the serial line last delivered bytes (time.monotonic())."""
         self._serial_dead = False
         """The serial line failed (unplugged, the far end closed): it is read no more."""
+        self._open_transport()
+        self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        """Builds what we send and holds our identity, sequence and signing state."""
+        self._setpoint = self.mav.set_position_target_local_ned_encode(
+            0, 0, 0, SETPOINT_FRAME, SETPOINT_TYPE_MASK, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        )
+        """The one SET_POSITION_TARGET_LOCAL_NED :meth:`send_setpoint` fills in and packs (no object per step); the
+        fields it does not set stay as made here: frame, type mask, and 0.0 for what the mask ignores."""
+        self._grant = self.mav.named_value_int_encode(0, GRANT_NAME.encode(), 0)
+        """The one lockstep grant :meth:`send_setpoint` fills in and sends beside a setpoint."""
+        self._packer = FramePacker(DIALECT.crc16)
+        """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
+        self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
+        """Decodes the frames we accept (already checked): pymavlink's objects, without a second CRC."""
+        self._verifier: SignatureVerifier | None = None
+        if signing_key is not None:
+            self.setup_signing(signing_key, signing_link_id)
+        if tlog_path is not None:
+            try:
+                self._open_tlog(Path(tlog_path))
+            except LinkError:
+                self._close_transport()
+                raise
+
+    # ----------------------------------------------------------------------------- set-up
+
+    def _open_transport(self) -> None:
+        """The UDP socket (bound, or aimed at the vehicle) or the serial port of ``self.spec``, polled for input;
+        LinkError (one line) if it cannot be opened."""
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._kind = "serial" if isinstance(self.spec, SerialSpec) else self.spec.kind
         try:
@@ -260,30 +289,6 @@ class MavLink:
         fails."""
         self._poll.register(self.fileno(), select.POLLIN)
         self.local_address: tuple[str, int] = ("", 0) if self._serial is not None else self._sock.getsockname()[:2]
-        self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
-        """Builds what we send and holds our identity, sequence and signing state."""
-        self._setpoint = self.mav.set_position_target_local_ned_encode(
-            0, 0, 0, SETPOINT_FRAME, SETPOINT_TYPE_MASK, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        )
-        """The one SET_POSITION_TARGET_LOCAL_NED :meth:`send_setpoint` fills in and packs (no object per step); the
-        fields it does not set stay as made here: frame, type mask, and 0.0 for what the mask ignores."""
-        self._grant = self.mav.named_value_int_encode(0, GRANT_NAME.encode(), 0)
-        """The one lockstep grant :meth:`send_setpoint` fills in and sends beside a setpoint."""
-        self._packer = FramePacker(DIALECT.crc16)
-        """Packs (and signs) what we send: pymavlink's bytes, fewer objects per frame (tests/test_bridge.py)."""
-        self._rx = FrameDecoder(M.mavlink_map, M.MAVLink_header)
-        """Decodes the frames we accept (already checked): pymavlink's objects, without a second CRC."""
-        self._verifier: SignatureVerifier | None = None
-        if signing_key is not None:
-            self.setup_signing(signing_key, signing_link_id)
-        if tlog_path is not None:
-            try:
-                self._open_tlog(Path(tlog_path))
-            except LinkError:
-                self._close_transport()
-                raise
-
-    # ----------------------------------------------------------------------------- set-up
 
     def setup_signing(self, key: bytes, link_id: int = 1) -> None:
         """Sign what we send with ``key`` and accept only correctly signed, fresh messages.

@@ -437,6 +437,47 @@ def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------- decision
 
 
+def _proposal_excess(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    proposed: np.ndarray,
+    hz: Hazards,
+    lim: Limits,
+    dt_s: float,
+    steps: int,
+    margin: np.ndarray,
+    err_end: EstimateError,
+    cfg: ShieldConfig,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The proposed action held ``steps`` steps from the state where it starts: (a) its path's excess over the margin
+    and (b) each backup's from where it ends. Returns the action as flown (clipped; a row that is not finite held at
+    0), the excess of the whole (the lesser of the path's and the best backup's; -inf for a row that is not finite)
+    and the best backup's index."""
+    m = len(x)
+    leads = lead_steps(cfg, dt_s)
+    raw = np.asarray(proposed, dtype=np.float64)
+    finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
+    proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
+    xs, ys, vs, ps = constant_rollout(x, y, v, phi, proposed, lim, dt_s, steps)
+    # (a) the path's excess over the margin; err_end bounds the path's error over the whole interval.
+    path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2 - margin - err_end.position_m
+    path = np.where(finite, path, -np.inf)
+    ex, ey, ev, ep = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
+    # (b) each backup's excess from the end state. The braking backups (a 150-step spiral each) only where no
+    # constant-speed one clears the release margin.
+    end_error = backup_error_m(err_end, lim, dt_s, leads)
+    ends = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=np.zeros(m, bool)) - margin[:, None] - end_error
+    need_brake = (ends.max(axis=1) < cfg.release_margin_m) & (path >= 0) & cfg.braking_backups
+    if need_brake.any():
+        braking = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=need_brake)
+        ends = np.maximum(ends, braking - margin[:, None] - end_error)
+    best_end = choose_backup(ends)
+    excess = np.minimum(path, ends.max(axis=1))
+    return proposed, excess, best_end
+
+
 def decide(
     state: np.ndarray,
     proposed: np.ndarray,
@@ -469,25 +510,8 @@ def decide(
         x, y, v, phi = step_actions(x, y, v, phi, pending, lim, dt_s)
     err_here = err_now.after(n_pending * dt_s, lim)  # at the state the next command starts from
     err_end = err_now.after((n_pending + steps) * dt_s, lim)  # at the end of the proposed action's interval
-    raw = np.asarray(proposed, dtype=np.float64)
-    finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
-    proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
     leads = lead_steps(cfg, dt_s)
-    xs, ys, vs, ps = constant_rollout(x, y, v, phi, proposed, lim, dt_s, steps)
-    # (a) the path's excess over the margin; err_end bounds the path's error over the whole interval.
-    path = point_clearance(xs, ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2 - margin - err_end.position_m
-    path = np.where(finite, path, -np.inf)
-    ex, ey, ev, ep = xs[:, -1], ys[:, -1], vs[:, -1], ps[:, -1]
-    # (b) each backup's excess from the end state. The braking backups (a 150-step spiral each) only where no
-    # constant-speed one clears the release margin.
-    end_error = backup_error_m(err_end, lim, dt_s, leads)
-    ends = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=np.zeros(m, bool)) - margin[:, None] - end_error
-    need_brake = (ends.max(axis=1) < cfg.release_margin_m) & (path >= 0) & cfg.braking_backups
-    if need_brake.any():
-        braking = backup_clearance(ex, ey, ev, ep, hz, lim, dt_s, leads, brake=need_brake)
-        ends = np.maximum(ends, braking - margin[:, None] - end_error)
-    best_end = choose_backup(ends)
-    excess = np.minimum(path, ends.max(axis=1))
+    proposed, excess, best_end = _proposal_excess(x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg)
     passes = excess >= 0
     passes_release = excess >= cfg.release_margin_m
 

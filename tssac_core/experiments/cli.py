@@ -180,6 +180,14 @@ def compact(grid: Grid, results: Path, report: Say = say) -> None:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    """The command line, its values checked (UsageError, one line) and --finish-by read as a time."""
+    args = build_parser().parse_args(argv)
+    check_args(args)
+    args.finish_by = parse_finish_by(args.finish_by) if args.finish_by is not None else None
+    return args
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m tssac_core.experiments", description=command_description(__doc__))
     p.add_argument("--grid", type=Path, required=True, help="grid file (e.g. experiments/paper.yaml)")
     p.add_argument(
@@ -250,7 +258,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         help="train nothing: keep only the deployable actor in finished runs' checkpoints "
         "and delete their resume/ states (to commit results; their evaluations stay valid)",
     )
-    args = p.parse_args(argv)
+    return p
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The values no flag's type checks, and the flags that do not go together."""
     if args.jobs is not None and args.jobs < 1:
         raise UsageError("--jobs must be at least 1")
     if args.cpus is not None and args.cpus < 1:
@@ -266,8 +278,6 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         raise UsageError(
             f"{chooser} chooses jobs to train, and {trains_nothing} trains nothing (it works on every finished run)"
         )
-    args.finish_by = parse_finish_by(args.finish_by) if args.finish_by is not None else None
-    return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:

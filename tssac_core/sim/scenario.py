@@ -20,6 +20,7 @@ import dataclasses
 import enum
 import hashlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -401,13 +402,20 @@ def dump(scenario: Scenario, path: str | Path) -> None:
 # ----------------------------------------------------------------------------------- validation
 
 
-def validate(s: Scenario, source: str) -> None:
-    """Semantic checks beyond types; raises ScenarioError naming the field."""
+def _checker(source: str) -> Callable[[bool, str, str], None]:
+    """``check(ok, where, problem)``: ScenarioError naming ``source`` and the field ``where`` unless ``ok``."""
 
     def check(ok: bool, where: str, problem: str) -> None:
         if not ok:
             raise ScenarioError(source, where, problem)
 
+    return check
+
+
+def validate(s: Scenario, source: str) -> None:
+    """Semantic checks beyond types; raises ScenarioError naming the field."""
+
+    check = _checker(source)
     check(0 < s.area_km <= MAX_AREA_KM, "area_km", f"must be in (0, {MAX_AREA_KM:g}] km, got {s.area_km}")
     check(0 < s.dt_s <= 1.0, "dt_s", f"must be in (0, 1] s, got {s.dt_s}")
     check(
@@ -425,6 +433,25 @@ def validate(s: Scenario, source: str) -> None:
         "inconsistent: need R1 strike_launch_km < R2 detect_km < R3 sam_launch_km < R4 sam_detect_km, got "
         f"{r.strike_launch_km} / {r.detect_km} / {r.sam_launch_km} / {r.sam_detect_km}",
     )
+    _validate_vehicles(s, source)
+    check((s.layout is None) != (s.random is None), "layout", "give exactly one of 'layout' (fixed) or 'random'")
+    if s.layout is not None:
+        _validate_layout(s, s.layout, source)
+    if s.random is not None:
+        _validate_random(s, s.random, source)
+    _validate_link(s.link, source)
+    check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
+    check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
+    if s.wind is not None:
+        _validate_wind(s, s.wind, source)
+    if s.expect is not None:
+        _validate_expect(s.expect, source)
+
+
+def _validate_vehicles(s: Scenario, source: str) -> None:
+    """One vehicle per role, each with speeds, turn rate and acceleration a fixed-wing UAV can have."""
+
+    check = _checker(source)
     names = [role.value for role in ROLES]
     for key in s.vehicles:
         check(key in names, f"vehicles.{key}", f"unknown role (allowed: {', '.join(names)})")
@@ -445,12 +472,12 @@ def validate(s: Scenario, source: str) -> None:
         )
         check(0 < v.turn_rate_max_deg_s <= 90, f"{where}.turn_rate_max_deg_s", "must be in (0, 90] deg/s")
         check(0 < v.accel_max_m_s2 <= 100, f"{where}.accel_max_m_s2", "must be in (0, 100] m/s^2")
-    check((s.layout is None) != (s.random is None), "layout", "give exactly one of 'layout' (fixed) or 'random'")
-    if s.layout is not None:
-        _validate_layout(s, s.layout, source)
-    if s.random is not None:
-        _validate_random(s, s.random, source)
-    lk = s.link
+
+
+def _validate_link(lk: LinkModel, source: str) -> None:
+    """Probabilities, noise and latency a link can have, and a loss that lets commands through."""
+
+    check = _checker(source)
     for name in ("gps_dropout_prob", "packet_loss", "duplication", "reordering"):
         check(
             0.0 <= getattr(lk, name) <= 1.0, f"link.{name}", f"must be a probability in [0, 1], got {getattr(lk, name)}"
@@ -472,27 +499,26 @@ def validate(s: Scenario, source: str) -> None:
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
     check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
     check(0 < lk.gps_rate_hz <= 100, "link.gps_rate_hz", "must be in (0, 100] Hz")
-    check(-90 <= s.origin.lat_deg <= 90, "origin.lat_deg", "must be in [-90, 90]")
-    check(-180 <= s.origin.lon_deg <= 180, "origin.lon_deg", "must be in [-180, 180]")
-    if s.wind is not None:
-        _validate_wind(s, s.wind, source)
-    if s.expect is not None:
-        check(
-            0 < s.expect.episodes <= MAX_EXPECT_EPISODES,
-            "expect.episodes",
-            f"must be positive and at most {MAX_EXPECT_EPISODES}",
-        )
-        check(0 <= s.expect.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
-        check(s.expect.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
-        check(0 <= s.expect.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
-        check(
-            s.expect.max_cost_high95 is None or s.expect.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0"
-        )
-        check(
-            s.expect.speedup is None or 0 < s.expect.speedup <= 1000,
-            "expect.speedup",
-            "must be positive and at most 1000",
-        )
+
+
+def _validate_expect(e: Expect, source: str) -> None:
+    """What a regression test may promise: counts and rates in their ranges."""
+
+    check = _checker(source)
+    check(
+        0 < e.episodes <= MAX_EXPECT_EPISODES,
+        "expect.episodes",
+        f"must be positive and at most {MAX_EXPECT_EPISODES}",
+    )
+    check(0 <= e.min_success_rate <= 1, "expect.min_success_rate", "must be in [0, 1]")
+    check(e.max_mean_cost >= 0, "expect.max_mean_cost", "must be >= 0")
+    check(0 <= e.min_success_low95 <= 1, "expect.min_success_low95", "must be in [0, 1]")
+    check(e.max_cost_high95 is None or e.max_cost_high95 >= 0, "expect.max_cost_high95", "must be >= 0")
+    check(
+        e.speedup is None or 0 < e.speedup <= 1000,
+        "expect.speedup",
+        "must be positive and at most 1000",
+    )
 
 
 def _validate_wind(s: Scenario, w: Wind, source: str) -> None:
