@@ -3,6 +3,7 @@ the journal aside) and in the packages' docstrings and comments exists, and ever
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -122,3 +123,43 @@ def test_the_index_lists_every_page() -> None:
     pages = [p for p in (ROOT / "docs").glob("*.md") if p.name != "README.md"] + [ROOT / f for f in FIGURE_PAGES]
     missing = [str(p.relative_to(ROOT)) for p in pages if p.resolve() not in linked]
     assert not missing, missing
+
+
+RESULT_TABLE = "| where | scenario, missions | command | monitor | mission success | mean cost | JSON |"
+
+
+def quoted(summary: dict) -> tuple[str, str]:
+    """How the README writes a results JSON's success and mean cost, with their 95% intervals."""
+    low, high = summary["success_interval95"]
+    cost_low, cost_high = summary["mean_cost_interval95"]
+    return (
+        f"{100 * summary['success_rate']:.1f}% ({100 * low:.1f}-{100 * high:.1f})",
+        f"{summary['mean_cost']:.2f} ({cost_low:.2f}-{cost_high:.2f})",
+    )
+
+
+def readme_result_rows() -> list[list[str]]:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = text[text.index(RESULT_TABLE) :].split("\n\n")[0].splitlines()[2:]
+    return [[cell.strip() for cell in line.strip("|").split(" | ")] for line in table]
+
+
+def test_every_figure_the_readme_quotes_is_the_json_it_cites() -> None:
+    rows = readme_result_rows()
+    checked = 0
+    for where, _, _, _, success, cost, cited in rows:
+        paths = re.findall(r"`([\w./-]+\.json)`", cited)
+        if "(`" in cited:  # a figure inside a benchmark's JSON (its key path given): not a results JSON
+            continue
+        assert len(paths) == len(success.split(" / ")) == len(cost.split(" / ")), where
+        for path, s, c in zip(paths, success.split(" / "), cost.split(" / "), strict=True):
+            assert (s, c) == quoted(json.loads((ROOT / path).read_text())), f"{where}: {path}"
+            checked += 1
+    assert checked >= 8, checked
+
+
+def test_the_figure_check_catches_a_figure_that_is_not_the_jsons() -> None:
+    summary = {"success_rate": 0.9983, "success_interval95": [0.99728, 0.99894], "mean_cost": 0.0418}
+    summary["mean_cost_interval95"] = [0.0147, 0.0755]
+    assert quoted(summary) == ("99.8% (99.7-99.9)", "0.04 (0.01-0.08)")
+    assert quoted({**summary, "success_rate": 0.995})[0] == "99.5% (99.7-99.9)"
