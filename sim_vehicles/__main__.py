@@ -7,7 +7,7 @@ Prints one line per vehicle with the connection string a client uses, then a rea
     strike sysid=3 udpout:127.0.0.1:14580
     ready scenario=strike seed=0 clock=realtime speedup=1
 
-With ``--serial BAUD`` each vehicle is also on a pseudo-terminal at BAUD (:mod:`sim_vehicles.serial_port`), and
+With ``--serial BAUD`` each vehicle is also on a pseudo-terminal at BAUD (:mod:`sim_vehicles.link.serial_port`), and
 its line names that serial port (``decoy sysid=1 /dev/pts/5,57600``); the UDP ports stay open beside it.
 
 and, when the run ends, one ``end ...`` line (reason, success, steps, simulated time, cost per role).

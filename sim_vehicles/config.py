@@ -82,7 +82,7 @@ class SitlConfig:
     """``--aircraft``: the JSBSim airframe, over the scenario's (None: the scenario's, f16 without one)."""
     serial_baud: int | None = None
     """``--serial BAUD``: every vehicle also on a pseudo-terminal, a serial line at this baud rate
-    (:mod:`sim_vehicles.serial_port`); None: UDP only."""
+    (:mod:`sim_vehicles.link.serial_port`); None: UDP only."""
     serial_byte_loss: float = 0.0
     """``--serial-byte-loss P``: the serial lines drop each byte, each way, with this probability (a noisy line)."""
 

@@ -67,18 +67,18 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from sim_vehicles.clock import Clock
-from sim_vehicles.commands import CommandHandler
+from sim_vehicles.autopilot.clock import Clock
+from sim_vehicles.autopilot.events import EventKind, WorldFlags, events_from_step
+from sim_vehicles.autopilot.modes import FlightMode
+from sim_vehicles.autopilot.telemetry import VehicleTruth
+from sim_vehicles.autopilot.vehicle import Vehicle, VehicleSetup
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.dynamics.backend import DynamicsError, VehicleDynamics, make_dynamics
-from sim_vehicles.events import EventKind, WorldFlags, events_from_step
-from sim_vehicles.mavlink_io import EndpointError, MavEndpoint
-from sim_vehicles.modes import FlightMode
-from sim_vehicles.serial_port import PtySerialPort
-from sim_vehicles.telemetry import VehicleTruth
+from sim_vehicles.link.mavlink_io import EndpointError, MavEndpoint
+from sim_vehicles.link.serial_port import PtySerialPort
+from sim_vehicles.protocol.commands import CommandHandler
+from sim_vehicles.protocol.vehicle_link import VehicleLink
 from sim_vehicles.truth_log import TruthLog
-from sim_vehicles.vehicle import Vehicle, VehicleSetup
-from sim_vehicles.vehicle_link import VehicleLink
 from tssac_core.common.files import create_exclusively
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, sample_layout, to_dict
 from tssac_core.sim.world import World
@@ -174,7 +174,7 @@ class WorldRunner:
         self._closed = False
         self._endpoints: list[MavEndpoint] = []
         self.serial_ports: list[PtySerialPort] = []
-        """With ``--serial``: serial_ports[i] is vehicle i's serial line (:mod:`sim_vehicles.serial_port`)."""
+        """With ``--serial``: serial_ports[i] is vehicle i's serial line (:mod:`sim_vehicles.link.serial_port`)."""
         self._truth: TruthLog | None = None
         self._tlogs: list[BinaryIO] = []
         self.dynamics: VehicleDynamics | None = None

@@ -56,11 +56,11 @@ class RunningSitl:
         return self.runner.vehicles[index]
 
     def link(self, index: int) -> Any:
-        """The vehicle's MAVLink side (:class:`sim_vehicles.vehicle_link.VehicleLink`)."""
+        """The vehicle's MAVLink side (:class:`sim_vehicles.protocol.vehicle_link.VehicleLink`)."""
         return self.runner.links[index]
 
     def endpoint(self, index: int) -> Any:
-        """The vehicle's UDP endpoint (:class:`sim_vehicles.mavlink_io.MavEndpoint`)."""
+        """The vehicle's UDP endpoint (:class:`sim_vehicles.link.mavlink_io.MavEndpoint`)."""
         return self.runner.links[index].endpoint
 
     def stop(self, timeout_s: float = 5.0) -> RunResult | None:

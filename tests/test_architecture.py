@@ -249,13 +249,13 @@ def test_ray_workers_import_this_checkout():
 WIRE_FIELD_MODULES = (
     "mavlink_bridge/link/frames.py",
     "mavlink_bridge/link/connection.py",
-    "sim_vehicles/clock.py",
-    "sim_vehicles/commands.py",
-    "sim_vehicles/setpoints.py",
-    "sim_vehicles/streams.py",
-    "sim_vehicles/telemetry.py",
-    "sim_vehicles/vehicle.py",
-    "sim_vehicles/vehicle_link.py",
+    "sim_vehicles/autopilot/clock.py",
+    "sim_vehicles/protocol/commands.py",
+    "sim_vehicles/autopilot/setpoints.py",
+    "sim_vehicles/protocol/streams.py",
+    "sim_vehicles/autopilot/telemetry.py",
+    "sim_vehicles/autopilot/vehicle.py",
+    "sim_vehicles/protocol/vehicle_link.py",
 )
 """The modules that write or read MAVLink fields, on either end."""
 WIRE_FLOAT_SCALES = frozenset({100.0, 1000.0, 1e6, 1e7, 1e9, 1e-7})
@@ -329,12 +329,12 @@ def test_both_ends_convert_through_the_wire(monkeypatch: pytest.MonkeyPatch):
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
     from mavlink_bridge.link.frames import action_to_setpoint, from_global_position_int, from_local_position_ned
-    from sim_vehicles import setpoints, telemetry
-    from sim_vehicles.clock import Clock
-    from sim_vehicles.events import WorldFlags
-    from sim_vehicles.link_model import GpsFix
-    from sim_vehicles.modes import FlightMode
-    from sim_vehicles.vehicle import Vehicle, VehicleSetup
+    from sim_vehicles.autopilot import setpoints, telemetry
+    from sim_vehicles.autopilot.clock import Clock
+    from sim_vehicles.autopilot.events import WorldFlags
+    from sim_vehicles.autopilot.modes import FlightMode
+    from sim_vehicles.autopilot.vehicle import Vehicle, VehicleSetup
+    from sim_vehicles.link.link_model import GpsFix
     from tssac_core.sim.scenario import Role, load
     from tssac_core.wire import units
 
@@ -442,3 +442,20 @@ def test_the_length_rule_sees_a_long_function_and_its_reason():
     assert long_functions(f"def f():\n{body}") == [("f", MAX_FUNCTION_LINES + 1)]
     assert long_functions(f"def f():  # long: a table\n{body}") == []
     assert long_functions(f"def f():\n{body[: -len(body.splitlines()[-1]) - 1]}") == []
+
+
+SITL_ROOMS = ("link", "autopilot", "dynamics", "protocol")
+"""``sim_vehicles``' rooms, lowest first: each imports only the rooms before it; the run (config, world_runner,
+truth_log, the command) sits above them all."""
+SITL_RUN = ["__init__.py", "__main__.py", "config.py", "truth_log.py", "world_runner.py"]
+
+
+def test_the_sitl_is_in_rooms_with_no_upward_arrow():
+    loose = sorted(p.name for p in (ROOT / "sim_vehicles").glob("*.py"))
+    assert loose == SITL_RUN, loose
+    rooms = sorted(p.name for p in (ROOT / "sim_vehicles").iterdir() if (p / "__init__.py").is_file())
+    assert rooms == sorted(SITL_ROOMS)
+    edges = room_edges("sim_vehicles", SITL_ROOMS)
+    assert ("protocol", "autopilot") in edges and ("autopilot", "link") in edges  # the walk sees the rooms' imports
+    upward = sorted((a, b) for a, b in edges if b not in SITL_ROOMS or SITL_ROOMS.index(b) >= SITL_ROOMS.index(a))
+    assert not upward, upward

@@ -20,7 +20,7 @@ from mavlink_bridge.link import guided_commands
 from mavlink_bridge.link.connection import MavLink
 from mavlink_bridge.link.frames import Setpoint
 from mavlink_bridge.link.guided_commands import slew_from_setpoint
-from sim_vehicles.modes import FlightMode
+from sim_vehicles.autopilot.modes import FlightMode
 from tssac_core.sim.scenario import VehicleSpec, dump, load
 from tssac_core.wire import units
 from tssac_core.wire.lockstep import GRANT_NAME

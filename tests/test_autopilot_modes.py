@@ -12,9 +12,9 @@ import time
 import pytest
 from sitl_helpers import GUIDED, MANUAL, Client, mavlink2, scenario, sitl, wait_until
 
-from sim_vehicles import navigation, setpoints
+from sim_vehicles.autopilot import navigation, setpoints
+from sim_vehicles.autopilot.modes import FlightMode
 from sim_vehicles.config import LockstepStart
-from sim_vehicles.modes import FlightMode
 
 M = mavlink2
 RTL, LOITER = int(FlightMode.RTL), int(FlightMode.LOITER)

@@ -341,7 +341,7 @@ def test_link_finds_a_frame_behind_garbage_and_drops_unknown_ids_as_the_sitl_doe
     finally:
         vehicle.close()
     # The SITL's endpoint splits the same bytes into the same messages.
-    from sim_vehicles.mavlink_io import MavEndpoint
+    from sim_vehicles.link.mavlink_io import MavEndpoint
 
     endpoint = MavEndpoint("127.0.0.1", 0, 2, 1)
     try:

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from sim_vehicles.autopilot.telemetry import GRAVITY_M_S2
 from sim_vehicles.dynamics.kinematic import KinematicDynamics
-from sim_vehicles.telemetry import GRAVITY_M_S2
 from tssac_core.sim.scenario import (
     DEFAULT_SCENARIO,
     SCENARIOS_DIR,

@@ -20,7 +20,7 @@ from ground_station_helpers import MavProxyConsole as _Console
 from ground_station_helpers import free_udp_port as _free_udp_port
 from sitl_helpers import REPO, STRIKE, sitl
 
-from sim_vehicles.modes import FlightMode
+from sim_vehicles.autopilot.modes import FlightMode
 from tssac_core.sim.scenario import DynamicsModel
 
 mavsdk = pytest.importorskip("mavsdk", minversion="4.0")

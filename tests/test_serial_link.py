@@ -30,7 +30,7 @@ from mavlink_bridge.link.telemetry_budget import (
     stream_bytes_per_s,
 )
 from sim_vehicles import __main__ as sitl_cli
-from sim_vehicles.streams import DEFAULT_INTERVALS_S
+from sim_vehicles.protocol.streams import DEFAULT_INTERVALS_S
 from tssac_core.wire.stream_framing import SequenceGaps, StreamFramer
 from tssac_core.wire.uart import UART_BAUDS, bytes_per_s
 

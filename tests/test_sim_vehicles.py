@@ -24,7 +24,7 @@ from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink
 
 from sim_vehicles.__main__ import main
 from sim_vehicles.config import SitlConfig
-from sim_vehicles.link_model import GpsReceiver, LinkChannel
+from sim_vehicles.link.link_model import GpsReceiver, LinkChannel
 from sim_vehicles.world_runner import WorldRunner
 from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
 from tssac_core.sim.world import World
@@ -206,7 +206,7 @@ def test_heartbeat_and_telemetry_at_their_rates_in_sim_time() -> None:
 def test_frames_of_one_step_share_a_datagram() -> None:
     # A step's telemetry (ATTITUDE, the two position messages, VFR_HUD...) leaves in one datagram per
     # client, every frame whole and valid, no datagram larger than COALESCE_BYTES unless it is one frame.
-    from sim_vehicles.vehicle_link import COALESCE_BYTES
+    from sim_vehicles.protocol.vehicle_link import COALESCE_BYTES
 
     with sitl(scenario(), speedup=20.0) as s, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
@@ -467,10 +467,10 @@ def test_a_refused_param_set_is_answered_at_once_as_ardupilot_does() -> None:
 
 def test_every_refusal_text_is_complete_and_fits_one_statustext() -> None:
     """Every text a refusal can make, over extreme values: at most 50 characters, so never cut."""
-    from sim_vehicles.commands import GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL
-    from sim_vehicles.modes import refusal
-    from sim_vehicles.params import vehicle_params
-    from sim_vehicles.setpoints import GLOBAL_REFUSAL, Refusal, parse_attitude_target, parse_position_target
+    from sim_vehicles.autopilot.modes import refusal
+    from sim_vehicles.autopilot.params import vehicle_params
+    from sim_vehicles.autopilot.setpoints import GLOBAL_REFUSAL, Refusal, parse_attitude_target, parse_position_target
+    from sim_vehicles.protocol.commands import GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL
 
     texts = [GOTO_REFUSAL, MISSION_UPLOAD_REFUSAL, GLOBAL_REFUSAL.text]
     names = [p.name for p in vehicle_params(1, 1.0, 0.1, 5.0, 2.0, 200.0, 300.0)]

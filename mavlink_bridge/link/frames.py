@@ -4,8 +4,8 @@ World (eq. 5): x east, y north in metres from the area's south-west corner; head
 counter-clockwise from east; turn rate omega counter-clockwise-positive; action [omega, u] in
 [-1, 1], scaled by the vehicle's limits (``turn_rate_max_deg_s``, ``accel_max_m_s2`` of the scenario).
 
-MAVLink (as the bundled SITL documents it, ``sim_vehicles.telemetry`` / ``sim_vehicles.vehicle``; every unit,
-axis and sign below is converted by :mod:`tssac_core.wire.units`, the functions the SITL uses too):
+MAVLink (as the bundled SITL documents it, ``sim_vehicles.autopilot.telemetry`` / ``sim_vehicles.autopilot.vehicle``;
+every unit, axis and sign below is converted by :mod:`tssac_core.wire.units`, the functions the SITL uses too):
 
 * LOCAL_POSITION_NED: origin at the area's SW corner, ``x`` north = world y, ``y`` east = world x,
   ``vx`` north, ``vy`` east (m, m/s).

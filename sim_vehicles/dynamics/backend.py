@@ -11,8 +11,8 @@ from typing import Protocol
 
 import numpy as np
 
+from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.dynamics.kinematic import KinematicDynamics
-from sim_vehicles.telemetry import VehicleTruth
 from tssac_core.sim.scenario import Dynamics, DynamicsModel
 from tssac_core.sim.world import World
 

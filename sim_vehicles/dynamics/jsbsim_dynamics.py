@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from sim_vehicles.autopilot.telemetry import AirData, VehicleTruth
 from sim_vehicles.dynamics.jsbsim_airframe import (
     AirframeSpec,
     AirframeState,
@@ -21,7 +22,6 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
     StartState,
     Wind,
 )
-from sim_vehicles.telemetry import AirData, VehicleTruth
 from tssac_core.sim.scenario import ROLES, Scenario
 from tssac_core.sim.world import World
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from sim_vehicles.telemetry import GRAVITY_M_S2, AirData, VehicleTruth
+from sim_vehicles.autopilot.telemetry import GRAVITY_M_S2, AirData, VehicleTruth
 from tssac_core.sim.world import World
 from tssac_core.wire import units
 

@@ -1,6 +1,6 @@
 """Finding the MAVLink frames in one UDP datagram: one scanner for both ends of our links.
 
-The SITL vehicles (``sim_vehicles.mavlink_io``) and the companions (``mavlink_bridge.link.connection``) split every
+The SITL vehicles (``sim_vehicles.link.mavlink_io``) and the companions (``mavlink_bridge.link.connection``) split every
 datagram with :func:`scan_frames` and only then verify (signing) and decode (pymavlink) each frame, so the
 same bytes give the same frames on both sides. A candidate frame is a start byte (0xFD MAVLink 2, 0xFE
 MAVLink 1) whose header gives a length that fits in the datagram, whose message id the dialect knows and

@@ -4,7 +4,7 @@ The world (:mod:`tssac_core.sim.world`) works in x east, y north (metres from th
 corner) with heading phi counter-clockwise from east (eq. 5). MAVLink speaks NED (x north, y east,
 z down), yaw clockwise from north, and latitude/longitude in degrees. The projection and the headings
 that cross that boundary go through this module, on both sides: the SITL vehicles
-(:mod:`sim_vehicles.telemetry`) and the companion (:mod:`mavlink_bridge.link.frames`); the units of the fields
+(:mod:`sim_vehicles.autopilot.telemetry`) and the companion (:mod:`mavlink_bridge.link.frames`); the units of the fields
 (degE7, cm/s, ms, ...) and the NED axes and signs are :mod:`tssac_core.wire.units`.
 
 Flat earth (an equirectangular projection about the scenario's ``origin``)::

@@ -2,7 +2,7 @@
 
 Each event travels as a NAMED_VALUE_INT (:class:`EventName`, at most 10 characters; ``time_boot_ms`` = the step's
 simulated time) and as a STATUSTEXT (:data:`RADAR_TEXTS`, :data:`IDENTIFIED_TEXT`, :data:`HIT_TEXT`,
-:func:`mission_end_text`). The table of what each one means is in ``sim_vehicles/events.py``.
+:func:`mission_end_text`). The table of what each one means is in ``sim_vehicles/autopilot/events.py``.
 """
 
 from __future__ import annotations

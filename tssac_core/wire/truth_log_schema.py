@@ -20,7 +20,7 @@ Line types (key ``type``):
             model the air (JSBSim, or wind): {``airspeed_m_s``, ``alt_m``, ``roll_rad`` (right wing down
             positive), ``pitch_rad``, ``heading_rad`` (the nose, CCW from east)}}} — true states, no sensor noise.
 ``event``   ``step``, ``t_s``, ``event`` (RADAR_ON, IDENT, HIT, HAZARD, FENCE, MSN_END — see
-            ``sim_vehicles.events``), ``value``, ``vehicle`` (role or null); and STATUSTEXT: a client's
+            ``sim_vehicles.autopilot.events``), ``value``, ``vehicle`` (role or null); and STATUSTEXT: a client's
             STATUSTEXT to the vehicle (e.g. the runtime-assurance monitor's hand-overs), ``value`` its
             severity, ``text`` its text, relayed to the vehicle's other clients.
 ``summary`` (last line) ``success`` (target hit), ``end`` ("success", "geofence", "episode_cap" or

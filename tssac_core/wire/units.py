@@ -4,7 +4,8 @@ The world (:mod:`tssac_core.sim.world`, eq. 5) works in seconds, metres and radi
 phi counter-clockwise from east, turn rate omega counter-clockwise-positive, and an action [omega, u] in [-1, 1]
 scaled by the vehicle's limits. MAVLink's fields are in other units (``time_boot_ms``, microseconds, millimetres,
 cm/s, degE7, centidegrees) and another frame (NED: x north, y east; yaw and yaw rate clockwise-positive about the
-down axis). The SITL (:mod:`sim_vehicles.telemetry`, :mod:`sim_vehicles.setpoints`, :mod:`sim_vehicles.vehicle`)
+down axis). The SITL (:mod:`sim_vehicles.autopilot.telemetry`, :mod:`sim_vehicles.autopilot.setpoints`,
+:mod:`sim_vehicles.autopilot.vehicle`)
 writes telemetry and reads setpoints with these functions, the companion (:mod:`mavlink_bridge.link.frames`) reads
 telemetry and writes setpoints with the same ones, so each conversion is written once
 (``tests/test_architecture.py`` checks that neither side spells a scale itself).

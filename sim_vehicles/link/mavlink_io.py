@@ -45,7 +45,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import signing
+from sim_vehicles.link import signing
 from tssac_core.wire.framing import (
     Dialect,
     FrameDecoder,

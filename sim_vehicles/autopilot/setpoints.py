@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles.guided_slew import HeadingTarget, SpeedTarget
+from sim_vehicles.autopilot.guided_slew import HeadingTarget, SpeedTarget
 from tssac_core.wire import units
 
 M = mavlink2
@@ -72,7 +72,7 @@ class SetpointForm(enum.Enum):
     THRUST_YAW_RATE = "thrust"
     VELOCITY_NED = "velocity_ned"
     GUIDED_SLEW = "guided_slew"
-    """ArduPlane's GUIDED_CHANGE_HEADING / _SPEED (COMMAND_INT or COMMAND_LONG; sim_vehicles.guided_slew)."""
+    """ArduPlane's GUIDED_CHANGE_HEADING / _SPEED (COMMAND_INT or COMMAND_LONG; sim_vehicles.autopilot.guided_slew)."""
 
 
 @dataclass(frozen=True)

@@ -4,17 +4,17 @@ The vehicle's state is its setup, its parameters, arming, mode, the setpoint it 
 state after the last world step. It never moves itself: the runner (:mod:`sim_vehicles.world_runner`) asks it for
 its action (:meth:`Vehicle.action`), steps the world and hands it the new true state (:meth:`Vehicle.observe`).
 Everything MAVLink (the socket, the link model, telemetry streams, incoming messages) is its
-:class:`~sim_vehicles.vehicle_link.VehicleLink`; the vehicle speaks through it only to say something (a STATUSTEXT,
-:class:`Radio`) and to tell the lockstep barrier that it has come under companion control.
+:class:`~sim_vehicles.protocol.vehicle_link.VehicleLink`; the vehicle speaks through it only to say something (a
+STATUSTEXT, :class:`Radio`) and to tell the lockstep barrier that it has come under companion control.
 
-What arrives from clients is handled by :class:`sim_vehicles.commands.CommandHandler`, which changes this state
+What arrives from clients is handled by :class:`sim_vehicles.protocol.commands.CommandHandler`, which changes this state
 only through the methods here (:meth:`Vehicle.set_mode`, :meth:`Vehicle.set_armed`, :meth:`Vehicle.fly_demand`,
 ...).
 
-* Modes (:mod:`sim_vehicles.modes`, ArduPlane's numbers): MANUAL holds heading and speed; GUIDED
-  flies setpoints; LOITER, CIRCLE and RTL steer by themselves (:mod:`sim_vehicles.navigation`) while
+* Modes (:mod:`sim_vehicles.autopilot.modes`, ArduPlane's numbers): MANUAL holds heading and speed; GUIDED
+  flies setpoints; LOITER, CIRCLE and RTL steer by themselves (:mod:`sim_vehicles.autopilot.navigation`) while
   armed. Disarmed, the vehicle holds heading and speed (it is airborne from the first step).
-* Setpoints (:mod:`sim_vehicles.setpoints`): the companion's acceleration + yaw rate, MAVSDK's
+* Setpoints (:mod:`sim_vehicles.autopilot.setpoints`): the companion's acceleration + yaw rate, MAVSDK's
   forward speed + yaw rate, or SET_ATTITUDE_TARGET's thrust + yaw rate; obeyed only armed in
   GUIDED. The world's action is (omega / turn_rate_max, u / accel_max) in [-1, 1], omega = -yaw_rate
   (:mod:`tssac_core.wire.units`: the companion scales its setpoints with the same functions).
@@ -41,15 +41,15 @@ from typing import Protocol
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import guided_slew, navigation
-from sim_vehicles.clock import Clock
-from sim_vehicles.events import EventKind, MissionEvent, WorldFlags
-from sim_vehicles.guided_slew import HeadingTarget, SpeedTarget
-from sim_vehicles.link_model import GpsReceiver
-from sim_vehicles.modes import AUTONOMOUS, FlightMode
-from sim_vehicles.params import ParamTable, vehicle_params
-from sim_vehicles.setpoints import Demand, Refusal, SetpointForm, accel_command
-from sim_vehicles.telemetry import VehicleTruth
+from sim_vehicles.autopilot import guided_slew, navigation
+from sim_vehicles.autopilot.clock import Clock
+from sim_vehicles.autopilot.events import EventKind, MissionEvent, WorldFlags
+from sim_vehicles.autopilot.guided_slew import HeadingTarget, SpeedTarget
+from sim_vehicles.autopilot.modes import AUTONOMOUS, FlightMode
+from sim_vehicles.autopilot.params import ParamTable, vehicle_params
+from sim_vehicles.autopilot.setpoints import Demand, Refusal, SetpointForm, accel_command
+from sim_vehicles.autopilot.telemetry import VehicleTruth
+from sim_vehicles.link.link_model import GpsReceiver
 from tssac_core.sim.scenario import LinkModel, Origin
 from tssac_core.wire import units
 
@@ -155,7 +155,7 @@ class RefusalLimiter:
 
 
 class Radio(Protocol):
-    """What the vehicle says over its datalink (:class:`sim_vehicles.vehicle_link.VehicleLink`)."""
+    """What the vehicle says over its datalink (:class:`sim_vehicles.protocol.vehicle_link.VehicleLink`)."""
 
     def statustext(self, severity: int, text: str) -> None:
         """A STATUSTEXT to every client."""
@@ -211,7 +211,7 @@ class Vehicle:
         self.counters = VehicleCounters()
         self._on_event = on_event
         self.radio: Radio = _NoRadio()
-        """Set by the vehicle's :class:`~sim_vehicles.vehicle_link.VehicleLink` when it is made."""
+        """Set by the vehicle's :class:`~sim_vehicles.protocol.vehicle_link.VehicleLink` when it is made."""
         self.armed = False
         self.mode = FlightMode.MANUAL
         self.failsafe = False
@@ -314,8 +314,8 @@ class Vehicle:
         return 0.0, 0.0
 
     def _slew_command(self, demand: Demand) -> tuple[float, float]:
-        """ArduPlane's GUIDED under CHANGE_HEADING / CHANGE_SPEED (:mod:`sim_vehicles.guided_slew`): the turn toward
-        the heading target, the speed toward the speed target, each at its commanded rate."""
+        """ArduPlane's GUIDED under CHANGE_HEADING / CHANGE_SPEED (:mod:`sim_vehicles.autopilot.guided_slew`): the
+        turn toward the heading target, the speed toward the speed target, each at its commanded rate."""
         su, t = self.setup, self.truth
         air = t.air
         omega = 0.0

@@ -14,7 +14,7 @@ class Clock:
     sim_s: float = 0.0
     """Simulated time (s since boot)."""
     link_s: float = 0.0
-    """The link models' clock (see :mod:`sim_vehicles.link_model`)."""
+    """The link models' clock (see :mod:`sim_vehicles.link.link_model`)."""
     wall_s: float = 0.0
     """time.monotonic() of the current loop iteration."""
     unix_start_s: float = 0.0

@@ -8,9 +8,9 @@ print(hashlib.sha256(b'PASSPHRASE').hexdigest())" > key.hex`` makes a file that 
 With a key the vehicle signs everything it sends (:func:`enable_signing`: the same
 :class:`MAVLinkSigning` fields ``mavfile.setup_signing`` sets, link id 0) and accepts only correctly
 signed, fresh messages, checked by :class:`tssac_core.wire.signing.SignatureVerifier` in
-:mod:`sim_vehicles.mavlink_io` (signature first, then the timestamp). Unsigned HEARTBEAT and
+:mod:`sim_vehicles.link.mavlink_io` (signature first, then the timestamp). Unsigned HEARTBEAT and
 RADIO_STATUS (:data:`MONITOR_IDS`) are accepted only from passive monitors and only when the run allows
-them (``--unsigned-monitors``); rejections are counted by kind in :class:`sim_vehicles.mavlink_io.RxCounters`.
+them (``--unsigned-monitors``); rejections are counted by kind in :class:`sim_vehicles.link.mavlink_io.RxCounters`.
 """
 
 from __future__ import annotations

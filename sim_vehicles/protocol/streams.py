@@ -3,7 +3,7 @@
 Every stream has an interval in simulated seconds (:data:`DEFAULT_INTERVALS_S`; MAV_CMD_SET_MESSAGE_INTERVAL
 changes it, MAV_CMD_GET_MESSAGE_INTERVAL reads it). The position streams (:data:`GPS_GATED`) carry a GPS fix:
 they are sent when due *and* a fix newer than the last one sent exists. :func:`build` makes the message(s) of
-one id from a vehicle's state with the builders of :mod:`sim_vehicles.telemetry`.
+one id from a vehicle's state with the builders of :mod:`sim_vehicles.autopilot.telemetry`.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from typing import Any, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import telemetry
-from sim_vehicles.link_model import GpsFix
-from sim_vehicles.vehicle import EPS_S, Vehicle
+from sim_vehicles.autopilot import telemetry
+from sim_vehicles.autopilot.vehicle import EPS_S, Vehicle
+from sim_vehicles.link.link_model import GpsFix
 from tssac_core.wire import units
 
 M = mavlink2  # message ids and enums
@@ -129,8 +129,8 @@ FIELD_BUILDERS: dict[int, Callable[[Vehicle], Fields | None]] = {
 }
 """The streams a lockstep vehicle sends at every step, as their message's fields for the vehicle's current state (the
 arguments of pymavlink's ``<message>_encode``; None: nothing to say yet), so that they can be packed without building
-message objects (:meth:`sim_vehicles.mavlink_io.MavEndpoint.encode_fields`). :func:`build` makes their messages from
-the same fields."""
+message objects (:meth:`sim_vehicles.link.mavlink_io.MavEndpoint.encode_fields`). :func:`build` makes their messages
+from the same fields."""
 
 
 def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list[mavlink2.MAVLink_message]:

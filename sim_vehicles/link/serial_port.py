@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim_vehicles.mavlink_io import DIALECT, MAX_DATAGRAM
+from sim_vehicles.link.mavlink_io import DIALECT, MAX_DATAGRAM
 from tssac_core.wire.framing import scan_frames
 from tssac_core.wire.stream_framing import StreamCounters, StreamFramer
 from tssac_core.wire.uart import bytes_per_s, termios_speed

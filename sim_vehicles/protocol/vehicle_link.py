@@ -1,10 +1,10 @@
 """One vehicle's MAVLink side: its endpoint behind the link model, its telemetry, the lockstep credit, the tlog.
 
-A :class:`VehicleLink` owns the vehicle's :class:`~sim_vehicles.mavlink_io.MavEndpoint` (socket, framing,
-signing, clients), two :class:`~sim_vehicles.link_model.LinkChannel` (datalink out and in) and the
-:class:`~sim_vehicles.streams.StreamTable`; it reads the :class:`~sim_vehicles.vehicle.Vehicle`'s state to make
-telemetry and hands what clients send to its :class:`MessageHandler`
-(:class:`sim_vehicles.commands.CommandHandler`, attached by the runner). The runner drives it: drain the socket
+A :class:`VehicleLink` owns the vehicle's :class:`~sim_vehicles.link.mavlink_io.MavEndpoint` (socket, framing,
+signing, clients), two :class:`~sim_vehicles.link.link_model.LinkChannel` (datalink out and in) and the
+:class:`~sim_vehicles.protocol.streams.StreamTable`; it reads the :class:`~sim_vehicles.autopilot.vehicle.Vehicle`'s
+state to make telemetry and hands what clients send to its :class:`MessageHandler`
+(:class:`sim_vehicles.protocol.commands.CommandHandler`, attached by the runner). The runner drives it: drain the socket
 (:meth:`VehicleLink.poll_socket`), handle what the incoming channel delivers (:meth:`VehicleLink.process_incoming`),
 after each step publish the due streams (:meth:`VehicleLink.publish`), and send what the outgoing channel delivers
 (:meth:`VehicleLink.flush`).
@@ -27,12 +27,13 @@ from typing import BinaryIO, Protocol
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import guided_slew, streams, telemetry
-from sim_vehicles.events import MissionEvent
-from sim_vehicles.link_model import LinkChannel
-from sim_vehicles.mavlink_io import Address, MavEndpoint, Parsed, Sender
-from sim_vehicles.setpoints import Demand, Refusal, parse_attitude_target, parse_position_target
-from sim_vehicles.vehicle import Vehicle
+from sim_vehicles.autopilot import guided_slew, telemetry
+from sim_vehicles.autopilot.events import MissionEvent
+from sim_vehicles.autopilot.setpoints import Demand, Refusal, parse_attitude_target, parse_position_target
+from sim_vehicles.autopilot.vehicle import Vehicle
+from sim_vehicles.link.link_model import LinkChannel
+from sim_vehicles.link.mavlink_io import Address, MavEndpoint, Parsed, Sender
+from sim_vehicles.protocol import streams
 from tssac_core.wire import units
 from tssac_core.wire.lockstep import GRANT_NAME
 
@@ -110,7 +111,8 @@ class VehicleLink:
         """Ground-station addresses (``--out``) that get the stream from the start and are never forgotten."""
         self.credit = LockstepCredit()
         self.handler: MessageHandler | None = None
-        """What handles incoming messages (:class:`sim_vehicles.commands.CommandHandler`, attached by the runner)."""
+        """What handles incoming messages (:class:`sim_vehicles.protocol.commands.CommandHandler`, attached by the
+        runner)."""
         self._tlog = tlog
         self._sent_in_step = _StepOccurrences()
         """Frames sent per message id at the current step time: the occurrence part of their link-model key."""
@@ -132,7 +134,7 @@ class VehicleLink:
     # ------------------------------------------------------------------------- lockstep credit
 
     def took_control(self) -> None:
-        """The vehicle has come under companion control (:class:`sim_vehicles.vehicle.Radio`)."""
+        """The vehicle has come under companion control (:class:`sim_vehicles.autopilot.vehicle.Radio`)."""
         self.credit.entry_ms = self.credit.answered_ms
         self.credit.granted_ms = -1
 
@@ -286,8 +288,8 @@ class VehicleLink:
         self._queue(mid, tick_ms, dest, lambda to: endpoint.encode(msg, to))
 
     def send_fields(self, mid: int, fields: streams.Fields, dest: Address | None = None) -> None:
-        """:meth:`send` of message ``mid`` given by its fields (:data:`sim_vehicles.streams.FIELD_BUILDERS`), packed
-        without building the message object."""
+        """:meth:`send` of message ``mid`` given by its fields
+        (:data:`sim_vehicles.protocol.streams.FIELD_BUILDERS`), packed without building the message object."""
         cls = mavlink2.mavlink_map[mid]
         tick_ms = int(fields[_SYSTEM_TIME_MS]) if mid == M.MAVLINK_MSG_ID_SYSTEM_TIME else -1
         endpoint = self.endpoint
@@ -398,7 +400,8 @@ class VehicleLink:
 
     def relay(self, msg: mavlink2.MAVLink_message, source: Address) -> None:
         """A client's frame passed on as it came (its ids, sequence number and signature) to every other client and
-        ground station (:meth:`sim_vehicles.commands.CommandHandler._on_heartbeat`); nothing when there is no other."""
+        ground station (:meth:`sim_vehicles.protocol.commands.CommandHandler._on_heartbeat`); nothing when there is
+        no other."""
         frame = bytes(msg.get_msgbuf())
         for peer in set(self.endpoint.peers) | set(self.outputs):
             if peer != source:

@@ -20,7 +20,7 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles.link_model import GpsFix
+from sim_vehicles.link.link_model import GpsFix
 from tssac_core.sim.scenario import Origin
 from tssac_core.wire import units
 from tssac_core.wire.geodetic import heading_cdeg, local_to_geodetic, yaw_ned_from_phi

@@ -2,8 +2,8 @@
 missions, FTP and time sync.
 
 :class:`CommandHandler` reads messages and answers them over the vehicle's
-:class:`~sim_vehicles.vehicle_link.VehicleLink`; it changes the vehicle's state only through
-:class:`sim_vehicles.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
+:class:`~sim_vehicles.protocol.vehicle_link.VehicleLink`; it changes the vehicle's state only through
+:class:`sim_vehicles.autopilot.vehicle.Vehicle`'s methods (``set_mode``, ``set_armed``, ``fly_demand``, ...).
 Every COMMAND_LONG / COMMAND_INT is answered with a COMMAND_ACK to its sender. Messages addressed to
 another system or component are ignored (counted) and never passed on: a ground station on ``--out``
 sends each frame to every vehicle (pymavlink's ``udpin`` side writes to all the addresses it has heard),
@@ -20,11 +20,11 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles import guided_slew, modes, setpoints
-from sim_vehicles.mavlink_io import Address
-from sim_vehicles.modes import FlightMode
-from sim_vehicles.vehicle import Vehicle
-from sim_vehicles.vehicle_link import VehicleLink
+from sim_vehicles.autopilot import guided_slew, modes, setpoints
+from sim_vehicles.autopilot.modes import FlightMode
+from sim_vehicles.autopilot.vehicle import Vehicle
+from sim_vehicles.link.mavlink_io import Address
+from sim_vehicles.protocol.vehicle_link import VehicleLink
 from tssac_core.wire import units
 
 _log = logging.getLogger(__name__)
