@@ -133,6 +133,9 @@ def map_on_ray(
                         value = next_yield(ray, generator)
                     except TaskError as exc:
                         if not exc.worker_died or attempts[index] > WORKER_RETRIES:
+                            # Its task has ended: cancelling it now races Ray's own completion of it (Ray 2.52
+                            # aborts the driver: "Tried to complete task that was not pending"). Only the others are.
+                            del running[id(generator)]
                             raise TaskFailed(index, str(exc)) from None
                         del running[id(generator)]
                         submit(index)
