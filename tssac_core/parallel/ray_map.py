@@ -15,6 +15,8 @@ progress and no one is polled).
 - The first task that raises cancels the others and raises :class:`TaskFailed` (one line naming the item).
 - KeyboardInterrupt (Ctrl-C) cancels every task (each gets a KeyboardInterrupt, to stop what it started) and
   is re-raised.
+- A task that has already ended is never cancelled: a cancellation that meets Ray's own completion of the task
+  aborts the driver in Ray 2.52 ("Tried to complete task that was not pending", the race of ray-project/ray#54846).
 """
 
 from __future__ import annotations
@@ -133,8 +135,7 @@ def map_on_ray(
                         value = next_yield(ray, generator)
                     except TaskError as exc:
                         if not exc.worker_died or attempts[index] > WORKER_RETRIES:
-                            # Its task has ended: cancelling it now races Ray's own completion of it (Ray 2.52
-                            # aborts the driver: "Tried to complete task that was not pending"). Only the others are.
+                            # Its task has ended: cancelling it would race Ray's completion of it (`cancel`).
                             del running[id(generator)]
                             raise TaskFailed(index, str(exc)) from None
                         del running[id(generator)]
@@ -159,9 +160,12 @@ def cancel(ray: Any, refs: list[Any]) -> None:
 
     ``refs``: tasks' ObjectRefs or generator tasks' ObjectRefGenerators; a generator is waited for by its
     ``completed()`` ref, since it reads as ready as soon as it is cancelled, before its task has cleaned up."""
-    for ref in refs:
-        ray.cancel(ref)
     ends = {(r.completed() if isinstance(r, ray.ObjectRefGenerator) else r): r for r in refs}
+    # Not those that have ended (module docstring).
+    ended, _ = ray.wait(list(ends), num_returns=len(ends), timeout=0)
+    for end, ref in ends.items():
+        if end not in ended:
+            ray.cancel(ref)
     _, late = ray.wait(list(ends), num_returns=len(ends), timeout=CANCEL_GRACE_S)
     for end in late:
         ray.cancel(ends[end], force=True)
