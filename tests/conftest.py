@@ -29,14 +29,6 @@ def pytest_configure(config: pytest.Config) -> None:
         compileall.compile_dir(ROOT / package, quiet=1)
 
 
-FIRST = "test_types.py"
-"""The type check runs beside the tests (tests/test_types.py): first, so that it never ends the run alone."""
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: item.path.name != FIRST)  # stable: the rest keep their order
-
-
 OMNISAFE_TESTS = ("test_omnisafe_env.py", "test_crosscheck_omnisafe.py")
 """Tests that import OmniSafe: they run in OmniSafe's own environment (tests/test_omnisafe_side.py runs them there);
 in any other they are not collected, rather than skipped."""
