@@ -212,7 +212,15 @@ def test_without_the_monitor_every_adversary_enters_radars_or_leaves(adversary, 
     assert unsafe.mean() >= 0.8, f"{adversary}: {unsafe.mean():.0%} of the missions unsafe"
 
 
-@pytest.mark.parametrize("adversary", list(Adversary), ids=str)
+MONITOR_CI_TIER = {Adversary.AT_RADAR, Adversary.TURN_RIGHT, Adversary.RANDOM}
+"""The adversaries CI flies against the monitor (the ones that aim at a radar, hug a turn, and draw anything); the
+others fly in the slow tier (``pytest -m slow``)."""
+
+
+@pytest.mark.parametrize(
+    "adversary",
+    [pytest.param(a, id=str(a), marks=() if a in MONITOR_CI_TIER else pytest.mark.slow) for a in Adversary],
+)
 def test_with_the_monitor_no_adversary_enters_a_radar_or_leaves(adversary, layout_sets):
     pilots = [AdversaryPilot(adversary)] * 3
     for name, (scenario, layouts) in layout_sets.items():

@@ -787,6 +787,7 @@ def test_the_variance_critic_is_an_addition_the_default_learner_does_not_have() 
     assert torch.equal(fresh.q_c_var.weights[0], kept)  # type: ignore[union-attr]
 
 
+@pytest.mark.slow
 def test_a_cvar_learner_avoids_the_risky_action_that_a_mean_learner_takes() -> None:
     """One-step task: reward 0.2 a_0, cost 0.5 +- a_0 / 2 (a fair coin): every action has mean cost 0.5, and the
     cost's spread grows with |a_0|. With the multiplier held at 1, the mean learner sees no reason not to take

@@ -17,7 +17,7 @@ from tssac_core.sim.scenario import load
 def test_guidance_solves_random_layouts(random_path):
     s = load(random_path)
     results = fly_missions(s, [GUIDANCE] * 3, episodes=30, seed=2024)
-    summary = results.summary(s.cost_limit)
+    summary = results.record(s.cost_limit).to_json()
     assert summary["success_rate"] >= 0.9
     assert summary["mean_cost"] <= 0.5
     assert summary["episodes"] == 30
@@ -79,7 +79,7 @@ def test_a_uav_that_flies_out_ends_the_mission_and_is_counted(strike_path):
     assert results.out_of_area[0].tolist() == [False, False, True]
     assert not results.success[0]
     assert results.time_s[0] < s.episode_steps * s.dt_s  # ended by leaving, not by the episode cap
-    roles = results.summary(s.cost_limit)["roles"]
+    roles = results.record(s.cost_limit).to_json()["roles"]
     assert (roles["decoy"]["left_area_rate"], roles["strike"]["left_area_rate"]) == (0.0, 1.0)
 
 
@@ -110,7 +110,7 @@ def test_the_summary_has_intervals_tails_and_the_worst_missions_by_index_and_see
         seeds=[5000 + k for k in range(10, 10 + n)],
         indices=list(range(10, 10 + n)),
     )
-    summary = results.summary(3.0)
+    summary = results.record(3.0).to_json()
     assert summary["success_rate"] == 39 / 40
     assert summary["success_interval95"] == [wilson_interval(39, 40).low, wilson_interval(39, 40).high]
     low, high = summary["mean_cost_interval95"]
@@ -150,7 +150,7 @@ def test_evaluate_flies_one_mission_again_with_mission(tmp_path, random_path, ca
     )
     data = json.loads(out.read_text())
     s = load(random_path)
-    again = fly_missions(s, [GUIDANCE] * 3, episodes=1, seed=102).summary(s.cost_limit)
+    again = fly_missions(s, [GUIDANCE] * 3, episodes=1, seed=102).record(s.cost_limit).to_json()
     assert data["episodes"] == 1 and data["mean_mission_time_s"] == again["mean_mission_time_s"]
     for key in ("success_interval95", "mean_cost_interval95", "worst_missions"):
         assert key in data

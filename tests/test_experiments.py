@@ -360,6 +360,7 @@ def test_second_invocation_starts_nothing(smoke, capsys):
     assert [line.split()[0] for line in capsys.readouterr().out.splitlines()] == ["finished", "finished"]
 
 
+@pytest.mark.slow
 def test_the_smoke_grid_on_ray_gives_the_local_executors_table(smoke, tmp_path, capsys):
     """``--executor ray`` (a Ray of 2 CPUs started inside the command, both jobs at once) trains the same teams:
     the evaluations the local run cached are taken as they are (their key is a digest of the actors' weights),
@@ -545,6 +546,7 @@ def test_a_run_copied_from_another_clone_is_recognised_by_its_task(smoke, tmp_pa
     assert line.startswith("conflict") and "scenario:" in line
 
 
+@pytest.mark.slow
 def test_transfer_runs_train_their_role_beside_the_teammates_and_are_reported(smoke, tmp_path, capsys):
     results = tmp_path / "results"
     shutil.copytree(smoke, results)
@@ -646,6 +648,7 @@ def test_a_config_json_this_version_cannot_read_is_a_conflict_not_a_crash(tmp_pa
 # ------------------------------------------------------------------------- interruption and resume
 
 
+@pytest.mark.slow
 def test_sigterm_stops_the_job_and_the_next_run_resumes_it(tmp_path):
     """SIGTERM to the runner mid-job: the job's process is gone with it; the next run continues it with --resume."""
     # Two epochs per role: after the decoy's first one is saved, there is well over a second left to stop it.
@@ -943,6 +946,10 @@ def evaluation(cost_limit: float, **per_episode: list) -> TeamEvaluation:
     )
 
 
+CACHE_RUN = {"controller": "guidance", "scenario": "scenarios/random.yaml", "seed": 1, "cost_limit": 3.0}
+"""What every cache file says flew it, where."""
+
+
 def test_within_limit_counts_uav_missions_at_or_under_the_limit():
     # 2 missions x 3 UAVs: one long stay inside a radar (812 steps) and one cost exactly at the limit
     assert within_limit(evaluation(3.0, cost=[[0.0, 3.0, 812.0], [0.0, 0.0, 4.0]])) == 4 / 6
@@ -955,7 +962,7 @@ def test_a_cached_evaluation_is_read_with_what_it_has():
         "success_rate": 0.5,
         "mean_cost": 1.5,
         "episodes": 2,
-        "cost_limit": 3.0,
+        **CACHE_RUN,
         "per_episode": {"success": [True, False], "cost": [[0, 3, 0], [0, 0, 6]], "return": [[1, 2, 3]] * 2},
     }
     e = TeamEvaluation.from_record(old)
@@ -966,7 +973,16 @@ def test_a_cached_evaluation_is_read_with_what_it_has():
         **old,
         "success_interval95": [0.1, 0.9],
         "mean_cost_interval95": [0.0, 3.0],
-        "shield": {"backup_time_fraction": 0.25},
+        "shield": {
+            "interventions_per_uav_mission": 1 / 3,
+            "max_interventions_per_uav_mission": 1,
+            "max_switches_per_uav_mission": 2,
+            "backup_time_fraction": 0.25,
+            "unprotected_time_fraction": 0.0,
+            "uav_missions_with_cost": 2,
+            "uavs_left_area": 0,
+            "roles": {"decoy": {"interventions_per_mission": 1.0, "backup_time_fraction": 0.25}},
+        },
     }
     tail["per_episode"] = {
         **old["per_episode"],
@@ -996,6 +1012,7 @@ def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_li
     assert pooled_cost([]).to_json() == {"uav_missions": 0, "mean": None, "ci95": None, "over_limit": 0, "largest": []}
 
 
+@pytest.mark.slow
 def test_the_tail_is_flown_only_where_its_cache_is_missing_or_stale(smoke, tmp_path, capsys):
     """--cached-tail reports what is cached and says which rows lack it; a plain report flies what is missing, and an
     evaluation cached under another layout rule (before every mission had its own seed) is flown again."""
@@ -1102,7 +1119,7 @@ def test_the_cascade_counts_each_roles_task_among_the_missions_the_role_before_i
             "success_rate": float(np.mean(success)),
             "mean_cost": 0.0,
             "episodes": len(success),
-            "cost_limit": 3.0,
+            **CACHE_RUN,
             "roles": {role: {"task_success_rate": r} for role, r in zip(("decoy", "detect", "strike"), rates)},
             "per_episode": {"success": success, "cost": [[0.0] * 3] * len(success), "out_of_area": [[False] * 3] * 4},
         }

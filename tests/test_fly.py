@@ -270,6 +270,7 @@ def _start_guidance_fly(
     )
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 @pytest.mark.timeout(240)
 def test_fly_sigint_stops_every_process_and_writes_the_finished_missions(tmp_path: Path) -> None:
@@ -402,6 +403,7 @@ def _truth_steps(log: Path) -> list[str]:
     return [line for line in log.read_text().splitlines() if line.startswith('{"type":"step"')]
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 @pytest.mark.timeout(240)
 def test_two_crews_side_by_side_fly_the_serial_missions(tmp_path: Path) -> None:

@@ -55,7 +55,7 @@ def test_the_summary_has_the_intervals_tails_and_worst_missions_of_evaluate():
     rows = [_row(i, 9000 + i, True) for i in range(20)]
     rows[4] = _row(4, 9004, False, strike=523.0)
     rows[11] = _row(11, 9011, True, decoy=2.0)
-    out = summarise(rows, cfg)
+    out = summarise(rows, cfg).to_json()
     assert out["success_rate"] == 0.95
     assert out["success_interval95"] == [wilson_interval(19, 20).low, wilson_interval(19, 20).high]
     assert out["mean_cost"] == pytest.approx(525.0 / 60)
@@ -71,7 +71,7 @@ def test_the_summary_has_the_intervals_tails_and_worst_missions_of_evaluate():
 
 def test_without_a_truth_log_the_cost_figures_are_unknown():
     cfg = config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance"])
-    out = summarise([{"index": 0, "seed": 0, "success": True, "sim_time_s": 200.0, "cost": None}], cfg)
+    out = summarise([{"index": 0, "seed": 0, "success": True, "sim_time_s": 200.0, "cost": None}], cfg).to_json()
     assert out["mean_cost"] is None and out["mean_cost_interval95"] is None and out["worst_missions"] == []
     assert out["success_interval95"][0] == pytest.approx(wilson_interval(1, 1).low) and np.isclose(
         out["success_interval95"][1], 1.0

@@ -101,7 +101,9 @@ def test_load_policy_needs_a_role_for_a_directory():
     assert load_policy(MODELS, "strike").role.value == "strike"
 
 
-@pytest.mark.parametrize("mode", [AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP])
+@pytest.mark.parametrize(
+    "mode", [AutoresetMode.SAME_STEP, pytest.param(AutoresetMode.NEXT_STEP, marks=pytest.mark.slow)]
+)
 def test_make_vec_is_the_batched_world_and_equals_sync_vector_env(mode):
     n = 4
     # Guidance teammates: missions end (the target is hit), so autoreset is compared too.

@@ -99,6 +99,7 @@ def test_attitude_reports_the_airframes_bank_and_the_log_its_measured_turns(
     assert max(abs(r["air"]["alt_m"] - 5000.0) for r in rows) < 100.0
 
 
+@pytest.mark.slow
 def test_the_same_mission_twice_gives_the_same_truth_log(
     calm: tuple[Path, dict[str, Any], str], tmp_path: Path
 ) -> None:

@@ -171,6 +171,7 @@ def _fly_json(
     return json.loads(out.read_text())
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 @pytest.mark.timeout(600)
 def test_one_crew_flies_a_campaign_with_the_missions_of_fresh_processes(tmp_path: Path) -> None:

@@ -27,6 +27,7 @@ from benchmarks.omnisafe_env import BuildFailed, omnisafe_python, writing_byteco
 pytestmark = pytest.mark.xdist_group("omnisafe")
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1200)  # a first build on a busy machine took up to 12 minutes
 def test_omnisafe_tests_pass_in_omnisafes_environment() -> None:
     try:

@@ -106,7 +106,9 @@ def test_sharded_evaluation_equals_the_serial_one(local_ray, tmp_path):
     assert len(set(one.returns[:, 0].tolist())) == 5  # five different missions, not one five times
     shielded = fly_missions(scenario, [GUIDANCE] * 3, 5, 31, indices=[2, 3, 5, 7, 8], shield=ShieldConfig())
     pieces = fly_missions_sharded(scenario, [GUIDANCE] * 3, [2, 3, 5, 7, 8], 31, 2, RAY, shield=ShieldConfig())
-    assert pieces.summary(scenario.cost_limit) == shielded.summary(scenario.cost_limit)  # the monitor's counts too
+    assert (
+        pieces.record(scenario.cost_limit).to_json() == shielded.record(scenario.cost_limit).to_json()
+    )  # the monitor's counts too
     assert pieces.monitor is not None and np.array_equal(pieces.monitor.flown_steps, shielded.monitor.flown_steps)
 
 
@@ -146,6 +148,7 @@ def _descendants(pid: int) -> set[int]:
     return found
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 def test_sigterm_stops_fly_on_workers_and_leaves_no_process_behind(tmp_path):
     """SIGTERM to ``fly --workers 2 --executor ray`` (its own Ray) ends it as Ctrl-C does: exit 130, the JSON of the
@@ -292,6 +295,7 @@ def test_map_on_ray_runs_an_item_again_when_its_worker_dies(local_ray, tasks_by_
     assert events == [1, 2, 3]
 
 
+@pytest.mark.slow
 def test_a_job_whose_worker_is_killed_resumes(local_ray, tmp_path):
     """SIGKILL to the Ray worker mid-job: its training process dies with it, Ray runs the task again, and the
     run resumes from its last finished epoch (no epoch trained twice)."""
@@ -398,6 +402,7 @@ def test_ray_flags_in_the_wrong_place_are_one_line(command, argv, message, capsy
     assert not (ROOT / "unused").exists()
 
 
+@pytest.mark.slow
 def test_train_seeds_run_as_ray_tasks(local_ray, tmp_path, capsys):
     """``train --seeds 0,1 --executor ray``: both seeds' runs, as the local executor writes them."""
     from tssac_core.train.cli import main as train_main
@@ -422,6 +427,7 @@ with ray_session(RayTarget(cpus=1)) as ray:
 """
 
 
+@pytest.mark.slow
 def test_a_local_ray_says_nothing_on_the_console():
     """Ray's own lines stay off the command's stderr: no "Set ray log level" line from its start, no FutureWarning,
     none of its C++ core's errors (the missing metrics agent's comes some 30 s after the start, longer than this session

@@ -43,6 +43,7 @@ def test_the_blocks_are_found_and_say_what_the_test_checks():
     assert "--shield" in lines[1] and "--models ppo-team" in lines[1]
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 @pytest.mark.timeout(400)
 def test_the_readme_sb3_snippet_trains_evaluates_and_flies_over_mavlink(tmp_path: Path):

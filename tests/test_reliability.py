@@ -259,6 +259,7 @@ def _spy_bytes(port: int, frames: list[bytes], duration_s: float = 2.0) -> int:
         spy.close()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_replay_across_vehicles_gives_a_keyless_spy_nothing() -> None:
     """Signed frames captured on their way to or from the decoy, sent to the detect UAV (or back to the decoy) a
@@ -452,6 +453,7 @@ def _fly_three_engaging_in_turn(order: tuple[int, ...], steps: int, truth_log: P
                 c.close()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_a_lossy_slow_lockstep_start_does_not_depend_on_which_client_answers_last(tmp_path: Path) -> None:
     """The start gate opens on the last client's answer, which reaches the socket at a time the wall clock chose:

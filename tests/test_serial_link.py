@@ -269,6 +269,8 @@ def _fly(tmp: Path, name: str, *extra: str) -> dict[str, Any]:
 # The tests of the flown missions share one test process, so that their module fixture flies them once, not once in
 # each process that runs one of them.
 flown_missions = pytest.mark.xdist_group("serial_link_missions")
+"""The tests of the missions flown over a line: two of them fly in real time (about 30 s of waiting), so they are in
+the slow tier (``pytest -m slow``); CI's tier flies a whole mission over serial in tests/test_routing.py."""
 
 
 @pytest.fixture(scope="module")
@@ -284,6 +286,7 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Any]]
 
 
 @pytest.mark.sitl
+@pytest.mark.slow
 @flown_missions
 @pytest.mark.timeout(240)
 @pytest.mark.parametrize("run", ["57600", "921600"])
@@ -305,6 +308,7 @@ def test_a_whole_mission_over_a_serial_line_loses_no_frame(flown: dict[str, dict
 
 
 @pytest.mark.sitl
+@pytest.mark.slow
 @flown_missions
 @pytest.mark.timeout(240)
 def test_the_telemetry_at_57600_stays_within_the_line(flown: dict[str, dict[str, Any]]) -> None:
@@ -320,6 +324,7 @@ def test_the_telemetry_at_57600_stays_within_the_line(flown: dict[str, dict[str,
 
 
 @pytest.mark.sitl
+@pytest.mark.slow
 @flown_missions
 @pytest.mark.timeout(240)
 def test_a_line_that_drops_bytes_is_survived(flown: dict[str, dict[str, Any]]) -> None:

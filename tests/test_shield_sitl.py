@@ -162,6 +162,7 @@ def test_a_team_deciding_every_40_s_is_kept_out_from_an_admitted_start_over_sitl
     assert results["shield"]["unprotected_time_fraction"] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.sitl
 @pytest.mark.timeout(600)
 def test_before_its_first_fix_a_shielded_companion_flies_the_monitor_over_sitl(tmp_path: Path) -> None:

@@ -7,7 +7,7 @@ from the world's truth log. The layouts come from seeds training never drew from
 (training seeds its layout generators with 0-2; these start at 7001). A failure prints the
 per-mission table.
 
-    pytest -m sitl            # just these
+    pytest -m sitl            # just these (CI's tier: -m 'sitl and not slow')
 """
 
 from __future__ import annotations
@@ -26,6 +26,9 @@ REPO = Path(__file__).resolve().parents[1]
 MODELS = REPO / "models" / "tssac"
 EVAL_SEED = 7001
 SCENARIOS = sorted(p for p in (REPO / "scenarios").glob("*.yaml") if load(p).expect is not None)
+CI_TIER = {"strike", "signed"}
+"""The scenarios CI flies (a minute of CPU between them); the campaigns of the others take minutes each and fly in the
+slow tier (``pytest -m slow``)."""
 
 
 def table(summary: dict) -> str:
@@ -41,7 +44,9 @@ def table(summary: dict) -> str:
 
 @pytest.mark.sitl
 @pytest.mark.timeout(900)
-@pytest.mark.parametrize("scenario", SCENARIOS, ids=[p.stem for p in SCENARIOS])
+@pytest.mark.parametrize(
+    "scenario", [pytest.param(p, id=p.stem, marks=() if p.stem in CI_TIER else pytest.mark.slow) for p in SCENARIOS]
+)
 def test_shipped_models_meet_the_scenario_expectations(scenario: Path, tmp_path: Path) -> None:
     expect = load(scenario).expect
     assert expect is not None

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tssac_core.common.evaluation_record import RoleFigures, WorstMission
 from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
-    mission_statistics,
+    pooled_record,
     wilson_interval,
     within_fraction,
     worst_missions,
@@ -57,19 +58,20 @@ def test_the_worst_missions_name_their_seed_and_role():
     cost = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 700.0], [0.0, 12.0, 0.0]])
     rows = worst_missions(cost, seeds=[101, 102, 103], roles=["decoy", "detect", "strike"], count=10)
     assert rows == [
-        {"mission": 1, "seed": 102, "role": "strike", "cost": 700.0},
-        {"mission": 2, "seed": 103, "role": "detect", "cost": 12.0},
-        {"mission": 1, "seed": 102, "role": "decoy", "cost": 5.0},
+        WorstMission(mission=1, seed=102, role="strike", cost=700.0),
+        WorstMission(mission=2, seed=103, role="detect", cost=12.0),
+        WorstMission(mission=1, seed=102, role="decoy", cost=5.0),
     ]
 
 
-def test_mission_statistics_has_the_intervals_and_every_roles_tail():
+def test_pooled_record_has_the_intervals_and_every_roles_tail():
     success = np.array([True] * 19 + [False])
     cost = np.zeros((20, 3))
     cost[19, 2] = 400.0
-    out = mission_statistics(success, cost, 3.0, ["decoy", "detect", "strike"], seeds=list(range(20)))
-    assert out["success_interval95"] == pytest.approx([wilson_interval(19, 20).low, wilson_interval(19, 20).high])
-    assert out["mean_cost_interval95"][0] == 0.0 and out["mean_cost_interval95"][1] > 400.0 / 60
-    assert out["roles_tail"]["strike"] == {"within_cost_limit": 0.95, "max_cost": 400.0, "cvar95_cost": 400.0}
-    assert out["roles_tail"]["decoy"]["within_cost_limit"] == 1.0
-    assert out["worst_missions"] == [{"mission": 19, "seed": 19, "role": "strike", "cost": 400.0}]
+    out = pooled_record(success, cost, 3.0, ["decoy", "detect", "strike"], seeds=list(range(20)))
+    assert out.success_interval95 == pytest.approx((wilson_interval(19, 20).low, wilson_interval(19, 20).high))
+    assert out.mean_cost_interval95 is not None
+    assert out.mean_cost_interval95[0] == 0.0 and out.mean_cost_interval95[1] > 400.0 / 60
+    assert out.roles["strike"] == RoleFigures(within_cost_limit=0.95, max_cost=400.0, cvar95_cost=400.0)
+    assert out.roles["decoy"].within_cost_limit == 1.0
+    assert out.worst_missions == [WorstMission(mission=19, seed=19, role="strike", cost=400.0)]

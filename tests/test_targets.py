@@ -7,18 +7,25 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+from tssac_core.common.evaluation_record import EvaluationRecord, RoleFigures
 from tssac_core.experiments.targets import TARGETS, misses
 
 REPO = Path(__file__).resolve().parents[1]
 RANDOM = TARGETS[0]
 
 
-def summary(success: float, cost: float, within: dict[str, float]) -> dict:
-    return {
-        "success_rate": success,
-        "mean_cost": cost,
-        "roles": {role: {"within_cost_limit": value} for role, value in within.items()},
-    }
+def summary(success: float, cost: float, within: dict[str, float]) -> EvaluationRecord:
+    return EvaluationRecord(
+        success_rate=success,
+        success_interval95=None,
+        mean_cost=cost,
+        mean_cost_interval95=None,
+        episodes=1000,
+        mean_mission_time_s=None,
+        roles={role: RoleFigures(within_cost_limit=value) for role, value in within.items()},
+    )
 
 
 def test_a_team_at_the_thresholds_meets_the_target_and_one_below_misses_each_named_part():
@@ -30,6 +37,7 @@ def test_a_team_at_the_thresholds_meets_the_target_and_one_below_misses_each_nam
     assert misses(TARGETS[1], summary(0.9, 0.5, dict.fromkeys(("decoy", "detect", "strike"), 0.0))) == []
 
 
+@pytest.mark.slow
 def test_the_command_flies_disjoint_seeds_per_target_and_writes_its_verdict(tmp_path):
     out = tmp_path / "targets.json"
     cmd = [sys.executable, "-m", "tssac_core.experiments.targets", str(REPO / "models" / "tssac"), "--seed", "5000"]

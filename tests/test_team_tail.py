@@ -32,10 +32,11 @@ MIN_WITHIN_LIMIT = {"decoy": 0.995, "detect": 0.995, "strike": 0.995}
 """Per role, the fraction of UAV-missions within the cost limit C."""
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_the_shipped_team_keeps_the_budget_on_a_thousand_random_layouts(random_path):
     s = load(random_path)
-    summary = fly_missions(s, list(load_team(MODELS)), MISSIONS, TAIL_SEED).summary(s.cost_limit)
+    summary = fly_missions(s, list(load_team(MODELS)), MISSIONS, TAIL_SEED).record(s.cost_limit).to_json()
     worst = ", ".join(f"mission {w['mission']} {w['role']} {w['cost']:.0f}" for w in summary["worst_missions"])
     report = (
         f"success {summary['success_rate']:.3f} {summary['success_interval95']}, mean cost {summary['mean_cost']:.2f} "

@@ -255,6 +255,7 @@ def test_evaluate_flies_trained_models(trained, tmp_path):
     assert (tmp_path / "e.json").is_file()
 
 
+@pytest.mark.slow
 def test_resume_after_kill_continues_identically(tmp_path):
     """kill -9 mid-run, then --resume: the result equals an uninterrupted run's, bit for bit."""
     args = [

@@ -6,6 +6,7 @@ import csv
 import json
 from pathlib import Path
 
+import pytest
 from tiny_training import tiny_args
 
 from tssac_core.train.cli import main
@@ -19,6 +20,7 @@ def metrics(run: Path) -> list[dict[str, str]]:
         return [{k: v for k, v in row.items() if k not in TIMING} for row in csv.DictReader(fh)]
 
 
+@pytest.mark.slow
 def test_each_seed_is_its_single_run_and_the_whole_resumes(tmp_path: Path, capsys):
     out = tmp_path / "seeds"
     assert main([*TINY, "--seeds", "0,1", "--out", str(out)]) == 0

@@ -12,9 +12,10 @@ Examples::
 
 Prints the success rate (target hit) with its 95% Wilson interval, the mean hazard cost per UAV per episode with
 its 95% bootstrap interval over missions, per-role figures with the tail (the fraction of UAV-missions within
-the cost limit C, the worst cost, CVaR_0.95) and the costliest UAV-missions; ``--json`` writes them with the
-keys ``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interval95``, ``episodes``, one
-entry per role name under ``roles`` and ``worst_missions`` (mission index, layout seed, role, cost).
+the cost limit C, the worst cost, CVaR_0.95) and the costliest UAV-missions; ``--json`` writes them as an evaluation
+record (:mod:`tssac_core.common.evaluation_record`: ``success_rate``, ``success_interval95``, ``mean_cost``,
+``mean_cost_interval95``, ``episodes``, one entry per role name under ``roles``, ``worst_missions`` (mission index,
+layout seed, role, cost), what flew where, and ``record_version``).
 Mission ``k`` of seed ``S`` flies its own layout, drawn from seed ``S + k`` (tssac_core.sim.missions), so
 ``--seed S --mission k`` flies any one of them again alone. ``--shield`` flies every UAV through the
 runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`, ``docs/runtime_assurance.md``) and adds its counts
@@ -43,6 +44,7 @@ from typing import Any
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
+from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord, WorldMonitorFigures
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -211,14 +213,14 @@ def load_pilots(models: Path | None, controller: str = GUIDANCE) -> list[PilotSp
 
 def compare_shield(
     models: Path | None, scenario: Scenario, episodes: int, seed: int, shield: ShieldConfig | None = None
-) -> dict[str, dict[str, Any]]:
+) -> dict[str, EvaluationRecord]:
     """A team (a models directory, None = the guidance controller) on the same missions with the monitor off
-    and on: ``{"off": summary, "on": summary}`` (the "with monitor" column of Table 4: success, cost, and the
-    time under the backup, ``on["shield"]["backup_time_fraction"]``)."""
+    and on: ``{"off": record, "on": record}`` (the "with monitor" column of Table 4: success, cost, and the
+    time under the backup, ``on.monitor.backup_time_fraction``)."""
     pilots = load_pilots(models)
     cfg = shield or ShieldConfig()  # the starts of both runs admitted with the monitor's margins: the same layouts
-    off = fly_missions(scenario, pilots, episodes, seed, start_check=cfg).summary(scenario.cost_limit)
-    on = fly_missions(scenario, pilots, episodes, seed, shield=cfg).summary(scenario.cost_limit)
+    off = fly_missions(scenario, pilots, episodes, seed, start_check=cfg).record(scenario.cost_limit)
+    on = fly_missions(scenario, pilots, episodes, seed, shield=cfg).record(scenario.cost_limit)
     return {"off": off, "on": on}
 
 
@@ -293,15 +295,14 @@ def summarize(
     controller: str,
     seed: int,
     shield: ShieldConfig | None,
-) -> dict[str, Any]:
-    """The JSON: the results' figures (:meth:`MissionResults.summary`) and what flew them, where, with which seed."""
-    summary = results.summary(scenario.cost_limit)
-    summary.update(
-        {"controller": controller, "scenario": str(scenario_path), "seed": seed, "cost_limit": scenario.cost_limit}
+) -> EvaluationRecord:
+    """The results' record (:meth:`MissionResults.record`) with what flew them, where, with which seed, and the
+    monitor's settings when it flew."""
+    record = dataclasses.replace(
+        results.record(scenario.cost_limit),
+        run=BatchedRun(controller=controller, scenario=str(scenario_path), seed=seed, cost_limit=scenario.cost_limit),
     )
-    if shield is not None:
-        summary["shield"]["config"] = dataclasses.asdict(shield)
-    return summary
+    return record if shield is None else record.with_monitor_config(dataclasses.asdict(shield))
 
 
 def evaluate_policy(
@@ -333,7 +334,7 @@ def evaluate_policy(
     config = ShieldConfig() if shield is True else (shield or None)
     indices = [mission] if mission is not None else list(range(episodes))
     results = fly_team(world, pilots, indices, seed, config, progress=progress)
-    summary = summarize(results, world, path, policies_label(described, team, controller), seed, config)
+    summary = summarize(results, world, path, policies_label(described, team, controller), seed, config).to_json()
     summary["policies"] = described
     if json is not None:
         write_json(json, summary)
@@ -372,42 +373,40 @@ def main(argv: Sequence[str] | None = None) -> int:
     shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     results = fly_team(scenario, pilots, indices, args.seed, shield, args.workers, args.address, not args.no_progress)
-    summary = summarize(results, scenario, args.scenario, who, args.seed, shield)
-    if described:
-        summary["policies"] = described
-    print_summary(summary, scenario.cost_limit)
+    record = summarize(results, scenario, args.scenario, who, args.seed, shield)
+    print_summary(record, scenario.cost_limit)
     if args.json:
+        summary = record.to_json()
+        if described:
+            summary["policies"] = described
         write_json(args.json, summary)
         print(f"wrote {args.json}")
     return 0
 
 
-def print_summary(summary: dict[str, Any], cost_limit: float) -> None:
-    """The summary's figures, intervals and tails, and its worst missions, on stdout."""
-    lo, hi = summary["success_interval95"]
-    clo, chi = summary["mean_cost_interval95"]
+def print_summary(record: EvaluationRecord, cost_limit: float) -> None:
+    """The record's figures, intervals and tails, and its worst missions, on stdout."""
+    assert record.success_interval95 is not None and record.mean_cost_interval95 is not None, "the batched world's"
+    lo, hi = record.success_interval95
+    clo, chi = record.mean_cost_interval95
     print(
-        f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {summary['episodes']} "
-        f"missions, "
-        f"mean hazard cost per UAV {summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f}; limit {cost_limit:g})"
+        f"success rate {record.success_rate:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {record.episodes} missions, "
+        f"mean hazard cost per UAV {record.mean_cost:.2f} (95% interval {clo:.2f}-{chi:.2f}; limit {cost_limit:g})"
     )
-    for role, fig in summary["roles"].items():
+    for role, fig in record.roles.items():
         print(
-            f"  {role:6s} task {fig['task_success_rate']:.1%}  cost mean {fig['mean_cost']:.2f} within C "
-            f"{fig['within_cost_limit']:.1%} "
-            f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}  left the area {fig['left_area_rate']:.1%}  "
-            f"return {fig['mean_return']:.1f}"
+            f"  {role:6s} task {fig.task_success_rate:.1%}  cost mean {fig.mean_cost:.2f} within C "
+            f"{fig.within_cost_limit:.1%} CVaR95 {fig.cvar95_cost:.1f} max {fig.max_cost:.0f}  left the area "
+            f"{fig.left_area_rate:.1%}  return {fig.mean_return:.1f}"
         )
-    for row in summary["worst_missions"]:
-        print(f"  worst: mission {row['mission']} (layout seed {row['seed']}) {row['role']} cost {row['cost']:.0f}")
-    if "shield" in summary:
-        sh = summary["shield"]
+    for row in record.worst_missions:
+        print(f"  worst: mission {row.mission} (layout seed {row.seed}) {row.role} cost {row.cost:.0f}")
+    sh = record.monitor
+    if isinstance(sh, WorldMonitorFigures):
         print(
-            f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission (max "
-            f"{sh['max_interventions_per_uav_mission']}), "
-            f"{sh['backup_time_fraction']:.2%} of flight time under the backup, {sh['uav_missions_with_cost']} "
-            f"UAV-missions with cost, "
-            f"{sh['uavs_left_area']} UAVs left the area"
+            f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission (max "
+            f"{sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of flight time under the backup, "
+            f"{sh.uav_missions_with_cost} UAV-missions with cost, {sh.uavs_left_area} UAVs left the area"
         )
 
 

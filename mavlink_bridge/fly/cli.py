@@ -18,7 +18,7 @@ import numpy as np
 from mavlink_bridge.fly.config import PROG, FlyConfig, config_from_args, make_signing_key
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
-from mavlink_bridge.fly.scoring import summarise
+from mavlink_bridge.fly.scoring import CampaignResults, summarise
 from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes.children import ChildProcesses
@@ -81,17 +81,53 @@ def fly_campaign(
                 runner.close()
 
 
-def campaign_summary(
+def campaign_results(
     rows: list[dict[str, Any]], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float
-) -> dict[str, Any]:
-    """The results JSON of the missions flown (in mission order: missions flown side by side end in any order),
-    with how the campaign ended."""
+) -> CampaignResults:
+    """The results of the missions flown (in mission order: missions flown side by side end in any order), with how
+    the campaign ended."""
     rows.sort(key=lambda r: r["index"])
-    summary = summarise(rows, cfg)
-    summary["interrupted"] = interrupted
-    summary["error"] = error
-    summary["wall_time_s"] = round(wall_s, 3)
-    return summary
+    return CampaignResults(summarise(rows, cfg), rows, interrupted, error, wall_s)
+
+
+def campaign_error(exc: Exception) -> tuple[str, int] | None:
+    """How a campaign that raised ``exc`` ended: its error line and exit code (None: a defect, to be re-raised)."""
+    if isinstance(exc, (MissionTimedOut, WriteFailed, TaskFailed)):
+        return str(exc), EXIT_FAILED
+    if isinstance(exc, WorldRefused):  # before any mission flew: bad input, and no JSON of a campaign that never began
+        return str(exc), EXIT_BAD_INPUT
+    if isinstance(exc, ChildFailed):
+        return str(exc), EXIT_FAILED
+    if isinstance(exc, BAD_INPUT):
+        return bad_input_line(exc), EXIT_BAD_INPUT
+    if isinstance(exc, MemoryError):
+        return "out of memory", EXIT_FAILED
+    return None
+
+
+def prepare(cfg: FlyConfig, tmp: Path) -> tuple[FlyConfig, Path, Path | None]:
+    """The campaign's private directories (``--tlog``; ``--logs``, else ``tmp``) and its signing key, made there when
+    it asks for one: the config that flies (with the key), the working directory, and the key made."""
+    if cfg.tlog_dir is not None:
+        private_directory(cfg.tlog_dir, "--tlog")
+    work = private_directory(cfg.logs_dir, "--logs") if cfg.logs_dir is not None else tmp
+    if not cfg.makes_key:
+        return cfg, work, None
+    made_key = make_signing_key(work)
+    return dataclasses.replace(cfg, signing_key_path=made_key), work, made_key
+
+
+def write_results(cfg: FlyConfig, results: CampaignResults, code: int) -> tuple[FlyConfig, int]:
+    """``--json``, unless the campaign never began (bad input before any mission); a write that fails is said here and
+    is no exit 0 (the config comes back without the file it did not write)."""
+    if cfg.json_path is None or (code == EXIT_BAD_INPUT and not results.missions):
+        return cfg, code
+    try:
+        write_json(cfg.json_path, results.to_json())
+    except OSError as exc:  # the campaign's record is lost: said here, and not an exit 0
+        print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
+        return dataclasses.replace(cfg, json_path=None), code or EXIT_FAILED
+    return cfg, code
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -110,61 +146,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     error: str | None = None
     interrupted = False
     code = 0
-    tmp: tempfile.TemporaryDirectory[str] | None = None
     started = time.monotonic()
-    try:
-        if cfg.tlog_dir is not None:
-            private_directory(cfg.tlog_dir, "--tlog")
-        if cfg.logs_dir is not None:
-            work = private_directory(cfg.logs_dir, "--logs")
-        else:
-            tmp = tempfile.TemporaryDirectory(prefix="tssac-fly-")
-            work = Path(tmp.name)
-        made_key: Path | None = None
-        if cfg.makes_key:
-            made_key = make_signing_key(work)
-            cfg = dataclasses.replace(cfg, signing_key_path=made_key)
-        fly_campaign(cfg, children, work, made_key, rows)
-    except (MissionTimedOut, WriteFailed, TaskFailed) as exc:
-        error = str(exc)
-        code = EXIT_FAILED
-    except KeyboardInterrupt:
-        interrupted = True
-        code = EXIT_INTERRUPTED
-    except WorldRefused as exc:  # before any mission flew: bad input, and no JSON of a campaign that never began
-        error = str(exc)
-        code = EXIT_BAD_INPUT
-    except ChildFailed as exc:
-        error = str(exc)
-        code = EXIT_FAILED
-    except BAD_INPUT as exc:
-        error = bad_input_line(exc)
-        code = EXIT_BAD_INPUT
-    except MemoryError:
-        error = "out of memory"
-        code = EXIT_FAILED
-    except Exception as exc:  # a defect: the JSON must not say that nothing went wrong, and the traceback follows
-        error = f"internal error: {type(exc).__name__}: {exc}"
-        code = EXIT_FAILED
-        raise
-    finally:
-        # No second signal may cut the clean-up short: the children are in their own sessions.
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        children.stop_all()
-        signal.signal(signal.SIGTERM, previous)
-        signal.signal(signal.SIGINT, previous_int)
-        summary = campaign_summary(rows, cfg, interrupted, error, time.monotonic() - started)
-        if cfg.json_path is not None and not (code == EXIT_BAD_INPUT and not rows):
-            try:
-                write_json(cfg.json_path, summary)
-            except OSError as exc:  # the campaign's record is lost: said here, and not an exit 0
-                print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
-                code = code or EXIT_FAILED
-                cfg = dataclasses.replace(cfg, json_path=None)
-        if tmp is not None:
-            tmp.cleanup()
-    print_report(summary, cfg)
+    with tempfile.TemporaryDirectory(prefix="tssac-fly-") as tmp:
+        try:
+            cfg, work, made_key = prepare(cfg, Path(tmp))
+            fly_campaign(cfg, children, work, made_key, rows)
+        except KeyboardInterrupt:
+            interrupted, code = True, EXIT_INTERRUPTED
+        except Exception as exc:
+            ended = campaign_error(exc)
+            # a defect: the JSON must not say that nothing went wrong, and the traceback follows
+            error, code = ended or (f"internal error: {type(exc).__name__}: {exc}", EXIT_FAILED)
+            if ended is None:
+                raise
+        finally:
+            # No second signal may cut the clean-up short: the children are in their own sessions.
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            children.stop_all()
+            signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_int)
+            results = campaign_results(rows, cfg, interrupted, error, time.monotonic() - started)
+            cfg, code = write_results(cfg, results, code)
+    print_report(results, cfg)
     if interrupted:
         print(
             f"interrupted after {len(rows)} of {cfg.episodes} missions"

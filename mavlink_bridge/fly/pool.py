@@ -3,7 +3,7 @@ of one team on one scenario as one campaign (a campaign that spanned sittings, o
 
 Every mission is one layout of its own seed, so campaigns on disjoint layout seeds pool exactly: success with its
 Wilson interval, the mean cost per UAV with the bootstrap interval over missions, and the tail per role, the same
-figures (``tssac_core.common.stats.mission_statistics``) as one ``fly`` run of all the missions would give.
+figures (``tssac_core.common.stats.pooled_record``) as one ``fly`` run of all the missions would give.
 
 Every file is checked before anything is pooled, and what cannot be pooled is refused in one line (exit 2): a file
 that is not a fly results file (unreadable, not UTF-8, not JSON, not an object, no missions); a mission whose fields
@@ -29,7 +29,8 @@ from typing import Any, NoReturn, TypeGuard
 import numpy as np
 
 from tssac_core.common.cli import bad_input_line, command_description, write_json
-from tssac_core.common.stats import mission_statistics
+from tssac_core.common.evaluation_record import EvaluationRecord
+from tssac_core.common.stats import pooled_record
 from tssac_core.sim.scenario import ROLES
 
 PROG = "python -m mavlink_bridge.fly.pool"
@@ -225,31 +226,35 @@ def _check_together(campaigns: Sequence[Campaign], partial: bool) -> None:
             )
 
 
-def pool(campaigns: Sequence[Campaign], partial: bool = False) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Pooled:
+    """The pooled figures of campaigns, and which campaigns."""
+
+    record: EvaluationRecord
+    campaigns: list[Campaign]
+
+    def to_json(self) -> dict[str, Any]:
+        first = self.campaigns[0].data
+        return {
+            **self.record.to_json(),
+            "campaigns": [
+                {"file": c.name, "seed": c.data["seed"], "episodes": len(c.missions), "complete": c.stopped is None}
+                for c in self.campaigns
+            ],
+            **{key: first.get(key) for key in SAME},
+            "scenario": Path(first["scenario"]).name,
+        }
+
+
+def pool(campaigns: Sequence[Campaign], partial: bool = False) -> Pooled:
     """The pooled figures of checked ``campaigns`` (in order)."""
     _check_together(campaigns, partial)
-    first = campaigns[0].data
     missions = [m for c in campaigns for m in c.missions]
-    seeds = [m.seed for m in missions]
     success = np.array([m.success for m in missions])
     cost = np.array([m.cost for m in missions], dtype=np.float64)
-    roles = [r.value for r in ROLES]
-    stats = mission_statistics(success, cost, float(first["cost_limit"]), roles, seeds)
-    return {
-        "success_rate": float(success.mean()),
-        "success_interval95": stats["success_interval95"],
-        "mean_cost": float(cost.mean()),
-        "mean_cost_interval95": stats["mean_cost_interval95"],
-        "episodes": len(missions),
-        "roles": stats["roles_tail"],
-        "worst_missions": stats["worst_missions"],
-        "campaigns": [
-            {"file": c.name, "seed": c.data["seed"], "episodes": len(c.missions), "complete": c.stopped is None}
-            for c in campaigns
-        ],
-        **{key: first.get(key) for key in SAME},
-        "scenario": Path(first["scenario"]).name,
-    }
+    limit = float(campaigns[0].data["cost_limit"])
+    record = pooled_record(success, cost, limit, [r.value for r in ROLES], [m.seed for m in missions])
+    return Pooled(record, list(campaigns))
 
 
 def _fail(message: str) -> NoReturn:
@@ -278,17 +283,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(
                 f"{PROG}: note: {c.name}: {c.stopped}: pooling its {len(c.missions)} finished missions", file=sys.stderr
             )
-    lo, hi = pooled["success_interval95"]
-    clo, chi = pooled["mean_cost_interval95"]
+    r = pooled.record
+    assert r.success_interval95 is not None and r.mean_cost_interval95 is not None, "every pooled mission has a cost"
+    lo, hi = r.success_interval95
+    clo, chi = r.mean_cost_interval95
     print(
-        f"success rate {pooled['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {pooled['episodes']} "
-        f"missions, mean hazard cost per UAV {pooled['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f})"
+        f"success rate {r.success_rate:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {r.episodes} "
+        f"missions, mean hazard cost per UAV {r.mean_cost:.2f} (95% interval {clo:.2f}-{chi:.2f})"
     )
-    for role, tail in pooled["roles"].items():
-        print(f"  {role:6s} within C {tail['within_cost_limit']:.1%}  worst {tail['max_cost']:.0f}")
+    for role, tail in r.roles.items():
+        print(f"  {role:6s} within C {tail.within_cost_limit:.1%}  worst {tail.max_cost:.0f}")
     if args.json is not None:
         try:
-            write_json(args.json, pooled)
+            write_json(args.json, pooled.to_json())
         except OSError as exc:
             _fail(bad_input_line(exc))
         print(f"wrote {args.json}")

@@ -4,69 +4,66 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
-from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_log import MissionRecord
+from mavlink_bridge.fly.scoring import CampaignResults
+from tssac_core.common.evaluation_record import SitlMonitorFigures
 from tssac_core.sim.scenario import Dynamics, DynamicsModel, Layout, Scenario
 
 
-def print_report(summary: dict[str, Any], cfg: FlyConfig) -> None:
-    n = summary["episodes"]
-    if not n:
+def print_report(results: CampaignResults, cfg: FlyConfig) -> None:
+    r = results.record
+    if not r.episodes:
         return
-    lo, hi = summary["success_interval95"]
+    assert r.success_rate is not None and r.success_interval95 is not None, "known for a campaign that flew"
+    lo, hi = r.success_interval95
     cost = "unknown"
-    if summary["mean_cost"] is not None:
-        clo, chi = summary["mean_cost_interval95"]
-        cost = f"{summary['mean_cost']:.2f} (95% interval {clo:.2f}-{chi:.2f})"
+    if r.mean_cost is not None and r.mean_cost_interval95 is not None:
+        clo, chi = r.mean_cost_interval95
+        cost = f"{r.mean_cost:.2f} (95% interval {clo:.2f}-{chi:.2f})"
     print(
-        f"success rate {summary['success_rate']:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {n} missions, mean hazard "
-        f"cost "
-        f"per UAV {cost} (limit {cfg.scenario.cost_limit:g}), mean mission time "
-        f"{summary['mean_mission_time_s'] or 0:.1f} s"
+        f"success rate {r.success_rate:.1%} (95% interval {lo:.1%}-{hi:.1%}) over {r.episodes} missions, mean hazard "
+        f"cost per UAV {cost} (limit {cfg.scenario.cost_limit:g}), mean mission time {r.mean_mission_time_s or 0:.1f} s"
     )
-    for role, fig in summary["roles"].items():
+    for role, fig in r.roles.items():
         parts = [f"  {role:6s}"]
-        if "mean_cost" in fig:
+        if fig.mean_cost is not None:
             parts.append(
-                f"task {fig['task_success_rate']:.0%}  cost mean {fig['mean_cost']:.2f} within C "
-                f"{fig['within_cost_limit']:.1%} "
-                f"CVaR95 {fig['cvar95_cost']:.1f} max {fig['max_cost']:.0f}"
+                f"task {fig.task_success_rate:.0%}  cost mean {fig.mean_cost:.2f} within C {fig.within_cost_limit:.1%} "
+                f"CVaR95 {fig.cvar95_cost:.1f} max {fig.max_cost:.0f}"
             )
-        if "latency_p50_ms" in fig:
-            parts.append(f"latency p50 {fig['latency_p50_ms']:.2f} ms p99 {fig['latency_p99_ms']:.2f} ms")
+        if fig.latency_p50_ms is not None:
+            parts.append(f"latency p50 {fig.latency_p50_ms:.2f} ms p99 {fig.latency_p99_ms:.2f} ms")
         print("  ".join(parts))
     if cfg.connect is None:
         print(f"dynamics: {physics_text(cfg.scenario)}")
-    sh = summary.get("shield")
-    if sh and sh.get("scope"):
-        print(f"shield: {sh['scope']}")
-    if sh and sh.get("uav_missions"):
+    sh = r.monitor
+    assert sh is None or isinstance(sh, SitlMonitorFigures), "fly's monitor is its companions'"
+    if sh is not None and sh.scope:
+        print(f"shield: {sh.scope}")
+    if sh is not None and sh.uav_missions:
         print(
-            f"shield: {sh['interventions_per_uav_mission']:.2f} interventions per UAV-mission "
-            f"(max {sh['max_interventions_per_uav_mission']}), "
-            f"{sh['backup_time_fraction']:.2%} of control steps under the "
-            f"backup, margin up to {sh['max_margin_m']:.0f} m, {sh['uav_missions_with_cost']} UAV-missions with cost, "
-            f"{sh['uavs_left_area']} UAVs left the area"
+            f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission "
+            f"(max {sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of control steps under the "
+            f"backup, margin up to {sh.max_margin_m:.0f} m, {sh.uav_missions_with_cost} UAV-missions with cost, "
+            f"{sh.uavs_left_area} UAVs left the area"
         )
-    for w in summary["worst_missions"]:
+    for w in r.worst_missions:
         print(
-            f"  worst: mission {w['mission']} (seed {w['seed']}) {w['role']} cost {w['cost']:.0f}: fly again with "
-            f"--seed "
-            f"{cfg.seed} --mission {w['mission']} --plot FILE"
+            f"  worst: mission {w.mission} (seed {w.seed}) {w.role} cost {w.cost:.0f}: fly again with --seed "
+            f"{cfg.seed} --mission {w.mission} --plot FILE"
         )
-    for r in summary["missions"]:
-        speed = f", {r['speed_x']:.0f}x real time in flight" if r.get("speed_x") else ""
+    for m in results.missions:
+        speed = f", {m['speed_x']:.0f}x real time in flight" if m.get("speed_x") else ""
         print(
-            f"  mission {r['index']}: {'success' if r.get('success') else r.get('end')}, "
-            f"{r.get('sim_time_s') or 0:.1f} s simulated, "
-            f"{r['wall_time_s']:.1f} s wall{speed}"
+            f"  mission {m['index']}: {'success' if m.get('success') else m.get('end')}, "
+            f"{m.get('sim_time_s') or 0:.1f} s simulated, {m['wall_time_s']:.1f} s wall{speed}"
         )
-    for r in summary["missions"]:
+    for m in results.missions:
         for key, what in (("plot", "plot"), ("animation", "animation")):
-            if r.get(key):
-                print(f"wrote {what} of mission {r['index']}: {r[key]}")
+            if m.get(key):
+                print(f"wrote {what} of mission {m['index']}: {m[key]}")
     if cfg.json_path is not None:
         print(f"wrote {cfg.json_path}")
 

@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from mavlink_bridge.fly.config import FlyConfig, monitor_scope
 from mavlink_bridge.fly.mission_log import MissionRecord
+from tssac_core.common.evaluation_record import (
+    EvaluationRecord,
+    FlownDynamics,
+    FlownWind,
+    RoleFigures,
+    SitlMonitorFigures,
+    SitlRun,
+    WorstMission,
+)
 from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
@@ -44,121 +55,123 @@ def outcome_from_companions(statuses: dict[str, dict[str, Any]]) -> dict[str, An
     return {"success": success, "end": end, "sim_time_s": max(times) if times else None, "cost": None}
 
 
-def shield_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+def monitor_figures(rows: list[dict[str, Any]], scope: str | None) -> SitlMonitorFigures:
     """The monitor's figures over the missions, from the companions' counts: interventions per UAV-mission, the
     fraction of control steps under the backup, the largest margin used; and what the guarantee is about (UAV-missions
-    with any cost, UAVs that left the area)."""
-    counts = [s["shield"] for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
-    steps = sum(c["decisions"] for c in counts)
-    control = [s.get("control_steps") or 0 for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
+    with any cost, UAVs that left the area). ``scope``: why the guarantee does not hold here (None: it does)."""
+    shielded = [s for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
+    counts = [s["shield"] for s in shielded]
+    control = sum(s.get("control_steps") or 0 for s in shielded)
     costed = [r for r in rows if r.get("cost")]
-    return {
-        "uav_missions": len(counts),
-        "interventions_per_uav_mission": float(np.mean([c["interventions"] for c in counts])) if counts else None,
-        "max_interventions_per_uav_mission": max((c["interventions"] for c in counts), default=None),
-        "backup_time_fraction": sum(c["backup_steps"] for c in counts) / max(1, sum(control)) if counts else None,
-        "unprotected_time_fraction": sum(c["unprotected_steps"] for c in counts) / max(1, sum(control))
-        if counts
-        else None,
-        "decisions": steps,
-        "resets": sum(c["resets"] for c in counts),
-        "max_margin_m": max((c["max_margin_m"] for c in counts), default=None),
-        "uav_missions_with_cost": int(sum(v > 0 for r in costed for v in r["cost"].values())) if costed else None,
-        "uavs_left_area": int(sum(sum(r.get("left_area", {}).values()) for r in costed)) if costed else None,
-    }
+    return SitlMonitorFigures(
+        uav_missions=len(counts),
+        interventions_per_uav_mission=float(np.mean([c["interventions"] for c in counts])) if counts else None,
+        max_interventions_per_uav_mission=max((c["interventions"] for c in counts), default=None),
+        backup_time_fraction=sum(c["backup_steps"] for c in counts) / max(1, control) if counts else None,
+        unprotected_time_fraction=sum(c["unprotected_steps"] for c in counts) / max(1, control) if counts else None,
+        decisions=sum(c["decisions"] for c in counts),
+        resets=sum(c["resets"] for c in counts),
+        max_margin_m=max((c["max_margin_m"] for c in counts), default=None),
+        uav_missions_with_cost=int(sum(v > 0 for r in costed for v in r["cost"].values())) if costed else None,
+        uavs_left_area=int(sum(sum(r.get("left_area", {}).values()) for r in costed)) if costed else None,
+        guarantee=scope is None,
+        scope=scope,
+    )
 
 
-def role_figures(
-    rows: list[dict[str, Any]], costed: list[dict[str, Any]], name: str, cost_limit: float
-) -> dict[str, Any]:
+def role_figures(rows: list[dict[str, Any]], costed: list[dict[str, Any]], name: str, cost_limit: float) -> RoleFigures:
     """One role's figures: its cost tail and task success over the missions whose cost is known (``costed``), its
     companions' control latency over all."""
-    fig: dict[str, Any] = {}
+    tail = RoleFigures()
     if costed:
         costs = np.array([r["cost"][name] for r in costed])
-        fig.update(
-            {
-                "mean_cost": float(costs.mean()),
-                "max_cost": float(costs.max()),
-                "within_cost_limit": float((costs <= cost_limit).mean()),
-                "cvar95_cost": cvar(costs),
-            }
+        tail = RoleFigures(
+            mean_cost=float(costs.mean()),
+            max_cost=float(costs.max()),
+            within_cost_limit=float((costs <= cost_limit).mean()),
+            cvar95_cost=cvar(costs),
+            task_success_rate=float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed])),
         )
-        fig["task_success_rate"] = float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed]))
-    p50 = [
-        r["companions"][name]["latency_p50_ms"]
-        for r in rows
-        if r.get("companions", {}).get(name, {}).get("latency_p50_ms") is not None
-    ]
-    p99 = [
-        r["companions"][name]["latency_p99_ms"]
-        for r in rows
-        if r.get("companions", {}).get(name, {}).get("latency_p99_ms") is not None
-    ]
-    if p50:
-        fig["latency_p50_ms"] = float(np.median(p50))
-        fig["latency_p99_ms"] = float(np.max(p99))
-    return fig
+    companions = [r["companions"][name] for r in rows if name in r.get("companions", {})]
+    p50 = [c["latency_p50_ms"] for c in companions if c.get("latency_p50_ms") is not None]
+    p99 = [c["latency_p99_ms"] for c in companions if c.get("latency_p99_ms") is not None]
+    if not p50:
+        return tail
+    return dataclasses.replace(tail, latency_p50_ms=float(np.median(p50)), latency_p99_ms=float(np.max(p99)))
 
 
-def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> dict[str, Any]:
-    """The results JSON: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
-    tail (within C, worst, CVaR_0.95), the costliest UAV-missions and the missions: the keys of
-    ``tssac_core.evaluate``'s JSON (tssac_core.common.stats), with the cost figures None when the cost is unknown."""
+def flown_run(cfg: FlyConfig) -> SitlRun:
+    """What flew the campaign, where, on which clock."""
+    dynamics = cfg.scenario.dynamics or Dynamics()
+    wind = cfg.scenario.wind
+    if cfg.connect is not None:
+        clock = "connected, lockstep" if cfg.lockstep else "connected"
+    else:
+        clock = "lockstep" if cfg.lockstep else f"speedup {cfg.speedup:g}"
+    return SitlRun(
+        episodes_requested=cfg.episodes,
+        pilot=str(cfg.models) if cfg.models is not None else cfg.pilot,
+        setpoints=cfg.setpoints.value,
+        scenario=str(cfg.scenario_path),
+        # The vehicles of --connect fly whatever physics they fly: unknown here.
+        dynamics=None if cfg.connect is not None else FlownDynamics(dynamics.model.value, dynamics.aircraft),
+        wind=None if wind is None else FlownWind(wind.speed_m_s, wind.from_deg, wind.turbulence.value),
+        seed=cfg.seed,
+        clock=clock,
+        cost_limit=cfg.scenario.cost_limit,
+        signing=cfg.signing_key_path is not None,
+    )
+
+
+def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> EvaluationRecord:
+    """The campaign's record: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
+    tail (within C, worst, CVaR_0.95), the costliest UAV-missions, as ``tssac_core.evaluate``'s
+    (tssac_core.common.stats), with the cost figures None when the cost is unknown."""
     n = len(rows)
     wins = int(sum(bool(r.get("success")) for r in rows))
-    out: dict[str, Any] = {
-        "success_rate": wins / n if n else None,
-        "success_interval95": [wilson_interval(wins, n).low, wilson_interval(wins, n).high] if n else None,
-        "mean_cost": None,
-        "mean_cost_interval95": None,
-        "episodes": n,
-        "episodes_requested": cfg.episodes,
-        "mean_mission_time_s": None,
-        "roles": {},
-    }
     times = [r["sim_time_s"] for r in rows if r.get("sim_time_s") is not None]
-    if times:
-        out["mean_mission_time_s"] = float(np.mean(times))
     costed = [r for r in rows if r.get("cost")]
-    out["worst_missions"] = []
+    mean_cost: float | None = None
+    cost_interval: tuple[float, float] | None = None
+    worst: list[WorstMission] = []
     if costed:
         cost = np.array([[r["cost"][role.value] for role in ROLES] for r in costed], dtype=np.float64)
         interval = bootstrap_mean_interval(cost)
-        out["mean_cost"] = float(cost.mean())
-        out["mean_cost_interval95"] = [interval.low, interval.high]
-        worst = worst_missions(cost, [r["seed"] for r in costed], [role.value for role in ROLES], WORST_MISSIONS)
-        for w in worst:
-            w["mission"] = costed[w["mission"]]["index"]
-        out["worst_missions"] = worst
-    for role in ROLES:
-        out["roles"][role.value] = role_figures(rows, costed, role.value, cfg.scenario.cost_limit)
-    if cfg.shield:
-        out["shield"] = shield_summary(rows)
-        scope = monitor_scope(cfg.scenario)
-        out["shield"]["guarantee"] = scope is None
-        out["shield"]["scope"] = scope
-    dynamics = cfg.scenario.dynamics or Dynamics()
-    wind = cfg.scenario.wind
-    out.update(
-        {
-            "pilot": str(cfg.models) if cfg.models is not None else cfg.pilot,
-            "setpoints": cfg.setpoints.value,
-            "scenario": str(cfg.scenario_path),
-            # The vehicles of --connect fly whatever physics they fly: unknown here.
-            "dynamics": None
-            if cfg.connect is not None
-            else {"model": dynamics.model.value, "aircraft": dynamics.aircraft},
-            "wind": None
-            if wind is None
-            else {"speed_m_s": wind.speed_m_s, "from_deg": wind.from_deg, "turbulence": wind.turbulence.value},
-            "seed": cfg.seed,
-            "clock": ("connected, lockstep" if cfg.lockstep else "connected")
-            if cfg.connect is not None
-            else ("lockstep" if cfg.lockstep else f"speedup {cfg.speedup:g}"),
-            "cost_limit": cfg.scenario.cost_limit,
-            "signing": cfg.signing_key_path is not None,
-            "missions": rows,
-        }
+        mean_cost, cost_interval = float(cost.mean()), (interval.low, interval.high)
+        worst = [
+            dataclasses.replace(w, mission=costed[w.mission]["index"])
+            for w in worst_missions(cost, [r["seed"] for r in costed], [role.value for role in ROLES], WORST_MISSIONS)
+        ]
+    rate = wilson_interval(wins, n) if n else None
+    return EvaluationRecord(
+        success_rate=wins / n if n else None,
+        success_interval95=(rate.low, rate.high) if rate is not None else None,
+        mean_cost=mean_cost,
+        mean_cost_interval95=cost_interval,
+        episodes=n,
+        mean_mission_time_s=float(np.mean(times)) if times else None,
+        roles={role.value: role_figures(rows, costed, role.value, cfg.scenario.cost_limit) for role in ROLES},
+        worst_missions=worst,
+        monitor=monitor_figures(rows, monitor_scope(cfg.scenario)) if cfg.shield else None,
+        run=flown_run(cfg),
     )
-    return out
+
+
+@dataclass(frozen=True)
+class CampaignResults:
+    """fly's results: the record, each mission's row (in mission order), and how the campaign ended."""
+
+    record: EvaluationRecord
+    missions: list[dict[str, Any]]
+    interrupted: bool
+    error: str | None
+    wall_time_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            **self.record.to_json(),
+            "missions": self.missions,
+            "interrupted": self.interrupted,
+            "error": self.error,
+            "wall_time_s": round(self.wall_time_s, 3),
+        }

@@ -18,9 +18,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+
+from tssac_core.common.evaluation_record import EvaluationRecord, RoleFigures, WorstMission
 
 Z_95 = 1.959963984540054
 """The standard normal's 97.5% quantile: a two-sided 95% interval."""
@@ -98,18 +99,14 @@ def within_fraction(values: np.ndarray, limit: float) -> float:
     return float((v <= limit).mean())
 
 
-def tail_figures(cost: np.ndarray, limit: float) -> dict[str, float]:
+def tail_figures(cost: np.ndarray, limit: float) -> RoleFigures:
     """One role's tail over its UAV-missions: within the limit, the worst cost, CVaR_0.95."""
-    return {
-        "within_cost_limit": within_fraction(cost, limit),
-        "max_cost": float(np.max(cost)),
-        "cvar95_cost": cvar(cost),
-    }
+    return RoleFigures(
+        within_cost_limit=within_fraction(cost, limit), max_cost=float(np.max(cost)), cvar95_cost=cvar(cost)
+    )
 
 
-def worst_missions(
-    cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str], count: int = 10
-) -> list[dict[str, Any]]:
+def worst_missions(cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str], count: int = 10) -> list[WorstMission]:
     """The ``count`` costliest UAV-missions (cost > 0), worst first: mission index, its layout seed, role, cost."""
     c = np.asarray(cost, dtype=np.float64)
     order = np.argsort(-c, axis=None, kind="stable")[:count]
@@ -118,29 +115,26 @@ def worst_missions(
         i, j = (int(k) for k in np.unravel_index(int(flat), c.shape))
         if c[i, j] <= 0:
             break
-        rows.append({"mission": int(i), "seed": int(seeds[i]), "role": roles[j], "cost": float(c[i, j])})
+        rows.append(WorstMission(mission=i, seed=int(seeds[i]), role=roles[j], cost=float(c[i, j])))
     return rows
 
 
-def mission_statistics(
-    success: np.ndarray,
-    cost: np.ndarray,
-    limit: float,
-    roles: Sequence[str],
-    seeds: Sequence[int] | None = None,
-    worst: int = 10,
-) -> dict[str, Any]:
-    """The interval and tail figures of M missions (``success`` (M,), ``cost`` (M, 3) per UAV), as the JSON
-    of ``tssac_core.evaluate`` and ``mavlink_bridge.fly`` carry them."""
+def pooled_record(
+    success: np.ndarray, cost: np.ndarray, limit: float, roles: Sequence[str], seeds: Sequence[int], worst: int = 10
+) -> EvaluationRecord:
+    """The figures of M missions (``success`` (M,), ``cost`` (M, 3) per UAV) with their intervals, every role's tail
+    and the costliest UAV-missions, as ``mavlink_bridge.fly.pool`` gives them for campaigns flown apart."""
     s = np.asarray(success, dtype=bool)
     c = np.asarray(cost, dtype=np.float64)
     rate = wilson_interval(int(s.sum()), int(s.size))
     mean = bootstrap_mean_interval(c)
-    out: dict[str, Any] = {
-        "success_interval95": [rate.low, rate.high],
-        "mean_cost_interval95": [mean.low, mean.high],
-        "roles_tail": {role: tail_figures(c[:, j], limit) for j, role in enumerate(roles)},
-    }
-    if seeds is not None:
-        out["worst_missions"] = worst_missions(c, seeds, roles, worst)
-    return out
+    return EvaluationRecord(
+        success_rate=float(s.mean()),
+        success_interval95=(rate.low, rate.high),
+        mean_cost=float(c.mean()),
+        mean_cost_interval95=(mean.low, mean.high),
+        episodes=int(s.size),
+        mean_mission_time_s=None,
+        roles={role: tail_figures(c[:, j], limit) for j, role in enumerate(roles)},
+        worst_missions=worst_missions(c, seeds, roles, worst),
+    )

@@ -32,6 +32,7 @@ import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import write_json
+from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.experiments.grid import Grid
 from tssac_core.sim.missions import MissionResults, fly_missions
@@ -191,26 +192,26 @@ class TeamEvaluation:
 
     @classmethod
     def from_record(cls, data: dict[str, Any]) -> TeamEvaluation:
-        """From a cache file's contents (:func:`evaluate`)."""
-        shield = data.get("shield")
-
-        def interval(key: str) -> tuple[float, float] | None:
-            return (data[key][0], data[key][1]) if key in data else None
-
-        roles = data.get("roles")
+        """From a cache file's contents (:func:`evaluate`): its evaluation record and ``per_episode``."""
+        record = EvaluationRecord.from_json(data)
+        assert record.success_rate is not None and record.mean_cost is not None, "the batched world knows both"
+        assert isinstance(record.run, BatchedRun), "a batched evaluation says what flew"
         tasks = None
-        if roles is not None:  # a rate over the evaluation's missions: back to a count
-            tasks = {role: round(figures["task_success_rate"] * data["episodes"]) for role, figures in roles.items()}
-
+        if record.roles:  # a rate over the evaluation's missions: back to a count
+            tasks = {
+                role: round((figures.task_success_rate or 0.0) * record.episodes)
+                for role, figures in record.roles.items()
+            }
+        monitor = record.monitor
         return cls(
-            success_rate=data["success_rate"],
-            mean_cost=data["mean_cost"],
-            episodes=data["episodes"],
-            cost_limit=data["cost_limit"],
-            backup_time_fraction=shield["backup_time_fraction"] if shield is not None else None,
+            success_rate=record.success_rate,
+            mean_cost=record.mean_cost,
+            episodes=record.episodes,
+            cost_limit=record.run.cost_limit,
+            backup_time_fraction=monitor.backup_time_fraction if monitor is not None else None,
             per_episode=PerEpisode.from_record(data["per_episode"]),
-            success_interval95=interval("success_interval95"),
-            mean_cost_interval95=interval("mean_cost_interval95"),
+            success_interval95=record.success_interval95,
+            mean_cost_interval95=record.mean_cost_interval95,
             tasks_finished=tasks,
         )
 
@@ -282,14 +283,22 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
     results = fly_missions(
         scenario, pilots, spec.episodes, spec.seed, layouts=layouts, shield=ShieldConfig() if spec.monitor else None
     )
-    summary = results.summary(scenario.cost_limit)
+    record = dataclasses.replace(
+        results.record(scenario.cost_limit),
+        run=BatchedRun(
+            controller=str(team) if team is not None else GUIDANCE,
+            scenario=str(spec.scenario),
+            seed=spec.seed,
+            cost_limit=scenario.cost_limit,
+        ),
+    )
     per_episode: dict[str, Any] = {"success": results.success.tolist(), "cost": results.cost.tolist()}
     if spec.label.is_tail:
         per_episode["out_of_area"] = results.out_of_area.tolist()
     else:
         per_episode["return"] = results.returns.tolist()
     if results.monitor is not None:
-        summary["shield"]["config"] = dataclasses.asdict(ShieldConfig())
+        record = record.with_monitor_config(dataclasses.asdict(ShieldConfig()))
         per_episode.update(
             {
                 "backup_steps": results.monitor.backup_steps.tolist(),
@@ -297,18 +306,9 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
                 "interventions": results.monitor.interventions.tolist(),
             }
         )
-    summary.update(
-        {
-            "controller": str(team) if team is not None else GUIDANCE,
-            "scenario": str(spec.scenario),
-            "seed": spec.seed,
-            "cost_limit": scenario.cost_limit,
-            "cache_key": cache_key(team, spec),
-            "per_episode": per_episode,
-        }
-    )
-    write_json(cache, summary)
-    return TeamEvaluation.from_record(summary)
+    data = {**record.to_json(), "cache_key": cache_key(team, spec), "per_episode": per_episode}
+    write_json(cache, data)
+    return TeamEvaluation.from_record(data)
 
 
 def team_pilots(team: Path) -> list[PilotSpec]:

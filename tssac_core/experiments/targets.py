@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
+from tssac_core.common.evaluation_record import EvaluationRecord
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 
@@ -43,16 +44,18 @@ TARGETS = (
 )
 
 
-def misses(target: Target, summary: dict[str, Any]) -> list[str]:
-    """What of ``target`` the evaluation ``summary`` does not reach, in words (empty: met)."""
+def misses(target: Target, record: EvaluationRecord) -> list[str]:
+    """What of ``target`` the evaluation ``record`` does not reach, in words (empty: met)."""
+    assert record.success_rate is not None and record.mean_cost is not None, "the batched world knows both"
     missed = []
-    if summary["success_rate"] < target.min_success:
-        missed.append(f"success {summary['success_rate']:.1%} < {target.min_success:.0%}")
-    if summary["mean_cost"] > target.max_mean_cost:
-        missed.append(f"mean cost {summary['mean_cost']:.2f} > {target.max_mean_cost:g}")
+    if record.success_rate < target.min_success:
+        missed.append(f"success {record.success_rate:.1%} < {target.min_success:.0%}")
+    if record.mean_cost > target.max_mean_cost:
+        missed.append(f"mean cost {record.mean_cost:.2f} > {target.max_mean_cost:g}")
     if target.min_within_limit is not None:
         for role in ROLES:
-            within = summary["roles"][role.value]["within_cost_limit"]
+            within = record.roles[role.value].within_cost_limit
+            assert within is not None, "the batched world knows each role's cost"
             if within < target.min_within_limit:
                 missed.append(f"{role.value} within C {within:.1%} < {target.min_within_limit:.1%}")
     return missed
@@ -68,22 +71,25 @@ def check_team(team: Path, seed: int, scale: float = 1.0) -> dict[str, Any]:
     for target in TARGETS:
         scenario = load(SCENARIOS_DIR / target.scenario)
         missions = max(1, round(target.missions * scale))
-        summary = fly_missions(scenario, pilots, missions, first).summary(scenario.cost_limit)
-        rows.append({"target": asdict(target), "seed": first, "summary": summary, "misses": misses(target, summary)})
+        record = fly_missions(scenario, pilots, missions, first).record(scenario.cost_limit)
+        rows.append(
+            {"target": asdict(target), "seed": first, "summary": record.to_json(), "misses": misses(target, record)}
+        )
         first += missions
     return {"team": str(team), "meets_every_target": not any(r["misses"] for r in rows), "targets": rows}
 
 
 def line(row: dict[str, Any]) -> str:
     """One target's figures with their intervals, and what is missed."""
-    s = row["summary"]
-    lo, hi = s["success_interval95"]
-    clo, chi = s["mean_cost_interval95"]
-    within = " / ".join(f"{s['roles'][r.value]['within_cost_limit']:.1%}" for r in ROLES)
+    s = EvaluationRecord.from_json(row["summary"])
+    assert s.success_interval95 is not None and s.mean_cost_interval95 is not None, "the batched world knows both"
+    lo, hi = s.success_interval95
+    clo, chi = s.mean_cost_interval95
+    within = " / ".join(f"{s.roles[r.value].within_cost_limit:.1%}" for r in ROLES)
     verdict = "met" if not row["misses"] else "MISSED: " + "; ".join(row["misses"])
     return (
-        f"  {row['target']['scenario']:<20} {s['episodes']:>5} (seed {row['seed']}): success {s['success_rate']:.1%} "
-        f"({lo:.1%}-{hi:.1%}), mean cost {s['mean_cost']:.2f} ({clo:.2f}-{chi:.2f}), within C {within}: {verdict}"
+        f"  {row['target']['scenario']:<20} {s.episodes:>5} (seed {row['seed']}): success {s.success_rate:.1%} "
+        f"({lo:.1%}-{hi:.1%}), mean cost {s.mean_cost:.2f} ({clo:.2f}-{chi:.2f}), within C {within}: {verdict}"
     )
 
 

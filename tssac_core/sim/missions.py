@@ -8,13 +8,19 @@ in either world, and a run can be split by mission index (shards) without changi
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.common.evaluation_record import (
+    EvaluationRecord,
+    RoleFigures,
+    RoleMonitorFigures,
+    WorldMonitorFigures,
+)
 from tssac_core.common.stats import (
     bootstrap_mean_interval,
     cvar,
@@ -69,61 +75,59 @@ class MissionResults:
     backup_track: np.ndarray | None = None
     """(M, T, 3) bool: the backup flew that step, if recorded with the monitor."""
 
-    def summary(self, cost_limit: float) -> dict[str, Any]:
-        """The JSON figures: ``success_rate`` with its 95% Wilson interval, ``mean_cost`` (per UAV per episode) with
-        its 95% bootstrap interval over missions, ``episodes``, per role the tail (within C, worst, CVaR_0.95), and
-        the costliest UAV-missions (:mod:`tssac_core.common.stats`)."""
-        per_role = {}
-        for j, role in enumerate(ROLES):
-            per_role[role.value] = {
-                "mean_cost": float(self.cost[:, j].mean()),
-                "max_cost": float(self.cost[:, j].max()),
-                "within_cost_limit": float((self.cost[:, j] <= cost_limit).mean()),
-                "cvar95_cost": cvar(self.cost[:, j]),
-                "task_success_rate": float(self.task_done[:, j].mean()),
-                "left_area_rate": float(self.out_of_area[:, j].mean()),
-                "mean_return": float(self.returns[:, j].mean()),
-            }
+    def record(self, cost_limit: float) -> EvaluationRecord:
+        """The figures: the success rate with its 95% Wilson interval, the mean cost (per UAV per episode) with its 95%
+        bootstrap interval over missions, per role the tail (within C, worst, CVaR_0.95), the costliest UAV-missions
+        (:mod:`tssac_core.common.stats`), and the monitor's figures when it flew."""
+        roles = {
+            role.value: RoleFigures(
+                mean_cost=float(self.cost[:, j].mean()),
+                max_cost=float(self.cost[:, j].max()),
+                within_cost_limit=float((self.cost[:, j] <= cost_limit).mean()),
+                cvar95_cost=cvar(self.cost[:, j]),
+                task_success_rate=float(self.task_done[:, j].mean()),
+                left_area_rate=float(self.out_of_area[:, j].mean()),
+                mean_return=float(self.returns[:, j].mean()),
+            )
+            for j, role in enumerate(ROLES)
+        }
         rate = wilson_interval(int(self.success.sum()), int(len(self.success)))
         mean = bootstrap_mean_interval(self.cost)
         worst = worst_missions(self.cost, self.seeds, [r.value for r in ROLES], WORST_MISSIONS) if self.seeds else []
-        for row in worst:
-            row["mission"] = self.indices[row["mission"]]
-        summary: dict[str, Any] = {
-            "success_rate": float(self.success.mean()),
-            "success_interval95": [rate.low, rate.high],
-            "mean_cost": float(self.cost.mean()),
-            "mean_cost_interval95": [mean.low, mean.high],
-            "episodes": int(len(self.success)),
-            "mean_mission_time_s": float(self.time_s.mean()),
-            "roles": per_role,
-            "worst_missions": worst,
-        }
-        if self.monitor is not None:
-            summary["shield"] = monitor_summary(self.monitor, self.cost, self.out_of_area)
-        return summary
+        return EvaluationRecord(
+            success_rate=float(self.success.mean()),
+            success_interval95=(rate.low, rate.high),
+            mean_cost=float(self.cost.mean()),
+            mean_cost_interval95=(mean.low, mean.high),
+            episodes=int(len(self.success)),
+            mean_mission_time_s=float(self.time_s.mean()),
+            roles=roles,
+            worst_missions=[dataclasses.replace(w, mission=self.indices[w.mission]) for w in worst],
+            monitor=None if self.monitor is None else monitor_figures(self.monitor, self.cost, self.out_of_area),
+        )
 
 
-def monitor_summary(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.ndarray) -> dict[str, Any]:
+def monitor_figures(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.ndarray) -> WorldMonitorFigures:
     """The monitor's figures: interventions per UAV-mission, the fraction of flight time under the backup,
     and the hazards that the guarantee is about (UAV-missions with any cost, UAVs that left the area)."""
     flown = counts.flown_steps.sum()
-    per_role = {}
-    for j, role in enumerate(ROLES):
-        per_role[role.value] = {
-            "interventions_per_mission": float(counts.interventions[:, j].mean()),
-            "backup_time_fraction": float(counts.backup_steps[:, j].sum() / max(1, counts.flown_steps[:, j].sum())),
-        }
-    return {
-        "interventions_per_uav_mission": float(counts.interventions.mean()),
-        "max_interventions_per_uav_mission": int(counts.interventions.max()),
-        "max_switches_per_uav_mission": int(counts.switches.max()),
-        "backup_time_fraction": float(counts.backup_steps.sum() / max(1, flown)),
-        "unprotected_time_fraction": float(counts.unprotected_steps.sum() / max(1, flown)),
-        "uav_missions_with_cost": int((cost > 0).sum()),
-        "uavs_left_area": int(out_of_area.sum()),
-        "roles": per_role,
+    roles = {
+        role.value: RoleMonitorFigures(
+            interventions_per_mission=float(counts.interventions[:, j].mean()),
+            backup_time_fraction=float(counts.backup_steps[:, j].sum() / max(1, counts.flown_steps[:, j].sum())),
+        )
+        for j, role in enumerate(ROLES)
     }
+    return WorldMonitorFigures(
+        interventions_per_uav_mission=float(counts.interventions.mean()),
+        max_interventions_per_uav_mission=int(counts.interventions.max()),
+        max_switches_per_uav_mission=int(counts.switches.max()),
+        backup_time_fraction=float(counts.backup_steps.sum() / max(1, flown)),
+        unprotected_time_fraction=float(counts.unprotected_steps.sum() / max(1, flown)),
+        uav_missions_with_cost=int((cost > 0).sum()),
+        uavs_left_area=int(out_of_area.sum()),
+        roles=roles,
+    )
 
 
 def hold_nonfinite(actions: np.ndarray) -> np.ndarray:

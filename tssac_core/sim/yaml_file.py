@@ -10,6 +10,7 @@ import math
 import types
 import typing
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -79,75 +80,132 @@ def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError) 
     int, bool or str), checked all the way down; the first problem raises ``error(source, field path, problem)``.
     Scenario files, preset files and grid files are read with it, so a value is judged, and its problem worded, the
     same in each."""
+    at = _Place(where, source, error)
     origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return typed_value(inner, value, where, source, error)
+        return _optional(tp, value, at)
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        allowed = [str(member.value) for member in tp]
-        if not isinstance(value, str) or value not in allowed:
-            raise error(source, where, f"expected one of {', '.join(allowed)}, got {_short(value)}")
-        return tp(value)
+        return _enum_member(tp, value, at)
     if dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise error(source, where, f"expected a mapping, got {type(value).__name__}")
-        hints = typing.get_type_hints(tp)
-        names = {f.name for f in dataclasses.fields(tp)}
-        for key in value:
-            if key not in names:
-                raise error(source, _join(where, str(key)), f"unknown key (allowed: {', '.join(sorted(names))})")
-        kwargs = {}
-        for f in dataclasses.fields(tp):
-            if f.name in value:
-                kwargs[f.name] = typed_value(hints[f.name], value[f.name], _join(where, f.name), source, error)
-            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise error(source, _join(where, f.name), "missing required field")
-        build = cast(Callable[..., Any], tp)  # a dataclass type (dataclasses.fields above), called with its fields
-        return build(**kwargs)
+        return _dataclass(cast(type, tp), value, at)
     if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise error(source, where, f"expected a list, got {type(value).__name__}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(typed_value(args[0], v, f"{where}[{i}]", source, error) for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise error(source, where, f"expected a list of {len(args)} numbers, got {len(value)}")
-        return tuple(typed_value(a, v, f"{where}[{i}]", source, error) for i, (a, v) in enumerate(zip(args, value)))
+        return _tuple(typing.get_args(tp), value, at)
     if origin is dict:
-        if not isinstance(value, dict):
-            raise error(source, where, f"expected a mapping, got {type(value).__name__}")
-        return {str(k): typed_value(args[1], v, _join(where, str(k)), source, error) for k, v in value.items()}
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise error(source, where, f"expected a number, got {_short(value)}")
-        if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
-            raise error(
-                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
-            )
-        if not math.isfinite(value):
-            raise error(source, where, f"expected a finite number, got {value!r}")
-        if abs(value) > MAX_MAGNITUDE:
-            raise error(source, where, f"out of range: {value!r} (numbers are at most {MAX_MAGNITUDE:.0e} in size)")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise error(source, where, f"expected an integer, got {_short(value)}")
-        if abs(value) > MAX_MAGNITUDE:
-            raise error(
-                source, where, f"out of range: {_short(value)} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
-            )
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise error(source, where, f"expected true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise error(source, where, f"expected a string, got {value!r}")
-        return value
-    raise TypeError(f"unsupported schema type {_type_name(tp)} at {where}")  # a bug in the schema
+        return _mapping(typing.get_args(tp)[1], value, at)
+    scalar = _SCALARS.get(tp)
+    if scalar is None:
+        raise TypeError(f"unsupported schema type {_type_name(tp)} at {where}")  # a bug in the schema
+    return scalar(value, at)
+
+
+@dataclass(frozen=True)
+class _Place:
+    """Where a value is: its field path in its file, and the error that names them."""
+
+    where: str
+    source: str
+    error: FileError
+
+    def fail(self, problem: str) -> Exception:
+        return self.error(self.source, self.where, problem)
+
+    def into(self, name: str) -> _Place:
+        return _Place(_join(self.where, name), self.source, self.error)
+
+    def item(self, index: int) -> _Place:
+        return _Place(f"{self.where}[{index}]", self.source, self.error)
+
+    def read(self, tp: Any, value: Any) -> Any:
+        return typed_value(tp, value, self.where, self.source, self.error)
+
+
+def _optional(tp: Any, value: Any, at: _Place) -> Any:
+    args = typing.get_args(tp)
+    if value is None and type(None) in args:
+        return None
+    (inner,) = [a for a in args if a is not type(None)]
+    return at.read(inner, value)
+
+
+def _enum_member(tp: type[enum.Enum], value: Any, at: _Place) -> enum.Enum:
+    allowed = [str(member.value) for member in tp]
+    if not isinstance(value, str) or value not in allowed:
+        raise at.fail(f"expected one of {', '.join(allowed)}, got {_short(value)}")
+    return tp(value)
+
+
+def _dataclass(tp: type, value: Any, at: _Place) -> Any:
+    if not isinstance(value, dict):
+        raise at.fail(f"expected a mapping, got {type(value).__name__}")
+    hints = typing.get_type_hints(tp)
+    names = {f.name for f in dataclasses.fields(tp)}
+    for key in value:
+        if key not in names:
+            raise at.into(str(key)).fail(f"unknown key (allowed: {', '.join(sorted(names))})")
+    kwargs = {}
+    for f in dataclasses.fields(tp):
+        if f.name in value:
+            kwargs[f.name] = at.into(f.name).read(hints[f.name], value[f.name])
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise at.into(f.name).fail("missing required field")
+    build = cast(Callable[..., Any], tp)  # a dataclass type (dataclasses.fields above), called with its fields
+    return build(**kwargs)
+
+
+def _tuple(args: tuple[Any, ...], value: Any, at: _Place) -> tuple[Any, ...]:
+    if not isinstance(value, (list, tuple)):
+        raise at.fail(f"expected a list, got {type(value).__name__}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(at.item(i).read(args[0], v) for i, v in enumerate(value))
+    if len(value) != len(args):
+        raise at.fail(f"expected a list of {len(args)} numbers, got {len(value)}")
+    return tuple(at.item(i).read(a, v) for i, (a, v) in enumerate(zip(args, value)))
+
+
+def _mapping(value_type: Any, value: Any, at: _Place) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise at.fail(f"expected a mapping, got {type(value).__name__}")
+    return {str(k): at.into(str(k)).read(value_type, v) for k, v in value.items()}
+
+
+def _too_large(value: Any) -> str:
+    return f"out of range: {value} (numbers are at most {MAX_MAGNITUDE:.0e} in size)"
+
+
+def _float(value: Any, at: _Place) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise at.fail(f"expected a number, got {_short(value)}")
+    if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
+        raise at.fail(_too_large(_short(value)))
+    if not math.isfinite(value):
+        raise at.fail(f"expected a finite number, got {value!r}")
+    if abs(value) > MAX_MAGNITUDE:
+        raise at.fail(_too_large(repr(value)))
+    return float(value)
+
+
+def _int(value: Any, at: _Place) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise at.fail(f"expected an integer, got {_short(value)}")
+    if abs(value) > MAX_MAGNITUDE:
+        raise at.fail(_too_large(_short(value)))
+    return value
+
+
+def _bool(value: Any, at: _Place) -> bool:
+    if not isinstance(value, bool):
+        raise at.fail(f"expected true or false, got {value!r}")
+    return value
+
+
+def _str(value: Any, at: _Place) -> str:
+    if not isinstance(value, str):
+        raise at.fail(f"expected a string, got {value!r}")
+    return value
+
+
+_SCALARS: dict[Any, Callable[[Any, _Place], Any]] = {float: _float, int: _int, bool: _bool, str: _str}
+"""The scalar types a schema may hold, each with its check."""
 
 
 def _short(value: Any, max_chars: int = 40) -> str:

@@ -1,0 +1,264 @@
+"""One evaluation's figures as one typed record: what the batched evaluation (``python -m tssac_core.evaluate``, the
+experiments' caches, ``experiments.targets``) and ``python -m mavlink_bridge.fly`` write, and what their reports read.
+
+The JSON has the keys it always had (``success_rate``, ``success_interval95``, ``mean_cost``, ``mean_cost_interval95``,
+``episodes``, ``mean_mission_time_s``, ``roles``, ``worst_missions``, with the monitor ``shield``, then what flew
+where) and ``record_version``. A file without ``record_version`` was written before the record existed and is read as
+version 1 (an old experiments cache may also lack the intervals and the per-role figures: None and empty here). A
+figure a world cannot know is None: ``fly`` against a ``--connect`` vehicle has no truth log, so no cost; its JSON
+keeps such top-level figures as explicit nulls, and leaves a role's unknown figures out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+RECORD_VERSION = 1
+"""The schema this module writes; it reads every version up to this one."""
+
+Interval = tuple[float, float]
+"""A 95% interval (low, high); a JSON list of two."""
+
+
+class RecordError(ValueError):
+    """A JSON object that is no evaluation record this version can read: one line saying what is wrong."""
+
+
+@dataclass(frozen=True)
+class RoleFigures:
+    """One role's figures over the missions (None: not known in this world, left out of the JSON)."""
+
+    mean_cost: float | None = None
+    max_cost: float | None = None
+    within_cost_limit: float | None = None
+    """The fraction of its UAV-missions whose cost is within the scenario's C."""
+    cvar95_cost: float | None = None
+    task_success_rate: float | None = None
+    left_area_rate: float | None = None
+    mean_return: float | None = None
+    latency_p50_ms: float | None = None
+    """``fly``: the median of its companions' median control latency."""
+    latency_p99_ms: float | None = None
+    """``fly``: the largest of its companions' 99th-percentile control latency."""
+
+
+@dataclass(frozen=True)
+class WorstMission:
+    """One of the costliest UAV-missions: fly it again with ``--seed <run seed> --mission <mission>``."""
+
+    mission: int
+    seed: int
+    """Its layout's seed."""
+    role: str
+    cost: float
+
+
+@dataclass(frozen=True)
+class RoleMonitorFigures:
+    """The batched world's monitor, one role."""
+
+    interventions_per_mission: float
+    backup_time_fraction: float
+
+
+@dataclass(frozen=True)
+class WorldMonitorFigures:
+    """The runtime-assurance monitor in the batched world, counted per simulation step."""
+
+    interventions_per_uav_mission: float
+    max_interventions_per_uav_mission: int
+    max_switches_per_uav_mission: int
+    backup_time_fraction: float
+    """The share of flight time under the backup."""
+    unprotected_time_fraction: float
+    """The share of flight time with no backup that the monitor could prove safe."""
+    uav_missions_with_cost: int
+    uavs_left_area: int
+    roles: dict[str, RoleMonitorFigures]
+    config: dict[str, object] | None = None
+    """The monitor's settings (``ShieldConfig`` as a dict), when the writer states them."""
+
+
+@dataclass(frozen=True)
+class SitlMonitorFigures:
+    """The runtime-assurance monitor in ``fly``'s companions, counted per control step (None: no companion counted)."""
+
+    uav_missions: int
+    interventions_per_uav_mission: float | None
+    max_interventions_per_uav_mission: int | None
+    backup_time_fraction: float | None
+    unprotected_time_fraction: float | None
+    decisions: int
+    resets: int
+    max_margin_m: float | None
+    """The largest margin a companion's monitor used (its estimate's error and timing on top of the configured one)."""
+    uav_missions_with_cost: int | None
+    uavs_left_area: int | None
+    guarantee: bool = True
+    """False: the world flies physics the monitor's bound does not cover (``scope`` says why)."""
+    scope: str | None = None
+
+
+MonitorFigures = WorldMonitorFigures | SitlMonitorFigures
+
+
+@dataclass(frozen=True)
+class BatchedRun:
+    """What flew a batched evaluation, where."""
+
+    controller: str
+    """The models directory, the controller, or which policies in which roles."""
+    scenario: str
+    seed: int
+    cost_limit: float
+
+
+@dataclass(frozen=True)
+class FlownDynamics:
+    model: str
+    aircraft: str
+
+
+@dataclass(frozen=True)
+class FlownWind:
+    speed_m_s: float
+    from_deg: float
+    turbulence: str
+
+
+@dataclass(frozen=True)
+class SitlRun:
+    """What flew a ``fly`` campaign, where, over which link and clock."""
+
+    episodes_requested: int
+    pilot: str
+    setpoints: str
+    scenario: str
+    dynamics: FlownDynamics | None
+    """None: the vehicles of ``--connect`` fly physics this side does not know."""
+    wind: FlownWind | None
+    seed: int
+    clock: str
+    cost_limit: float
+    signing: bool
+
+
+@dataclass(frozen=True)
+class EvaluationRecord:
+    """M missions' figures, with 95% intervals: the Wilson score interval of the success rate and the bootstrap
+    interval over missions of the mean cost per UAV (:mod:`tssac_core.common.stats`)."""
+
+    success_rate: float | None
+    success_interval95: Interval | None
+    mean_cost: float | None
+    """Hazard cost per UAV per mission."""
+    mean_cost_interval95: Interval | None
+    episodes: int
+    mean_mission_time_s: float | None
+    roles: dict[str, RoleFigures] = field(default_factory=dict)
+    worst_missions: list[WorstMission] = field(default_factory=list)
+    monitor: MonitorFigures | None = None
+    run: BatchedRun | SitlRun | None = None
+    """What flew the missions, where (None: the figures alone)."""
+
+    def with_monitor_config(self, config: Mapping[str, object]) -> EvaluationRecord:
+        """This record with the monitor's settings stated (the batched world's monitor only)."""
+        assert isinstance(self.monitor, WorldMonitorFigures), "the batched world's monitor states its settings"
+        return dataclasses.replace(self, monitor=dataclasses.replace(self.monitor, config=dict(config)))
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON object, its keys in the order the files have always had them."""
+        out: dict[str, Any] = {
+            "success_rate": self.success_rate,
+            "success_interval95": _interval_json(self.success_interval95),
+            "mean_cost": self.mean_cost,
+            "mean_cost_interval95": _interval_json(self.mean_cost_interval95),
+            "episodes": self.episodes,
+            "mean_mission_time_s": self.mean_mission_time_s,
+            "roles": {role: _known(fig) for role, fig in self.roles.items()},
+            "worst_missions": [dataclasses.asdict(w) for w in self.worst_missions],
+        }
+        if self.monitor is not None:
+            out["shield"] = _monitor_json(self.monitor)
+        if self.run is not None:
+            out.update(dataclasses.asdict(self.run))
+        out["record_version"] = RECORD_VERSION
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> EvaluationRecord:
+        """Read a record (any version up to :data:`RECORD_VERSION`, and the files written before it had one);
+        RecordError names what is missing or wrong."""
+        version = data.get("record_version", 1)
+        if not isinstance(version, int) or not 1 <= version <= RECORD_VERSION:
+            raise RecordError(f"record_version {version!r}: this version reads 1 to {RECORD_VERSION}")
+        try:
+            shield = data.get("shield")
+            return cls(
+                success_rate=data["success_rate"],
+                success_interval95=_interval(data.get("success_interval95")),
+                mean_cost=data["mean_cost"],
+                mean_cost_interval95=_interval(data.get("mean_cost_interval95")),
+                episodes=int(data["episodes"]),
+                mean_mission_time_s=data.get("mean_mission_time_s"),
+                roles={role: RoleFigures(**fig) for role, fig in data.get("roles", {}).items()},
+                worst_missions=[WorstMission(**w) for w in data.get("worst_missions", [])],
+                monitor=None if shield is None else _monitor(shield),
+                run=_run(data),
+            )
+        except KeyError as exc:
+            raise RecordError(f"no {exc.args[0]!r} in the evaluation record") from None
+        except (TypeError, ValueError) as exc:
+            raise RecordError(f"not an evaluation record: {exc}") from None
+
+
+def _interval_json(interval: Interval | None) -> list[float] | None:
+    return None if interval is None else [interval[0], interval[1]]
+
+
+def _interval(value: Any) -> Interval | None:
+    if value is None:
+        return None
+    low, high = value
+    return (low, high)
+
+
+def _known(figures: RoleFigures) -> dict[str, float]:
+    return {k: v for k, v in dataclasses.asdict(figures).items() if v is not None}
+
+
+def _monitor_json(monitor: MonitorFigures) -> dict[str, Any]:
+    out = dataclasses.asdict(monitor)
+    if isinstance(monitor, WorldMonitorFigures) and monitor.config is None:
+        del out["config"]
+    return out
+
+
+def _monitor(data: Mapping[str, Any]) -> MonitorFigures:
+    if "decisions" in data:  # counted by companions
+        return SitlMonitorFigures(**data)
+    fields = {k: v for k, v in data.items() if k != "roles"}
+    roles = {role: RoleMonitorFigures(**fig) for role, fig in data["roles"].items()}
+    return WorldMonitorFigures(**fields, roles=roles)
+
+
+SITL_BEFORE = {"setpoints": "body-rates", "dynamics": None, "wind": None}
+"""What a fly file written before these keys flew: body-rate setpoints (the only dialect then), in still air (wind came
+with them), on physics it does not state (None)."""
+
+
+def _run(data: Mapping[str, Any]) -> BatchedRun | SitlRun | None:
+    if "pilot" in data:
+        given = {**SITL_BEFORE, **{f.name: data[f.name] for f in dataclasses.fields(SitlRun) if f.name in data}}
+        dynamics, wind = given.pop("dynamics"), given.pop("wind")
+        return SitlRun(
+            **given,
+            dynamics=None if dynamics is None else FlownDynamics(**dynamics),
+            wind=None if wind is None else FlownWind(**wind),
+        )
+    if "controller" in data:
+        return BatchedRun(**{f.name: data[f.name] for f in dataclasses.fields(BatchedRun)})
+    return None
