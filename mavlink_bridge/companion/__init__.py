@@ -40,8 +40,9 @@ Exit statuses (one ``end ...`` line on stdout, ``--status-json`` for the details
 (``--duration-s`` of vehicle time flown), ``stopped`` (SIGINT / SIGTERM), all with exit code 0;
 ``lost`` / ``no_vehicle`` / ``refused`` exit 3; bad input exits 2 with one line.
 
-Modules: ``config`` (CompanionConfig and the constants) · ``pilots`` (a trained policy, the
+Modules: ``config`` (CompanionConfig and the constants) · ``held_pilot`` (a trained policy, the
 guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) ·
-``status`` (counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock
-pacing) · ``cli`` (``python -m mavlink_bridge.companion``).
+``shield`` (the monitor on one vehicle) · ``mission_end`` (when a mission's end heard is believed) · ``status``
+(counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock pacing) · ``cli``
+(``python -m mavlink_bridge.companion``).
 """

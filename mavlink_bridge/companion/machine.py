@@ -10,14 +10,11 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 
 from mavlink_bridge.companion.config import (
-    END_CONFIRM_S,
-    END_GRACE_S,
-    END_SILENCE_S,
     GUIDED_MODE,
     LOITER_MODE,
     MIN_POS_SIGMA_M,
@@ -25,6 +22,7 @@ from mavlink_bridge.companion.config import (
     CompanionConfig,
 )
 from mavlink_bridge.companion.held_pilot import DecisionClock, HeldPilot, make_pilot
+from mavlink_bridge.companion.mission_end import EndWatch
 from mavlink_bridge.companion.shield import CompanionShield, Estimate
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.estimation.state_filter import FilterNoise, VehicleStateFilter
@@ -77,18 +75,6 @@ class Phase(enum.Enum):
 
 class _Stop(Exception):
     """Internal: leave the loop."""
-
-
-@dataclass
-class _ClaimedEnd:
-    """A mission end heard from the vehicle's address, not yet confirmed by the vehicle's own heartbeats."""
-
-    status: str
-    message: str
-    since_s: float
-    """Wall time (time.monotonic()) it was heard."""
-    poweroff_since_s: float | None = None
-    """When the first POWEROFF heartbeat came after it."""
 
 
 def open_link(cfg: CompanionConfig) -> MavLink:
@@ -151,7 +137,7 @@ class Companion:
         self.phase = Phase.CONNECT
         self._stop_requested = False
         self._link: MavLink | None = None
-        self._claimed_end: _ClaimedEnd | None = None
+        self._ends = EndWatch()
         self._reset_vehicle_state()
         self._status: tuple[str, str] | None = None
 
@@ -481,50 +467,31 @@ class Companion:
     # ----------------------------------------------------------------------- mission end
 
     def _claim_end(self, status: str, message: str) -> None:
-        """A mission end from the vehicle's address: flown on until the vehicle's own telemetry confirms it.
-
-        Without signing anyone who can spoof the vehicle's address can send HIT or MSN_END. The vehicle itself,
-        once its mission has ended, reports POWEROFF in every HEARTBEAT and falls silent when it exits; while it
-        still reports any other state, the end is not its own and the companion keeps its vehicle under control.
-        """
-        if self._claimed_end is None:
+        """A mission end from the vehicle's address: flown on until the vehicle confirms it (:mod:`.mission_end`)."""
+        if self._ends.hear(status, message, time.monotonic()):
             _log.info("%s: %s: waiting for the vehicle to confirm it", self.cfg.role.value, message)
-            self._claimed_end = _ClaimedEnd(status, message, time.monotonic())
 
     def _check_claimed_end(self, system_status: int, rx_s: float) -> None:
         """A vehicle heartbeat read at ``rx_s`` confirms a claimed end (POWEROFF) or, after the grace, refutes it."""
-        claim = self._claimed_end
-        if claim is None or rx_s < claim.since_s:
-            return
-        if system_status == M.MAV_STATE_POWEROFF:
-            if claim.poweroff_since_s is None:
-                claim.poweroff_since_s = rx_s
-        elif rx_s - claim.since_s > END_GRACE_S:
+        refuted = self._ends.heartbeat(system_status, rx_s)
+        if refuted is not None:
             _log.warning(
                 "%s: ignoring '%s': the vehicle still reports state %d, not a mission end",
                 self.cfg.role.value,
-                claim.message,
+                refuted.message,
                 system_status,
             )
             self.counters.ends_refuted += 1
-            self._claimed_end = None
 
     def _end_believed(self) -> bool:
         """A mission end is claimed in a frame signed with the run's key: it came from the vehicle itself."""
-        return self._claimed_end is not None and self._link is not None and self._link.signing
+        return self._ends.claim is not None and self._link is not None and self._link.signing
 
     def _check_end(self, now: float) -> None:
-        """End the run once a claimed end is confirmed: the vehicle silent, or only POWEROFF from it. With signing
-        the claim came in a frame signed with the run's key, from the vehicle itself: it is confirmed at once."""
-        claim = self._claimed_end
-        if claim is None:
-            return
-        if self._end_believed():
-            raise _Stop(claim.status, claim.message)
-        silent = now - max(self.last_rx_s, claim.since_s) >= END_SILENCE_S
-        powered_off = claim.poweroff_since_s is not None and now - claim.since_s >= END_CONFIRM_S
-        if silent or powered_off:
-            raise _Stop(claim.status, claim.message)
+        """End the run once a claimed end is confirmed (:meth:`EndWatch.confirmed`)."""
+        end = self._ends.confirmed(now, self.last_rx_s, self._end_believed())
+        if end is not None:
+            raise _Stop(end.status, end.message)
 
     # --------------------------------------------------------------------------- control
 
