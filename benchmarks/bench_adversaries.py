@@ -23,7 +23,6 @@ settings wrote and flies only the rest, so a run stopped part-way (a session's e
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import dataclasses
 import json
@@ -35,13 +34,13 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from tqdm import tqdm
 
 import tssac_core
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, command_description, run, write_json
+from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -95,13 +94,8 @@ class BenchConfig:
         return self.episodes < DEFAULT_EPISODES or (0 < self.sitl_missions < DEFAULT_SITL_MISSIONS)
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(f"{message} (see --help)")
-
-
 def parse_args(argv: Sequence[str] | None) -> BenchConfig:
-    p = _Parser(prog="python benchmarks/bench_adversaries.py", description=command_description(__doc__))
+    p = UsageParser(prog="python benchmarks/bench_adversaries.py", description=command_description(__doc__))
     p.add_argument("--adversaries", default=",".join(ADVERSARY_NAMES), help="comma-separated (default: all)")
     p.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="batched missions per adversary/scenario")
     p.add_argument("--sitl-missions", type=int, default=DEFAULT_SITL_MISSIONS, help="SITL missions per ... (0: none)")

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING
 
 from mavlink_bridge.companion.config import (
     COMMAND_TIMEOUT_S,
@@ -28,7 +28,7 @@ from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.common.cli import UsageError, bad_input_line
+from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
@@ -41,13 +41,8 @@ _log = logging.getLogger("mavlink_bridge.companion")
 PROG = "python -m mavlink_bridge.companion"
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(f"{message} (see --help)")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = UsageParser(
         prog=PROG,
         description="Fly one SITL (or real) UAV over MAVLink with a trained policy or the guidance controller.",
     )

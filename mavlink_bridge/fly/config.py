@@ -10,13 +10,12 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_grant_s
 from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
-from tssac_core.common.cli import SEED_MAX, UsageError, seed_arg
+from tssac_core.common.cli import SEED_MAX, UsageError, UsageParser, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import create_exclusively
 from tssac_core.deploy.manifest import check_models as check_manifest
@@ -111,13 +110,8 @@ class FlyConfig:
         return self.executor is Executor.RAY
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(f"{message} (see --help)")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = UsageParser(
         prog=PROG, description="Fly whole missions over MAVLink: a SITL world plus one companion process per UAV."
     )
     _mission_flags(p.add_argument_group("the mission"))

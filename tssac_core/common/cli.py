@@ -8,7 +8,7 @@ import logging
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from tssac_core.common.errors import InputError
 from tssac_core.common.files import write_text_safely
@@ -19,6 +19,14 @@ EXIT_INTERRUPTED = 130
 
 class UsageError(InputError):
     """A command-line argument a user can fix; the message is the one line they see."""
+
+
+class UsageParser(argparse.ArgumentParser):
+    """An argument parser whose errors are a :class:`UsageError` (the command's runner prints it as one line and
+    exits 2) instead of argparse's usage block and exit."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{message} (see --help)")
 
 
 BAD_INPUT = (InputError, OSError)
