@@ -12,6 +12,7 @@ import pytest
 
 from mavlink_bridge.fly import pool as pool_module
 from mavlink_bridge.fly.pool import main
+from tssac_core.common.evaluation_record import EvaluationRecord
 from tssac_core.common.stats import wilson_interval
 
 HARD50 = Path(__file__).resolve().parents[1] / "results" / "recipe-trials" / "hard50"
@@ -41,6 +42,11 @@ def test_two_halves_pool_to_the_whole(tmp_path: Path, capsys: pytest.CaptureFixt
     assert pooled["success_interval95"] == pytest.approx(whole["success_interval95"])
     assert pooled["mean_cost"] == pytest.approx(whole["mean_cost"])
     assert pooled["mean_cost_interval95"] == pytest.approx(whole["mean_cost_interval95"])
+    assert pooled["mean_mission_time_s"] == pytest.approx(whole["mean_mission_time_s"])
+    assert (
+        EvaluationRecord.from_json(pooled).roles["strike"].within_cost_limit
+        == whole["roles"]["strike"]["within_cost_limit"]
+    )
     wins = sum(m["success"] for m in whole["missions"])
     assert pooled["success_interval95"][0] == pytest.approx(wilson_interval(wins, 200).low)
     assert "over 200 missions" in capsys.readouterr().out

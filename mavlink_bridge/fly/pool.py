@@ -55,6 +55,8 @@ class Mission:
     success: bool
     cost: tuple[float, ...]
     """Steps inside a radar per role, in :data:`ROLES` order."""
+    sim_time_s: float | None = None
+    """The mission's simulated time, where its row gives one."""
 
 
 @dataclass(frozen=True)
@@ -120,7 +122,9 @@ def _mission(row: object, k: int, campaign_seed: int, where: str) -> Mission:
         value = cost[name]
         if not (_is_number(value) and math.isfinite(value) and value >= 0):
             raise PoolError(f"{at}: the {name}'s cost must be a finite number of steps >= 0, got {value!r}")
-    return Mission(index, seed, success, tuple(float(cost[n]) for n in names))
+    time_s = row.get("sim_time_s")
+    sim_time_s = float(time_s) if _is_number(time_s) and math.isfinite(time_s) and time_s >= 0 else None
+    return Mission(index, seed, success, tuple(float(cost[n]) for n in names), sim_time_s)
 
 
 def _stopped(data: dict[str, Any], flown: int) -> str | None:
@@ -253,7 +257,15 @@ def pool(campaigns: Sequence[Campaign], partial: bool = False) -> Pooled:
     success = np.array([m.success for m in missions])
     cost = np.array([m.cost for m in missions], dtype=np.float64)
     limit = float(campaigns[0].data["cost_limit"])
-    record = pooled_record(success, cost, limit, [r.value for r in ROLES], [m.seed for m in missions])
+    times = [m.sim_time_s for m in missions if m.sim_time_s is not None]
+    record = pooled_record(
+        success,
+        cost,
+        limit,
+        [r.value for r in ROLES],
+        [m.seed for m in missions],
+        time_s=times if len(times) == len(missions) else None,
+    )
     return Pooled(record, list(campaigns))
 
 

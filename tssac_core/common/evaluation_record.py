@@ -251,7 +251,7 @@ with them), on physics it does not state (None)."""
 
 
 def _run(data: Mapping[str, Any]) -> BatchedRun | SitlRun | None:
-    if "pilot" in data:
+    if "pilot" in data and "episodes_requested" in data:  # one fly run; fly.pool's file names the pilot of several
         given = {**SITL_BEFORE, **{f.name: data[f.name] for f in dataclasses.fields(SitlRun) if f.name in data}}
         dynamics, wind = given.pop("dynamics"), given.pop("wind")
         return SitlRun(

@@ -120,10 +120,17 @@ def worst_missions(cost: np.ndarray, seeds: Sequence[int], roles: Sequence[str],
 
 
 def pooled_record(
-    success: np.ndarray, cost: np.ndarray, limit: float, roles: Sequence[str], seeds: Sequence[int], worst: int = 10
+    success: np.ndarray,
+    cost: np.ndarray,
+    limit: float,
+    roles: Sequence[str],
+    seeds: Sequence[int],
+    worst: int = 10,
+    time_s: Sequence[float] | None = None,
 ) -> EvaluationRecord:
-    """The figures of M missions (``success`` (M,), ``cost`` (M, 3) per UAV) with their intervals, every role's tail
-    and the costliest UAV-missions, as ``mavlink_bridge.fly.pool`` gives them for campaigns flown apart."""
+    """The figures of M missions (``success`` (M,), ``cost`` (M, 3) per UAV, ``time_s`` (M,) each one's simulated time
+    if known) with their intervals, every role's tail and the costliest UAV-missions, as ``mavlink_bridge.fly.pool``
+    gives them for campaigns flown apart."""
     s = np.asarray(success, dtype=bool)
     c = np.asarray(cost, dtype=np.float64)
     rate = wilson_interval(int(s.sum()), int(s.size))
@@ -134,7 +141,7 @@ def pooled_record(
         mean_cost=float(c.mean()),
         mean_cost_interval95=(mean.low, mean.high),
         episodes=int(s.size),
-        mean_mission_time_s=None,
+        mean_mission_time_s=float(np.mean(time_s)) if time_s else None,
         roles={role: tail_figures(c[:, j], limit) for j, role in enumerate(roles)},
         worst_missions=worst_missions(c, seeds, roles, worst),
     )
