@@ -21,6 +21,7 @@ from mavlink_bridge.companion.config import (
     MIN_VEL_SIGMA_M_S,
     CompanionConfig,
 )
+from mavlink_bridge.companion.grants import GrantRule
 from mavlink_bridge.companion.held_pilot import DecisionClock, HeldPilot, make_pilot
 from mavlink_bridge.companion.mission_end import EndWatch
 from mavlink_bridge.companion.shield import CompanionShield, Estimate
@@ -39,7 +40,6 @@ from mavlink_bridge.link.frames import (
 from mavlink_bridge.link.guided_commands import SLEW_COMMANDS, SetpointDialect, slew_from_setpoint
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.sim.world_state import WorldState, initial_state
-from tssac_core.wire.lockstep import granted_through_ms
 from tssac_core.wire.mission_events import (
     FLAGS,
     HIT_TEXT,
@@ -120,14 +120,7 @@ class Companion:
             max_accel_m_s2=self.spec.accel_max_m_s2,
             max_turn_rate_rad_s=math.radians(self.spec.turn_rate_max_deg_s),
         )
-        lossless = link_model.packet_loss == 0 and link_model.reordering == 0
-        self._grants = config.lockstep and config.lockstep_grant_s > 0 and lossless
-        """Answer only when the setpoint may change (:mod:`tssac_core.wire.lockstep`): lockstep over a link that loses
-        and reorders nothing, where an answer at every tick would repeat the one before."""
-        self._max_grant_ms = int(config.lockstep_grant_s * 1000.0)
-        self._fixes_every_tick = link_model.gps_dropout_prob == 0 and link_model.gps_rate_hz * s.dt_s >= 1.0 - 1e-9
-        """A position fix comes with every tick (no GPS dropout, a fix per step): the telemetry-gap hold cannot fire
-        while a grant runs."""
+        self._grant_rule = GrantRule.of(config)
         self.counters = CompanionCounters()
         self.latencies_s: list[float] = []
         self._first_control_wall_s: float | None = None
@@ -580,9 +573,8 @@ class Companion:
 
     def _grant_ms(self, t_ms: int) -> int | None:
         """The last tick a setpoint sent at tick ``t_ms`` answers for (None: only its own): up to the pilot's and
-        the monitor's next decision, no further than ``lockstep_grant_s``, and no tick at which the telemetry-gap
-        hold could fire or the flight's duration ends."""
-        if not self._grants:
+        the monitor's next decision (:class:`GrantRule`)."""
+        if not self._grant_rule.enabled:
             return None
         step = t_ms // self.dt_ms
         next_step = self.pilot.next_decision_step(step)
@@ -591,19 +583,12 @@ class Companion:
             turn = self.shield.next_change_step  # a backup's turn after its lead, before the next decision
             if turn is not None:
                 next_step = min(next_step, max(step + 1, turn))
-        last_ms = granted_through_ms(t_ms, self.dt_ms, next_step * self.dt_ms, self._max_grant_ms)
-        if last_ms is None or (self._fixes_every_tick and self.cfg.duration_s is None):
-            return last_ms
-        if self._duration_over(t_ms):
-            return None  # this tick's answer is the flight's last
-        granted_ms = t_ms
-        for tick_ms in range(t_ms + self.dt_ms, last_ms + 1, self.dt_ms):
-            if not self._fixes_every_tick and self._gap_s(tick_ms) > self.cfg.hold_after_s:
-                break  # the gap hold could fire here if no fix comes
-            granted_ms = tick_ms
-            if self._duration_over(tick_ms):
-                break  # the flight ends with this tick's answer
-        return granted_ms if granted_ms > t_ms else None
+        return self._grant_rule.through_ms(
+            t_ms,
+            next_step,
+            lambda tick_ms: self._gap_s(tick_ms) > self.cfg.hold_after_s,
+            self._duration_over if self.cfg.duration_s is not None else None,
+        )
 
     def _gap_s(self, t_ms: int) -> float:
         """Vehicle seconds from the last position fix to tick ``t_ms``, if no fix came in between."""
