@@ -26,6 +26,7 @@ from tssac_core.experiments.evaluations import (
     PerEpisode,
     TeamEvaluation,
     cache_key,
+    cached,
     eval_specs,
 )
 from tssac_core.experiments.figures import clipped_error, penalty_entries
@@ -996,6 +997,27 @@ def test_a_cached_evaluation_is_read_with_what_it_has():
     assert t.success_interval95 == (0.1, 0.9) and t.mean_cost_interval95 == (0.0, 3.0)
     assert t.backup_time_fraction == 0.25 and t.per_episode.returns is None
     assert t.per_episode.monitor is not None and t.per_episode.monitor.flown_steps.sum() == 24
+
+
+def test_a_damaged_cache_with_the_right_key_is_flown_again_not_a_crash(tmp_path):
+    spec = EvalSpec(EvalLabel.RANDOM, ROOT / "scenarios" / "short.yaml", 2, 12345)
+    cache = tmp_path / spec.cache_name()
+    whole = {
+        "success_rate": 0.5,
+        "mean_cost": 0.0,
+        "episodes": 2,
+        **CACHE_RUN,
+        "cache_key": cache_key(None, spec),
+        "per_episode": {"success": [True, False], "cost": [[0.0] * 3] * 2},
+    }
+    cache.write_text(json.dumps(whole))
+    assert cached(None, spec, cache) is not None
+    for damage in ({"episodes": "two"}, {"success_interval95": [0.1]}, {"roles": {"decoy": {"speed": 1.0}}}):
+        cache.write_text(json.dumps({**whole, **damage}))
+        assert cached(None, spec, cache) is None, damage
+    for lost in ("episodes", "controller"):  # a figure, or what flew it
+        cache.write_text(json.dumps({k: v for k, v in whole.items() if k != lost}))
+        assert cached(None, spec, cache) is None, lost
 
 
 def test_pooled_cost_interval_spans_the_mean_and_counts_the_missions_over_the_limit():

@@ -32,7 +32,7 @@ import numpy as np
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import write_json
-from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord
+from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord, RecordError
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.experiments.grid import Grid
 from tssac_core.sim.missions import MissionResults, fly_missions
@@ -194,8 +194,8 @@ class TeamEvaluation:
     def from_record(cls, data: dict[str, Any]) -> TeamEvaluation:
         """From a cache file's contents (:func:`evaluate`): its evaluation record and ``per_episode``."""
         record = EvaluationRecord.from_json(data)
-        assert record.success_rate is not None and record.mean_cost is not None, "the batched world knows both"
-        assert isinstance(record.run, BatchedRun), "a batched evaluation says what flew"
+        if record.success_rate is None or record.mean_cost is None or not isinstance(record.run, BatchedRun):
+            raise RecordError("not a batched evaluation: no success rate, mean cost, or what flew it")
         tasks = None
         if record.roles:  # a rate over the evaluation's missions: back to a count
             tasks = {
@@ -262,7 +262,10 @@ def cached(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation | N
         return None
     if data.get("cache_key") != cache_key(team, spec) or "per_episode" not in data:
         return None
-    return TeamEvaluation.from_record(data)
+    try:
+        return TeamEvaluation.from_record(data)
+    except (RecordError, KeyError, TypeError, ValueError):  # a damaged cache is flown again, as a stale one is
+        return None
 
 
 def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
