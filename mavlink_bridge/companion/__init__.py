@@ -42,7 +42,8 @@ Exit statuses (one ``end ...`` line on stdout, ``--status-json`` for the details
 
 Modules: ``config`` (CompanionConfig and the constants) · ``held_pilot`` (a trained policy, the
 guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) ·
-``shield`` (the monitor on one vehicle) · ``mission_end`` (when a mission's end heard is believed) · ``status``
+``shield`` (the monitor on one vehicle) · ``mission_end`` (when a mission's end heard is believed) · ``grants``
+(how far a lockstep answer reaches) · ``clock_rate`` (the vehicle clock's rate, off lockstep) · ``status``
 (counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock pacing) · ``cli``
 (``python -m mavlink_bridge.companion``).
 """

@@ -14,6 +14,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from mavlink_bridge.companion.clock_rate import ClockRate
 from mavlink_bridge.companion.config import (
     GUIDED_MODE,
     LOITER_MODE,
@@ -155,8 +156,7 @@ class Companion:
         self.armed = False
         self.mode: int | None = None
         self._state_valid_after_s = 0.0  # heartbeats read before this wall time predate our last commands
-        self._rate_ref: tuple[float, int] | None = None  # (wall, vehicle ms) for the clock-rate estimate
-        self.rate: float | None = None  # vehicle seconds per wall second
+        self._clock_rate = ClockRate()  # vehicle seconds per wall second
         self._holding: str | None = None  # why we hold, while we do
         self._gap_seen = False  # a gap happened since the last fix: re-engage a disarmed vehicle
         self._sent: Setpoint | None = None  # the setpoint sent last
@@ -350,18 +350,12 @@ class Companion:
         if self.vt_ms is None or t_ms > self.vt_ms:
             self.vt_ms = t_ms
             self.vt_rx_s = rx_s
-            self._update_rate(rx_s, t_ms)
+            self._clock_rate.seen(rx_s, t_ms)
 
-    def _update_rate(self, wall_s: float, t_ms: int) -> None:
-        """Vehicle seconds per wall second, over windows of at least half a wall second."""
-        if self._rate_ref is None:
-            self._rate_ref = (wall_s, t_ms)
-            return
-        w0, t0 = self._rate_ref
-        if wall_s - w0 >= 0.5:
-            rate = (t_ms - t0) / 1000.0 / (wall_s - w0)
-            self.rate = rate if self.rate is None else 0.5 * (self.rate + rate)
-            self._rate_ref = (wall_s, t_ms)
+    @property
+    def rate(self) -> float | None:
+        """Vehicle seconds per wall second (:class:`ClockRate`), None until measured."""
+        return self._clock_rate.rate
 
     def _on_restart(self, t_ms: int) -> None:
         role = self.cfg.role.value
