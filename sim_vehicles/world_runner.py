@@ -70,6 +70,7 @@ import numpy as np
 from sim_vehicles.autopilot.clock import Clock
 from sim_vehicles.autopilot.events import EventKind, WorldFlags, events_from_step
 from sim_vehicles.autopilot.modes import FlightMode
+from sim_vehicles.autopilot.pacing import EPS, PacedSchedule
 from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.autopilot.vehicle import Vehicle, VehicleSetup
 from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
@@ -90,13 +91,10 @@ _log = logging.getLogger(__name__)
 
 MAX_CATCHUP_STEPS = 20
 """Steps taken per loop iteration at most, so that I/O is never starved."""
-MAX_LAG_S = 1.0
-"""Simulated seconds behind schedule after which real-time pacing is re-anchored."""
 KEEPALIVE_S = 1.0
 """Wall seconds between snapshots while a lockstep world holds still."""
 MAX_SELECT_S = 0.05
 """Upper bound of one wait, so a stop request is seen within this time."""
-_EPS = 1e-9
 
 
 def _row(v: Vehicle, truth: VehicleTruth, cost: float, cost_total: float) -> VehicleRow:
@@ -252,6 +250,7 @@ class WorldRunner:
         self.scenario = s
         self.dt_s = s.dt_s
         self.lockstep = config.clock is ClockMode.LOCKSTEP
+        self._pacing = PacedSchedule(s.dt_s, config.speedup)
         self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
@@ -494,19 +493,13 @@ class WorldRunner:
         return all(ready) if self.config.lockstep_start is LockstepStart.ALL else any(ready)
 
     def _anchor(self, now: float) -> None:
-        self._pace_wall0 = now
-        self._pace_sim0 = self.clock.sim_s
+        self._pacing.anchor(now, self.clock.sim_s)
 
     def _step_due(self, now: float) -> bool:
-        target = self._pace_sim0 + (now - self._pace_wall0) * self.config.speedup
-        if target - self.clock.sim_s > MAX_LAG_S + self.dt_s:
-            _log.warning("simulation is %.2f s behind its clock; re-anchoring the schedule", target - self.clock.sim_s)
-            self._anchor(now)
-            return True
-        return self.clock.sim_s + self.dt_s <= target + _EPS
+        return self._pacing.step_due(now, self.clock.sim_s)
 
     def _next_step_wall(self) -> float:
-        return self._pace_wall0 + (self.clock.sim_s + self.dt_s - self._pace_sim0) / self.config.speedup
+        return self._pacing.next_step_wall(self.clock.sim_s)
 
     def _advance_paced(self, now: float) -> float:
         n = 0
@@ -569,7 +562,7 @@ class WorldRunner:
         wall time is spent waiting for nothing)."""
         end_s = self._end_sim_s + self.config.linger_s
         n = 0
-        while self.clock.sim_s + _EPS < end_s and n < MAX_CATCHUP_STEPS and (self.lockstep or self._step_due(now)):
+        while self.clock.sim_s + EPS < end_s and n < MAX_CATCHUP_STEPS and (self.lockstep or self._step_due(now)):
             self._linger_steps += 1
             sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
             if self._link_on_sim_time:
@@ -578,7 +571,7 @@ class WorldRunner:
             for link in self.links:
                 link.publish(tick=self.lockstep)
             n += 1
-        if self.clock.sim_s + _EPS >= end_s:
+        if self.clock.sim_s + EPS >= end_s:
             self._phase = _Phase.DONE
             return None
         return now if self.lockstep else self._next_step_wall()
