@@ -102,7 +102,8 @@ class SitlMonitorFigures:
     scope: str | None = None
 
 
-MonitorFigures = WorldMonitorFigures | SitlMonitorFigures
+RecordedMonitor = WorldMonitorFigures | SitlMonitorFigures
+"""The monitor's figures as the world that flew counted them: per simulation step, or per companion control step."""
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,7 @@ class EvaluationRecord:
     mean_mission_time_s: float | None
     roles: dict[str, RoleFigures] = field(default_factory=dict)
     worst_missions: list[WorstMission] = field(default_factory=list)
-    monitor: MonitorFigures | None = None
+    monitor: RecordedMonitor | None = None
     run: BatchedRun | SitlRun | None = None
     """What flew the missions, where (None: the figures alone)."""
 
@@ -230,14 +231,14 @@ def _known(figures: RoleFigures) -> dict[str, float]:
     return {k: v for k, v in dataclasses.asdict(figures).items() if v is not None}
 
 
-def _monitor_json(monitor: MonitorFigures) -> dict[str, Any]:
+def _monitor_json(monitor: RecordedMonitor) -> dict[str, Any]:
     out = dataclasses.asdict(monitor)
     if isinstance(monitor, WorldMonitorFigures) and monitor.config is None:
         del out["config"]
     return out
 
 
-def _monitor(data: Mapping[str, Any]) -> MonitorFigures:
+def _monitor(data: Mapping[str, Any]) -> RecordedMonitor:
     if "decisions" in data:  # counted by companions
         return SitlMonitorFigures(**data)
     fields = {k: v for k, v in data.items() if k != "roles"}
