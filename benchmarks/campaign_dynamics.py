@@ -5,8 +5,10 @@ dynamics"), as measured, whatever the figures are. Two more campaigns fly the sh
 ArduPlane's GUIDED dialect (``--setpoints arduplane``, names ending ``-arduplane``) on the same layouts, to set beside
 the body-rate campaigns.
 
-Each campaign is one ``fly`` command writing its JSON into ``--out``; a campaign whose JSON is already there is not
-flown again, so an interrupted run resumes where it stopped (run the same command again). At the end the script
+Each campaign is one ``fly`` command writing its JSON into ``--out``; a campaign whose JSON is already there, whole, is
+not flown again, so an interrupted run resumes where it stopped (run the same command again). A JSON that ``fly`` wrote
+when it was stopped part-way (``interrupted``, or fewer missions than asked for) is set aside as ``NAME.partial.json``
+and that campaign is flown again from its first mission, on the same layouts. At the end the script
 prints the table (success and mean cost with their 95% intervals) and writes it as ``summary.json`` beside the
 campaigns.
 
@@ -84,6 +86,17 @@ def row(campaign: Campaign, result: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def complete(out: Path, episodes: int) -> bool:
+    """Whether ``out`` holds a whole campaign of ``episodes`` missions; a partial one is moved aside."""
+    if not out.is_file():
+        return False
+    result = json.loads(out.read_text())
+    if not result.get("interrupted") and result.get("episodes") == episodes and not result.get("error"):
+        return True
+    out.replace(out.with_suffix(".partial.json"))
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=command_description(__doc__))
     p.add_argument("--out", type=Path, required=True, help="directory for the campaigns' JSON (resumes from it)")
@@ -99,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.only and not any(text in campaign.name for text in args.only):
             continue
         out = args.out / f"{campaign.name}.json"
-        if not out.is_file():
+        if not complete(out, args.episodes):
             t0 = time.monotonic()
             proc = subprocess.run(campaign.argv(args, out), cwd=ROOT, capture_output=True, text=True)
             print(f"{campaign.name}: exit {proc.returncode} in {time.monotonic() - t0:.0f} s", flush=True)
