@@ -38,6 +38,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
     airframe_path,
     load_airframe,
 )
+from tssac_core.assurance.lagged_backups import lag_gains
 from tssac_core.common.cli import UsageError, run
 from tssac_core.sim.airframe_response import (
     RESPONSE_SCHEMA,
@@ -45,7 +46,6 @@ from tssac_core.sim.airframe_response import (
     ResponseFileError,
     dump_response,
     file_sha256,
-    lag_gains,
     load_response,
 )
 
@@ -106,7 +106,7 @@ def fly_turn(
 
 def lag_rates(before: float, command: float, steps: int, delay_steps: int, taus: np.ndarray, dt_s: float) -> np.ndarray:
     """The model's mean turn rate over each of ``steps`` steps of a command held from step 0, (G, steps) for G time
-    constants at once (:func:`tssac_core.sim.airframe_response.lag_step_mean`'s model): ``before`` for the delay,
+    constants at once (:func:`tssac_core.assurance.lagged_backups.lag_step_mean`'s model): ``before`` for the delay,
     then the first-order lag toward the command, omega(t) = command + (before - command) exp(-t / tau), whose mean
     over step j of it is command + (before - command) (1 - g)^j h, with g = 1 - exp(-dt / tau), h = tau g / dt."""
     g, h = lag_gains(taus, dt_s)

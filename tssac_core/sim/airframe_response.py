@@ -9,7 +9,8 @@ file describes the difference in the world's own terms (a heading-rate command h
     omega_k+1 = omega_k + g (omega_cmd(k - d) - omega_k),   g = 1 - exp(-dt / tau)   (delay d steps, then first order)
 
 the continuous first-order lag sampled at the steps; the heading turns over step k by its exact mean,
-``omega_cmd(k - d) + (omega_k - omega_cmd(k - d)) h`` with ``h = tau g / dt`` (:func:`lag_step_mean`)
+``omega_cmd(k - d) + (omega_k - omega_cmd(k - d)) h`` with ``h = tau g / dt``
+(:func:`tssac_core.assurance.lagged_backups.lag_step_mean`)
 
 with ``d = round(delay_s / dt_s)``, and the forward acceleration bounded by
 ``decel_max_m_s2(v) <= a <= accel_max_m_s2(v)``.
@@ -33,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
 from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import read_yaml, typed_value
 
@@ -61,24 +63,6 @@ class ResponseAt:
     def lag_gain(self, dt_s: float) -> float:
         """The first-order lag's share of the gap closed per world step: 1 - exp(-dt / tau)."""
         return float(lag_gains(np.array([self.tau_s]), dt_s)[0][0])
-
-
-def lag_gains(taus: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """For time constants ``taus`` (s, >= 0): g = 1 - exp(-dt / tau), the share of the gap to the command closed in a
-    step, and h = tau g / dt, the gap's share left in the step's mean rate (tau = 0: g = 1, h = 0, no lag)."""
-    taus = np.asarray(taus, dtype=np.float64)
-    safe = np.where(taus > 0.0, taus, 1.0)
-    g = np.where(taus > 0.0, -np.expm1(-dt_s / safe), 1.0)
-    h = np.where(taus > 0.0, safe * g / dt_s, 0.0)
-    return g, h
-
-
-def lag_step_mean(
-    omega: np.ndarray, command: np.ndarray, g: np.ndarray, h: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """One step of the lag (module docstring): the rate's mean over the step and the rate at its end."""
-    gap = omega - command
-    return command + gap * h, command + gap * (1.0 - g)
 
 
 @dataclass(frozen=True)
@@ -196,3 +180,16 @@ def dump_response(response: AirframeResponse) -> str:
         if isinstance(value, tuple):
             data[key] = list(value)
     return header + yaml.safe_dump(data, sort_keys=False, width=120)
+
+
+def airframe_lag(response: AirframeResponse, speeds_m_s: np.ndarray, dt_s: float) -> AirframeLag:
+    """The monitor's model of each vehicle's airframe (:class:`tssac_core.assurance.lagged_backups.AirframeLag`): the
+    response read at each vehicle's speed (the worse of the table's neighbours)."""
+    at = [response.at(float(v)) for v in np.asarray(speeds_m_s, dtype=np.float64)]
+    return AirframeLag(
+        delay_steps=np.array([r.delay_steps(dt_s) for r in at], dtype=np.int64),
+        tau_s=np.array([r.tau_s for r in at]),
+        accel_m_s2=np.array([r.accel_max_m_s2 for r in at]),
+        decel_m_s2=np.array([r.decel_max_m_s2 for r in at]),
+        residual_m=np.array([r.turn_residual_m for r in at]),
+    )

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.sim.airframe_response import AirframeResponse, lag_gains, lag_step_mean
+from tssac_core.assurance.lagged_backups import lag_gains, lag_step_mean
+from tssac_core.sim.airframe_response import AirframeResponse
 from tssac_core.sim.world import World
 
 Range = tuple[float, float]
@@ -93,7 +94,7 @@ class VariedAirframes:
         self._max_delay = round(variation.turn_delay_s[1] / dt)
         self._delay = np.zeros((n, 3), dtype=np.int64)
         self._gain = np.ones((n, 3))
-        """g of :func:`tssac_core.sim.airframe_response.lag_gains` per vehicle (1: no lag)."""
+        """g of :func:`tssac_core.assurance.lagged_backups.lag_gains` per vehicle (1: no lag)."""
         self._hold = np.zeros((n, 3))
         """h of the same (0: no lag)."""
         self._low = np.full((n, 3), -1.0)

@@ -1,0 +1,241 @@
+"""The monitor's prediction with an airframe's response: the turn-rate lag, and a keep-out region for every backup
+that holds for ever under it (issue 58, the monitor under real dynamics; the model and its fitted data:
+:mod:`tssac_core.sim.airframe_response`).
+
+Pure numpy, vectorised over M vehicles, in the frames and units of :mod:`tssac_core.assurance.monitor`.
+
+**The model** (per vehicle, at its speed). The heading rate follows the commanded one after ``d`` world steps
+through a first-order lag of time constant tau: with c_k the command the airframe follows over step k (the one sent
+d steps earlier), g = 1 - exp(-dt / tau) and h = tau g / dt,
+
+    mean rate over step k   m_k = c_k + (omega_k - c_k) h
+    rate at its end         omega_k+1 = c_k + (omega_k - c_k) (1 - g)
+
+and the position moves by eq. 5's exact arc at the mean rate (the chord v dt sinc(m dt / 2) along
+phi + m dt / 2), as the fit flew it. The forward acceleration is the command clipped to what the airframe achieves
+([decel, accel]). :class:`LagState` carries what the lag needs beyond eq. 5's state: the rate flown now and the
+commands sent but not yet followed.
+
+**A backup's keep-out region** (a constant-speed backup: straight for its lead, then a maximum-rate turn
+omega_c = +-omega_max for ever). The lead and the turn's first ``K`` steps (the delay and four time constants) are
+the model's own samples; an arc between two samples is never farther than v dt / 2 from one of them. After them, with
+r = v / |omega_c| and the *instantaneous centre* c(t) = p(t) + r n(phi(t)) (n the unit normal toward the turn),
+
+    dc/dt = v (1 - omega(t) / omega_c) u(phi)   so   |dc/dt| = r |omega(t) - omega_c|
+
+and the first-order gap after step K decays as |omega_K - omega_c| exp(-t / tau): the centre moves at most
+rho = r |omega_K - omega_c| tau in all, and the vehicle, always at r from c(t), stays for ever inside the disk of
+radius r + rho about c_K. Its clearance is exact (:func:`~tssac_core.assurance.monitor.circle_clearance`); the
+samples' clearance less v dt / 2 covers the rest. Against the real airframe the model is off by at most the fitted
+``turn_residual_m`` (the largest distance the fit's turns left): taken off every clearance here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tssac_core.assurance.monitor import Hazards, Limits, circle_clearance, point_clearance
+
+SETTLE_TIME_CONSTANTS = 4.0
+"""A turn's samples run for the delay and this many time constants; the rest is the disk (its rho is then at most
+exp(-4), under 2%, of the gap at the turn's start times r tau)."""
+
+
+def lag_gains(taus: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """For time constants ``taus`` (s, >= 0): g = 1 - exp(-dt / tau), the share of the gap to the command closed in a
+    step, and h = tau g / dt, the gap's share left in the step's mean rate (tau = 0: g = 1, h = 0, no lag)."""
+    taus = np.asarray(taus, dtype=np.float64)
+    safe = np.where(taus > 0.0, taus, 1.0)
+    g = np.where(taus > 0.0, -np.expm1(-dt_s / safe), 1.0)
+    h = np.where(taus > 0.0, safe * g / dt_s, 0.0)
+    return g, h
+
+
+def lag_step_mean(
+    omega: np.ndarray, command: np.ndarray, g: np.ndarray, h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the lag (module docstring): the rate's mean over the step and the rate at its end."""
+    gap = omega - command
+    return command + gap * h, command + gap * (1.0 - g)
+
+
+@dataclass(frozen=True)
+class AirframeLag:
+    """The response of each vehicle's airframe at its speed, (M,) arrays (module docstring)."""
+
+    delay_steps: np.ndarray
+    """Whole world steps before a command is followed, int."""
+    tau_s: np.ndarray
+    """The lag's time constant (s, >= 0)."""
+    accel_m_s2: np.ndarray
+    """The largest forward acceleration it achieves (> 0)."""
+    decel_m_s2: np.ndarray
+    """The largest deceleration it achieves (< 0)."""
+    residual_m: np.ndarray
+    """How far the airframe's path may lie from the model's (m)."""
+
+    def select(self, idx: np.ndarray) -> AirframeLag:
+        return AirframeLag(
+            self.delay_steps[idx], self.tau_s[idx], self.accel_m_s2[idx], self.decel_m_s2[idx], self.residual_m[idx]
+        )
+
+    def settle_steps(self, dt_s: float) -> int:
+        """The turn's sampled steps K: the longest delay and SETTLE_TIME_CONSTANTS of the longest time constant."""
+        return int(self.delay_steps.max(initial=0)) + math.ceil(
+            SETTLE_TIME_CONSTANTS * self.tau_s.max(initial=0) / dt_s
+        )
+
+
+@dataclass(frozen=True)
+class LagState:
+    """What the lag needs beyond x, y, v, phi, (M,) and (M, D) arrays."""
+
+    omega_rad_s: np.ndarray
+    """The heading rate flown now."""
+    pending_rad_s: np.ndarray
+    """(M, D) the heading-rate commands sent and not yet followed, oldest first; a vehicle whose delay d is shorter
+    than D uses its last d columns (D >= every vehicle's delay)."""
+
+    @staticmethod
+    def steady(omega_rad_s: np.ndarray, width: int) -> LagState:
+        """A vehicle in a steady turn at ``omega`` (0: straight), its last ``width`` commands that rate."""
+        omega = np.asarray(omega_rad_s, dtype=np.float64)
+        return LagState(omega.copy(), np.repeat(omega[:, None], width, axis=1))
+
+    def select(self, idx: np.ndarray) -> LagState:
+        return LagState(self.omega_rad_s[idx], self.pending_rad_s[idx])
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """A path flown under the model: the states after steps 1..S, (M, S) each, and what the lag needs after each."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    speeds: np.ndarray
+    headings: np.ndarray
+    rates: np.ndarray
+    """(M, S) the heading rate flown at the end of each step."""
+    queue: np.ndarray
+    """(M, D + S) the pending commands, then the ones flown: what is still pending after step k is columns
+    k + 1 .. k + D."""
+
+    def lag_after(self, steps: int) -> LagState:
+        """The lag's state after ``steps`` steps (1..S)."""
+        width = self.queue.shape[1] - self.rates.shape[1]
+        return LagState(self.rates[:, steps - 1], self.queue[:, steps : steps + width])
+
+
+def lagged_rollout(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    turn_commands_rad_s: np.ndarray,
+    accel_commands_m_s2: np.ndarray,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+) -> Rollout:
+    """Fly ``S`` steps of commands, (M, S) heading rates (rad/s) and accelerations (m/s^2), under the model (module
+    docstring): the pending commands first, the acceleration clipped to [decel, accel] and the speed to its limits."""
+    m, s = turn_commands_rad_s.shape
+    width = lag_state.pending_rad_s.shape[1]
+    queue = np.concatenate([lag_state.pending_rad_s, turn_commands_rad_s], axis=1)  # (M, D + S)
+    start = width - airframe.delay_steps  # column of the command followed over step 0, (M,)
+    if np.any(start < 0):
+        raise ValueError(f"LagState: {width} pending commands, but a delay of {airframe.delay_steps.max()} steps")
+    followed = np.take_along_axis(queue, start[:, None] + np.arange(s)[None, :], axis=1)  # (M, S)
+    g, h = lag_gains(airframe.tau_s, dt_s)
+    accel = np.clip(accel_commands_m_s2, airframe.decel_m_s2[:, None], airframe.accel_m_s2[:, None])
+    omega = lag_state.omega_rad_s.astype(np.float64)
+    px, py, pv, ph = (np.asarray(a, dtype=np.float64).copy() for a in (x, y, v, phi))
+    out = np.empty((5, m, s))
+    for k in range(s):
+        rate, omega = lag_step_mean(omega, followed[:, k], g, h)
+        v_next = np.clip(pv + accel[:, k] * dt_s, lim.speed_min_m_s, lim.speed_max_m_s)
+        half = 0.5 * rate * dt_s
+        chord = 0.5 * (pv + v_next) * dt_s * np.sinc(half / np.pi)
+        px = px + chord * np.cos(ph + half)
+        py = py + chord * np.sin(ph + half)
+        ph = ph + rate * dt_s
+        pv = v_next
+        out[:, :, k] = px, py, pv, ph, omega
+    return Rollout(out[0], out[1], out[2], out[3], out[4], queue)
+
+
+def turn_keep_out(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    sign: float,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+) -> tuple[Rollout, np.ndarray, np.ndarray, np.ndarray]:
+    """A maximum-rate turn (``sign`` +1 left, -1 right) held for ever at constant speed from each state: its first K
+    steps (:meth:`AirframeLag.settle_steps`) as samples, and the disk the rest stays in, centre (M,) x, y and radius
+    (M,) (module docstring)."""
+    m = len(x)
+    k = airframe.settle_steps(dt_s)
+    command = sign * lim.turn_rate_max_rad_s
+    path = lagged_rollout(
+        x, y, v, phi, lag_state, np.repeat(command[:, None], k, axis=1), np.zeros((m, k)), airframe, lim, dt_s
+    )
+    px, py, heading, speed = path.xs[:, -1], path.ys[:, -1], path.headings[:, -1], path.speeds[:, -1]
+    r = speed / lim.turn_rate_max_rad_s
+    # K covers every delay, so the command is followed from step K on: the gap decays as a first-order lag.
+    rho = r * np.abs(path.rates[:, -1] - command) * airframe.tau_s
+    cx, cy = px - sign * r * np.sin(heading), py + sign * r * np.cos(heading)
+    return path, cx, cy, r + rho
+
+
+def lagged_backup_clearance(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    hz: Hazards,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+    leads: np.ndarray,
+) -> np.ndarray:
+    """Clearance of every constant-speed backup flown for ever under the model from each state, less the airframe's
+    residual, (M, L * 2) (candidate lead * 2 + turn; turn 0 left, 1 right, as the monitor's first two ``TURNS``).
+
+    A backup flies straight (heading-rate command 0, speed held) for its lead of ``leads`` world steps, then its
+    maximum-rate turn for ever: the lead's samples, the turn's K samples (less v_max dt / 2 each) and the disk the
+    rest stays in (module docstring)."""
+    m, n_leads = len(x), len(leads)
+    longest = int(leads.max(initial=0))
+    out = np.empty((m, n_leads, 2))
+    half_step = lim.speed_max_m_s * dt_s / 2
+    # The least clearance of the lead's samples up to each of its steps, the start included (the first half-step's
+    # arc lies within v dt / 2 of the start).
+    lead_min = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step[:, None], longest + 1, axis=1)
+    lx, ly, lv, lp = (a[:, None] for a in (x, y, v, phi))
+    straight = None
+    if longest:
+        straight = lagged_rollout(
+            x, y, v, phi, lag_state, np.zeros((m, longest)), np.zeros((m, longest)), airframe, lim, dt_s
+        )
+        along = np.minimum.accumulate(point_clearance(straight.xs, straight.ys, hz) - half_step[:, None], axis=1)
+        lead_min[:, 1:] = np.minimum(lead_min[:, 1:], along)
+        lx, ly = np.concatenate([lx, straight.xs], 1), np.concatenate([ly, straight.ys], 1)
+        lv, lp = np.concatenate([lv, straight.speeds], 1), np.concatenate([lp, straight.headings], 1)
+    for i, lead in enumerate(int(t) for t in leads):
+        ahead = straight.lag_after(lead) if lead and straight is not None else lag_state
+        ex, ey, ev, ep = lx[:, lead], ly[:, lead], lv[:, lead], lp[:, lead]
+        for j, sign in enumerate((1.0, -1.0)):
+            path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, ahead, sign, airframe, lim, dt_s)
+            samples = point_clearance(path.xs, path.ys, hz).min(axis=1) - half_step
+            out[:, i, j] = np.minimum.reduce([lead_min[:, lead], samples, circle_clearance(cx, cy, radius, hz)])
+    return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
