@@ -33,6 +33,7 @@ def random_airframes(rng: np.random.Generator, m: int, residual: float = 0.0) ->
     return AirframeLag(
         delay_steps=rng.integers(0, 3, m),
         tau_s=rng.uniform(0.0, 2.0, m),
+        rollout_tau_s=rng.uniform(0.0, 2.0, m),
         accel_m_s2=np.full(m, 6.0),
         decel_m_s2=np.full(m, -2.0),
         residual_m=np.full(m, residual),
@@ -50,7 +51,9 @@ def test_without_a_lag_the_model_is_eq5() -> None:
     x, y, v, phi = random_states(rng, m)
     action = rng.uniform(-1.0, 1.0, (m, 2))
     lim = limits(m)
-    none = AirframeLag(np.zeros(m, np.int64), np.zeros(m), np.full(m, 10.0), np.full(m, -10.0), np.zeros(m))
+    none = AirframeLag(
+        np.zeros(m, np.int64), np.zeros(m), np.zeros(m), np.full(m, 10.0), np.full(m, -10.0), np.zeros(m)
+    )
     turn = np.repeat((action[:, 0] * W)[:, None], steps, axis=1)
     accel = np.repeat((action[:, 1] * 10.0)[:, None], steps, axis=1)
     got = lagged_rollout(x, y, v, phi, LagState.steady(np.zeros(m), 0), turn, accel, none, lim, DT)
@@ -59,9 +62,11 @@ def test_without_a_lag_the_model_is_eq5() -> None:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
 
 
-def test_the_rate_follows_the_pending_commands_then_a_first_order_lag() -> None:
+def test_the_rate_follows_the_pending_commands_then_a_first_order_lag_rolling_in_and_another_rolling_out() -> None:
     tau, delay = 1.5, 2
-    air = AirframeLag(np.array([delay]), np.array([tau]), np.array([6.0]), np.array([-2.0]), np.zeros(1))
+    air = AirframeLag(
+        np.array([delay]), np.array([tau]), np.array([0.5]), np.array([6.0]), np.array([-2.0]), np.zeros(1)
+    )
     pending = np.array([[0.01, 0.02]])  # sent before, followed first, oldest first
     state = LagState(np.array([0.0]), pending)
     steps = 30
@@ -77,6 +82,14 @@ def test_the_rate_follows_the_pending_commands_then_a_first_order_lag() -> None:
     np.testing.assert_allclose(out.rates[0], want, rtol=0, atol=1e-15)
     after = out.lag_after(steps)
     np.testing.assert_allclose(after.pending_rad_s, [[W, W]])
+    # Rolling out (command 0 from a steady turn): the roll-out's time constant, after the pending turn commands.
+    level = lagged_rollout(
+        np.zeros(1), np.zeros(1), np.full(1, 200.0), np.zeros(1), LagState.steady(np.array([W]), 2),
+        np.zeros((1, 12)), np.zeros((1, 12)), air, limits(1), DT,
+    )  # fmt: skip
+    g_out, _ = lag_gains(np.array([0.5]), DT)
+    want = [W, W] + [W * (1.0 - g_out[0]) ** k for k in range(1, 11)]
+    np.testing.assert_allclose(level.rates[0], want, rtol=0, atol=1e-15)
     # The speed held, the acceleration clipped to what the airframe achieves.
     fast = lagged_rollout(
         np.zeros(1), np.zeros(1), np.full(1, 200.0), np.zeros(1), state, np.zeros((1, 10)), np.full((1, 10), 10.0),
@@ -131,7 +144,7 @@ def test_each_backups_clearance_is_at_most_its_long_flights_less_the_residual() 
 
 
 def test_a_state_with_fewer_pending_commands_than_the_delay_is_refused() -> None:
-    air = AirframeLag(np.array([2]), np.array([1.0]), np.array([6.0]), np.array([-2.0]), np.zeros(1))
+    air = AirframeLag(np.array([2]), np.array([1.0]), np.array([0.5]), np.array([6.0]), np.array([-2.0]), np.zeros(1))
     with pytest.raises(ValueError, match="pending commands"):
         lagged_rollout(
             np.zeros(1), np.zeros(1), np.full(1, 200.0), np.zeros(1), LagState.steady(np.zeros(1), 1),
@@ -191,20 +204,21 @@ def f16_excess_m(speed_m_s: float, before_deg_s: float, partial_steps: int, sign
 
 # (speed, steady turn before (deg/s), steps of the opposite turn before the backup, backup turn, lead (s)): between
 # fitted speeds (the worse neighbour's lag and residual), reversals from full bank, mid-roll, from straight, a lead.
-# Leads from a turning state are not in the sweep: the F-16 rolls out of a turn slower than the fitted lag says,
-# and a lead of 8-32 s after a steady turn ends 380-860 m outside the region (docs/runtime_assurance.md, "Under an
-# airframe's response"); from straight flight a lead is covered.
+# (speed, steady turn before (deg/s), steps of the opposite turn before the backup, backup turn, lead (s)): between
+# fitted speeds (interpolated lag, the worse neighbour's residual), reversals from full bank, mid-roll, from straight,
+# leads flown out of a turn (the roll-out's own time constant).
 WORST_CASES = [
     (175.0, 5.0, 0, -1.0, 0.0),
+    (225.0, 5.0, 20, -1.0, 32.0),
     (275.0, 5.0, 10, -1.0, 0.0),
-    (300.0, -5.0, 0, 1.0, 0.0),
-    (225.0, 0.0, 0, 1.0, 8.0),
+    (300.0, -5.0, 0, 1.0, 8.0),
 ]
 MORE_CASES = [
-    (speed, before, partial, sign, 0.0)
-    for speed in (150.0, 175.0, 200.0, 225.0, 250.0, 275.0, 300.0)
+    (speed, before, partial, sign, lead)
+    for speed in (150.0, 175.0, 225.0, 275.0, 300.0)
     for before, partial, sign in ((0.0, 0, 1.0), (5.0, 0, -1.0), (-5.0, 0, 1.0), (5.0, 10, -1.0), (5.0, 20, -1.0))
-] + [(speed, 0.0, 0, 1.0, 32.0) for speed in (150.0, 225.0, 300.0)]
+    for lead in (0.0, 32.0)
+]
 
 
 @pytest.mark.parametrize("case", WORST_CASES, ids=lambda c: f"{c[0]:.0f}m_s-{c[1]:+.0f}-{c[2]}-{c[3]:+.0f}-{c[4]:g}s")
@@ -219,9 +233,10 @@ def test_the_f16_stays_within_its_residual_from_every_state_of_the_sweep(case: t
 
 
 def test_half_the_fitted_residual_is_not_a_bound_for_the_f16() -> None:
-    """The negative control: a reversal at 175 m/s goes further outside the region than half the residual."""
+    """The negative control: a lead of 32 s out of a reversal's roll at 225 m/s goes further outside the region than
+    half the residual."""
     from sim_vehicles.dynamics.response_fit import response_path
     from tssac_core.sim.airframe_response import load_response
 
-    residual = load_response(response_path("f16")).at(175.0).turn_residual_m
-    assert f16_excess_m(175.0, 5.0, 0, -1.0, 0.0) + residual > residual / 2
+    residual = load_response(response_path("f16")).at(225.0).turn_residual_m
+    assert f16_excess_m(225.0, 5.0, 20, -1.0, 32.0) + residual > residual / 2

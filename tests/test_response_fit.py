@@ -1,6 +1,6 @@
 """The airframe's fitted response (tssac_core/sim/airframe_response.py) and the tool that fits it from JSBSim
 (sim_vehicles/dynamics/response_fit.py): the lag's equation, the fit on data of known parameters, the table's
-worse-neighbour lookup, the file's round trip and refusals, and the committed f16 file against JSBSim itself."""
+lookup between speeds, the file's round trip and refusals, and the committed f16 file against JSBSim itself."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import pytest
 
 from sim_vehicles.dynamics.jsbsim_airframe import load_airframe
 from sim_vehicles.dynamics.response_fit import (
+    ROLLOUT_S,
     Turn,
     fit_lag,
     fly_turn,
@@ -23,6 +24,7 @@ from sim_vehicles.dynamics.response_fit import (
     mean_accel,
     model_paths,
     response_path,
+    switched_lag_rates,
 )
 from tssac_core.sim.airframe_response import (
     AirframeResponse,
@@ -55,28 +57,53 @@ def test_closed_form_lag_equals_the_recursion(before: float, command: float, del
     assert np.all(closed[:delay] == before) and closed[-1] == pytest.approx(command, abs=1e-6)
 
 
-def synthetic_turn(before: float, command: float, delay: int, tau_s: float, speed: float = 250.0) -> Turn:
+def test_the_switched_lag_rolls_out_with_its_own_time_constant_and_in_with_the_other() -> None:
+    taus = np.array([1.3, 2.0])
+    # one time constant both ways: the closed form
+    np.testing.assert_allclose(
+        switched_lag_rates(-W, W, 200, 2, np.array([1.3]), 1.3, DT_S), lag_rates(-W, W, 200, 2, np.array([1.3]), DT_S)
+    )
+    # a roll-out (less turn the same way, or none) follows the roll-out's time constant whatever the roll-in's
+    out = switched_lag_rates(W, 0.0, 200, 1, taus, 0.4, DT_S)
+    np.testing.assert_allclose(out, np.repeat(lag_rates(W, 0.0, 200, 1, np.array([0.4]), DT_S), 2, axis=0))
+    # a roll-in, and a reversal through zero, follow the roll-in's
+    for before in (0.0, -W):
+        np.testing.assert_allclose(
+            switched_lag_rates(before, W, 200, 1, taus, 0.4, DT_S), lag_rates(before, W, 200, 1, taus, DT_S)
+        )
+
+
+def synthetic_turn(
+    before: float, command: float, delay: int, tau_s: float, rollout_tau_s: float = 0.6, speed: float = 250.0
+) -> Turn:
     """A turn flown by the model itself (what a perfect fit must recover with no residual)."""
     skeleton = Turn(before, command, np.zeros(300), np.zeros((301, 2)), 0.3, speed)
-    path = model_paths(skeleton, delay, np.array([tau_s]), DT_S)[0]
+    path = model_paths(skeleton, delay, np.array([tau_s]), DT_S, rollout_tau_s)[0]
     return dataclasses.replace(skeleton, xy_m=path)
 
 
-def test_fit_recovers_a_known_delay_and_time_constant() -> None:
-    turns = [synthetic_turn(b, c, 4, 1.7) for b, c in ((0.0, W), (0.0, -W), (-W, W), (W, -W))]
-    delay, tau, residual = fit_lag(turns, DT_S)
-    assert (delay, tau) == (4, pytest.approx(1.7))
-    assert residual < 1e-6
+TURNS = ((0.0, W), (0.0, -W), (-W, W), (W, -W))
+ROLLOUTS = ((W, 0.0), (-W, 0.0))
+
+
+def test_fit_recovers_a_known_delay_and_both_time_constants() -> None:
+    turns = [synthetic_turn(b, c, 4, 1.7) for b, c in TURNS]
+    rollouts = [synthetic_turn(b, c, 4, 1.7) for b, c in ROLLOUTS]
+    fit = fit_lag(turns, rollouts, DT_S)
+    assert (fit.delay_steps, fit.tau_s, fit.rollout_tau_s) == (4, pytest.approx(1.7), pytest.approx(0.6))
+    assert fit.residual_m < 1e-6
     # negative control: the model one step late, or with another time constant, is metres off
     late = [synthetic_turn(b, c, 5, 1.7) for b, c in ((0.0, W), (-W, W))]
-    assert fit_lag(late, DT_S)[0] == 5
-    error = turns[0].xy_m - model_paths(turns[0], 4, np.array([1.2]), DT_S)[0]
+    assert fit_lag(late, [synthetic_turn(W, 0.0, 5, 1.7)], DT_S).delay_steps == 5
+    error = turns[0].xy_m - model_paths(turns[0], 4, np.array([1.2]), DT_S, 0.6)[0]
     assert np.hypot(*error.T).max() > 50.0
+    slow_out = rollouts[0].xy_m - model_paths(rollouts[0], 4, np.array([1.7]), DT_S, 1.7)[0]
+    assert np.hypot(*slow_out.T).max() > 50.0  # a roll-out as slow as the roll-in is metres off too
 
 
 def response(**changes: object) -> AirframeResponse:
     base = AirframeResponse(
-        schema=1,
+        schema=2,
         aircraft="f16",
         airframe_sha256="0" * 64,
         jsbsim_version="1.3.3",
@@ -91,20 +118,23 @@ def response(**changes: object) -> AirframeResponse:
         accel_max_m_s2=(8.0, 7.0, 5.0),
         decel_max_m_s2=(-1.0, -1.5, -3.0),
         accel_window_s=15.0,
+        turn_rollout_tau_s=(0.9, 0.5, 0.2),
     )
     return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
 
 
-def test_a_speed_between_two_entries_gets_the_worse_of_each() -> None:
+def test_a_speed_between_two_entries_interpolates_the_lag_and_takes_the_worse_bounds() -> None:
     r = response()
-    at = r.at(250.0)
-    assert (at.delay_s, at.tau_s, at.turn_residual_m) == (0.3, 1.1, 200.0)
-    assert (at.accel_max_m_s2, at.decel_max_m_s2) == (5.0, -1.5)
-    assert r.at(200.0) == dataclasses.replace(at, accel_max_m_s2=7.0)  # a tabled speed: its own entry
+    at = r.at(250.0)  # halfway between 200 and 300 m/s
+    assert (at.delay_s, at.tau_s, at.rollout_tau_s) == (pytest.approx(0.2), pytest.approx(1.0), pytest.approx(0.35))
+    assert (at.turn_residual_m, at.accel_max_m_s2, at.decel_max_m_s2) == (200.0, 5.0, -1.5)
+    own = r.at(200.0)  # a tabled speed: its own entry
+    assert (own.delay_s, own.tau_s, own.rollout_tau_s, own.turn_residual_m) == (0.3, 1.1, 0.5, 200.0)
+    assert (own.accel_max_m_s2, own.decel_max_m_s2) == (7.0, -1.5)
     worst = r.worst(150.0, 300.0)
-    assert (worst.delay_s, worst.tau_s, worst.turn_residual_m) == (0.3, 1.8, 200.0)
+    assert (worst.delay_s, worst.tau_s, worst.rollout_tau_s, worst.turn_residual_m) == (0.3, 1.8, 0.9, 200.0)
     assert (worst.accel_max_m_s2, worst.decel_max_m_s2) == (5.0, -1.0)
-    assert at.delay_steps(DT_S) == 3 and at.lag_gain(DT_S) == pytest.approx(1 - math.exp(-0.1 / 1.1))
+    assert at.delay_steps(DT_S) == 2 and at.lag_gain(DT_S) == pytest.approx(1 - math.exp(-0.1 / 1.0))
     with pytest.raises(ResponseFileError, match="outside the fitted span 150-300"):
         r.at(320.0)
 
@@ -123,7 +153,10 @@ def test_file_round_trip_and_refusals(tmp_path: Path) -> None:
     r = response()
     path.write_text(dump_response(r))
     assert load_response(path) == r
-    path.write_text(dump_response(r).replace("schema: 1", "schema: 9"))
+    version_1 = dump_response(r).replace("schema: 2", "schema: 1").split("turn_rollout_tau_s:")[0]
+    path.write_text(version_1)  # before the roll-out's time constant: the roll-in's count both ways
+    assert load_response(path).rollout_taus() == r.turn_tau_s
+    path.write_text(dump_response(r).replace("schema: 2", "schema: 9"))
     with pytest.raises(ResponseFileError, match="newer than this program"):
         load_response(path)
     path.write_text(dump_response(r).replace("accel_window_s:", "accel_window: 3\naccel_window_s:"))
@@ -142,35 +175,38 @@ def f16_response() -> AirframeResponse:
 
 
 def test_committed_f16_response_is_what_jsbsim_flies_at_250_m_s(f16_response: AirframeResponse) -> None:
-    """The file's entry at 250 m/s against four fresh JSBSim turns and two throttle runs (the full refit of every
-    speed is ``python -m sim_vehicles.dynamics.response_fit --check``); halving the time constant, or adding a step
-    of delay, makes the model's path farther from JSBSim's than the file's residual (the test can fail)."""
+    """The file's entry at 250 m/s against four fresh JSBSim turns, two roll-outs and two throttle runs (the full
+    refit of every speed is ``python -m sim_vehicles.dynamics.response_fit --check``); halving either time constant,
+    or adding a step of delay, makes the model's path farther from JSBSim's than the file's residual (the test can
+    fail)."""
     spec = load_airframe("f16")
     i = f16_response.speeds_m_s.index(250.0)
     circles_s = 4.0 * math.pi / f16_response.turn_rate_max_rad_s
-    turns = [
-        fly_turn(spec, 250.0, f16_response.altitude_m, DT_S, b, c, circles_s)
-        for b, c in ((0.0, W), (0.0, -W), (-W, W), (W, -W))
+    turns = [fly_turn(spec, 250.0, f16_response.altitude_m, DT_S, b, c, circles_s) for b, c in TURNS] + [
+        fly_turn(spec, 250.0, f16_response.altitude_m, DT_S, b, c, ROLLOUT_S) for b, c in ROLLOUTS
     ]
     delay = round(f16_response.turn_delay_s[i] / DT_S)
+    tau, rollout_tau = f16_response.turn_tau_s[i], f16_response.turn_rollout_tau_s[i]
 
-    def largest_distance(delay_steps: int, tau_s: float) -> float:
-        paths = [model_paths(t, delay_steps, np.array([tau_s]), DT_S)[0] for t in turns]
+    def largest_distance(delay_steps: int, tau_s: float, rollout_tau_s: float) -> float:
+        paths = [model_paths(t, delay_steps, np.array([tau_s]), DT_S, rollout_tau_s)[0] for t in turns]
         return max(float(np.hypot(*(t.xy_m - path).T).max()) for t, path in zip(turns, paths))
 
-    assert largest_distance(delay, f16_response.turn_tau_s[i]) == pytest.approx(
-        f16_response.turn_residual_m[i], abs=1e-3
-    )
-    assert largest_distance(delay, f16_response.turn_tau_s[i] / 2) > f16_response.turn_residual_m[i] + 5.0
-    assert largest_distance(delay + 3, f16_response.turn_tau_s[i]) > f16_response.turn_residual_m[i] + 5.0
+    residual = f16_response.turn_residual_m[i]
+    assert largest_distance(delay, tau, rollout_tau) == pytest.approx(residual, abs=1e-3)
+    assert largest_distance(delay, tau / 2, rollout_tau) > residual + 5.0
+    assert largest_distance(delay, tau, rollout_tau * 3) > residual + 5.0
+    assert largest_distance(delay + 3, tau, rollout_tau) > residual + 5.0
     accel = mean_accel(spec, 250.0, f16_response.altitude_m, DT_S, 10.0, f16_response.accel_window_s)
     decel = mean_accel(spec, 250.0, f16_response.altitude_m, DT_S, -10.0, f16_response.accel_window_s)
     assert (accel, decel) == (
         pytest.approx(f16_response.accel_max_m_s2[i], abs=1e-4),
         pytest.approx(f16_response.decel_max_m_s2[i], abs=1e-4),
     )
-    # what JSBSIM.md measured before the work: it rolls in for about 2 s and cannot brake at 10 m/s^2
+    # what JSBSIM.md measured before the work: it rolls in for about 2 s and cannot brake at 10 m/s^2; it rolls out
+    # faster than it rolls in
     assert f16_response.turn_tau_s[i] + f16_response.turn_delay_s[i] > 0.5
+    assert f16_response.turn_rollout_tau_s[i] < f16_response.turn_tau_s[i]
     assert -4.0 < decel < -1.0 and 4.0 < accel < 9.0
 
 

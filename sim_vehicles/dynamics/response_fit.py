@@ -8,10 +8,13 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
 
 * **Turn lag and residual.** Four runs under the airframe's inner loop, each held for two full circles: a
   maximum-rate turn left, then right, entered from straight flight; and a reversal from a steady maximum-rate turn
-  one way to the other, both ways. The model is flown from each run's state at the step, and the delay (whole world
-  steps, up to ``MAX_DELAY_S``) and first-order time constant (every ``TAU_GRID_S`` up to ``MAX_TAU_S``) chosen
-  that make the mean squared distance between the two paths, over all four runs, smallest; the largest distance
-  they leave is the residual, the error term a bound built on the model adds to its margin.
+  one way to the other, both ways; and two roll-outs, from a steady maximum-rate turn either way into straight flight
+  for ``ROLLOUT_S``. The model is flown from each run's state at the step. For each delay (whole world steps, up to
+  ``MAX_DELAY_S``) the roll-out's time constant is the one (every ``TAU_GRID_S`` up to ``MAX_TAU_S``) whose paths
+  keep closest to the roll-outs (least mean squared distance), and the roll-in's (also a reversal's) the one closest
+  to the four turns; the delay is the one with the least mean square over all six runs,
+  and the largest distance they leave is the residual, the error term a bound built on the model adds to its
+  margin.
 * **Acceleration.** Full and no throttle (commands of +-``ACCEL_COMMAND_M_S2``) from the speed, the airspeed's mean
   rate over ``--accel-window-s``; the inner loop's speed reference is not clipped during these runs.
 
@@ -38,7 +41,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
     airframe_path,
     load_airframe,
 )
-from tssac_core.assurance.lagged_backups import lag_gains
+from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
 from tssac_core.common.cli import UsageError, run
 from tssac_core.sim.airframe_response import (
     RESPONSE_SCHEMA,
@@ -54,6 +57,8 @@ MAX_TAU_S = 6.0
 TAU_GRID_S = 0.01
 REVERSAL_LEAD_S = 30.0
 """A reversal starts from this long in a steady maximum-rate turn the other way."""
+ROLLOUT_S = 40.0
+"""A roll-out run's length: longer than the monitor's longest straight lead (32 s)."""
 ACCEL_COMMAND_M_S2 = 10.0
 """The acceleration commanded to measure what the airframe achieves (more than it can: the throttle saturates)."""
 SPEED_REFERENCE_SPAN_M_S = (50.0, 500.0)
@@ -115,22 +120,59 @@ def lag_rates(before: float, command: float, steps: int, delay_steps: int, taus:
     return command + (before - command) * factor
 
 
-def fit_lag(turns: Sequence[Turn], dt_s: float) -> tuple[int, float, float]:
-    """The delay (world steps) and time constant (s) whose model paths keep closest to the airframe's over all the
-    turns in the least-squares sense (the mean squared distance; the largest distance has several nearly equal minima
-    far apart in delay and time constant, the mean squared one does not), and the largest distance they leave: the
-    residual (m). An exhaustive grid."""
+def switched_lag_rates(
+    before: float, command: float, steps: int, delay_steps: int, taus: np.ndarray, rollout_tau_s: float, dt_s: float
+) -> np.ndarray:
+    """The model's mean turn rate over each of ``steps`` steps, as :func:`lag_rates`, with the roll-out's time
+    constant while it rolls out (:func:`tssac_core.assurance.lagged_backups.switched_lag_step`), (G,
+    steps) for G roll-in time constants at once: a recursion."""
+    gains_in = lag_gains(taus, dt_s)
+    gains_out = lag_gains(np.full(len(taus), rollout_tau_s), dt_s)
+    omega = np.full(len(taus), before, dtype=np.float64)
+    out = np.empty((len(taus), steps))
+    out[:, : min(delay_steps, steps)] = before
+    for k in range(delay_steps, steps):
+        out[:, k], omega = switched_lag_step(omega, np.full(len(taus), command), gains_in, gains_out)
+    return out
+
+
+@dataclass(frozen=True)
+class LagFit:
+    """The fitted lag at one speed."""
+
+    delay_steps: int
+    tau_s: float
+    """Rolling in."""
+    rollout_tau_s: float
+    residual_m: float
+    """The largest distance between the airframe's and the model's paths over every run."""
+
+
+def fit_lag(turns: Sequence[Turn], rollouts: Sequence[Turn], dt_s: float) -> LagFit:
+    """The delay and the two time constants whose model paths keep closest to the airframe's in the least-squares
+    sense (the module docstring's order; the largest distance has several nearly equal minima far apart in delay and
+    time constant, the mean squared one does not), and the largest distance they leave. An exhaustive grid."""
     taus = np.arange(TAU_GRID_S, MAX_TAU_S + TAU_GRID_S / 2, TAU_GRID_S)
-    _, delay, tau, residual = min(_fit_at_delay(turns, d, taus, dt_s) for d in range(round(MAX_DELAY_S / dt_s) + 1))
-    return delay, tau, residual
+    best: tuple[float, LagFit] | None = None
+    for delay in range(round(MAX_DELAY_S / dt_s) + 1):
+        out_squares, _, rollout_tau, out_worst = _fit_at_delay(rollouts, delay, taus, dt_s, None)
+        in_squares, _, tau, in_worst = _fit_at_delay(turns, delay, taus, dt_s, rollout_tau)
+        fit = LagFit(delay, tau, rollout_tau, max(out_worst, in_worst))
+        if best is None or out_squares + in_squares < best[0]:
+            best = (out_squares + in_squares, fit)
+    assert best is not None
+    return best[1]
 
 
-def _fit_at_delay(turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: float) -> tuple[float, int, float, float]:
-    """(mean squared distance, delay, tau, largest distance) for the tau of ``taus`` with the least mean square."""
+def _fit_at_delay(
+    turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: float, rollout_tau_s: float | None
+) -> tuple[float, int, float, float]:
+    """(sum over the turns of the mean squared distance, delay, tau, largest distance) for the tau of ``taus`` with
+    the least sum; ``rollout_tau_s`` None: one time constant both ways."""
     squares = np.zeros(len(taus))
     worst = np.zeros(len(taus))
     for t in turns:
-        error = t.xy_m[None] - model_paths(t, delay, taus, dt_s)
+        error = t.xy_m[None] - model_paths(t, delay, taus, dt_s, rollout_tau_s)
         distance = np.hypot(error[..., 0], error[..., 1])
         squares += (distance**2).mean(axis=1)
         worst = np.maximum(worst, distance.max(axis=1))
@@ -138,16 +180,23 @@ def _fit_at_delay(turns: Sequence[Turn], delay: int, taus: np.ndarray, dt_s: flo
     return float(squares[i]), delay, round(float(taus[i]), 9), float(worst[i])
 
 
-def model_paths(turn: Turn, delay_steps: int, taus: np.ndarray, dt_s: float) -> np.ndarray:
+def model_paths(
+    turn: Turn, delay_steps: int, taus: np.ndarray, dt_s: float, rollout_tau_s: float | None = None
+) -> np.ndarray:
     """(G, K + 1, 2) the model's positions over the turn for G time constants: eq. 5's exact arcs at the start's
-    speed and the lagged rate's mean over each step."""
-    rates = lag_rates(turn.omega_before_rad_s, turn.command_rad_s, len(turn.rates_rad_s), delay_steps, taus, dt_s)
+    speed and the lagged rate's mean over each step (``rollout_tau_s`` None: one time constant both ways)."""
+    steps = len(turn.rates_rad_s)
+    if rollout_tau_s is None:
+        rates = lag_rates(turn.omega_before_rad_s, turn.command_rad_s, steps, delay_steps, taus, dt_s)
+    else:
+        before, command = turn.omega_before_rad_s, turn.command_rad_s
+        rates = switched_lag_rates(before, command, steps, delay_steps, taus, rollout_tau_s, dt_s)
     heading = turn.course_rad + np.concatenate([np.zeros((len(taus), 1)), np.cumsum(rates * dt_s, axis=1)], axis=1)
     half = rates * dt_s / 2.0
     chord = turn.speed_m_s * dt_s * np.sinc(half / np.pi)  # np.sinc(x) = sin(pi x) / (pi x)
     mid = heading[:, :-1] + half
-    steps = np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=2)
-    return np.concatenate([np.zeros((len(taus), 1, 2)), np.cumsum(steps, axis=1)], axis=1)
+    steps_xy = np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=2)
+    return np.concatenate([np.zeros((len(taus), 1, 2)), np.cumsum(steps_xy, axis=1)], axis=1)
 
 
 def mean_accel(
@@ -180,16 +229,18 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
     spec = load_airframe(path)
     w = math.radians(settings.turn_rate_max_deg_s)
     circles_s = 2.0 * 2.0 * math.pi / w
-    table: dict[str, list[float]] = {k: [] for k in ("delay", "tau", "residual", "accel", "decel")}
+    table: dict[str, list[float]] = {k: [] for k in ("delay", "tau", "rollout", "residual", "accel", "decel")}
     for v in settings.speeds_m_s:
         turns = [
             fly_turn(spec, v, settings.altitude_m, settings.dt_s, before, after, circles_s)
             for before, after in ((0.0, w), (0.0, -w), (-w, w), (w, -w))
         ]
-        delay, tau, residual = fit_lag(turns, settings.dt_s)
-        table["delay"].append(round(delay * settings.dt_s, 9))
-        table["tau"].append(round(tau, 9))
-        table["residual"].append(round(residual, 3))
+        rollouts = [fly_turn(spec, v, settings.altitude_m, settings.dt_s, before, 0.0, ROLLOUT_S) for before in (w, -w)]
+        fit = fit_lag(turns, rollouts, settings.dt_s)
+        table["delay"].append(round(fit.delay_steps * settings.dt_s, 9))
+        table["tau"].append(round(fit.tau_s, 9))
+        table["rollout"].append(round(fit.rollout_tau_s, 9))
+        table["residual"].append(round(fit.residual_m, 3))
         for key, sign in (("accel", 1.0), ("decel", -1.0)):
             command_m_s2 = sign * ACCEL_COMMAND_M_S2
             a = mean_accel(spec, v, settings.altitude_m, settings.dt_s, command_m_s2, settings.accel_window_s)
@@ -210,6 +261,7 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
         accel_max_m_s2=tuple(table["accel"]),
         decel_max_m_s2=tuple(table["decel"]),
         accel_window_s=settings.accel_window_s,
+        turn_rollout_tau_s=tuple(table["rollout"]),
     )
 
 

@@ -5,8 +5,10 @@ that holds for ever under it (issue 58, the monitor under real dynamics; the mod
 Pure numpy, vectorised over M vehicles, in the frames and units of :mod:`tssac_core.assurance.monitor`.
 
 **The model** (per vehicle, at its speed). The heading rate follows the commanded one after ``d`` world steps
-through a first-order lag of time constant tau: with c_k the command the airframe follows over step k (the one sent
-d steps earlier), g = 1 - exp(-dt / tau) and h = tau g / dt,
+through a first-order lag, of time constant tau_out while it rolls out (the command asks for less turn the same way,
+or none: a fixed wing rolls out of a turn faster than it rolls in) and tau otherwise (rolling in, or reversing): with
+c_k the command the airframe follows over step k (the one sent d steps earlier), g = 1 - exp(-dt / tau) and
+h = tau g / dt for the step's phase,
 
     mean rate over step k   m_k = c_k + (omega_k - c_k) h
     rate at its end         omega_k+1 = c_k + (omega_k - c_k) (1 - g)
@@ -23,11 +25,12 @@ r = v / |omega_c| and the *instantaneous centre* c(t) = p(t) + r n(phi(t)) (n th
 
     dc/dt = v (1 - omega(t) / omega_c) u(phi)   so   |dc/dt| = r |omega(t) - omega_c|
 
-and the first-order gap after step K decays as |omega_K - omega_c| exp(-t / tau): the centre moves at most
-rho = r |omega_K - omega_c| tau in all, and the vehicle, always at r from c(t), stays for ever inside the disk of
+and the gap after step K decays at least as |omega_K - omega_c| exp(-t / tau_max) (a first-order decay toward
+omega_c; tau_max the longer of the two time constants): the centre moves at most
+rho = r |omega_K - omega_c| tau_max in all, and the vehicle, always at r from c(t), stays for ever inside the disk of
 radius r + rho about c_K. Its clearance is exact (:func:`~tssac_core.assurance.monitor.circle_clearance`); the
 samples' clearance less v dt / 2 covers the rest. Against the real airframe the model is off by at most the fitted
-``turn_residual_m`` (the largest distance the fit's turns left): taken off every clearance here.
+``turn_residual_m`` (the largest distance the fit's turns and roll-outs left): taken off every clearance here.
 """
 
 from __future__ import annotations
@@ -62,6 +65,21 @@ def lag_step_mean(
     return command + gap * h, command + gap * (1.0 - g)
 
 
+def switched_lag_step(
+    omega: np.ndarray,
+    command: np.ndarray,
+    gains_in: tuple[np.ndarray, np.ndarray],
+    gains_out: tuple[np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the lag with one time constant rolling in and another rolling out (module docstring): while the
+    command asks for less turn the same way or none (0 <= omega command, |command| < |omega|: rolling out toward it)
+    the roll-out's gains (g, h), otherwise (rolling in, or reversing through zero) the roll-in's."""
+    out = (omega * command >= 0.0) & (np.abs(command) < np.abs(omega))
+    g = np.where(out, gains_out[0], gains_in[0])
+    h = np.where(out, gains_out[1], gains_in[1])
+    return lag_step_mean(omega, command, g, h)
+
+
 @dataclass(frozen=True)
 class AirframeLag:
     """The response of each vehicle's airframe at its speed, (M,) arrays (module docstring)."""
@@ -69,7 +87,10 @@ class AirframeLag:
     delay_steps: np.ndarray
     """Whole world steps before a command is followed, int."""
     tau_s: np.ndarray
-    """The lag's time constant (s, >= 0)."""
+    """The lag's time constant rolling in or reversing (s, >= 0)."""
+    rollout_tau_s: np.ndarray
+    """The lag's time constant rolling out, toward a smaller turn the same way or none (s, >= 0): a fixed wing rolls
+    out of a turn faster than it rolls in (the f16's roll-in waits for the load factor)."""
     accel_m_s2: np.ndarray
     """The largest forward acceleration it achieves (> 0)."""
     decel_m_s2: np.ndarray
@@ -79,13 +100,22 @@ class AirframeLag:
 
     def select(self, idx: np.ndarray) -> AirframeLag:
         return AirframeLag(
-            self.delay_steps[idx], self.tau_s[idx], self.accel_m_s2[idx], self.decel_m_s2[idx], self.residual_m[idx]
+            self.delay_steps[idx],
+            self.tau_s[idx],
+            self.rollout_tau_s[idx],
+            self.accel_m_s2[idx],
+            self.decel_m_s2[idx],
+            self.residual_m[idx],
         )
+
+    def longest_tau_s(self) -> np.ndarray:
+        """The longer of the two time constants, (M,)."""
+        return np.maximum(self.tau_s, self.rollout_tau_s)
 
     def settle_steps(self, dt_s: float) -> int:
         """The turn's sampled steps K: the longest delay and SETTLE_TIME_CONSTANTS of the longest time constant."""
         return int(self.delay_steps.max(initial=0)) + math.ceil(
-            SETTLE_TIME_CONSTANTS * self.tau_s.max(initial=0) / dt_s
+            SETTLE_TIME_CONSTANTS * self.longest_tau_s().max(initial=0) / dt_s
         )
 
 
@@ -150,13 +180,13 @@ def lagged_rollout(
     if np.any(start < 0):
         raise ValueError(f"LagState: {width} pending commands, but a delay of {airframe.delay_steps.max()} steps")
     followed = np.take_along_axis(queue, start[:, None] + np.arange(s)[None, :], axis=1)  # (M, S)
-    g, h = lag_gains(airframe.tau_s, dt_s)
+    gains_in, gains_out = lag_gains(airframe.tau_s, dt_s), lag_gains(airframe.rollout_tau_s, dt_s)
     accel = np.clip(accel_commands_m_s2, airframe.decel_m_s2[:, None], airframe.accel_m_s2[:, None])
     omega = lag_state.omega_rad_s.astype(np.float64)
     px, py, pv, ph = (np.asarray(a, dtype=np.float64).copy() for a in (x, y, v, phi))
     out = np.empty((5, m, s))
     for k in range(s):
-        rate, omega = lag_step_mean(omega, followed[:, k], g, h)
+        rate, omega = switched_lag_step(omega, followed[:, k], gains_in, gains_out)
         v_next = np.clip(pv + accel[:, k] * dt_s, lim.speed_min_m_s, lim.speed_max_m_s)
         half = 0.5 * rate * dt_s
         chord = 0.5 * (pv + v_next) * dt_s * np.sinc(half / np.pi)
@@ -190,8 +220,9 @@ def turn_keep_out(
     )
     px, py, heading, speed = path.xs[:, -1], path.ys[:, -1], path.headings[:, -1], path.speeds[:, -1]
     r = speed / lim.turn_rate_max_rad_s
-    # K covers every delay, so the command is followed from step K on: the gap decays as a first-order lag.
-    rho = r * np.abs(path.rates[:, -1] - command) * airframe.tau_s
+    # K covers every delay, so the command is followed from step K on: the gap decays as a first-order lag, at least
+    # as fast as the longer time constant says.
+    rho = r * np.abs(path.rates[:, -1] - command) * airframe.longest_tau_s()
     cx, cy = px - sign * r * np.sin(heading), py + sign * r * np.cos(heading)
     return path, cx, cy, r + rho
 

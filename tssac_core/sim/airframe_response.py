@@ -10,18 +10,24 @@ file describes the difference in the world's own terms (a heading-rate command h
 
 the continuous first-order lag sampled at the steps; the heading turns over step k by its exact mean,
 ``omega_cmd(k - d) + (omega_k - omega_cmd(k - d)) h`` with ``h = tau g / dt``
-(:func:`tssac_core.assurance.lagged_backups.lag_step_mean`)
+(:func:`tssac_core.assurance.lagged_backups.lag_step_mean`). The time constant is ``turn_rollout_tau_s`` while the
+rate rolls out (the command asks for less turn the same way, or none) and ``turn_tau_s`` otherwise (rolling in, or
+reversing): a fixed wing rolls out of a turn faster than it rolls in
+(:func:`tssac_core.assurance.lagged_backups.switched_lag_step`). The training world's varied airframes
+(:mod:`tssac_core.sim.varied_airframes`) fly one time constant both ways, the roll-in's.
 
 with ``d = round(delay_s / dt_s)``, and the forward acceleration bounded by
 ``decel_max_m_s2(v) <= a <= accel_max_m_s2(v)``.
 The lag is scheduled on speed: one time constant does not fit 150 and 300 m/s.
 ``turn_residual_m`` is the largest distance, per speed, between the airframe's path and this model's over a
 maximum-rate turn held for two full circles, entered from straight flight and from a maximum-rate turn the other
-way: an error term that a bound built on the model adds to its margin.
+way, and over a roll-out from a maximum-rate turn into straight flight: an error term that a bound built on the model
+adds to its margin.
 
-Between two tabled speeds the worse neighbour counts (the longer delay and time constant, the larger residual, the
-smaller acceleration and deceleration), so a value read at any speed in the table's span is one the airframe was
-measured to do at least as well as; outside the span the file is refused (:meth:`AirframeResponse.at`).
+Between two tabled speeds the delay and time constants are interpolated linearly, and the worse neighbour's residual,
+acceleration and deceleration count (the larger residual, the smaller magnitudes); outside the span the file is
+refused (:meth:`AirframeResponse.at`). That the residual still bounds the airframe between the tabled speeds is
+measured, not assumed: ``tests/test_lagged_backups.py`` flies the F-16 there.
 """
 
 from __future__ import annotations
@@ -38,8 +44,9 @@ from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
 from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import read_yaml, typed_value
 
-RESPONSE_SCHEMA = 1
-"""The file format's version; a newer one is refused."""
+RESPONSE_SCHEMA = 2
+"""The file format's version; a newer one is refused (2 added ``turn_rollout_tau_s``; a version 1 file reads with the
+roll-in's time constants for the roll-out)."""
 
 
 class ResponseFileError(InputError):
@@ -52,6 +59,7 @@ class ResponseAt:
 
     delay_s: float
     tau_s: float
+    rollout_tau_s: float
     turn_residual_m: float
     accel_max_m_s2: float
     decel_max_m_s2: float
@@ -88,6 +96,7 @@ class AirframeResponse:
     speeds_m_s: tuple[float, ...]
     turn_delay_s: tuple[float, ...]
     turn_tau_s: tuple[float, ...]
+    """The lag's time constant rolling in or reversing, s."""
     turn_residual_m: tuple[float, ...]
     accel_max_m_s2: tuple[float, ...]
     """Mean acceleration over ``accel_window_s`` of full throttle from each speed (m/s^2, positive)."""
@@ -95,15 +104,29 @@ class AirframeResponse:
     """Mean deceleration over ``accel_window_s`` at idle from each speed (m/s^2, negative)."""
     accel_window_s: float
     """The window of the acceleration figures (s)."""
+    turn_rollout_tau_s: tuple[float, ...] = ()
+    """The lag's time constant rolling out (toward a smaller turn the same way, or none), s; empty in a version 1 file
+    (the roll-in's then count)."""
+
+    def rollout_taus(self) -> tuple[float, ...]:
+        """``turn_rollout_tau_s``, or for a version 1 file the roll-in's time constants."""
+        return self.turn_rollout_tau_s or self.turn_tau_s
 
     def __post_init__(self) -> None:
         n = len(self.speeds_m_s)
-        tables = (self.turn_delay_s, self.turn_tau_s, self.turn_residual_m, self.accel_max_m_s2, self.decel_max_m_s2)
+        tables = (
+            self.turn_delay_s,
+            self.turn_tau_s,
+            self.rollout_taus(),
+            self.turn_residual_m,
+            self.accel_max_m_s2,
+            self.decel_max_m_s2,
+        )
         if n < 1 or any(len(t) != n for t in tables):
             raise ValueError(f"response of {self.aircraft}: every table needs one entry per speed ({n})")
         if any(b <= a for a, b in zip(self.speeds_m_s, self.speeds_m_s[1:])) or self.speeds_m_s[0] <= 0.0:
             raise ValueError(f"response of {self.aircraft}: speeds_m_s must be positive and ascending")
-        if min(self.turn_delay_s) < 0.0 or min(self.turn_tau_s) < 0.0 or min(self.turn_residual_m) < 0.0:
+        if min(self.turn_delay_s + self.turn_tau_s + self.rollout_taus() + self.turn_residual_m) < 0.0:
             raise ValueError(f"response of {self.aircraft}: delays, time constants and residuals must be >= 0")
         if min(self.accel_max_m_s2) <= 0.0 or max(self.decel_max_m_s2) >= 0.0:
             raise ValueError(f"response of {self.aircraft}: accelerations must be > 0 and decelerations < 0")
@@ -111,7 +134,9 @@ class AirframeResponse:
             raise ValueError(f"response of {self.aircraft}: dt_s, turn_rate_max_rad_s and accel_window_s must be > 0")
 
     def at(self, speed_m_s: float) -> ResponseAt:
-        """The response at ``speed_m_s``: the worse of its tabled neighbours (a tabled speed: its own entry)."""
+        """The response at ``speed_m_s``: the delay and time constants interpolated linearly between its tabled
+        neighbours (the lag's shape changes smoothly with speed: the worse neighbour's lag flown for 30 s leaves
+        heading errors the residual does not cover), the worse neighbour's residual and accelerations."""
         lo, hi = self.speeds_m_s[0], self.speeds_m_s[-1]
         if not lo - 1e-9 <= speed_m_s <= hi + 1e-9:
             raise ResponseFileError(
@@ -119,10 +144,16 @@ class AirframeResponse:
             )
         i = bisect.bisect_left(self.speeds_m_s, speed_m_s - 1e-9)
         j = i if abs(self.speeds_m_s[i] - speed_m_s) <= 1e-9 else i - 1
+        share = 0.0 if i == j else (speed_m_s - self.speeds_m_s[j]) / (self.speeds_m_s[i] - self.speeds_m_s[j])
+
+        def between(table: tuple[float, ...]) -> float:
+            return table[j] + share * (table[i] - table[j])
+
         pair = (i, j)
         return ResponseAt(
-            delay_s=max(self.turn_delay_s[k] for k in pair),
-            tau_s=max(self.turn_tau_s[k] for k in pair),
+            delay_s=between(self.turn_delay_s),
+            tau_s=between(self.turn_tau_s),
+            rollout_tau_s=between(self.rollout_taus()),
             turn_residual_m=max(self.turn_residual_m[k] for k in pair),
             accel_max_m_s2=min(self.accel_max_m_s2[k] for k in pair),
             decel_max_m_s2=max(self.decel_max_m_s2[k] for k in pair),
@@ -135,6 +166,7 @@ class AirframeResponse:
         return ResponseAt(
             delay_s=max(r.delay_s for r in inside),
             tau_s=max(r.tau_s for r in inside),
+            rollout_tau_s=max(r.rollout_tau_s for r in inside),
             turn_residual_m=max(r.turn_residual_m for r in inside),
             accel_max_m_s2=min(r.accel_max_m_s2 for r in inside),
             decel_max_m_s2=max(r.decel_max_m_s2 for r in inside),
@@ -189,6 +221,7 @@ def airframe_lag(response: AirframeResponse, speeds_m_s: np.ndarray, dt_s: float
     return AirframeLag(
         delay_steps=np.array([r.delay_steps(dt_s) for r in at], dtype=np.int64),
         tau_s=np.array([r.tau_s for r in at]),
+        rollout_tau_s=np.array([r.rollout_tau_s for r in at]),
         accel_m_s2=np.array([r.accel_max_m_s2 for r in at]),
         decel_m_s2=np.array([r.decel_max_m_s2 for r in at]),
         residual_m=np.array([r.turn_residual_m for r in at]),
