@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -434,6 +435,118 @@ def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
     return np.where((lead_left > 0)[:, None], np.stack([np.zeros(len(turn)), turn[:, 1]], axis=1), turn)
 
 
+# ------------------------------------------------------------------------------- prediction
+
+
+class Prediction(Protocol):
+    """How the monitor predicts a vehicle's paths: eq. 5-6 (:class:`KinematicPrediction`, the default) or an
+    airframe's fitted response (:class:`tssac_core.assurance.lagged_backups.LaggedPrediction`)."""
+
+    def after(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        pending: np.ndarray,
+        lim: Limits,
+        dt_s: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
+        """The state after the ``pending`` (M, L, 2) actions, and the prediction from there."""
+        ...
+
+    def proposal_excess(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        proposed: np.ndarray,
+        hz: Hazards,
+        lim: Limits,
+        dt_s: float,
+        steps: int,
+        margin: np.ndarray,
+        err_end: EstimateError,
+        cfg: ShieldConfig,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The proposed action as flown, the excess of its path and best backup, and that backup (as
+        :func:`_proposal_excess`)."""
+        ...
+
+    def backup_excess(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        rows: np.ndarray,
+        hz: Hazards,
+        lim: Limits,
+        dt_s: float,
+        leads: np.ndarray,
+        margin: np.ndarray,
+        err: EstimateError,
+        cfg: ShieldConfig,
+    ) -> np.ndarray:
+        """Every backup's excess from the states ``rows`` themselves, (R, L * N_TURNS) (as
+        :func:`_backup_excess_here`)."""
+        ...
+
+
+class KinematicPrediction:
+    """Eq. 5-6, as the batched world and the kinematic SITL fly: the module docstring's proof."""
+
+    def after(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        pending: np.ndarray,
+        lim: Limits,
+        dt_s: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
+        return (*step_actions(x, y, v, phi, pending, lim, dt_s), self)
+
+    def proposal_excess(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        proposed: np.ndarray,
+        hz: Hazards,
+        lim: Limits,
+        dt_s: float,
+        steps: int,
+        margin: np.ndarray,
+        err_end: EstimateError,
+        cfg: ShieldConfig,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return _proposal_excess(x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg)
+
+    def backup_excess(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        v: np.ndarray,
+        phi: np.ndarray,
+        rows: np.ndarray,
+        hz: Hazards,
+        lim: Limits,
+        dt_s: float,
+        leads: np.ndarray,
+        margin: np.ndarray,
+        err: EstimateError,
+        cfg: ShieldConfig,
+    ) -> np.ndarray:
+        return _backup_excess_here(x, y, v, phi, rows, hz, lim, dt_s, leads, margin, err, cfg)
+
+
+KINEMATIC = KinematicPrediction()
+
+
 # --------------------------------------------------------------------------------- decision
 
 
@@ -490,6 +603,7 @@ def decide(
     cfg: ShieldConfig,
     pending: np.ndarray | None = None,
     error: EstimateError | None = None,
+    prediction: Prediction = KINEMATIC,
 ) -> Decision:
     """One decision of the monitor for M vehicles.
 
@@ -498,7 +612,8 @@ def decide(
     (M, L, 2) the commands already sent that the vehicle will fly first (the link's latency; None or L = 0 in the
     batched world); ``margin_m`` scalar or (M,) the clearance to keep (:attr:`ShieldConfig.margin_m`, plus the
     timing slack off lockstep); ``error`` the bounds on the estimate's error (None: the true state, as in the
-    batched world), taken off every path's and backup's clearance as :func:`backup_error_m` says.
+    batched world), taken off every path's and backup's clearance as :func:`backup_error_m` says; ``prediction`` how
+    the paths are predicted (eq. 5-6 unless an airframe's response is given).
     """
     m = len(state)
     margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
@@ -507,11 +622,13 @@ def decide(
     n_pending = 0 if pending is None else pending.shape[1]
     if n_pending:
         assert pending is not None
-        x, y, v, phi = step_actions(x, y, v, phi, pending, lim, dt_s)
+        x, y, v, phi, prediction = prediction.after(x, y, v, phi, pending, lim, dt_s)
     err_here = err_now.after(n_pending * dt_s, lim)  # at the state the next command starts from
     err_end = err_now.after((n_pending + steps) * dt_s, lim)  # at the end of the proposed action's interval
     leads = lead_steps(cfg, dt_s)
-    proposed, excess, best_end = _proposal_excess(x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg)
+    proposed, excess, best_end = prediction.proposal_excess(
+        x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg
+    )
     passes = excess >= 0
     passes_release = excess >= cfg.release_margin_m
 
@@ -526,7 +643,7 @@ def decide(
     lost = ~fly_proposed & ~protected
     protected = protected.copy()
     if lost.any():
-        here = _backup_excess_here(x, y, v, phi, lost, hz, lim, dt_s, leads, margin, err_here, cfg)
+        here = prediction.backup_excess(x, y, v, phi, lost, hz, lim, dt_s, leads, margin, err_here, cfg)
         pick = choose_backup(here)
         backup[lost] = pick
         lead_left[lost] = leads[pick // N_TURNS]
