@@ -76,10 +76,11 @@ def _type_name(tp: Any) -> str:
 
 
 def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError) -> Any:
-    """``value`` (plain YAML data) as type ``tp`` (a dataclass, an enum by its values, tuple, dict, optional, float,
-    int, bool or str), checked all the way down; the first problem raises ``error(source, field path, problem)``.
-    Scenario files, preset files and grid files are read with it, so a value is judged, and its problem worded, the
-    same in each."""
+    """``value`` (plain YAML or JSON data) as type ``tp`` (a dataclass, an enum by its values, tuple, dict, optional,
+    float, int, bool, str, a path or bytes), checked all the way down; the first problem raises ``error(source, field
+    path, problem)``. Scenario files, preset files, grid files and the configurations fly gives its processes
+    (:mod:`tssac_core.sim.settings_json`) are read with it, so a value is judged, and its problem worded, the same in
+    each."""
     at = _Place(where, source, error)
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
@@ -204,8 +205,31 @@ def _str(value: Any, at: _Place) -> str:
     return value
 
 
-_SCALARS: dict[Any, Callable[[Any, _Place], Any]] = {float: _float, int: _int, bool: _bool, str: _str}
-"""The scalar types a schema may hold, each with its check."""
+def _path(value: Any, at: _Place) -> Path:
+    if not isinstance(value, str) or not value:
+        raise at.fail(f"expected a path, got {_short(value)}")
+    return Path(value)
+
+
+def _hex_bytes(value: Any, at: _Place) -> bytes:
+    if isinstance(value, str):
+        try:
+            return bytes.fromhex(value)
+        except ValueError:
+            pass
+    raise at.fail(f"expected bytes as hexadecimal digits, got {_short(value)}")
+
+
+_SCALARS: dict[Any, Callable[[Any, _Place], Any]] = {
+    float: _float,
+    int: _int,
+    bool: _bool,
+    str: _str,
+    Path: _path,
+    bytes: _hex_bytes,
+}
+"""The scalar types a schema may hold, each with its check (a path is a string, bytes are hexadecimal digits: the
+form :func:`tssac_core.sim.settings_json.plain` gives them)."""
 
 
 def _short(value: Any, max_chars: int = 40) -> str:
