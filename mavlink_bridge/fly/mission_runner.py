@@ -17,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge.fly.child_configs import COMPANION_MODULE, companion_config, tlog_path
+from mavlink_bridge.fly.child_configs import (
+    COMPANION_MODULE,
+    WORLD_MODULE,
+    companion_config,
+    tlog_path,
+    world_config,
+)
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.mission_log import TruthLogError, read_mission
@@ -33,12 +39,6 @@ from tssac_core.wire.mission_reset import NextMission
 
 _log = logging.getLogger("mavlink_bridge.fly")
 
-LOCKSTEP_SETPOINT_TIMEOUT_S = 5.0
-"""Under lockstep the vehicles' setpoint failsafe counts wall seconds at the step barrier: 5 s keeps a
-companion that a loaded machine paused for a moment in the loop (failsafes are still counted)."""
-LINGER_S = 0.2
-"""Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
-link with up to this much latency."""
 CREW_DEATH_WAIT_S = 2.0
 """How long fly waits for the exit status of a crew process whose standard input broke."""
 TLOGS_INCOMPLETE = "INCOMPLETE"
@@ -46,7 +46,7 @@ TLOGS_INCOMPLETE = "INCOMPLETE"
 the mission starts, removed when it has ended with every tlog whole. Left there (by an interruption, a failure, a
 kill), it says why in one line; a mission whose tlog could not all be written says which."""
 
-CREW_IMPORTS = ("sim_vehicles.__main__", COMPANION_MODULE, "mavlink_bridge.companion.machine")
+CREW_IMPORTS = (WORLD_MODULE, COMPANION_MODULE, "mavlink_bridge.companion.machine")
 """What a crew's fork server imports once for the world and the three companions it forks (their start-up is
 mostly imports: filterpy with scipy.stats, pymavlink, numpy)."""
 
@@ -269,32 +269,14 @@ class MissionRunner:
     def _start_world(
         self, mdir: Path, scenario_file: Path, truth: Path, seed: int, serve: bool = False
     ) -> tuple[LineReader, dict[str, str]]:
-        """The world (the reader of its output) and its vehicles' connection strings."""
-        cfg = self.cfg
-        argv = [
-            "--scenario",
-            str(scenario_file),
-            "--seed",
-            str(seed),
-            "--base-port",
-            "0",
-            "--truth-log",
-            str(truth),
-            "--linger-s",
-            repr(LINGER_S),
-        ]
-        if cfg.lockstep:
-            argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
-        else:  # the world waits for all three companions, as in lockstep, then runs at real time x speedup
-            argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
-        if cfg.signing_key_path is not None:
-            argv += ["--signing-key", str(cfg.signing_key_path)]
-        if cfg.serial_baud is not None:
-            argv += ["--serial", str(cfg.serial_baud), "--serial-byte-loss", repr(cfg.serial_byte_loss)]
-        if serve:
-            argv += ["--serve"]
+        """The world (the reader of its output) and its vehicles' connection strings; it is started with its typed
+        configuration (:func:`~mavlink_bridge.fly.child_configs.world_config`) on standard input."""
+        config = world_config(self.cfg, load(scenario_file), seed, truth, self._signing_key())
+        argv = ["--config-json", "-"] + (["--serve"] if serve else [])
         log = mdir / "sitl.log"
-        sitl = self._launch("sitl", "sim_vehicles", argv, log, stdout_pipe=True, serve=serve)
+        sitl = self._launch(
+            "sitl", WORLD_MODULE, argv, log, stdout_pipe=True, serve=serve, config_json=config.to_json()
+        )
         reader = LineReader(sitl)
         return reader, self._read_endpoints(reader, log)
 

@@ -56,10 +56,10 @@ def from_json(tp: type[T], text: str, source: str) -> T:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise SettingsError(source, "", f"not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
-    except RecursionError:
-        raise SettingsError(source, "", "not JSON (nested too deep)") from None
+    except (RecursionError, ValueError) as exc:  # nested too deep, an integer of thousands of digits
+        raise SettingsError(source, "", f"not JSON ({str(exc).split(';')[0] or type(exc).__name__})") from None
     try:
-        value: T = typed_value(tp, data, "", source, SettingsError)
+        value: T = typed_value(tp, data, "", source, SettingsError, bounded=False)
     except SettingsError:
         raise
     except ValueError as exc:  # the dataclass refused a value (its __post_init__): UsageError is one
