@@ -1,5 +1,6 @@
 """The typed configurations fly gives the processes it starts: one JSON round trip each, beside the dataclass
-(tssac_core.sim.settings_json), and a companion fly starts configured as a user's equivalent command line would."""
+(tssac_core.sim.settings_json), and the world and companions fly starts configured as a user's equivalent command
+lines would."""
 
 from __future__ import annotations
 
@@ -15,13 +16,22 @@ from mavlink_bridge.companion import cli as companion_cli
 from mavlink_bridge.companion import from_config
 from mavlink_bridge.companion.config import CompanionConfig
 from mavlink_bridge.estimation.filter_model import FilterModel
-from mavlink_bridge.fly.child_configs import companion_config, tlog_path
+from mavlink_bridge.fly.child_configs import (
+    LINGER_S,
+    LOCKSTEP_SETPOINT_TIMEOUT_S,
+    companion_config,
+    tlog_path,
+    world_config,
+)
 from mavlink_bridge.fly.config import DEFAULT_MODELS, FlyConfig, config_from_args
 from mavlink_bridge.link.guided_commands import SetpointDialect
+from sim_vehicles import __main__ as sitl_cli
+from sim_vehicles import from_config as sitl_from_config
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.deploy.numpy_actor import pilot_file
-from tssac_core.sim.scenario import ROLES, Role, Scenario, ScenarioError, dump, load, sample_layout
+from tssac_core.sim.scenario import ROLES, DynamicsModel, Role, Scenario, ScenarioError, dump, load, sample_layout
 from tssac_core.sim.settings_json import SettingsError, from_json, to_json
+from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig
 from tssac_core.wire.mission_reset import MissionInput, NextMission
 
 REPO = Path(__file__).resolve().parents[1]
@@ -205,5 +215,102 @@ def test_an_empty_standard_input_is_one_clear_error() -> None:
     try:
         with pytest.raises(companion_cli.UsageError, match="standard input ended before the configuration"):
             from_config.read_config("-", MissionInput(r))
+    finally:
+        os.close(r)
+
+
+# ------------------------------------------------------------------------------ what fly gives the world
+
+
+def _busy_world() -> SitlConfig:
+    """A world configuration with every kind of field set away from its default."""
+    return SitlConfig(
+        scenario=_fixed_scenario(),
+        seed=2**63 - 1,  # the largest seed --seed takes
+        host="127.0.0.2",
+        base_port=0,
+        clock=ClockMode.LOCKSTEP,
+        speedup=3.5,
+        lockstep_start=LockstepStart.ANY,
+        hold_start=True,
+        signing_key=KEY,
+        unsigned_monitors=True,
+        truth_log=Path("/tmp/mission-001/truth.jsonl"),
+        layout_out=Path("/tmp/layout.yaml"),
+        tlog_dir=Path("/tmp/tlogs"),
+        setpoint_timeout_s=5.0,
+        linger_s=0.2,
+        outputs=(("127.0.0.1", 14550), ("10.0.0.2", 14551)),
+        dynamics_model=DynamicsModel.JSBSIM,
+        aircraft="f16",
+        serial_baud=57600,
+        serial_byte_loss=0.01,
+    )
+
+
+def test_a_world_config_survives_its_json_round_trip_equal() -> None:
+    for config in (_busy_world(), SitlConfig(scenario=load(RANDOM))):
+        text = config.to_json()
+        assert "\n" not in text
+        assert SitlConfig.from_json(text) == config
+
+
+@pytest.mark.parametrize(
+    ("edit", "needle"),
+    [
+        (lambda d: "", "not JSON"),
+        (lambda d: json.dumps({**d, "sped": 2.0}), "sped: unknown key"),
+        (lambda d: json.dumps({**d, "clock": "fast"}), "clock: expected one of realtime, lockstep"),
+        (lambda d: json.dumps({**d, "outputs": [["127.0.0.1"]]}), "outputs[0]: expected a list of 2"),
+        (lambda d: json.dumps({**d, "seed": 1.5}), "seed: expected an integer"),
+        (lambda d: json.dumps({**d, "speedup": 0.0}), "speedup must be a positive number"),
+        (lambda d: json.dumps({k: v for k, v in d.items() if k != "scenario"}), "scenario: missing required field"),
+    ],
+)
+def test_a_malformed_world_config_is_one_clear_error(edit, needle: str) -> None:
+    data = json.loads(_busy_world().to_json())
+    with pytest.raises(SettingsError) as err:
+        SitlConfig.from_json(edit(data), "sitl.json")
+    line = str(err.value)
+    assert needle in line and line.startswith("sitl.json: ") and "\n" not in line, line
+
+
+@pytest.mark.parametrize("extra", [[], ["--speedup", "10"], ["--serial", "921600", "--serial-byte-loss", "0.001"]])
+def test_fly_configures_the_world_as_the_equivalent_command_line_would(tmp_path: Path, extra: list[str]) -> None:
+    """The world fly starts has the configuration ``python -m sim_vehicles`` builds from the flags fly gave it before
+    it handed configurations over."""
+    cfg = dataclasses.replace(_fly_config(*extra), signing_key_path=tmp_path / "k")
+    (tmp_path / "k").write_bytes(KEY)
+    scenario_file = tmp_path / "scenario.yaml"
+    dump(_fixed_scenario(), scenario_file)
+    truth = tmp_path / "truth.jsonl"
+    given = world_config(cfg, load(scenario_file), 4712, truth, KEY)
+    argv = ["--scenario", str(scenario_file), "--seed", "4712", "--base-port", "0", "--truth-log", str(truth)]
+    argv += ["--linger-s", repr(LINGER_S)]
+    if cfg.lockstep:
+        argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
+    else:
+        argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
+    argv += ["--signing-key", str(tmp_path / "k")]
+    if cfg.serial_baud is not None:
+        argv += ["--serial", str(cfg.serial_baud), "--serial-byte-loss", repr(cfg.serial_byte_loss)]
+    flags = sitl_cli.config_from_args(sitl_cli.build_parser().parse_args(argv))
+    assert given == flags
+    assert SitlConfig.from_json(given.to_json()) == flags
+
+
+def test_the_world_config_front_end_refuses_a_bad_config_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "sitl.json"
+    bad.write_text(json.dumps({**json.loads(_busy_world().to_json()), "seed": -1.0}))
+    assert sitl_from_config.main(["--config-json", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"{sitl_from_config.PROG}: error: {bad}: seed: expected an integer")
+    r, w = os.pipe()
+    os.close(w)
+    try:
+        with pytest.raises(ValueError, match="standard input ended before the configuration"):
+            sitl_from_config.read_config("-", MissionInput(r))
     finally:
         os.close(r)
