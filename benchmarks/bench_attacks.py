@@ -48,10 +48,10 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
 import tssac_core  # noqa: E402
-from sim_vehicles.config import SitlConfig  # noqa: E402
 from sim_vehicles.world_runner import WorldRunner  # noqa: E402
 from tssac_core.common.cli import command_description
 from tssac_core.sim.scenario import LinkModel, dump, load  # noqa: E402
+from tssac_core.sim.sitl_config import SitlConfig  # noqa: E402
 
 M = mavlink2
 ROOT = Path(tssac_core.__file__).resolve().parents[1]

@@ -3,8 +3,10 @@
 ``python -m sim_vehicles --scenario FILE`` starts them (see :mod:`sim_vehicles.__main__`); the
 protocol is described in ``docs/mavlink.md``. Rooms, each importing only those listed after it:
 
-* the run: :mod:`~sim_vehicles.config` (its configuration), :mod:`~sim_vehicles.world_runner` (the loop: world steps,
-  real time / speed-up / lockstep, events), :mod:`~sim_vehicles.truth_log` (the JSON Lines truth log);
+* the run: :mod:`~sim_vehicles.world_runner` (the loop: world steps, real time / speed-up / lockstep, events),
+  :mod:`~sim_vehicles.truth_log` (the JSON Lines truth log), the command lines (``__main__`` from flags,
+  ``from_config`` from the typed configuration fly gives it); the configuration itself,
+  :class:`~tssac_core.sim.sitl_config.SitlConfig`, lives in :mod:`tssac_core.sim.sitl_config`, where fly builds it too;
 * :mod:`sim_vehicles.protocol`: how a vehicle speaks MAVLink: its link both ways with telemetry and lockstep credit
   (``vehicle_link``), which streams when (``streams``), what clients send it (``commands``);
 * :mod:`sim_vehicles.dynamics`: the physics behind the seam (the kinematic eq. 5-6, JSBSim airframes);
@@ -17,7 +19,7 @@ protocol is described in ``docs/mavlink.md``. Rooms, each importing only those l
 * below all: :mod:`tssac_core.wire` (framing, units, frames and the flat-earth conversion).
 """
 
-from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.world_runner import Endpoint, RunResult, SitlError, WorldRunner
+from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig
 
 __all__ = ["ClockMode", "Endpoint", "LockstepStart", "RunResult", "SitlConfig", "SitlError", "WorldRunner"]

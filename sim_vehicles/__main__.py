@@ -32,10 +32,10 @@ from pathlib import Path
 from types import FrameType
 from typing import NoReturn
 
-from sim_vehicles.config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.world_runner import RunResult, SitlError, WorldRunner
 from tssac_core.common.cli import seed_arg
 from tssac_core.sim.scenario import DynamicsModel, ScenarioError, load
+from tssac_core.sim.sitl_config import DEFAULT_BASE_PORT, ClockMode, LockstepStart, SitlConfig
 from tssac_core.wire.mission_reset import MissionInput, ResetError, redirect_stderr
 from tssac_core.wire.signing import SigningKeyError, load_key
 
@@ -229,15 +229,35 @@ def parse_output(text: str) -> tuple[str, int]:
     return address, int(port_text)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def log_to_stderr(level: str) -> None:
+    """The world's log: ``level`` and up, on standard error (its log file, when fly starts it)."""
     logging.basicConfig(
-        level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+        level=level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
     )
+
+
+BAD_INPUT = (ScenarioError, SigningKeyError, SitlError, ValueError)
+"""What the world refuses in one line on stderr, with exit code 2 (a SettingsError is a ValueError)."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """A user's command line: the configuration from its flags, run (:func:`run`)."""
+    args = build_parser().parse_args(argv)
+    log_to_stderr(args.log_level)
     try:
         config = config_from_args(args)
+    except BAD_INPUT as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    return run(config, serve=args.serve)
+
+
+def run(config: SitlConfig, serve: bool, missions: MissionInput | None = None) -> int:
+    """Run ``config``'s world: its endpoint and ready lines, the mission, its end line, and with ``serve`` the next
+    missions read from ``missions`` (standard input when None); the exit code."""
+    try:
         runner = WorldRunner(config)
-    except (ScenarioError, SigningKeyError, SitlError, ValueError) as exc:
+    except BAD_INPUT as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
 
@@ -255,8 +275,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         dynamics = config.dynamics.model.value
         print(f"ready scenario={config.scenario.name} seed={config.seed} clock={speed} dynamics={dynamics}", flush=True)
         _print_end(runner.run_mission())
-        missions = MissionInput(0)  # standard input, read only by a serving world
-        while args.serve and not runner.stop_requested:
+        missions = missions or MissionInput(0)  # standard input, read only by a serving world
+        while serve and not runner.stop_requested:
             try:
                 mission = missions.next(lambda: runner.stop_requested)
                 if mission is None:

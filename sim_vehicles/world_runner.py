@@ -73,7 +73,6 @@ from sim_vehicles.autopilot.modes import FlightMode
 from sim_vehicles.autopilot.pacing import EPS, PacedSchedule
 from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.autopilot.vehicle import Vehicle, VehicleSetup
-from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig
 from sim_vehicles.dynamics.backend import DynamicsError, VehicleDynamics, make_dynamics
 from sim_vehicles.link.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.link.serial_port import PtySerialPort
@@ -82,6 +81,7 @@ from sim_vehicles.protocol.vehicle_link import VehicleLink
 from sim_vehicles.truth_log import TruthLog
 from tssac_core.common.files import create_exclusively
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, sample_layout, to_dict
+from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
 from tssac_core.wire.signing import StreamKey

@@ -25,9 +25,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
 mavutil.set_dialect("ardupilotmega")
 
-from sim_vehicles.config import ClockMode, LockstepStart, SitlConfig  # noqa: E402
 from sim_vehicles.world_runner import RunResult, WorldRunner  # noqa: E402
 from tssac_core.sim.scenario import LinkModel, Scenario, load  # noqa: E402
+from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 STRIKE = REPO / "scenarios" / "strike.yaml"

@@ -445,9 +445,9 @@ def test_the_length_rule_sees_a_long_function_and_its_reason():
 
 
 SITL_ROOMS = ("link", "autopilot", "dynamics", "protocol")
-"""``sim_vehicles``' rooms, lowest first: each imports only the rooms before it; the run (config, world_runner,
-truth_log, the command) sits above them all."""
-SITL_RUN = ["__init__.py", "__main__.py", "config.py", "truth_log.py", "world_runner.py"]
+"""``sim_vehicles``' rooms, lowest first: each imports only the rooms before it; the run (world_runner, truth_log, the
+commands from flags and from a configuration) sits above them all (its configuration is tssac_core.sim.sitl_config)."""
+SITL_RUN = ["__init__.py", "__main__.py", "from_config.py", "truth_log.py", "world_runner.py"]
 
 
 def test_the_sitl_is_in_rooms_with_no_upward_arrow():

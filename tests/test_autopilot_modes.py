@@ -14,7 +14,7 @@ from sitl_helpers import GUIDED, MANUAL, Client, mavlink2, scenario, sitl, wait_
 
 from sim_vehicles.autopilot import navigation, setpoints
 from sim_vehicles.autopilot.modes import FlightMode
-from sim_vehicles.config import LockstepStart
+from tssac_core.sim.sitl_config import LockstepStart
 
 M = mavlink2
 RTL, LOITER = int(FlightMode.RTL), int(FlightMode.LOITER)

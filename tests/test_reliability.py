@@ -27,10 +27,10 @@ from mavlink_bridge.fly.mission_runner import child_failure
 from mavlink_bridge.link.connection import MavLink
 from mavlink_bridge.processes.children import ChildProcesses
 from sim_vehicles.__main__ import main as sitl_main
-from sim_vehicles.config import ClockMode, LockstepStart
 from sim_vehicles.link.link_model import LinkChannel, keyed_uniforms
 from sim_vehicles.link.mavlink_io import MAX_MONITORS, MAX_PEERS, MONITOR_BYTES_PER_S
 from tssac_core.sim.scenario import LinkModel, ScenarioError, load
+from tssac_core.sim.sitl_config import ClockMode, LockstepStart
 from tssac_core.wire.signing import SignatureVerifier, Verdict, companion_link_id, now_10us
 from tssac_core.wire.truth_log_schema import read_truth_log
 

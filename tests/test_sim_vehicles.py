@@ -23,10 +23,10 @@ import pytest
 from sitl_helpers import GUIDED, MANUAL, REPO, STRIKE, Client, lockstep, mavlink2, mavutil, scenario, sitl, wait_until
 
 from sim_vehicles.__main__ import main
-from sim_vehicles.config import SitlConfig
 from sim_vehicles.link.link_model import GpsReceiver, LinkChannel
 from sim_vehicles.world_runner import WorldRunner
 from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
+from tssac_core.sim.sitl_config import SitlConfig
 from tssac_core.sim.world import World
 from tssac_core.wire.geodetic import (
     geodetic_to_local,
@@ -662,7 +662,7 @@ def test_real_time_with_hold_start_waits_for_the_team_then_runs() -> None:
 
 @pytest.mark.timeout(40)
 def test_lockstep_advances_exactly_one_step_per_setpoint_round() -> None:
-    from sim_vehicles.config import ClockMode
+    from tssac_core.sim.sitl_config import ClockMode
 
     with sitl(clock=ClockMode.LOCKSTEP, setpoint_timeout_s=1.0) as s:
         clients = [Client(p) for p in s.ports]

@@ -22,6 +22,7 @@ from mavlink_bridge.companion.config import (
     LOCKSTEP_GRANT_S,
     PILOT_NAMES,
     CompanionConfig,
+    default_command_timeout_s,
 )
 from mavlink_bridge.companion.status import CompanionResult
 from mavlink_bridge.estimation.filter_model import FilterModel
@@ -31,6 +32,7 @@ from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.scenario import Role, ScenarioError, load
+from tssac_core.sim.settings_json import SettingsError
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
 
 if TYPE_CHECKING:
@@ -183,13 +185,6 @@ def _output_flags(g: argparse._ActionsContainer) -> None:
     )
 
 
-def _command_timeout_s(given: float | None, lockstep: bool) -> float:
-    """``--command-timeout-s``, else its default (:data:`LOCKSTEP_COMMAND_TIMEOUT_S` with ``--lockstep``)."""
-    if given is not None:
-        return given
-    return LOCKSTEP_COMMAND_TIMEOUT_S if lockstep else COMMAND_TIMEOUT_S
-
-
 def config_from_args(args: argparse.Namespace) -> CompanionConfig:
     scenario = load(args.scenario)
     if scenario.layout is None:
@@ -212,7 +207,9 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         lockstep=args.lockstep,
         lockstep_grant_s=args.lockstep_grant_s,
         connect_timeout_s=args.timeout_s,
-        command_timeout_s=_command_timeout_s(args.command_timeout_s, args.lockstep),
+        command_timeout_s=(
+            default_command_timeout_s(args.lockstep) if args.command_timeout_s is None else args.command_timeout_s
+        ),
         command_retries=args.command_retries,
         hold_after_s=args.hold_after_s,
         silence_hold_s=args.silence_hold_s,
@@ -239,20 +236,36 @@ def bad_input_errors() -> tuple[type[Exception], ...]:
     """Exceptions that mean bad input: one line and exit code 2."""
     from mavlink_bridge.link.connection import LinkError
 
-    return (UsageError, ScenarioError, LinkError, CheckpointError, ResetError)
+    return (UsageError, ScenarioError, SettingsError, LinkError, CheckpointError, ResetError)
+
+
+def log_to_stderr(level: str) -> None:
+    """The companion's log: ``level`` and up, on standard error (its log file, when fly starts it)."""
+    logging.basicConfig(
+        level=level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """A user's command line: the configuration from its flags, flown (:func:`run`)."""
     try:
         args = build_parser().parse_args(argv)
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        logging.basicConfig(
-            level=args.log_level.upper(), stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
-        )
+        log_to_stderr(args.log_level)
         config = config_from_args(args)
+    except bad_input_errors() as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return run(config, serve=args.serve)
+
+
+def run(config: CompanionConfig, serve: bool, missions: MissionInput | None = None) -> int:
+    """Fly ``config``'s mission, and with ``serve`` the next ones read from ``missions`` (standard input when None),
+    until a quit, the end of the input or a signal; the exit code. Bad input is one line on stderr and code 2."""
+    try:
         companion = build_companion(config)
     except bad_input_errors() as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -269,14 +282,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     link = None
     try:
         try:
-            if args.serve:
+            if serve:
                 from mavlink_bridge.companion.machine import open_link
 
                 link = open_link(config)
             result = companion.run(link)
             _print_end(result)
             # --serve: mission after mission over the same link (tssac_core.wire.mission_reset).
-            missions = MissionInput(0)  # standard input, read only by a serving companion
+            missions = missions or MissionInput(0)  # standard input, read only by a serving companion
             # A mission whose tlog a full disk cut was flown all the same: its status says so, and fly decides
             # whether the campaign goes on (it does not); the process serves on, so fly reads that mission's end.
             while link is not None and result.exit_code in (EXIT_OK, EXIT_WRITE_FAILED) and not stopped:

@@ -12,9 +12,10 @@ from mavlink_bridge.link.serial_port import is_serial, parse_serial
 from mavlink_bridge.link.telemetry_budget import LineBudget, check_line, companion_streams, line_budget
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError
+from tssac_core.sim import settings_json
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
-from tssac_core.sim.scenario import LinkModel, Role, Scenario
+from tssac_core.sim.scenario import LinkModel, Role, Scenario, validate
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
@@ -73,6 +74,12 @@ def command_attempts(link: LinkModel) -> int:
     if round_trip <= 0.0:
         raise UsageError("the scenario's link delivers no frame: no command can get through")
     return max(COMMAND_ATTEMPTS, math.ceil(math.log(COMMAND_FAILURE) / math.log(1.0 - round_trip)))
+
+
+def default_command_timeout_s(lockstep: bool) -> float:
+    """``--command-timeout-s`` when none is given: :data:`LOCKSTEP_COMMAND_TIMEOUT_S` under lockstep, else
+    :data:`COMMAND_TIMEOUT_S`."""
+    return LOCKSTEP_COMMAND_TIMEOUT_S if lockstep else COMMAND_TIMEOUT_S
 
 
 EXIT_OK = 0
@@ -140,6 +147,20 @@ class CompanionConfig:
     setpoints: SetpointDialect = SetpointDialect.BODY_RATES
     """How GUIDED is commanded: body rates, or ArduPlane's GUIDED_CHANGE_HEADING / _SPEED
     (:mod:`mavlink_bridge.link.guided_commands`)."""
+
+    def to_json(self) -> str:
+        """This configuration as one line of JSON (:mod:`tssac_core.sim.settings_json`): what fly gives a companion
+        it starts (``python -m mavlink_bridge.companion.from_config``). It holds the signing key."""
+        return settings_json.to_json(self)
+
+    @classmethod
+    def from_json(cls, text: str, source: str = "the companion's configuration") -> CompanionConfig:
+        """The configuration :meth:`to_json` wrote, equal. Anything else raises one line: a
+        :class:`~tssac_core.sim.settings_json.SettingsError` (a malformed, missing or unknown field, or a value the
+        configuration refuses) or a ScenarioError (a scenario that does not validate)."""
+        config = settings_json.from_json(cls, text, source)
+        validate(config.scenario, f"{source}: scenario")
+        return config
 
     @property
     def line_budget(self) -> LineBudget | None:

@@ -17,28 +17,28 @@ from typing import Any
 
 import numpy as np
 
+from mavlink_bridge.fly.child_configs import (
+    COMPANION_MODULE,
+    WORLD_MODULE,
+    companion_config,
+    tlog_path,
+    world_config,
+)
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.mission_log import TruthLogError, read_mission
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
-from mavlink_bridge.link.guided_commands import SetpointDialect
+from mavlink_bridge.link.signing_key import read_signing_key
 from mavlink_bridge.processes.children import Child, ChildProcesses
 from mavlink_bridge.processes.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
 from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
 from tssac_core.common.files import create_exclusively, private_directory
-from tssac_core.deploy.numpy_actor import pilot_file
-from tssac_core.sim.scenario import ROLES, Layout, Scenario, dump, sample_layout
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, load, sample_layout
 from tssac_core.wire.mission_reset import NextMission
 
 _log = logging.getLogger("mavlink_bridge.fly")
 
-LOCKSTEP_SETPOINT_TIMEOUT_S = 5.0
-"""Under lockstep the vehicles' setpoint failsafe counts wall seconds at the step barrier: 5 s keeps a
-companion that a loaded machine paused for a moment in the loop (failsafes are still counted)."""
-LINGER_S = 0.2
-"""Simulated seconds the world serves after the mission's end: the end's announcement reaches the companions over a
-link with up to this much latency."""
 CREW_DEATH_WAIT_S = 2.0
 """How long fly waits for the exit status of a crew process whose standard input broke."""
 TLOGS_INCOMPLETE = "INCOMPLETE"
@@ -46,7 +46,7 @@ TLOGS_INCOMPLETE = "INCOMPLETE"
 the mission starts, removed when it has ended with every tlog whole. Left there (by an interruption, a failure, a
 kill), it says why in one line; a mission whose tlog could not all be written says which."""
 
-CREW_IMPORTS = ("sim_vehicles.__main__", "mavlink_bridge.companion.cli", "mavlink_bridge.companion.machine")
+CREW_IMPORTS = (WORLD_MODULE, COMPANION_MODULE, "mavlink_bridge.companion.machine")
 """What a crew's fork server imports once for the world and the three companions it forks (their start-up is
 mostly imports: filterpy with scipy.stats, pymavlink, numpy)."""
 
@@ -113,6 +113,20 @@ def child_failure(what: str, child: Child, rc: int, when: str = "") -> str:
     return f"{what} (pid {child.pid}) {how}{said}"
 
 
+def _send_config(child: Child, config_json: str, keep_open: bool) -> None:
+    """Write a child's configuration, one line, to its standard input; close that unless ``keep_open`` (the missions
+    follow). A child that died first does not read it: its exit status says why, where fly watches it."""
+    stdin = child.process.stdin
+    assert stdin is not None, f"{child.name}: standard input is not piped"
+    try:
+        stdin.write(config_json.encode() + b"\n")
+        stdin.flush()
+        if not keep_open:
+            stdin.close()
+    except OSError:  # a broken pipe: it has exited
+        pass
+
+
 def _write_mark(path: Path, text: str) -> None:
     with os.fdopen(create_exclusively(path), "w", encoding="utf-8") as fh:
         fh.write(text)
@@ -146,6 +160,8 @@ class MissionRunner:
         """The processes kept alive across missions (``cfg.persistent``), None until the first or after a failure."""
         self.forks: ForkServer | None = None
         """The server that forks each crew's processes, started with the first crew."""
+        self.signing_key: bytes | None = None
+        """The run's signing key, once read (:meth:`_signing_key`)."""
 
     def close(self) -> None:
         """Let the crew's processes quit (they exit on their own; the caller's stop_all reaps what does not), then
@@ -253,32 +269,14 @@ class MissionRunner:
     def _start_world(
         self, mdir: Path, scenario_file: Path, truth: Path, seed: int, serve: bool = False
     ) -> tuple[LineReader, dict[str, str]]:
-        """The world (the reader of its output) and its vehicles' connection strings."""
-        cfg = self.cfg
-        argv = [
-            "--scenario",
-            str(scenario_file),
-            "--seed",
-            str(seed),
-            "--base-port",
-            "0",
-            "--truth-log",
-            str(truth),
-            "--linger-s",
-            repr(LINGER_S),
-        ]
-        if cfg.lockstep:
-            argv += ["--lockstep", "--setpoint-timeout-s", str(LOCKSTEP_SETPOINT_TIMEOUT_S)]
-        else:  # the world waits for all three companions, as in lockstep, then runs at real time x speedup
-            argv += ["--speedup", repr(cfg.speedup), "--hold-start"]
-        if cfg.signing_key_path is not None:
-            argv += ["--signing-key", str(cfg.signing_key_path)]
-        if cfg.serial_baud is not None:
-            argv += ["--serial", str(cfg.serial_baud), "--serial-byte-loss", repr(cfg.serial_byte_loss)]
-        if serve:
-            argv += ["--serve"]
+        """The world (the reader of its output) and its vehicles' connection strings; it is started with its typed
+        configuration (:func:`~mavlink_bridge.fly.child_configs.world_config`) on standard input."""
+        config = world_config(self.cfg, load(scenario_file), seed, truth, self._signing_key())
+        argv = ["--config-json", "-"] + (["--serve"] if serve else [])
         log = mdir / "sitl.log"
-        sitl = self._launch("sitl", "sim_vehicles", argv, log, stdout_pipe=True, serve=serve)
+        sitl = self._launch(
+            "sitl", WORLD_MODULE, argv, log, stdout_pipe=True, serve=serve, config_json=config.to_json()
+        )
         reader = LineReader(sitl)
         return reader, self._read_endpoints(reader, log)
 
@@ -317,46 +315,59 @@ class MissionRunner:
     def _start_companions(
         self, index: int, mdir: Path, scenario_file: Path, endpoints: dict[str, str], serve: bool = False
     ) -> list[Child]:
-        cfg = self.cfg
+        """The three companions, each started with its typed configuration (:mod:`mavlink_bridge.fly.child_configs`)
+        on standard input; they fly the scenario file the world flies."""
+        scenario = load(scenario_file)
         out = []
         for role in ROLES:
             name = role.value
-            argv = [
-                "--connect",
+            config = companion_config(
+                self.cfg,
+                role,
                 endpoints[name],
-                "--role",
-                name,
-                "--scenario",
-                str(scenario_file),
-                "--status-json",
-                str(mdir / f"{name}.status.json"),
-            ]
-            argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", cfg.pilot]
-            if cfg.shield:
-                argv += ["--shield"]
-            if cfg.setpoints is not SetpointDialect.BODY_RATES:
-                argv += ["--setpoints", cfg.setpoints.value]
-            if cfg.lockstep:
-                argv += ["--lockstep", "--lockstep-grant-s", repr(cfg.lockstep_grant_s)]
-            if cfg.lean_telemetry:
-                argv += ["--lean-telemetry"]
-            if cfg.tlog_dir is not None:
-                argv += ["--tlog", str(cfg.tlog_dir / f"mission-{index:03d}" / f"{name}.tlog")]
-            if cfg.signing_key_path is not None:
-                argv += ["--signing-key", str(cfg.signing_key_path)]
-            if serve:
-                argv += ["--serve"]
-            out.append(self._launch(name, "mavlink_bridge.companion", argv, mdir / f"{name}.log", serve, serve))
+                scenario,
+                status_json=mdir / f"{name}.status.json",
+                tlog=tlog_path(self.cfg, index, role),
+                signing_key=self._signing_key(),
+            )
+            argv = ["--config-json", "-"] + (["--serve"] if serve else [])
+            log = mdir / f"{name}.log"
+            out.append(self._launch(name, COMPANION_MODULE, argv, log, serve, serve, config.to_json()))
         return out
 
-    def _launch(self, name: str, module: str, args: list[str], log: Path, stdout_pipe: bool, serve: bool) -> Child:
+    def _signing_key(self) -> bytes | None:
+        """The run's signing key (read once from ``cfg.signing_key_path``), None when it flies unsigned."""
+        if self.signing_key is None and self.cfg.signing_key_path is not None:
+            self.signing_key = read_signing_key(self.cfg.signing_key_path)
+        return self.signing_key
+
+    def _launch(
+        self,
+        name: str,
+        module: str,
+        args: list[str],
+        log: Path,
+        stdout_pipe: bool,
+        serve: bool,
+        config_json: str | None = None,
+    ) -> Child:
         """``python -m module args``: a crew's process (``serve``: it reads its next missions on standard input) is
-        forked from the crew's fork server; a mission's own process starts afresh, as a user's would."""
+        forked from the crew's fork server; a mission's own process starts afresh, as a user's would. ``config_json``:
+        the first line of its standard input, its configuration (then closed, unless it serves)."""
         if not serve or not FORK_SERVER_AVAILABLE:
             argv = [sys.executable, "-m", module, *args]
-            return self.children.start(
-                name, argv, log_path=log, stdout_pipe=stdout_pipe, stdin_pipe=serve, env=self.env
+            stdin_pipe = serve or config_json is not None
+            child = self.children.start(
+                name, argv, log_path=log, stdout_pipe=stdout_pipe, stdin_pipe=stdin_pipe, env=self.env
             )
+        else:
+            child = self._fork(name, module, args, log, stdout_pipe)
+        if config_json is not None:
+            _send_config(child, config_json, keep_open=serve)
+        return child
+
+    def _fork(self, name: str, module: str, args: list[str], log: Path, stdout_pipe: bool) -> Child:
+        """``python -m module args`` forked from the crew's fork server (started, or started again, here)."""
         if self.forks is None or not self.forks.alive:
             if self.forks is not None:
                 _log.warning("the fork server (pid %d) has ended: starting a new one", self.forks.child.pid)
@@ -442,7 +453,7 @@ class MissionRunner:
             wait_readable([crew.world], 0.2)
         for reader in crew.companions:
             name = reader.child.name
-            tlog = None if self.cfg.tlog_dir is None else self.cfg.tlog_dir / f"mission-{index:03d}" / f"{name}.tlog"
+            tlog = tlog_path(self.cfg, index, Role(name))
             crew.tell(
                 reader,
                 NextMission(

@@ -75,12 +75,14 @@ def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", str(tp))
 
 
-def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError) -> Any:
-    """``value`` (plain YAML data) as type ``tp`` (a dataclass, an enum by its values, tuple, dict, optional, float,
-    int, bool or str), checked all the way down; the first problem raises ``error(source, field path, problem)``.
-    Scenario files, preset files and grid files are read with it, so a value is judged, and its problem worded, the
-    same in each."""
-    at = _Place(where, source, error)
+def typed_value(tp: Any, value: Any, where: str, source: str, error: FileError, bounded: bool = True) -> Any:
+    """``value`` (plain YAML or JSON data) as type ``tp`` (a dataclass, an enum by its values, tuple, dict, optional,
+    float, int, bool, str, a path or bytes), checked all the way down; the first problem raises ``error(source, field
+    path, problem)``. Scenario files, preset files, grid files and the configurations fly gives its processes
+    (:mod:`tssac_core.sim.settings_json`) are read with it, so a value is judged, and its problem worded, the same in
+    each. ``bounded``: integers beyond :data:`MAX_MAGNITUDE` are refused (a file a user writes); False for a program's
+    own settings, whose dataclass checks its values (a seed goes up to 2**63 - 1)."""
+    at = _Place(where, source, error, bounded)
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         return _optional(tp, value, at)
@@ -105,18 +107,20 @@ class _Place:
     where: str
     source: str
     error: FileError
+    bounded: bool = True
+    """Integers beyond :data:`MAX_MAGNITUDE` are refused."""
 
     def fail(self, problem: str) -> Exception:
         return self.error(self.source, self.where, problem)
 
     def into(self, name: str) -> _Place:
-        return _Place(_join(self.where, name), self.source, self.error)
+        return _Place(_join(self.where, name), self.source, self.error, self.bounded)
 
     def item(self, index: int) -> _Place:
-        return _Place(f"{self.where}[{index}]", self.source, self.error)
+        return _Place(f"{self.where}[{index}]", self.source, self.error, self.bounded)
 
     def read(self, tp: Any, value: Any) -> Any:
-        return typed_value(tp, value, self.where, self.source, self.error)
+        return typed_value(tp, value, self.where, self.source, self.error, self.bounded)
 
 
 def _optional(tp: Any, value: Any, at: _Place) -> Any:
@@ -187,7 +191,7 @@ def _float(value: Any, at: _Place) -> float:
 def _int(value: Any, at: _Place) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise at.fail(f"expected an integer, got {_short(value)}")
-    if abs(value) > MAX_MAGNITUDE:
+    if at.bounded and abs(value) > MAX_MAGNITUDE:
         raise at.fail(_too_large(_short(value)))
     return value
 
@@ -204,8 +208,31 @@ def _str(value: Any, at: _Place) -> str:
     return value
 
 
-_SCALARS: dict[Any, Callable[[Any, _Place], Any]] = {float: _float, int: _int, bool: _bool, str: _str}
-"""The scalar types a schema may hold, each with its check."""
+def _path(value: Any, at: _Place) -> Path:
+    if not isinstance(value, str) or not value:
+        raise at.fail(f"expected a path, got {_short(value)}")
+    return Path(value)
+
+
+def _hex_bytes(value: Any, at: _Place) -> bytes:
+    if isinstance(value, str):
+        try:
+            return bytes.fromhex(value)
+        except ValueError:
+            pass
+    raise at.fail(f"expected bytes as hexadecimal digits, got {_short(value)}")
+
+
+_SCALARS: dict[Any, Callable[[Any, _Place], Any]] = {
+    float: _float,
+    int: _int,
+    bool: _bool,
+    str: _str,
+    Path: _path,
+    bytes: _hex_bytes,
+}
+"""The scalar types a schema may hold, each with its check (a path is a string, bytes are hexadecimal digits: the
+form :func:`tssac_core.sim.settings_json.plain` gives them)."""
 
 
 def _short(value: Any, max_chars: int = 40) -> str:

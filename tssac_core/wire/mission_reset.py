@@ -95,13 +95,19 @@ class MissionInput:
     def next(self, stop: Callable[[], bool], poll_s: float = 0.2, timeout_s: float | None = None) -> NextMission | None:
         """Block until the next mission line (None: quit, end of input, a stop request or the timeout).
         Raises ResetError for a malformed line."""
+        line = self.line(stop, poll_s, timeout_s)
+        return None if line is None else NextMission.from_line(line)
+
+    def line(self, stop: Callable[[], bool], poll_s: float = 0.2, timeout_s: float | None = None) -> str | None:
+        """Block until the next line that is not blank (None: end of input, a stop request or the timeout). A
+        process fly starts reads its configuration so, before its missions (``--config-json -``)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             line, newline, rest = self._buffer.partition(b"\n")
             if newline or (self._eof and line):
                 self._buffer = rest
                 if line.strip():
-                    return NextMission.from_line(line.decode(errors="replace"))
+                    return line.decode(errors="replace")
                 continue
             if self._eof or stop() or (deadline is not None and time.monotonic() >= deadline):
                 return None

@@ -1,4 +1,6 @@
-"""Configuration of a SITL run (what the command line sets), as frozen dataclasses."""
+"""Configuration of a SITL run (what ``python -m sim_vehicles``'s flags set, or what fly gives the world it starts), as
+frozen dataclasses. It lives below both: the SITL (:mod:`sim_vehicles`) runs it, fly (:mod:`mavlink_bridge.fly`) builds
+it, and neither package imports the other."""
 
 from __future__ import annotations
 
@@ -6,7 +8,8 @@ import enum
 from dataclasses import dataclass
 from pathlib import Path
 
-from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario
+from tssac_core.sim import settings_json
+from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario, validate
 from tssac_core.wire.uart import check_baud
 
 DEFAULT_BASE_PORT = 14560
@@ -35,7 +38,7 @@ class LockstepStart(enum.Enum):
 
 @dataclass(frozen=True)
 class SitlConfig:
-    """Everything a :class:`sim_vehicles.world_runner.WorldRunner` needs."""
+    """Everything a ``sim_vehicles.world_runner.WorldRunner`` needs."""
 
     scenario: Scenario
     """The mission; a random scenario gets its layout drawn with ``seed``."""
@@ -85,6 +88,20 @@ class SitlConfig:
     (:mod:`sim_vehicles.link.serial_port`); None: UDP only."""
     serial_byte_loss: float = 0.0
     """``--serial-byte-loss P``: the serial lines drop each byte, each way, with this probability (a noisy line)."""
+
+    def to_json(self) -> str:
+        """This configuration as one line of JSON (:mod:`tssac_core.sim.settings_json`): what fly gives a world it
+        starts (``python -m sim_vehicles.from_config``). It holds the signing key."""
+        return settings_json.to_json(self)
+
+    @classmethod
+    def from_json(cls, text: str, source: str = "the world's configuration") -> SitlConfig:
+        """The configuration :meth:`to_json` wrote, equal. Anything else raises one line: a
+        :class:`~tssac_core.sim.settings_json.SettingsError` (a malformed, missing or unknown field, or a value the
+        configuration refuses) or a ScenarioError (a scenario that does not validate)."""
+        config = settings_json.from_json(cls, text, source)
+        validate(config.scenario, f"{source}: scenario")
+        return config
 
     @property
     def dynamics(self) -> Dynamics:

@@ -1,0 +1,67 @@
+"""Typed settings (a frozen dataclass, such as the configuration ``fly`` gives each process it starts) as one line of
+JSON, and back: :func:`to_json` writes every field (None as null, a path as a string, bytes as hexadecimal digits, an
+enum by its value, a nested dataclass as an object); :func:`from_json` reads it back equal, checked field by field
+with :func:`tssac_core.sim.yaml_file.typed_value`, so a malformed or unknown field is one error line that names it."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+from pathlib import Path
+from typing import Any, TypeVar
+
+from tssac_core.common.errors import InputError
+from tssac_core.sim.yaml_file import typed_value
+
+T = TypeVar("T")
+
+
+class SettingsError(InputError):
+    """Settings that cannot be read; ``str()`` is one line: ``source: field: problem``."""
+
+    def __init__(self, source: str, field_path: str, problem: str) -> None:
+        where = f"{source}: {field_path}" if field_path else source
+        super().__init__(f"{where}: {problem}")
+
+
+def plain(value: Any) -> Any:
+    """``value`` as JSON data: what :func:`typed_value` reads back as the same value."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, bytes):
+        return value.hex()
+    if isinstance(value, (tuple, list)):
+        return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, float):
+        return float(value)  # a numpy float64 (a sampled layout's) as the float it is
+    return value
+
+
+def to_json(settings: Any) -> str:
+    """One line of JSON (no newline in it) holding every field of the dataclass ``settings``."""
+    return json.dumps(plain(settings), sort_keys=True, allow_nan=False)
+
+
+def from_json(tp: type[T], text: str, source: str) -> T:
+    """The ``tp`` that :func:`to_json` wrote as ``text``; anything else raises :class:`SettingsError` (as does the
+    dataclass's own check of its values, a ``ValueError``)."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SettingsError(source, "", f"not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+    except (RecursionError, ValueError) as exc:  # nested too deep, an integer of thousands of digits
+        raise SettingsError(source, "", f"not JSON ({str(exc).split(';')[0] or type(exc).__name__})") from None
+    try:
+        value: T = typed_value(tp, data, "", source, SettingsError, bounded=False)
+    except SettingsError:
+        raise
+    except ValueError as exc:  # the dataclass refused a value (its __post_init__): UsageError is one
+        raise SettingsError(source, "", str(exc)) from None
+    return value
