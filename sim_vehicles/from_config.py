@@ -14,15 +14,14 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import NoReturn
 
 from sim_vehicles.__main__ import BAD_INPUT, log_to_stderr, run
+from tssac_core.sim.settings_json import config_text
 from tssac_core.sim.sitl_config import SitlConfig
 from tssac_core.wire.mission_reset import MissionInput
 
 PROG = "python -m sim_vehicles.from_config"
-STDIN = "-"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,19 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def read_config(where: str, missions: MissionInput) -> SitlConfig:
-    """The configuration in file ``where``, or (``-``) on ``missions``' first line; raises ValueError (one line)."""
-    if where != STDIN:
-        try:
-            text = Path(where).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ValueError(f"--config-json {where}: cannot read it ({exc.strerror or exc})") from None
-        except UnicodeDecodeError:
-            raise ValueError(f"--config-json {where}: not UTF-8 text") from None
-        return SitlConfig.from_json(text, where)
-    line = missions.line(lambda: False)
-    if line is None:
-        raise ValueError("--config-json -: standard input ended before the configuration")
-    return SitlConfig.from_json(line, "--config-json -")
+    """The configuration in file ``where``, or (``-``) on ``missions``' first line; raises one line."""
+    return SitlConfig.from_json(*config_text(where, missions))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

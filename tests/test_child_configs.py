@@ -213,7 +213,7 @@ def test_an_empty_standard_input_is_one_clear_error() -> None:
     r, w = os.pipe()
     os.close(w)
     try:
-        with pytest.raises(companion_cli.UsageError, match="standard input ended before the configuration"):
+        with pytest.raises(SettingsError, match="^--config-json -: standard input ended before the configuration$"):
             from_config.read_config("-", MissionInput(r))
     finally:
         os.close(r)

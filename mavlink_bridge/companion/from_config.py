@@ -14,15 +14,14 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from mavlink_bridge.companion.cli import bad_input_errors, log_to_stderr, run
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, CompanionConfig
-from tssac_core.common.cli import UsageError, UsageParser
+from tssac_core.common.cli import UsageParser
+from tssac_core.sim.settings_json import config_text
 from tssac_core.wire.mission_reset import MissionInput
 
 PROG = "python -m mavlink_bridge.companion.from_config"
-STDIN = "-"
 
 
 def build_parser() -> UsageParser:
@@ -42,18 +41,7 @@ def build_parser() -> UsageParser:
 
 def read_config(where: str, missions: MissionInput) -> CompanionConfig:
     """The configuration in file ``where``, or (``-``) on ``missions``' first line; raises one line."""
-    if where != STDIN:
-        try:
-            text = Path(where).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise UsageError(f"--config-json {where}: cannot read it ({exc.strerror or exc})") from None
-        except UnicodeDecodeError:
-            raise UsageError(f"--config-json {where}: not UTF-8 text") from None
-        return CompanionConfig.from_json(text, where)
-    line = missions.line(lambda: False)
-    if line is None:
-        raise UsageError("--config-json -: standard input ended before the configuration")
-    return CompanionConfig.from_json(line, "--config-json -")
+    return CompanionConfig.from_json(*config_text(where, missions))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

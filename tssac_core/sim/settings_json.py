@@ -13,6 +13,7 @@ from typing import Any, TypeVar
 
 from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import typed_value
+from tssac_core.wire.mission_reset import MissionInput
 
 T = TypeVar("T")
 
@@ -65,3 +66,25 @@ def from_json(tp: type[T], text: str, source: str) -> T:
     except ValueError as exc:  # the dataclass refused a value (its __post_init__): UsageError is one
         raise SettingsError(source, "", str(exc)) from None
     return value
+
+
+STDIN = "-"
+"""``--config-json -``: the configuration is standard input's first line."""
+
+
+def config_text(where: str, missions: MissionInput) -> tuple[str, str]:
+    """The text of a child's ``--config-json FILE|-`` and the name to give it in errors: file ``where``'s, or (``-``)
+    the first line on ``missions`` (standard input, whose later lines are the served missions). A file that cannot be
+    read, or standard input that ends first, is one :class:`SettingsError` line."""
+    source = f"--config-json {where}"
+    if where != STDIN:
+        try:
+            return Path(where).read_text(encoding="utf-8"), where
+        except OSError as exc:
+            raise SettingsError(source, "", f"cannot read it ({exc.strerror or exc})") from None
+        except UnicodeDecodeError:
+            raise SettingsError(source, "", "not UTF-8 text") from None
+    line = missions.line(lambda: False)
+    if line is None:
+        raise SettingsError(source, "", "standard input ended before the configuration")
+    return line, source
