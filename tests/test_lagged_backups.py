@@ -17,6 +17,7 @@ from tssac_core.assurance.lagged_backups import (
     lag_gains,
     lagged_backup_clearance,
     lagged_rollout,
+    straight_rollout,
     turn_keep_out,
 )
 from tssac_core.assurance.monitor import Hazards, Limits, constant_rollout, point_clearance
@@ -96,6 +97,21 @@ def test_the_rate_follows_the_pending_commands_then_a_first_order_lag_rolling_in
         air, limits(1), DT,
     )  # fmt: skip
     assert fast.speeds[0, -1] == pytest.approx(200.0 + 6.0 * 10 * DT)
+
+
+@pytest.mark.parametrize("steps", [1, 2, 3, 320])
+def test_straight_flight_in_closed_form_is_the_step_by_step_path(steps: int) -> None:
+    rng = np.random.default_rng(7)
+    m = 40
+    x, y, v, phi = random_states(rng, m)
+    lim, air = limits(m), random_airframes(rng, m)
+    lag = LagState(rng.uniform(-W, W, m), rng.uniform(-W, W, (m, 2)))  # mid-roll, turns still pending
+    fast = straight_rollout(x, y, v, phi, lag, steps, air, lim, DT)
+    slow = lagged_rollout(x, y, v, phi, lag, np.zeros((m, steps)), np.zeros((m, steps)), air, lim, DT)
+    for a, b in zip((fast.xs, fast.ys, fast.speeds, fast.headings, fast.rates), (slow.xs, slow.ys, slow.speeds,
+                    slow.headings, slow.rates)):  # fmt: skip
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(fast.queue, slow.queue)
 
 
 def test_a_turn_never_leaves_its_keep_out_disk_and_half_the_disks_growth_is_not_enough() -> None:

@@ -248,7 +248,7 @@ def test_companion_monitor_margin_and_pending(random_path):
     state = (world.x_m[0, 0], world.y_m[0, 0], world.v_m_s[0, 0], world.phi_rad[0, 0])
     for k in range(30):
         proposed = np.array([1.0 if k % 7 < 3 else -0.5, 0.3])
-        action, _ = lockstep.action(True, 10, proposed, lambda: (state, (0.0, 0.0, 0.0)), 10 * k)
+        action, _ = lockstep.action(True, 10, proposed, lambda: (state, (0.0, 0.0, 0.0), (0.0, 0.0)), 10 * k)
         lockstep.sent(action, 10 * k)
         d = reference.decide(*state, proposed, 10, cfg.margin_m)
         np.testing.assert_array_equal(action, d.action[0])

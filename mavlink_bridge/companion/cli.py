@@ -31,6 +31,7 @@ from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
+from tssac_core.sim.airframe_response import response_option
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.sim.settings_json import SettingsError
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
@@ -77,6 +78,13 @@ def _pilot_flags(g: argparse._ActionsContainer) -> None:
     )
     g.add_argument(
         "--shield", action="store_true", help="fly through the runtime-assurance monitor (docs/runtime_assurance.md)"
+    )
+    g.add_argument(
+        "--airframe-response",
+        type=Path,
+        metavar="FILE",
+        help="with --shield: the monitor predicts with this airframe's fitted turn lag "
+        "(sim_vehicles/dynamics/airframes/<name>.response.yaml) instead of eq. 5 (docs/runtime_assurance.md)",
     )
     g.add_argument(
         "--source-system",
@@ -219,6 +227,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         lean_telemetry=args.lean_telemetry,
         pilot=args.pilot or "",
         shield=ShieldConfig() if args.shield else None,
+        airframe_response=response_option(args.airframe_response, args.shield),
         setpoints=SetpointDialect(args.setpoints),
         source_system=args.source_system,
     )

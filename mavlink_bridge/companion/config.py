@@ -141,6 +141,9 @@ class CompanionConfig:
     """Without a model: ``guidance`` (the default), ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: ShieldConfig | None = None
     """Fly through the runtime-assurance monitor (:mod:`mavlink_bridge.companion.shield`); None: the pilot alone."""
+    airframe_response: Path | None = None
+    """The airframe's fitted response the monitor predicts with (``--airframe-response``,
+    :mod:`tssac_core.sim.airframe_response`); None: eq. 5."""
     lean_telemetry: bool = False
     """Ask the vehicle to stop the streams the companion does not use (GLOBAL_POSITION_INT, ATTITUDE,
     VFR_HUD): less work on both sides when no ground station shares the vehicle (fly's own worlds)."""

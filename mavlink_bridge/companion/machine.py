@@ -40,6 +40,7 @@ from mavlink_bridge.link.frames import (
 )
 from mavlink_bridge.link.guided_commands import SLEW_COMMANDS, SetpointDialect, slew_from_setpoint
 from tssac_core.common.cli import UsageError, write_json
+from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.mission_events import (
     FLAGS,
@@ -109,7 +110,14 @@ class Companion:
         self.shield = (
             None
             if config.shield is None
-            else CompanionShield(self.layout_state, config.role, s, config.shield, config.lockstep)
+            else CompanionShield(
+                self.layout_state,
+                config.role,
+                s,
+                config.shield,
+                config.lockstep,
+                None if config.airframe_response is None else load_response(config.airframe_response),
+            )
         )
         self.pilot.action(lambda: self.layout_state, self.role_index, 0)  # warm up: the guidance plans its route
         self.pilot.reset()
@@ -668,11 +676,15 @@ class Companion:
         return action_to_setpoint((float(action[0]), float(action[1])), self.spec)
 
     def _monitor_estimate(self) -> Estimate:
-        """What the monitor decides on: the filter's (x, y, v, phi) and its sigmas of position (major axis), heading
-        and speed."""
+        """What the monitor decides on: the filter's (x, y, v, phi), its sigmas of position (major axis), heading
+        and speed, and its turn rate with its sigma (a filter without one: 0, as uncertain as the limit allows)."""
         f = self.filter
         x_m, y_m = f.pos_m
-        return (x_m, y_m, f.speed_m_s, f.heading_rad), (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
+        rate, rate_sigma = f.turn_rate_rad_s, f.turn_rate_sigma_rad_s
+        unknown = (0.0, math.radians(self.spec.turn_rate_max_deg_s))
+        turn = unknown if rate is None or rate_sigma is None else (rate, rate_sigma)
+        sigmas = (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
+        return (x_m, y_m, f.speed_m_s, f.heading_rad), sigmas, turn
 
     def _hold_reason(self, why: str) -> None:
         """Count and say (once per spell) what is amiss: the hold flies without the monitor, its backup with it."""

@@ -12,7 +12,12 @@ the proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMon
   late at a command change; the monitor takes it off each backup's clearance by that backup's lever arms;
 * the commands sent in the last round trip (``pending``): the vehicle flies the setpoint stamped for tick t
   about 2 x ``link.latency_ms`` after t, off lockstep and in lockstep alike (there the link runs on simulated
-  time). Before the first command reached the vehicle it flew the hold (straight on): the queue starts with it.
+  time). Before the first command reached the vehicle it flew the hold (straight on): the queue starts with it;
+* with an airframe's response (``--airframe-response``), the paths predicted with its lag
+  (:class:`~tssac_core.assurance.lagged_backups.LaggedPrediction`) instead of eq. 5: from the filter's turn rate,
+  with the turn commands the airframe has not yet followed (its delay, before the link's round trip); the turn
+  rate's error, ``sigma_k`` standard deviations, turns the path by at most that times the longer time constant
+  (the lag closes an error in the rate as it closes a gap to the command).
 
 Every tick's command comes from here: a non-finite action and a telemetry gap are proposals that never pass (the
 remembered backup flies, as in the batched world), and between decisions the monitor's last choice is held.
@@ -29,14 +34,19 @@ from typing import TypeAlias
 
 import numpy as np
 
+from tssac_core.assurance.lagged_backups import AirframeLag, LaggedPrediction, LagState, lagged_rollout
 from tssac_core.assurance.monitor import (
+    KINEMATIC,
     N_TURNS,
+    EstimateError,
+    Prediction,
     ShieldConfig,
     companion_error,
     companion_margin_m,
     largest_backup_error_m,
     step_actions,
 )
+from tssac_core.sim.airframe_response import AirframeResponse, airframe_lag
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world_monitor import VehicleMonitor
 from tssac_core.sim.world_state import WorldState
@@ -45,9 +55,9 @@ ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
 _TURN_NAMES = ("left", "right", "left braking", "right braking")
 
-Estimate: TypeAlias = tuple[tuple[float, float, float, float], tuple[float, float, float]]
-"""The filter's (x, y, v, phi) at a tick and its standard deviations of position (major axis, m), heading (rad) and
-speed (m/s)."""
+Estimate: TypeAlias = tuple[tuple[float, float, float, float], tuple[float, float, float], tuple[float, float]]
+"""The filter's (x, y, v, phi) at a tick, its standard deviations of position (major axis, m), heading (rad) and
+speed (m/s), and its turn rate and that's standard deviation (rad/s)."""
 
 
 @dataclass
@@ -74,9 +84,19 @@ class ShieldCounters:
 class CompanionShield:
     """One vehicle's monitor with its held action, its queue of sent commands and its counts."""
 
-    def __init__(self, state: WorldState, role: Role, scenario: Scenario, cfg: ShieldConfig, lockstep: bool) -> None:
+    def __init__(
+        self,
+        state: WorldState,
+        role: Role,
+        scenario: Scenario,
+        cfg: ShieldConfig,
+        lockstep: bool,
+        response: AirframeResponse | None = None,
+    ) -> None:
         self.cfg = cfg
         self.role = role
+        self.response = response
+        """The airframe's fitted response the monitor predicts with (None: eq. 5)."""
         self.monitor = VehicleMonitor(state, role.index, cfg)
         self.dt_s = scenario.dt_s
         self.latency_s = scenario.link.latency_ms / 1000.0
@@ -147,14 +167,26 @@ class CompanionShield:
         if not decision and self._turn_step is not None and step >= self._turn_step:
             self._held, self._turn_step = self._turn.copy(), None
         if decision:
-            state, sigmas = estimate()
+            state, sigmas, (turn_rate, turn_sigma) = estimate()
             margin = companion_margin_m(self.cfg, self.speed_max_m_s, self.off_lockstep)
             lim = self.monitor.limits
             error = companion_error(self.cfg, lim, self.dt_s, *sigmas, lossy=self.lossy)
+            prediction: Prediction = KINEMATIC
+            if self.response is not None:
+                airframe = self._airframe(state[2])
+                prediction = LaggedPrediction(airframe, self._lag_state(airframe, turn_rate))
+                turned = self.cfg.sigma_k * turn_sigma * airframe.longest_tau_s()
+                error = error + EstimateError(np.zeros(1), turned, np.zeros(1))
             if not np.all(np.isfinite(proposed)):
                 self.counters.nonfinite_proposals += 1
             d = self.monitor.decide(
-                *state, proposed=proposed, steps=steps, margin_m=margin, pending=self._pending(), error=error
+                *state,
+                proposed=proposed,
+                steps=steps,
+                margin_m=margin,
+                pending=self._pending(),
+                error=error,
+                prediction=prediction,
             )
             self._held = d.action[0].copy()
             self._turn = d.turn[0].copy()
@@ -178,6 +210,22 @@ class CompanionShield:
                 self.counters.unprotected_steps += 1
         return self._held, text
 
+    def _airframe(self, speed_m_s: float) -> AirframeLag:
+        """The airframe's response at ``speed_m_s`` (held to the fitted span: the limits keep the speed inside it)."""
+        assert self.response is not None
+        speeds = self.response.speeds_m_s
+        return airframe_lag(self.response, np.array([min(max(speed_m_s, speeds[0]), speeds[-1])]), self.dt_s)
+
+    def _lag_state(self, airframe: AirframeLag, turn_rate_rad_s: float) -> LagState:
+        """The lag's state where the link's round trip starts: the rate flown, and the turn commands sent before that
+        round trip that the airframe's delay has not yet let it follow (oldest first; the hold before the first)."""
+        delay, round_trip = int(airframe.delay_steps[0]), self.pending_ticks()
+        turns = [command[0] for command in self._sent]
+        before = turns[: len(turns) - round_trip] if round_trip else turns
+        queue = ([0.0] * delay + before)[len(before) :] if delay else []
+        w = self.monitor.limits.turn_rate_max_rad_s
+        return LagState(np.array([turn_rate_rad_s]), np.array([queue], dtype=np.float64).reshape(1, delay) * w)
+
     def sent(self, action: tuple[float, float] | np.ndarray, step: int, before_fix: bool = False) -> None:
         """Record the command [omega, u] sent at tick ``step``, whatever sent it (the queue that ``pending`` is taken
         from; before the first fix, also what :meth:`dead_reckoned` flies)."""
@@ -187,10 +235,11 @@ class CompanionShield:
             self._before_fix.append((step, command))
 
     def dead_reckoned(self, start: tuple[float, float, float, float], step: int) -> Estimate:
-        """The vehicle's state at tick ``step`` before any position fix: its start (the scenario's: known exactly)
-        flown through what it flew since tick 0: the hold until the first command reached it, then each command
-        from its tick plus the link's round trip (the world's own integration, eq. 5-6). Its sigmas are zero; a
-        setpoint lost or late is the error bound's hand-over term, as after a fix."""
+        """The vehicle's state at tick ``step`` before any position fix: its start (the scenario's: known exactly, in
+        straight flight) flown through what it flew since tick 0: the hold until the first command reached it, then
+        each command from its tick plus the link's round trip (the world's own integration, eq. 5-6, or with an
+        airframe's response its lagged model). Its sigmas are zero; a setpoint lost or late is the error bound's
+        hand-over term, as after a fix."""
         flown = np.zeros((max(step, 0), 2))
         delay = self.pending_ticks()
         for tick, command in self._before_fix:
@@ -198,6 +247,17 @@ class CompanionShield:
                 flown[tick + delay :] = command
         lim = self.monitor.limits
         x, y, v, phi = (np.array([value]) for value in start)
-        if len(flown):
+        turn_rate = 0.0
+        if len(flown) and self.response is not None:
+            airframe = self._airframe(start[2])
+            path = lagged_rollout(
+                x, y, v, phi, LagState.steady(np.zeros(1), int(airframe.delay_steps[0])),
+                flown[None, :, 0] * lim.turn_rate_max_rad_s[:, None], flown[None, :, 1] * lim.accel_max_m_s2[:, None],
+                airframe, lim, self.dt_s,
+            )  # fmt: skip
+            x, y, v, phi = path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
+            turn_rate = float(path.rates[0, -1])
+        elif len(flown):
             x, y, v, phi = step_actions(x, y, v, phi, flown[None], lim, self.dt_s)
-        return (float(x[0]), float(y[0]), float(v[0]), float(phi[0])), (0.0, 0.0, 0.0)
+            turn_rate = float(flown[-1, 0] * lim.turn_rate_max_rad_s[0])
+        return (float(x[0]), float(y[0]), float(v[0]), float(phi[0])), (0.0, 0.0, 0.0), (turn_rate, 0.0)

@@ -209,6 +209,7 @@ class _Backend(Protocol):
     def set(self, x: FloatArray, p: FloatArray) -> None: ...
     def pos_vel(self) -> tuple[float, float, float, float]: ...
     def turn_rate_rad_s(self) -> float | None: ...
+    def turn_rate_sigma_rad_s(self) -> float | None: ...
     def pos_cov(self) -> FloatArray: ...
     def speed_heading_sigma(self) -> tuple[float, float]: ...
 
@@ -252,6 +253,9 @@ class _ConstantVelocity:
         return float(x[0]), float(x[1]), float(x[2]), float(x[3])
 
     def turn_rate_rad_s(self) -> float | None:
+        return None
+
+    def turn_rate_sigma_rad_s(self) -> float | None:
         return None
 
     def pos_cov(self) -> FloatArray:
@@ -468,6 +472,9 @@ class _ConstantTurn:
     def turn_rate_rad_s(self) -> float | None:
         return float(self._kf.x[_OMEGA])
 
+    def turn_rate_sigma_rad_s(self) -> float | None:
+        return math.sqrt(max(0.0, float(self._kf.P[_OMEGA, _OMEGA])))
+
     def pos_cov(self) -> FloatArray:
         return np.asarray(self._kf.P[:2, :2], dtype=np.float64)
 
@@ -637,6 +644,12 @@ class VehicleStateFilter:
         """Estimated turn rate omega (rad/s, counter-clockwise positive); None for constant velocity."""
         self._require_initialised()
         return self._backend.turn_rate_rad_s()
+
+    @property
+    def turn_rate_sigma_rad_s(self) -> float | None:
+        """Standard deviation of the turn rate's estimate (rad/s); None for constant velocity."""
+        self._require_initialised()
+        return self._backend.turn_rate_sigma_rad_s()
 
     @property
     def position_sigma_m(self) -> float:

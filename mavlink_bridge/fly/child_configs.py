@@ -74,6 +74,7 @@ def companion_config(
         model=None if cfg.models is None else pilot_file(cfg.models, role),
         pilot="" if cfg.models is not None else cfg.pilot,
         shield=ShieldConfig() if cfg.shield else None,
+        airframe_response=cfg.airframe_response,
         setpoints=cfg.setpoints,
         lockstep=cfg.lockstep,
         lockstep_grant_s=cfg.lockstep_grant_s if cfg.lockstep else LOCKSTEP_GRANT_S,

@@ -22,6 +22,7 @@ from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
+from tssac_core.sim.airframe_response import load_response, response_option
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Dynamics, DynamicsModel, Scenario, load
 from tssac_core.wire.uart import BaudError, check_baud
@@ -72,6 +73,8 @@ class FlyConfig:
     """Without models: ``guidance``, ``straight`` or an adversary's name (:data:`PILOT_NAMES`)."""
     shield: bool = False
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
+    airframe_response: Path | None = None
+    """The airframe's fitted response their monitors predict with (``--airframe-response``); None: eq. 5."""
     setpoints: SetpointDialect = SetpointDialect.BODY_RATES
     """How the companions command GUIDED (``--setpoints``: body rates, or ArduPlane's GUIDED_CHANGE_* commands)."""
     mission: int | None = None
@@ -149,6 +152,13 @@ def _mission_flags(g: argparse._ActionsContainer) -> None:
         "--shield",
         action="store_true",
         help="the companions fly through the runtime-assurance monitor (docs/runtime_assurance.md); counts in the JSON",
+    )
+    g.add_argument(
+        "--airframe-response",
+        type=Path,
+        metavar="FILE",
+        help="with --shield: the monitors predict with this airframe's fitted turn lag "
+        "(sim_vehicles/dynamics/airframes/f16.response.yaml for --dynamics jsbsim's f16) instead of eq. 5",
     )
     g.add_argument(
         "--dynamics",
@@ -359,6 +369,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         lockstep_grant_s=a.lockstep_grant_s,
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
+        airframe_response=airframe_response_of(a, scenario),
         setpoints=SetpointDialect(a.setpoints),
         signing=not a.no_signing,
         workers=a.workers,
@@ -465,15 +476,41 @@ def with_dynamics(scenario: Scenario, model: str | None, aircraft: str | None) -
     return dataclasses.replace(scenario, dynamics=chosen)
 
 
-def monitor_scope(scenario: Scenario) -> str | None:
+def airframe_response_of(a: argparse.Namespace, scenario: Scenario) -> Path | None:
+    """``--airframe-response``: checked (:func:`~tssac_core.sim.airframe_response.response_option`), and for the
+    airframe the world flies: a response models a JSBSim airframe, not the kinematic vehicles, nor another airframe."""
+    path = response_option(a.airframe_response, a.shield)
+    if path is None:
+        return None
+    dynamics = scenario.dynamics or Dynamics()
+    if dynamics.model is DynamicsModel.KINEMATIC:
+        raise UsageError("--airframe-response models a JSBSim airframe: fly it with --dynamics jsbsim")
+    fitted = load_response(path).aircraft
+    if Path(dynamics.aircraft).stem != fitted:
+        raise UsageError(
+            f"--airframe-response {path.name} is fitted to {fitted}, but the world flies {dynamics.aircraft}"
+        )
+    return path
+
+
+def monitor_scope(scenario: Scenario, airframe_response: Path | None = None) -> str | None:
     """Why the runtime-assurance monitor's proof does not cover this scenario's flight (None: it does). The proof
     predicts with eq. 5 in still air (docs/runtime_assurance.md): a JSBSim airframe lags its commands and cannot brake
-    as hard, and a wind carries the vehicles off the predicted paths."""
+    as hard, and a wind carries the vehicles off the predicted paths. With an airframe's fitted response the monitor
+    predicts with its lag, and its bound holds within a residual measured against JSBSim, in still air: measured,
+    not proved."""
     dynamics = scenario.dynamics or Dynamics()
+    wind = scenario.wind is not None and scenario.wind.promised_max_m_s > 0.0
+    if airframe_response is not None:
+        where = f" and not in a {scenario.wind.promised_max_m_s:g} m/s wind" if wind and scenario.wind else ""
+        return (
+            f"the monitor predicts with the airframe response {airframe_response.name}: its bound holds within a "
+            f"residual measured against JSBSim in still air{where}, not a proof"
+        )
     reasons = []
     if dynamics.model is not DynamicsModel.KINEMATIC:
         reasons.append(f"{dynamics.model.value} {dynamics.aircraft} dynamics")
-    if scenario.wind is not None and scenario.wind.promised_max_m_s > 0.0:
+    if wind and scenario.wind is not None:
         reasons.append(f"a {scenario.wind.promised_max_m_s:g} m/s wind")
     if not reasons:
         return None

@@ -152,7 +152,7 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> EvaluationRecord:
         mean_mission_time_s=float(np.mean(times)) if times else None,
         roles={role.value: role_figures(rows, costed, role.value, cfg.scenario.cost_limit) for role in ROLES},
         worst_missions=worst,
-        monitor=monitor_figures(rows, monitor_scope(cfg.scenario)) if cfg.shield else None,
+        monitor=monitor_figures(rows, monitor_scope(cfg.scenario, cfg.airframe_response)) if cfg.shield else None,
         run=flown_run(cfg),
     )
 

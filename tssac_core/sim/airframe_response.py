@@ -41,6 +41,7 @@ import numpy as np
 import yaml
 
 from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
+from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import read_yaml, typed_value
 
@@ -226,3 +227,17 @@ def airframe_lag(response: AirframeResponse, speeds_m_s: np.ndarray, dt_s: float
         decel_m_s2=np.array([r.decel_max_m_s2 for r in at]),
         residual_m=np.array([r.turn_residual_m for r in at]),
     )
+
+
+def response_option(path: Path | None, shield: bool) -> Path | None:
+    """A command's ``--airframe-response FILE``, checked before anything flies: it needs ``--shield`` (it is the
+    monitor's model of the airframe) and a file that reads; each problem one :class:`UsageError` line."""
+    if path is None:
+        return None
+    if not shield:
+        raise UsageError("--airframe-response is the monitor's model of the airframe: it needs --shield")
+    try:
+        load_response(path)
+    except ResponseFileError as exc:
+        raise UsageError(f"--airframe-response {exc}") from None
+    return path.resolve()

@@ -13,11 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.assurance.monitor import (
+    KINEMATIC,
     Decision,
     EstimateError,
     Hazards,
     Limits,
     Memory,
+    Prediction,
     ShieldConfig,
     decide,
 )
@@ -157,8 +159,10 @@ class VehicleMonitor:
         margin_m: float,
         pending: np.ndarray | None = None,
         error: EstimateError | None = None,
+        prediction: Prediction = KINEMATIC,
     ) -> Decision:
-        """One decision: the action to fly for the next ``steps`` steps and whether the backup flies."""
+        """One decision: the action to fly for the next ``steps`` steps and whether the backup flies (``prediction``:
+        how the paths are predicted, eq. 5 unless the airframe's response is given)."""
         state = np.array([[x_m, y_m, v_m_s, phi_rad]])
         queue = None if pending is None else np.asarray(pending, dtype=np.float64).reshape(1, -1, 2)
         d = decide(
@@ -173,6 +177,7 @@ class VehicleMonitor:
             self.cfg,
             queue,
             error,
+            prediction,
         )
         self.memory = d.memory
         return d

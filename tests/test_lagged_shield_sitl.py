@@ -1,0 +1,76 @@
+"""The monitor predicting with the airframe's fitted response over MAVLink (``fly --shield --airframe-response``):
+JSBSim F-16s under a pilot that turns at the nearest radar, flown by the companions against the SITL world in
+lockstep, never enter it; the same pilot under the monitor that predicts with eq. 5 does (the negative control). And
+the option's bad input: one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tssac_core.sim.scenario import dump, load
+
+REPO = Path(__file__).resolve().parents[1]
+RESPONSE = REPO / "sim_vehicles" / "dynamics" / "airframes" / "f16.response.yaml"
+
+
+def fly(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "mavlink_bridge.fly", *args, "--no-progress"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        timeout=580,
+    )
+
+
+@pytest.fixture(scope="module")
+def toward_a_radar(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The strike mission (its UAVs start heading at the radar at (38, 44) km), 150 s."""
+    path = tmp_path_factory.mktemp("lagged") / "strike150.yaml"
+    dump(dataclasses.replace(load(REPO / "scenarios" / "strike.yaml"), episode_steps=1500), path)
+    return path
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("with_response", [True, False], ids=["airframe-response", "eq5"])
+def test_at_radar_over_jsbsim_is_kept_out_by_the_lagged_monitor_and_not_by_eq5(
+    toward_a_radar: Path, tmp_path: Path, with_response: bool
+) -> None:
+    out = tmp_path / "fly.json"
+    extra = ["--airframe-response", str(RESPONSE)] if with_response else []
+    proc = fly("--scenario", str(toward_a_radar), "--dynamics", "jsbsim", "--pilot", "at_radar", "--shield",
+               "--json", str(out), *extra)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    results = json.loads(out.read_text())
+    shield = results["shield"]
+    assert shield["interventions_per_uav_mission"] >= 1 and shield["guarantee"] is False
+    if with_response:
+        assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0, shield
+        assert "airframe response f16.response.yaml" in shield["scope"]
+    else:  # the negative control: eq. 5's backups miss the F-16's paths, into the radar
+        assert shield["uav_missions_with_cost"] >= 1, shield
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["--dynamics", "jsbsim", "--airframe-response", str(RESPONSE)], "needs --shield"),
+        (["--shield", "--airframe-response", str(RESPONSE)], "fly it with --dynamics jsbsim"),
+        (["--shield", "--dynamics", "jsbsim", "--airframe-response", "/nonexistent.yaml"], "--airframe-response"),
+    ],
+)
+def test_a_bad_airframe_response_is_one_line_and_nothing_written(args: list[str], words: str, tmp_path: Path) -> None:
+    out = tmp_path / "fly.json"
+    proc = fly("--scenario", str(REPO / "scenarios" / "short.yaml"), "--pilot", "straight", "--json", str(out), *args)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and words in lines[0], proc.stderr
+    assert not out.exists()
