@@ -8,6 +8,10 @@ UAV-missions, UAVs out of the area, the most steps one UAV spent inside a radar,
 the success rate; writes them as JSON.
 
     python benchmarks/bench_adversaries.py                     # the full size: 2,000 batched, 50 SITL each
+    python benchmarks/bench_adversaries.py --batched --sitl random --sitl-dynamics jsbsim \
+        --airframe-response sim_vehicles/dynamics/airframes/f16.response.yaml --json OUT --resume
+                                                               # the SITL rows on JSBSim F-16s, the monitor
+                                                               # predicting with the airframe's response
     python benchmarks/bench_adversaries.py --episodes 200 --sitl-missions 2 --json benchmarks/results/adversaries.json
 
 Seeds: the adversaries' own range, used for nothing else. Mission k of a batched scenario flies seed
@@ -77,16 +81,24 @@ class BenchConfig:
     json_path: Path | None
     progress: bool
     resume: bool
+    sitl_dynamics: str = "kinematic"
+    """The SITL vehicles' physics (``fly --dynamics``)."""
+    airframe_response: Path | None = None
+    """The SITL monitors predict with this airframe response (``fly --airframe-response``); None: eq. 5."""
 
     def settings(self) -> dict[str, Any]:
         """What a row depends on: rows written under other settings are never reused by ``--resume``."""
-        settings = {
+        settings: dict[str, Any] = {
             "episodes": self.episodes,
             "sitl_missions": self.sitl_missions,
             "seed": self.seed,
             "episode_steps": self.episode_steps,
             "shield": dataclasses.asdict(ShieldConfig()),
         }
+        if self.sitl_dynamics != "kinematic":  # only when set: files written before these options still resume
+            settings["sitl_dynamics"] = self.sitl_dynamics
+        if self.airframe_response is not None:
+            settings["airframe_response"] = self.airframe_response.name
         return json.loads(json.dumps(settings))  # as the file holds them (tuples as lists)
 
     @property
@@ -109,6 +121,15 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         help="batched scenarios (default random corner; none: none)",
     )
     p.add_argument("--sitl", nargs="*", default=list(SITL), help="SITL scenarios (default random degraded; none: none)")
+    p.add_argument(
+        "--sitl-dynamics", choices=["kinematic", "jsbsim"], default="kinematic", help="the SITL vehicles' physics"
+    )
+    p.add_argument(
+        "--airframe-response",
+        type=Path,
+        metavar="FILE",
+        help="the SITL monitors predict with this airframe's fitted response (with --sitl-dynamics jsbsim)",
+    )
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")
@@ -123,6 +144,8 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         raise UsageError("--episodes and --workers must be positive, --sitl-missions >= 0")
     if a.episode_steps is not None and a.episode_steps <= 0:
         raise UsageError(f"--episode-steps must be positive, got {a.episode_steps}")
+    if a.airframe_response is not None and (a.sitl_dynamics != "jsbsim" or not a.airframe_response.is_file()):
+        raise UsageError("--airframe-response: an existing response file, with --sitl-dynamics jsbsim")
     for name in (*a.batched, *a.sitl):
         if not (ROOT / "scenarios" / f"{name}.yaml").is_file():
             raise UsageError(f"scenario '{name}': no scenarios/{name}.yaml")
@@ -138,6 +161,8 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         json_path=a.json,
         progress=not a.no_progress,
         resume=a.resume,
+        sitl_dynamics=a.sitl_dynamics,
+        airframe_response=None if a.airframe_response is None else a.airframe_response.resolve(),
     )
 
 
@@ -194,6 +219,9 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     argv = ["--scenario", str(path), "--pilot", adversary.value, "--shield", "--episodes", str(cfg.sitl_missions)]
     workers = min(cfg.workers, cfg.sitl_missions)  # one mission: flown here, without starting Ray
     argv += ["--seed", str(seed), "--json", str(out), "--workers", str(workers), "--no-progress"]
+    argv += ["--dynamics", cfg.sitl_dynamics]
+    if cfg.airframe_response is not None:
+        argv += ["--airframe-response", str(cfg.airframe_response)]
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv],
@@ -213,7 +241,7 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     per_uav = shield.get("interventions_per_uav_mission")
     return {
         "adversary": adversary.value,
-        "where": f"SITL {name}",
+        "where": sitl_where(name, cfg),
         "monitor": True,
         "seed": seed,
         "missions": len(missions),
@@ -237,13 +265,23 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     }
 
 
+def sitl_where(name: str, cfg: BenchConfig) -> str:
+    """A SITL row's place: the scenario, and the physics and the monitor's model when they are not the default."""
+    where = f"SITL {name}"
+    if cfg.sitl_dynamics != "kinematic":
+        where += f" {cfg.sitl_dynamics}"
+    if cfg.airframe_response is not None:
+        where += " response"
+    return where
+
+
 def print_table(rows: list[dict[str, Any]]) -> None:
-    head = f"{'adversary':11s} {'where':17s} {'monitor':7s} {'missions':>8s} {'cost total':>10s} {'UAVs out':>8s} "
+    head = f"{'adversary':11s} {'where':26s} {'monitor':7s} {'missions':>8s} {'cost total':>10s} {'UAVs out':>8s} "
     print(head + f"{'max steps in':>12s} {'interventions':>13s} {'success':>7s}")
     for r in rows:
         interventions = "-" if r["interventions"] is None else f"{r['interventions']:,}"
         print(
-            f"{r['adversary']:11s} {r['where']:17s} {'on' if r['monitor'] else 'off':7s} {r['missions']:8,d} "
+            f"{r['adversary']:11s} {r['where']:26s} {'on' if r['monitor'] else 'off':7s} {r['missions']:8,d} "
             f"{r['cost_total']:10,.0f} {r['uavs_out_of_area']:8d} {r['max_steps_inside']:12,.0f} {interventions:>13s} "
             f"{r['success_rate']:7.1%}"
         )
@@ -309,14 +347,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
     if cfg.sitl_missions:
         sitl = [(a, n) for a in cfg.adversaries for n in cfg.sitl]
-        todo_sitl = [b for b in sitl if (b[0].value, f"SITL {b[1]}", True) not in kept]
+        todo_sitl = [b for b in sitl if (b[0].value, sitl_where(b[1], cfg), True) not in kept]
         with (
             tempfile.TemporaryDirectory(prefix="bench-adversaries-") as tmp,
             tqdm(total=len(todo_sitl) * cfg.sitl_missions, desc="SITL missions", disable=not cfg.progress) as bar,
         ):
             for adversary, name in sitl:
                 add(
-                    (adversary.value, f"SITL {name}", True),
+                    (adversary.value, sitl_where(name, cfg), True),
                     lambda: sitl_row(adversary, name, cfg, Path(tmp), bar),  # noqa: B023 (called at once)
                 )
     print_table(rows)
