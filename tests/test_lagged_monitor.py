@@ -18,6 +18,7 @@ from tssac_core.assurance.monitor import (
     Limits,
     Memory,
     Prediction,
+    Scene,
     ShieldConfig,
     decide,
     point_clearance,
@@ -69,7 +70,7 @@ def fly(predict_with_lag: bool, seed: int, m: int = 60, seconds: float = 240.0) 
     lag = LagState.steady(np.zeros(m), DELAY)
     # admitted starts only: some backup keeps the margin from there (the monitor's induction starts there)
     here = LaggedPrediction(air, lag).backup_excess(
-        x, y, v, phi, np.ones(m, bool), hz, lim, DT, np.zeros(0), margin, EstimateError.zero(m), cfg
+        x, y, v, phi, EstimateError.zero(m), Scene(hz, lim, DT, margin, cfg)
     )
     keep = here.max(axis=1) >= 0
     assert keep.sum() >= m // 2

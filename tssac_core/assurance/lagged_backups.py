@@ -46,7 +46,7 @@ from tssac_core.assurance.monitor import (
     Hazards,
     Limits,
     Prediction,
-    ShieldConfig,
+    Scene,
     backup_error_m,
     choose_backup,
     circle_clearance,
@@ -357,19 +357,13 @@ class LaggedPrediction:
         return LaggedPrediction(self.airframe.select(rows), self.lag.select(rows))
 
     def after(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        pending: np.ndarray,
-        lim: Limits,
-        dt_s: float,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, pending: np.ndarray, scene: Scene
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
+        lim = scene.lim
         actions = np.clip(pending, -1.0, 1.0)
         turn = actions[:, :, 0] * lim.turn_rate_max_rad_s[:, None]
         accel = actions[:, :, 1] * lim.accel_max_m_s2[:, None]
-        path = lagged_rollout(x, y, v, phi, self.lag, turn, accel, self.airframe, lim, dt_s)
+        path = lagged_rollout(x, y, v, phi, self.lag, turn, accel, self.airframe, lim, scene.dt_s)
         n = pending.shape[1]
         end = (path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1])
         return (*end, LaggedPrediction(self.airframe, path.lag_after(n)))
@@ -381,67 +375,34 @@ class LaggedPrediction:
         v: np.ndarray,
         phi: np.ndarray,
         proposed: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
         steps: int,
-        margin: np.ndarray,
         err_end: EstimateError,
-        cfg: ShieldConfig,
+        scene: Scene,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        lim, dt_s = scene.lim, scene.dt_s
         raw = np.asarray(proposed, dtype=np.float64)
         finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
         proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
         turn = np.repeat((proposed[:, 0] * lim.turn_rate_max_rad_s)[:, None], steps, axis=1)
         accel = np.repeat((proposed[:, 1] * lim.accel_max_m_s2)[:, None], steps, axis=1)
         path = lagged_rollout(x, y, v, phi, self.lag, turn, accel, self.airframe, lim, dt_s)
-        clear = point_clearance(path.xs, path.ys, hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2
-        clear = clear - margin - err_end.position_m - self.airframe.residual_m
+        clear = point_clearance(path.xs, path.ys, scene.hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2
+        clear = clear - scene.margin - err_end.position_m - self.airframe.residual_m
         clear = np.where(finite, clear, -np.inf)
         end = LaggedPrediction(self.airframe, path.lag_after(steps))
         ex, ey, ev, ep = path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
-        ends = end._excess(ex, ey, ev, ep, hz, lim, dt_s, margin, err_end, cfg)
+        ends = end.backup_excess(ex, ey, ev, ep, err_end, scene)
         return proposed, np.minimum(clear, ends.max(axis=1)), choose_backup(ends)
 
     def backup_excess(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        rows: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
-        leads: np.ndarray,
-        margin: np.ndarray,
-        err: EstimateError,
-        cfg: ShieldConfig,
-    ) -> np.ndarray:
-        sub_err = EstimateError(err.position_m[rows], err.heading_rad[rows], err.speed_m_s[rows])
-        return self.select(rows)._excess(
-            x[rows], y[rows], v[rows], phi[rows], hz.select(rows), lim.select(rows), dt_s, margin[rows], sub_err, cfg
-        )
-
-    def _excess(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
-        margin: np.ndarray,
-        err: EstimateError,
-        cfg: ShieldConfig,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, err: EstimateError, scene: Scene
     ) -> np.ndarray:
         """Every backup's excess over the margin and the error bound, (M, L * N_TURNS), the monitor's candidate order;
         the braking turns' columns -inf."""
-        m = len(x)
-        leads = lead_steps(cfg, dt_s)
-        clear = lagged_backup_clearance(x, y, v, phi, self.lag, hz, self.airframe, lim, dt_s, leads)
+        m, lim, dt_s = len(x), scene.lim, scene.dt_s
+        leads = lead_steps(scene.cfg, dt_s)
+        clear = lagged_backup_clearance(x, y, v, phi, self.lag, scene.hz, self.airframe, lim, dt_s, leads)
         out = np.full((m, len(leads), N_TURNS), -np.inf)
         out[:, :, :2] = clear.reshape(m, len(leads), 2)
         error = backup_error_m(err, lim, dt_s, leads + self.airframe.settle_steps(dt_s))
-        return out.reshape(m, len(leads) * N_TURNS) - margin[:, None] - error
+        return out.reshape(m, len(leads) * N_TURNS) - scene.margin[:, None] - error

@@ -173,6 +173,9 @@ class EstimateError:
     def zero(m: int) -> EstimateError:
         return EstimateError(np.zeros(m), np.zeros(m), np.zeros(m))
 
+    def select(self, rows: np.ndarray) -> EstimateError:
+        return EstimateError(self.position_m[rows], self.heading_rad[rows], self.speed_m_s[rows])
+
     def __add__(self, other: EstimateError) -> EstimateError:
         return EstimateError(
             self.position_m + other.position_m, self.heading_rad + other.heading_rad, self.speed_m_s + other.speed_m_s
@@ -438,19 +441,32 @@ def backup_action(backup: np.ndarray, lead_left: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------- prediction
 
 
+@dataclass(frozen=True)
+class Scene:
+    """What every path of one decision is judged against: the hazards, the limits, the world step, the margin to keep
+    ((M,)) and the monitor's configuration."""
+
+    hz: Hazards
+    lim: Limits
+    dt_s: float
+    margin: np.ndarray
+    cfg: ShieldConfig
+
+    def select(self, rows: np.ndarray) -> Scene:
+        return Scene(self.hz.select(rows), self.lim.select(rows), self.dt_s, self.margin[rows], self.cfg)
+
+
 class Prediction(Protocol):
     """How the monitor predicts a vehicle's paths: eq. 5-6 (:class:`KinematicPrediction`, the default) or an
-    airframe's fitted response (:class:`tssac_core.assurance.lagged_backups.LaggedPrediction`)."""
+    airframe's fitted response (:class:`tssac_core.assurance.lagged_backups.LaggedPrediction`). States are (M,)
+    arrays x, y, v, phi."""
+
+    def select(self, rows: np.ndarray) -> Prediction:
+        """The prediction of vehicles ``rows`` alone."""
+        ...
 
     def after(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        pending: np.ndarray,
-        lim: Limits,
-        dt_s: float,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, pending: np.ndarray, scene: Scene
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
         """The state after the ``pending`` (M, L, 2) actions, and the prediction from there."""
         ...
@@ -462,52 +478,31 @@ class Prediction(Protocol):
         v: np.ndarray,
         phi: np.ndarray,
         proposed: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
         steps: int,
-        margin: np.ndarray,
         err_end: EstimateError,
-        cfg: ShieldConfig,
+        scene: Scene,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The proposed action as flown, the excess of its path and best backup, and that backup (as
         :func:`_proposal_excess`)."""
         ...
 
     def backup_excess(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        rows: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
-        leads: np.ndarray,
-        margin: np.ndarray,
-        err: EstimateError,
-        cfg: ShieldConfig,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, err: EstimateError, scene: Scene
     ) -> np.ndarray:
-        """Every backup's excess from the states ``rows`` themselves, (R, L * N_TURNS) (as
-        :func:`_backup_excess_here`)."""
+        """Every backup's excess from the states themselves, (M, L * N_TURNS) (as :func:`_backup_excess_here`)."""
         ...
 
 
 class KinematicPrediction:
     """Eq. 5-6, as the batched world and the kinematic SITL fly: the module docstring's proof."""
 
+    def select(self, rows: np.ndarray) -> Prediction:
+        return self
+
     def after(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        pending: np.ndarray,
-        lim: Limits,
-        dt_s: float,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, pending: np.ndarray, scene: Scene
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
-        return (*step_actions(x, y, v, phi, pending, lim, dt_s), self)
+        return (*step_actions(x, y, v, phi, pending, scene.lim, scene.dt_s), self)
 
     def proposal_excess(
         self,
@@ -516,32 +511,20 @@ class KinematicPrediction:
         v: np.ndarray,
         phi: np.ndarray,
         proposed: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
         steps: int,
-        margin: np.ndarray,
         err_end: EstimateError,
-        cfg: ShieldConfig,
+        scene: Scene,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return _proposal_excess(x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg)
+        sc = scene
+        return _proposal_excess(x, y, v, phi, proposed, sc.hz, sc.lim, sc.dt_s, steps, sc.margin, err_end, sc.cfg)
 
     def backup_excess(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        rows: np.ndarray,
-        hz: Hazards,
-        lim: Limits,
-        dt_s: float,
-        leads: np.ndarray,
-        margin: np.ndarray,
-        err: EstimateError,
-        cfg: ShieldConfig,
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, err: EstimateError, scene: Scene
     ) -> np.ndarray:
-        return _backup_excess_here(x, y, v, phi, rows, hz, lim, dt_s, leads, margin, err, cfg)
+        rows = np.ones(len(x), bool)
+        leads = lead_steps(scene.cfg, scene.dt_s)
+        sc = scene
+        return _backup_excess_here(x, y, v, phi, rows, sc.hz, sc.lim, sc.dt_s, leads, sc.margin, err, sc.cfg)
 
 
 KINEMATIC = KinematicPrediction()
@@ -617,18 +600,17 @@ def decide(
     """
     m = len(state)
     margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
+    scene = Scene(hz, lim, dt_s, margin, cfg)
     err_now = EstimateError.zero(m) if error is None else error
     x, y, v, phi = (np.asarray(state[:, i], dtype=np.float64) for i in range(4))
     n_pending = 0 if pending is None else pending.shape[1]
     if n_pending:
         assert pending is not None
-        x, y, v, phi, prediction = prediction.after(x, y, v, phi, pending, lim, dt_s)
+        x, y, v, phi, prediction = prediction.after(x, y, v, phi, pending, scene)
     err_here = err_now.after(n_pending * dt_s, lim)  # at the state the next command starts from
     err_end = err_now.after((n_pending + steps) * dt_s, lim)  # at the end of the proposed action's interval
     leads = lead_steps(cfg, dt_s)
-    proposed, excess, best_end = prediction.proposal_excess(
-        x, y, v, phi, proposed, hz, lim, dt_s, steps, margin, err_end, cfg
-    )
+    proposed, excess, best_end = prediction.proposal_excess(x, y, v, phi, proposed, steps, err_end, scene)
     passes = excess >= 0
     passes_release = excess >= cfg.release_margin_m
 
@@ -643,7 +625,9 @@ def decide(
     lost = ~fly_proposed & ~protected
     protected = protected.copy()
     if lost.any():
-        here = prediction.backup_excess(x, y, v, phi, lost, hz, lim, dt_s, leads, margin, err_here, cfg)
+        here = prediction.select(lost).backup_excess(
+            x[lost], y[lost], v[lost], phi[lost], err_here.select(lost), scene.select(lost)
+        )
         pick = choose_backup(here)
         backup[lost] = pick
         lead_left[lost] = leads[pick // N_TURNS]
