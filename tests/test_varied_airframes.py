@@ -68,6 +68,23 @@ def test_turn_rate_follows_the_delay_and_first_order_lag(scenario: Scenario) -> 
     assert np.all(np.diff(turned)[:3] == 0.0) and np.diff(turned)[-1] > 0.99 * w_max * 0.1
 
 
+def test_a_roll_out_follows_its_own_time_constant(scenario: Scenario) -> None:
+    """Out of a steady left turn into straight flight: the rate decays with the roll-out's time constant (0.4 s), not
+    the roll-in's (1.2 s): the monitor's model (tssac_core.assurance.lagged_backups.switched_lag_step)."""
+    variation = AirframeVariation(turn_tau_s=(1.2, 1.2), turn_rollout_tau_s=(0.4, 0.4))
+    task = RoleTask(scenario, Role.STRIKE, n=1, teammates="none", seed=0, airframes=variation)
+    task.reset()
+    fly(task, np.tile([1.0, 0.0], (200, 1)))  # settled in the turn
+    before = task.world.phi_rad[0, task.j]
+    trace = fly(task, np.tile([0.0, 0.0], (40, 1)))
+    w_max = task.world.c.turn_rate_max_rad_s[task.j]
+    g_in, g_out = 1.0 - math.exp(-0.1 / 1.2), 1.0 - math.exp(-0.1 / 0.4)
+    omega = 1.0 - (1.0 - g_in) ** 200  # the rate reached, as a fraction of the maximum
+    turned = np.diff(np.unwrap(np.concatenate([[before], trace[:, 0, 3]])))
+    expected = [omega * (1.0 - g_out) ** k * 0.4 * g_out / 0.1 * w_max * 0.1 for k in range(40)]
+    np.testing.assert_allclose(turned, expected, atol=1e-12)
+
+
 def test_acceleration_is_clipped_to_what_the_airframe_achieves(scenario: Scenario) -> None:
     variation = AirframeVariation(accel_max_m_s2=(3.0, 3.0), decel_max_m_s2=(-2.0, -2.0))
     task = RoleTask(scenario, Role.STRIKE, n=2, teammates="none", seed=0, airframes=variation)
@@ -123,6 +140,7 @@ def test_ranges_from_the_f16_response_and_bad_ranges() -> None:
     response = load_response(F16_RESPONSE)
     v = AirframeVariation.from_response(response, wind_max_m_s=10.0)
     assert v.turn_tau_s == (min(response.turn_tau_s), max(response.turn_tau_s))
+    assert v.turn_rollout_tau_s == (min(response.turn_rollout_tau_s), max(response.turn_rollout_tau_s))
     assert v.decel_max_m_s2 is not None and v.decel_max_m_s2[1] < 0 and v.wind_m_s == (0.0, 10.0)
     with pytest.raises(ValueError, match="low <= high"):
         AirframeVariation(turn_tau_s=(2.0, 1.0))

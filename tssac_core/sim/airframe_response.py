@@ -13,8 +13,8 @@ the continuous first-order lag sampled at the steps; the heading turns over step
 (:func:`tssac_core.assurance.lagged_backups.lag_step_mean`). The time constant is ``turn_rollout_tau_s`` while the
 rate rolls out (the command asks for less turn the same way, or none) and ``turn_tau_s`` otherwise (rolling in, or
 reversing): a fixed wing rolls out of a turn faster than it rolls in
-(:func:`tssac_core.assurance.lagged_backups.switched_lag_step`). The training world's varied airframes
-(:mod:`tssac_core.sim.varied_airframes`) fly one time constant both ways, the roll-in's.
+(:func:`tssac_core.assurance.lagged_backups.switched_lag_step`), in the monitor's model and in the training world's
+varied airframes (:mod:`tssac_core.sim.varied_airframes`) alike.
 
 with ``d = round(delay_s / dt_s)``, and the forward acceleration bounded by
 ``decel_max_m_s2(v) <= a <= accel_max_m_s2(v)``.

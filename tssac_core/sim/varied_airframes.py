@@ -10,7 +10,9 @@ Per world and vehicle, drawn at each reset from :class:`AirframeVariation`'s ran
 
 * turn lag: the heading rate flown follows the command after ``d`` world steps through a first-order lag
   (``tssac_core/sim/airframe_response.py``'s model): ``omega_k+1 = omega_k + (1 - exp(-dt/tau)) (omega_cmd(k-d) -
-  omega_k)``, the heading turning over each step by the lag's exact mean rate;
+  omega_k)``, the heading turning over each step by the lag's exact mean rate, with its own time constant rolling
+  out of a turn (:func:`tssac_core.assurance.lagged_backups.switched_lag_step`, the runtime-assurance monitor's
+  model);
 * achievable acceleration: the forward acceleration is clipped to ``[decel, accel]`` (below the scenario's +-a_max);
 * turbulence: a zero-mean normal heading-rate disturbance per step (``turn_noise_deg_s``, its standard deviation);
 
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import lag_gains, lag_step_mean
+from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
 from tssac_core.sim.airframe_response import AirframeResponse
 from tssac_core.sim.world import World
 
@@ -41,6 +43,9 @@ class AirframeVariation:
 
     turn_delay_s: Range = (0.0, 0.0)
     turn_tau_s: Range = (0.0, 0.0)
+    """Rolling in (or reversing)."""
+    turn_rollout_tau_s: Range | None = None
+    """Rolling out of a turn; None: the roll-in's time constant both ways."""
     accel_max_m_s2: Range | None = None
     """Achievable forward acceleration (positive); None: the scenario's a_max."""
     decel_max_m_s2: Range | None = None
@@ -52,6 +57,7 @@ class AirframeVariation:
 
     def __post_init__(self) -> None:
         ranges = {"turn_delay_s": self.turn_delay_s, "turn_tau_s": self.turn_tau_s, "wind_m_s": self.wind_m_s}
+        ranges |= {"turn_rollout_tau_s": self.turn_rollout_tau_s or (0.0, 0.0)}
         ranges |= {"accel_max_m_s2": self.accel_max_m_s2 or (1.0, 1.0)}
         decel = self.decel_max_m_s2 or (-1.0, -1.0)
         ranges |= {"decel_max_m_s2": (-decel[1], -decel[0])}  # magnitudes, low to high
@@ -75,6 +81,7 @@ class AirframeVariation:
         return cls(
             turn_delay_s=(min(response.turn_delay_s), max(response.turn_delay_s)),
             turn_tau_s=(min(response.turn_tau_s), max(response.turn_tau_s)),
+            turn_rollout_tau_s=(min(response.rollout_taus()), max(response.rollout_taus())),
             accel_max_m_s2=(min(response.accel_max_m_s2), max(response.accel_max_m_s2)),
             decel_max_m_s2=(min(response.decel_max_m_s2), max(response.decel_max_m_s2)),
             wind_m_s=(0.0, wind_max_m_s),
@@ -97,6 +104,10 @@ class VariedAirframes:
         """g of :func:`tssac_core.assurance.lagged_backups.lag_gains` per vehicle (1: no lag)."""
         self._hold = np.zeros((n, 3))
         """h of the same (0: no lag)."""
+        self._out_gain = np.ones((n, 3))
+        """g rolling out of a turn."""
+        self._out_hold = np.zeros((n, 3))
+        """h rolling out of a turn."""
         self._low = np.full((n, 3), -1.0)
         """Normalised action bounds of the forward acceleration (decel / a_max), (N, 3)."""
         self._high = np.ones((n, 3))
@@ -115,6 +126,10 @@ class VariedAirframes:
         dt = self._dt
         self._delay[idx] = np.rint(rng.uniform(*v.turn_delay_s, size=(k, 3)) / dt).astype(np.int64)
         self._gain[idx], self._hold[idx] = lag_gains(rng.uniform(*v.turn_tau_s, size=(k, 3)), dt)
+        if v.turn_rollout_tau_s is None:
+            self._out_gain[idx], self._out_hold[idx] = self._gain[idx], self._hold[idx]
+        else:
+            self._out_gain[idx], self._out_hold[idx] = lag_gains(rng.uniform(*v.turn_rollout_tau_s, size=(k, 3)), dt)
         a_max = self.world.c.accel_max_m_s2[None, :]
         if v.accel_max_m_s2 is not None:
             self._high[idx] = np.minimum(rng.uniform(*v.accel_max_m_s2, size=(k, 3)) / a_max, 1.0)
@@ -134,7 +149,8 @@ class VariedAirframes:
         self._history = np.roll(self._history, 1, axis=0)
         self._history[0] = out[..., 0]
         delayed = np.take_along_axis(self._history, self._delay[None], axis=0)[0]
-        flown, self._omega = lag_step_mean(self._omega, delayed, self._gain, self._hold)
+        gains_in, gains_out = (self._gain, self._hold), (self._out_gain, self._out_hold)
+        flown, self._omega = switched_lag_step(self._omega, delayed, gains_in, gains_out)
         if self.variation.turn_noise_deg_s > 0.0:
             noise = rng.normal(0.0, math.radians(self.variation.turn_noise_deg_s), size=flown.shape)
             flown = flown + noise / self.world.c.turn_rate_max_rad_s[None, :]
