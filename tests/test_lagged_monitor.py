@@ -1,11 +1,14 @@
 """The monitor deciding with an airframe's response (tssac_core.assurance.monitor.decide with a LaggedPrediction):
 vehicles that fly the lagged model itself, under pilots that aim at the nearest radar or act at random, never come
 nearer than the margin to a radar or the area's edge; the same pilots under the monitor that predicts with eq. 5
-(the negative control) do."""
+(the negative control) do. And the batched world's missions on airframes drawn from the F-16 response's spans
+(fly_missions(airframes=...)): every adversary kept out, where eq. 5's monitor lets some in."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +26,13 @@ from tssac_core.assurance.monitor import (
     decide,
     point_clearance,
 )
+from tssac_core.sim.adversaries import Adversary, AdversaryPilot
+from tssac_core.sim.airframe_response import load_response
+from tssac_core.sim.missions import fly_missions, mission_layout
+from tssac_core.sim.scenario import load
+from tssac_core.sim.varied_airframes import AirframeVariation
 
+REPO = Path(__file__).resolve().parents[1]
 DT = 0.1
 W = math.radians(5.0)
 AREA = 100_000.0
@@ -106,3 +115,38 @@ def test_the_lagged_monitor_keeps_vehicles_of_the_lagged_model_out_and_the_eq5_m
 @pytest.mark.parametrize("seed", [2, 3, 4, 5])
 def test_the_lagged_monitor_keeps_them_out_for_five_minutes_on_more_worlds(seed: int) -> None:
     assert fly(True, seed=seed, m=60, seconds=300.0) >= ShieldConfig().margin_m - 1e-6
+
+
+# ------------------------------------------------------------------- the batched world on varied F-16 airframes
+
+LAYOUT_SEED = 4_400_000
+"""random.yaml's layouts of this seed (the adversary tests' own range)."""
+
+
+def batched_hazards(adversary: Adversary, missions: int, monitor_sees_airframes: bool) -> tuple[int, int, int]:
+    """Fly ``missions`` of random.yaml (150 s) with every UAV an ``adversary``, on airframes drawn from the F-16
+    response's spans (calm, no turbulence), through the monitor: UAV-missions with cost, UAVs out, unprotected steps."""
+    from sim_vehicles.dynamics.response_fit import response_path
+
+    variation = AirframeVariation.from_response(load_response(response_path("f16")))
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "random.yaml"), episode_steps=1500)
+    layouts = [mission_layout(scenario, LAYOUT_SEED, k) for k in range(missions)]
+    results = fly_missions(
+        scenario, [AdversaryPilot(adversary)] * 3, 0, LAYOUT_SEED, layouts=layouts, shield=ShieldConfig(),
+        airframes=variation, monitor_sees_airframes=monitor_sees_airframes,
+    )  # fmt: skip
+    assert results.monitor is not None
+    return int((results.cost > 0).sum()), int(results.out_of_area.sum()), int(results.monitor.unprotected_steps.sum())
+
+
+@pytest.mark.parametrize("adversary", [Adversary.AT_RADAR, Adversary.AT_EDGE, Adversary.RANDOM], ids=str)
+def test_on_varied_airframes_the_lagged_monitor_keeps_adversaries_out_and_eq5_does_not(adversary: Adversary) -> None:
+    assert batched_hazards(adversary, 12, monitor_sees_airframes=True) == (0, 0, 0)
+    with_cost, out, _ = batched_hazards(adversary, 12, monitor_sees_airframes=False)
+    assert with_cost + out > 0  # the negative control: eq. 5's monitor on the same missions lets some in or out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("adversary", list(Adversary), ids=str)
+def test_on_varied_airframes_no_adversary_gets_in_on_forty_layouts(adversary: Adversary) -> None:
+    assert batched_hazards(adversary, 40, monitor_sees_airframes=True) == (0, 0, 0)

@@ -32,6 +32,7 @@ from tssac_core.sim.pilots import PilotSpec, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
 from tssac_core.sim.team import Team
+from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
 from tssac_core.sim.world import World
 from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
 from tssac_core.sim.world_state import snapshot
@@ -139,6 +140,11 @@ def hold_nonfinite(actions: np.ndarray) -> np.ndarray:
     return actions if finite.all() else np.where(finite, actions, 0.0)
 
 
+AIRFRAME_STREAM = 58
+"""The random stream of the varied airframes of a run (``default_rng([seed, AIRFRAME_STREAM])``): apart from the
+layouts' and the pilots'."""
+
+
 def fly_missions(
     scenario: Scenario,
     pilots: Sequence[PilotSpec],
@@ -152,6 +158,8 @@ def fly_missions(
     shield: ShieldConfig | None = None,
     on_step: Callable[[int, int], None] | None = None,
     start_check: ShieldConfig | None = None,
+    airframes: AirframeVariation | None = None,
+    monitor_sees_airframes: bool = True,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
@@ -164,9 +172,24 @@ def fly_missions(
     ``shield``: fly every UAV through the runtime-assurance monitor (:mod:`tssac_core.assurance.monitor`) with these
     margins.
     ``start_check``: the margins the drawn starts are admitted with (default: ``shield``'s, else the default ones).
+    ``airframes``: the vehicles fly airframes drawn from these ranges (:mod:`tssac_core.sim.varied_airframes`, seeded
+    from ``seed``), and the monitor predicts with each one's lag (``monitor_sees_airframes`` False: with eq. 5, the
+    negative control); None: eq. 5-6.
     """
     missions = iter_missions(
-        scenario, pilots, episodes, seed, mode, record, layouts, indices, shield, on_step, start_check
+        scenario,
+        pilots,
+        episodes,
+        seed,
+        mode,
+        record,
+        layouts,
+        indices,
+        shield,
+        on_step,
+        start_check,
+        airframes,
+        monitor_sees_airframes,
     )
     try:
         while True:
@@ -190,6 +213,8 @@ def iter_missions(
     shield: ShieldConfig | None = None,
     on_step: Callable[[int, int], None] | None = None,
     start_check: ShieldConfig | None = None,
+    airframes: AirframeVariation | None = None,
+    monitor_sees_airframes: bool = True,
 ) -> Generator[int, None, MissionResults]:
     """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
     returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
@@ -210,7 +235,13 @@ def iter_missions(
     team = Team(pilots, mode)
     # The reward's route fields are the route observation's (RouteConfig() both): one field per layout, not two.
     routes = team.routes
-    monitor = None if shield is None else WorldMonitor(world, [decision_interval(p) for p in pilots], shield)
+    varied, airframe_rng = None, np.random.default_rng([seed, AIRFRAME_STREAM])
+    if airframes is not None:
+        varied = VariedAirframes(airframes, world)
+        varied.reset(np.arange(world.n), airframe_rng)
+    repeats = [decision_interval(p) for p in pilots]
+    seen = varied if monitor_sees_airframes else None
+    monitor = None if shield is None else WorldMonitor(world, repeats, shield, seen)
     backup_track: list[np.ndarray] = []
     while world.running.any():
         if record:
@@ -225,6 +256,8 @@ def iter_missions(
             if record:
                 backup_track.append(monitor.engaged & moving)
         actions = hold_nonfinite(actions)
+        if varied is not None:
+            actions = varied.shape(actions, airframe_rng)
         result = world.step(actions)
         returns += reward(result, moving, cfg, detour_prev, routes.detour_m(snapshot(world)))
         out |= result.out_of_area

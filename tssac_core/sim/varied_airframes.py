@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
+from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, switched_lag_step
 from tssac_core.sim.airframe_response import AirframeResponse
 from tssac_core.sim.world import World
 
@@ -104,6 +104,9 @@ class VariedAirframes:
         """g of :func:`tssac_core.assurance.lagged_backups.lag_gains` per vehicle (1: no lag)."""
         self._hold = np.zeros((n, 3))
         """h of the same (0: no lag)."""
+        self._tau = np.zeros((n, 3))
+        """The drawn time constants rolling in and rolling out (s)."""
+        self._out_tau = np.zeros((n, 3))
         self._out_gain = np.ones((n, 3))
         """g rolling out of a turn."""
         self._out_hold = np.zeros((n, 3))
@@ -125,11 +128,13 @@ class VariedAirframes:
         idx = np.asarray(index, dtype=np.int64)
         dt = self._dt
         self._delay[idx] = np.rint(rng.uniform(*v.turn_delay_s, size=(k, 3)) / dt).astype(np.int64)
-        self._gain[idx], self._hold[idx] = lag_gains(rng.uniform(*v.turn_tau_s, size=(k, 3)), dt)
+        self._tau[idx] = rng.uniform(*v.turn_tau_s, size=(k, 3))
+        self._gain[idx], self._hold[idx] = lag_gains(self._tau[idx], dt)
         if v.turn_rollout_tau_s is None:
-            self._out_gain[idx], self._out_hold[idx] = self._gain[idx], self._hold[idx]
+            self._out_tau[idx] = self._tau[idx]
         else:
-            self._out_gain[idx], self._out_hold[idx] = lag_gains(rng.uniform(*v.turn_rollout_tau_s, size=(k, 3)), dt)
+            self._out_tau[idx] = rng.uniform(*v.turn_rollout_tau_s, size=(k, 3))
+        self._out_gain[idx], self._out_hold[idx] = lag_gains(self._out_tau[idx], dt)
         a_max = self.world.c.accel_max_m_s2[None, :]
         if v.accel_max_m_s2 is not None:
             self._high[idx] = np.minimum(rng.uniform(*v.accel_max_m_s2, size=(k, 3)) / a_max, 1.0)
@@ -157,3 +162,25 @@ class VariedAirframes:
         out[..., 0] = np.clip(flown, -1.0, 1.0)
         out[..., 1] = np.clip(out[..., 1], self._low, self._high)
         return out
+
+    def airframe(self, flat: np.ndarray) -> AirframeLag:
+        """The airframes drawn for vehicles ``flat`` (indices into the (N, 3) vehicles, row-major) as the runtime-
+        assurance monitor's model of them: exactly what they fly without turbulence (so no residual)."""
+        n = self.world.n
+        a_max = np.broadcast_to(self.world.c.accel_max_m_s2, (n, 3)).reshape(-1)[flat]
+        return AirframeLag(
+            delay_steps=self._delay.reshape(-1)[flat],
+            tau_s=self._tau.reshape(-1)[flat],
+            rollout_tau_s=self._out_tau.reshape(-1)[flat],
+            accel_m_s2=self._high.reshape(-1)[flat] * a_max,
+            decel_m_s2=self._low.reshape(-1)[flat] * a_max,
+            residual_m=np.zeros(len(flat)),
+        )
+
+    def lag_state(self, flat: np.ndarray) -> LagState:
+        """The lag's state of vehicles ``flat`` before this step's commands: the rate flown, and the last
+        ``max_delay`` commands (oldest first; a vehicle of delay d follows the last d of them next)."""
+        n, width = self.world.n, self._max_delay
+        w = np.broadcast_to(self.world.c.turn_rate_max_rad_s, (n, 3)).reshape(-1)[flat]
+        pending = self._history[:width][::-1].reshape(width, -1)[:, flat].T * w[:, None]
+        return LagState(self._omega.reshape(-1)[flat] * w, pending)

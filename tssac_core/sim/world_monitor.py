@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.assurance.lagged_backups import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
     Decision,
@@ -23,6 +24,7 @@ from tssac_core.assurance.monitor import (
     ShieldConfig,
     decide,
 )
+from tssac_core.sim.varied_airframes import VariedAirframes
 from tssac_core.sim.world import N_ROLES, World
 from tssac_core.sim.world_state import WorldState
 
@@ -46,10 +48,14 @@ class MonitorCounts:
 class WorldMonitor:
     """Holds the monitor's memory for every vehicle of a World and filters the team's actions."""
 
-    def __init__(self, world: World, repeats: list[int], cfg: ShieldConfig) -> None:
+    def __init__(
+        self, world: World, repeats: list[int], cfg: ShieldConfig, airframes: VariedAirframes | None = None
+    ) -> None:
         if len(repeats) != N_ROLES:
             raise ValueError(f"one decision interval per role, got {repeats}")
         self.cfg = cfg
+        self.airframes = airframes
+        """The world's vehicles fly these airframes (None: eq. 5-6): the monitor predicts with their lag."""
         self.repeats = np.asarray(repeats, dtype=np.int64)
         n = world.n
         c = world.c
@@ -102,6 +108,10 @@ class WorldMonitor:
     def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
         flat = np.flatnonzero(due.reshape(-1))
         state = np.stack([world.x_m, world.y_m, world.v_m_s, world.phi_rad], axis=-1).reshape(-1, 4)[flat]
+        varied = self.airframes
+        prediction: Prediction = (
+            KINEMATIC if varied is None else LaggedPrediction(varied.airframe(flat), varied.lag_state(flat))
+        )
         d = decide(
             state,
             proposed.reshape(-1, 2)[flat],
@@ -112,6 +122,7 @@ class WorldMonitor:
             steps,
             self.cfg.margin_m,
             self.cfg,
+            prediction=prediction,
         )
         self.memory = self.memory.merged(flat, d.memory)
         w, j = np.unravel_index(flat, due.shape)
