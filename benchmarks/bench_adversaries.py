@@ -12,6 +12,10 @@ the success rate; writes them as JSON.
         --airframe-response sim_vehicles/dynamics/airframes/f16.response.yaml --json OUT --resume
                                                                # the SITL rows on JSBSim F-16s, the monitor
                                                                # predicting with the airframe's response
+    python benchmarks/bench_adversaries.py --sitl --airframe-response FILE [--eq5-monitor] --workers 1 --json OUT
+                                                               # the batched rows on airframes drawn from the
+                                                               # response's spans; --eq5-monitor: the monitor
+                                                               # predicts with eq. 5 (the negative control)
     python benchmarks/bench_adversaries.py --episodes 200 --sitl-missions 2 --json benchmarks/results/adversaries.json
 
 Seeds: the adversaries' own range, used for nothing else. Mission k of a batched scenario flies seed
@@ -48,8 +52,10 @@ from tssac_core.common.cli import UsageError, UsageParser, command_description, 
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
+from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import Scenario, dump, load
+from tssac_core.sim.varied_airframes import AirframeVariation
 
 ROOT = Path(tssac_core.__file__).resolve().parents[1]
 DEFAULT_EPISODES = 2000
@@ -84,7 +90,10 @@ class BenchConfig:
     sitl_dynamics: str = "kinematic"
     """The SITL vehicles' physics (``fly --dynamics``)."""
     airframe_response: Path | None = None
-    """The SITL monitors predict with this airframe response (``fly --airframe-response``); None: eq. 5."""
+    """The SITL monitors predict with this airframe response (``fly --airframe-response``), and the batched rows fly
+    airframes drawn from its spans, their monitors predicting with each one's lag; None: eq. 5-6."""
+    eq5_monitor: bool = False
+    """With ``airframe_response``: the monitors predict with eq. 5 all the same (the negative control)."""
 
     def settings(self) -> dict[str, Any]:
         """What a row depends on: rows written under other settings are never reused by ``--resume``."""
@@ -99,6 +108,8 @@ class BenchConfig:
             settings["sitl_dynamics"] = self.sitl_dynamics
         if self.airframe_response is not None:
             settings["airframe_response"] = self.airframe_response.name
+        if self.eq5_monitor:
+            settings["eq5_monitor"] = True
         return json.loads(json.dumps(settings))  # as the file holds them (tuples as lists)
 
     @property
@@ -128,7 +139,13 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         "--airframe-response",
         type=Path,
         metavar="FILE",
-        help="the SITL monitors predict with this airframe's fitted response (with --sitl-dynamics jsbsim)",
+        help="the SITL monitors predict with this airframe's fitted response (with --sitl-dynamics jsbsim); the "
+        "batched rows fly airframes drawn from its spans (on one worker)",
+    )
+    p.add_argument(
+        "--eq5-monitor",
+        action="store_true",
+        help="with --airframe-response: the monitors predict with eq. 5 all the same (the negative control)",
     )
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
@@ -144,8 +161,13 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         raise UsageError("--episodes and --workers must be positive, --sitl-missions >= 0")
     if a.episode_steps is not None and a.episode_steps <= 0:
         raise UsageError(f"--episode-steps must be positive, got {a.episode_steps}")
-    if a.airframe_response is not None and (a.sitl_dynamics != "jsbsim" or not a.airframe_response.is_file()):
-        raise UsageError("--airframe-response: an existing response file, with --sitl-dynamics jsbsim")
+    sitl_rows = a.sitl_missions > 0 and bool(a.sitl)
+    if a.airframe_response is not None and (
+        not a.airframe_response.is_file() or (sitl_rows and a.sitl_dynamics != "jsbsim")
+    ):
+        raise UsageError("--airframe-response: an existing response file (SITL rows: with --sitl-dynamics jsbsim)")
+    if a.eq5_monitor and a.airframe_response is None:
+        raise UsageError("--eq5-monitor is the control of --airframe-response: give both")
     for name in (*a.batched, *a.sitl):
         if not (ROOT / "scenarios" / f"{name}.yaml").is_file():
             raise UsageError(f"scenario '{name}': no scenarios/{name}.yaml")
@@ -163,6 +185,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         resume=a.resume,
         sitl_dynamics=a.sitl_dynamics,
         airframe_response=None if a.airframe_response is None else a.airframe_response.resolve(),
+        eq5_monitor=a.eq5_monitor,
     )
 
 
@@ -181,7 +204,13 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
     monitor = ShieldConfig() if shield else None
     t0 = time.monotonic()
     results: MissionResults
-    if cfg.workers > 1:
+    if cfg.airframe_response is not None:  # on airframes drawn from the response's spans: one process
+        variation = AirframeVariation.from_response(load_response(cfg.airframe_response))
+        results = fly_missions(
+            scenario, pilots, cfg.episodes, seed, progress=bar.update, shield=monitor, airframes=variation,
+            monitor_sees_airframes=not cfg.eq5_monitor,
+        )  # fmt: skip
+    elif cfg.workers > 1:
         indices = list(range(cfg.episodes))
         target = RayTarget(None)
         results = fly_missions_sharded(
@@ -192,7 +221,7 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
     counts = results.monitor
     return {
         "adversary": adversary.value,
-        "where": f"batched {name}",
+        "where": batched_where(name, cfg),
         "monitor": shield,
         "seed": seed,
         "missions": len(results.success),
@@ -220,7 +249,7 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     workers = min(cfg.workers, cfg.sitl_missions)  # one mission: flown here, without starting Ray
     argv += ["--seed", str(seed), "--json", str(out), "--workers", str(workers), "--no-progress"]
     argv += ["--dynamics", cfg.sitl_dynamics]
-    if cfg.airframe_response is not None:
+    if cfg.airframe_response is not None and not cfg.eq5_monitor:
         argv += ["--airframe-response", str(cfg.airframe_response)]
     t0 = time.monotonic()
     proc = subprocess.run(
@@ -271,8 +300,15 @@ def sitl_where(name: str, cfg: BenchConfig) -> str:
     if cfg.sitl_dynamics != "kinematic":
         where += f" {cfg.sitl_dynamics}"
     if cfg.airframe_response is not None:
-        where += " response"
+        where += " eq5" if cfg.eq5_monitor else " response"
     return where
+
+
+def batched_where(name: str, cfg: BenchConfig) -> str:
+    """A batched row's place: the scenario, and on varied airframes the monitor's model."""
+    if cfg.airframe_response is None:
+        return f"batched {name}"
+    return f"batched {name} airframes" + (" eq5" if cfg.eq5_monitor else "")
 
 
 def print_table(rows: list[dict[str, Any]]) -> None:
@@ -335,14 +371,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_rows(cfg, argv, rows, complete=False)
 
     batched = [(a, n, s) for a in cfg.adversaries for n in cfg.batched for s in (False, True)]
-    todo = [b for b in batched if (b[0].value, f"batched {b[1]}", b[2]) not in kept]
+    todo = [b for b in batched if (b[0].value, batched_where(b[1], cfg), b[2]) not in kept]
     with (
-        ray_session(RayTarget(None)) if cfg.workers > 1 and todo else contextlib.nullcontext(),  # one Ray, every row
+        # one Ray for every row (none on varied airframes: they fly in this process)
+        ray_session(RayTarget(None))
+        if cfg.workers > 1 and todo and cfg.airframe_response is None
+        else contextlib.nullcontext(),
         tqdm(total=len(todo) * cfg.episodes, desc="batched missions", disable=not cfg.progress) as bar,
     ):
         for adversary, name, shield in batched:
             add(
-                (adversary.value, f"batched {name}", shield),
+                (adversary.value, batched_where(name, cfg), shield),
                 lambda: batched_row(adversary, name, shield, cfg, bar),  # noqa: B023 (called at once)
             )
     if cfg.sitl_missions:
