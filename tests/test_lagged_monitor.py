@@ -139,7 +139,7 @@ def batched_hazards(adversary: Adversary, missions: int, monitor_sees_airframes:
     return int((results.cost > 0).sum()), int(results.out_of_area.sum()), int(results.monitor.unprotected_steps.sum())
 
 
-@pytest.mark.parametrize("adversary", [Adversary.AT_RADAR, Adversary.AT_EDGE, Adversary.RANDOM], ids=str)
+@pytest.mark.parametrize("adversary", [Adversary.AT_RADAR, Adversary.RANDOM], ids=str)
 def test_on_varied_airframes_the_lagged_monitor_keeps_adversaries_out_and_eq5_does_not(adversary: Adversary) -> None:
     assert batched_hazards(adversary, 12, monitor_sees_airframes=True) == (0, 0, 0)
     with_cost, out, _ = batched_hazards(adversary, 12, monitor_sees_airframes=False)
