@@ -350,7 +350,7 @@ def write_rows(cfg: BenchConfig, argv: Sequence[str] | None, rows: list[dict[str
             "note": SMOKE_NOTE if cfg.smoke else "",
             "complete": complete,
             "size": f"{cfg.episodes} batched missions per adversary and scenario (off and on), "
-            f"{cfg.sitl_missions} SITL missions per adversary and scenario (on)",
+            f"{cfg.sitl_missions if cfg.sitl else 0} SITL missions per adversary and scenario (on)",
             "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
             "settings": cfg.settings(),
             "episode_steps": cfg.episode_steps,
