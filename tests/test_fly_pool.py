@@ -152,6 +152,20 @@ def test_every_malformed_or_mismatched_campaign_is_one_line_exit_2(
     assert not out.exists()
 
 
+def test_campaigns_whose_monitors_predict_differently_are_not_pooled(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both with the monitor, one predicting with eq. 5 and one with an airframe's response: refused in one line."""
+    a, b = halves(tmp_path)
+    for path, scope in ((a, None), (b, "the monitor predicts with the airframe response f16.response.yaml: ...")):
+        path.write_text(json.dumps(_set("shield", {"interventions_per_uav_mission": 0.0, "scope": scope})(
+            json.loads(path.read_text()))))  # fmt: skip
+    with pytest.raises(SystemExit) as exc:
+        main([str(a), str(b), "--json", str(tmp_path / "pooled.json")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and "monitor (--shield)" in err and "f16.response" in err, err
+
+
 @pytest.mark.parametrize(
     "content, needle",
     [

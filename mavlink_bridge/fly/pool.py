@@ -181,13 +181,16 @@ def read_campaign(path: Path) -> Campaign:
     return check_campaign(data, str(path))
 
 
-def _flight_settings(data: dict[str, Any]) -> tuple[object, object, bool]:
+def _flight_settings(data: dict[str, Any]) -> tuple[object, object, object]:
     """The physics, wind and monitor a campaign flew with (files of before the physics seam were kinematic, in still
-    air)."""
+    air): the monitor by whether it flew and what its bound rests on (its ``scope``: eq. 5 or an airframe's response;
+    None where its proof holds)."""
     dynamics = data.get("dynamics")
     model = dynamics.get("model") if isinstance(dynamics, dict) else "kinematic"
     aircraft = dynamics.get("aircraft") if isinstance(dynamics, dict) and model != "kinematic" else None
-    return (model, aircraft), data.get("wind"), "shield" in data
+    shield = data.get("shield")
+    monitor = (True, shield.get("scope")) if isinstance(shield, dict) else ("shield" in data, None)
+    return (model, aircraft), data.get("wind"), monitor
 
 
 def _check_together(campaigns: Sequence[Campaign], partial: bool) -> None:
