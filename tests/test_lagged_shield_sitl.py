@@ -74,3 +74,25 @@ def test_a_bad_airframe_response_is_one_line_and_nothing_written(args: list[str]
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and words in lines[0], proc.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        ({"speed_min_m_s": 100.0}, "fitted at 150-300 m/s, the scenario's decoy flies 100-300 m/s"),
+        ({"turn_rate_max_deg_s": 3.0}, "turn-rate limit of 5 deg/s, the scenario's decoy turns at 3 deg/s"),
+    ],
+)
+def test_a_response_that_does_not_cover_the_scenarios_vehicles_is_refused(
+    change: dict[str, float], words: str, tmp_path: Path
+) -> None:
+    """Speeds the fit never flew, or another turn-rate limit: the response is no model of these vehicles."""
+    scenario = load(REPO / "scenarios" / "short.yaml")
+    vehicles = dict(scenario.vehicles, decoy=dataclasses.replace(scenario.vehicles["decoy"], **change))
+    path, out = tmp_path / "other.yaml", tmp_path / "fly.json"
+    dump(dataclasses.replace(scenario, vehicles=vehicles), path)
+    proc = fly("--scenario", str(path), "--pilot", "straight", "--shield", "--dynamics", "jsbsim",
+               "--airframe-response", str(RESPONSE), "--json", str(out))  # fmt: skip
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and words in lines[0], proc.stderr
+    assert not out.exists()

@@ -227,7 +227,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         lean_telemetry=args.lean_telemetry,
         pilot=args.pilot or "",
         shield=ShieldConfig() if args.shield else None,
-        airframe_response=response_option(args.airframe_response, args.shield),
+        airframe_response=response_option(args.airframe_response, args.shield, scenario),
         setpoints=SetpointDialect(args.setpoints),
         source_system=args.source_system,
     )

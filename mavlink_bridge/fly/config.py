@@ -479,7 +479,7 @@ def with_dynamics(scenario: Scenario, model: str | None, aircraft: str | None) -
 def airframe_response_of(a: argparse.Namespace, scenario: Scenario) -> Path | None:
     """``--airframe-response``: checked (:func:`~tssac_core.sim.airframe_response.response_option`), and for the
     airframe the world flies: a response models a JSBSim airframe, not the kinematic vehicles, nor another airframe."""
-    path = response_option(a.airframe_response, a.shield)
+    path = response_option(a.airframe_response, a.shield, scenario)
     if path is None:
         return None
     dynamics = scenario.dynamics or Dynamics()

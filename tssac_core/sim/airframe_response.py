@@ -34,8 +34,10 @@ from __future__ import annotations
 
 import bisect
 import hashlib
+import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -44,6 +46,9 @@ from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import InputError
 from tssac_core.sim.yaml_file import read_yaml, typed_value
+
+if TYPE_CHECKING:
+    from tssac_core.sim.scenario import Scenario
 
 RESPONSE_SCHEMA = 2
 """The file format's version; a newer one is refused (2 added ``turn_rollout_tau_s``; a version 1 file reads with the
@@ -229,15 +234,39 @@ def airframe_lag(response: AirframeResponse, speeds_m_s: np.ndarray, dt_s: float
     )
 
 
-def response_option(path: Path | None, shield: bool) -> Path | None:
+def response_option(path: Path | None, shield: bool, scenario: Scenario) -> Path | None:
     """A command's ``--airframe-response FILE``, checked before anything flies: it needs ``--shield`` (it is the
-    monitor's model of the airframe) and a file that reads; each problem one :class:`UsageError` line."""
+    monitor's model of the airframe), a file that reads, and a fit that covers the scenario's vehicles
+    (:func:`check_covers`); each problem one :class:`UsageError` line."""
     if path is None:
         return None
     if not shield:
         raise UsageError("--airframe-response is the monitor's model of the airframe: it needs --shield")
     try:
-        load_response(path)
+        check_covers(load_response(path), scenario)
     except ResponseFileError as exc:
         raise UsageError(f"--airframe-response {exc}") from None
     return path.resolve()
+
+
+def check_covers(response: AirframeResponse, scenario: Scenario) -> None:
+    """Refuse (one :class:`ResponseFileError` line) a response that does not describe how the scenario's vehicles fly:
+    a world step or a turn-rate limit other than the fit's, or a speed range outside its fitted span (a model read
+    outside the speeds it was fitted at is no bound)."""
+    lo, hi = response.speeds_m_s[0], response.speeds_m_s[-1]
+    where = f"response of {response.aircraft}"
+    if abs(scenario.dt_s - response.dt_s) > 1e-9:
+        raise ResponseFileError(
+            f"{where}: fitted for steps of {response.dt_s:g} s, the scenario steps {scenario.dt_s:g} s"
+        )
+    for role, spec in scenario.vehicles.items():
+        if abs(math.radians(spec.turn_rate_max_deg_s) - response.turn_rate_max_rad_s) > 1e-9:
+            raise ResponseFileError(
+                f"{where}: fitted at a turn-rate limit of {math.degrees(response.turn_rate_max_rad_s):g} deg/s, the "
+                f"scenario's {role} turns at {spec.turn_rate_max_deg_s:g} deg/s"
+            )
+        if spec.speed_min_m_s < lo - 1e-9 or spec.speed_max_m_s > hi + 1e-9:
+            raise ResponseFileError(
+                f"{where}: fitted at {lo:g}-{hi:g} m/s, the scenario's {role} flies "
+                f"{spec.speed_min_m_s:g}-{spec.speed_max_m_s:g} m/s"
+            )
