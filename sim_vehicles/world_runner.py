@@ -256,7 +256,7 @@ class WorldRunner:
         self.world.reset([0], [self.layout])
         self._close_dynamics()
         try:
-            self.dynamics = make_dynamics(config.dynamics, self.world, config.seed)
+            self.dynamics = make_dynamics(config.dynamics, self.world, config.seed, config.monitor_response)
         except DynamicsError as exc:
             raise SitlError(f"cannot fly {config.dynamics.model.value} dynamics: {exc}") from None
         self.flags = WorldFlags()

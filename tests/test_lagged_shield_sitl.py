@@ -96,3 +96,18 @@ def test_a_response_that_does_not_cover_the_scenarios_vehicles_is_refused(
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and words in lines[0], proc.stderr
     assert not out.exists()
+
+
+def test_a_response_fitted_to_another_version_of_the_airframe_is_refused_by_the_world(tmp_path: Path) -> None:
+    """The world flies an edited f16.yaml; the monitors' response was fitted to the shipped one: the world refuses
+    before the mission, and fly says so in one line."""
+    airframe = tmp_path / "f16.yaml"
+    shipped = REPO / "sim_vehicles" / "dynamics" / "airframes" / "f16.yaml"
+    airframe.write_text(shipped.read_text().replace("settle_s: 5.0", "settle_s: 6.0"))
+    out = tmp_path / "fly.json"
+    proc = fly("--scenario", str(REPO / "scenarios" / "short.yaml"), "--pilot", "straight", "--shield",
+               "--dynamics", "jsbsim", "--aircraft", str(airframe), "--airframe-response", str(RESPONSE),
+               "--json", str(out))  # fmt: skip
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and "fitted to another version" in lines[0], proc.stderr
+    assert not out.exists()

@@ -48,6 +48,7 @@ def world_config(
         signing_key=signing_key,
         serial_baud=cfg.serial_baud,
         serial_byte_loss=cfg.serial_byte_loss if serial else SitlConfig.serial_byte_loss,
+        monitor_response=cfg.airframe_response,
     )
 
 

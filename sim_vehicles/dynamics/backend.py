@@ -7,12 +7,14 @@ model) and says what each vehicle's true state is; the world then judges the mis
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
 from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.dynamics.kinematic import KinematicDynamics
+from tssac_core.sim.airframe_response import ResponseFileError, load_response
 from tssac_core.sim.scenario import Dynamics, DynamicsModel
 from tssac_core.sim.world import World
 
@@ -42,15 +44,19 @@ class VehicleDynamics(Protocol):
         ...
 
 
-def make_dynamics(dynamics: Dynamics, world: World, seed: int) -> VehicleDynamics:
-    """The backend ``dynamics`` names, for ``world`` (reset to its layout); raises :class:`DynamicsError`."""
+def make_dynamics(dynamics: Dynamics, world: World, seed: int, monitor_response: Path | None = None) -> VehicleDynamics:
+    """The backend ``dynamics`` names, for ``world`` (reset to its layout); raises :class:`DynamicsError`, also for a
+    ``monitor_response`` (the airframe response the companions' monitors predict with) fitted to another airframe, or
+    to another version of this one."""
     if dynamics.model is DynamicsModel.KINEMATIC:
         return KinematicDynamics(world)
     # JSBSim is imported only when it flies: the kinematic world and its fork server never load it.
-    from sim_vehicles.dynamics.jsbsim_airframe import AirframeError, load_airframe
+    from sim_vehicles.dynamics.jsbsim_airframe import AirframeError, airframe_path, load_airframe
     from sim_vehicles.dynamics.jsbsim_dynamics import JsbsimDynamics
 
     try:
+        if monitor_response is not None:
+            load_response(monitor_response, airframe_path(dynamics.aircraft))
         return JsbsimDynamics(world, load_airframe(dynamics.aircraft), seed)
-    except AirframeError as exc:
+    except (AirframeError, ResponseFileError) as exc:
         raise DynamicsError(str(exc)) from None

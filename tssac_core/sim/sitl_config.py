@@ -88,6 +88,9 @@ class SitlConfig:
     (:mod:`sim_vehicles.link.serial_port`); None: UDP only."""
     serial_byte_loss: float = 0.0
     """``--serial-byte-loss P``: the serial lines drop each byte, each way, with this probability (a noisy line)."""
+    monitor_response: Path | None = None
+    """The airframe response the companions' monitors predict with (``fly --airframe-response``): the world refuses
+    one fitted to another version of the airframe it flies, before the mission (None: nothing to check)."""
 
     def to_json(self) -> str:
         """This configuration as one line of JSON (:mod:`tssac_core.sim.settings_json`): what fly gives a world it
