@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from sim_vehicles.__main__ import BAD_INPUT, log_to_stderr, run
-from tssac_core.sim.settings_json import config_text
+from tssac_core.sim.settings_json import add_config_flags, config_text
 from tssac_core.sim.sitl_config import SitlConfig
 from tssac_core.wire.mission_reset import MissionInput
 
@@ -33,14 +33,9 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Start the SITL world from its configuration (what fly starts).")
-    p.add_argument(
-        "--config-json",
-        required=True,
-        metavar="FILE|-",
-        help="the world's configuration, one line of JSON (SitlConfig.to_json); -: standard input's first line",
-    )
-    p.add_argument(
-        "--serve", action="store_true", help="after the mission, read the next ones from standard input (as the CLI's)"
+    add_config_flags(
+        p,
+        "the world's configuration, one line of JSON (SitlConfig.to_json); -: standard input's first line",
     )
     return p
 

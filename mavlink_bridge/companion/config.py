@@ -15,7 +15,7 @@ from tssac_core.common.cli import UsageError
 from tssac_core.sim import settings_json
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
-from tssac_core.sim.scenario import LinkModel, Role, Scenario, validate
+from tssac_core.sim.scenario import LinkModel, Role, Scenario
 
 GUIDED_MODE = 15
 """ArduPlane's GUIDED custom_mode (the bundled SITL follows ArduPlane's numbers)."""
@@ -161,9 +161,7 @@ class CompanionConfig:
         """The configuration :meth:`to_json` wrote, equal. Anything else raises one line: a
         :class:`~tssac_core.sim.settings_json.SettingsError` (a malformed, missing or unknown field, or a value the
         configuration refuses) or a ScenarioError (a scenario that does not validate)."""
-        config = settings_json.from_json(cls, text, source)
-        validate(config.scenario, f"{source}: scenario")
-        return config
+        return settings_json.mission_settings_from_json(cls, text, source)
 
     @property
     def line_budget(self) -> LineBudget | None:

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from mavlink_bridge.companion.cli import bad_input_errors, log_to_stderr, run
 from mavlink_bridge.companion.config import EXIT_BAD_INPUT, CompanionConfig
 from tssac_core.common.cli import UsageParser
-from tssac_core.sim.settings_json import config_text
+from tssac_core.sim.settings_json import add_config_flags, config_text
 from tssac_core.wire.mission_reset import MissionInput
 
 PROG = "python -m mavlink_bridge.companion.from_config"
@@ -26,15 +26,9 @@ PROG = "python -m mavlink_bridge.companion.from_config"
 
 def build_parser() -> UsageParser:
     p = UsageParser(prog=PROG, description="Fly one UAV's companion from its configuration (what fly starts).")
-    p.add_argument(
-        "--config-json",
-        required=True,
-        metavar="FILE|-",
-        help="the companion's configuration, one line of JSON (CompanionConfig.to_json); -: standard input's first "
-        "line",
-    )
-    p.add_argument(
-        "--serve", action="store_true", help="after the mission, read the next ones from standard input (as the CLI's)"
+    add_config_flags(
+        p,
+        "the companion's configuration, one line of JSON (CompanionConfig.to_json); -: standard input's first line",
     )
     return p
 

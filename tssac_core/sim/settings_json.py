@@ -5,6 +5,7 @@ with :func:`tssac_core.sim.yaml_file.typed_value`, so a malformed or unknown fie
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import enum
 import json
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from tssac_core.common.errors import InputError
+from tssac_core.sim.scenario import validate
 from tssac_core.sim.yaml_file import typed_value
 from tssac_core.wire.mission_reset import MissionInput
 
@@ -88,3 +90,19 @@ def config_text(where: str, missions: MissionInput) -> tuple[str, str]:
     if line is None:
         raise SettingsError(source, "", "standard input ended before the configuration")
     return line, source
+
+
+def mission_settings_from_json(tp: type[T], text: str, source: str) -> T:
+    """:func:`from_json` for a child's configuration that carries a ``scenario``: the scenario validated too (a
+    ScenarioError, one line)."""
+    settings = from_json(tp, text, source)
+    validate(settings.scenario, f"{source}: scenario")  # type: ignore[attr-defined]
+    return settings
+
+
+def add_config_flags(p: argparse.ArgumentParser, help_text: str) -> None:
+    """A child's ``--config-json FILE|-`` (its configuration, ``help_text``) and ``--serve``."""
+    p.add_argument("--config-json", required=True, metavar="FILE|-", help=help_text)
+    p.add_argument(
+        "--serve", action="store_true", help="after the mission, read the next ones from standard input (as the CLI's)"
+    )

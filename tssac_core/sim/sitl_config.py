@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tssac_core.sim import settings_json
-from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario, validate
+from tssac_core.sim.scenario import Dynamics, DynamicsModel, Scenario
 from tssac_core.wire.uart import check_baud
 
 DEFAULT_BASE_PORT = 14560
@@ -102,9 +102,7 @@ class SitlConfig:
         """The configuration :meth:`to_json` wrote, equal. Anything else raises one line: a
         :class:`~tssac_core.sim.settings_json.SettingsError` (a malformed, missing or unknown field, or a value the
         configuration refuses) or a ScenarioError (a scenario that does not validate)."""
-        config = settings_json.from_json(cls, text, source)
-        validate(config.scenario, f"{source}: scenario")
-        return config
+        return settings_json.mission_settings_from_json(cls, text, source)
 
     @property
     def dynamics(self) -> Dynamics:
