@@ -16,6 +16,11 @@ the success rate; writes them as JSON.
                                                                # the batched rows on airframes drawn from the
                                                                # response's spans; --eq5-monitor: the monitor
                                                                # predicts with eq. 5 (the negative control)
+    python benchmarks/bench_adversaries.py --sitl --airframe-response FILE --wind-m-s 10 [--no-loiter] --workers 1 \
+        --json OUT                                             # the same in a steady 10 m/s wind (its direction
+                                                               # drawn per mission), the backups ending in the
+                                                               # ground loiter; --no-loiter: in calm air's
+                                                               # constant turn (the negative control)
     python benchmarks/bench_adversaries.py --episodes 200 --sitl-missions 2 --json benchmarks/results/adversaries.json
 
 Seeds: the adversaries' own range, used for nothing else. Mission k of a batched scenario flies seed
@@ -34,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import math
 import os
 import subprocess
 import sys
@@ -44,9 +50,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 import tssac_core
+from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
 from tssac_core.parallel.mission_shards import fly_missions_sharded
@@ -94,6 +102,11 @@ class BenchConfig:
     airframes drawn from its spans, their monitors predicting with each one's lag; None: eq. 5-6."""
     eq5_monitor: bool = False
     """With ``airframe_response``: the monitors predict with eq. 5 all the same (the negative control)."""
+    wind_m_s: float = 0.0
+    """With ``airframe_response``: the batched worlds fly in a steady wind of this speed, from a direction drawn per
+    mission, and the monitors' backups end in the ground loiter sized for it."""
+    no_loiter: bool = False
+    """With ``wind_m_s``: the backups end in calm air's constant turn all the same (the negative control)."""
 
     def settings(self) -> dict[str, Any]:
         """What a row depends on: rows written under other settings are never reused by ``--resume``."""
@@ -110,6 +123,10 @@ class BenchConfig:
             settings["airframe_response"] = self.airframe_response.name
         if self.eq5_monitor:
             settings["eq5_monitor"] = True
+        if self.wind_m_s:
+            settings["wind_m_s"] = self.wind_m_s
+        if self.no_loiter:
+            settings["no_loiter"] = True
         return json.loads(json.dumps(settings))  # as the file holds them (tuples as lists)
 
     @property
@@ -147,6 +164,18 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         action="store_true",
         help="with --airframe-response: the monitors predict with eq. 5 all the same (the negative control)",
     )
+    p.add_argument(
+        "--wind-m-s",
+        type=float,
+        default=0.0,
+        help="with --airframe-response: the batched rows fly in a steady wind of this speed (m/s, its direction drawn "
+        "per mission), the monitors' backups ending in the ground loiter",
+    )
+    p.add_argument(
+        "--no-loiter",
+        action="store_true",
+        help="with --wind-m-s: the backups end in calm air's constant turn all the same (the negative control)",
+    )
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")
@@ -168,6 +197,10 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         raise UsageError("--airframe-response: an existing response file (SITL rows: with --sitl-dynamics jsbsim)")
     if a.eq5_monitor and a.airframe_response is None:
         raise UsageError("--eq5-monitor is the control of --airframe-response: give both")
+    if not 0.0 <= a.wind_m_s < 100.0 or (a.wind_m_s and (a.airframe_response is None or sitl_rows)):
+        raise UsageError("--wind-m-s: a speed in [0, 100) m/s, with --airframe-response, for batched rows (--sitl)")
+    if a.no_loiter and not a.wind_m_s:
+        raise UsageError("--no-loiter is the control of --wind-m-s: give both")
     for name in (*a.batched, *a.sitl):
         if not (ROOT / "scenarios" / f"{name}.yaml").is_file():
             raise UsageError(f"scenario '{name}': no scenarios/{name}.yaml")
@@ -186,6 +219,8 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         sitl_dynamics=a.sitl_dynamics,
         airframe_response=None if a.airframe_response is None else a.airframe_response.resolve(),
         eq5_monitor=a.eq5_monitor,
+        wind_m_s=a.wind_m_s,
+        no_loiter=a.no_loiter,
     )
 
 
@@ -205,10 +240,10 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
     t0 = time.monotonic()
     results: MissionResults
     if cfg.airframe_response is not None:  # on airframes drawn from the response's spans: one process
-        variation = AirframeVariation.from_response(load_response(cfg.airframe_response))
+        variation, loiter = varied_airframes(cfg, scenario)
         results = fly_missions(
             scenario, pilots, cfg.episodes, seed, progress=bar.update, shield=monitor, airframes=variation,
-            monitor_sees_airframes=not cfg.eq5_monitor,
+            monitor_sees_airframes=not cfg.eq5_monitor, loiter=loiter,
         )  # fmt: skip
     elif cfg.workers > 1:
         indices = list(range(cfg.episodes))
@@ -239,6 +274,23 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
         "unsafe_missions": [int(k) for k in ((results.cost > 0) | results.out_of_area).any(axis=1).nonzero()[0]][:20],
         "wall_time_s": round(time.monotonic() - t0, 1),
     }
+
+
+def varied_airframes(cfg: BenchConfig, scenario: Scenario) -> tuple[AirframeVariation, LoiterBound | None]:
+    """The batched rows' airframes (the response's spans, in ``--wind-m-s`` from a direction drawn per mission) and
+    the loiter's bound for them (None in calm air or under ``--no-loiter``)."""
+    assert cfg.airframe_response is not None
+    response = load_response(cfg.airframe_response)
+    variation = AirframeVariation.from_response(response, wind_max_m_s=cfg.wind_m_s)
+    if not cfg.wind_m_s:
+        return variation, None
+    variation = dataclasses.replace(variation, wind_m_s=(cfg.wind_m_s, cfg.wind_m_s))
+    if cfg.no_loiter:
+        return variation, None
+    spec = next(iter(scenario.vehicles.values()))
+    speeds = tuple(float(v) for v in np.arange(spec.speed_min_m_s, spec.speed_max_m_s + 1.0, 25.0))
+    turn_rate = math.radians(spec.turn_rate_max_deg_s)
+    return variation, variation.loiter_bound(response.loiter_law(), speeds, turn_rate, scenario.dt_s)
 
 
 def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar: tqdm) -> dict[str, Any]:
@@ -308,7 +360,10 @@ def batched_where(name: str, cfg: BenchConfig) -> str:
     """A batched row's place: the scenario, and on varied airframes the monitor's model."""
     if cfg.airframe_response is None:
         return f"batched {name}"
-    return f"batched {name} airframes" + (" eq5" if cfg.eq5_monitor else "")
+    where = f"batched {name} airframes" + (" eq5" if cfg.eq5_monitor else "")
+    if cfg.wind_m_s:
+        where += f" wind {cfg.wind_m_s:g}" + (" turn" if cfg.no_loiter else " loiter")
+    return where
 
 
 def print_table(rows: list[dict[str, Any]]) -> None:

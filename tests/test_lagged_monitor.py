@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tssac_core.assurance.lagged_backups import AirframeLag, LaggedPrediction, LagState, lagged_rollout
+from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
+from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
     EstimateError,

@@ -148,6 +148,47 @@ def test_inconsistent_tables_are_refused() -> None:
         response(decel_max_m_s2=(-1.0, 0.5, -3.0))
 
 
+LOITER = {
+    "schema": 3,
+    "turn_heading_residual_deg": (6.0, 4.0, 2.0),
+    "loiter_wind_max_m_s": 10.0,
+    "loiter_excursion_m": (550.0, 520.0, 540.0),
+}
+
+
+def test_the_loiter_fit_round_trips_reads_between_speeds_and_a_version_2_file_has_none(tmp_path: Path) -> None:
+    path = tmp_path / "x.response.yaml"
+    r = response(**LOITER)
+    path.write_text(dump_response(r))
+    assert load_response(path) == r
+    at = r.at(250.0)  # between 200 and 300: the worse neighbour's excursion and heading residual
+    assert (at.loiter_excursion_m, at.heading_residual_deg) == (540.0, 4.0)
+    bound = r.loiter_bound()
+    assert bound is not None and bound.max_m_s == 10.0 and bound.law == r.loiter_law()
+    np.testing.assert_allclose(bound.wind(np.zeros(1), np.zeros(1), np.array([250.0])).heading_residual_rad,
+                               [math.radians(4.0)])  # fmt: skip
+    path.write_text(dump_response(response()))  # a version 2 file: no loiter, no heading residual
+    old = load_response(path)
+    assert old.loiter_bound() is None and old.at(250.0).loiter_excursion_m is None
+    with pytest.raises(ValueError, match="one entry per speed"):
+        response(**(LOITER | {"loiter_excursion_m": (1.0, 2.0)}))
+
+
+def test_a_wind_stronger_than_the_loiter_was_measured_in_is_refused() -> None:
+    from tssac_core.sim.airframe_response import check_covers
+    from tssac_core.sim.scenario import Wind, load
+
+    repo = Path(__file__).resolve().parents[1]
+    scenario = load(repo / "scenarios" / "random.yaml")
+    fitted = response(**(LOITER | {"speeds_m_s": (150.0, 200.0, 300.0)}))
+    check_covers(fitted, dataclasses.replace(scenario, wind=Wind(speed_m_s=10.0, from_deg=270.0)))
+    with pytest.raises(ResponseFileError, match="measured in winds up to 10 m/s, the scenario promises 12 m/s"):
+        check_covers(fitted, dataclasses.replace(scenario, wind=Wind(speed_m_s=8.0, from_deg=270.0, max_m_s=12.0)))
+    with pytest.raises(ResponseFileError, match="calm air only"):
+        check_covers(response(), dataclasses.replace(scenario, wind=Wind(speed_m_s=5.0, from_deg=0.0)))
+    check_covers(response(), scenario)  # calm: no loiter needed
+
+
 def test_file_round_trip_and_refusals(tmp_path: Path) -> None:
     path = tmp_path / "x.response.yaml"
     r = response()

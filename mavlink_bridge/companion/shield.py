@@ -14,7 +14,7 @@ the proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMon
   about 2 x ``link.latency_ms`` after t, off lockstep and in lockstep alike (there the link runs on simulated
   time). Before the first command reached the vehicle it flew the hold (straight on): the queue starts with it;
 * with an airframe's response (``--airframe-response``), the paths predicted with its lag
-  (:class:`~tssac_core.assurance.lagged_backups.LaggedPrediction`) instead of eq. 5: from the filter's turn rate,
+  (:class:`~tssac_core.assurance.lagged_prediction.LaggedPrediction`) instead of eq. 5: from the filter's turn rate,
   with the turn commands the airframe has not yet followed (its delay, before the link's round trip); the turn
   rate's error, ``sigma_k`` standard deviations, turns the path by at most that times the longer time constant
   (the lag closes an error in the rate as it closes a gap to the command).
@@ -34,7 +34,8 @@ from typing import TypeAlias
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import AirframeLag, LaggedPrediction, LagState, lagged_rollout
+from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
+from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
     N_TURNS,

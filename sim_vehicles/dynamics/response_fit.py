@@ -14,16 +14,22 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
   keep closest to the roll-outs (least mean squared distance), and the roll-in's (also a reversal's) the one closest
   to the four turns; the delay is the one with the least mean square over all six runs,
   and the largest distance they leave is the residual, the error term a bound built on the model adds to its
-  margin.
+  margin; the largest difference of heading over each run's first ``ROLLOUT_S``, the heading residual.
 * **Acceleration.** Full and no throttle (commands of +-``ACCEL_COMMAND_M_S2``) from the speed, the airspeed's mean
   rate over ``--accel-window-s``; the inner loop's speed reference is not clipped during these runs.
+* **The ground loiter's excursion** (the wind's backup): how far beyond its radius the airframe and the lag model just
+  fitted fly the loiter, from a reversal at full bank and from straight flight, in calm air and in
+  ``--wind-max-m-s`` from 16 directions (:mod:`sim_vehicles.dynamics.loiter_fit`), at each speed and halfway to its
+  neighbours (``--wind-max-m-s 0`` fits calm air only).
 
-Everything is deterministic (JSBSim, calm air): ``--check`` refits and compares with the file at 1e-9.
+Everything is deterministic (JSBSim, steady winds, no turbulence): ``--check`` refits and compares with the file at
+1e-9.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 from collections.abc import Sequence
@@ -41,12 +47,15 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
     airframe_path,
     load_airframe,
 )
+from sim_vehicles.dynamics.loiter_fit import fly_loiter, loiter_cases, loiter_excursion_m
+from tssac_core.assurance.ground_loiter import LoiterLaw
 from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
 from tssac_core.common.cli import UsageError, run
 from tssac_core.sim.airframe_response import (
     RESPONSE_SCHEMA,
     AirframeResponse,
     ResponseFileError,
+    airframe_lag,
     dump_response,
     file_sha256,
     load_response,
@@ -146,6 +155,9 @@ class LagFit:
     rollout_tau_s: float
     residual_m: float
     """The largest distance between the airframe's and the model's paths over every run."""
+    heading_residual_rad: float = 0.0
+    """The largest difference between the airframe's course and the model's heading over every run's first
+    ``ROLLOUT_S``."""
 
 
 def fit_lag(turns: Sequence[Turn], rollouts: Sequence[Turn], dt_s: float) -> LagFit:
@@ -161,7 +173,19 @@ def fit_lag(turns: Sequence[Turn], rollouts: Sequence[Turn], dt_s: float) -> Lag
         if best is None or out_squares + in_squares < best[0]:
             best = (out_squares + in_squares, fit)
     assert best is not None
-    return best[1]
+    fit = best[1]
+    turned = [heading_error_rad(t, fit, dt_s) for t in [*turns, *rollouts]]
+    return dataclasses.replace(fit, heading_residual_rad=max(turned))
+
+
+def heading_error_rad(turn: Turn, fit: LagFit, dt_s: float) -> float:
+    """The largest difference over a run's first ``ROLLOUT_S`` (the longest straight lead and more) between the
+    airframe's course and the fitted model's heading, both turned from the run's start by their own rates: how far
+    off the model's heading may be where a backup's loiter starts."""
+    steps = min(len(turn.rates_rad_s), round(ROLLOUT_S / dt_s))
+    before, command, tau = turn.omega_before_rad_s, turn.command_rad_s, np.array([fit.tau_s])
+    model = switched_lag_rates(before, command, steps, fit.delay_steps, tau, fit.rollout_tau_s, dt_s)[0]
+    return float(np.abs(np.cumsum((turn.rates_rad_s[:steps] - model) * dt_s)).max())
 
 
 def _fit_at_delay(
@@ -221,6 +245,9 @@ class FitSettings:
     altitude_m: float = 5000.0
     dt_s: float = 0.1
     accel_window_s: float = 15.0
+    wind_max_m_s: float = 10.0
+    """The steady wind the loiter's excursion is measured in (0: calm air only)."""
+    loiter_law: LoiterLaw = LoiterLaw()
 
 
 def fit_response(aircraft: str, settings: FitSettings, command: str) -> AirframeResponse:
@@ -229,7 +256,8 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
     spec = load_airframe(path)
     w = math.radians(settings.turn_rate_max_deg_s)
     circles_s = 2.0 * 2.0 * math.pi / w
-    table: dict[str, list[float]] = {k: [] for k in ("delay", "tau", "rollout", "residual", "accel", "decel")}
+    keys = ("delay", "tau", "rollout", "residual", "heading", "accel", "decel")
+    table: dict[str, list[float]] = {k: [] for k in keys}
     for v in settings.speeds_m_s:
         turns = [
             fly_turn(spec, v, settings.altitude_m, settings.dt_s, before, after, circles_s)
@@ -241,11 +269,13 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
         table["tau"].append(round(fit.tau_s, 9))
         table["rollout"].append(round(fit.rollout_tau_s, 9))
         table["residual"].append(round(fit.residual_m, 3))
+        table["heading"].append(round(math.degrees(fit.heading_residual_rad), 3))
         for key, sign in (("accel", 1.0), ("decel", -1.0)):
             command_m_s2 = sign * ACCEL_COMMAND_M_S2
             a = mean_accel(spec, v, settings.altitude_m, settings.dt_s, command_m_s2, settings.accel_window_s)
             table[key].append(round(a, 4))
-    return AirframeResponse(
+    law = settings.loiter_law
+    provisional = AirframeResponse(
         schema=RESPONSE_SCHEMA,
         aircraft=path.stem,
         airframe_sha256=file_sha256(path),
@@ -262,7 +292,37 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
         decel_max_m_s2=tuple(table["decel"]),
         accel_window_s=settings.accel_window_s,
         turn_rollout_tau_s=tuple(table["rollout"]),
+        turn_heading_residual_deg=tuple(table["heading"]),
+        loiter_authority=law.authority,
+        loiter_lookahead_share=law.lookahead_share,
+        loiter_track_gain_1_s=law.track_gain_1_s,
     )
+    excursions = fit_loiter(spec, provisional, settings)
+    return dataclasses.replace(provisional, loiter_wind_max_m_s=settings.wind_max_m_s, loiter_excursion_m=excursions)
+
+
+def fit_loiter(spec: AirframeSpec, lag: AirframeResponse, settings: FitSettings) -> tuple[float, ...]:
+    """The loiter's excursion per tabled speed (module docstring): the largest of the runs at the speed and halfway to
+    each tabled neighbour (so that the worse neighbour's figure covers every speed between two), each run flown with
+    the lag just fitted (interpolated between tabled speeds, as the monitor reads it)."""
+    speeds = settings.speeds_m_s
+    halfway = [(a + b) / 2.0 for a, b in zip(speeds, speeds[1:])]
+    envelope = (speeds[0], speeds[-1])
+    runs: dict[float, float] = {}
+    for v in sorted(set(speeds) | set(halfway)):
+        air = airframe_lag(lag, np.array([v]), settings.dt_s)
+        runs[v] = loiter_excursion_m(
+            [
+                fly_loiter(spec, case, air, settings.wind_max_m_s, settings.loiter_law, lag.turn_rate_max_rad_s,
+                           settings.altitude_m, settings.dt_s, envelope)
+                for case in loiter_cases(v, settings.wind_max_m_s)
+            ]
+        )  # fmt: skip
+    out = []
+    for k, v in enumerate(speeds):
+        band = [v] + halfway[max(k - 1, 0) : k + 1]
+        out.append(max(runs[b] for b in band))
+    return tuple(out)
 
 
 def differences(fitted: AirframeResponse, stored: AirframeResponse, tolerance: float = 1e-9) -> list[str]:
@@ -302,6 +362,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--turn-rate-deg-s", type=float, default=FitSettings.turn_rate_max_deg_s)
     p.add_argument("--altitude-m", type=float, default=FitSettings.altitude_m)
     p.add_argument("--accel-window-s", type=float, default=FitSettings.accel_window_s)
+    p.add_argument(
+        "--wind-max-m-s",
+        type=float,
+        default=FitSettings.wind_max_m_s,
+        help="the steady wind the ground loiter is measured in, from 16 directions (m/s; 0: calm air only)",
+    )
     args = p.parse_args(argv)
     speeds = args.speeds
     if any(not (math.isfinite(v) and 0 < v < 1000) for v in speeds) or sorted(set(speeds)) != speeds:
@@ -310,18 +376,23 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         raise UsageError(
             "--turn-rate-deg-s must be in (0, 30], --altitude-m in (0, 20000], --accel-window-s in [1, 120]"
         )
+    if not 0 <= args.wind_max_m_s < 0.5 * speeds[0]:
+        raise UsageError(f"--wind-max-m-s must be in [0, {0.5 * speeds[0]:g}) (half the slowest speed)")
     return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    settings = FitSettings(tuple(args.speeds), args.turn_rate_deg_s, args.altitude_m, 0.1, args.accel_window_s)
+    settings = FitSettings(
+        tuple(args.speeds), args.turn_rate_deg_s, args.altitude_m, 0.1, args.accel_window_s, args.wind_max_m_s
+    )
     try:
         out = args.out or response_path(args.aircraft)
         words = ["python -m sim_vehicles.dynamics.response_fit", "--aircraft", str(args.aircraft)]
         if settings != FitSettings():
             words += ["--speeds", *(f"{v:g}" for v in args.speeds), "--turn-rate-deg-s", f"{args.turn_rate_deg_s:g}"]
             words += ["--altitude-m", f"{args.altitude_m:g}", "--accel-window-s", f"{args.accel_window_s:g}"]
+            words += ["--wind-max-m-s", f"{args.wind_max_m_s:g}"]
         stored = load_response(out, airframe_path(args.aircraft)) if args.check else None
         fitted = fit_response(args.aircraft, settings, " ".join(words))
         if stored is not None:

@@ -41,16 +41,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.assurance.monitor import (
-    N_TURNS,
-    EstimateError,
     Hazards,
     Limits,
-    Prediction,
-    Scene,
-    backup_error_m,
-    choose_backup,
     circle_clearance,
-    lead_steps,
     point_clearance,
 )
 
@@ -340,69 +333,3 @@ def lagged_backup_clearance(
     disk = circle_clearance(cx, cy, radius, r_hz)
     out = np.minimum.reduce([lead_min[rows, pick], samples, disk]).reshape(m, n_leads, 2)
     return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
-
-
-@dataclass(frozen=True)
-class LaggedPrediction:
-    """The monitor's :class:`~tssac_core.assurance.monitor.Prediction` under an airframe's response: the proposal's
-    path and every backup flown by the lagged model from the lag's state, each clearance less the residual. The
-    backups are the constant-speed ones (the braking ones are not offered: an airframe brakes at what it achieves,
-    a few m/s^2, and holds a speed where it does not). The estimate's error moves a backup's path as the module
-    :mod:`~tssac_core.assurance.monitor` says, with each lead K steps longer (the turn's samples)."""
-
-    airframe: AirframeLag
-    lag: LagState
-
-    def select(self, rows: np.ndarray) -> LaggedPrediction:
-        return LaggedPrediction(self.airframe.select(rows), self.lag.select(rows))
-
-    def after(
-        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, pending: np.ndarray, scene: Scene
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Prediction]:
-        lim = scene.lim
-        actions = np.clip(pending, -1.0, 1.0)
-        turn = actions[:, :, 0] * lim.turn_rate_max_rad_s[:, None]
-        accel = actions[:, :, 1] * lim.accel_max_m_s2[:, None]
-        path = lagged_rollout(x, y, v, phi, self.lag, turn, accel, self.airframe, lim, scene.dt_s)
-        n = pending.shape[1]
-        end = (path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1])
-        return (*end, LaggedPrediction(self.airframe, path.lag_after(n)))
-
-    def proposal_excess(
-        self,
-        x: np.ndarray,
-        y: np.ndarray,
-        v: np.ndarray,
-        phi: np.ndarray,
-        proposed: np.ndarray,
-        steps: int,
-        err_end: EstimateError,
-        scene: Scene,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        lim, dt_s = scene.lim, scene.dt_s
-        raw = np.asarray(proposed, dtype=np.float64)
-        finite: np.ndarray = np.all(np.isfinite(raw), axis=1)
-        proposed = np.clip(np.where(finite[:, None], raw, 0.0), -1.0, 1.0)
-        turn = np.repeat((proposed[:, 0] * lim.turn_rate_max_rad_s)[:, None], steps, axis=1)
-        accel = np.repeat((proposed[:, 1] * lim.accel_max_m_s2)[:, None], steps, axis=1)
-        path = lagged_rollout(x, y, v, phi, self.lag, turn, accel, self.airframe, lim, dt_s)
-        clear = point_clearance(path.xs, path.ys, scene.hz).min(axis=1) - lim.speed_max_m_s * dt_s / 2
-        clear = clear - scene.margin - err_end.position_m - self.airframe.residual_m
-        clear = np.where(finite, clear, -np.inf)
-        end = LaggedPrediction(self.airframe, path.lag_after(steps))
-        ex, ey, ev, ep = path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
-        ends = end.backup_excess(ex, ey, ev, ep, err_end, scene)
-        return proposed, np.minimum(clear, ends.max(axis=1)), choose_backup(ends)
-
-    def backup_excess(
-        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, err: EstimateError, scene: Scene
-    ) -> np.ndarray:
-        """Every backup's excess over the margin and the error bound, (M, L * N_TURNS), the monitor's candidate order;
-        the braking turns' columns -inf."""
-        m, lim, dt_s = len(x), scene.lim, scene.dt_s
-        leads = lead_steps(scene.cfg, dt_s)
-        clear = lagged_backup_clearance(x, y, v, phi, self.lag, scene.hz, self.airframe, lim, dt_s, leads)
-        out = np.full((m, len(leads), N_TURNS), -np.inf)
-        out[:, :, :2] = clear.reshape(m, len(leads), 2)
-        error = backup_error_m(err, lim, dt_s, leads + self.airframe.settle_steps(dt_s))
-        return out.reshape(m, len(leads) * N_TURNS) - scene.margin[:, None] - error

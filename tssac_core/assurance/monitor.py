@@ -458,7 +458,7 @@ class Scene:
 
 class Prediction(Protocol):
     """How the monitor predicts a vehicle's paths: eq. 5-6 (:class:`KinematicPrediction`, the default) or an
-    airframe's fitted response (:class:`tssac_core.assurance.lagged_backups.LaggedPrediction`). States are (M,)
+    airframe's fitted response (:class:`tssac_core.assurance.lagged_prediction.LaggedPrediction`). States are (M,)
     arrays x, y, v, phi."""
 
     def select(self, rows: np.ndarray) -> Prediction:

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
+from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw
 from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import InputError
@@ -50,9 +51,10 @@ from tssac_core.sim.yaml_file import read_yaml, typed_value
 if TYPE_CHECKING:
     from tssac_core.sim.scenario import Scenario
 
-RESPONSE_SCHEMA = 2
+RESPONSE_SCHEMA = 3
 """The file format's version; a newer one is refused (2 added ``turn_rollout_tau_s``; a version 1 file reads with the
-roll-in's time constants for the roll-out)."""
+roll-in's time constants for the roll-out; 3 added the ground loiter's fit, ``loiter_*``: a file without it promises
+no loiter, so no wind)."""
 
 
 class ResponseFileError(InputError):
@@ -69,6 +71,10 @@ class ResponseAt:
     turn_residual_m: float
     accel_max_m_s2: float
     decel_max_m_s2: float
+    loiter_excursion_m: float | None = None
+    """How far beyond its radius the ground loiter may fly (m); None: no loiter fitted."""
+    heading_residual_deg: float = 0.0
+    """How far the airframe's course may lie from the model's heading (deg)."""
 
     def delay_steps(self, dt_s: float) -> int:
         """The delay in whole world steps of ``dt_s``."""
@@ -113,6 +119,35 @@ class AirframeResponse:
     turn_rollout_tau_s: tuple[float, ...] = ()
     """The lag's time constant rolling out (toward a smaller turn the same way, or none), s; empty in a version 1 file
     (the roll-in's then count)."""
+    turn_heading_residual_deg: tuple[float, ...] = ()
+    """Per speed, the largest difference between the airframe's course and the model's heading over the same runs as
+    ``turn_residual_m`` (deg): where a backup's loiter starts its centre lies R normal to the ground track, so a heading
+    off by this moves the centre by R times it; empty in files before version 3 (none of their backups loiters)."""
+    loiter_wind_max_m_s: float = 0.0
+    """The steady wind the ground loiter's excursion was measured in, from every direction (m/s; the loiter's circle
+    is sized for it: :func:`tssac_core.assurance.ground_loiter.loiter_radius_m`)."""
+    loiter_authority: float = LoiterLaw.authority
+    """The loiter law's gains the excursion was measured with
+    (:class:`~tssac_core.assurance.ground_loiter.LoiterLaw`)."""
+    loiter_lookahead_share: float = LoiterLaw.lookahead_share
+    loiter_track_gain_1_s: float = LoiterLaw.track_gain_1_s
+    loiter_excursion_m: tuple[float, ...] = ()
+    """Per speed, the largest distance beyond the loiter's radius from its centre that the airframe (JSBSim) or its
+    lag model flew (m), from straight flight and from maximum-rate turns either way, in calm air and in
+    ``loiter_wind_max_m_s`` from every direction; empty: no loiter fitted (files before version 3)."""
+
+    def loiter_law(self) -> LoiterLaw:
+        """The loiter law the excursion was measured with."""
+        return LoiterLaw(self.loiter_authority, self.loiter_lookahead_share, self.loiter_track_gain_1_s)
+
+    def loiter_bound(self) -> LoiterBound | None:
+        """The ground loiter's fitted figures (None: none fitted, a file before version 3)."""
+        if not self.loiter_excursion_m:
+            return None
+        headings = tuple(math.radians(d) for d in self.turn_heading_residual_deg) or (0.0,) * len(self.speeds_m_s)
+        return LoiterBound(
+            self.loiter_wind_max_m_s, self.loiter_law(), self.speeds_m_s, self.loiter_excursion_m, headings
+        )
 
     def rollout_taus(self) -> tuple[float, ...]:
         """``turn_rollout_tau_s``, or for a version 1 file the roll-in's time constants."""
@@ -128,12 +163,19 @@ class AirframeResponse:
             self.accel_max_m_s2,
             self.decel_max_m_s2,
         )
-        if n < 1 or any(len(t) != n for t in tables):
+        optional = (self.loiter_excursion_m, self.turn_heading_residual_deg)
+        if n < 1 or any(len(t) != n for t in tables) or any(len(t) not in (0, n) for t in optional):
             raise ValueError(f"response of {self.aircraft}: every table needs one entry per speed ({n})")
         if any(b <= a for a, b in zip(self.speeds_m_s, self.speeds_m_s[1:])) or self.speeds_m_s[0] <= 0.0:
             raise ValueError(f"response of {self.aircraft}: speeds_m_s must be positive and ascending")
-        if min(self.turn_delay_s + self.turn_tau_s + self.rollout_taus() + self.turn_residual_m) < 0.0:
-            raise ValueError(f"response of {self.aircraft}: delays, time constants and residuals must be >= 0")
+        if (
+            min(self.turn_delay_s + self.turn_tau_s + self.rollout_taus() + self.turn_residual_m) < 0.0
+            or min(self.loiter_excursion_m + (self.loiter_wind_max_m_s,), default=0.0) < 0.0
+        ):
+            raise ValueError(
+                f"response of {self.aircraft}: delays, time constants, residuals and excursions must be >= 0"
+            )
+        self.loiter_law()  # its gains checked
         if min(self.accel_max_m_s2) <= 0.0 or max(self.decel_max_m_s2) >= 0.0:
             raise ValueError(f"response of {self.aircraft}: accelerations must be > 0 and decelerations < 0")
         if not (self.dt_s > 0.0 and self.turn_rate_max_rad_s > 0.0 and self.accel_window_s > 0.0):
@@ -163,6 +205,10 @@ class AirframeResponse:
             turn_residual_m=max(self.turn_residual_m[k] for k in pair),
             accel_max_m_s2=min(self.accel_max_m_s2[k] for k in pair),
             decel_max_m_s2=max(self.decel_max_m_s2[k] for k in pair),
+            loiter_excursion_m=max(self.loiter_excursion_m[k] for k in pair) if self.loiter_excursion_m else None,
+            heading_residual_deg=max((self.turn_heading_residual_deg[k] for k in pair), default=0.0)
+            if self.turn_heading_residual_deg
+            else 0.0,
         )
 
     def worst(self, speed_min_m_s: float, speed_max_m_s: float) -> ResponseAt:
@@ -176,6 +222,10 @@ class AirframeResponse:
             turn_residual_m=max(r.turn_residual_m for r in inside),
             accel_max_m_s2=min(r.accel_max_m_s2 for r in inside),
             decel_max_m_s2=max(r.decel_max_m_s2 for r in inside),
+            loiter_excursion_m=max(
+                (r.loiter_excursion_m for r in inside if r.loiter_excursion_m is not None), default=None
+            ),
+            heading_residual_deg=max(r.heading_residual_deg for r in inside),
         )
 
 
@@ -251,8 +301,9 @@ def response_option(path: Path | None, shield: bool, scenario: Scenario) -> Path
 
 def check_covers(response: AirframeResponse, scenario: Scenario) -> None:
     """Refuse (one :class:`ResponseFileError` line) a response that does not describe how the scenario's vehicles fly:
-    a world step or a turn-rate limit other than the fit's, or a speed range outside its fitted span (a model read
-    outside the speeds it was fitted at is no bound)."""
+    a world step or a turn-rate limit other than the fit's, a speed range outside its fitted span (a model read
+    outside the speeds it was fitted at is no bound), or a wind stronger than the one its ground loiter was measured
+    in (the backups' bound in wind)."""
     lo, hi = response.speeds_m_s[0], response.speeds_m_s[-1]
     where = f"response of {response.aircraft}"
     if abs(scenario.dt_s - response.dt_s) > 1e-9:
@@ -269,4 +320,18 @@ def check_covers(response: AirframeResponse, scenario: Scenario) -> None:
             raise ResponseFileError(
                 f"{where}: fitted at {lo:g}-{hi:g} m/s, the scenario's {role} flies "
                 f"{spec.speed_min_m_s:g}-{spec.speed_max_m_s:g} m/s"
+            )
+    wind = scenario.wind
+    if wind is not None and wind.promised_max_m_s > 0.0:
+        if not response.loiter_excursion_m:
+            raise ResponseFileError(
+                f"{where}: fitted in calm air only (no ground loiter), the scenario promises winds up to "
+                f"{wind.promised_max_m_s:g} m/s: fit it with python -m sim_vehicles.dynamics.response_fit "
+                "--wind-max-m-s W"
+            )
+        if wind.promised_max_m_s > response.loiter_wind_max_m_s + 1e-9:
+            raise ResponseFileError(
+                f"{where}: its ground loiter was measured in winds up to {response.loiter_wind_max_m_s:g} m/s, the "
+                f"scenario promises {wind.promised_max_m_s:g} m/s: fit it with --wind-max-m-s "
+                f"{wind.promised_max_m_s:g} or more"
             )

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.evaluation_record import (
     EvaluationRecord,
@@ -160,6 +161,7 @@ def fly_missions(
     start_check: ShieldConfig | None = None,
     airframes: AirframeVariation | None = None,
     monitor_sees_airframes: bool = True,
+    loiter: LoiterBound | None = None,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
@@ -174,7 +176,9 @@ def fly_missions(
     ``start_check``: the margins the drawn starts are admitted with (default: ``shield``'s, else the default ones).
     ``airframes``: the vehicles fly airframes drawn from these ranges (:mod:`tssac_core.sim.varied_airframes`, seeded
     from ``seed``), and the monitor predicts with each one's lag (``monitor_sees_airframes`` False: with eq. 5, the
-    negative control); None: eq. 5-6.
+    negative control); None: eq. 5-6. ``loiter``: with them, the monitor's backups end in the ground loiter that this
+    bounds (the wind's backup, :mod:`tssac_core.assurance.ground_loiter`; e.g.
+    :meth:`~tssac_core.sim.varied_airframes.AirframeVariation.loiter_bound`), not in a constant turn.
     """
     missions = iter_missions(
         scenario,
@@ -190,6 +194,7 @@ def fly_missions(
         start_check,
         airframes,
         monitor_sees_airframes,
+        loiter,
     )
     try:
         while True:
@@ -215,6 +220,7 @@ def iter_missions(
     start_check: ShieldConfig | None = None,
     airframes: AirframeVariation | None = None,
     monitor_sees_airframes: bool = True,
+    loiter: LoiterBound | None = None,
 ) -> Generator[int, None, MissionResults]:
     """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
     returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
@@ -241,7 +247,8 @@ def iter_missions(
         varied.reset(np.arange(world.n), airframe_rng)
     repeats = [decision_interval(p) for p in pilots]
     seen = varied if monitor_sees_airframes else None
-    monitor = None if shield is None else WorldMonitor(world, repeats, shield, seen)
+    sees_loiter = loiter if seen is not None else None
+    monitor = None if shield is None else WorldMonitor(world, repeats, shield, seen, sees_loiter)
     backup_track: list[np.ndarray] = []
     while world.running.any():
         if record:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw, model_excursion_m
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, switched_lag_step
 from tssac_core.sim.airframe_response import AirframeResponse
 from tssac_core.sim.world import World
@@ -87,6 +88,33 @@ class AirframeVariation:
             wind_m_s=(0.0, wind_max_m_s),
             turn_noise_deg_s=turn_noise_deg_s,
         )
+
+    def corners(self, turn_rate_max_rad_s: float, dt_s: float) -> AirframeLag:
+        """The airframes at the corners of the lag's ranges (delay, roll-in and roll-out time constants: 8, (K,))."""
+        delays = sorted({round(d / dt_s) for d in self.turn_delay_s})
+        outs = self.turn_rollout_tau_s or self.turn_tau_s
+        rows = [(d, t, o) for d in delays for t in sorted(set(self.turn_tau_s)) for o in sorted(set(outs))]
+        k = len(rows)
+        return AirframeLag(
+            np.array([r[0] for r in rows], dtype=np.int64),
+            np.array([r[1] for r in rows]),
+            np.array([r[2] for r in rows]),
+            np.full(k, 1.0),
+            np.full(k, -1.0),
+            np.zeros(k),
+        )
+
+    def loiter_bound(
+        self, law: LoiterLaw, speeds_m_s: tuple[float, ...], turn_rate_max_rad_s: float, dt_s: float
+    ) -> LoiterBound:
+        """The ground loiter's bound for airframes drawn from these ranges in winds up to the range's top: the loiter
+        flown on the lag model at the ranges' corners (:func:`tssac_core.assurance.ground_loiter.model_excursion_m`)
+        at ``speeds_m_s`` (the vehicles' envelope; between two of them the worse neighbour counts)."""
+        wind = self.wind_m_s[1]
+        excursion = model_excursion_m(
+            self.corners(turn_rate_max_rad_s, dt_s), speeds_m_s, wind, law, turn_rate_max_rad_s, dt_s
+        )
+        return LoiterBound(wind, law, speeds_m_s, excursion)
 
 
 class VariedAirframes:

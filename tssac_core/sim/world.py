@@ -428,6 +428,12 @@ class World:
         else:
             self._wind_xy = (np.asarray(extra_m_s, dtype=np.float64) + np.array(wind)[:, None])[:, :, None]
 
+    def wind_m_s(self) -> np.ndarray:
+        """(2, N) each world's wind (east, north; m/s): the scenario's and any drawn per episode; zeros in calm air."""
+        if self._wind_xy is None:
+            return np.zeros((2, self.n))
+        return np.broadcast_to(self._wind_xy[:, :, 0], (2, self.n)).copy()
+
     def set_states(self, x_m: np.ndarray, y_m: np.ndarray, v_m_s: np.ndarray, phi_rad: np.ndarray) -> None:
         """Vehicle states after dt from another dynamics model (the SITL's JSBSim airframes), (N, 3) each: the ground
         position, the ground speed and the course (eq. 5's v and phi of the path flown). Parked vehicles and finished

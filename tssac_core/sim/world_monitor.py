@@ -4,6 +4,11 @@ Each vehicle is decided for at its pilot's decisions (every ``action_repeat`` wo
 the guidance controller), with the world's exact state: no estimate error, no latency. Between decisions
 the action the monitor chose is held, as the pilots hold theirs, except where a flying backup's straight lead ends
 between two decisions: its turn starts there (the leads are whole seconds whatever the decision interval).
+
+With a loiter bound (``loiter``: the world's vehicles fly in wind, on airframes whose lag the monitor sees) a backup
+ends in the ground loiter instead of a constant turn (:mod:`tssac_core.assurance.ground_loiter`): where its lead ends
+the circle's centre is fixed from the vehicle's state, and from then on every step's heading rate is the loiter law's
+from the state and the world's wind, until the policy flies again.
 """
 
 from __future__ import annotations
@@ -12,9 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import LaggedPrediction
+from tssac_core.assurance.ground_loiter import LoiterBound, loiter_centre, loiter_turn_rate
+from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
+    N_TURNS,
     Decision,
     EstimateError,
     Hazards,
@@ -49,13 +56,22 @@ class WorldMonitor:
     """Holds the monitor's memory for every vehicle of a World and filters the team's actions."""
 
     def __init__(
-        self, world: World, repeats: list[int], cfg: ShieldConfig, airframes: VariedAirframes | None = None
+        self,
+        world: World,
+        repeats: list[int],
+        cfg: ShieldConfig,
+        airframes: VariedAirframes | None = None,
+        loiter: LoiterBound | None = None,
     ) -> None:
         if len(repeats) != N_ROLES:
             raise ValueError(f"one decision interval per role, got {repeats}")
+        if loiter is not None and airframes is None:
+            raise ValueError("the loiter's bound is measured for airframes: give the airframes it holds for")
         self.cfg = cfg
         self.airframes = airframes
         """The world's vehicles fly these airframes (None: eq. 5-6): the monitor predicts with their lag."""
+        self.loiter = loiter
+        """The backups end in the ground loiter, bounded by this (None: a constant turn, calm air's backup)."""
         self.repeats = np.asarray(repeats, dtype=np.int64)
         n = world.n
         c = world.c
@@ -76,6 +92,10 @@ class WorldMonitor:
         self.counts = MonitorCounts(zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy())
         self._engaged = np.zeros((n, N_ROLES), dtype=bool)
         self._unprotected = np.zeros((n, N_ROLES), dtype=bool)
+        self._loiter_sign = np.zeros((n, N_ROLES))
+        """+1 / -1: the vehicle flies its backup's loiter, counter-clockwise / clockwise; 0: it does not."""
+        self._loiter_centre = np.zeros((n, N_ROLES, 2))
+        self._loiter_radius = np.ones((n, N_ROLES))
 
     @property
     def engaged(self) -> np.ndarray:
@@ -96,22 +116,73 @@ class WorldMonitor:
         moving = world.active & world.running[:, None]
         turning = moving & (self._turn_at == world.steps[:, None])
         self._flying[turning] = self._turn[turning]
+        if self.loiter is not None:
+            self._begin_loiter(world, turning)
         for repeat in np.unique(self.repeats):
             due = moving & (world.steps[:, None] % repeat == 0) & (self.repeats[None, :] == repeat)
             if due.any():
                 self._decide(world, proposed, due, int(repeat))
+        if self.loiter is not None:
+            self._fly_loiter(world, moving & (self._loiter_sign != 0))
         self.counts.flown_steps += moving
         self.counts.backup_steps += moving & self._engaged
         self.counts.unprotected_steps += moving & self._unprotected
         return np.where(moving[..., None], self._flying, proposed)
 
+    def _wind(self, world: World) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) each vehicle's wind, east and north (m/s)."""
+        east, north = world.wind_m_s()
+        return np.repeat(east[:, None], N_ROLES, axis=1), np.repeat(north[:, None], N_ROLES, axis=1)
+
+    def _prediction(self, world: World, flat: np.ndarray, speeds: np.ndarray) -> Prediction:
+        varied = self.airframes
+        if varied is None:
+            return KINEMATIC
+        wind = None
+        if self.loiter is not None:
+            east, north = self._wind(world)
+            wind = self.loiter.wind(east.reshape(-1)[flat], north.reshape(-1)[flat], speeds)
+        return LaggedPrediction(varied.airframe(flat), varied.lag_state(flat), wind)
+
+    def _begin_loiter(self, world: World, starting: np.ndarray) -> None:
+        """Fix the loiter's circle of the ``starting`` (N, 3) vehicles from their states: their backup's lead ends."""
+        if not starting.any():
+            return
+        assert self.loiter is not None
+        w, j = np.nonzero(starting)
+        backup = self.memory.backup.reshape(world.n, N_ROLES)[w, j]
+        sign = np.where(backup % N_TURNS == 0, 1.0, -1.0)
+        east, north = self._wind(world)
+        v, phi = world.v_m_s[w, j], world.phi_rad[w, j]
+        gx, gy = v * np.cos(phi) + east[w, j], v * np.sin(phi) + north[w, j]
+        limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
+        radius = self.loiter.wind(east[w, j], north[w, j], v).radius_m(v, limit)
+        cx, cy = loiter_centre(world.x_m[w, j], world.y_m[w, j], gx, gy, sign, radius)
+        self._loiter_sign[w, j] = sign
+        self._loiter_centre[w, j] = np.stack([cx, cy], axis=-1)
+        self._loiter_radius[w, j] = radius
+
+    def _fly_loiter(self, world: World, loitering: np.ndarray) -> None:
+        """This step's command of the ``loitering`` (N, 3) vehicles: the loiter law's heading rate, the speed held."""
+        if not loitering.any():
+            return
+        assert self.loiter is not None
+        w, j = np.nonzero(loitering)
+        east, north = self._wind(world)
+        v, phi = world.v_m_s[w, j], world.phi_rad[w, j]
+        gx, gy = v * np.cos(phi) + east[w, j], v * np.sin(phi) + north[w, j]
+        limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
+        centre = self._loiter_centre[w, j]
+        rate = loiter_turn_rate(
+            world.x_m[w, j], world.y_m[w, j], gx, gy, east[w, j], north[w, j], centre[:, 0], centre[:, 1],
+            self._loiter_radius[w, j], self._loiter_sign[w, j], limit, self.loiter.law,
+        )  # fmt: skip
+        self._flying[w, j] = np.stack([rate / limit, np.zeros(len(w))], axis=-1)
+
     def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
         flat = np.flatnonzero(due.reshape(-1))
         state = np.stack([world.x_m, world.y_m, world.v_m_s, world.phi_rad], axis=-1).reshape(-1, 4)[flat]
-        varied = self.airframes
-        prediction: Prediction = (
-            KINEMATIC if varied is None else LaggedPrediction(varied.airframe(flat), varied.lag_state(flat))
-        )
+        prediction = self._prediction(world, flat, state[:, 2])
         d = decide(
             state,
             proposed.reshape(-1, 2)[flat],
@@ -133,6 +204,11 @@ class WorldMonitor:
         self._unprotected[w, j] = d.unprotected
         self.counts.interventions[w, j] += d.engaged_now
         self.counts.switches[w, j] += d.engaged_now.astype(np.int64) + d.released_now
+        if self.loiter is not None:
+            self._loiter_sign[w[~d.engaged], j[~d.engaged]] = 0.0
+            starting = np.zeros(due.shape, dtype=bool)
+            starting[w, j] = d.engaged & (d.straight_steps == 0) & (self._loiter_sign[w, j] == 0.0)
+            self._begin_loiter(world, starting)
         return d
 
 
