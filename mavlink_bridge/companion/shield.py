@@ -17,7 +17,12 @@ the proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMon
   (:class:`~tssac_core.assurance.lagged_prediction.LaggedPrediction`) instead of eq. 5: from the filter's turn rate,
   with the turn commands the airframe has not yet followed (its delay, before the link's round trip); the turn
   rate's error, ``sigma_k`` standard deviations, turns the path by at most that times the longer time constant
-  (the lag closes an error in the rate as it closes a gap to the command).
+  (the lag closes an error in the rate as it closes a gap to the command);
+* in a scenario that promises wind, with a response whose ground loiter was fitted (``loiter_*``), the backups end in
+  the ground loiter (:mod:`tssac_core.assurance.ground_loiter`): the monitor decides on the air's part of the
+  filter's ground velocity (less the wind the vehicle reports in WIND, the scenario's until the first report), and
+  where a flying backup's lead ends the loiter's centre is fixed from the estimate, whose position, ground velocity
+  and the wind give every tick's heading rate from then on (a closed loop: the command changes every tick).
 
 Every tick's command comes from here: a non-finite action and a telemetry gap are proposals that never pass (the
 remembered backup flies, as in the batched world), and between decisions the monitor's last choice is held.
@@ -34,6 +39,7 @@ from typing import TypeAlias
 
 import numpy as np
 
+from tssac_core.assurance.ground_loiter import LoiterBound, loiter_centre, loiter_turn_rate
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
@@ -115,6 +121,16 @@ class CompanionShield:
         self._before_fix: list[tuple[int, tuple[float, float]]] = []
         """(tick, command) of every command sent before the first position fix: what the vehicle flies from its start,
         for :meth:`dead_reckoned`."""
+        promised = 0.0 if scenario.wind is None else scenario.wind.promised_max_m_s
+        self.loiter: LoiterBound | None = None if response is None or promised == 0.0 else response.loiter_bound()
+        """The backups end in the ground loiter bounded by this (None: calm air's constant turn)."""
+        wind = (0.0, 0.0) if scenario.wind is None else scenario.wind.velocity_m_s()
+        self.wind_m_s = wind
+        """The steady wind (east, north), m/s: the scenario's until the vehicle reports one (:meth:`set_wind`)."""
+        self._circle: tuple[float, float, float, float] | None = None
+        """The loiter flying now: its centre (x, y), radius and direction (+1 counter-clockwise); None: none."""
+        self._tick = 0
+        """The last tick :meth:`action` was asked for."""
 
     def reset(self) -> None:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""
@@ -122,6 +138,7 @@ class CompanionShield:
         self.engaged = False
         self._unprotected = False
         self._turn_step = None
+        self._circle = None
         self._sent.clear()
         self._before_fix.clear()
         self.counters.resets += 1
@@ -147,8 +164,15 @@ class CompanionShield:
 
     @property
     def next_change_step(self) -> int | None:
-        """The tick before the next decision at which the command changes (a backup's turn after its lead), if any."""
+        """The tick before the next decision at which the command changes (a backup's turn after its lead; while a
+        loiter flies, the next tick), if any."""
+        if self._circle is not None:
+            return self._tick + 1
         return self._turn_step
+
+    def set_wind(self, east_m_s: float, north_m_s: float) -> None:
+        """The wind the vehicle reports (WIND), as the air's velocity east and north (m/s)."""
+        self.wind_m_s = (east_m_s, north_m_s)
 
     def action(
         self,
@@ -165,17 +189,26 @@ class CompanionShield:
         pilot's action, non-finite when there is none (it never passes). ``estimate()``: the filter's state and
         standard deviations (:data:`Estimate`), asked at decisions only."""
         text = None
+        self._tick = step
         if not decision and self._turn_step is not None and step >= self._turn_step:
             self._held, self._turn_step = self._turn.copy(), None
+            if self.loiter is not None and self.engaged:
+                self._begin_loiter(estimate())
         if decision:
             state, sigmas, (turn_rate, turn_sigma) = estimate()
+            if self.loiter is not None:
+                state, sigmas, turn_rate = self._in_the_air(state, sigmas, turn_rate)
             margin = companion_margin_m(self.cfg, self.speed_max_m_s, self.off_lockstep)
             lim = self.monitor.limits
             error = companion_error(self.cfg, lim, self.dt_s, *sigmas, lossy=self.lossy)
             prediction: Prediction = KINEMATIC
             if self.response is not None:
                 airframe = self._airframe(state[2])
-                prediction = LaggedPrediction(airframe, self._lag_state(airframe, turn_rate))
+                wind = None
+                if self.loiter is not None:
+                    east, north = (np.array([c]) for c in self.wind_m_s)
+                    wind = self.loiter.wind(east, north, np.array([state[2]]))
+                prediction = LaggedPrediction(airframe, self._lag_state(airframe, turn_rate), wind)
                 turned = self.cfg.sigma_k * turn_sigma * airframe.longest_tau_s()
                 error = error + EstimateError(np.zeros(1), turned, np.zeros(1))
             if not np.all(np.isfinite(proposed)):
@@ -205,11 +238,63 @@ class CompanionShield:
                 text = f"{self.role.value}: {RELEASED_TEXT}, policy flies"
             self.engaged = bool(d.engaged[0])
             self._unprotected = bool(d.unprotected[0])
+            if not self.engaged:
+                self._circle = None
+            elif self.loiter is not None and straight == 0 and self._circle is None:
+                self._begin_loiter(estimate())
+        if self._circle is not None:
+            self._held = self._loiter_action(estimate())
         if self.engaged:
             self.counters.backup_steps += 1
             if self._unprotected:
                 self.counters.unprotected_steps += 1
         return self._held, text
+
+    def _in_the_air(
+        self, state: tuple[float, float, float, float], sigmas: tuple[float, float, float], turn_rate: float
+    ) -> tuple[tuple[float, float, float, float], tuple[float, float, float], float]:
+        """The filter's ground state as the monitor's model flies it in wind: the air's velocity (the ground velocity
+        less the wind) as speed and heading, the course rate as the heading rate (chi' = kappa |g|, psi' = chi' |g|^2
+        / (V (V + w . h))), and the heading's sigma widened by |g| / V (the ground velocity turned by d turns the air's
+        by at most d |g| / V)."""
+        x, y, ground, course = state
+        we, wn = self.wind_m_s
+        gx, gy = ground * np.cos(course), ground * np.sin(course)
+        ax, ay = gx - we, gy - wn
+        air = float(np.hypot(ax, ay))
+        along = (ax * gx + ay * gy) / air
+        rate = turn_rate * ground**2 / (air * along) if along > 0 else turn_rate
+        position, heading, speed = sigmas
+        return (x, y, air, float(np.arctan2(ay, ax))), (position, heading * ground / air, speed), float(rate)
+
+    def _begin_loiter(self, estimate: Estimate) -> None:
+        """Fix the loiter's circle where the flying backup's lead ends: at R from the estimate on the turn's side of
+        its ground track."""
+        assert self.loiter is not None
+        (x, y, ground, course), _, _ = estimate
+        we, wn = self.wind_m_s
+        gx, gy = ground * np.cos(course), ground * np.sin(course)
+        air = np.array([float(np.hypot(gx - we, gy - wn))])
+        sign = 1.0 if int(self.monitor.memory.backup[0]) % N_TURNS == 0 else -1.0
+        radius = self.loiter.wind(np.array([we]), np.array([wn]), air).radius_m(
+            air, self.monitor.limits.turn_rate_max_rad_s
+        )
+        cx, cy = loiter_centre(np.array([x]), np.array([y]), np.array([gx]), np.array([gy]), sign, radius)
+        self._circle = (float(cx[0]), float(cy[0]), float(radius[0]), sign)
+
+    def _loiter_action(self, estimate: Estimate) -> np.ndarray:
+        """This tick's command of the flying loiter: the law's heading rate from the estimate and the wind, the speed
+        held."""
+        assert self.loiter is not None and self._circle is not None
+        (x, y, ground, course), _, _ = estimate
+        cx, cy, radius, sign = self._circle
+        we, wn = self.wind_m_s
+        limit = self.monitor.limits.turn_rate_max_rad_s
+        rate = loiter_turn_rate(
+            np.array([x]), np.array([y]), np.array([ground * np.cos(course)]), np.array([ground * np.sin(course)]),
+            we, wn, np.array([cx]), np.array([cy]), np.array([radius]), sign, limit, self.loiter.law,
+        )  # fmt: skip
+        return np.array([float(rate[0] / limit[0]), 0.0])
 
     def _airframe(self, speed_m_s: float) -> AirframeLag:
         """The airframe's response at ``speed_m_s`` (held to the fitted span: the limits keep the speed inside it)."""

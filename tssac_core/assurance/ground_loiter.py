@@ -286,14 +286,16 @@ def loiter_backup_error_m(
     Flown from a state off by (d_p, d_phi, d_v), the lead (time T) moves by at most d_p + v_max T d_phi + T d_v; the
     loiter's centre, at R from the lead's end normal to its ground track, by that plus R_max d_track + dR/dV d_v,
     where a heading error turns the ground track by at most d_phi v_max / (v_min - W_max) and
-    dR/dV = (V + W)(V - W) / (authority omega_max V^2) <= 1 / (authority omega_max); its radius by dR/dV d_v."""
+    dR/dV = (V + W)(V - W) / (authority omega_max V^2) <= 1 / (authority omega_max); its radius by dR/dV d_v. The
+    loiter is a closed loop on the flier's estimate of its position, which may be off by d_p again: the circle it
+    holds moves by that much too (2 d_p in all)."""
     t = leads.astype(np.float64)[None, :] * dt_s
     w, vmax = lim.turn_rate_max_rad_s[:, None], lim.speed_max_m_s[:, None]
     r_max = wind.radius_m(lim.speed_max_m_s, lim.turn_rate_max_rad_s)[:, None]
     track_per_heading = vmax / (lim.speed_min_m_s[:, None] - wind.max_m_s)
     lever = vmax * t + r_max * track_per_heading
     secs = t + 2.0 / (wind.law.authority * w)
-    one = err.position_m[:, None] + err.heading_rad[:, None] * lever + err.speed_m_s[:, None] * secs
+    one = 2.0 * err.position_m[:, None] + err.heading_rad[:, None] * lever + err.speed_m_s[:, None] * secs
     return np.repeat(one[:, :, None], N_TURNS, axis=2).reshape(len(err.position_m), len(leads) * N_TURNS)
 
 
