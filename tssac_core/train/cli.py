@@ -25,7 +25,6 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from tssac_core.common.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
@@ -72,6 +71,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
     import torch  # here, not above: --help and bad input answer without loading torch
 
     from tssac_core.reporting.progress import progress_bar
+    from tssac_core.train.epoch import MetricsRow
     from tssac_core.train.loop import train_role
     from tssac_core.train.rundir import prepare_run, shipped, write_plots
     from tssac_core.train.tensorboard import EpochSink, open_sink
@@ -83,7 +83,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
     begin_invocation(out)
     sink: EpochSink | None = open_sink(tensorboard) if tensorboard is not None else None
 
-    def on_epoch(row: dict[str, Any]) -> None:
+    def on_epoch(row: MetricsRow) -> None:
         record_invocation(out, time.perf_counter() - start, Ended.RUNNING)  # a kill now costs this epoch at most
         if sink is not None:
             sink.write(row)

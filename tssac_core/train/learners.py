@@ -59,7 +59,7 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, onpolicy_config, sac_config
-from tssac_core.train.epoch import EpochLog
+from tssac_core.train.epoch import EpochLog, MetricsRow
 from tssac_core.train.rundir import role_checkpoint
 
 logger = logging.getLogger("tssac_core.train")
@@ -145,7 +145,7 @@ class OffPolicyLearner:
     def end_epoch(self, log: EpochLog) -> tuple[int, dict[str, float]]:
         return 0, {}
 
-    def log_epoch(self, epoch: int, row: dict[str, Any]) -> None:
+    def log_epoch(self, epoch: int, row: MetricsRow) -> None:
         pass
 
     def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
@@ -320,14 +320,14 @@ class OnPolicyLearner:
         self._summary = f"measured J_C {episode_cost:.2f} over L {episode_length:.0f}, kl {stats.approx_kl:.4f}{cpo}"
         return stats.policy_steps, stats_columns(stats, update_time)
 
-    def log_epoch(self, epoch: int, row: dict[str, Any]) -> None:
+    def log_epoch(self, epoch: int, row: MetricsRow) -> None:
         logger.info(
             "%s %s epoch %d: return %.2f, cost %.2f, %s",
             self.role.value,
             self.cfg.algo,
             epoch,
-            row["return"],
-            row["cost"],
+            row.figures["return"],
+            row.figures["cost"],
             self._summary,
         )
 

@@ -15,7 +15,7 @@ import csv
 import dataclasses
 import logging
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -44,6 +44,9 @@ from tssac_core.train.config import (
 )
 from tssac_core.train.legacy import read_config
 from tssac_core.train.resume import read_resume_state
+
+if TYPE_CHECKING:  # the epoch's module imports this one
+    from tssac_core.train.epoch import MetricsRow
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -114,7 +117,7 @@ METRIC_FIELDS = [
 ]
 
 
-def append_metrics(path: Path, row: dict[str, Any]) -> None:
+def append_metrics(path: Path, row: MetricsRow) -> None:
     """Append one epoch's row; a resumed run keeps the columns its file was started with."""
     new = not path.is_file()
     fields = METRIC_FIELDS
@@ -125,7 +128,7 @@ def append_metrics(path: Path, row: dict[str, Any]) -> None:
         writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         if new:
             writer.writeheader()
-        writer.writerow(row)
+        writer.writerow(row.csv_row())
 
 
 def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:
