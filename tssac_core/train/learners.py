@@ -39,7 +39,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from tssac_core.algos.onpolicy.cpo import Cpo
+from tssac_core.algos.onpolicy.cpo import Cpo, CpoState
 from tssac_core.algos.onpolicy.gae import gae
 from tssac_core.algos.onpolicy.ppo import (
     OnPolicyAlgo,
@@ -47,11 +47,12 @@ from tssac_core.algos.onpolicy.ppo import (
     OnPolicyConfig,
     OnPolicyStats,
     Ppo,
+    PpoState,
     evaluate_values,
     sample_actions,
 )
 from tssac_core.algos.replay import ReplayBuffer
-from tssac_core.algos.sac_lagrangian import SacLagrangian, transfer
+from tssac_core.algos.sac_lagrangian import SacLagrangian, SacState, transfer
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
 from tssac_core.sim.env import TaskStep
@@ -148,7 +149,7 @@ class OffPolicyLearner:
     def log_epoch(self, epoch: int, row: MetricsRow) -> None:
         pass
 
-    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], SacState]:
         state = self.learner.state_dict()
         return state["actor"], state
 
@@ -331,7 +332,7 @@ class OnPolicyLearner:
             self._summary,
         )
 
-    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], PpoState | CpoState]:
         return self.learner.actor.state_dict(), self.learner.state_dict()
 
     def state(self) -> dict[str, Any]:

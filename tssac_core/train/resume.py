@@ -30,6 +30,7 @@ import torch
 from tssac_core.common.cli import UsageError
 from tssac_core.deploy.policy import torch_save_atomic
 from tssac_core.sim.scenario import Role
+from tssac_core.train.validation import SelectorState
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -53,7 +54,7 @@ class ResumeState:
     """The worlds (RoleTask.snapshot)."""
     obs: np.ndarray
     torch_rng: torch.Tensor
-    selector: dict[str, Any]
+    selector: SelectorState
     learner: dict[str, Any]
     """The learner family's part (RoleLearner.state)."""
 

@@ -15,12 +15,14 @@ import csv
 import dataclasses
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.algos.onpolicy.cpo import CpoState
+from tssac_core.algos.onpolicy.ppo import PpoState
+from tssac_core.algos.sac_lagrangian import SacState, UpdateStats
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
@@ -66,7 +68,7 @@ def save_trained_role(
     role: Role,
     hidden_sizes: tuple[int, ...],
     actor_state: dict[str, torch.Tensor],
-    learner_state: dict[str, Any],
+    learner_state: SacState | PpoState | CpoState,
     env_steps: int,
     updates: int,
     epoch: int,

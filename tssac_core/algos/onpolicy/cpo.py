@@ -31,9 +31,11 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
+from torch.optim.optimizer import StateDict
 
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.onpolicy.ppo import (
+    NetworksState,
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
@@ -237,6 +239,12 @@ def fisher_vector_product(
     return fvp
 
 
+class CpoState(NetworksState):
+    """What :meth:`Cpo.state_dict` returns: the networks and the value optimiser (torch's own state)."""
+
+    value_optim: StateDict
+
+
 class Cpo:
     """CPO: actor, V^r, V^c and the value optimiser (the actor moves by natural-gradient steps).
     Deterministic given `torch.manual_seed`."""
@@ -334,14 +342,14 @@ class Cpo:
             step_fraction=accepted,
         )
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> CpoState:
         """Networks and the value optimiser (share storage with the learner, like torch's)."""
         return {
             **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
             "value_optim": self.value_optim.state_dict(),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: CpoState) -> None:
         """Restore what `state_dict` returned."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))

@@ -25,13 +25,14 @@ import copy
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypedDict
 
 import numpy as np
 import torch
 from torch import nn
+from torch.optim.optimizer import StateDict
 
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier, SignalRule, choose_signal
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, MultiplierState, SignalRule, choose_signal
 from tssac_core.algos.networks import SquashedGaussianActor, mlp, tanh_log_abs_det_jacobian
 from tssac_core.algos.onpolicy.config import OnPolicyAlgo, OnPolicyConfig
 from tssac_core.algos.sac_config import MultiplierSignal
@@ -221,12 +222,30 @@ def evaluate_values(v_r: nn.Module, v_c: nn.Module, obs: torch.Tensor) -> tuple[
     return v_r(obs).squeeze(-1), v_c(obs).squeeze(-1)
 
 
-def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> dict[str, Any]:
+class NetworksState(TypedDict):
+    """The policy and value networks of an on-policy learner, tagged with its algorithm (:func:`networks_state`)."""
+
+    algo: str
+    actor: dict[str, torch.Tensor]
+    v_r: dict[str, torch.Tensor]
+    v_c: dict[str, torch.Tensor]
+
+
+class PpoState(NetworksState):
+    """What :meth:`Ppo.state_dict` returns: the networks, then the optimisers (torch's own state) and the
+    multiplier."""
+
+    actor_optim: StateDict
+    value_optim: StateDict
+    multiplier: MultiplierState
+
+
+def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> NetworksState:
     """The policy and value networks of an on-policy learner, tagged with its algorithm."""
     return {"algo": algo.value, "actor": actor.state_dict(), "v_r": v_r.state_dict(), "v_c": v_c.state_dict()}
 
 
-def load_networks(state: dict[str, Any], algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> None:
+def load_networks(state: NetworksState, algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> None:
     """Restore what `networks_state` returned, refusing another algorithm's state."""
     if state.get("algo") != algo.value:
         raise ValueError(f"cannot load a {state.get('algo')} state into a {algo.value} learner")
@@ -341,7 +360,7 @@ class Ppo:
             value_steps=value_steps,
         )
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> PpoState:
         """Networks, optimisers and the multiplier (share storage with the learner, like torch's)."""
         return {
             **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
@@ -350,7 +369,7 @@ class Ppo:
             "multiplier": self.multiplier.state_dict(),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: PpoState) -> None:
         """Restore what `state_dict` returned."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         # Copies: never share Adam moments with another learner loaded from the same dict.
