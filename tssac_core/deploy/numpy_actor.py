@@ -30,7 +30,7 @@ import logging
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol, TypedDict
 
 import numpy as np
 
@@ -41,6 +41,33 @@ from tssac_core.sim.scenario import ROLES, Role
 
 FORMAT = "tssac-actor-npz"
 FORMAT_VERSION = 1
+
+
+class CheckpointFields(TypedDict):
+    """What a role checkpoint (and so an exported actor) stores about itself beside the weights, as plain JSON values
+    (``tssac_core.deploy.policy.CheckpointInfo.fields``)."""
+
+    role: str
+    algo: str
+    observation_mode: str
+    obs_dim: int
+    act_dim: int
+    hidden_sizes: list[int]
+    scenario_digest: str
+    versions: dict[str, str]
+    metrics: dict[str, float]
+    action_repeat: int
+
+
+class ActorMeta(CheckpointFields):
+    """An exported actor's metadata (``<role>.npz``'s ``meta``, the ONNX file's properties): the format, the
+    checkpoint's fields, and the file it was made from."""
+
+    format: str
+    format_version: int
+    source: str
+    source_sha256: str
+
 
 logger = logging.getLogger(__name__)
 
@@ -65,7 +92,7 @@ def sha256_file(path: Path) -> str:
 class NumpyPolicy:
     """The deterministic actor of an exported ``<role>.npz``: ``act(obs) -> action`` in [-1, 1], float64."""
 
-    def __init__(self, meta: dict[str, Any], layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def __init__(self, meta: ActorMeta, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
         self.meta = meta
         self.role = Role(meta["role"])
         self.observation_mode = ObservationMode(meta["observation_mode"])
@@ -103,7 +130,7 @@ class NumpyPolicy:
     """The action for ``obs`` (one (d,) or a batch (n, d)): what a gymnasium user calls."""
 
 
-def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
+def read_actor(p: Path) -> tuple[ActorMeta, list[tuple[np.ndarray, np.ndarray]]]:
     """(meta, layers) of an exported actor; CheckpointError (one line) for anything wrong with the file."""
     if not p.is_file():
         raise CheckpointError(f"{p}: exported actor not found")
@@ -113,7 +140,7 @@ def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarr
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise CheckpointError(f"{p}: not a readable .npz file ({type(exc).__name__})") from None
     try:
-        meta = json.loads(str(arrays.pop("meta")))
+        meta: ActorMeta = json.loads(str(arrays.pop("meta")))
     except (KeyError, ValueError):
         raise CheckpointError(f"{p}: not an exported TSSAC actor (no readable meta)") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:

@@ -25,6 +25,7 @@ from tssac_core.algos.sac_lagrangian import SacState
 from tssac_core.common.errors import CheckpointError, check_action_repeat
 from tssac_core.common.files import replace_durably
 from tssac_core.deploy.manifest import check_models, warn_once
+from tssac_core.deploy.numpy_actor import CheckpointFields
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 
@@ -48,7 +49,7 @@ class CheckpointInfo:
     action_repeat: int = 1
     """The decision interval it was trained with: hold each action for this many 0.1 s steps."""
 
-    def fields(self) -> dict[str, Any]:
+    def fields(self) -> CheckpointFields:
         """As plain JSON values: what a checkpoint (and an exported actor) stores beside the weights."""
         return {
             "role": self.role.value,
