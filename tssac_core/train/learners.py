@@ -34,7 +34,7 @@ import time
 from collections import deque
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple, NotRequired, TypedDict, final
 
 import numpy as np
 import torch
@@ -51,7 +51,7 @@ from tssac_core.algos.onpolicy.ppo import (
     evaluate_values,
     sample_actions,
 )
-from tssac_core.algos.replay import ReplayBuffer
+from tssac_core.algos.replay import ReplayBuffer, ReplayState
 from tssac_core.algos.sac_lagrangian import SacLagrangian, SacState, transfer
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
@@ -73,6 +73,56 @@ def transfer_source(cfg: TrainConfig, role: Role, out: Path) -> Path | None:
     if algorithm(cfg.algo).transfers and role.index > 0:
         return role_checkpoint(cfg, out, ROLES[role.index - 1])
     return None
+
+
+class Pcg64Words(TypedDict):
+    state: int
+    inc: int
+
+
+class Pcg64State(TypedDict):
+    """numpy's PCG64 generator state (``Generator.bit_generator.state``), key for key as numpy gives it."""
+
+    bit_generator: str
+    state: Pcg64Words
+    has_uint32: int
+    uinteger: int
+
+
+def pcg64_state(rng: np.random.Generator) -> Pcg64State:
+    """The state of ``rng`` (a PCG64 generator: ``np.random.default_rng``'s)."""
+    s = rng.bit_generator.state
+    return {
+        "bit_generator": s["bit_generator"],
+        "state": {"state": s["state"]["state"], "inc": s["state"]["inc"]},
+        "has_uint32": s["has_uint32"],
+        "uinteger": s["uinteger"],
+    }
+
+
+@final
+class OffPolicyResume(TypedDict):
+    """An off-policy learner's part of a resume state (:meth:`OffPolicyLearner.state`)."""
+
+    learner: SacState
+    buffer: ReplayState
+    rng: Pcg64State
+    transferred: bool
+    recent_costs: NotRequired[list[float]]
+    """Missing from resume states older than the multiplier's measured-cost signal."""
+
+
+@final
+class OnPolicyResume(TypedDict):
+    """An on-policy learner's part of a resume state (:meth:`OnPolicyLearner.state`)."""
+
+    algo: str
+    learner: PpoState | CpoState
+    ep_len: np.ndarray
+    finished: list[tuple[float, int]]
+
+
+LearnerResume = OffPolicyResume | OnPolicyResume
 
 
 class OffPolicyLearner:
@@ -153,16 +203,18 @@ class OffPolicyLearner:
         state = self.learner.state_dict()
         return state["actor"], state
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> OffPolicyResume:
         return {
             "learner": self.learner.state_dict(),
             "buffer": self.buffer.state_dict(),
-            "rng": self.rng.bit_generator.state,
+            "rng": pcg64_state(self.rng),
             "transferred": self.transferred,
             "recent_costs": list(self.recent_costs),
         }
 
-    def restore(self, state: dict[str, Any]) -> None:
+    def restore(self, state: LearnerResume) -> None:
+        if "buffer" not in state:
+            raise CheckpointError("an on-policy learner's resume state cannot resume an off-policy learner")
         self.learner.load_state_dict(state["learner"])
         self.buffer.load_state_dict(state["buffer"])
         self.rng.bit_generator.state = state["rng"]
@@ -335,7 +387,7 @@ class OnPolicyLearner:
     def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], PpoState | CpoState]:
         return self.learner.actor.state_dict(), self.learner.state_dict()
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> OnPolicyResume:
         return {
             "algo": self.config.algo.value,
             "learner": self.learner.state_dict(),
@@ -343,7 +395,9 @@ class OnPolicyLearner:
             "finished": list(self.finished),
         }
 
-    def restore(self, state: dict[str, Any]) -> None:
+    def restore(self, state: LearnerResume) -> None:
+        if "ep_len" not in state:
+            raise CheckpointError("an off-policy learner's resume state cannot resume an on-policy learner")
         self.learner.load_state_dict(state["learner"])
         self.ep_len = state["ep_len"]
         self.finished.extend(state["finished"])

@@ -22,7 +22,7 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -31,6 +31,9 @@ from tssac_core.common.cli import UsageError
 from tssac_core.deploy.policy import torch_save_atomic
 from tssac_core.sim.scenario import Role
 from tssac_core.train.validation import SelectorState
+
+if TYPE_CHECKING:  # the learners' module imports this one (through rundir)
+    from tssac_core.train.learners import LearnerResume
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -55,7 +58,7 @@ class ResumeState:
     obs: np.ndarray
     torch_rng: torch.Tensor
     selector: SelectorState
-    learner: dict[str, Any]
+    learner: LearnerResume
     """The learner family's part (RoleLearner.state)."""
 
 

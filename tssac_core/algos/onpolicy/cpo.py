@@ -26,7 +26,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 import torch
@@ -40,6 +40,7 @@ from tssac_core.algos.onpolicy.ppo import (
     OnPolicyBatch,
     OnPolicyConfig,
     OnPolicyStats,
+    PpoState,
     as_batch_tensor,
     evaluate_values,
     fit_values,
@@ -239,6 +240,7 @@ def fisher_vector_product(
     return fvp
 
 
+@final
 class CpoState(NetworksState):
     """What :meth:`Cpo.state_dict` returns: the networks and the value optimiser (torch's own state)."""
 
@@ -349,7 +351,7 @@ class Cpo:
             "value_optim": self.value_optim.state_dict(),
         }
 
-    def load_state_dict(self, state: CpoState) -> None:
+    def load_state_dict(self, state: CpoState | PpoState) -> None:
         """Restore what `state_dict` returned."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))

@@ -25,7 +25,7 @@ import copy
 import logging
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, TypedDict
+from typing import TYPE_CHECKING, NamedTuple, TypedDict, final
 
 import numpy as np
 import torch
@@ -36,6 +36,9 @@ from tssac_core.algos.lagrange import DampedLagrangeMultiplier, MultiplierState,
 from tssac_core.algos.networks import SquashedGaussianActor, mlp, tanh_log_abs_det_jacobian
 from tssac_core.algos.onpolicy.config import OnPolicyAlgo, OnPolicyConfig
 from tssac_core.algos.sac_config import MultiplierSignal
+
+if TYPE_CHECKING:  # cpo builds on this module
+    from tssac_core.algos.onpolicy.cpo import CpoState
 
 logger = logging.getLogger(__name__)
 
@@ -231,6 +234,7 @@ class NetworksState(TypedDict):
     v_c: dict[str, torch.Tensor]
 
 
+@final
 class PpoState(NetworksState):
     """What :meth:`Ppo.state_dict` returns: the networks, then the optimisers (torch's own state) and the
     multiplier."""
@@ -369,9 +373,11 @@ class Ppo:
             "multiplier": self.multiplier.state_dict(),
         }
 
-    def load_state_dict(self, state: PpoState) -> None:
-        """Restore what `state_dict` returned."""
+    def load_state_dict(self, state: PpoState | CpoState) -> None:
+        """Restore what `state_dict` returned (another algorithm's state is refused, by `load_networks`)."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
+        if "actor_optim" not in state:
+            raise ValueError(f"cannot load a {state['algo']} state into a {self.config.algo.value} learner")
         # Copies: never share Adam moments with another learner loaded from the same dict.
         self.actor_optim.load_state_dict(copy.deepcopy(state["actor_optim"]))
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))
