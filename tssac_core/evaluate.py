@@ -40,7 +40,7 @@ import math
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
@@ -224,12 +224,21 @@ def compare_shield(
     return {"off": off, "on": on}
 
 
+class PolicyDescription(TypedDict):
+    """One role's entry in the JSON's ``policies``: the policy's name, the observation it takes and its decision
+    interval."""
+
+    policy: str
+    observation: str
+    decision_interval_s: float
+
+
 def fly_pilots(
     policies: Mapping[Role | str, PolicySpec] | PolicySpec,
     scenario: Scenario,
     models: Path | None,
     controller: str = GUIDANCE,
-) -> tuple[list[PilotSpec], dict[str, dict[str, Any]]]:
+) -> tuple[list[PilotSpec], dict[str, PolicyDescription]]:
     """The team's pilots with ``policies`` in their roles (one spec: every role), each checked against its role's env
     before any mission (PolicyError, one line); the other roles fly ``models``' actors or ``controller``. Also the
     JSON's ``policies`` entry: per role its name, observation and decision interval."""
@@ -254,7 +263,7 @@ def fly_pilots(
     for j, role in enumerate(ROLES):
         if role in checked:
             pilots[j] = checked[role]
-    described = {
+    described: dict[str, PolicyDescription] = {
         role.value: {
             "policy": spec.name,
             "observation": spec.observation_mode.value,
@@ -341,7 +350,7 @@ def evaluate_policy(
     return summary
 
 
-def policies_label(described: Mapping[str, Mapping[str, Any]], models: Path | str | None, controller: str) -> str:
+def policies_label(described: Mapping[str, PolicyDescription], models: Path | str | None, controller: str) -> str:
     """The JSON's ``controller`` for a policy run: ``decoy=ppo.zip, others=models/tssac``."""
     mine = ", ".join(f"{role}={d['policy']}" for role, d in described.items())
     if len(described) == len(ROLES):
@@ -359,7 +368,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     scenario = load_for_batched_world(args.scenario)
     controller = args.controller or GUIDANCE
     who = str(args.models) if args.models else controller
-    described: dict[str, dict[str, Any]] = {}
+    described: dict[str, PolicyDescription] = {}
     if args.policy_sources:
         specs = {
             role: load_policy_spec(kind, path, role, args.observation, args.decision_interval_s)
