@@ -12,7 +12,7 @@ from tssac_core.common.cli import EXIT_INTERRUPTED, run
 from tssac_core.sim.scenario import Role
 from tssac_core.train import loop
 from tssac_core.train.cli import main
-from tssac_core.train.epoch import MetricsRow
+from tssac_core.train.rundir import MetricsRow
 from tssac_core.train.tensorboard import scalars
 
 TINY = [

@@ -30,11 +30,11 @@ import numpy as np
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import replace_durably
+from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import MANIFEST, check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import (
     FORMAT,
     FORMAT_VERSION,
-    ActorMeta,
     NumpyPolicy,
     holds_onnx,
     pilot_file,

@@ -30,43 +30,18 @@ import logging
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Protocol, TypedDict
+from typing import Protocol
 
 import numpy as np
 
 from tssac_core.common.errors import CheckpointError, check_action_repeat
+from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 
 FORMAT = "tssac-actor-npz"
 FORMAT_VERSION = 1
-
-
-class CheckpointFields(TypedDict):
-    """What a role checkpoint (and so an exported actor) stores about itself beside the weights, as plain JSON values
-    (``tssac_core.deploy.policy.CheckpointInfo.fields``)."""
-
-    role: str
-    algo: str
-    observation_mode: str
-    obs_dim: int
-    act_dim: int
-    hidden_sizes: list[int]
-    scenario_digest: str
-    versions: dict[str, str]
-    metrics: dict[str, float]
-    action_repeat: int
-
-
-class ActorMeta(CheckpointFields):
-    """An exported actor's metadata (``<role>.npz``'s ``meta``, the ONNX file's properties): the format, the
-    checkpoint's fields, and the file it was made from."""
-
-    format: str
-    format_version: int
-    source: str
-    source_sha256: str
 
 
 logger = logging.getLogger(__name__)

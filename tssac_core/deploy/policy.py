@@ -19,13 +19,12 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.algos.onpolicy.cpo import CpoState
-from tssac_core.algos.onpolicy.ppo import PpoState
+from tssac_core.algos.onpolicy.ppo import CpoState, PpoState
 from tssac_core.algos.sac_lagrangian import SacState
 from tssac_core.common.errors import CheckpointError, check_action_repeat
 from tssac_core.common.files import replace_durably
+from tssac_core.deploy.actor_meta import CheckpointFields
 from tssac_core.deploy.manifest import check_models, warn_once
-from tssac_core.deploy.numpy_actor import CheckpointFields
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 

@@ -71,9 +71,8 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
     import torch  # here, not above: --help and bad input answer without loading torch
 
     from tssac_core.reporting.progress import progress_bar
-    from tssac_core.train.epoch import MetricsRow
     from tssac_core.train.loop import train_role
-    from tssac_core.train.rundir import prepare_run, shipped, write_plots
+    from tssac_core.train.rundir import MetricsRow, prepare_run, shipped, write_plots
     from tssac_core.train.tensorboard import EpochSink, open_sink
 
     cfg, scenario = prepare_run(cfg, out, resume)

@@ -25,7 +25,7 @@ from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.varied_airframes import AirframeVariation
 from tssac_core.train.config import TrainConfig, reward_config
-from tssac_core.train.rundir import role_checkpoint
+from tssac_core.train.rundir import MetricsRow, role_checkpoint
 from tssac_core.train.validation import EpochSelector
 
 logger = logging.getLogger("tssac_core.train")
@@ -63,21 +63,6 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
         return None
     response = load_response(cfg.airframe_response)
     return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
-
-
-@dataclass(frozen=True)
-class MetricsRow:
-    """One epoch's row of ``metrics.csv``: the role and the epoch's figures by column (counts are ints).
-
-    The columns the file has are :data:`tssac_core.train.rundir.METRIC_FIELDS`; :meth:`csv_row` is what it gets."""
-
-    role: Role
-    figures: dict[str, float]
-    """Column -> value: the epoch and its counts, the episodes' means, the update statistics, the learner's own
-    columns and the validation's."""
-
-    def csv_row(self) -> dict[str, str | float]:
-        return {"role": self.role.value, **self.figures}
 
 
 def reached_stop(cfg: TrainConfig, row: MetricsRow) -> bool:

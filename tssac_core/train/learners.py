@@ -34,14 +34,15 @@ import time
 from collections import deque
 from collections.abc import Iterable
 from pathlib import Path
-from typing import NamedTuple, NotRequired, TypedDict, final
+from typing import NamedTuple
 
 import numpy as np
 import torch
 
-from tssac_core.algos.onpolicy.cpo import Cpo, CpoState
+from tssac_core.algos.onpolicy.cpo import Cpo
 from tssac_core.algos.onpolicy.gae import gae
 from tssac_core.algos.onpolicy.ppo import (
+    CpoState,
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
@@ -51,7 +52,7 @@ from tssac_core.algos.onpolicy.ppo import (
     evaluate_values,
     sample_actions,
 )
-from tssac_core.algos.replay import ReplayBuffer, ReplayState
+from tssac_core.algos.replay import ReplayBuffer
 from tssac_core.algos.sac_lagrangian import SacLagrangian, SacState, transfer
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
@@ -60,8 +61,9 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, onpolicy_config, sac_config
-from tssac_core.train.epoch import EpochLog, MetricsRow
-from tssac_core.train.rundir import role_checkpoint
+from tssac_core.train.epoch import EpochLog
+from tssac_core.train.resume import LearnerResume, OffPolicyResume, OnPolicyResume, pcg64_state
+from tssac_core.train.rundir import MetricsRow, role_checkpoint
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -73,56 +75,6 @@ def transfer_source(cfg: TrainConfig, role: Role, out: Path) -> Path | None:
     if algorithm(cfg.algo).transfers and role.index > 0:
         return role_checkpoint(cfg, out, ROLES[role.index - 1])
     return None
-
-
-class Pcg64Words(TypedDict):
-    state: int
-    inc: int
-
-
-class Pcg64State(TypedDict):
-    """numpy's PCG64 generator state (``Generator.bit_generator.state``), key for key as numpy gives it."""
-
-    bit_generator: str
-    state: Pcg64Words
-    has_uint32: int
-    uinteger: int
-
-
-def pcg64_state(rng: np.random.Generator) -> Pcg64State:
-    """The state of ``rng`` (a PCG64 generator: ``np.random.default_rng``'s)."""
-    s = rng.bit_generator.state
-    return {
-        "bit_generator": s["bit_generator"],
-        "state": {"state": s["state"]["state"], "inc": s["state"]["inc"]},
-        "has_uint32": s["has_uint32"],
-        "uinteger": s["uinteger"],
-    }
-
-
-@final
-class OffPolicyResume(TypedDict):
-    """An off-policy learner's part of a resume state (:meth:`OffPolicyLearner.state`)."""
-
-    learner: SacState
-    buffer: ReplayState
-    rng: Pcg64State
-    transferred: bool
-    recent_costs: NotRequired[list[float]]
-    """Missing from resume states older than the multiplier's measured-cost signal."""
-
-
-@final
-class OnPolicyResume(TypedDict):
-    """An on-policy learner's part of a resume state (:meth:`OnPolicyLearner.state`)."""
-
-    algo: str
-    learner: PpoState | CpoState
-    ep_len: np.ndarray
-    finished: list[tuple[float, int]]
-
-
-LearnerResume = OffPolicyResume | OnPolicyResume
 
 
 class OffPolicyLearner:

@@ -29,10 +29,10 @@ from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.train.algorithms import Selection
 from tssac_core.train.config import TrainConfig, selection_of, selects_within_limit
-from tssac_core.train.epoch import EpochLog, MetricsRow, log_stop, make_task, reached_stop, ship_role, teammates_for
+from tssac_core.train.epoch import EpochLog, log_stop, make_task, reached_stop, ship_role, teammates_for
 from tssac_core.train.learners import RoleLearner, make_role_learner, transfer_source
 from tssac_core.train.resume import ResumeState, read_resume_state, write_resume_state
-from tssac_core.train.rundir import append_metrics, role_position, save_trained_role
+from tssac_core.train.rundir import MetricsRow, append_metrics, role_position, save_trained_role
 from tssac_core.train.validation import EpochSelector
 
 logger = logging.getLogger("tssac_core.train")

@@ -14,14 +14,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.algos.onpolicy.cpo import CpoState
-from tssac_core.algos.onpolicy.ppo import PpoState
+from tssac_core.algos.onpolicy.ppo import CpoState, PpoState
 from tssac_core.algos.sac_lagrangian import SacState, UpdateStats
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
@@ -46,9 +45,6 @@ from tssac_core.train.config import (
 )
 from tssac_core.train.legacy import read_config
 from tssac_core.train.resume import read_resume_state
-
-if TYPE_CHECKING:  # the epoch's module imports this one
-    from tssac_core.train.epoch import MetricsRow
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -117,6 +113,21 @@ METRIC_FIELDS = [
     "val_cvar95_cost",
     "val_max_cost",
 ]
+
+
+@dataclass(frozen=True)
+class MetricsRow:
+    """One epoch's row of ``metrics.csv``: the role and the epoch's figures by column (counts are ints).
+
+    The columns the file has are :data:`METRIC_FIELDS`; :meth:`csv_row` is what it gets."""
+
+    role: Role
+    figures: dict[str, float]
+    """Column -> value: the epoch and its counts, the episodes' means, the update statistics, the learner's own
+    columns and the validation's."""
+
+    def csv_row(self) -> dict[str, str | float]:
+        return {"role": self.role.value, **self.figures}
 
 
 def append_metrics(path: Path, row: MetricsRow) -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:  # the loop's module imports torch; this one must not
-    from tssac_core.train.epoch import MetricsRow
+    from tssac_core.train.rundir import MetricsRow
 
 TAGS: dict[str, str] = {
     "return": "return",

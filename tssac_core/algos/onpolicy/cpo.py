@@ -26,16 +26,15 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, final
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
-from torch.optim.optimizer import StateDict
 
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.onpolicy.ppo import (
-    NetworksState,
+    CpoState,
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
@@ -238,13 +237,6 @@ def fisher_vector_product(
         return _flat_grad(grad_kl.dot(v), params, retain_graph=True) + damping * v
 
     return fvp
-
-
-@final
-class CpoState(NetworksState):
-    """What :meth:`Cpo.state_dict` returns: the networks and the value optimiser (torch's own state)."""
-
-    value_optim: StateDict
 
 
 class Cpo:

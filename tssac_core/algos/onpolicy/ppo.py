@@ -25,7 +25,7 @@ import copy
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple, TypedDict, final
+from typing import NamedTuple, TypedDict, final
 
 import numpy as np
 import torch
@@ -36,9 +36,6 @@ from tssac_core.algos.lagrange import DampedLagrangeMultiplier, MultiplierState,
 from tssac_core.algos.networks import SquashedGaussianActor, mlp, tanh_log_abs_det_jacobian
 from tssac_core.algos.onpolicy.config import OnPolicyAlgo, OnPolicyConfig
 from tssac_core.algos.sac_config import MultiplierSignal
-
-if TYPE_CHECKING:  # cpo builds on this module
-    from tssac_core.algos.onpolicy.cpo import CpoState
 
 logger = logging.getLogger(__name__)
 
@@ -242,6 +239,13 @@ class PpoState(NetworksState):
     actor_optim: StateDict
     value_optim: StateDict
     multiplier: MultiplierState
+
+
+@final
+class CpoState(NetworksState):
+    """What :meth:`Cpo.state_dict` returns: the networks and the value optimiser (torch's own state)."""
+
+    value_optim: StateDict
 
 
 def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> NetworksState:
