@@ -40,11 +40,16 @@ import math
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
-from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord, WorldMonitorFigures
+from tssac_core.common.evaluation_record import (
+    BatchedRun,
+    EvaluationRecord,
+    EvaluationRecordJson,
+    WorldMonitorFigures,
+)
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -233,6 +238,12 @@ class PolicyDescription(TypedDict):
     decision_interval_s: float
 
 
+class EvaluationJson(EvaluationRecordJson):
+    """What ``--json`` writes: the evaluation record, and with ``--policy`` the policies flown."""
+
+    policies: NotRequired[dict[str, PolicyDescription]]
+
+
 def fly_pilots(
     policies: Mapping[Role | str, PolicySpec] | PolicySpec,
     scenario: Scenario,
@@ -326,7 +337,7 @@ def evaluate_policy(
     mission: int | None = None,
     json: str | Path | None = None,
     progress: bool = True,
-) -> dict[str, Any]:
+) -> EvaluationJson:
     """Evaluate a policy trained anywhere as ``python -m tssac_core.evaluate --policy`` does, and return the JSON's
     dict (the same figures, intervals and keys as for the shipped team, plus ``policies``).
 
@@ -343,8 +354,8 @@ def evaluate_policy(
     config = ShieldConfig() if shield is True else (shield or None)
     indices = [mission] if mission is not None else list(range(episodes))
     results = fly_team(world, pilots, indices, seed, config, progress=progress)
-    summary = summarize(results, world, path, policies_label(described, team, controller), seed, config).to_json()
-    summary["policies"] = described
+    record = summarize(results, world, path, policies_label(described, team, controller), seed, config)
+    summary: EvaluationJson = {**record.to_json(), "policies": described}
     if json is not None:
         write_json(json, summary)
     return summary
@@ -385,7 +396,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     record = summarize(results, scenario, args.scenario, who, args.seed, shield)
     print_summary(record, scenario.cost_limit)
     if args.json:
-        summary = record.to_json()
+        summary: EvaluationJson = {**record.to_json()}
         if described:
             summary["policies"] = described
         write_json(args.json, summary)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -13,6 +12,7 @@ from mavlink_bridge.fly.mission_log import MissionRecord
 from mavlink_bridge.fly.mission_row import CompanionStatus, MissionRow, Outcome, ShieldCounts
 from tssac_core.common.evaluation_record import (
     EvaluationRecord,
+    EvaluationRecordJson,
     FlownDynamics,
     FlownWind,
     RoleFigures,
@@ -167,6 +167,15 @@ def summarise(rows: list[MissionRow], cfg: FlyConfig) -> EvaluationRecord:
     )
 
 
+class CampaignJson(EvaluationRecordJson):
+    """What ``fly --json`` writes: the record, the missions' rows and how the campaign ended."""
+
+    missions: list[MissionRow]
+    interrupted: bool
+    error: str | None
+    wall_time_s: float
+
+
 @dataclass(frozen=True)
 class CampaignResults:
     """fly's results: the record, each mission's row (in mission order), and how the campaign ended."""
@@ -177,7 +186,7 @@ class CampaignResults:
     error: str | None
     wall_time_s: float
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> CampaignJson:
         return {
             **self.record.to_json(),
             "missions": self.missions,
