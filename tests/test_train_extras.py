@@ -9,8 +9,10 @@ from pathlib import Path
 import pytest
 
 from tssac_core.common.cli import EXIT_INTERRUPTED, run
+from tssac_core.sim.scenario import Role
 from tssac_core.train import loop
 from tssac_core.train.cli import main
+from tssac_core.train.rundir import MetricsRow
 from tssac_core.train.tensorboard import scalars
 
 TINY = [
@@ -37,7 +39,7 @@ TINY = [
 
 
 def test_scalars_name_the_role_and_leave_out_what_an_epoch_lacks():
-    row = {"role": "detect", "epoch": 3, "return": -12.5, "beta": 0.4, "xi": math.nan, "val_cost": 1.0, "x": 2}
+    row = MetricsRow(Role.DETECT, {"epoch": 3, "return": -12.5, "beta": 0.4, "xi": math.nan, "val_cost": 1.0, "x": 2})
     assert scalars(row) == {"detect/return": -12.5, "detect/multiplier/beta": 0.4, "detect/validation/cost": 1.0}
 
 

@@ -40,11 +40,16 @@ import math
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
-from tssac_core.common.evaluation_record import BatchedRun, EvaluationRecord, WorldMonitorFigures
+from tssac_core.common.evaluation_record import (
+    BatchedRun,
+    EvaluationRecord,
+    EvaluationRecordJson,
+    WorldMonitorFigures,
+)
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -224,12 +229,27 @@ def compare_shield(
     return {"off": off, "on": on}
 
 
+class PolicyDescription(TypedDict):
+    """One role's entry in the JSON's ``policies``: the policy's name, the observation it takes and its decision
+    interval."""
+
+    policy: str
+    observation: str
+    decision_interval_s: float
+
+
+class EvaluationJson(EvaluationRecordJson):
+    """What ``--json`` writes: the evaluation record, and with ``--policy`` the policies flown."""
+
+    policies: NotRequired[dict[str, PolicyDescription]]
+
+
 def fly_pilots(
     policies: Mapping[Role | str, PolicySpec] | PolicySpec,
     scenario: Scenario,
     models: Path | None,
     controller: str = GUIDANCE,
-) -> tuple[list[PilotSpec], dict[str, dict[str, Any]]]:
+) -> tuple[list[PilotSpec], dict[str, PolicyDescription]]:
     """The team's pilots with ``policies`` in their roles (one spec: every role), each checked against its role's env
     before any mission (PolicyError, one line); the other roles fly ``models``' actors or ``controller``. Also the
     JSON's ``policies`` entry: per role its name, observation and decision interval."""
@@ -254,7 +274,7 @@ def fly_pilots(
     for j, role in enumerate(ROLES):
         if role in checked:
             pilots[j] = checked[role]
-    described = {
+    described: dict[str, PolicyDescription] = {
         role.value: {
             "policy": spec.name,
             "observation": spec.observation_mode.value,
@@ -317,7 +337,7 @@ def evaluate_policy(
     mission: int | None = None,
     json: str | Path | None = None,
     progress: bool = True,
-) -> dict[str, Any]:
+) -> EvaluationJson:
     """Evaluate a policy trained anywhere as ``python -m tssac_core.evaluate --policy`` does, and return the JSON's
     dict (the same figures, intervals and keys as for the shipped team, plus ``policies``).
 
@@ -334,14 +354,14 @@ def evaluate_policy(
     config = ShieldConfig() if shield is True else (shield or None)
     indices = [mission] if mission is not None else list(range(episodes))
     results = fly_team(world, pilots, indices, seed, config, progress=progress)
-    summary = summarize(results, world, path, policies_label(described, team, controller), seed, config).to_json()
-    summary["policies"] = described
+    record = summarize(results, world, path, policies_label(described, team, controller), seed, config)
+    summary: EvaluationJson = {**record.to_json(), "policies": described}
     if json is not None:
         write_json(json, summary)
     return summary
 
 
-def policies_label(described: Mapping[str, Mapping[str, Any]], models: Path | str | None, controller: str) -> str:
+def policies_label(described: Mapping[str, PolicyDescription], models: Path | str | None, controller: str) -> str:
     """The JSON's ``controller`` for a policy run: ``decoy=ppo.zip, others=models/tssac``."""
     mine = ", ".join(f"{role}={d['policy']}" for role, d in described.items())
     if len(described) == len(ROLES):
@@ -359,7 +379,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     scenario = load_for_batched_world(args.scenario)
     controller = args.controller or GUIDANCE
     who = str(args.models) if args.models else controller
-    described: dict[str, dict[str, Any]] = {}
+    described: dict[str, PolicyDescription] = {}
     if args.policy_sources:
         specs = {
             role: load_policy_spec(kind, path, role, args.observation, args.decision_interval_s)
@@ -376,7 +396,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     record = summarize(results, scenario, args.scenario, who, args.seed, shield)
     print_summary(record, scenario.cost_limit)
     if args.json:
-        summary = record.to_json()
+        summary: EvaluationJson = {**record.to_json()}
         if described:
             summary["policies"] = described
         write_json(args.json, summary)

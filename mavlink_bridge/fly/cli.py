@@ -11,11 +11,11 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import Any
 
 import numpy as np
 
 from mavlink_bridge.fly.config import PROG, FlyConfig, config_from_args, make_signing_key
+from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.scoring import CampaignResults, summarise
@@ -49,14 +49,14 @@ def _on_sigterm(signum: int, _frame: FrameType | None) -> None:
 
 
 def fly_campaign(
-    cfg: FlyConfig, children: ChildProcesses, work: Path, made_key: Path | None, rows: list[dict[str, Any]]
+    cfg: FlyConfig, children: ChildProcesses, work: Path, made_key: Path | None, rows: list[MissionRow]
 ) -> None:
     """Fly the campaign's missions (one crew here, crews side by side, or Ray tasks), each mission's row appended to
     ``rows`` as it ends; the first mission that did not end in time, or whose companion lost a write, ends the
     campaign (MissionTimedOut, WriteFailed). ``made_key``: the signing key fly made for this run, if it made one."""
     with progress_bar(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress) as bar:
 
-        def record(row: dict[str, Any]) -> None:
+        def record(row: MissionRow) -> None:
             rows.append(row)
             bar.update(1)
             bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
@@ -82,7 +82,7 @@ def fly_campaign(
 
 
 def campaign_results(
-    rows: list[dict[str, Any]], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float
+    rows: list[MissionRow], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float
 ) -> CampaignResults:
     """The results of the missions flown (in mission order: missions flown side by side end in any order), with how
     the campaign ended."""
@@ -142,7 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     children = ChildProcesses()
-    rows: list[dict[str, Any]] = []
+    rows: list[MissionRow] = []
     error: str | None = None
     interrupted = False
     code = 0

@@ -28,6 +28,7 @@ from tssac_core.wire.truth_log_schema import (
     STEP,
     SUMMARY,
     VEHICLES_KEY,
+    EventLine,
 )
 
 TASK_EVENTS = {"decoy": (EventName.RADAR_ON, 1), "detect": (EventName.IDENT, 1), "strike": (EventName.HIT, 1)}
@@ -54,7 +55,8 @@ class MissionRecord:
     summary: dict[str, Any] | None
     """None if the world was killed before it could write one."""
     tracks_m: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
-    events: list[dict[str, Any]] = field(default_factory=list)
+    events: list[EventLine] = field(default_factory=list)
+    """The log's ``event`` lines, as written."""
     steps: int = 0
     failsafe_steps: dict[str, int] = field(default_factory=dict)
     last_flags: dict[str, bool] = field(default_factory=dict)

@@ -13,7 +13,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from mavlink_bridge.fly.child_configs import (
 from mavlink_bridge.fly.config import REPO, FlyConfig
 from mavlink_bridge.fly.crew import Crew, CrewError, LineReader, wait_readable
 from mavlink_bridge.fly.mission_log import TruthLogError, read_mission
+from mavlink_bridge.fly.mission_row import CompanionStatus, MissionRow, Outcome
 from mavlink_bridge.fly.report import animate_mission_record, plot_mission_record
 from mavlink_bridge.fly.scoring import outcome, outcome_from_companions
 from mavlink_bridge.link.signing_key import read_signing_key
@@ -132,9 +132,9 @@ def _write_mark(path: Path, text: str) -> None:
         fh.write(text)
 
 
-def _settle_tlog_mark(marker: Path, row: dict[str, Any]) -> None:
+def _settle_tlog_mark(marker: Path, row: MissionRow) -> None:
     """A mission that ended: its tlogs are whole (the mark goes) unless one was cut or the mission timed out."""
-    lost = [f"{name}: {s['write_error']}" for name, s in row["companions"].items() if s.get("write_error")]
+    lost = [f"{name}: {error}" for name, s in row["companions"].items() if (error := s.get("write_error"))]
     if lost:
         try:  # the mark is ours, in a directory of ours: rewritten in place, its page reused on a full disk
             with open(marker, "w", encoding="utf-8") as fh:
@@ -187,7 +187,7 @@ class MissionRunner:
             time.sleep(0.01)
         self.children.stop(crew.children)
 
-    def fly(self, index: int) -> dict[str, Any]:
+    def fly(self, index: int) -> MissionRow:
         cfg = self.cfg
         seed = cfg.seed + index
         mdir = private_directory(self.work_dir / f"mission-{index:03d}", "--logs")
@@ -219,30 +219,33 @@ class MissionRunner:
             cpu_s = _children_cpu_s() - cpu0 if self.children_cpu else None
         wall_s = time.monotonic() - t0
         statuses = {c.name: self._companion_status(c, mdir) for c in companions}
-        row: dict[str, Any] = {
+        record = None
+        if sitl is not None:
+            try:
+                record = read_mission(truth)
+            except TruthLogError as exc:
+                raise ChildFailed(f"mission {index}: {exc}") from None
+        ended: Outcome = (
+            outcome(record, cfg.scenario.cost_limit) if record is not None else outcome_from_companions(statuses)
+        )
+        row: MissionRow = {
             "index": index,
             "seed": seed,
             "pids": pids,
             "wall_time_s": round(wall_s, 3),
             "cpu_s": None if cpu_s is None else round(cpu_s, 3),
             "companions": statuses,
+            **ended,
         }
-        if sitl is not None:
-            try:
-                record = read_mission(truth)
-            except TruthLogError as exc:
-                raise ChildFailed(f"mission {index}: {exc}") from None
-            row.update(outcome(record, cfg.scenario.cost_limit))
+        if record is not None:
             if cfg.plot_path is not None:
                 row["plot"] = str(plot_mission_record(cfg, index, layout, record))
             if cfg.animate_path is not None:
                 row["animation"] = str(animate_mission_record(cfg, index, layout, record))
-        else:
-            row.update(outcome_from_companions(statuses))
         flight = [float(f) for s in statuses.values() if (f := s.get("flight_wall_s"))]
-        if flight and row.get("sim_time_s"):
+        if flight and (sim_time_s := row["sim_time_s"]):
             row["flight_wall_s"] = round(max(flight), 3)
-            row["speed_x"] = round(row["sim_time_s"] / max(flight), 1)
+            row["speed_x"] = round(sim_time_s / max(flight), 1)
         # The CPU the flight took, world and companions, start-up excluded (what bench_bridge reports).
         cpus = [s.get("flight_cpu_s") for s in statuses.values()] + (
             [row.get("world_flight_cpu_s")] if sitl is not None else []
@@ -542,34 +545,31 @@ class MissionRunner:
         return False
 
     @staticmethod
-    def _companion_status(c: Child, mdir: Path) -> dict[str, Any]:
+    def _companion_status(c: Child, mdir: Path) -> CompanionStatus:
         path = mdir / f"{c.name}.status.json"
-        out: dict[str, Any] = {"exit_code": c.poll()}
+        exit_code = c.poll()
         try:
             data = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
-            out["status"] = "unknown"
-            return out
+            return {"exit_code": exit_code, "status": "unknown"}
         counters = data.get("counters", {})
         lat = data.get("latency_ms", {})
-        out.update(
-            {
-                # A process kept for the next mission has not exited: its status file has the mission's exit code.
-                "exit_code": data.get("exit_code", out["exit_code"]),
-                "status": data.get("status"),
-                "vehicle_time_s": data.get("vehicle_time_s"),
-                "flight_wall_s": data.get("flight_wall_s"),
-                "flight_cpu_s": data.get("flight_cpu_s"),
-                "control_steps": counters.get("control_steps"),
-                "setpoints_sent": counters.get("setpoints_sent"),
-                "ticks_granted": counters.get("ticks_granted"),
-                "holds": counters.get("holds"),
-                "restarts": counters.get("restarts"),
-                "latency_p50_ms": lat.get("p50"),
-                "latency_p99_ms": lat.get("p99"),
-                "shield": data.get("shield"),
-            }
-        )
+        out: CompanionStatus = {
+            # A process kept for the next mission has not exited: its status file has the mission's exit code.
+            "exit_code": data.get("exit_code", exit_code),
+            "status": data.get("status"),
+            "vehicle_time_s": data.get("vehicle_time_s"),
+            "flight_wall_s": data.get("flight_wall_s"),
+            "flight_cpu_s": data.get("flight_cpu_s"),
+            "control_steps": counters.get("control_steps"),
+            "setpoints_sent": counters.get("setpoints_sent"),
+            "ticks_granted": counters.get("ticks_granted"),
+            "holds": counters.get("holds"),
+            "restarts": counters.get("restarts"),
+            "latency_p50_ms": lat.get("p50"),
+            "latency_p99_ms": lat.get("p99"),
+            "shield": data.get("shield"),
+        }
         if data.get("write_error") is not None:
             out["write_error"] = str(data["write_error"])
         return out

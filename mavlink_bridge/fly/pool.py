@@ -24,12 +24,12 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn, TypeGuard
+from typing import Any, NoReturn, TypedDict, TypeGuard
 
 import numpy as np
 
 from tssac_core.common.cli import bad_input_line, command_description, write_json
-from tssac_core.common.evaluation_record import EvaluationRecord
+from tssac_core.common.evaluation_record import EvaluationRecord, EvaluationRecordJson
 from tssac_core.common.stats import pooled_record
 from tssac_core.sim.scenario import ROLES
 
@@ -233,6 +233,20 @@ def _check_together(campaigns: Sequence[Campaign], partial: bool) -> None:
             )
 
 
+class PooledCampaign(TypedDict):
+    file: str
+    seed: int
+    episodes: int
+    complete: bool
+
+
+class PooledJson(EvaluationRecordJson):
+    """What ``fly.pool --json`` writes: the pooled record, the campaigns, and what they all flew (:data:`SAME`, the
+    scenario's file name)."""
+
+    campaigns: list[PooledCampaign]
+
+
 @dataclass(frozen=True)
 class Pooled:
     """The pooled figures of campaigns, and which campaigns."""
@@ -240,7 +254,7 @@ class Pooled:
     record: EvaluationRecord
     campaigns: list[Campaign]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> PooledJson:
         first = self.campaigns[0].data
         return {
             **self.record.to_json(),
@@ -248,7 +262,10 @@ class Pooled:
                 {"file": c.name, "seed": c.data["seed"], "episodes": len(c.missions), "complete": c.stopped is None}
                 for c in self.campaigns
             ],
-            **{key: first.get(key) for key in SAME},
+            # SAME's keys, which every campaign has (check_campaign) and shares (_check_together).
+            "pilot": first["pilot"],
+            "cost_limit": first["cost_limit"],
+            "clock": first["clock"],
             "scenario": Path(first["scenario"]).name,
         }
 

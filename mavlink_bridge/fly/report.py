@@ -61,9 +61,9 @@ def print_report(results: CampaignResults, cfg: FlyConfig) -> None:
             f"{m.get('sim_time_s') or 0:.1f} s simulated, {m['wall_time_s']:.1f} s wall{speed}"
         )
     for m in results.missions:
-        for key, what in (("plot", "plot"), ("animation", "animation")):
-            if m.get(key):
-                print(f"wrote {what} of mission {m['index']}: {m[key]}")
+        for what, drawn in (("plot", m.get("plot")), ("animation", m.get("animation"))):
+            if drawn:
+                print(f"wrote {what} of mission {m['index']}: {drawn}")
     if cfg.json_path is not None:
         print(f"wrote {cfg.json_path}")
 

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from mavlink_bridge.fly.config import FlyConfig, monitor_scope
 from mavlink_bridge.fly.mission_log import MissionRecord
+from mavlink_bridge.fly.mission_row import CompanionStatus, MissionRow, Outcome, ShieldCounts
 from tssac_core.common.evaluation_record import (
     EvaluationRecord,
+    EvaluationRecordJson,
     FlownDynamics,
     FlownWind,
     RoleFigures,
@@ -31,7 +32,7 @@ WORST_MISSIONS = 10
 """How many of the costliest UAV-missions the JSON lists (as tssac_core.evaluate's)."""
 
 
-def outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
+def outcome(record: MissionRecord, cost_limit: float) -> Outcome:
     tasks = record.task_done()
     return {
         "success": record.success,
@@ -47,22 +48,27 @@ def outcome(record: MissionRecord, cost_limit: float) -> dict[str, Any]:
     }
 
 
-def outcome_from_companions(statuses: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def outcome_from_companions(statuses: dict[str, CompanionStatus]) -> Outcome:
     ends = [s.get("status") for s in statuses.values()]
     success = "success" in ends
     end = "success" if success else next((e for e in ends if e in ("geofence", "episode_cap")), "unknown")
-    times = [s["vehicle_time_s"] for s in statuses.values() if s.get("vehicle_time_s") is not None]
+    times = [t for s in statuses.values() if (t := s.get("vehicle_time_s")) is not None]
     return {"success": success, "end": end, "sim_time_s": max(times) if times else None, "cost": None}
 
 
-def monitor_figures(rows: list[dict[str, Any]], scope: str | None) -> SitlMonitorFigures:
+def costed_rows(rows: list[MissionRow]) -> list[tuple[MissionRow, dict[str, float]]]:
+    """The rows whose cost is known, each with its cost per role."""
+    return [(r, cost) for r in rows if (cost := r.get("cost"))]
+
+
+def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFigures:
     """The monitor's figures over the missions, from the companions' counts: interventions per UAV-mission, the
     fraction of control steps under the backup, the largest margin used; and what the guarantee is about (UAV-missions
     with any cost, UAVs that left the area). ``scope``: why the guarantee does not hold here (None: it does)."""
-    shielded = [s for r in rows for s in r.get("companions", {}).values() if s.get("shield")]
-    counts = [s["shield"] for s in shielded]
-    control = sum(s.get("control_steps") or 0 for s in shielded)
-    costed = [r for r in rows if r.get("cost")]
+    shielded = [(s, shield) for r in rows for s in r.get("companions", {}).values() if (shield := s.get("shield"))]
+    counts: list[ShieldCounts] = [shield for _, shield in shielded]
+    control = sum(s.get("control_steps") or 0 for s, _ in shielded)
+    costed = costed_rows(rows)
     return SitlMonitorFigures(
         uav_missions=len(counts),
         interventions_per_uav_mission=float(np.mean([c["interventions"] for c in counts])) if counts else None,
@@ -72,29 +78,31 @@ def monitor_figures(rows: list[dict[str, Any]], scope: str | None) -> SitlMonito
         decisions=sum(c["decisions"] for c in counts),
         resets=sum(c["resets"] for c in counts),
         max_margin_m=max((c["max_margin_m"] for c in counts), default=None),
-        uav_missions_with_cost=int(sum(v > 0 for r in costed for v in r["cost"].values())) if costed else None,
-        uavs_left_area=int(sum(sum(r.get("left_area", {}).values()) for r in costed)) if costed else None,
+        uav_missions_with_cost=int(sum(v > 0 for _, cost in costed for v in cost.values())) if costed else None,
+        uavs_left_area=int(sum(sum(r.get("left_area", {}).values()) for r, _ in costed)) if costed else None,
         guarantee=scope is None,
         scope=scope,
     )
 
 
-def role_figures(rows: list[dict[str, Any]], costed: list[dict[str, Any]], name: str, cost_limit: float) -> RoleFigures:
+def role_figures(
+    rows: list[MissionRow], costed: list[tuple[MissionRow, dict[str, float]]], name: str, cost_limit: float
+) -> RoleFigures:
     """One role's figures: its cost tail and task success over the missions whose cost is known (``costed``), its
     companions' control latency over all."""
     tail = RoleFigures()
     if costed:
-        costs = np.array([r["cost"][name] for r in costed])
+        costs = np.array([cost[name] for _, cost in costed])
         tail = RoleFigures(
             mean_cost=float(costs.mean()),
             max_cost=float(costs.max()),
             within_cost_limit=float((costs <= cost_limit).mean()),
             cvar95_cost=cvar(costs),
-            task_success_rate=float(np.mean([bool(r.get("task_done", {}).get(name)) for r in costed])),
+            task_success_rate=float(np.mean([bool(r.get("task_done", {}).get(name)) for r, _ in costed])),
         )
     companions = [r["companions"][name] for r in rows if name in r.get("companions", {})]
-    p50 = [c["latency_p50_ms"] for c in companions if c.get("latency_p50_ms") is not None]
-    p99 = [c["latency_p99_ms"] for c in companions if c.get("latency_p99_ms") is not None]
+    p50 = [p for c in companions if (p := c.get("latency_p50_ms")) is not None]
+    p99 = [p for c in companions if (p := c.get("latency_p99_ms")) is not None]
     if not p50:
         return tail
     return dataclasses.replace(tail, latency_p50_ms=float(np.median(p50)), latency_p99_ms=float(np.max(p99)))
@@ -123,24 +131,26 @@ def flown_run(cfg: FlyConfig) -> SitlRun:
     )
 
 
-def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> EvaluationRecord:
+def summarise(rows: list[MissionRow], cfg: FlyConfig) -> EvaluationRecord:
     """The campaign's record: success_rate and mean_cost with their 95% intervals, episodes, per-role figures with the
     tail (within C, worst, CVaR_0.95), the costliest UAV-missions, as ``tssac_core.evaluate``'s
     (tssac_core.common.stats), with the cost figures None when the cost is unknown."""
     n = len(rows)
     wins = int(sum(bool(r.get("success")) for r in rows))
-    times = [r["sim_time_s"] for r in rows if r.get("sim_time_s") is not None]
-    costed = [r for r in rows if r.get("cost")]
+    times = [t for r in rows if (t := r.get("sim_time_s")) is not None]
+    costed = costed_rows(rows)
     mean_cost: float | None = None
     cost_interval: tuple[float, float] | None = None
     worst: list[WorstMission] = []
     if costed:
-        cost = np.array([[r["cost"][role.value] for role in ROLES] for r in costed], dtype=np.float64)
+        cost = np.array([[c[role.value] for role in ROLES] for _, c in costed], dtype=np.float64)
         interval = bootstrap_mean_interval(cost)
         mean_cost, cost_interval = float(cost.mean()), (interval.low, interval.high)
         worst = [
-            dataclasses.replace(w, mission=costed[w.mission]["index"])
-            for w in worst_missions(cost, [r["seed"] for r in costed], [role.value for role in ROLES], WORST_MISSIONS)
+            dataclasses.replace(w, mission=costed[w.mission][0]["index"])
+            for w in worst_missions(
+                cost, [r["seed"] for r, _ in costed], [role.value for role in ROLES], WORST_MISSIONS
+            )
         ]
     rate = wilson_interval(wins, n) if n else None
     return EvaluationRecord(
@@ -157,17 +167,26 @@ def summarise(rows: list[dict[str, Any]], cfg: FlyConfig) -> EvaluationRecord:
     )
 
 
+class CampaignJson(EvaluationRecordJson):
+    """What ``fly --json`` writes: the record, the missions' rows and how the campaign ended."""
+
+    missions: list[MissionRow]
+    interrupted: bool
+    error: str | None
+    wall_time_s: float
+
+
 @dataclass(frozen=True)
 class CampaignResults:
     """fly's results: the record, each mission's row (in mission order), and how the campaign ended."""
 
     record: EvaluationRecord
-    missions: list[dict[str, Any]]
+    missions: list[MissionRow]
     interrupted: bool
     error: str | None
     wall_time_s: float
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> CampaignJson:
         return {
             **self.record.to_json(),
             "missions": self.missions,

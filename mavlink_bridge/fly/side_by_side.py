@@ -22,9 +22,9 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
+from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes.children import ChildProcesses
 
@@ -65,11 +65,11 @@ class _Crew:
     thread: threading.Thread = field(init=False)
 
 
-def fly_side_by_side(cfg: FlyConfig, workers: int, work_dir: Path, on_row: Callable[[dict[str, Any]], None]) -> None:
+def fly_side_by_side(cfg: FlyConfig, workers: int, work_dir: Path, on_row: Callable[[MissionRow], None]) -> None:
     """Fly the missions of ``cfg.indices()`` with ``workers`` crews at once; ``on_row`` gets each row in the main
     thread as its mission ends (so an interruption keeps the finished ones). Raises what stopped a crew."""
     todo = _Indices(cfg.indices())
-    results: queue.SimpleQueue[dict[str, Any] | _Done] = queue.SimpleQueue()
+    results: queue.SimpleQueue[MissionRow | _Done] = queue.SimpleQueue()
     stop = threading.Event()
     # With fresh processes per mission the runner's CPU figure is the reaped children's: every crew's at once here.
     crews = [
@@ -103,7 +103,7 @@ def fly_side_by_side(cfg: FlyConfig, workers: int, work_dir: Path, on_row: Calla
 
 
 def _fly_crew(
-    crew: _Crew, todo: _Indices, results: queue.SimpleQueue[dict[str, Any] | _Done], stop: threading.Event
+    crew: _Crew, todo: _Indices, results: queue.SimpleQueue[MissionRow | _Done], stop: threading.Event
 ) -> None:
     """One crew's thread: the next mission while there is one and nothing has stopped the run."""
     error: BaseException | None = None

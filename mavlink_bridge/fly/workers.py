@@ -17,9 +17,9 @@ import dataclasses
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
+from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.mission_runner import MissionRunner
 from mavlink_bridge.processes.children import ChildProcesses
 from tssac_core.parallel.ray_cluster import RayTarget
@@ -91,7 +91,7 @@ def _worker_run(task: MissionTask) -> _WorkerRun:
     return _kept
 
 
-def fly_mission(task: MissionTask) -> dict[str, Any]:
+def fly_mission(task: MissionTask) -> MissionRow:
     """The Ray task: one mission, flown by the worker's crew of processes (kept for its next mission of the same
     run when ``cfg.persistent``), or by processes of its own, stopped whatever happens (a cancel arrives as
     KeyboardInterrupt)."""
@@ -110,7 +110,7 @@ def fly_mission(task: MissionTask) -> dict[str, Any]:
 
 
 def fly_on_workers(
-    cfg: FlyConfig, workers: int, target: RayTarget, made_key: Path | None, on_row: Callable[[dict[str, Any]], None]
+    cfg: FlyConfig, workers: int, target: RayTarget, made_key: Path | None, on_row: Callable[[MissionRow], None]
 ) -> None:
     """Fly the missions of ``cfg.indices()``, ``workers`` at once; ``on_row`` gets each row as its mission ends (so an
     interruption keeps the finished ones). Raises TaskFailed for a mission whose processes failed."""

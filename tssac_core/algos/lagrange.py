@@ -8,9 +8,10 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import torch
+from torch.optim.optimizer import StateDict
 
 from tssac_core.algos import losses
 from tssac_core.algos.sac_config import MultiplierSignal
@@ -85,6 +86,14 @@ def choose_signal(
     if recent_window:
         return SignalRule(CostSignal.Q_C_RECENT, recent_window=recent_window)
     return SignalRule(CostSignal.Q_C_BATCH)
+
+
+class MultiplierState(TypedDict):
+    """What :meth:`DampedLagrangeMultiplier.state_dict` returns."""
+
+    beta: torch.Tensor
+    optim: StateDict
+    """Adam's state, as torch's ``Optimizer.state_dict`` gives it."""
 
 
 class DampedLagrangeMultiplier:
@@ -176,11 +185,11 @@ class DampedLagrangeMultiplier:
             self._beta.fill_(self.beta_init)
         self._optim = torch.optim.Adam([self._beta], lr=self.lr)
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> MultiplierState:
         """beta and the optimiser state."""
         return {"beta": self.beta.clone(), "optim": self._optim.state_dict()}
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: MultiplierState) -> None:
         """Restore what `state_dict` returned."""
         with torch.no_grad():
             self._beta.copy_(state["beta"])

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypedDict
 
 import numpy as np
 import torch
@@ -17,6 +17,21 @@ class ReplaySamples(NamedTuple):
     costs: torch.Tensor  # (batch,), eq. 11
     next_observations: torch.Tensor  # (batch, obs_dim)
     terminated: torch.Tensor  # (batch,), 0.0 or 1.0; truncation is *not* termination
+
+
+class ReplayState(TypedDict):
+    """What :meth:`ReplayBuffer.state_dict` returns: each field's filled rows (float32, in storage order), then the
+    ring's write position, fill and capacity."""
+
+    observations: torch.Tensor
+    actions: torch.Tensor
+    rewards: torch.Tensor
+    costs: torch.Tensor
+    next_observations: torch.Tensor
+    terminated: torch.Tensor
+    ptr: int
+    size: int
+    capacity: int
 
 
 _FIELDS = ReplaySamples._fields
@@ -106,15 +121,25 @@ class ReplayBuffer:
         rows = torch.from_numpy(self._rows[idx])
         return ReplaySamples(*(rows[:, self._columns[name]] for name in _FIELDS))
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> ReplayState:
         """The filled rows (tensors, in storage order), the write position and the capacity."""
-        state: dict[str, Any] = {
-            name: torch.from_numpy(array[: self._size].copy()) for name, array in self._arrays.items()
-        }
-        state.update(ptr=self._ptr, size=self._size, capacity=self.capacity)
-        return state
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+        def filled(name: str) -> torch.Tensor:
+            return torch.from_numpy(self._arrays[name][: self._size].copy())
+
+        return {
+            "observations": filled("observations"),
+            "actions": filled("actions"),
+            "rewards": filled("rewards"),
+            "costs": filled("costs"),
+            "next_observations": filled("next_observations"),
+            "terminated": filled("terminated"),
+            "ptr": self._ptr,
+            "size": self._size,
+            "capacity": self.capacity,
+        }
+
+    def load_state_dict(self, state: ReplayState) -> None:
         """Restore what `state_dict` returned; the storage layout (and so sampling) is identical.
 
         A buffer that was full can only be loaded into one of the same capacity (its ring order
@@ -127,8 +152,17 @@ class ReplayBuffer:
             raise ValueError(f"saved buffer holds {size} transitions, capacity is {self.capacity}")
         if size == saved_capacity and saved_capacity != self.capacity:
             raise ValueError(f"saved buffer was full at capacity {saved_capacity}; this one has {self.capacity}")
-        for name, array in self._arrays.items():
-            rows = state[name].numpy()
+        saved = ReplaySamples(
+            state["observations"],
+            state["actions"],
+            state["rewards"],
+            state["costs"],
+            state["next_observations"],
+            state["terminated"],
+        )
+        for name, tensor in zip(_FIELDS, saved, strict=True):
+            array = self._arrays[name]
+            rows = tensor.numpy()
             if rows.shape[1:] != array.shape[1:] or len(rows) != size:
                 raise ValueError(f"{name}: saved {tuple(rows.shape)} does not fit {array.shape}")
             array[:size] = rows

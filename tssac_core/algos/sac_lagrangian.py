@@ -21,15 +21,16 @@ import copy
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Literal, NotRequired, TypedDict
 
 import numpy as np
 import torch
 from torch import nn
+from torch.optim.optimizer import StateDict
 
 from tssac_core.algos import losses
 from tssac_core.algos.budget import qc_limit
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier, SignalRule, choose_signal
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, MultiplierState, SignalRule, choose_signal
 from tssac_core.algos.networks import Critic, SquashedGaussianActor
 from tssac_core.algos.replay import ReplaySamples
 from tssac_core.algos.sac_config import MULTIPLIER_VARIANTS, SacConfig, Variant
@@ -47,7 +48,37 @@ def fast_adam(params: Sequence[torch.Tensor], lr: float) -> torch.optim.Adam:
         return torch.optim.Adam(params, lr=lr, foreach=True)
 
 
-def load_optimiser(optim: torch.optim.Optimizer, state: dict[str, Any]) -> None:
+NetworkName = Literal["actor", "q_r", "q_c", "q_r_target", "q_c_target", "q_c_var", "q_c_var_target"]
+"""A network of the learner, as :meth:`SacLagrangian.networks` and :class:`SacState` name it."""
+
+
+class _VarianceCritics(TypedDict, total=False):
+    q_c_var: dict[str, torch.Tensor]
+    q_c_var_target: dict[str, torch.Tensor]
+
+
+class SacState(TypedDict):
+    """What :meth:`SacLagrangian.state_dict` returns (and a role checkpoint's ``learner`` holds): each network's
+    weights by name, in the order of :meth:`SacLagrangian.networks`, then the optimisers (torch's own state),
+    alpha, the multiplier and the variant."""
+
+    actor: dict[str, torch.Tensor]
+    q_r: dict[str, torch.Tensor]
+    q_c: dict[str, torch.Tensor]
+    q_r_target: dict[str, torch.Tensor]
+    q_c_target: dict[str, torch.Tensor]
+    q_c_var: NotRequired[dict[str, torch.Tensor]]
+    """With SacConfig.cost_cvar_level only."""
+    q_c_var_target: NotRequired[dict[str, torch.Tensor]]
+    actor_optim: StateDict
+    critic_optim: StateDict
+    alpha: torch.Tensor
+    alpha_optim: StateDict
+    multiplier: MultiplierState
+    variant: str
+
+
+def load_optimiser(optim: torch.optim.Optimizer, state: StateDict) -> None:
     """`optim.load_state_dict`, keeping optim's own implementation choice (fused / foreach):
     a loaded param group brings the flags it was saved with (None in older checkpoints)."""
     flags = {key: optim.param_groups[0].get(key) for key in ("fused", "foreach")}
@@ -149,9 +180,9 @@ class SacLagrangian:
         self.critic_optim = fast_adam(self._critic_params, self.config.lr)
         self.alpha_optim = fast_adam([self.alpha], self.config.lr)
 
-    def networks(self) -> dict[str, nn.Module]:
+    def networks(self) -> dict[NetworkName, nn.Module]:
         """The networks by name, as they appear in `state_dict` and `transfer`."""
-        nets: dict[str, nn.Module] = {
+        nets: dict[NetworkName, nn.Module] = {
             "actor": self.actor,
             "q_r": self.q_r,
             "q_c": self.q_c,
@@ -159,7 +190,7 @@ class SacLagrangian:
             "q_c_target": self.q_c_target,
         }
         if self.q_c_var is not None and self.q_c_var_target is not None:
-            nets.update(q_c_var=self.q_c_var, q_c_var_target=self.q_c_var_target)
+            nets["q_c_var"], nets["q_c_var_target"] = self.q_c_var, self.q_c_var_target
         return nets
 
     @torch.no_grad()
@@ -304,24 +335,31 @@ class SacLagrangian:
         ).tolist()  # one synchronisation for all statistics
         return UpdateStats(*scalars)
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> SacState:
         """All needed to resume: networks, targets, optimiser states, alpha, the multiplier.
 
         As with torch's own `state_dict`, the tensors share storage with the live learner: save it
         (`torch.save`) or `copy.deepcopy` it to keep a snapshot while training goes on.
         """
-        state: dict[str, Any] = {name: net.state_dict() for name, net in self.networks().items()}
-        state.update(
-            actor_optim=self.actor_optim.state_dict(),
-            critic_optim=self.critic_optim.state_dict(),
-            alpha=self.alpha.detach().clone(),
-            alpha_optim=self.alpha_optim.state_dict(),
-            multiplier=self.multiplier.state_dict(),
-            variant=self.config.variant.value,
-        )
-        return state
+        variance: _VarianceCritics = {}
+        if self.q_c_var is not None and self.q_c_var_target is not None:
+            variance = {"q_c_var": self.q_c_var.state_dict(), "q_c_var_target": self.q_c_var_target.state_dict()}
+        return {
+            "actor": self.actor.state_dict(),
+            "q_r": self.q_r.state_dict(),
+            "q_c": self.q_c.state_dict(),
+            "q_r_target": self.q_r_target.state_dict(),
+            "q_c_target": self.q_c_target.state_dict(),
+            **variance,
+            "actor_optim": self.actor_optim.state_dict(),
+            "critic_optim": self.critic_optim.state_dict(),
+            "alpha": self.alpha.detach().clone(),
+            "alpha_optim": self.alpha_optim.state_dict(),
+            "multiplier": self.multiplier.state_dict(),
+            "variant": self.config.variant.value,
+        }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: SacState) -> None:
         """Restore what `state_dict` returned (same sizes; a different variant is logged)."""
         if state.get("variant") != self.config.variant.value:
             logger.warning(
@@ -341,9 +379,9 @@ class SacLagrangian:
         self.multiplier.load_state_dict(state["multiplier"])
 
 
-TRANSFERRED_NETWORKS = ("actor", "q_r", "q_c", "q_r_target", "q_c_target")
+TRANSFERRED_NETWORKS: tuple[NetworkName, ...] = ("actor", "q_r", "q_c", "q_r_target", "q_c_target")
 """What `transfer` copies: all network weights. Everything else is reset."""
-VARIANCE_NETWORKS = ("q_c_var", "q_c_var_target")
+VARIANCE_NETWORKS: tuple[NetworkName, ...] = ("q_c_var", "q_c_var_target")
 """Also copied when both learners have them (SacConfig.cost_cvar_level); else the target's stay as they are."""
 VARIANCE_FLOOR = 1e-6
 """Added to the variance critic's softplus, so that sqrt(V^c) has a finite gradient everywhere."""
@@ -354,7 +392,7 @@ def cost_variance(net: nn.Module, obs: torch.Tensor, actions: torch.Tensor) -> t
     return nn.functional.softplus(net(obs, actions)[0]) + VARIANCE_FLOOR
 
 
-def transfer(target: SacLagrangian, source_state: dict[str, Any]) -> list[str]:
+def transfer(target: SacLagrangian, source_state: SacState) -> list[str]:
     """TSSAC's parameter transfer N_k -> N_k+1 (Algorithm 1, lines 17 and 19).
 
     Copied from `source_state` (a `SacLagrangian.state_dict()`): the weights of the actor, the

@@ -11,10 +11,11 @@ keeps such top-level figures as explicit nulls, and leaves a role's unknown figu
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 RECORD_VERSION = 1
 """The schema this module writes; it reads every version up to this one."""
@@ -147,6 +148,97 @@ class SitlRun:
     signing: bool
 
 
+class WorstMissionJson(TypedDict):
+    mission: int
+    seed: int
+    role: str
+    cost: float
+
+
+class RoleMonitorJson(TypedDict):
+    interventions_per_mission: float
+    backup_time_fraction: float
+
+
+class WorldMonitorJson(TypedDict):
+    """:class:`WorldMonitorFigures` in the JSON (``config`` only when stated)."""
+
+    interventions_per_uav_mission: float
+    max_interventions_per_uav_mission: int
+    max_switches_per_uav_mission: int
+    backup_time_fraction: float
+    unprotected_time_fraction: float
+    uav_missions_with_cost: int
+    uavs_left_area: int
+    roles: dict[str, RoleMonitorJson]
+    config: NotRequired[dict[str, object]]
+
+
+class SitlMonitorJson(TypedDict):
+    """:class:`SitlMonitorFigures` in the JSON."""
+
+    uav_missions: int
+    interventions_per_uav_mission: float | None
+    max_interventions_per_uav_mission: int | None
+    backup_time_fraction: float | None
+    unprotected_time_fraction: float | None
+    decisions: int
+    resets: int
+    max_margin_m: float | None
+    uav_missions_with_cost: int | None
+    uavs_left_area: int | None
+    guarantee: bool
+    scope: str | None
+
+
+class FlownDynamicsJson(TypedDict):
+    model: str
+    aircraft: str
+
+
+class FlownWindJson(TypedDict):
+    speed_m_s: float
+    from_deg: float
+    turbulence: str
+
+
+class RunJson(TypedDict, total=False):
+    """What flew, spread into the record's JSON: :class:`BatchedRun`'s fields, or :class:`SitlRun`'s."""
+
+    controller: str
+    episodes_requested: int
+    pilot: str
+    setpoints: str
+    scenario: str
+    dynamics: FlownDynamicsJson | None
+    wind: FlownWindJson | None
+    seed: int
+    clock: str
+    cost_limit: float
+    signing: bool
+
+
+class _ShieldJson(TypedDict, total=False):
+    shield: WorldMonitorJson | SitlMonitorJson
+
+
+class EvaluationRecordJson(RunJson):
+    """:meth:`EvaluationRecord.to_json` (module docstring): the figures, with the monitor ``shield``, then what flew
+    (:class:`RunJson`'s keys) and ``record_version``."""
+
+    success_rate: float | None
+    success_interval95: list[float] | None
+    mean_cost: float | None
+    mean_cost_interval95: list[float] | None
+    episodes: int
+    mean_mission_time_s: float | None
+    roles: dict[str, dict[str, float]]
+    """Per role, its known figures (:class:`RoleFigures`' fields that are not None)."""
+    worst_missions: list[WorstMissionJson]
+    shield: NotRequired[WorldMonitorJson | SitlMonitorJson]
+    record_version: int
+
+
 @dataclass(frozen=True)
 class EvaluationRecord:
     """M missions' figures, with 95% intervals: the Wilson score interval of the success rate and the bootstrap
@@ -170,9 +262,12 @@ class EvaluationRecord:
         assert isinstance(self.monitor, WorldMonitorFigures), "the batched world's monitor states its settings"
         return dataclasses.replace(self, monitor=dataclasses.replace(self.monitor, config=dict(config)))
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> EvaluationRecordJson:
         """The JSON object, its keys in the order the files have always had them."""
-        out: dict[str, Any] = {
+        shield: _ShieldJson = {}
+        if self.monitor is not None:
+            shield["shield"] = _monitor_json(self.monitor)
+        return {
             "success_rate": self.success_rate,
             "success_interval95": _interval_json(self.success_interval95),
             "mean_cost": self.mean_cost,
@@ -180,14 +275,13 @@ class EvaluationRecord:
             "episodes": self.episodes,
             "mean_mission_time_s": self.mean_mission_time_s,
             "roles": {role: _known(fig) for role, fig in self.roles.items()},
-            "worst_missions": [dataclasses.asdict(w) for w in self.worst_missions],
+            "worst_missions": [
+                {"mission": w.mission, "seed": w.seed, "role": w.role, "cost": w.cost} for w in self.worst_missions
+            ],
+            **shield,
+            **_run_json(self.run),
+            "record_version": RECORD_VERSION,
         }
-        if self.monitor is not None:
-            out["shield"] = _monitor_json(self.monitor)
-        if self.run is not None:
-            out.update(dataclasses.asdict(self.run))
-        out["record_version"] = RECORD_VERSION
-        return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> EvaluationRecord:
@@ -231,11 +325,62 @@ def _known(figures: RoleFigures) -> dict[str, float]:
     return {k: v for k, v in dataclasses.asdict(figures).items() if v is not None}
 
 
-def _monitor_json(monitor: RecordedMonitor) -> dict[str, Any]:
-    out = dataclasses.asdict(monitor)
-    if isinstance(monitor, WorldMonitorFigures) and monitor.config is None:
-        del out["config"]
+def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJson:
+    if isinstance(monitor, SitlMonitorFigures):
+        return {
+            "uav_missions": monitor.uav_missions,
+            "interventions_per_uav_mission": monitor.interventions_per_uav_mission,
+            "max_interventions_per_uav_mission": monitor.max_interventions_per_uav_mission,
+            "backup_time_fraction": monitor.backup_time_fraction,
+            "unprotected_time_fraction": monitor.unprotected_time_fraction,
+            "decisions": monitor.decisions,
+            "resets": monitor.resets,
+            "max_margin_m": monitor.max_margin_m,
+            "uav_missions_with_cost": monitor.uav_missions_with_cost,
+            "uavs_left_area": monitor.uavs_left_area,
+            "guarantee": monitor.guarantee,
+            "scope": monitor.scope,
+        }
+    out: WorldMonitorJson = {
+        "interventions_per_uav_mission": monitor.interventions_per_uav_mission,
+        "max_interventions_per_uav_mission": monitor.max_interventions_per_uav_mission,
+        "max_switches_per_uav_mission": monitor.max_switches_per_uav_mission,
+        "backup_time_fraction": monitor.backup_time_fraction,
+        "unprotected_time_fraction": monitor.unprotected_time_fraction,
+        "uav_missions_with_cost": monitor.uav_missions_with_cost,
+        "uavs_left_area": monitor.uavs_left_area,
+        "roles": {
+            role: {
+                "interventions_per_mission": r.interventions_per_mission,
+                "backup_time_fraction": r.backup_time_fraction,
+            }
+            for role, r in monitor.roles.items()
+        },
+    }
+    if monitor.config is not None:
+        out["config"] = copy.deepcopy(monitor.config)  # as dataclasses.asdict copied it
     return out
+
+
+def _run_json(run: BatchedRun | SitlRun | None) -> RunJson:
+    """What flew, as the record's JSON spreads it (its fields in order; nothing for None)."""
+    if run is None:
+        return {}
+    if isinstance(run, BatchedRun):
+        return {"controller": run.controller, "scenario": run.scenario, "seed": run.seed, "cost_limit": run.cost_limit}
+    d, w = run.dynamics, run.wind
+    return {
+        "episodes_requested": run.episodes_requested,
+        "pilot": run.pilot,
+        "setpoints": run.setpoints,
+        "scenario": run.scenario,
+        "dynamics": None if d is None else {"model": d.model, "aircraft": d.aircraft},
+        "wind": None if w is None else {"speed_m_s": w.speed_m_s, "from_deg": w.from_deg, "turbulence": w.turbulence},
+        "seed": run.seed,
+        "clock": run.clock,
+        "cost_limit": run.cost_limit,
+        "signing": run.signing,
+    }
 
 
 def _monitor(data: Mapping[str, Any]) -> RecordedMonitor:

@@ -30,6 +30,7 @@ import numpy as np
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import replace_durably
+from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import MANIFEST, check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import (
     FORMAT,
@@ -52,14 +53,14 @@ IR_VERSION = 8
 """The ONNX IR version that goes with :data:`OPSET` (a newer IR would shut out older runtimes for nothing)."""
 
 
-def checkpoint_actor(checkpoint: Path) -> tuple[dict[str, Any], Layers]:
+def checkpoint_actor(checkpoint: Path) -> tuple[ActorMeta, Layers]:
     """(meta, layers) of a role checkpoint's deterministic actor: what ``<role>.npz`` holds (imports torch)."""
     from torch import nn
 
     from tssac_core.deploy.policy import Policy
 
     policy = Policy.load(checkpoint)
-    meta = {
+    meta: ActorMeta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         **policy.info.fields(),
@@ -78,6 +79,7 @@ def export_actor(checkpoint: str | Path, out: str | Path | None = None) -> Path:
     """Write the deterministic actor of a role checkpoint as ``<role>.npz`` beside it (or to ``out``), atomically."""
     src = Path(checkpoint)
     meta, layers = checkpoint_actor(src)
+    # Any: np.savez's keywords include allow_pickle (a bool), which a dict of arrays passed as ** would clash with.
     arrays: dict[str, Any] = {"meta": np.array(json.dumps(meta))}
     for i, (w, b) in enumerate(layers):
         arrays[f"w{i}"] = w
@@ -124,7 +126,7 @@ def export_paths(targets: Sequence[str]) -> list[Path]:
     return found
 
 
-def source_actor(models: Path, role: Role) -> tuple[Path, dict[str, Any], Layers]:
+def source_actor(models: Path, role: Role) -> tuple[Path, ActorMeta, Layers]:
     """(file, meta, layers) of the actor ``role`` flies from ``models`` (:func:`pilot_file`: the fresh .npz, numpy
     only; else the .pt, through torch), after the manifest is checked for that file."""
     src = pilot_file(models, role)
@@ -133,14 +135,14 @@ def source_actor(models: Path, role: Role) -> tuple[Path, dict[str, Any], Layers
     return src, {**meta, "source": src.name, "source_sha256": sha256_file(src)}, layers
 
 
-def onnx_metadata(meta: dict[str, Any]) -> dict[str, str]:
+def onnx_metadata(meta: ActorMeta) -> dict[str, str]:
     """The ``metadata_props`` of ``<role>.onnx``: the numpy actor's metadata less what the graph states itself (format
     and sizes), each value a string (JSON for numbers and nested values)."""
     skip = {"format", "format_version", "obs_dim", "act_dim", "hidden_sizes"}
     return {k: v if isinstance(v, str) else json.dumps(v) for k, v in meta.items() if k not in skip}
 
 
-def actor_model(meta: dict[str, Any], layers: Layers) -> Any:
+def actor_model(meta: ActorMeta, layers: Layers) -> Any:
     """The ONNX model (``onnx.ModelProto``) of a numpy actor: obs (n, obs_dim) -> Gemm, Relu per hidden layer ->
     Gemm -> Slice of the mean half (the first act_dim outputs) -> Tanh -> action (n, act_dim), what
     :class:`~tssac_core.deploy.numpy_actor.NumpyPolicy` computes; checked by ``onnx.checker``."""
@@ -195,7 +197,7 @@ def checked_model(
     return model
 
 
-def export_onnx(models: Path, out: Path, only: Sequence[Role] | None = None) -> list[tuple[Path, dict[str, Any]]]:
+def export_onnx(models: Path, out: Path, only: Sequence[Role] | None = None) -> list[tuple[Path, ActorMeta]]:
     """Write the actor every role of ``models`` flies (of the roles ``only``, if given) as ``out/<role>.onnx`` (each
     atomically) and record them in ``out/SHA256SUMS``; ``out`` is made if missing and must hold no .pt or .npz (one
     format per directory). Returns each file written with the metadata of the actor it was made from."""
@@ -291,7 +293,7 @@ def main_onnx(targets: Sequence[str], out: Path | None) -> int:
     return 0
 
 
-def _shape(meta: dict[str, Any]) -> str:
+def _shape(meta: ActorMeta) -> str:
     """The actor's layer sizes, ``24->128->128->4``."""
     return "->".join(str(n) for n in [meta["obs_dim"], *meta["hidden_sizes"], 2 * int(meta["act_dim"])])
 

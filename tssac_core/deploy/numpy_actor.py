@@ -30,17 +30,19 @@ import logging
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from tssac_core.common.errors import CheckpointError, check_action_repeat
+from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
 
 FORMAT = "tssac-actor-npz"
 FORMAT_VERSION = 1
+
 
 logger = logging.getLogger(__name__)
 
@@ -65,7 +67,7 @@ def sha256_file(path: Path) -> str:
 class NumpyPolicy:
     """The deterministic actor of an exported ``<role>.npz``: ``act(obs) -> action`` in [-1, 1], float64."""
 
-    def __init__(self, meta: dict[str, Any], layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def __init__(self, meta: ActorMeta, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
         self.meta = meta
         self.role = Role(meta["role"])
         self.observation_mode = ObservationMode(meta["observation_mode"])
@@ -103,7 +105,7 @@ class NumpyPolicy:
     """The action for ``obs`` (one (d,) or a batch (n, d)): what a gymnasium user calls."""
 
 
-def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarray]]]:
+def read_actor(p: Path) -> tuple[ActorMeta, list[tuple[np.ndarray, np.ndarray]]]:
     """(meta, layers) of an exported actor; CheckpointError (one line) for anything wrong with the file."""
     if not p.is_file():
         raise CheckpointError(f"{p}: exported actor not found")
@@ -113,7 +115,7 @@ def read_actor(p: Path) -> tuple[dict[str, Any], list[tuple[np.ndarray, np.ndarr
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise CheckpointError(f"{p}: not a readable .npz file ({type(exc).__name__})") from None
     try:
-        meta = json.loads(str(arrays.pop("meta")))
+        meta: ActorMeta = json.loads(str(arrays.pop("meta")))
     except (KeyError, ValueError):
         raise CheckpointError(f"{p}: not an exported TSSAC actor (no readable meta)") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:

@@ -19,8 +19,11 @@ import numpy as np
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
+from tssac_core.algos.onpolicy.ppo import CpoState, PpoState
+from tssac_core.algos.sac_lagrangian import SacState
 from tssac_core.common.errors import CheckpointError, check_action_repeat
 from tssac_core.common.files import replace_durably
+from tssac_core.deploy.actor_meta import CheckpointFields
 from tssac_core.deploy.manifest import check_models, warn_once
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.scenario import ROLES, Role
@@ -45,7 +48,7 @@ class CheckpointInfo:
     action_repeat: int = 1
     """The decision interval it was trained with: hold each action for this many 0.1 s steps."""
 
-    def fields(self) -> dict[str, Any]:
+    def fields(self) -> CheckpointFields:
         """As plain JSON values: what a checkpoint (and an exported actor) stores beside the weights."""
         return {
             "role": self.role.value,
@@ -79,7 +82,7 @@ def save_role_checkpoint(
     path: str | Path,
     info: CheckpointInfo,
     actor_state: dict[str, torch.Tensor],
-    learner_state: dict[str, Any] | None,
+    learner_state: SacState | PpoState | CpoState | None,
 ) -> None:
     """Write a role checkpoint atomically (a crash never leaves a half-written file)."""
     payload = {
@@ -119,10 +122,11 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def learner_state(path: str | Path) -> dict[str, Any]:
+def learner_state(path: str | Path) -> SacState:
     """The full learner state a role checkpoint carries for transfer and fine-tuning; CheckpointError if the
-    file has none (a compacted checkpoint holds the actor only)."""
-    state = read_checkpoint(path).get("learner")
+    file has none (a compacted checkpoint holds the actor only). Not checked further here: loading it into a
+    learner (``transfer``) raises KeyError or RuntimeError for one of another shape."""
+    state: SacState | None = read_checkpoint(path).get("learner")
     if not isinstance(state, dict):
         raise CheckpointError(
             f"{path}: holds the actor only (compacted), not the learner state that transfer and --init-from need"

@@ -23,10 +23,10 @@ import dataclasses
 import enum
 import hashlib
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -134,6 +134,23 @@ class MonitorPerEpisode:
     interventions: np.ndarray
 
 
+PerEpisodeJson = TypedDict(
+    "PerEpisodeJson",
+    {
+        "success": list[bool],
+        "cost": list[list[float]],
+        "return": NotRequired[list[list[float]]],
+        "out_of_area": NotRequired[list[list[bool]]],
+        "backup_steps": NotRequired[list[list[float]]],
+        "flown_steps": NotRequired[list[list[float]]],
+        "interventions": NotRequired[list[list[float]]],
+    },
+)
+"""A cache file's ``per_episode`` (:func:`evaluate`): per mission, and per role where a list of lists; ``return`` for
+the 50-layout evaluations, ``out_of_area`` for the tails, the counts with the monitor. (Functional syntax: ``return``
+is a keyword.)"""
+
+
 @dataclass(frozen=True)
 class PerEpisode:
     """One evaluation's figures per mission: M missions, three roles."""
@@ -150,22 +167,20 @@ class PerEpisode:
     """With the monitor: its counts."""
 
     @classmethod
-    def from_record(cls, data: dict[str, Any]) -> PerEpisode:
+    def from_record(cls, data: PerEpisodeJson) -> PerEpisode:
         """From a cache file's ``per_episode``."""
-
-        def optional(key: str, dtype: type) -> np.ndarray | None:
-            return np.asarray(data[key], dtype=dtype) if key in data else None
-
         monitor = None
         if "backup_steps" in data:
             monitor = MonitorPerEpisode(
-                *(np.asarray(data[key], dtype=np.float64) for key in ("backup_steps", "flown_steps", "interventions"))
+                np.asarray(data["backup_steps"], dtype=np.float64),
+                np.asarray(data["flown_steps"], dtype=np.float64),
+                np.asarray(data["interventions"], dtype=np.float64),
             )
         return cls(
             success=np.asarray(data["success"], dtype=bool),
             cost=np.asarray(data["cost"], dtype=np.float64),
-            returns=optional("return", np.float64),
-            out_of_area=optional("out_of_area", bool),
+            returns=np.asarray(data["return"], dtype=np.float64) if "return" in data else None,
+            out_of_area=np.asarray(data["out_of_area"], dtype=bool) if "out_of_area" in data else None,
             monitor=monitor,
         )
 
@@ -235,11 +250,24 @@ def team_digest(team: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def cache_key(team: Path | None, spec: EvalSpec) -> dict[str, Any]:
+class CacheKey(TypedDict):
+    """What a cached evaluation was made from (:func:`cache_key`)."""
+
+    team: str
+    """The team's digest (:func:`team_digest`), or the guidance controller's name."""
+    scenario_digest: str
+    seed: int
+    episodes: int
+    layouts: NotRequired[str]
+    shield: NotRequired[dict[str, float | Sequence[float]]]
+    """The monitor's settings (ShieldConfig's fields)."""
+
+
+def cache_key(team: Path | None, spec: EvalSpec) -> CacheKey:
     """What a cached evaluation must have been made from to stand for ``team`` flying ``spec``: the pilots, the task,
     the seed, the number of layouts, their rule (a key without ``layouts`` is LayoutRule.IN_TURN, the only rule when
     the 50-layout caches were written) and the monitor's settings."""
-    key: dict[str, Any] = {
+    key: CacheKey = {
         "team": team_digest(team) if team is not None else GUIDANCE,
         "scenario_digest": load(spec.scenario).digest(),
         "seed": spec.seed,
@@ -295,20 +323,16 @@ def evaluate(team: Path | None, spec: EvalSpec, cache: Path) -> TeamEvaluation:
             cost_limit=scenario.cost_limit,
         ),
     )
-    per_episode: dict[str, Any] = {"success": results.success.tolist(), "cost": results.cost.tolist()}
+    per_episode: PerEpisodeJson = {"success": results.success.tolist(), "cost": results.cost.tolist()}
     if spec.label.is_tail:
         per_episode["out_of_area"] = results.out_of_area.tolist()
     else:
         per_episode["return"] = results.returns.tolist()
     if results.monitor is not None:
         record = record.with_monitor_config(dataclasses.asdict(ShieldConfig()))
-        per_episode.update(
-            {
-                "backup_steps": results.monitor.backup_steps.tolist(),
-                "flown_steps": results.monitor.flown_steps.tolist(),
-                "interventions": results.monitor.interventions.tolist(),
-            }
-        )
+        per_episode["backup_steps"] = results.monitor.backup_steps.tolist()
+        per_episode["flown_steps"] = results.monitor.flown_steps.tolist()
+        per_episode["interventions"] = results.monitor.interventions.tolist()
     data = {**record.to_json(), "cache_key": cache_key(team, spec), "per_episode": per_episode}
     write_json(cache, data)
     return TeamEvaluation.from_record(data)

@@ -14,11 +14,10 @@ SAC-Lagrangian, and the task success averaged over the role's epochs (which also
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Literal, NotRequired, TypedDict, cast
 
 import numpy as np
 
@@ -51,12 +50,21 @@ PAPER_TABLE4: dict[str, tuple[float, float]] = {
 PAPER_EPOCHS = 50
 """Table 3: epochs per role."""
 TRANSFER_THRESHOLD = 0.9
-TRANSFER_ROLES = ("detect", "strike")
+TransferRole = Literal["detect", "strike"]
+"""The roles that have a previous role to transfer from."""
+TRANSFER_ROLES: tuple[TransferRole, ...] = ("detect", "strike")
 TRANSFER_SIDES = ("tssac", "sac_lag")
 """The grid's own curricula compared for the transfer speed-up: with transfer, without."""
 
 
 # ------------------------------------------------------------------------------ figures over seeds
+
+
+class OverSeedsJson(TypedDict):
+    mean: float | None
+    std: float | None
+    per_seed: dict[str, float]
+    """Seed (as a string) -> its figure."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +75,7 @@ class OverSeeds:
     std: float | None
     per_seed: dict[int, float]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> OverSeedsJson:
         return {"mean": self.mean, "std": self.std, "per_seed": {str(s): v for s, v in self.per_seed.items()}}
 
 
@@ -86,6 +94,14 @@ def within_limit(evaluation: TeamEvaluation) -> float:
     return float(np.mean(evaluation.per_episode.cost <= evaluation.cost_limit))
 
 
+class CostPoolJson(TypedDict):
+    uav_missions: int
+    mean: float | None
+    ci95: list[float] | None
+    over_limit: int
+    largest: list[float]
+
+
 @dataclass(frozen=True)
 class CostPool:
     """The mean hazard cost per UAV per mission over every seed's missions pooled (:func:`pooled_cost`)."""
@@ -99,7 +115,7 @@ class CostPool:
     largest: list[float]
     """The three largest single costs."""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> CostPoolJson:
         return {
             "uav_missions": self.uav_missions,
             "mean": self.mean,
@@ -166,6 +182,27 @@ class MonitorFigures:
     interventions_per_uav_mission: float
 
 
+class TailPoolJson(TypedDict):
+    """:class:`TailPool` in ``experiments.json``: the counts, then :class:`TailFigures`' fields if there are
+    missions, then :class:`MonitorFigures`' if every evaluation was flown with the monitor."""
+
+    missions: int
+    seeds: int
+    success_rate: NotRequired[float]
+    success_interval95: NotRequired[list[float]]
+    mean_cost: NotRequired[float]
+    mean_cost_interval95: NotRequired[list[float]]
+    within_cost_limit: NotRequired[float]
+    within_cost_limit_per_role: NotRequired[dict[str, float]]
+    over_limit: NotRequired[int]
+    cvar95_cost: NotRequired[float]
+    largest: NotRequired[list[float]]
+    left_area: NotRequired[int]
+    tasks_finished: NotRequired[dict[str, int] | None]
+    backup_time_fraction: NotRequired[float]
+    interventions_per_uav_mission: NotRequired[float]
+
+
 @dataclass(frozen=True)
 class TailPool:
     """The tail evaluations of an algorithm's seeds pooled into one sample of missions."""
@@ -177,14 +214,23 @@ class TailPool:
     monitor: MonitorFigures | None
     """None unless every pooled evaluation was flown with the monitor."""
 
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"missions": self.missions, "seeds": self.seeds}
-        if self.figures is not None:
-            out.update(dataclasses.asdict(self.figures))
-            out["success_interval95"] = list(self.figures.success_interval95)
-            out["mean_cost_interval95"] = list(self.figures.mean_cost_interval95)
-        if self.monitor is not None:
-            out.update(dataclasses.asdict(self.monitor))
+    def to_json(self) -> TailPoolJson:
+        out: TailPoolJson = {"missions": self.missions, "seeds": self.seeds}
+        if (f := self.figures) is not None:
+            out["success_rate"] = f.success_rate
+            out["success_interval95"] = list(f.success_interval95)
+            out["mean_cost"] = f.mean_cost
+            out["mean_cost_interval95"] = list(f.mean_cost_interval95)
+            out["within_cost_limit"] = f.within_cost_limit
+            out["within_cost_limit_per_role"] = dict(f.within_cost_limit_per_role)
+            out["over_limit"] = f.over_limit
+            out["cvar95_cost"] = f.cvar95_cost
+            out["largest"] = list(f.largest)
+            out["left_area"] = f.left_area
+            out["tasks_finished"] = dict(f.tasks_finished) if f.tasks_finished is not None else None
+        if (m := self.monitor) is not None:
+            out["backup_time_fraction"] = m.backup_time_fraction
+            out["interventions_per_uav_mission"] = m.interventions_per_uav_mission
         return out
 
 
@@ -242,10 +288,25 @@ def _pooled_tasks(evaluations: list[TeamEvaluation]) -> dict[str, int] | None:
     return counts
 
 
+class SeedFiguresJson(TypedDict):
+    success_rate: float
+    mean_cost: float
+
+
 @dataclass(frozen=True)
 class SeedFigures:
     success_rate: float
     mean_cost: float
+
+    def to_json(self) -> SeedFiguresJson:
+        return {"success_rate": self.success_rate, "mean_cost": self.mean_cost}
+
+
+class TailRowJson(TailPoolJson):
+    """:class:`TailRow` in ``experiments.json``: its pool's figures, then which seeds were flown and theirs."""
+
+    flown_seeds: list[int]
+    per_seed: dict[str, SeedFiguresJson]
 
 
 @dataclass(frozen=True)
@@ -256,11 +317,11 @@ class TailRow:
     flown_seeds: list[int]
     per_seed: dict[int, SeedFigures]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> TailRowJson:
         return {
             **self.pool.to_json(),
             "flown_seeds": self.flown_seeds,
-            "per_seed": {str(s): dataclasses.asdict(f) for s, f in self.per_seed.items()},
+            "per_seed": {str(s): f.to_json() for s, f in self.per_seed.items()},
         }
 
 
@@ -277,6 +338,13 @@ def tail_row(jobs: list[Job], label: EvalLabel, evaluations: Evaluations) -> Tai
 # ----------------------------------------------------------------------------- rows per algorithm
 
 
+class EvalRowJson(TypedDict):
+    success_rate: OverSeedsJson
+    mean_cost: OverSeedsJson
+    within_cost_limit: OverSeedsJson
+    pooled_cost: CostPoolJson
+
+
 @dataclass(frozen=True)
 class EvalRow:
     """An algorithm's figures on one of the 50-layout evaluations (Table 4, figure 11)."""
@@ -286,7 +354,7 @@ class EvalRow:
     within_cost_limit: OverSeeds
     pooled_cost: CostPool
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> EvalRowJson:
         return {
             "success_rate": self.success_rate.to_json(),
             "mean_cost": self.mean_cost.to_json(),
@@ -312,13 +380,44 @@ class PaperFigures:
     success_rate: float
     mean_cost: float
 
+    def to_json(self) -> SeedFiguresJson:
+        return {"success_rate": self.success_rate, "mean_cost": self.mean_cost}
 
-TAIL_FIELDS = {
+
+TailField = Literal["tail", "tail_monitor", "generalization_tail"]
+
+TAIL_FIELDS: dict[EvalLabel, TailField] = {
     EvalLabel.TAIL: "tail",
     EvalLabel.TAIL_MONITOR: "tail_monitor",
     EvalLabel.GENERALIZATION_TAIL: "generalization_tail",
 }
 """The field of :class:`AlgorithmSummary` and :class:`GuidanceSummary` that holds each tail evaluation."""
+
+
+class _TailRowsJson(TypedDict, total=False):
+    tail: TailRowJson
+    tail_monitor: TailRowJson
+    generalization_tail: TailRowJson
+
+
+class _GeneralizationJson(TypedDict, total=False):
+    generalization: EvalRowJson
+
+
+class AlgorithmSummaryJson(TypedDict):
+    """:class:`AlgorithmSummary` in ``experiments.json`` (the tails after ``seeds``, if the grid flies them)."""
+
+    name: str
+    algo: str
+    penalty: float
+    seeds: list[int]
+    tail: NotRequired[TailRowJson]
+    tail_monitor: NotRequired[TailRowJson]
+    generalization_tail: NotRequired[TailRowJson]
+    random: EvalRowJson
+    generalization: NotRequired[EvalRowJson]
+    training_wall_s: OverSeedsJson
+    paper: SeedFiguresJson | None
 
 
 @dataclass(frozen=True)
@@ -345,17 +444,32 @@ class AlgorithmSummary:
         """The row of the tail evaluation ``label`` (None: the grid does not fly it)."""
         return cast(TailRow | None, getattr(self, TAIL_FIELDS[label]))
 
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"name": self.name, "algo": self.algo, "penalty": self.penalty, "seeds": self.seeds}
+    def to_json(self) -> AlgorithmSummaryJson:
+        tails: _TailRowsJson = {}
         for label in TAIL_LABELS:
             if (tail := self.tail_of(label)) is not None:
-                out[label.value] = tail.to_json()
-        out["random"] = self.random.to_json()
+                tails[TAIL_FIELDS[label]] = tail.to_json()
+        generalization: _GeneralizationJson = {}
         if self.generalization is not None:
-            out["generalization"] = self.generalization.to_json()
-        out["training_wall_s"] = self.training_wall_s.to_json()
-        out["paper"] = dataclasses.asdict(self.paper) if self.paper is not None else None
-        return out
+            generalization["generalization"] = self.generalization.to_json()
+        return {
+            "name": self.name,
+            "algo": self.algo,
+            "penalty": self.penalty,
+            "seeds": self.seeds,
+            **tails,
+            "random": self.random.to_json(),
+            **generalization,
+            "training_wall_s": self.training_wall_s.to_json(),
+            "paper": self.paper.to_json() if self.paper is not None else None,
+        }
+
+
+class GuidanceRowJson(TypedDict):
+    success_rate: float
+    mean_cost: float
+    episodes: int
+    within_cost_limit: float
 
 
 @dataclass(frozen=True)
@@ -366,6 +480,22 @@ class GuidanceRow:
     mean_cost: float
     episodes: int
     within_cost_limit: float
+
+    def to_json(self) -> GuidanceRowJson:
+        return {
+            "success_rate": self.success_rate,
+            "mean_cost": self.mean_cost,
+            "episodes": self.episodes,
+            "within_cost_limit": self.within_cost_limit,
+        }
+
+
+class GuidanceSummaryJson(TypedDict):
+    random: GuidanceRowJson
+    generalization: NotRequired[GuidanceRowJson]
+    tail: NotRequired[TailPoolJson]
+    tail_monitor: NotRequired[TailPoolJson]
+    generalization_tail: NotRequired[TailPoolJson]
 
 
 @dataclass(frozen=True)
@@ -382,13 +512,13 @@ class GuidanceSummary:
         """The tail evaluation ``label`` (None: the grid does not fly it)."""
         return cast(TailPool | None, getattr(self, TAIL_FIELDS[label]))
 
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"random": dataclasses.asdict(self.random)}
+    def to_json(self) -> GuidanceSummaryJson:
+        out: GuidanceSummaryJson = {"random": self.random.to_json()}
         if self.generalization is not None:
-            out["generalization"] = dataclasses.asdict(self.generalization)
+            out["generalization"] = self.generalization.to_json()
         for label in TAIL_LABELS:
             if (tail := self.tail_of(label)) is not None:
-                out[label.value] = tail.to_json()
+                out[TAIL_FIELDS[label]] = tail.to_json()
         return out
 
 
@@ -443,6 +573,17 @@ def guidance_summary(labels: Sequence[EvalLabel], evaluations: Evaluations) -> G
 # ----------------------------------------------------------------------------------- transfer
 
 
+class StepsFiguresJson(TypedDict):
+    entry: str | None
+    per_seed: dict[str, int | None]
+    counted: dict[str, int]
+    seeds: int
+    reached: int
+    mean_steps: float | None
+    mean_is_lower_bound: bool
+    mean_task_success: OverSeedsJson
+
+
 @dataclass(frozen=True)
 class StepsFigures:
     """Decisions until a role first reached a task-success level in each run of one side, and their mean."""
@@ -461,7 +602,7 @@ class StepsFigures:
     mean_task_success: OverSeeds
     """Task success in training averaged over the role's epochs (the area under its learning curve)."""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> StepsFiguresJson:
         return {
             "entry": self.entry,
             "per_seed": {str(s): v for s, v in self.per_seed.items()},
@@ -501,6 +642,22 @@ def steps_figures(jobs: list[Job], role: str, threshold: float, entry: str | Non
     )
 
 
+class SpeedupRoleJson(TypedDict):
+    """A role in ``transfer_speedup``: the sides named by their algorithm (:data:`TRANSFER_SIDES`)."""
+
+    tssac: StepsFiguresJson
+    sac_lag: StepsFiguresJson
+    speedup: float | None
+    speedup_is_lower_bound: bool
+
+
+TransferRoleJson = TypedDict(
+    "TransferRoleJson",
+    {"with": StepsFiguresJson, "without": StepsFiguresJson, "speedup": float | None, "speedup_is_lower_bound": bool},
+)
+"""A role in ``transfer_experiment``: the sides named with and without."""
+
+
 @dataclass(frozen=True)
 class RoleComparison:
     """One role's decisions to the level with transfer and without, and the speed-up (:func:`compare`)."""
@@ -513,10 +670,20 @@ class RoleComparison:
     speedup_is_lower_bound: bool
     """Only the without-transfer mean is a lower bound."""
 
-    def to_json(self, with_key: str, without_key: str) -> dict[str, Any]:
+    def by_algorithm(self) -> SpeedupRoleJson:
+        """As ``transfer_speedup`` writes it: with transfer is TSSAC, without is SAC-Lagrangian."""
         return {
-            with_key: self.with_transfer.to_json(),
-            without_key: self.without_transfer.to_json(),
+            "tssac": self.with_transfer.to_json(),
+            "sac_lag": self.without_transfer.to_json(),
+            "speedup": self.speedup,
+            "speedup_is_lower_bound": self.speedup_is_lower_bound,
+        }
+
+    def with_without(self) -> TransferRoleJson:
+        """As ``transfer_experiment`` writes it."""
+        return {
+            "with": self.with_transfer.to_json(),
+            "without": self.without_transfer.to_json(),
             "speedup": self.speedup,
             "speedup_is_lower_bound": self.speedup_is_lower_bound,
         }
@@ -530,21 +697,30 @@ def compare(fast: StepsFigures, slow: StepsFigures) -> RoleComparison:
     return RoleComparison(fast, slow, ratio, ratio is not None and slow.mean_is_lower_bound)
 
 
+class TransferSpeedupJson(TypedDict):
+    threshold: float
+    detect: NotRequired[SpeedupRoleJson]
+    strike: NotRequired[SpeedupRoleJson]
+
+
 @dataclass(frozen=True)
 class TransferSpeedup:
     """Transfer inside the grid's own curricula: per role, TSSAC (with) against SAC-Lagrangian (without)."""
 
     threshold: float
-    roles: dict[str, RoleComparison]
+    roles: dict[TransferRole, RoleComparison]
 
-    def to_json(self) -> dict[str, Any]:
-        return {"threshold": self.threshold, **{role: r.to_json(*TRANSFER_SIDES) for role, r in self.roles.items()}}
+    def to_json(self) -> TransferSpeedupJson:
+        out: TransferSpeedupJson = {"threshold": self.threshold}
+        for role, r in self.roles.items():
+            out[role] = r.by_algorithm()
+        return out
 
 
 def transfer_speedup(grid: Grid, finished: list[Job]) -> TransferSpeedup:
     """Decisions until >= 90% task success in the grid's own curricula, TSSAC vs SAC-Lagrangian, per role
     (mean over finished seeds; :func:`steps_figures`, :func:`compare`)."""
-    roles = {}
+    roles: dict[TransferRole, RoleComparison] = {}
     for role in TRANSFER_ROLES:
         sides = []
         for algo in TRANSFER_SIDES:
@@ -555,6 +731,25 @@ def transfer_speedup(grid: Grid, finished: list[Job]) -> TransferSpeedup:
     return TransferSpeedup(TRANSFER_THRESHOLD, roles)
 
 
+class TransferFiguresJson(TypedDict):
+    threshold: float
+    teammates: str
+    epochs: int
+    steps_per_epoch: int
+    roles: list[str]
+    detect: NotRequired[TransferRoleJson]
+    strike: NotRequired[TransferRoleJson]
+
+
+def transfer_role(role: str) -> TransferRole:
+    """``role`` as one of the roles transfer is measured for (the grid's reader allows no other)."""
+    if role == "detect":
+        return "detect"
+    if role == "strike":
+        return "strike"
+    raise ValueError(f"no transfer into the {role} role")
+
+
 @dataclass(frozen=True)
 class TransferFigures:
     """The transfer experiment's figures (``grid.transfer``): per role, both sides' decisions to the level."""
@@ -563,18 +758,20 @@ class TransferFigures:
     teammates: str
     epochs: int
     steps_per_epoch: int
-    roles: tuple[str, ...]
-    per_role: dict[str, RoleComparison]
+    roles: tuple[TransferRole, ...]
+    per_role: dict[TransferRole, RoleComparison]
 
-    def to_json(self) -> dict[str, Any]:
-        return {
+    def to_json(self) -> TransferFiguresJson:
+        out: TransferFiguresJson = {
             "threshold": self.threshold,
             "teammates": self.teammates,
             "epochs": self.epochs,
             "steps_per_epoch": self.steps_per_epoch,
             "roles": list(self.roles),
-            **{role: r.to_json("with", "without") for role, r in self.per_role.items()},
         }
+        for role, r in self.per_role.items():
+            out[role] = r.with_without()
+        return out
 
 
 def transfer_experiment(grid: Grid, runs: list[Job]) -> TransferFigures | None:
@@ -583,8 +780,9 @@ def transfer_experiment(grid: Grid, runs: list[Job]) -> TransferFigures | None:
     t = grid.transfer
     if t is None:
         return None
-    per_role = {}
-    for role in t.roles:
+    roles = tuple(transfer_role(role) for role in t.roles)
+    per_role: dict[TransferRole, RoleComparison] = {}
+    for role in roles:
         sides = []
         for entry in (t.with_transfer, t.without_transfer):
             jobs = [j for j in runs if j.role == role and j.entry == entry]
@@ -595,12 +793,26 @@ def transfer_experiment(grid: Grid, runs: list[Job]) -> TransferFigures | None:
         teammates=shown(t.teammates),
         epochs=t.epochs,
         steps_per_epoch=grid.train.steps_per_epoch,
-        roles=tuple(t.roles),
+        roles=roles,
         per_role=per_role,
     )
 
 
 # ------------------------------------------------------------------------------------- the whole
+
+
+class EvaluationInfoJson(TypedDict):
+    scenario: str
+    episodes: int
+    seed: int
+    generalization_scenario: str | None
+    tail_episodes: int | None
+    tail_seed: int | None
+    tail_monitor: bool | None
+    layouts: str
+    tail_layouts: str | None
+    generalization_tail_episodes: int | None
+    generalization_tail_seed: int | None
 
 
 @dataclass(frozen=True)
@@ -621,6 +833,28 @@ class EvaluationInfo:
     generalization_tail_episodes: int | None
     generalization_tail_seed: int | None
 
+    def to_json(self) -> EvaluationInfoJson:
+        return {
+            "scenario": self.scenario,
+            "episodes": self.episodes,
+            "seed": self.seed,
+            "generalization_scenario": self.generalization_scenario,
+            "tail_episodes": self.tail_episodes,
+            "tail_seed": self.tail_seed,
+            "tail_monitor": self.tail_monitor,
+            "layouts": self.layouts,
+            "tail_layouts": self.tail_layouts,
+            "generalization_tail_episodes": self.generalization_tail_episodes,
+            "generalization_tail_seed": self.generalization_tail_seed,
+        }
+
+
+class TrainingBudgetJson(TypedDict):
+    epochs_per_role: int
+    steps_per_epoch: int
+    action_repeat: int
+    paper_epochs_per_role: int
+
 
 @dataclass(frozen=True)
 class TrainingBudget:
@@ -628,6 +862,29 @@ class TrainingBudget:
     steps_per_epoch: int
     action_repeat: int
     paper_epochs_per_role: int
+
+    def to_json(self) -> TrainingBudgetJson:
+        return {
+            "epochs_per_role": self.epochs_per_role,
+            "steps_per_epoch": self.steps_per_epoch,
+            "action_repeat": self.action_repeat,
+            "paper_epochs_per_role": self.paper_epochs_per_role,
+        }
+
+
+class SummaryJson(TypedDict):
+    """``experiments.json``."""
+
+    grid: str
+    results: str
+    evaluation: EvaluationInfoJson
+    training: TrainingBudgetJson
+    cost_limit: float
+    algorithms: list[AlgorithmSummaryJson]
+    guidance: GuidanceSummaryJson
+    transfer_speedup: TransferSpeedupJson
+    transfer_experiment: TransferFiguresJson | None
+    left_out: list[str]
 
 
 @dataclass(frozen=True)
@@ -647,12 +904,12 @@ class Summary:
     left_out: list[str]
     """The grid's jobs not reported (not finished, or run with other settings)."""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> SummaryJson:
         return {
             "grid": self.grid,
             "results": self.results,
-            "evaluation": dataclasses.asdict(self.evaluation),
-            "training": dataclasses.asdict(self.training),
+            "evaluation": self.evaluation.to_json(),
+            "training": self.training.to_json(),
             "cost_limit": self.cost_limit,
             "algorithms": [a.to_json() for a in self.algorithms.values()],
             "guidance": self.guidance.to_json(),

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
-from tssac_core.common.evaluation_record import EvaluationRecord
+from tssac_core.common.evaluation_record import EvaluationRecord, EvaluationRecordJson
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import ROLES, SCENARIOS_DIR, load
 
@@ -36,6 +36,15 @@ class Target:
     """Mean hazard cost per UAV and mission."""
     min_within_limit: float | None = None
     """Every role's fraction of UAV-missions with a cost within C (None: not a target here)."""
+
+    def to_json(self) -> TargetJson:
+        return {
+            "scenario": self.scenario,
+            "missions": self.missions,
+            "min_success": self.min_success,
+            "max_mean_cost": self.max_mean_cost,
+            "min_within_limit": self.min_within_limit,
+        }
 
 
 TARGETS = (
@@ -61,25 +70,50 @@ def misses(target: Target, record: EvaluationRecord) -> list[str]:
     return missed
 
 
-def check_team(team: Path, seed: int, scale: float = 1.0) -> dict[str, Any]:
+class TargetJson(TypedDict):
+    scenario: str
+    missions: int
+    min_success: float
+    max_mean_cost: float
+    min_within_limit: float | None
+
+
+class TargetRow(TypedDict):
+    """One target flown by one team: the target, the first mission's seed, the record and what is missed."""
+
+    target: TargetJson
+    seed: int
+    summary: EvaluationRecordJson
+    misses: list[str]
+
+
+class TeamCheck(TypedDict):
+    """A team against every target (what ``--json`` holds per team)."""
+
+    team: str
+    meets_every_target: bool
+    targets: list[TargetRow]
+
+
+def check_team(team: Path, seed: int, scale: float = 1.0) -> TeamCheck:
     """Fly ``team`` on every target's missions (``scale`` times as many, at least 1); its summaries and misses."""
     from tssac_core.deploy.policy import load_team  # torch: after the arguments are parsed
 
     pilots = list(load_team(team))
-    rows = []
+    rows: list[TargetRow] = []
     first = seed
     for target in TARGETS:
         scenario = load(SCENARIOS_DIR / target.scenario)
         missions = max(1, round(target.missions * scale))
         record = fly_missions(scenario, pilots, missions, first).record(scenario.cost_limit)
         rows.append(
-            {"target": asdict(target), "seed": first, "summary": record.to_json(), "misses": misses(target, record)}
+            {"target": target.to_json(), "seed": first, "summary": record.to_json(), "misses": misses(target, record)}
         )
         first += missions
     return {"team": str(team), "meets_every_target": not any(r["misses"] for r in rows), "targets": rows}
 
 
-def line(row: dict[str, Any]) -> str:
+def line(row: TargetRow) -> str:
     """One target's figures with their intervals, and what is missed."""
     s = EvaluationRecord.from_json(row["summary"])
     assert s.success_interval95 is not None and s.mean_cost_interval95 is not None, "the batched world knows both"

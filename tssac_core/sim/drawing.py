@@ -5,14 +5,23 @@ that importing the world stays light; the callers choose the backend (Agg for fi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 from tssac_core.sim.scenario import Layout
 
 ROLE_COLOURS = {"decoy": "tab:blue", "detect": "tab:green", "strike": "black"}
 
 
-LEGEND_BESIDE: dict[str, Any] = {
+class LegendPlacement(TypedDict):
+    """Keyword arguments of matplotlib's ``Axes.legend`` that place it."""
+
+    fontsize: int
+    loc: Literal["upper left"]
+    bbox_to_anchor: tuple[float, float]
+    borderaxespad: float
+
+
+LEGEND_BESIDE: LegendPlacement = {
     "fontsize": 7,
     "loc": "upper left",
     "bbox_to_anchor": (1.02, 1.0),

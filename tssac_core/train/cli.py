@@ -25,7 +25,6 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from tssac_core.common.cli import EXIT_INTERRUPTED, UsageError, run, write_json
 from tssac_core.parallel.ray_cluster import RayTarget
@@ -73,7 +72,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
 
     from tssac_core.reporting.progress import progress_bar
     from tssac_core.train.loop import train_role
-    from tssac_core.train.rundir import prepare_run, shipped, write_plots
+    from tssac_core.train.rundir import MetricsRow, prepare_run, shipped, write_plots
     from tssac_core.train.tensorboard import EpochSink, open_sink
 
     cfg, scenario = prepare_run(cfg, out, resume)
@@ -83,7 +82,7 @@ def train_one(cfg: TrainConfig, out: Path, resume: bool, quiet: bool, tensorboar
     begin_invocation(out)
     sink: EpochSink | None = open_sink(tensorboard) if tensorboard is not None else None
 
-    def on_epoch(row: dict[str, Any]) -> None:
+    def on_epoch(row: MetricsRow) -> None:
         record_invocation(out, time.perf_counter() - start, Ended.RUNNING)  # a kill now costs this epoch at most
         if sink is not None:
             sink.write(row)

@@ -9,7 +9,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.varied_airframes import AirframeVariation
 from tssac_core.train.config import TrainConfig, reward_config
-from tssac_core.train.rundir import role_checkpoint
+from tssac_core.train.rundir import MetricsRow, role_checkpoint
 from tssac_core.train.validation import EpochSelector
 
 logger = logging.getLogger("tssac_core.train")
@@ -66,9 +65,9 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
     return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
 
 
-def reached_stop(cfg: TrainConfig, row: dict[str, Any]) -> bool:
+def reached_stop(cfg: TrainConfig, row: MetricsRow) -> bool:
     """The epoch's training task success reached ``cfg.stop_at_task_success`` (never when that is 0)."""
-    return cfg.stop_at_task_success > 0 and row["task_success"] >= cfg.stop_at_task_success
+    return cfg.stop_at_task_success > 0 and row.figures["task_success"] >= cfg.stop_at_task_success
 
 
 @dataclass
@@ -92,12 +91,11 @@ class EpochLog:
         self.tasks += step.episode_task[ended].astype(float).tolist()
         self.successes += step.episode_success[ended].astype(float).tolist()
 
-    def row(self, role: Role, epoch: int, env_steps: int, updates: int, steps: int) -> dict[str, Any]:
+    def row(self, role: Role, epoch: int, env_steps: int, updates: int, steps: int) -> MetricsRow:
         def mean(xs: list[float]) -> float:
             return float(np.mean(xs)) if xs else math.nan
 
-        row: dict[str, Any] = {
-            "role": role.value,
+        row: dict[str, float] = {
             "epoch": epoch,
             "env_steps": env_steps,
             "episodes": len(self.returns),
@@ -112,16 +110,16 @@ class EpochLog:
         row["env_steps_per_s"] = steps / self.env_time if self.env_time > 0 else math.nan
         row["updates_per_s"] = len(self.stats) / self.update_time if self.update_time > 0 else math.nan
         row["updates"] = updates
-        return row
+        return MetricsRow(role, row)
 
 
-def log_stop(role: Role, epoch: int, row: dict[str, Any]) -> None:
+def log_stop(role: Role, epoch: int, row: MetricsRow) -> None:
     logger.info(
         "%s: task success %.2f in epoch %d (%d decisions) reaches --stop-at-task-success: role done",
         role.value,
-        row["task_success"],
+        row.figures["task_success"],
         epoch,
-        row["env_steps"],
+        row.figures["env_steps"],
     )
 
 

@@ -34,7 +34,7 @@ import time
 from collections import deque
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -42,16 +42,18 @@ import torch
 from tssac_core.algos.onpolicy.cpo import Cpo
 from tssac_core.algos.onpolicy.gae import gae
 from tssac_core.algos.onpolicy.ppo import (
+    CpoState,
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
     OnPolicyStats,
     Ppo,
+    PpoState,
     evaluate_values,
     sample_actions,
 )
 from tssac_core.algos.replay import ReplayBuffer
-from tssac_core.algos.sac_lagrangian import SacLagrangian, transfer
+from tssac_core.algos.sac_lagrangian import SacLagrangian, SacState, transfer
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.policy import learner_state
 from tssac_core.sim.env import TaskStep
@@ -60,7 +62,8 @@ from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, onpolicy_config, sac_config
 from tssac_core.train.epoch import EpochLog
-from tssac_core.train.rundir import role_checkpoint
+from tssac_core.train.resume import LearnerResume, OffPolicyResume, OnPolicyResume, pcg64_state
+from tssac_core.train.rundir import MetricsRow, role_checkpoint
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -145,23 +148,25 @@ class OffPolicyLearner:
     def end_epoch(self, log: EpochLog) -> tuple[int, dict[str, float]]:
         return 0, {}
 
-    def log_epoch(self, epoch: int, row: dict[str, Any]) -> None:
+    def log_epoch(self, epoch: int, row: MetricsRow) -> None:
         pass
 
-    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], SacState]:
         state = self.learner.state_dict()
         return state["actor"], state
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> OffPolicyResume:
         return {
             "learner": self.learner.state_dict(),
             "buffer": self.buffer.state_dict(),
-            "rng": self.rng.bit_generator.state,
+            "rng": pcg64_state(self.rng),
             "transferred": self.transferred,
             "recent_costs": list(self.recent_costs),
         }
 
-    def restore(self, state: dict[str, Any]) -> None:
+    def restore(self, state: LearnerResume) -> None:
+        if "buffer" not in state:
+            raise CheckpointError("an on-policy learner's resume state cannot resume an off-policy learner")
         self.learner.load_state_dict(state["learner"])
         self.buffer.load_state_dict(state["buffer"])
         self.rng.bit_generator.state = state["rng"]
@@ -320,21 +325,21 @@ class OnPolicyLearner:
         self._summary = f"measured J_C {episode_cost:.2f} over L {episode_length:.0f}, kl {stats.approx_kl:.4f}{cpo}"
         return stats.policy_steps, stats_columns(stats, update_time)
 
-    def log_epoch(self, epoch: int, row: dict[str, Any]) -> None:
+    def log_epoch(self, epoch: int, row: MetricsRow) -> None:
         logger.info(
             "%s %s epoch %d: return %.2f, cost %.2f, %s",
             self.role.value,
             self.cfg.algo,
             epoch,
-            row["return"],
-            row["cost"],
+            row.figures["return"],
+            row.figures["cost"],
             self._summary,
         )
 
-    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    def checkpoint_states(self) -> tuple[dict[str, torch.Tensor], PpoState | CpoState]:
         return self.learner.actor.state_dict(), self.learner.state_dict()
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> OnPolicyResume:
         return {
             "algo": self.config.algo.value,
             "learner": self.learner.state_dict(),
@@ -342,7 +347,9 @@ class OnPolicyLearner:
             "finished": list(self.finished),
         }
 
-    def restore(self, state: dict[str, Any]) -> None:
+    def restore(self, state: LearnerResume) -> None:
+        if "ep_len" not in state:
+            raise CheckpointError("an off-policy learner's resume state cannot resume an on-policy learner")
         self.learner.load_state_dict(state["learner"])
         self.ep_len = state["ep_len"]
         self.finished.extend(state["finished"])

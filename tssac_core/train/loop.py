@@ -19,7 +19,6 @@ import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -33,7 +32,7 @@ from tssac_core.train.config import TrainConfig, selection_of, selects_within_li
 from tssac_core.train.epoch import EpochLog, log_stop, make_task, reached_stop, ship_role, teammates_for
 from tssac_core.train.learners import RoleLearner, make_role_learner, transfer_source
 from tssac_core.train.resume import ResumeState, read_resume_state, write_resume_state
-from tssac_core.train.rundir import append_metrics, role_position, save_trained_role
+from tssac_core.train.rundir import MetricsRow, append_metrics, role_position, save_trained_role
 from tssac_core.train.validation import EpochSelector
 
 logger = logging.getLogger("tssac_core.train")
@@ -96,7 +95,7 @@ def train_role(
     out: Path,
     resume: bool,
     bar: tqdm,
-    on_epoch: Callable[[dict[str, Any]], None] | None = None,
+    on_epoch: Callable[[MetricsRow], None] | None = None,
 ) -> None:
     """Train one role for cfg.epochs epochs, checkpointing every epoch; writes ``<role>.pt``. ``on_epoch`` is
     given every epoch's metrics row (what ``metrics.csv`` gets) once it is written."""
@@ -134,8 +133,8 @@ def train_role(
         made, columns = learner.end_epoch(log)
         updates += made
         row = log.row(role, epoch, env_steps, updates, iters * cfg.envs)
-        row.update(columns)
-        row.update(selector.after_epoch(epoch, write_checkpoint))
+        row.figures.update(columns)
+        row.figures.update(selector.after_epoch(epoch, write_checkpoint))
         append_metrics(out / "metrics.csv", row)
         if on_epoch is not None:
             on_epoch(row)
@@ -143,9 +142,9 @@ def train_role(
         bar.set_postfix(
             role=role.value,
             ep=epoch,
-            ret=f"{row['return']:.1f}",
-            cost=f"{row['cost']:.1f}",
-            task=f"{row['task_success']:.2f}",
+            ret=f"{row.figures['return']:.1f}",
+            cost=f"{row.figures['cost']:.1f}",
+            task=f"{row.figures['task_success']:.2f}",
         )
         if reached_stop(cfg, row):
             # No resume state for this epoch: a kill before the role ships repeats it (from the same state).

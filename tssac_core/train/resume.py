@@ -22,14 +22,18 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict, final
 
 import numpy as np
 import torch
 
+from tssac_core.algos.onpolicy.ppo import CpoState, PpoState
+from tssac_core.algos.replay import ReplayState
+from tssac_core.algos.sac_lagrangian import SacState
 from tssac_core.common.cli import UsageError
 from tssac_core.deploy.policy import torch_save_atomic
 from tssac_core.sim.scenario import Role
+from tssac_core.train.validation import SelectorState
 
 logger = logging.getLogger("tssac_core.train")
 
@@ -40,6 +44,56 @@ FORMAT_VERSION = 2
 
 class ResumeStateError(UsageError):
     """A role has resume states but none loads; ``str()`` is one line."""
+
+
+class Pcg64Words(TypedDict):
+    state: int
+    inc: int
+
+
+class Pcg64State(TypedDict):
+    """numpy's PCG64 generator state (``Generator.bit_generator.state``), key for key as numpy gives it."""
+
+    bit_generator: str
+    state: Pcg64Words
+    has_uint32: int
+    uinteger: int
+
+
+def pcg64_state(rng: np.random.Generator) -> Pcg64State:
+    """The state of ``rng`` (a PCG64 generator: ``np.random.default_rng``'s)."""
+    s = rng.bit_generator.state
+    return {
+        "bit_generator": s["bit_generator"],
+        "state": {"state": s["state"]["state"], "inc": s["state"]["inc"]},
+        "has_uint32": s["has_uint32"],
+        "uinteger": s["uinteger"],
+    }
+
+
+@final
+class OffPolicyResume(TypedDict):
+    """An off-policy learner's part of a resume state (:meth:`OffPolicyLearner.state`)."""
+
+    learner: SacState
+    buffer: ReplayState
+    rng: Pcg64State
+    transferred: bool
+    recent_costs: NotRequired[list[float]]
+    """Missing from resume states older than the multiplier's measured-cost signal."""
+
+
+@final
+class OnPolicyResume(TypedDict):
+    """An on-policy learner's part of a resume state (:meth:`OnPolicyLearner.state`)."""
+
+    algo: str
+    learner: PpoState | CpoState
+    ep_len: np.ndarray
+    finished: list[tuple[float, int]]
+
+
+LearnerResume = OffPolicyResume | OnPolicyResume
 
 
 @dataclass(frozen=True)
@@ -53,8 +107,8 @@ class ResumeState:
     """The worlds (RoleTask.snapshot)."""
     obs: np.ndarray
     torch_rng: torch.Tensor
-    selector: dict[str, Any]
-    learner: dict[str, Any]
+    selector: SelectorState
+    learner: LearnerResume
     """The learner family's part (RoleLearner.state)."""
 
 

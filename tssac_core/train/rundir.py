@@ -14,13 +14,14 @@ from __future__ import annotations
 import csv
 import dataclasses
 import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import torch
 
 from tssac_core.algos.networks import SquashedGaussianActor
-from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.algos.onpolicy.ppo import CpoState, PpoState
+from tssac_core.algos.sac_lagrangian import SacState, UpdateStats
 from tssac_core.common.cli import UsageError, write_json
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.manifest import CONFIG, check_model_file, check_recorded, read_manifest, record, warn_once
@@ -63,7 +64,7 @@ def save_trained_role(
     role: Role,
     hidden_sizes: tuple[int, ...],
     actor_state: dict[str, torch.Tensor],
-    learner_state: dict[str, Any],
+    learner_state: SacState | PpoState | CpoState,
     env_steps: int,
     updates: int,
     epoch: int,
@@ -114,7 +115,22 @@ METRIC_FIELDS = [
 ]
 
 
-def append_metrics(path: Path, row: dict[str, Any]) -> None:
+@dataclass(frozen=True)
+class MetricsRow:
+    """One epoch's row of ``metrics.csv``: the role and the epoch's figures by column (counts are ints).
+
+    The columns the file has are :data:`METRIC_FIELDS`; :meth:`csv_row` is what it gets."""
+
+    role: Role
+    figures: dict[str, float]
+    """Column -> value: the epoch and its counts, the episodes' means, the update statistics, the learner's own
+    columns and the validation's."""
+
+    def csv_row(self) -> dict[str, str | float]:
+        return {"role": self.role.value, **self.figures}
+
+
+def append_metrics(path: Path, row: MetricsRow) -> None:
     """Append one epoch's row; a resumed run keeps the columns its file was started with."""
     new = not path.is_file()
     fields = METRIC_FIELDS
@@ -125,7 +141,7 @@ def append_metrics(path: Path, row: dict[str, Any]) -> None:
         writer = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         if new:
             writer.writeheader()
-        writer.writerow(row)
+        writer.writerow(row.csv_row())
 
 
 def truncate_metrics(path: Path, keep: set[tuple[str, int]]) -> None:

@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:  # the loop's module imports torch; this one must not
+    from tssac_core.train.rundir import MetricsRow
 
 TAGS: dict[str, str] = {
     "return": "return",
@@ -55,17 +58,17 @@ TAGS: dict[str, str] = {
 class EpochSink(Protocol):
     """Where the training loop hands each epoch's metrics row."""
 
-    def write(self, row: dict[str, Any]) -> None: ...
+    def write(self, row: MetricsRow) -> None: ...
 
     def close(self) -> None: ...
 
 
-def scalars(row: dict[str, Any]) -> dict[str, float]:
+def scalars(row: MetricsRow) -> dict[str, float]:
     """The TensorBoard scalars of one metrics row: ``{"<role>/<tag>": value}``, finite numbers only."""
-    role = str(row["role"])
+    role = row.role.value
     out: dict[str, float] = {}
     for column, tag in TAGS.items():
-        value = row.get(column)
+        value = row.figures.get(column)
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue
         if math.isfinite(value):
@@ -82,8 +85,8 @@ class TensorBoardSink:
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
 
-    def write(self, row: dict[str, Any]) -> None:
-        step = int(row["epoch"])
+    def write(self, row: MetricsRow) -> None:
+        step = int(row.figures["epoch"])
         for tag, value in scalars(row).items():
             self.writer.add_scalar(tag, value, step)
         self.writer.flush()

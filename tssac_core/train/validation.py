@@ -41,7 +41,7 @@ import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
@@ -68,6 +68,28 @@ TAIL_WITHIN_FRACTION = 0.995
 a mean within C still allows one mission in a hundred hundreds of steps inside a radar)."""
 
 
+class ScoreState(TypedDict):
+    """A :class:`Score` in a resume state (the fields after ``cost_limit`` are missing from older ones)."""
+
+    epoch: int
+    mission_success: float
+    task_success: float
+    mean_cost: float
+    cost_limit: float
+    cost_high: NotRequired[float]
+    within_limit_fraction: NotRequired[float]
+    cvar95_cost: NotRequired[float]
+    max_cost: NotRequired[float]
+    missions: NotRequired[int]
+
+
+class SelectorState(TypedDict):
+    """What :meth:`EpochSelector.state_dict` returns (``top`` is missing from older resume states)."""
+
+    best: ScoreState | None
+    top: NotRequired[list[ScoreState]]
+
+
 @dataclass(frozen=True)
 class Score:
     epoch: int
@@ -83,6 +105,21 @@ class Score:
     cvar95_cost: float = float("nan")
     max_cost: float = float("nan")
     missions: int = 0
+
+    def state(self) -> ScoreState:
+        """As a resume state holds it: every field, in order."""
+        return {
+            "epoch": self.epoch,
+            "mission_success": self.mission_success,
+            "task_success": self.task_success,
+            "mean_cost": self.mean_cost,
+            "cost_limit": self.cost_limit,
+            "cost_high": self.cost_high,
+            "within_limit_fraction": self.within_limit_fraction,
+            "cvar95_cost": self.cvar95_cost,
+            "max_cost": self.max_cost,
+            "missions": self.missions,
+        }
 
     def key(self, within_limit: bool = True) -> tuple[bool, float, float, int]:
         """The larger the better (module docstring); ``within_limit``: the cost limit comes first."""
@@ -240,11 +277,12 @@ class EpochSelector:
         )
         return best
 
-    def state_dict(self) -> dict[str, Any]:
-        return {"best": asdict(self.best) if self.best else None, "top": [asdict(s) for s in self.top]}
+    def state_dict(self) -> SelectorState:
+        return {"best": self.best.state() if self.best else None, "top": [s.state() for s in self.top]}
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.best = Score(**state["best"]) if state.get("best") else None
+    def load_state_dict(self, state: SelectorState) -> None:
+        best = state.get("best")
+        self.best = Score(**best) if best else None
         self.top = [Score(**s) for s in state.get("top", [])]
 
 

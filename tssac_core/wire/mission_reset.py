@@ -24,7 +24,6 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any
 
 QUIT = {"quit": True}
 
@@ -74,13 +73,22 @@ class NextMission:
             raise ResetError("mission line needs an integer 'index' and a 'scenario' path")
         if not isinstance(data.get("seed", 0), int):
             raise ResetError("mission line: 'seed' must be an integer")
-        paths: dict[str, Any] = {}
-        for name in ("scenario", "truth_log", "tlog_dir", "status_json", "tlog", "log"):
+        paths: dict[str, Path | None] = {}
+        for name in ("truth_log", "tlog_dir", "status_json", "tlog", "log"):
             value = data.get(name)
             if value is not None and not isinstance(value, str):
                 raise ResetError(f"mission line: {name!r} must be a path")
             paths[name] = None if value is None else Path(value)
-        return cls(index=data["index"], seed=data.get("seed", 0), **paths)
+        return cls(
+            index=data["index"],
+            scenario=Path(data["scenario"]),
+            seed=data.get("seed", 0),
+            truth_log=paths["truth_log"],
+            tlog_dir=paths["tlog_dir"],
+            status_json=paths["status_json"],
+            tlog=paths["tlog"],
+            log=paths["log"],
+        )
 
 
 class MissionInput:

@@ -35,7 +35,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 SCHEMA_VERSION = 2
 """Version 2 added the header's ``schema`` and ``dynamics`` and each row's ``turn_rate_rad_s``, ``accel_m_s2`` and
@@ -45,6 +45,45 @@ HEADER, STEP, EVENT, SUMMARY = "header", "step", "event", "summary"
 ROLES_KEY, VEHICLES_KEY = "roles", "vehicles"
 FLAGS = ("radar_on", "identified", "hit")
 """The mission flags of a ``step`` line (and of the ``summary``)."""
+
+
+class AirRowJson(TypedDict):
+    airspeed_m_s: float
+    alt_m: float
+    roll_rad: float
+    pitch_rad: float
+    heading_rad: float
+
+
+class VehicleRowJson(TypedDict):
+    """A vehicle's entry in a ``step`` line's ``vehicles`` (:meth:`VehicleRow.as_dict`)."""
+
+    x_m: float
+    y_m: float
+    v_m_s: float
+    phi_rad: float
+    cost: float
+    cost_total: float
+    omega_cmd: float
+    u_cmd: float
+    armed: bool
+    mode: str
+    failsafe: bool
+    turn_rate_rad_s: float
+    accel_m_s2: float
+    air: NotRequired[AirRowJson]
+
+
+class EventLine(TypedDict):
+    """An ``event`` line (see the module docstring); ``text`` only on a relayed STATUSTEXT."""
+
+    type: str
+    step: int
+    t_s: float
+    event: str
+    value: int
+    vehicle: str | None
+    text: NotRequired[str]
 
 
 @dataclass(frozen=True)
@@ -67,8 +106,8 @@ class VehicleRow:
     accel_m_s2: float = 0.0
     air: AirRow | None = None
 
-    def as_dict(self) -> dict[str, Any]:
-        row = {
+    def as_dict(self) -> VehicleRowJson:
+        row: VehicleRowJson = {
             "x_m": round(self.x_m, 4),
             "y_m": round(self.y_m, 4),
             "v_m_s": round(self.v_m_s, 5),
@@ -98,7 +137,7 @@ class AirRow:
     pitch_rad: float
     heading_rad: float
 
-    def as_dict(self) -> dict[str, float]:
+    def as_dict(self) -> AirRowJson:
         return {
             "airspeed_m_s": round(self.airspeed_m_s, 4),
             "alt_m": round(self.alt_m, 3),
@@ -147,7 +186,7 @@ def _row_json(r: VehicleRow) -> str:
     # Plain finite floats (the usual row) are written as json writes them, float.__repr__, without a call per value.
     plain = tuple(map(type, numbers)) == _TEN_FLOATS and math.isfinite(sum(numbers))
     texts = list(map(float.__repr__ if plain else _scalar, numbers))
-    air = "" if r.air is None else ',"air":' + encode(r.air.as_dict())[:-1]
+    air = "" if r.air is None else ',"air":' + json.dumps(r.air.as_dict(), separators=(",", ":"))
     return _ROW % (*texts[:8], _scalar(r.armed), _quoted(r.mode), _scalar(r.failsafe), *texts[8:], air)
 
 

@@ -34,10 +34,12 @@ from torch import nn
 
 from tssac_core.algos.networks import SquashedGaussianActor
 from tssac_core.algos.onpolicy.ppo import (
+    CpoState,
     OnPolicyAlgo,
     OnPolicyBatch,
     OnPolicyConfig,
     OnPolicyStats,
+    PpoState,
     as_batch_tensor,
     evaluate_values,
     fit_values,
@@ -334,14 +336,14 @@ class Cpo:
             step_fraction=accepted,
         )
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> CpoState:
         """Networks and the value optimiser (share storage with the learner, like torch's)."""
         return {
             **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
             "value_optim": self.value_optim.state_dict(),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: CpoState | PpoState) -> None:
         """Restore what `state_dict` returned."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))

@@ -25,13 +25,14 @@ import copy
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypedDict, final
 
 import numpy as np
 import torch
 from torch import nn
+from torch.optim.optimizer import StateDict
 
-from tssac_core.algos.lagrange import DampedLagrangeMultiplier, SignalRule, choose_signal
+from tssac_core.algos.lagrange import DampedLagrangeMultiplier, MultiplierState, SignalRule, choose_signal
 from tssac_core.algos.networks import SquashedGaussianActor, mlp, tanh_log_abs_det_jacobian
 from tssac_core.algos.onpolicy.config import OnPolicyAlgo, OnPolicyConfig
 from tssac_core.algos.sac_config import MultiplierSignal
@@ -221,12 +222,38 @@ def evaluate_values(v_r: nn.Module, v_c: nn.Module, obs: torch.Tensor) -> tuple[
     return v_r(obs).squeeze(-1), v_c(obs).squeeze(-1)
 
 
-def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> dict[str, Any]:
+class NetworksState(TypedDict):
+    """The policy and value networks of an on-policy learner, tagged with its algorithm (:func:`networks_state`)."""
+
+    algo: str
+    actor: dict[str, torch.Tensor]
+    v_r: dict[str, torch.Tensor]
+    v_c: dict[str, torch.Tensor]
+
+
+@final
+class PpoState(NetworksState):
+    """What :meth:`Ppo.state_dict` returns: the networks, then the optimisers (torch's own state) and the
+    multiplier."""
+
+    actor_optim: StateDict
+    value_optim: StateDict
+    multiplier: MultiplierState
+
+
+@final
+class CpoState(NetworksState):
+    """What :meth:`Cpo.state_dict` returns: the networks and the value optimiser (torch's own state)."""
+
+    value_optim: StateDict
+
+
+def networks_state(algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> NetworksState:
     """The policy and value networks of an on-policy learner, tagged with its algorithm."""
     return {"algo": algo.value, "actor": actor.state_dict(), "v_r": v_r.state_dict(), "v_c": v_c.state_dict()}
 
 
-def load_networks(state: dict[str, Any], algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> None:
+def load_networks(state: NetworksState, algo: OnPolicyAlgo, actor: nn.Module, v_r: nn.Module, v_c: nn.Module) -> None:
     """Restore what `networks_state` returned, refusing another algorithm's state."""
     if state.get("algo") != algo.value:
         raise ValueError(f"cannot load a {state.get('algo')} state into a {algo.value} learner")
@@ -341,7 +368,7 @@ class Ppo:
             value_steps=value_steps,
         )
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> PpoState:
         """Networks, optimisers and the multiplier (share storage with the learner, like torch's)."""
         return {
             **networks_state(self.config.algo, self.actor, self.v_r, self.v_c),
@@ -350,9 +377,11 @@ class Ppo:
             "multiplier": self.multiplier.state_dict(),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore what `state_dict` returned."""
+    def load_state_dict(self, state: PpoState | CpoState) -> None:
+        """Restore what `state_dict` returned (another algorithm's state is refused, by `load_networks`)."""
         load_networks(state, self.config.algo, self.actor, self.v_r, self.v_c)
+        if "actor_optim" not in state:
+            raise ValueError(f"cannot load a {state['algo']} state into a {self.config.algo.value} learner")
         # Copies: never share Adam moments with another learner loaded from the same dict.
         self.actor_optim.load_state_dict(copy.deepcopy(state["actor_optim"]))
         self.value_optim.load_state_dict(copy.deepcopy(state["value_optim"]))
