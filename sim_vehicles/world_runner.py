@@ -4,7 +4,8 @@ Single-threaded: one ``select`` over the three vehicles' sockets, then in each i
 
 1. every vehicle drains its socket into its incoming link channel and handles what the channel
    delivers (commands, setpoints, parameters, ...);
-2. the world advances by as many steps as the clock allows (below); after each step every vehicle
+2. the world advances by as many steps as its clock policy allows (:mod:`sim_vehicles.clock`, one per
+   mode, which the loop asks and which this docstring's Time section describes); after each step every vehicle
    gets its true state, takes its GPS fix and sends its due telemetry, and mission events are
    announced to every vehicle's clients;
 3. every vehicle sends what its outgoing link channel delivers.
@@ -55,7 +56,6 @@ the run early.
 from __future__ import annotations
 
 import dataclasses
-import enum
 import logging
 import select
 import threading
@@ -69,10 +69,9 @@ import numpy as np
 
 from sim_vehicles.autopilot.clock import Clock
 from sim_vehicles.autopilot.events import EventKind, WorldFlags, events_from_step
-from sim_vehicles.autopilot.modes import FlightMode
-from sim_vehicles.autopilot.pacing import EPS, PacedSchedule
 from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.autopilot.vehicle import Vehicle, VehicleSetup
+from sim_vehicles.clock import ClockPolicy, Phase, clock_policy
 from sim_vehicles.dynamics.backend import DynamicsError, VehicleDynamics, make_dynamics
 from sim_vehicles.link.mavlink_io import EndpointError, MavEndpoint
 from sim_vehicles.link.serial_port import PtySerialPort
@@ -81,7 +80,7 @@ from sim_vehicles.protocol.vehicle_link import VehicleLink
 from sim_vehicles.truth_log import TruthLog
 from tssac_core.common.files import create_exclusively
 from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, sample_layout, to_dict
-from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig
+from tssac_core.sim.sitl_config import ClockMode, SitlConfig
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
 from tssac_core.wire.signing import StreamKey
@@ -89,10 +88,6 @@ from tssac_core.wire.truth_log_schema import SCHEMA_VERSION, AirRow, VehicleRow
 
 _log = logging.getLogger(__name__)
 
-MAX_CATCHUP_STEPS = 20
-"""Steps taken per loop iteration at most, so that I/O is never starved."""
-KEEPALIVE_S = 1.0
-"""Wall seconds between snapshots while a lockstep world holds still."""
 MAX_SELECT_S = 0.05
 """Upper bound of one wait, so a stop request is seen within this time."""
 
@@ -121,13 +116,6 @@ def _row(v: Vehicle, truth: VehicleTruth, cost: float, cost_total: float) -> Veh
 
 class SitlError(Exception):
     """The SITL cannot start (port in use, unwritable log, ...); ``str()`` is one line."""
-
-
-class _Phase(enum.Enum):
-    HOLD = "hold"
-    RUN = "run"
-    LINGER = "linger"
-    DONE = "done"
 
 
 @dataclass(frozen=True)
@@ -250,7 +238,6 @@ class WorldRunner:
         self.scenario = s
         self.dt_s = s.dt_s
         self.lockstep = config.clock is ClockMode.LOCKSTEP
-        self._pacing = PacedSchedule(s.dt_s, config.speedup)
         self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
@@ -261,13 +248,9 @@ class WorldRunner:
             raise SitlError(f"cannot fly {config.dynamics.model.value} dynamics: {exc}") from None
         self.flags = WorldFlags()
         self.clock = Clock(unix_start_s=time.time(), lockstep=self.lockstep)
-        self._phase = _Phase.HOLD if self.lockstep or config.hold_start else _Phase.RUN
-        self._paced = not self.lockstep
-        """Lockstep with nobody in the loop: the world runs at real time x speedup."""
         self._end: MissionEnd | None = None
         self._first_step_cpu_s: float | None = None
         """This process's CPU clock at the first world step (the summary reports the flight's CPU)."""
-        self._linger_steps = 0
         self.vehicles = []
         self.links = []
         self.result: RunResult | None = None
@@ -287,6 +270,8 @@ class WorldRunner:
             vehicle, link = self._make_vehicle(i, role, seeds[i], initial[i])
             self.vehicles.append(vehicle)
             self.links.append(link)
+        self.clock_policy: ClockPolicy = clock_policy(config, self.clock, self.links, self._step)
+        """When the world steps, how long the loop waits, and how the link clock runs (:mod:`sim_vehicles.clock`)."""
         if config.truth_log is not None:
             self._open_truth_log(config, Path(config.truth_log), self.dynamics.name)
 
@@ -388,61 +373,36 @@ class WorldRunner:
         return self._stop.is_set()
 
     def _loop(self) -> None:
-        self._wall0 = time.monotonic()
-        self.clock.wall_s = self._wall0
+        policy = self.clock_policy
+        wall0 = time.monotonic()
+        self.clock.wall_s = wall0
         for link in self.links:
-            link.publish(tick=self.lockstep)  # t = 0: first GPS fix, stream schedules start
-        self._anchor(self._wall0)
-        self._paced = not self.lockstep
-        self._barrier_wall = self._wall0
-        self._last_output_wall = self._wall0
+            link.publish(tick=policy.ticks)  # t = 0: first GPS fix, stream schedules start
+        policy.start(wall0)
         fds = [(link, link.endpoint.fileno()) for link in self.links]
         sockets = [fd for _, fd in fds] + [fd for port in self.serial_ports for fd in port.fds()]
         readable: list[int] = sockets  # the first pass reads every socket, then those select saw readable
-        while not self._stop.is_set() and self._phase is not _Phase.DONE:
+        while not self._stop.is_set() and policy.phase is not Phase.DONE:
             now = time.monotonic()
-            self._tick_clock(now)
+            policy.tick(now)
             for port in self.serial_ports:  # what the companions wrote on the lines, to the vehicles
                 port.pump(now)
             for link, fd in fds:
                 link.poll_socket(receive=fd in readable)
             for link in self.links:
                 link.process_incoming()
-            deadline = self._advance(now)
+            deadline = policy.advance(now)
             for link in self.links:
                 link.flush()
             for port in self.serial_ports:  # and what the vehicles sent, onto the lines
                 port.pump(time.monotonic())
-            if self._phase is _Phase.DONE:
+            if policy.phase is Phase.DONE:
                 break
             readable = select.select(sockets, [], [], self._wait_s(time.monotonic(), deadline))[0]
 
-    @property
-    def _link_on_sim_time(self) -> bool:
-        """Lockstep steps drive the link clock (it stands still while the world waits at the barrier), and so do a
-        lockstep world's linger steps."""
-        return self.lockstep and (self._phase is _Phase.LINGER or (self._phase is _Phase.RUN and not self._paced))
-
-    @property
-    def _link_fast_forward(self) -> bool:
-        """A lockstep world holding at the start: no simulated time passes, and what the links carry crosses at once
-        (in order, lost as the link model draws it), so that the handshake costs no wall time and its frames reach
-        the clients the same way in every run."""
-        return self.lockstep and self._phase is _Phase.HOLD
-
-    def _fast_forward_link(self) -> None:
-        """The link clock to the last delivery the links hold: everything in flight arrives now."""
-        due = [d for d in (link.next_link_due_s() for link in self.links) if d is not None]
-        self.clock.link_s = max([self.clock.link_s, *due])
-
-    def _tick_clock(self, now_wall: float) -> None:
-        if self._link_fast_forward:
-            self._fast_forward_link()
-        elif not self._link_on_sim_time:
-            self.clock.link_s += (now_wall - self.clock.wall_s) * self.config.speedup
-        self.clock.wall_s = now_wall
-
     def _wait_s(self, now_wall: float, deadline_wall: float | None) -> float:
+        """How long the loop may wait on its sockets: until the policy's next planned action, the serial lines' next
+        bytes or the links' next delivery, :data:`MAX_SELECT_S` at most."""
         waits = [MAX_SELECT_S]
         if deadline_wall is not None:
             waits.append(deadline_wall - now_wall)
@@ -450,142 +410,16 @@ class WorldRunner:
             due = port.next_due_s(now_wall)
             if due is not None:
                 waits.append(due)
-        if self._link_fast_forward:  # the next iteration delivers what the links carry
-            if any(link.next_link_due_s() is not None for link in self.links):
-                waits.append(0.0)
-        elif not self._link_on_sim_time:  # on simulated time, only steps bring link deliveries closer
-            for link in self.links:
-                due = link.next_link_due_s()
-                if due is not None:
-                    waits.append((due - self.clock.link_s) / self.config.speedup)
+        link_wait_s = self.clock_policy.link_wait_s()
+        if link_wait_s is not None:
+            waits.append(link_wait_s)
         return max(0.0, min(waits))
-
-    # --------------------------------------------------------------------------- advancing
-
-    def _advance(self, now: float) -> float | None:
-        """Take the steps that are due; return the wall time of the next planned action."""
-        if self._phase is _Phase.HOLD:
-            if not self._start_gate_open():
-                return self._keepalive(now)
-            _log.info("start gate open, the world starts")
-            if self.lockstep:
-                # The last client's answer reached the socket only now: it crosses the link before the first step,
-                # as the others' did (which answer comes last is the wall clock's choice; the mission must not be).
-                self._fast_forward_link()
-                for link in self.links:
-                    link.process_incoming()
-                    link.flush()
-            self._phase = _Phase.RUN
-            self._barrier_wall = now
-            self._anchor(now)  # real time: the schedule starts now, not when the world was created
-        if self._phase is _Phase.RUN:
-            return self._advance_lockstep(now) if self.lockstep else self._advance_paced(now)
-        if self._phase is _Phase.LINGER:
-            return self._advance_linger(now)
-        return None
-
-    def _start_gate_open(self) -> bool:
-        # Lockstep: armed in GUIDED and the client has answered a tick (its mode change acknowledged).
-        ready = [
-            link.holds_world if self.lockstep else v.armed and v.mode is FlightMode.GUIDED
-            for v, link in zip(self.vehicles, self.links, strict=True)
-        ]
-        return all(ready) if self.config.lockstep_start is LockstepStart.ALL else any(ready)
-
-    def _anchor(self, now: float) -> None:
-        self._pacing.anchor(now, self.clock.sim_s)
-
-    def _step_due(self, now: float) -> bool:
-        return self._pacing.step_due(now, self.clock.sim_s)
-
-    def _next_step_wall(self) -> float:
-        return self._pacing.next_step_wall(self.clock.sim_s)
-
-    def _advance_paced(self, now: float) -> float:
-        n = 0
-        while self._phase is _Phase.RUN and n < MAX_CATCHUP_STEPS and self._step_due(now):
-            self._step()
-            n += 1
-        return now if n == MAX_CATCHUP_STEPS else self._next_step_wall()
-
-    def _advance_lockstep(self, now: float) -> float | None:
-        in_loop = [link for link in self.links if link.holds_world]
-        if not in_loop:
-            if not self._paced:
-                _log.info("lockstep: no vehicle in the loop; running at %g x real time", self.config.speedup)
-                self._paced = True
-                self._anchor(now)
-            return self._advance_paced(now)
-        if self._paced:
-            self._paced = False
-            self._barrier_wall = now
-        waiting = [link for link in in_loop if not link.answered()]
-        for link in waiting:
-            v = link.vehicle
-            since = max(self._barrier_wall, v.loop_since_wall_s)
-            if now - since > v.setpoint_timeout_s:
-                v.enter_failsafe(f"no setpoint for {v.setpoint_timeout_s:g} s wall")
-        waiting = [link for link in waiting if link.holds_world]
-        if waiting:
-            keepalive = self._keepalive(now)
-            return min(
-                [keepalive]
-                + [
-                    max(self._barrier_wall, link.vehicle.loop_since_wall_s) + link.vehicle.setpoint_timeout_s
-                    for link in waiting
-                ]
-            )
-        if not any(link.holds_world for link in self.links):
-            return now  # every waiting vehicle just failed safe: run paced from the next iteration
-        n = 0
-        while True:
-            self._step()
-            self._barrier_wall = now
-            n += 1
-            if self._phase is not _Phase.RUN or n == MAX_CATCHUP_STEPS:
-                break
-            # Setpoints the link delivers at the new step time are flown from it on.
-            for link in self.links:
-                link.process_incoming()
-            # With link latency the newest tick the clients have seen may already be answered: step on.
-            if not all(link.answered() for link in self.links if link.holds_world) or not any(
-                link.holds_world for link in self.links
-            ):
-                break
-        if n == MAX_CATCHUP_STEPS or self._phase is not _Phase.RUN:
-            return now  # more steps are due, or the mission ended and its linger runs at once: no waiting
-        return now + min(v.setpoint_timeout_s for v in self.vehicles)
-
-    def _advance_linger(self, now: float) -> float | None:
-        """Serve ``linger_s`` more simulated seconds, the world frozen: paced in real time; under lockstep at once, the
-        link on simulated time (what was sent with less latency than the linger is delivered, as at real time, and no
-        wall time is spent waiting for nothing)."""
-        end_s = self._end_sim_s + self.config.linger_s
-        n = 0
-        while self.clock.sim_s + EPS < end_s and n < MAX_CATCHUP_STEPS and (self.lockstep or self._step_due(now)):
-            self._linger_steps += 1
-            sim_s = (int(self.world.steps[0]) + self._linger_steps) * self.dt_s
-            if self._link_on_sim_time:
-                self.clock.link_s += sim_s - self.clock.sim_s
-            self.clock.sim_s = sim_s
-            for link in self.links:
-                link.publish(tick=self.lockstep)
-            n += 1
-        if self.clock.sim_s + EPS >= end_s:
-            self._phase = _Phase.DONE
-            return None
-        return now if self.lockstep else self._next_step_wall()
-
-    def _keepalive(self, now: float) -> float:
-        if now - self._last_output_wall >= KEEPALIVE_S:
-            self._last_output_wall = now
-            for link in self.links:
-                link.send_snapshot()
-        return self._last_output_wall + KEEPALIVE_S
 
     # ---------------------------------------------------------------------------------- step
 
-    def _step(self) -> None:
+    def _step(self) -> int | None:
+        """One world step: the commands flown, the mission's events announced, each vehicle's telemetry sent, the
+        truth log written. The step the mission ended at, or None while it goes on."""
         w = self.world
         if self._first_step_cpu_s is None:
             self._first_step_cpu_s = time.process_time()
@@ -597,10 +431,7 @@ class WorldRunner:
         truths = self.dynamics.advance(actions)  # the physics, then the mission on the states it flew
         result = w.mission_step()
         step = int(w.steps[0])
-        if self._link_on_sim_time:
-            self.clock.link_s += step * self.dt_s - self.clock.sim_s
-        self.clock.sim_s = step * self.dt_s
-        self._last_output_wall = self.clock.wall_s
+        self.clock_policy.at_sim_time(step * self.dt_s)
         self.flags.radar_on = bool(w.radar_on[0])
         self.flags.identified = bool(w.identified[0])
         self.flags.hit = bool(w.hit[0])
@@ -623,7 +454,7 @@ class WorldRunner:
             # bookkeeping below: its client starts on the step while the world finishes it. A tick its
             # client has granted leaves with the next one it has not (one datagram, one wake-up for many
             # ticks; the loop sends whatever is left after its steps).
-            link.publish(tick=self.lockstep)
+            link.publish(tick=self.clock_policy.ticks)
             if not link.granted(tick_ms):
                 link.flush()
         if self._truth is not None:
@@ -633,10 +464,7 @@ class WorldRunner:
             self._truth.step(step, self.clock.sim_s, flags, rows)
             for event in events:
                 self._truth.event(event.as_dict())
-        if result.terminated[0] or result.truncated[0]:
-            self._phase = _Phase.LINGER
-            self._end_sim_s = self.clock.sim_s
-            self._anchor(self.clock.wall_s)
+        return step if result.terminated[0] or result.truncated[0] else None
 
     def _vehicle_event(self, role: str, name: str, value: int, text: str | None = None) -> None:
         if self._truth is not None:

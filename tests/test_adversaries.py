@@ -170,8 +170,8 @@ def test_the_companion_flies_the_pilot_it_is_given():
     strike = load(SCENARIOS / "strike.yaml")
     for name in PILOT_NAMES:
         companion = build_companion(CompanionConfig("udpout:127.0.0.1:9", Role.STRIKE, strike, pilot=name))
-        assert companion.pilot.name == name
-        assert isinstance(companion.pilot.pilot, AdversaryPilot) == (name in {a.value for a in Adversary})
+        assert companion.pilot_step.pilot.name == name
+        assert isinstance(companion.pilot_step.pilot.pilot, AdversaryPilot) == (name in {a.value for a in Adversary})
 
 
 # ---------------------------------------------------------------------------------------------- batched world

@@ -444,7 +444,7 @@ def test_the_length_rule_sees_a_long_function_and_its_reason():
     assert long_functions(f"def f():\n{body[: -len(body.splitlines()[-1]) - 1]}") == []
 
 
-SITL_ROOMS = ("link", "autopilot", "dynamics", "protocol")
+SITL_ROOMS = ("link", "autopilot", "clock", "dynamics", "protocol")
 """``sim_vehicles``' rooms, lowest first: each imports only the rooms before it; the run (world_runner, truth_log, the
 commands from flags and from a configuration) sits above them all (its configuration is tssac_core.sim.sitl_config)."""
 SITL_RUN = ["__init__.py", "__main__.py", "from_config.py", "truth_log.py", "world_runner.py"]

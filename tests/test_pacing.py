@@ -1,10 +1,10 @@
-"""A paced SITL world's real-time schedule (sim_vehicles.autopilot.pacing)."""
+"""A paced SITL world's real-time schedule (sim_vehicles.clock.pacing)."""
 
 from __future__ import annotations
 
 import pytest
 
-from sim_vehicles.autopilot.pacing import MAX_LAG_S, PacedSchedule
+from sim_vehicles.clock.pacing import MAX_LAG_S, PacedSchedule
 
 
 def test_a_step_is_due_dt_over_speedup_after_the_one_before():

@@ -978,7 +978,7 @@ def test_a_lockstep_world_lingers_straight_after_its_last_step(monkeypatch: pyte
 
     def watched_wait_s(self: WorldRunner, now_wall: float, deadline_wall: float | None) -> float:
         wait = real_wait_s(self, now_wall, deadline_wall)
-        waits.append((self._phase.value, wait))
+        waits.append((self.clock_policy.phase.value, wait))
         return wait
 
     monkeypatch.setattr(WorldRunner, "_wait_s", watched_wait_s)

@@ -42,8 +42,10 @@ Exit statuses (one ``end ...`` line on stdout, ``--status-json`` for the details
 
 Modules: ``config`` (CompanionConfig and the constants) · ``held_pilot`` (a trained policy, the
 guidance controller, or a test pilot: ``straight`` and the adversaries of :mod:`tssac_core.sim.adversaries`) ·
-``shield`` (the monitor on one vehicle) · ``mission_end`` (when a mission's end heard is believed) · ``grants``
-(how far a lockstep answer reaches) · ``clock_rate`` (the vehicle clock's rate, off lockstep) · ``status``
-(counters, mission flags, the result) · ``machine`` (the state machine and its vehicle-clock pacing) · ``cli``
+``shield`` (the monitor on one vehicle) · ``pilot_step`` (a tick's pilot side: the estimate to the pilot, what is
+amiss, every tick through the monitor) · ``mission_end`` (when a mission's end heard is believed) · ``grants``
+(how far a lockstep answer reaches) · ``tick_clock`` (the vehicle's clock followed: when a control step is due, how
+long to wait) · ``clock_rate`` (the vehicle clock's rate, off lockstep) · ``status`` (counters, mission flags, the
+result) · ``machine`` (the state machine: connect, engage, receive, control, end) · ``cli``
 (``python -m mavlink_bridge.companion``).
 """
