@@ -60,6 +60,38 @@ def test_at_radar_over_jsbsim_is_kept_out_by_the_lagged_monitor_and_not_by_eq5(
         assert shield["uav_missions_with_cost"] >= 1, shield
 
 
+@pytest.fixture(scope="module")
+def toward_a_radar_in_wind(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same in a steady 10 m/s wind from the west, the response's fitted maximum."""
+    from tssac_core.sim.scenario import Wind
+
+    path = tmp_path_factory.mktemp("lagged-wind") / "strike150-wind.yaml"
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "strike.yaml"), episode_steps=1500)
+    dump(dataclasses.replace(scenario, wind=Wind(speed_m_s=10.0, from_deg=270.0)), path)
+    return path
+
+
+@pytest.mark.sitl
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("with_response", [True, False], ids=["ground-loiter", "eq5"])
+def test_in_wind_at_radar_over_jsbsim_is_kept_out_by_the_loiter_and_not_by_eq5(
+    toward_a_radar_in_wind: Path, tmp_path: Path, with_response: bool
+) -> None:
+    """In wind the companions' backups end in the ground loiter (the vehicle's WIND reports, the law every tick): the
+    F-16s stay out; the eq. 5 monitor's in the same wind let them in (the negative control)."""
+    out = tmp_path / "fly.json"
+    extra = ["--airframe-response", str(RESPONSE)] if with_response else []
+    proc = fly("--scenario", str(toward_a_radar_in_wind), "--dynamics", "jsbsim", "--pilot", "at_radar", "--shield",
+               "--json", str(out), *extra)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    shield = json.loads(out.read_text())["shield"]
+    if with_response:
+        assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0, shield
+        assert "ground loiter" in shield["scope"] and shield["guarantee"] is False
+    else:
+        assert shield["uav_missions_with_cost"] >= 1, shield
+
+
 @pytest.mark.parametrize(
     ("args", "words"),
     [

@@ -284,6 +284,11 @@ class Companion:
             self._on_statustext(str(msg.text).rstrip("\x00"))
         elif mtype == "COMMAND_ACK" and msg.command in SLEW_COMMANDS:
             self._on_slew_ack(int(msg.command), int(msg.result))
+        elif mtype == "WIND" and self.pilot_step.shield is not None:
+            # The wind the vehicle reports, blowing FROM ``direction`` (deg clockwise from north): the air's velocity.
+            towards = math.radians(float(msg.direction)) + math.pi
+            speed = float(msg.speed)
+            self.pilot_step.shield.set_wind(speed * math.sin(towards), speed * math.cos(towards))
 
     def _on_slew_ack(self, command: int, result: int) -> None:
         """A GUIDED slew command's answer. Refused, the vehicle cannot be flown in this dialect: it is left in LOITER,

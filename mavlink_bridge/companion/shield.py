@@ -32,6 +32,7 @@ Each hand-over is said to the vehicle in a STATUSTEXT (``"<role>: shield on, bac
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -171,8 +172,10 @@ class CompanionShield:
         return self._turn_step
 
     def set_wind(self, east_m_s: float, north_m_s: float) -> None:
-        """The wind the vehicle reports (WIND), as the air's velocity east and north (m/s)."""
-        self.wind_m_s = (east_m_s, north_m_s)
+        """The wind the vehicle reports (WIND), as the air's velocity east and north (m/s); a report that is not finite
+        is ignored (the last good one, or the scenario's, stays)."""
+        if math.isfinite(east_m_s) and math.isfinite(north_m_s):
+            self.wind_m_s = (east_m_s, north_m_s)
 
     def action(
         self,
