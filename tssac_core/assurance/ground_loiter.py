@@ -47,8 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, straight_rollout, switched_lag_step
-from tssac_core.assurance.monitor import N_TURNS, EstimateError, Hazards, Limits, circle_clearance, point_clearance
+from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, lead_samples, switched_lag_step
+from tssac_core.assurance.monitor import N_TURNS, EstimateError, Hazards, Limits, circle_clearance
 
 
 @dataclass(frozen=True)
@@ -254,26 +254,18 @@ def loiter_backup_clearance(
     model, carried by the wind, then the ground loiter for ever: the lead's samples (less half a step's ground
     distance, (v_max + W_max) dt / 2, each) and the loiter's disk from the lead's end (:func:`loiter_keep_out`)."""
     m, n_leads = len(x), len(leads)
-    longest = int(leads.max(initial=0))
     half_step = (lim.speed_max_m_s + wind.max_m_s) * dt_s / 2
-    lead_min = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step[:, None], longest + 1, axis=1)
-    lx, ly, lv, lp = (a[:, None] for a in (x, y, v, phi))
-    if longest:
-        straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
-        dx, dy = wind.drift(longest, dt_s)
-        sx, sy = straight.xs + dx, straight.ys + dy
-        along = np.minimum.accumulate(point_clearance(sx, sy, hz) - half_step[:, None], axis=1)
-        lead_min[:, 1:] = np.minimum(lead_min[:, 1:], along)
-        lx, ly = np.concatenate([lx, sx], 1), np.concatenate([ly, sy], 1)
-        lv, lp = np.concatenate([lv, straight.speeds], 1), np.concatenate([lp, straight.headings], 1)
+    longest = int(leads.max(initial=0))
+    carried = (wind.east_m_s, wind.north_m_s)
+    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, longest, half_step, carried)
     rows = np.repeat(np.arange(m), n_leads)
     pick = np.tile(np.asarray(leads, dtype=np.int64), m)
-    ex, ey, ev, ep = (a[rows, pick] for a in (lx, ly, lv, lp))
+    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
     r_wind, r_hz, r_lim = wind.select(rows), hz.select(rows), lim.select(rows)
     out = np.empty((m * n_leads, 2))
     for turn, sign in enumerate((1.0, -1.0)):
         cx, cy, radius = loiter_keep_out(ex, ey, ev, ep, sign, r_wind, r_lim.turn_rate_max_rad_s)
-        out[:, turn] = np.minimum(lead_min[rows, pick], circle_clearance(cx, cy, radius, r_hz))
+        out[:, turn] = np.minimum(lead.least_m[rows, pick], circle_clearance(cx, cy, radius, r_hz))
     return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
 
 

@@ -280,6 +280,57 @@ def turn_keep_out(
     return path, cx, cy, r + rho
 
 
+@dataclass(frozen=True)
+class LeadSamples:
+    """The straight leads flown from each state under the model, sampled at every step (column 0: the start), (M,
+    longest + 1) each."""
+
+    least_m: np.ndarray
+    """The least clearance of the samples up to each step, each less half a step's distance."""
+    xs: np.ndarray
+    ys: np.ndarray
+    speeds: np.ndarray
+    headings: np.ndarray
+    straight: Rollout | None
+    """The lead's rollout (None: no lead longer than 0)."""
+
+
+def lead_samples(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    hz: Hazards,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+    longest: int,
+    half_step_m: np.ndarray,
+    wind_m_s: tuple[np.ndarray, np.ndarray] | None = None,
+) -> LeadSamples:
+    """Straight flight (heading-rate command 0, speed held) for ``longest`` steps under the model, carried by the steady
+    ``wind_m_s`` ((M,) east and north; None: calm air), and the least clearance of its samples up to each step, the
+    start included (the arc of a step lies within ``half_step_m`` of one of its ends)."""
+    least = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step_m[:, None], longest + 1, axis=1)
+    xs, ys, speeds, headings = (a[:, None] for a in (x, y, v, phi))
+    straight = None
+    if longest:
+        straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
+        sx, sy = straight.xs, straight.ys
+        if wind_m_s is not None:
+            t = dt_s * np.arange(1, longest + 1)[None, :]
+            sx, sy = sx + wind_m_s[0][:, None] * t, sy + wind_m_s[1][:, None] * t
+        along = np.minimum.accumulate(point_clearance(sx, sy, hz) - half_step_m[:, None], axis=1)
+        least[:, 1:] = np.minimum(least[:, 1:], along)
+        xs, ys = np.concatenate([xs, sx], 1), np.concatenate([ys, sy], 1)
+        speeds, headings = (
+            np.concatenate([speeds, straight.speeds], 1),
+            np.concatenate([headings, straight.headings], 1),
+        )
+    return LeadSamples(least, xs, ys, speeds, headings, straight)
+
+
 def lagged_backup_clearance(
     x: np.ndarray,
     y: np.ndarray,
@@ -299,19 +350,9 @@ def lagged_backup_clearance(
     maximum-rate turn for ever: the lead's samples, the turn's K samples (less v_max dt / 2 each) and the disk the
     rest stays in (module docstring)."""
     m, n_leads = len(x), len(leads)
-    longest = int(leads.max(initial=0))
     half_step = lim.speed_max_m_s * dt_s / 2
-    # The least clearance of the lead's samples up to each of its steps, the start included (the first half-step's
-    # arc lies within v dt / 2 of the start).
-    lead_min = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step[:, None], longest + 1, axis=1)
-    lx, ly, lv, lp = (a[:, None] for a in (x, y, v, phi))
-    straight = None
-    if longest:
-        straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
-        along = np.minimum.accumulate(point_clearance(straight.xs, straight.ys, hz) - half_step[:, None], axis=1)
-        lead_min[:, 1:] = np.minimum(lead_min[:, 1:], along)
-        lx, ly = np.concatenate([lx, straight.xs], 1), np.concatenate([ly, straight.ys], 1)
-        lv, lp = np.concatenate([lv, straight.speeds], 1), np.concatenate([lp, straight.headings], 1)
+    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, int(leads.max(initial=0)), half_step)
+    straight = lead.straight
     # Every lead's end, both turns: one batch of M * L * 2 turns (row = (vehicle * L + lead) * 2 + turn).
     lead_idx = np.asarray(leads, dtype=np.int64)
     rates = lag_state.omega_rad_s[:, None].repeat(n_leads, axis=1)
@@ -324,12 +365,12 @@ def lagged_backup_clearance(
             pending[:, i] = straight.queue[:, lead_idx[i] : lead_idx[i] + width]
     rows = np.repeat(np.arange(m), n_leads * 2)
     pick = (np.repeat(lead_idx[None, :], m, axis=0).reshape(-1)).repeat(2)
-    ex, ey, ev, ep = (a[rows, pick] for a in (lx, ly, lv, lp))
+    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
     lag = LagState(rates.reshape(-1).repeat(2), pending.reshape(m * n_leads, width).repeat(2, axis=0))
     sign = np.tile([1.0, -1.0], m * n_leads)
     r_hz, r_air, r_lim = hz.select(rows), airframe.select(rows), lim.select(rows)
     path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, lag, sign, r_air, r_lim, dt_s)
     samples = point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows]
     disk = circle_clearance(cx, cy, radius, r_hz)
-    out = np.minimum.reduce([lead_min[rows, pick], samples, disk]).reshape(m, n_leads, 2)
+    out = np.minimum.reduce([lead.least_m[rows, pick], samples, disk]).reshape(m, n_leads, 2)
     return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
