@@ -206,6 +206,19 @@ def fly_missions(
         return results
 
 
+def world_monitor(
+    world: World,
+    pilots: Sequence[PilotSpec],
+    shield: ShieldConfig,
+    airframes: VariedAirframes | None,
+    loiter: LoiterBound | None,
+) -> WorldMonitor:
+    """The monitor of a batch of missions: deciding at each pilot's decisions, predicting with the ``airframes`` the
+    vehicles fly (None: eq. 5), its backups ending in the ground loiter ``loiter`` bounds where it sees them."""
+    repeats = [decision_interval(p) for p in pilots]
+    return WorldMonitor(world, repeats, shield, airframes, loiter if airframes is not None else None)
+
+
 def iter_missions(
     scenario: Scenario,
     pilots: Sequence[PilotSpec],
@@ -245,10 +258,8 @@ def iter_missions(
     if airframes is not None:
         varied = VariedAirframes(airframes, world)
         varied.reset(np.arange(world.n), airframe_rng)
-    repeats = [decision_interval(p) for p in pilots]
     seen = varied if monitor_sees_airframes else None
-    sees_loiter = loiter if seen is not None else None
-    monitor = None if shield is None else WorldMonitor(world, repeats, shield, seen, sees_loiter)
+    monitor = None if shield is None else world_monitor(world, pilots, shield, seen, loiter)
     backup_track: list[np.ndarray] = []
     while world.running.any():
         if record:
