@@ -291,3 +291,31 @@ def test_filter_major_axis_sigma():
     major, drms = f.position_sigma_major_m, f.position_sigma_m
     assert drms / math.sqrt(2) <= major <= drms  # the largest of two variances: between half and all of the trace
     assert 0.5 < major < 15.0  # the filter knows the position better than one fix
+
+
+def test_in_wind_the_companions_monitor_turns_the_filters_ground_state_into_the_airs_and_back(random_path):
+    """With a response whose loiter is fitted, in a scenario's wind: the state the monitor decides on is the air's part
+    of the filter's ground velocity (airspeed, heading) and its course rate as the heading rate; dead reckoning gives
+    the ground's (carried by the wind). One is the other's inverse; the wind the vehicle reports replaces the
+    scenario's, a report that is not finite does not."""
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.sim.airframe_response import load_response
+    from tssac_core.sim.scenario import Wind
+
+    s = dataclasses.replace(load(random_path), wind=Wind(speed_m_s=10.0, from_deg=270.0))
+    lay = sample_layout(s, np.random.default_rng(35))
+    world = World(s, 1)
+    world.reset([0], [lay])
+    shield = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(), True, load_response(response_path("f16")))
+    assert shield.loiter is not None and shield.wind_m_s == pytest.approx((10.0, 0.0))
+    shield.set_wind(8.0, -6.0)
+    shield.set_wind(float("nan"), 1.0)
+    assert shield.wind_m_s == (8.0, -6.0)
+    air = (1000.0, 2000.0, 250.0, 1.2)
+    ground, course_rate = shield._over_the_ground(air, math.radians(4.0), 10.0)
+    assert ground[:2] == pytest.approx((1080.0, 1940.0))  # carried 10 s by (8, -6) m/s
+    gx, gy = 250.0 * math.cos(1.2) + 8.0, 250.0 * math.sin(1.2) - 6.0
+    assert ground[2:] == pytest.approx((math.hypot(gx, gy), math.atan2(gy, gx)))
+    back, sigmas, rate = shield._in_the_air(ground, (5.0, 0.01, 1.0), course_rate)
+    assert back == pytest.approx((1080.0, 1940.0, 250.0, 1.2)) and rate == pytest.approx(math.radians(4.0))
+    assert sigmas[1] == pytest.approx(0.01 * ground[2] / 250.0)

@@ -349,4 +349,21 @@ class CompanionShield:
         elif len(flown):
             x, y, v, phi = step_actions(x, y, v, phi, flown[None], lim, self.dt_s)
             turn_rate = float(flown[-1, 0] * lim.turn_rate_max_rad_s[0])
-        return (float(x[0]), float(y[0]), float(v[0]), float(phi[0])), (0.0, 0.0, 0.0), (turn_rate, 0.0)
+        state = (float(x[0]), float(y[0]), float(v[0]), float(phi[0]))
+        if self.loiter is not None:  # in the wind: carried by it, and as the filter reports, over the ground
+            state, turn_rate = self._over_the_ground(state, turn_rate, len(flown) * self.dt_s)
+        return state, (0.0, 0.0, 0.0), (turn_rate, 0.0)
+
+    def _over_the_ground(
+        self, air: tuple[float, float, float, float], heading_rate: float, seconds: float
+    ) -> tuple[tuple[float, float, float, float], float]:
+        """A state flown ``seconds`` in the air mass (airspeed and heading) as the filter reports it: carried by the
+        wind that long, its ground speed and course, its heading rate as the course rate (the inverse of
+        :meth:`_in_the_air`)."""
+        x, y, v, phi = air
+        we, wn = self.wind_m_s
+        gx, gy = v * np.cos(phi) + we, v * np.sin(phi) + wn
+        ground = float(np.hypot(gx, gy))
+        along = (v * np.cos(phi) * gx + v * np.sin(phi) * gy) / v
+        course_rate = heading_rate * v * along / ground**2
+        return (x + we * seconds, y + wn * seconds, ground, float(np.arctan2(gy, gx))), float(course_rate)
