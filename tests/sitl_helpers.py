@@ -109,8 +109,9 @@ class Client:
         self.conn = mavutil.mavlink_connection(
             f"udpout:127.0.0.1:{port}", source_system=source_system, source_component=source_component
         )
-        # Telemetry at 20x real time is ~1000 datagrams/s: leave room for a test thread that is slow to read.
-        self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        # Telemetry at 20x real time is ~1000 datagrams/s, and a lockstep linger sends a minute's in a burst: leave room
+        # for a test thread that is slow to read on a loaded machine (the kernel caps it at net.core.rmem_max).
+        self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
         if key is not None:
             self.conn.setup_signing(key, sign_outgoing=True)
         self.mav: mavlink2.MAVLink = self.conn.mav
