@@ -79,7 +79,9 @@ from sim_vehicles.protocol.commands import CommandHandler
 from sim_vehicles.protocol.vehicle_link import VehicleLink
 from sim_vehicles.truth_log import TruthLog
 from tssac_core.common.files import create_exclusively
-from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, sample_layout, to_dict
+from tssac_core.sim.airframe_response import ResponseFileError
+from tssac_core.sim.lagged_starts import response_start_check
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, ScenarioError, dump, sample_layout, to_dict
 from tssac_core.sim.sitl_config import ClockMode, SitlConfig
 from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
@@ -238,7 +240,11 @@ class WorldRunner:
         self.scenario = s
         self.dt_s = s.dt_s
         self.lockstep = config.clock is ClockMode.LOCKSTEP
-        self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed))
+        try:
+            starts = response_start_check(s, config.monitor_response)
+            self.layout: Layout = sample_layout(s, np.random.default_rng(config.seed), start_check=starts)
+        except (ResponseFileError, ScenarioError) as exc:
+            raise SitlError(f"cannot fly this layout for the monitors' airframe response: {exc}") from None
         self.world = World(s, n=1)
         self.world.reset([0], [self.layout])
         self._close_dynamics()

@@ -23,6 +23,7 @@ from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
 from tssac_core.sim.adversaries import ADVERSARY_NAMES
 from tssac_core.sim.airframe_response import load_response, response_option
+from tssac_core.sim.lagged_starts import lagged_start_check
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Dynamics, DynamicsModel, Scenario, load
 from tssac_core.wire.uart import BaudError, check_baud
@@ -485,11 +486,14 @@ def airframe_response_of(a: argparse.Namespace, scenario: Scenario) -> Path | No
     dynamics = scenario.dynamics or Dynamics()
     if dynamics.model is DynamicsModel.KINEMATIC:
         raise UsageError("--airframe-response models a JSBSim airframe: fly it with --dynamics jsbsim")
-    fitted = load_response(path).aircraft
-    if Path(dynamics.aircraft).stem != fitted:
+    response = load_response(path)
+    if Path(dynamics.aircraft).stem != response.aircraft:
         raise UsageError(
-            f"--airframe-response {path.name} is fitted to {fitted}, but the world flies {dynamics.aircraft}"
+            f"--airframe-response {path.name} is fitted to {response.aircraft}, but the world flies {dynamics.aircraft}"
         )
+    problem = None if scenario.layout is None else lagged_start_check(scenario, response)(scenario.layout)
+    if problem is not None:
+        raise UsageError(f"{scenario.name}: {problem[0]}: {problem[1]}")
     return path
 
 

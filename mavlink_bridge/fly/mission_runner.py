@@ -34,7 +34,8 @@ from mavlink_bridge.processes.children import Child, ChildProcesses
 from mavlink_bridge.processes.fork_server import AVAILABLE as FORK_SERVER_AVAILABLE
 from mavlink_bridge.processes.fork_server import ForkServer, ForkServerError
 from tssac_core.common.files import create_exclusively, private_directory
-from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, dump, load, sample_layout
+from tssac_core.sim.lagged_starts import response_start_check
+from tssac_core.sim.scenario import ROLES, Layout, Role, Scenario, StartCheck, dump, load, sample_layout
 from tssac_core.wire.mission_reset import NextMission
 
 _log = logging.getLogger("mavlink_bridge.fly")
@@ -64,9 +65,11 @@ EXIT_BAD_INPUT = 2
 """The exit code of a command that refused its input (tssac_core.common.cli.EXIT_BAD_INPUT)."""
 
 
-def mission_layout(scenario: Scenario, seed: int, index: int) -> Layout:
-    """The layout of mission ``index``: the fixed one, or ``sample_layout`` with ``default_rng(seed + index)``."""
-    return sample_layout(scenario, np.random.default_rng(seed + index))
+def mission_layout(scenario: Scenario, seed: int, index: int, starts: StartCheck | None = None) -> Layout:
+    """The layout of mission ``index``: the fixed one, or ``sample_layout`` with ``default_rng(seed + index)``;
+    ``starts``: the further check of its starts a monitor predicting with an airframe's response needs
+    (:func:`tssac_core.sim.lagged_starts.response_start_check`)."""
+    return sample_layout(scenario, np.random.default_rng(seed + index), start_check=starts)
 
 
 def _child_env() -> dict[str, str]:
@@ -155,6 +158,8 @@ class MissionRunner:
         self.children = children
         self.work_dir = work_dir
         self.children_cpu = children_cpu
+        self.starts = response_start_check(cfg.scenario, cfg.airframe_response)
+        """The further check of each layout's starts when the monitors predict with an airframe's response."""
         self.env = _child_env()
         self.crew: Crew | None = None
         """The processes kept alive across missions (``cfg.persistent``), None until the first or after a failure."""
@@ -192,7 +197,7 @@ class MissionRunner:
         seed = cfg.seed + index
         mdir = private_directory(self.work_dir / f"mission-{index:03d}", "--logs")
         marker = self._mark_tlogs(index, seed)
-        layout = mission_layout(cfg.scenario, cfg.seed, index)
+        layout = mission_layout(cfg.scenario, cfg.seed, index, self.starts)
         scenario_file = mdir / "scenario.yaml"
         dump(dataclasses.replace(cfg.scenario, layout=layout, random=None), scenario_file)
         truth = mdir / "truth.jsonl"

@@ -728,16 +728,13 @@ def _limits(s: Scenario) -> Limits:
     )
 
 
-def unprotected_start(s: Scenario, lay: Layout, cfg: ShieldConfig | None = None) -> tuple[str, str] | None:
-    """The first UAV whose start the runtime-assurance monitor cannot protect, as (field, problem), or None.
+StartCheck = Callable[[Layout], "tuple[str, str] | None"]
+"""A further check of a layout's starts: the (field, problem) of the first it refuses, or None."""
 
-    The monitor's guarantee (docs/runtime_assurance.md) covers every state from which one of its backups keeps the
-    margin for ever; the start is the one state it does not choose, so a layout is admitted only if every start is
-    such a state, in both places the monitor runs: the batched world (the true state, margin
-    :attr:`ShieldConfig.margin_m`) and a companion in lockstep (the same margin less the error bound of
-    :func:`start_error`, after the link's round trip of the hold), with the margins of ``cfg`` (the monitor's that
-    flies: ``evaluate --shield-margin-m``; default :class:`ShieldConfig`). It holds for any decision interval."""
-    cfg = ShieldConfig() if cfg is None else cfg
+
+def start_scene(s: Scenario, lay: Layout) -> tuple[np.ndarray, Hazards, Limits]:
+    """The three UAVs' starts as the monitor sees them, (3, 4): x, y (m), the scenario's initial speed and the start
+    heading (rad) in decoy, detect, strike order; the layout's radars and area for each; and their limits."""
     specs = [s.vehicle(role) for role in ROLES]
     state = np.array(
         [
@@ -750,18 +747,36 @@ def unprotected_start(s: Scenario, lay: Layout, cfg: ShieldConfig | None = None)
     centres = np.array([r.position_km for r in lay.radars], dtype=np.float64).reshape(1, k, 2) * 1000.0
     radii = np.array([r.radius_km for r in lay.radars], dtype=np.float64).reshape(1, k) * 1000.0
     hz = Hazards(np.repeat(centres, 3, axis=0), np.repeat(radii, 3, axis=0), s.area_km * 1000.0)
-    lim = _limits(s)
+    return state, hz, _limits(s)
+
+
+def start_problem(role: Role, excess_m: float) -> tuple[str, str]:
+    """The (field, problem) of a start the monitor cannot protect: its best backup lacks ``-excess_m``."""
+    return (
+        f"layout.starts.{role.value}",
+        f"the runtime-assurance monitor cannot protect this start: its best backup lacks {-excess_m:.0f} m "
+        "of clearance from the radars and the area's edges",
+    )
+
+
+def unprotected_start(s: Scenario, lay: Layout, cfg: ShieldConfig | None = None) -> tuple[str, str] | None:
+    """The first UAV whose start the runtime-assurance monitor cannot protect, as (field, problem), or None.
+
+    The monitor's guarantee (docs/runtime_assurance.md) covers every state from which one of its backups keeps the
+    margin for ever; the start is the one state it does not choose, so a layout is admitted only if every start is
+    such a state, in both places the monitor runs: the batched world (the true state, margin
+    :attr:`ShieldConfig.margin_m`) and a companion in lockstep (the same margin less the error bound of
+    :func:`start_error`, after the link's round trip of the hold), with the margins of ``cfg`` (the monitor's that
+    flies: ``evaluate --shield-margin-m``; default :class:`ShieldConfig`). It holds for any decision interval."""
+    cfg = ShieldConfig() if cfg is None else cfg
+    state, hz, lim = start_scene(s, lay)
     batched = start_excess_m(state, hz, lim, s.dt_s, cfg, cfg.margin_m)
     hold = round(2.0 * s.link.latency_ms / 1000.0 / s.dt_s)
     error = start_error(s, state[:, 2], cfg)
     companion = start_excess_m(state, hz, lim, s.dt_s, cfg, cfg.margin_m, hold_steps=hold, error=error)
     for role, excess in zip(ROLES, np.minimum(batched, companion), strict=True):
         if excess < 0:
-            return (
-                f"layout.starts.{role.value}",
-                f"the runtime-assurance monitor cannot protect this start: its best backup lacks {-excess:.0f} m "
-                "of clearance from the radars and the area's edges",
-            )
+            return start_problem(role, float(excess))
     return None
 
 
@@ -771,6 +786,7 @@ def sample_layout(
     max_tries: int = 1000,
     protected_starts: bool = True,
     shield: ShieldConfig | None = None,
+    start_check: StartCheck | None = None,
 ) -> Layout:
     """Draw one feasible layout from ``s.random`` (the fixed layout if the scenario has one).
 
@@ -778,9 +794,15 @@ def sample_layout(
     so every mission flown or evaluated starts where the monitor's guarantee holds. ``protected_starts=False``
     (training and its validation, where no monitor flies) keeps the draws a recipe has always had, so that a run
     trains again bit for bit; such a start is about one layout in 4,000 of ``scenarios/random.yaml``. ``shield``:
-    the monitor's margins the starts are checked with (default :class:`ShieldConfig`)."""
+    the monitor's margins the starts are checked with (default :class:`ShieldConfig`). ``start_check``: a further
+    check of the starts (a monitor that predicts with an airframe's response:
+    :func:`tssac_core.sim.lagged_starts.lagged_start_check`); a draw it refuses is drawn again, a fixed layout it
+    refuses raises :class:`ScenarioError`."""
     if s.random is None:
         assert s.layout is not None
+        problem = None if start_check is None else start_check(s.layout)
+        if problem is not None:
+            raise ScenarioError(s.name, *problem)
         if protected_starts and shield is not None and shield != ShieldConfig():
             # The file was checked with the default margins on load; a monitor with others checks them again.
             problem = unprotected_start(s, s.layout, shield)
@@ -811,5 +833,6 @@ def sample_layout(
             starts[role.value] = Start(p, rng.uniform(*rnd.start_heading_deg))
         layout = Layout(sam, target, tuple(radars), starts)
         if layout_problem(s, layout, rnd.clearance_km, protected_starts, shield) is None:
-            return layout
+            if start_check is None or start_check(layout) is None:
+                return layout
     raise RuntimeError(f"no feasible layout in {max_tries} draws: the random ranges leave no way to the zones")
