@@ -334,3 +334,41 @@ WIND_BACKUP_CASES = [
 @pytest.mark.parametrize("case", WIND_BACKUP_CASES, ids=lambda c: "-".join(f"{x:g}" for x in c))
 def test_a_whole_backup_in_wind_stays_in_the_monitors_keep_out_region(case: tuple) -> None:
     assert f16_wind_backup_excess_m(*case) <= 0.0
+
+
+@pytest.mark.parametrize("windy", [False, True], ids=["calm", "wind"])
+def test_the_reported_margin_is_the_error_the_decisions_take_off(windy: bool) -> None:
+    """``largest_backup_error_m`` (fly's "margin up to") is what the lagged prediction's backups lose to the error, in
+    calm air (each lead longer by the turn's samples) and in wind (the loiter's levers), not eq. 5's."""
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.assurance.lagged_prediction import LaggedPrediction
+    from tssac_core.assurance.monitor import (
+        KINEMATIC,
+        EstimateError,
+        Hazards,
+        Limits,
+        Scene,
+        ShieldConfig,
+        largest_backup_error_m,
+    )
+    from tssac_core.sim.airframe_response import airframe_lag, load_response
+
+    response = load_response(response_path("f16"))
+    bound = response.loiter_bound()
+    assert bound is not None
+    v = np.array([250.0])
+    air = airframe_lag(response, v, DT)
+    wind = bound.wind(np.array([10.0]), np.zeros(1), v) if windy else None
+    prediction = LaggedPrediction(air, LagState.steady(np.zeros(1), int(air.delay_steps[0])), wind)
+    lim = Limits(np.full(1, 150.0), np.full(1, 300.0), np.full(1, W), np.full(1, 10.0))
+    hz = Hazards(np.array([[[40_000.0, 0.0]]]), np.array([[12_000.0]]), 100_000.0)
+    scene = Scene(hz, lim, DT, np.array([100.0]), ShieldConfig())
+    state = (np.array([10_000.0]), np.array([0.0]), v, np.zeros(1))
+    zero = EstimateError(np.zeros(1), np.zeros(1), np.zeros(1))
+    err = EstimateError(np.array([40.0]), np.array([0.01]), np.array([2.0]))
+    lost = prediction.backup_excess(*state, zero, scene) - prediction.backup_excess(*state, err, scene)
+    offered = np.isfinite(prediction.backup_excess(*state, zero, scene))
+    assert largest_backup_error_m(err, 0, scene, prediction) == pytest.approx(lost[offered].max())
+    assert largest_backup_error_m(err, 0, scene, prediction) != pytest.approx(
+        largest_backup_error_m(err, 0, scene, KINEMATIC)
+    )

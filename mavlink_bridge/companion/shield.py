@@ -48,6 +48,7 @@ from tssac_core.assurance.monitor import (
     N_TURNS,
     EstimateError,
     Prediction,
+    Scene,
     ShieldConfig,
     companion_error,
     companion_margin_m,
@@ -230,7 +231,8 @@ class CompanionShield:
             straight = int(d.straight_steps[0])
             self._turn_step = step + straight if 0 < straight < steps else None
             self.counters.decisions += 1
-            need = margin + largest_backup_error_m(error, lim, self.dt_s, steps, self.cfg)
+            scene = Scene(self.monitor.hazards, lim, self.dt_s, np.array([margin]), self.cfg)
+            need = margin + largest_backup_error_m(error, steps, scene, prediction)
             self.counters.max_margin_m = max(self.counters.max_margin_m, need)
             if d.engaged_now[0]:
                 self.counters.interventions += 1

@@ -102,11 +102,22 @@ class LaggedPrediction:
         leads = lead_steps(scene.cfg, dt_s)
         if self.wind is None:
             clear = lagged_backup_clearance(x, y, v, phi, self.lag, scene.hz, self.airframe, lim, dt_s, leads)
-            error = backup_error_m(err, lim, dt_s, leads + self.airframe.settle_steps(dt_s))
         else:
             wind = self.wind
             clear = loiter_backup_clearance(x, y, v, phi, self.lag, scene.hz, self.airframe, lim, dt_s, leads, wind)
-            error = loiter_backup_error_m(err, lim, dt_s, leads, wind)
         out = np.full((m, len(leads), N_TURNS), -np.inf)
         out[:, :, :2] = clear.reshape(m, len(leads), 2)
-        return out.reshape(m, len(leads) * N_TURNS) - scene.margin[:, None] - error
+        return out.reshape(m, len(leads) * N_TURNS) - scene.margin[:, None] - self.backup_error(err, scene)
+
+    def backup_error(self, err: EstimateError, scene: Scene) -> np.ndarray:
+        """In calm air each lead K steps longer (the turn's samples), in wind the loiter's
+        (:func:`~tssac_core.assurance.ground_loiter.loiter_backup_error_m`); the braking turns, not offered, 0."""
+        lim, dt_s = scene.lim, scene.dt_s
+        leads = lead_steps(scene.cfg, dt_s)
+        if self.wind is None:
+            error = backup_error_m(err, lim, dt_s, leads + self.airframe.settle_steps(dt_s))
+        else:
+            error = loiter_backup_error_m(err, lim, dt_s, leads, self.wind)
+        per_turn = error.reshape(len(error), len(leads), N_TURNS).copy()
+        per_turn[:, :, 2:] = 0.0
+        return per_turn.reshape(len(error), len(leads) * N_TURNS)

@@ -492,6 +492,11 @@ class Prediction(Protocol):
         """Every backup's excess from the states themselves, (M, L * N_TURNS) (as :func:`_backup_excess_here`)."""
         ...
 
+    def backup_error(self, err: EstimateError, scene: Scene) -> np.ndarray:
+        """How much of each offered backup's clearance the error ``err`` takes away, (M, L * N_TURNS) metres (0 for a
+        backup not offered)."""
+        ...
+
 
 class KinematicPrediction:
     """Eq. 5-6, as the batched world and the kinematic SITL fly: the module docstring's proof."""
@@ -525,6 +530,9 @@ class KinematicPrediction:
         leads = lead_steps(scene.cfg, scene.dt_s)
         sc = scene
         return _backup_excess_here(x, y, v, phi, rows, sc.hz, sc.lim, sc.dt_s, leads, sc.margin, err, sc.cfg)
+
+    def backup_error(self, err: EstimateError, scene: Scene) -> np.ndarray:
+        return backup_error_m(err, scene.lim, scene.dt_s, lead_steps(scene.cfg, scene.dt_s))
 
 
 KINEMATIC = KinematicPrediction()
@@ -774,6 +782,7 @@ def companion_error(
     return est + handover_error(lim, dt_s, cfg.handover_ticks if lossy else 0)
 
 
-def largest_backup_error_m(err: EstimateError, lim: Limits, dt_s: float, steps: int, cfg: ShieldConfig) -> float:
-    """The most clearance the error bound takes from any backup at the end of a decision interval (a report)."""
-    return float(backup_error_m(err.after(steps * dt_s, lim), lim, dt_s, lead_steps(cfg, dt_s)).max())
+def largest_backup_error_m(err: EstimateError, steps: int, scene: Scene, prediction: Prediction = KINEMATIC) -> float:
+    """The most clearance the error bound takes from any backup the prediction offers at the end of a decision
+    interval of ``steps`` (a report)."""
+    return float(prediction.backup_error(err.after(steps * scene.dt_s, scene.lim), scene).max())
