@@ -333,7 +333,7 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
         "interventions": None if per_uav is None else round(per_uav * uav_missions),
         "interventions_per_uav_mission": per_uav,
         "backup_time_fraction": shield.get("backup_time_fraction"),
-        "unprotected_steps": None,
+        "unprotected_steps": unprotected_steps(missions),
         "success_rate": summary.get("success_rate"),
         "unsafe_missions": [
             int(m["index"])
@@ -344,6 +344,16 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
         "fly_error": summary.get("error"),
         "wall_time_s": round(time.monotonic() - t0, 1),
     }
+
+
+def unprotected_steps(missions: list[dict[str, Any]]) -> int | None:
+    """Control steps flown with no passing action and no clear backup, summed over the missions' companions (their
+    status files' ``shield.unprotected_steps``); None if no companion reported its counts."""
+    counts = [
+        (c.get("shield") or {}).get("unprotected_steps") for m in missions for c in (m.get("companions") or {}).values()
+    ]
+    known = [int(n) for n in counts if n is not None]
+    return sum(known) if known else None
 
 
 def sitl_where(name: str, cfg: BenchConfig) -> str:

@@ -40,7 +40,7 @@ from typing import TypeAlias
 
 import numpy as np
 
-from tssac_core.assurance.ground_loiter import LoiterBound, loiter_centre, loiter_turn_rate
+from tssac_core.assurance.ground_loiter import LoiterBound, loiter_action, loiter_centre
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
@@ -272,18 +272,20 @@ class CompanionShield:
         position, heading, speed = sigmas
         return (x, y, air, float(np.arctan2(ay, ax))), (position, heading * ground / air, speed), float(rate)
 
+    def _ground_and_air(self, estimate: Estimate) -> tuple[float, float, float, float, float]:
+        """The estimate's position, ground velocity (east, north) and airspeed (the ground velocity less the wind)."""
+        (x, y, ground, course), _, _ = estimate
+        we, wn = self.wind_m_s
+        gx, gy = ground * np.cos(course), ground * np.sin(course)
+        return x, y, float(gx), float(gy), float(np.hypot(gx - we, gy - wn))
+
     def _begin_loiter(self, estimate: Estimate) -> None:
         """Fix the loiter's circle where the flying backup's lead ends: at R from the estimate on the turn's side of
         its ground track."""
         assert self.loiter is not None
-        (x, y, ground, course), _, _ = estimate
-        we, wn = self.wind_m_s
-        gx, gy = ground * np.cos(course), ground * np.sin(course)
-        air = np.array([float(np.hypot(gx - we, gy - wn))])
+        x, y, gx, gy, air = self._ground_and_air(estimate)
         sign = 1.0 if int(self.monitor.memory.backup[0]) % N_TURNS == 0 else -1.0
-        radius = self.loiter.wind(np.array([we]), np.array([wn]), air).radius_m(
-            air, self.monitor.limits.turn_rate_max_rad_s
-        )
+        radius = self.loiter.radius_m(np.array([air]), self.monitor.limits.turn_rate_max_rad_s)
         cx, cy = loiter_centre(np.array([x]), np.array([y]), np.array([gx]), np.array([gy]), sign, radius)
         self._circle = (float(cx[0]), float(cy[0]), float(radius[0]), sign)
 
@@ -291,15 +293,15 @@ class CompanionShield:
         """This tick's command of the flying loiter: the law's heading rate from the estimate and the wind, the speed
         held."""
         assert self.loiter is not None and self._circle is not None
-        (x, y, ground, course), _, _ = estimate
+        x, y, gx, gy, _ = self._ground_and_air(estimate)
         cx, cy, radius, sign = self._circle
         we, wn = self.wind_m_s
-        limit = self.monitor.limits.turn_rate_max_rad_s
-        rate = loiter_turn_rate(
-            np.array([x]), np.array([y]), np.array([ground * np.cos(course)]), np.array([ground * np.sin(course)]),
-            we, wn, np.array([cx]), np.array([cy]), np.array([radius]), sign, limit, self.loiter.law,
+        circle = (np.array([cx]), np.array([cy]), np.array([radius]), sign)
+        action = loiter_action(
+            np.array([x]), np.array([y]), np.array([gx]), np.array([gy]), we, wn, circle,
+            self.monitor.limits.turn_rate_max_rad_s, self.loiter.law,
         )  # fmt: skip
-        return np.array([float(rate[0] / limit[0]), 0.0])
+        return action[0]
 
     def _airframe(self, speed_m_s: float) -> AirframeLag:
         """The airframe's response at ``speed_m_s`` (held to the fitted span: the limits keep the speed inside it)."""

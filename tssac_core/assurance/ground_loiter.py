@@ -119,6 +119,25 @@ def loiter_turn_rate(
     return np.clip(heading_rate, -limit, limit)
 
 
+def loiter_action(
+    x: np.ndarray,
+    y: np.ndarray,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    wind_x: np.ndarray | float,
+    wind_y: np.ndarray | float,
+    circle: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | float],
+    turn_rate_max_rad_s: np.ndarray,
+    law: LoiterLaw,
+) -> np.ndarray:
+    """The normalised action [omega, u] (M, 2) that flies the loiter ``circle`` (centre x, centre y, radius, sign):
+    :func:`loiter_turn_rate` over the limit, the speed held."""
+    cx, cy, radius, sign = circle
+    limit = np.asarray(turn_rate_max_rad_s, dtype=np.float64)
+    rate = loiter_turn_rate(x, y, gx, gy, wind_x, wind_y, cx, cy, radius, sign, limit, law)
+    return np.stack([rate / limit, np.zeros(len(rate))], axis=-1)
+
+
 @dataclass(frozen=True)
 class LoiterFlight:
     """A loiter flown on the model: positions after steps 1..S, (M, S) each."""
@@ -316,6 +335,10 @@ class LoiterBound:
         lo = np.clip(hi - 1, 0, len(table) - 1)
         exact = np.isclose(table[hi], speed_m_s)
         return np.where(exact, column[hi], np.maximum(column[lo], column[hi]))
+
+    def radius_m(self, speed_m_s: np.ndarray, turn_rate_max_rad_s: np.ndarray) -> np.ndarray:
+        """The loiter circle's radius at each airspeed, sized for the promised wind (:func:`loiter_radius_m`)."""
+        return loiter_radius_m(speed_m_s, self.max_m_s, turn_rate_max_rad_s, self.law.authority)
 
     def excursion_at(self, speed_m_s: np.ndarray) -> np.ndarray:
         """(M,) the excursion at each speed (the worse neighbour's between two tabled speeds)."""

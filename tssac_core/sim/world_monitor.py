@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.ground_loiter import LoiterBound, loiter_centre, loiter_turn_rate
+from tssac_core.assurance.ground_loiter import LoiterBound, loiter_action, loiter_centre
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
@@ -144,6 +144,15 @@ class WorldMonitor:
             wind = self.loiter.wind(east.reshape(-1)[flat], north.reshape(-1)[flat], speeds)
         return LaggedPrediction(varied.airframe(flat), varied.lag_state(flat), wind)
 
+    def _over_the_ground(
+        self, world: World, w: np.ndarray, j: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Vehicles (w, j): their wind (east, north), airspeed, ground velocity (gx, gy) and turn-rate limit."""
+        east, north = (wind[w, j] for wind in self._wind(world))
+        v, phi = world.v_m_s[w, j], world.phi_rad[w, j]
+        limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
+        return east, north, v, v * np.cos(phi) + east, v * np.sin(phi) + north, limit
+
     def _begin_loiter(self, world: World, starting: np.ndarray) -> None:
         """Fix the loiter's circle of the ``starting`` (N, 3) vehicles from their states: their backup's lead ends."""
         if not starting.any():
@@ -152,11 +161,8 @@ class WorldMonitor:
         w, j = np.nonzero(starting)
         backup = self.memory.backup.reshape(world.n, N_ROLES)[w, j]
         sign = np.where(backup % N_TURNS == 0, 1.0, -1.0)
-        east, north = self._wind(world)
-        v, phi = world.v_m_s[w, j], world.phi_rad[w, j]
-        gx, gy = v * np.cos(phi) + east[w, j], v * np.sin(phi) + north[w, j]
-        limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
-        radius = self.loiter.wind(east[w, j], north[w, j], v).radius_m(v, limit)
+        _, _, v, gx, gy, limit = self._over_the_ground(world, w, j)
+        radius = self.loiter.radius_m(v, limit)
         cx, cy = loiter_centre(world.x_m[w, j], world.y_m[w, j], gx, gy, sign, radius)
         self._loiter_sign[w, j] = sign
         self._loiter_centre[w, j] = np.stack([cx, cy], axis=-1)
@@ -168,16 +174,11 @@ class WorldMonitor:
             return
         assert self.loiter is not None
         w, j = np.nonzero(loitering)
-        east, north = self._wind(world)
-        v, phi = world.v_m_s[w, j], world.phi_rad[w, j]
-        gx, gy = v * np.cos(phi) + east[w, j], v * np.sin(phi) + north[w, j]
-        limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
+        east, north, _, gx, gy, limit = self._over_the_ground(world, w, j)
         centre = self._loiter_centre[w, j]
-        rate = loiter_turn_rate(
-            world.x_m[w, j], world.y_m[w, j], gx, gy, east[w, j], north[w, j], centre[:, 0], centre[:, 1],
-            self._loiter_radius[w, j], self._loiter_sign[w, j], limit, self.loiter.law,
-        )  # fmt: skip
-        self._flying[w, j] = np.stack([rate / limit, np.zeros(len(w))], axis=-1)
+        circle = (centre[:, 0], centre[:, 1], self._loiter_radius[w, j], self._loiter_sign[w, j])
+        x, y = world.x_m[w, j], world.y_m[w, j]
+        self._flying[w, j] = loiter_action(x, y, gx, gy, east, north, circle, limit, self.loiter.law)
 
     def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
         flat = np.flatnonzero(due.reshape(-1))
