@@ -57,3 +57,20 @@ def test_a_benchmark_run_leaves_the_tree_as_it_was(tmp_path):
     assert (tmp_path / "help.json").is_file() and f"wrote {tmp_path / 'help.json'}" in done.stdout
     after = subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True).stdout
     assert after == before
+
+
+def test_a_sitl_row_counts_the_companions_unprotected_steps() -> None:
+    """bench_adversaries' SITL rows sum each companion's ``shield.unprotected_steps`` (None when none reported)."""
+    from benchmarks.bench_adversaries import unprotected_steps
+
+    def mission(*counts: int | None) -> dict[str, object]:
+        roles = ("decoy", "detect", "strike")
+        return {
+            "companions": {
+                r: {"shield": None if n is None else {"unprotected_steps": n}} for r, n in zip(roles, counts)
+            }
+        }
+
+    assert unprotected_steps([mission(0, 3, 0), mission(2, 0, None)]) == 5
+    assert unprotected_steps([mission(None, None, None)]) is None
+    assert unprotected_steps([]) is None
