@@ -104,3 +104,30 @@ def test_fly_refuses_a_start_its_monitors_cannot_protect_in_one_line(tmp_path: P
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert "layout.starts.decoy" in lines[0] and "cannot protect this start" in lines[0], lines
     assert not out.exists()
+
+
+@pytest.mark.parametrize("given", [False, True], ids=["drawn-and-checked", "eq5-layouts"])
+def test_batched_missions_on_varied_airframes_start_where_their_monitor_protects(given: bool) -> None:
+    """corner.yaml's first 100 layouts of seed 2,120,001 on airframes drawn from the F-16's spans in a 10 m/s wind:
+    the ``nan`` pilot (the backup flies from the first decision) is never unprotected on the layouts fly_missions draws,
+    two of which it drew again for their airframes; on the same seeds' eq. 5 layouts, given as they are (no second
+    check), some start has no clear backup at the first decision (the negative control)."""
+    from tssac_core.sim.adversaries import Adversary, AdversaryPilot
+    from tssac_core.sim.missions import fly_missions, mission_layout
+    from tssac_core.sim.varied_airframes import AirframeVariation
+
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "corner.yaml"), episode_steps=300)
+    seed, n = 2_120_001, 100
+    variation = dataclasses.replace(AirframeVariation.from_response(RESPONSE, wind_max_m_s=10.0), wind_m_s=(10.0, 10.0))
+    eq5 = [mission_layout(scenario, seed, k) for k in range(n)]
+    results = fly_missions(
+        scenario, [AdversaryPilot(Adversary.NAN)] * 3, episodes=n, seed=seed, shield=ShieldConfig(),
+        airframes=variation, loiter=RESPONSE.loiter_bound(), layouts=eq5 if given else None,
+    )  # fmt: skip
+    assert results.monitor is not None
+    unprotected = int(results.monitor.unprotected_steps.sum())
+    if given:
+        assert unprotected > 0
+    else:
+        assert unprotected == 0 and float(results.cost.sum()) == 0.0 and not results.out_of_area.any()
+        assert 1 <= sum(a != b for a, b in zip(results.layouts, eq5, strict=True)) <= 5

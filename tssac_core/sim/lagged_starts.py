@@ -17,11 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.lagged_backups import LagState
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
-from tssac_core.assurance.monitor import Scene, ShieldConfig
+from tssac_core.assurance.monitor import EstimateError, Scene, ShieldConfig
 from tssac_core.sim.airframe_response import AirframeResponse, airframe_lag, load_response
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, StartCheck, start_error, start_problem, start_scene
+from tssac_core.sim.varied_airframes import VariedAirframes
+from tssac_core.sim.world import World
 
 
 def lagged_start_excess_m(s: Scenario, lay: Layout, response: AirframeResponse, cfg: ShieldConfig) -> np.ndarray:
@@ -73,3 +76,36 @@ def response_start_check(s: Scenario, response_path: Path | None) -> StartCheck 
     SITL's ``monitor_response``), or None for monitors that predict with eq. 5. A file that does not read raises
     :class:`~tssac_core.sim.airframe_response.ResponseFileError` (one line)."""
     return None if response_path is None else lagged_start_check(s, load_response(response_path))
+
+
+def varied_start_check(
+    s: Scenario,
+    world: World,
+    varied: VariedAirframes,
+    loiter: LoiterBound | None,
+    index: int,
+    cfg: ShieldConfig,
+) -> StartCheck:
+    """The further check of world ``index``'s starts in the batched world, where the monitor sees the airframes the
+    vehicles fly (:class:`~tssac_core.sim.varied_airframes.VariedAirframes`, drawn for the world, straight and
+    settled) and the world's wind, its backups ending in the ``loiter`` that bounds them there (None: calm air's
+    turn): some backup from each start itself keeps the margin of ``cfg`` (the true state, no link: what the
+    first decision finds when the proposal fails)."""
+    flat = np.arange(len(ROLES)) + len(ROLES) * index
+    airframe, lag = varied.airframe(flat), varied.lag_state(flat)
+    east, north = (float(c) for c in world.wind_m_s()[:, index])
+    n = len(ROLES)
+
+    def check(lay: Layout) -> tuple[str, str] | None:
+        state, hz, lim = start_scene(s, lay)
+        x, y, v, phi = (state[:, k] for k in range(4))
+        wind = None if loiter is None else loiter.wind(np.full(n, east), np.full(n, north), v)
+        scene = Scene(hz, lim, s.dt_s, np.full(n, cfg.margin_m), cfg)
+        excess = LaggedPrediction(airframe, lag, wind).backup_excess(x, y, v, phi, EstimateError.zero(n), scene)
+        for role, best in zip(ROLES, excess.max(axis=1), strict=True):
+            if best < 0:
+                problem = start_problem(role, float(best))
+                return problem[0], f"{problem[1]} (predicting with the airframe the mission flies)"
+        return None
+
+    return check

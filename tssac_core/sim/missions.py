@@ -28,10 +28,11 @@ from tssac_core.common.stats import (
     wilson_interval,
     worst_missions,
 )
+from tssac_core.sim.lagged_starts import varied_start_check
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import PilotSpec, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
-from tssac_core.sim.scenario import ROLES, Layout, Scenario, sample_layout
+from tssac_core.sim.scenario import ROLES, Layout, Scenario, StartCheck, sample_layout
 from tssac_core.sim.team import Team
 from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
 from tssac_core.sim.world import World
@@ -47,10 +48,13 @@ def mission_seed(seed: int, index: int) -> int:
     return seed + index
 
 
-def mission_layout(scenario: Scenario, seed: int, index: int, shield: ShieldConfig | None = None) -> Layout:
+def mission_layout(
+    scenario: Scenario, seed: int, index: int, shield: ShieldConfig | None = None, starts: StartCheck | None = None
+) -> Layout:
     """The layout of mission ``index``: the scenario's fixed one, or a draw from its own seed (module docstring), its
-    starts admitted by the monitor with ``shield``'s margins (default :class:`ShieldConfig`)."""
-    return sample_layout(scenario, np.random.default_rng(mission_seed(seed, index)), shield=shield)
+    starts admitted by the monitor with ``shield``'s margins (default :class:`ShieldConfig`) and by ``starts``, the
+    further check of a monitor that predicts with the airframes the mission flies."""
+    return sample_layout(scenario, np.random.default_rng(mission_seed(seed, index)), shield=shield, start_check=starts)
 
 
 @dataclass
@@ -219,6 +223,27 @@ def world_monitor(
     return WorldMonitor(world, repeats, shield, airframes, loiter if airframes is not None else None)
 
 
+def _admit_starts(
+    scenario: Scenario,
+    seed: int,
+    index_list: list[int],
+    layouts: list[Layout],
+    world: World,
+    varied: VariedAirframes,
+    loiter: LoiterBound | None,
+    shield: ShieldConfig,
+    active: tuple[bool, ...],
+) -> None:
+    """Draw again, in place, each layout whose starts the monitor predicting with its mission's airframes and wind
+    cannot protect (:func:`tssac_core.sim.lagged_starts.varied_start_check`): from the mission's own seed, the next
+    draw both checks admit. The airframes and winds are drawn after the layouts and do not depend on them."""
+    for i, k in enumerate(index_list):
+        check = varied_start_check(scenario, world, varied, loiter, i, shield)
+        if check(layouts[i]) is not None:
+            layouts[i] = mission_layout(scenario, seed, k, shield, check)
+            world.reset([i], [layouts[i]], active)
+
+
 def iter_missions(
     scenario: Scenario,
     pilots: Sequence[PilotSpec],
@@ -259,6 +284,8 @@ def iter_missions(
         varied = VariedAirframes(airframes, world)
         varied.reset(np.arange(world.n), airframe_rng)
     seen = varied if monitor_sees_airframes else None
+    if shield is not None and seen is not None and index_list:
+        _admit_starts(scenario, seed, index_list, layouts, world, seen, loiter, check or ShieldConfig(), active)
     monitor = None if shield is None else world_monitor(world, pilots, shield, seen, loiter)
     backup_track: list[np.ndarray] = []
     while world.running.any():
