@@ -36,12 +36,12 @@ def lagged_start_excess_m(s: Scenario, lay: Layout, response: AirframeResponse, 
     promised = 0.0 if s.wind is None else s.wind.promised_max_m_s
     loiter = response.loiter_bound() if promised > 0.0 else None
     east, north = (0.0, 0.0) if s.wind is None else s.wind.velocity_m_s()
+    lo, hi = response.speeds_m_s[0], response.speeds_m_s[-1]
     out = np.empty(len(ROLES))
-    for i in range(len(ROLES)):
+    for i in range(len(ROLES)):  # one vehicle at a time: each has its own delay
         rows = np.array([i])
         x, y, v, phi = (state[rows, k] for k in range(4))
-        speeds = response.speeds_m_s
-        airframe = airframe_lag(response, np.clip(v, speeds[0], speeds[-1]), s.dt_s)
+        airframe = airframe_lag(response, np.clip(v, lo, hi), s.dt_s)
         wind = None if loiter is None else loiter.wind(np.array([east]), np.array([north]), v)
         lag = LagState.steady(np.zeros(1), int(airframe.delay_steps[0]))
         prediction = LaggedPrediction(airframe, lag, wind)
