@@ -90,6 +90,16 @@ def test_position_integrates_the_ground_velocity(level_flight):
         assert after.east_m - before.east_m == pytest.approx(v_east_m_s * DT_S, rel=1e-4)
 
 
+@pytest.mark.parametrize("speed_m_s", [150.0, 300.0])
+def test_a_settled_start_flies_straight(f16, speed_m_s):
+    """From the settled start under commands (0, 0), calm air: the course rate stays below 0.01 deg/s for 10 s at the
+    envelope's ends (what the companion's filter may start from at the first fix: the shield's
+    STRAIGHT_START_TURN_SIGMA_RAD_S, 0.1 deg/s, allows ten times it)."""
+    with JsbsimAirframe(f16, start_east(speed_m_s), Wind(), 150.0, 300.0) as airframe:
+        states = [airframe.state, *fly(airframe, 0.0, 0.0, 10.0)]
+    assert max(abs(math.degrees(s.turn_rate_rad_s)) for s in states) < 0.01
+
+
 def test_heading_rate_step_settles(turn_step):
     """A heading-rate step 0 -> 5 deg/s, measured as the course rate (turn_rate_rad_s, calm air): t90 within
     3.5 s, overshoot below 10 %, steady-state error (last 5 s) below 0.1 deg/s; altitude within 30 m."""

@@ -319,3 +319,26 @@ def test_in_wind_the_companions_monitor_turns_the_filters_ground_state_into_the_
     back, sigmas, rate = shield._in_the_air(ground, (5.0, 0.01, 1.0), course_rate)
     assert back == pytest.approx((1080.0, 1940.0, 250.0, 1.2)) and rate == pytest.approx(math.radians(4.0))
     assert sigmas[1] == pytest.approx(0.01 * ground[2] / 250.0)
+
+
+def test_the_filter_starts_from_the_known_straight_start_until_a_turn_reaches_the_vehicle(random_path):
+    """A monitor predicting with a response: at the first fix, before any turn command has reached the vehicle (the
+    link's round trip after it was sent), the filter may start from a turn rate of 0 with a small sigma; once one may
+    have, from its own prior (None); a monitor predicting with eq. 5 never asks for it."""
+    from mavlink_bridge.companion.shield import STRAIGHT_START_TURN_SIGMA_RAD_S
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.sim.airframe_response import load_response
+
+    s = load(random_path)
+    world = World(s, 1)
+    world.reset([0], [sample_layout(s, np.random.default_rng(35))])
+    response = load_response(response_path("f16"))
+    shield = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(), True, response)
+    eq5 = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(), True)
+    delay = shield.pending_ticks()
+    assert shield.straight_start_turn_rate(0) == (0.0, STRAIGHT_START_TURN_SIGMA_RAD_S)
+    shield.sent((0.0, 1.0), 0, before_fix=True)  # straight on, faster: still no turn
+    shield.sent((0.5, 0.0), 3, before_fix=True)
+    assert shield.straight_start_turn_rate(3 + delay - 1) == (0.0, STRAIGHT_START_TURN_SIGMA_RAD_S)
+    assert shield.straight_start_turn_rate(3 + delay) is None
+    assert eq5.straight_start_turn_rate(0) is None

@@ -314,3 +314,18 @@ def test_extended_and_unscented_filters_agree_on_a_turning_track() -> None:
     a, b = (est[m] for m in TURN_MODELS)
     gap = np.hypot(a["pos_e"] - b["pos_e"], a["pos_n"] - b["pos_n"])
     assert float(np.max(gap[20:])) < 0.05, float(np.max(gap[20:]))
+
+
+def test_a_reset_can_start_from_a_known_turn_rate() -> None:
+    """``reset(..., turn_rate=(omega, sigma))`` starts the constant-turn filter's rate there with that sigma (the
+    default: 0, as uncertain as the noise's prior); a prior that is not finite or has no positive sigma is refused."""
+    noise = FilterNoise.from_sensor(5.0, 0.5, max_accel_m_s2=10.0, max_turn_rate_rad_s=math.radians(5.0))
+    known, unknown = VehicleStateFilter(noise), VehicleStateFilter(noise)
+    known.reset(0.0, (0.0, 0.0), (250.0, 0.0), turn_rate=(0.01, 0.002))
+    unknown.reset(0.0, (0.0, 0.0), (250.0, 0.0))
+    assert known.turn_rate_rad_s == pytest.approx(0.01) and known.turn_rate_sigma_rad_s == pytest.approx(0.002)
+    assert unknown.turn_rate_rad_s == 0.0
+    assert unknown.turn_rate_sigma_rad_s == pytest.approx(noise.initial_turn_rate_sigma_rad_s)
+    for bad in ((math.nan, 0.001), (0.0, 0.0), (0.0, math.nan)):
+        with pytest.raises(ValueError, match="turn_rate"):
+            known.reset(0.0, (0.0, 0.0), (250.0, 0.0), turn_rate=bad)

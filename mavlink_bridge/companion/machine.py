@@ -372,7 +372,12 @@ class Companion:
         ):
             self.counters.fixes_rejected += 1
             return
-        if self.filter.update(m.t_s, (m.east_m, m.north_m), (m.vel_east_m_s, m.vel_north_m_s)):
+        pos, vel = (m.east_m, m.north_m), (m.vel_east_m_s, m.vel_north_m_s)
+        prior = None if self.filter.initialised else self.pilot_step.start_turn_rate(int(round(m.t_s * 1000.0)))
+        if prior is not None:  # the first fix of a flight whose turn rate is known: the filter starts from it
+            self.filter.reset(m.t_s, pos, vel, prior)
+            self.counters.fixes += 1
+        elif self.filter.update(m.t_s, pos, vel):
             self.counters.fixes += 1
         else:
             self.counters.fixes_rejected += 1

@@ -199,6 +199,11 @@ class PilotStep:
         sigmas = (f.position_sigma_major_m, *f.speed_heading_sigma[::-1])
         return (x_m, y_m, f.speed_m_s, f.heading_rad), sigmas, turn
 
+    def start_turn_rate(self, t_ms: int) -> tuple[float, float] | None:
+        """What the filter may start from at the first fix, at tick ``t_ms``: the monitor's known straight start
+        (:meth:`~mavlink_bridge.companion.shield.CompanionShield.straight_start_turn_rate`), or None."""
+        return None if self.shield is None else self.shield.straight_start_turn_rate(t_ms // self.dt_ms)
+
     def sent(self, setpoint: Setpoint, t_ms: int, before_fix: bool) -> None:
         """``setpoint`` was sent (or a grant answered with it) at tick ``t_ms``: the monitor counts it on the link
         (``before_fix``: the vehicle's position is not yet known)."""

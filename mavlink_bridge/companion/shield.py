@@ -64,6 +64,10 @@ ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
 _TURN_NAMES = ("left", "right", "left braking", "right braking")
 
+STRAIGHT_START_TURN_SIGMA_RAD_S = math.radians(0.1)
+"""The standard deviation taken for a settled airframe's turn rate in straight flight: the F-16's stays below 0.01
+deg/s for 10 s at every speed of its envelope (tests/test_jsbsim_airframe.py), so 0.1 deg/s is a tenfold allowance."""
+
 Estimate: TypeAlias = tuple[tuple[float, float, float, float], tuple[float, float, float], tuple[float, float]]
 """The filter's (x, y, v, phi) at a tick, its standard deviations of position (major axis, m), heading (rad) and
 speed (m/s), and its turn rate and that's standard deviation (rad/s)."""
@@ -326,6 +330,19 @@ class CompanionShield:
         self._sent.append(command)
         if before_fix:
             self._before_fix.append((step, command))
+
+    def straight_start_turn_rate(self, step: int) -> tuple[float, float] | None:
+        """What the filter may start from at the first fix, at tick ``step``, when the monitor predicts with an
+        airframe's response: the start is straight, settled flight (the scenario's, as :meth:`dead_reckoned` takes
+        it), so until a turn command reaches the vehicle its turn rate is 0 within the inner loop's steady error,
+        (0, :data:`STRAIGHT_START_TURN_SIGMA_RAD_S`). None (the filter's own prior: as uncertain as the limit) once a
+        turn may have begun, or for a monitor that predicts with eq. 5, which does not use the rate."""
+        if self.response is None:
+            return None
+        delay = self.pending_ticks()
+        if any(command[0] != 0.0 and tick + delay <= step for tick, command in self._before_fix):
+            return None
+        return 0.0, STRAIGHT_START_TURN_SIGMA_RAD_S
 
     def dead_reckoned(self, start: tuple[float, float, float, float], step: int) -> Estimate:
         """The vehicle's state at tick ``step`` before any position fix: its start (the scenario's: known exactly, in

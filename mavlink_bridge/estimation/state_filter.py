@@ -202,7 +202,9 @@ def _integrator_q(spectral_density: float, dt_s: float, order: int) -> FloatArra
 class _Backend(Protocol):
     """What VehicleStateFilter needs from a motion model (state kept inside a filterpy object)."""
 
-    def initialise(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None: ...
+    def initialise(
+        self, pos_m: tuple[float, float], vel_m_s: tuple[float, float], turn_rate: tuple[float, float] | None
+    ) -> None: ...
     def predict(self, dt_s: float) -> None: ...
     def update(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None: ...
     def get(self) -> tuple[FloatArray, FloatArray]: ...
@@ -223,7 +225,9 @@ class _ConstantVelocity:
         self._kf.H = np.eye(4)
         self._kf.R = np.diag([noise.pos_sigma_m**2] * 2 + [noise.vel_sigma_m_s**2] * 2)
 
-    def initialise(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
+    def initialise(
+        self, pos_m: tuple[float, float], vel_m_s: tuple[float, float], turn_rate: tuple[float, float] | None
+    ) -> None:
         self._kf.x = np.array([pos_m[0], pos_m[1], vel_m_s[0], vel_m_s[1]], dtype=np.float64)
         self._kf.P = self._kf.R.copy()
 
@@ -418,16 +422,17 @@ class _ConstantTurn:
             self._kf = _TurnEkf(dim_x=5, dim_z=4)
         self._kf.R = np.diag([noise.pos_sigma_m**2] * 2 + [noise.vel_sigma_m_s**2] * 2)
 
-    def initialise(self, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
+    def initialise(
+        self, pos_m: tuple[float, float], vel_m_s: tuple[float, float], turn_rate: tuple[float, float] | None
+    ) -> None:
         speed = math.hypot(*vel_m_s)
         n = self._noise
-        self._kf.x = np.array([pos_m[0], pos_m[1], speed, math.atan2(vel_m_s[1], vel_m_s[0]), 0.0])
+        omega, omega_sigma = (0.0, n.initial_turn_rate_sigma_rad_s) if turn_rate is None else turn_rate
+        self._kf.x = np.array([pos_m[0], pos_m[1], speed, math.atan2(vel_m_s[1], vel_m_s[0]), omega])
         # Heading from a velocity of speed s with noise sigma per axis: sigma_phi ~ sigma / s,
         # meaningless (use pi) when the vehicle is barely moving.
         phi_sigma = min(math.pi, n.vel_sigma_m_s / max(speed, 1e-9))
-        self._kf.P = np.diag(
-            [n.pos_sigma_m**2, n.pos_sigma_m**2, n.vel_sigma_m_s**2, phi_sigma**2, n.initial_turn_rate_sigma_rad_s**2]
-        )
+        self._kf.P = np.diag([n.pos_sigma_m**2, n.pos_sigma_m**2, n.vel_sigma_m_s**2, phi_sigma**2, omega_sigma**2])
 
     def _tidy(self) -> None:
         self._kf.x[_PHI] = _wrap_angle_rad(float(self._kf.x[_PHI]))
@@ -511,12 +516,22 @@ class VehicleStateFilter:
 
     # -- commands -------------------------------------------------------------------------------
 
-    def reset(self, t_s: float, pos_m: tuple[float, float], vel_m_s: tuple[float, float]) -> None:
-        """Start afresh from one measurement at time t_s (s, vehicle clock)."""
+    def reset(
+        self,
+        t_s: float,
+        pos_m: tuple[float, float],
+        vel_m_s: tuple[float, float],
+        turn_rate: tuple[float, float] | None = None,
+    ) -> None:
+        """Start afresh from one measurement at time t_s (s, vehicle clock). ``turn_rate``: what is known of the turn
+        rate then, (rad/s, its standard deviation); None: 0, as uncertain as
+        :attr:`FilterNoise.initial_turn_rate_sigma_rad_s` (a constant-velocity filter has no turn rate)."""
         t = _finite_time(t_s)
         pos = _finite_pair("pos_m", pos_m)
         vel = _finite_pair("vel_m_s", vel_m_s)
-        self._backend.initialise(pos, vel)
+        if turn_rate is not None and not (math.isfinite(turn_rate[0]) and turn_rate[1] > 0.0):
+            raise ValueError(f"turn_rate must be finite with a positive sigma, got {turn_rate!r}")
+        self._backend.initialise(pos, vel, turn_rate)
         self._t_s = t
         self._snapshot(t)
         self._rejected_count = 0
