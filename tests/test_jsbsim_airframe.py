@@ -93,8 +93,8 @@ def test_position_integrates_the_ground_velocity(level_flight):
 @pytest.mark.parametrize("speed_m_s", [150.0, 300.0])
 def test_a_settled_start_flies_straight(f16, speed_m_s):
     """From the settled start under commands (0, 0), calm air: the course rate stays below 0.01 deg/s for 10 s at the
-    envelope's ends (what the companion's filter may start from at the first fix: the shield's
-    STRAIGHT_START_TURN_SIGMA_RAD_S, 0.1 deg/s, allows ten times it)."""
+    envelope's ends (what the companion's filter may start from at the first fix:
+    tssac_core.sim.lagged_starts.STRAIGHT_START_TURN_SIGMA_RAD_S, 0.1 deg/s, allows ten times it)."""
     with JsbsimAirframe(f16, start_east(speed_m_s), Wind(), 150.0, 300.0) as airframe:
         states = [airframe.state, *fly(airframe, 0.0, 0.0, 10.0)]
     assert max(abs(math.degrees(s.turn_rate_rad_s)) for s in states) < 0.01

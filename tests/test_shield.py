@@ -325,9 +325,9 @@ def test_the_filter_starts_from_the_known_straight_start_until_a_turn_reaches_th
     """A monitor predicting with a response: at the first fix, before any turn command has reached the vehicle (the
     link's round trip after it was sent), the filter may start from a turn rate of 0 with a small sigma; once one may
     have, from its own prior (None); a monitor predicting with eq. 5 never asks for it."""
-    from mavlink_bridge.companion.shield import STRAIGHT_START_TURN_SIGMA_RAD_S
     from sim_vehicles.dynamics.response_fit import response_path
     from tssac_core.sim.airframe_response import load_response
+    from tssac_core.sim.lagged_starts import STRAIGHT_START_TURN_SIGMA_RAD_S
 
     s = load(random_path)
     world = World(s, 1)

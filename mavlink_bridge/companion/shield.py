@@ -56,6 +56,7 @@ from tssac_core.assurance.monitor import (
     step_actions,
 )
 from tssac_core.sim.airframe_response import AirframeResponse, airframe_lag
+from tssac_core.sim.lagged_starts import STRAIGHT_START_TURN_SIGMA_RAD_S
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world_monitor import VehicleMonitor
 from tssac_core.sim.world_state import WorldState
@@ -63,10 +64,6 @@ from tssac_core.sim.world_state import WorldState
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
 _TURN_NAMES = ("left", "right", "left braking", "right braking")
-
-STRAIGHT_START_TURN_SIGMA_RAD_S = math.radians(0.1)
-"""The standard deviation taken for a settled airframe's turn rate in straight flight: the F-16's stays below 0.01
-deg/s for 10 s at every speed of its envelope (tests/test_jsbsim_airframe.py), so 0.1 deg/s is a tenfold allowance."""
 
 Estimate: TypeAlias = tuple[tuple[float, float, float, float], tuple[float, float, float], tuple[float, float]]
 """The filter's (x, y, v, phi) at a tick, its standard deviations of position (major axis, m), heading (rad) and

@@ -7,12 +7,14 @@ circle is wider. A start eq. 5 admits can lack clearance under that model, and t
 backup: the UAV flies unprotected until one clears. This module checks every start the way that first decision does:
 after the link's round trip of the hold (straight on at constant speed: what the vehicle flies before the first
 command reaches it, settled, its turn rate zero), the hold's path keeps the margin and some backup from its end keeps
-it for ever, both after the error bound of :func:`~tssac_core.sim.scenario.start_error`. The SITL world and ``fly``
+it for ever, both after the error bound of :func:`~tssac_core.sim.scenario.start_error` and the turn rate's
+at the first fix (:data:`STRAIGHT_START_TURN_SIGMA_RAD_S`). The SITL world and ``fly``
 draw layouts with it, so the same seed gives both the same layout.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +27,11 @@ from tssac_core.sim.airframe_response import AirframeResponse, airframe_lag, loa
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, StartCheck, start_error, start_problem, start_scene
 from tssac_core.sim.varied_airframes import VariedAirframes
 from tssac_core.sim.world import World
+
+STRAIGHT_START_TURN_SIGMA_RAD_S = math.radians(0.1)
+"""The standard deviation taken for a settled airframe's turn rate in straight flight, what a companion's filter starts
+from at the first fix until a turn command reaches the vehicle: the F-16's stays below 0.01 deg/s for 10 s at every
+speed of its envelope (tests/test_jsbsim_airframe.py), so 0.1 deg/s is a tenfold allowance."""
 
 
 def lagged_start_excess_m(s: Scenario, lay: Layout, response: AirframeResponse, cfg: ShieldConfig) -> np.ndarray:
@@ -46,7 +53,9 @@ def lagged_start_excess_m(s: Scenario, lay: Layout, response: AirframeResponse, 
         lag = LagState.steady(np.zeros(1), int(airframe.delay_steps[0]))
         prediction = LaggedPrediction(airframe, lag, wind)
         scene = Scene(hz.select(rows), lim.select(rows), s.dt_s, np.array([cfg.margin_m]), cfg)
-        err = error.select(rows)
+        # The filter's turn rate at the first fix, as a heading error (the shield's turned term).
+        turned = cfg.sigma_k * STRAIGHT_START_TURN_SIGMA_RAD_S * airframe.longest_tau_s()
+        err = error.select(rows) + EstimateError(np.zeros(1), turned, np.zeros(1))
         if hold:
             hold_end = err.after(hold * s.dt_s, scene.lim)
             _, excess, _ = prediction.proposal_excess(x, y, v, phi, np.zeros((1, 2)), hold, hold_end, scene)
