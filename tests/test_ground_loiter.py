@@ -366,9 +366,10 @@ def test_the_reported_margin_is_the_error_the_decisions_take_off(windy: bool) ->
     state = (np.array([10_000.0]), np.array([0.0]), v, np.zeros(1))
     zero = EstimateError(np.zeros(1), np.zeros(1), np.zeros(1))
     err = EstimateError(np.array([40.0]), np.array([0.01]), np.array([2.0]))
-    lost = prediction.backup_excess(*state, zero, scene) - prediction.backup_excess(*state, err, scene)
-    offered = np.isfinite(prediction.backup_excess(*state, zero, scene))
-    assert largest_backup_error_m(err, 0, scene, prediction) == pytest.approx(lost[offered].max())
+    exact, with_error = (prediction.backup_excess(*state, e, scene) for e in (zero, err))
+    offered = np.isfinite(exact)  # the braking turns are not offered (-inf)
+    lost = exact[offered] - with_error[offered]
+    assert largest_backup_error_m(err, 0, scene, prediction) == pytest.approx(lost.max())
     assert largest_backup_error_m(err, 0, scene, prediction) != pytest.approx(
         largest_backup_error_m(err, 0, scene, KINEMATIC)
     )

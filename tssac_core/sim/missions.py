@@ -223,6 +223,19 @@ def world_monitor(
     return WorldMonitor(world, repeats, shield, airframes, loiter if airframes is not None else None)
 
 
+def _varied_airframes(
+    world: World, airframes: AirframeVariation | None, seed: int
+) -> tuple[VariedAirframes | None, np.random.Generator]:
+    """The missions' airframes drawn from ``airframes`` (None: eq. 5-6 exactly) and the stream that shapes their
+    actions, both from the run's seed."""
+    rng = np.random.default_rng([seed, AIRFRAME_STREAM])
+    if airframes is None:
+        return None, rng
+    varied = VariedAirframes(airframes, world)
+    varied.reset(np.arange(world.n), rng)
+    return varied, rng
+
+
 def _admit_starts(
     scenario: Scenario,
     seed: int,
@@ -279,10 +292,7 @@ def iter_missions(
     team = Team(pilots, mode)
     # The reward's route fields are the route observation's (RouteConfig() both): one field per layout, not two.
     routes = team.routes
-    varied, airframe_rng = None, np.random.default_rng([seed, AIRFRAME_STREAM])
-    if airframes is not None:
-        varied = VariedAirframes(airframes, world)
-        varied.reset(np.arange(world.n), airframe_rng)
+    varied, airframe_rng = _varied_airframes(world, airframes, seed)
     seen = varied if monitor_sees_airframes else None
     if shield is not None and seen is not None and index_list:
         _admit_starts(scenario, seed, index_list, layouts, world, seen, loiter, check or ShieldConfig(), active)
