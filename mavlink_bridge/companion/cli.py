@@ -29,6 +29,7 @@ from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.sim.airframe_response import response_option
@@ -86,6 +87,7 @@ def _pilot_flags(g: argparse._ActionsContainer) -> None:
         help="with --shield: the monitor predicts with this airframe's fitted turn lag "
         "(sim_vehicles/dynamics/airframes/<name>.response.yaml) instead of eq. 5 (docs/runtime_assurance.md)",
     )
+    g.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
     g.add_argument(
         "--source-system",
         type=int,
@@ -226,7 +228,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         filter_model=FilterModel(args.filter),
         lean_telemetry=args.lean_telemetry,
         pilot=args.pilot or "",
-        shield=ShieldConfig() if args.shield else None,
+        shield=ShieldConfig(adjust=adjust_option(args.shield_adjust, args.shield)) if args.shield else None,
         airframe_response=response_option(args.airframe_response, args.shield, scenario),
         setpoints=SetpointDialect(args.setpoints),
         source_system=args.source_system,

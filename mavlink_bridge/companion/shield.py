@@ -81,6 +81,8 @@ class ShieldCounters:
     """Times control went back to the policy."""
     backup_steps: int = 0
     """Control steps flown under the backup."""
+    adjusted_steps: int = 0
+    """Control steps flown under the monitor's adjusted action (``ShieldConfig.adjust``)."""
     unprotected_steps: int = 0
     """Control steps with no passing action and no clear backup."""
     resets: int = 0
@@ -115,6 +117,7 @@ class CompanionShield:
         self.speed_max_m_s = scenario.vehicle(role).speed_max_m_s
         self.counters = ShieldCounters()
         self.engaged = False
+        self._adjusted = False
         self._unprotected = False
         self._held = np.zeros(2)
         self._turn = np.zeros(2)
@@ -139,6 +142,7 @@ class CompanionShield:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""
         self.monitor.reset()
         self.engaged = False
+        self._adjusted = False
         self._unprotected = False
         self._turn_step = None
         self._circle = None
@@ -243,6 +247,7 @@ class CompanionShield:
                 self.counters.releases += 1
                 text = f"{self.role.value}: {RELEASED_TEXT}, policy flies"
             self.engaged = bool(d.engaged[0])
+            self._adjusted = bool(d.adjusted[0])
             self._unprotected = bool(d.unprotected[0])
             if not self.engaged:
                 self._circle = None
@@ -250,11 +255,14 @@ class CompanionShield:
                 self._begin_loiter(estimate())
         if self._circle is not None:
             self._held = self._loiter_action(estimate())
-        if self.engaged:
-            self.counters.backup_steps += 1
-            if self._unprotected:
-                self.counters.unprotected_steps += 1
+        self._count_tick()
         return self._held, text
+
+    def _count_tick(self) -> None:
+        """One control step under the adjusted action, the backup, or without a clear backup."""
+        self.counters.adjusted_steps += self._adjusted
+        self.counters.backup_steps += self.engaged
+        self.counters.unprotected_steps += self.engaged and self._unprotected
 
     def _in_the_air(
         self, state: tuple[float, float, float, float], sigmas: tuple[float, float, float], turn_rate: float

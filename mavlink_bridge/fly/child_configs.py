@@ -74,7 +74,7 @@ def companion_config(
         scenario=scenario,
         model=None if cfg.models is None else pilot_file(cfg.models, role),
         pilot="" if cfg.models is not None else cfg.pilot,
-        shield=ShieldConfig() if cfg.shield else None,
+        shield=ShieldConfig(adjust=cfg.shield_adjust) if cfg.shield else None,
         airframe_response=cfg.airframe_response,
         setpoints=cfg.setpoints,
         lockstep=cfg.lockstep,

@@ -15,6 +15,7 @@ from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_gra
 from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
+from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.common.cli import SEED_MAX, UsageError, UsageParser, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import create_exclusively
@@ -76,6 +77,8 @@ class FlyConfig:
     """The companions fly through the runtime-assurance monitor (``--shield``, docs/runtime_assurance.md)."""
     airframe_response: Path | None = None
     """The airframe's fitted response their monitors predict with (``--airframe-response``); None: eq. 5."""
+    shield_adjust: bool = False
+    """The monitors fly the passing action nearest a failing proposal before the backup (``--shield-adjust``)."""
     setpoints: SetpointDialect = SetpointDialect.BODY_RATES
     """How the companions command GUIDED (``--setpoints``: body rates, or ArduPlane's GUIDED_CHANGE_* commands)."""
     mission: int | None = None
@@ -161,6 +164,7 @@ def _mission_flags(g: argparse._ActionsContainer) -> None:
         help="with --shield: the monitors predict with this airframe's fitted turn lag "
         "(sim_vehicles/dynamics/airframes/f16.response.yaml for --dynamics jsbsim's f16) instead of eq. 5",
     )
+    g.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
     g.add_argument(
         "--dynamics",
         choices=[m.value for m in DynamicsModel],
@@ -371,6 +375,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         pilot=a.pilot or GUIDANCE,
         shield=a.shield,
         airframe_response=airframe_response_of(a, scenario),
+        shield_adjust=adjust_option(a.shield_adjust, a.shield),
         setpoints=SetpointDialect(a.setpoints),
         signing=not a.no_signing,
         workers=a.workers,

@@ -18,6 +18,7 @@ class ShieldCounts(TypedDict):
     interventions: int
     releases: int
     backup_steps: int
+    adjusted_steps: NotRequired[int]
     unprotected_steps: int
     resets: int
     max_margin_m: float

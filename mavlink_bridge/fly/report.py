@@ -46,7 +46,8 @@ def print_report(results: CampaignResults, cfg: FlyConfig) -> None:
         print(
             f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission "
             f"(max {sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of control steps under the "
-            f"backup, margin up to {sh.max_margin_m:.0f} m, {sh.uav_missions_with_cost} UAV-missions with cost, "
+            f"backup{adjusted_text(sh.adjusted_time_fraction)}, margin up to {sh.max_margin_m:.0f} m, "
+            f"{sh.uav_missions_with_cost} UAV-missions with cost, "
             f"{sh.uavs_left_area} UAVs left the area"
         )
     for w in r.worst_missions:
@@ -139,3 +140,8 @@ def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: M
     )
     with PYPLOT_LOCK:
         return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix), cfg.progress)
+
+
+def adjusted_text(fraction: float | None) -> str:
+    """ ", x% adjusted" when the monitor flew adjusted actions (``--shield-adjust``), else nothing."""
+    return f", {fraction:.2%} adjusted" if fraction else ""

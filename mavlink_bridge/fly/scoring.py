@@ -74,6 +74,7 @@ def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFig
         interventions_per_uav_mission=float(np.mean([c["interventions"] for c in counts])) if counts else None,
         max_interventions_per_uav_mission=max((c["interventions"] for c in counts), default=None),
         backup_time_fraction=sum(c["backup_steps"] for c in counts) / max(1, control) if counts else None,
+        adjusted_time_fraction=sum(c.get("adjusted_steps", 0) for c in counts) / max(1, control) if counts else None,
         unprotected_time_fraction=sum(c["unprotected_steps"] for c in counts) / max(1, control) if counts else None,
         decisions=sum(c["decisions"] for c in counts),
         resets=sum(c["resets"] for c in counts),

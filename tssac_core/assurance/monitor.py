@@ -77,6 +77,10 @@ class ShieldConfig:
     """Companion over a lossy link or off lockstep: setpoints in a row that may be lost or late when the command
     changes (the vehicle flies the previous one that long); the error bound covers this many (see
     :func:`handover_error`)."""
+    adjust: bool = False
+    """When the proposed action fails and the backup is not flying: first the passing action nearest the proposal among
+    :func:`adjusted_candidates` flies; the backup takes over only when none passes (False: the backup at once). A
+    flying backup still goes back to the proposal alone, by the release rule."""
 
     def __post_init__(self) -> None:
         for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s"):
@@ -198,6 +202,8 @@ class Decision:
     memory: Memory
     engaged: np.ndarray
     """The backup flies this interval."""
+    adjusted: np.ndarray
+    """The monitor's nearest passing candidate flies this interval, not the proposal (:attr:`ShieldConfig.adjust`)."""
     engaged_now: np.ndarray
     """The backup took over at this decision (an intervention)."""
     released_now: np.ndarray
@@ -618,11 +624,23 @@ def decide(
     err_here = err_now.after(n_pending * dt_s, lim)  # at the state the next command starts from
     err_end = err_now.after((n_pending + steps) * dt_s, lim)  # at the end of the proposed action's interval
     leads = lead_steps(cfg, dt_s)
+    finite = np.all(np.isfinite(np.asarray(proposed, dtype=np.float64)), axis=1)
     proposed, excess, best_end = prediction.proposal_excess(x, y, v, phi, proposed, steps, err_end, scene)
+    engaged, protected = memory.engaged, memory.protected
+    adjusted = np.zeros(m, bool)
+    if cfg.adjust:
+        # A finite proposal that fails while the policy flies: the nearest passing candidate before the backup.
+        rows = finite & (excess < 0) & ~engaged
+        idx, found, action, near_excess, near_end = _nearest_passing(
+            prediction, x, y, v, phi, proposed, steps, err_end, scene, rows
+        )
+        take = idx[found]
+        proposed, excess, best_end = proposed.copy(), excess.copy(), best_end.copy()
+        proposed[take], excess[take], best_end[take] = action[found], near_excess[found], near_end[found]
+        adjusted[take] = True
     passes = excess >= 0
     passes_release = excess >= cfg.release_margin_m
 
-    engaged, protected = memory.engaged, memory.protected
     backup, lead_left = memory.backup.copy(), memory.lead_left.copy()
     count = np.where(engaged & passes_release, memory.passes + 1, 0)
     # An unprotected vehicle has no guarantee to keep: any passing action is better than its backup.
@@ -655,6 +673,7 @@ def decide(
         action=action,
         memory=new_memory,
         engaged=now_engaged,
+        adjusted=fly_proposed & adjusted,
         engaged_now=engage,
         released_now=release,
         unprotected=now_engaged & ~new_memory.protected,
@@ -662,6 +681,53 @@ def decide(
         straight_steps=straight_steps,
         turn=TURNS[backup % N_TURNS],
     )
+
+
+ADJUST_TURNS = np.linspace(-1.0, 1.0, 9)
+"""The turn rates (of the limit) the adjusted candidates try beside the proposal's own."""
+
+
+def adjusted_candidates(proposed: np.ndarray) -> np.ndarray:
+    """The actions the monitor tries when a proposal (M, 2) fails, (M, C, 2): the proposal's turn rate and every one of
+    :data:`ADJUST_TURNS`, each at the proposal's acceleration and braking at the limit."""
+    m = len(proposed)
+    turns = np.concatenate([proposed[:, :1], np.repeat(ADJUST_TURNS[None, :], m, axis=0)], axis=1)
+    accels = np.stack([proposed[:, 1], np.full(m, -1.0)], axis=1)
+    grid = np.broadcast_arrays(turns[:, :, None], accels[:, None, :])
+    return np.stack(grid, axis=-1).reshape(m, -1, 2)
+
+
+def _nearest_passing(
+    prediction: Prediction,
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    proposed: np.ndarray,
+    steps: int,
+    err_end: EstimateError,
+    scene: Scene,
+    rows: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For the vehicles ``rows`` (a bool mask): the passing candidate (:func:`adjusted_candidates`) nearest the
+    proposal, nearness |d omega| + |d u| / 2. Returns the rows' indices (R,), whether one
+    passed, its action (R, 2), excess and best backup."""
+    idx = np.flatnonzero(rows)
+    if not len(idx):
+        return idx, np.zeros(0, bool), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
+    cand = adjusted_candidates(proposed[idx])
+    r, c = cand.shape[:2]
+    rep = np.repeat(idx, c)
+    sub = prediction.select(rep)
+    _, excess, best = sub.proposal_excess(
+        x[rep], y[rep], v[rep], phi[rep], cand.reshape(-1, 2), steps, err_end.select(rep), scene.select(rep)
+    )
+    excess, best = excess.reshape(r, c), best.reshape(r, c)
+    distance = np.abs(cand - proposed[idx, None, :]) @ np.array([1.0, 0.5])
+    key = np.where(excess >= 0, distance, np.inf)
+    pick = np.argmin(key, axis=1)
+    at = np.arange(r)
+    return idx, np.isfinite(key[at, pick]), cand[at, pick], excess[at, pick], best[at, pick]
 
 
 def _backup_excess_here(

@@ -81,6 +81,8 @@ class WorldMonitorFigures:
     roles: dict[str, RoleMonitorFigures]
     config: dict[str, object] | None = None
     """The monitor's settings (``ShieldConfig`` as a dict), when the writer states them."""
+    adjusted_time_fraction: float = 0.0
+    """The share of flight time under the monitor's adjusted action (``ShieldConfig.adjust``)."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,8 @@ class SitlMonitorFigures:
     guarantee: bool = True
     """False: the world flies physics the monitor's bound does not cover (``scope`` says why)."""
     scope: str | None = None
+    adjusted_time_fraction: float | None = None
+    """The share of control steps under the monitor's adjusted action (None: not counted)."""
 
 
 RecordedMonitor = WorldMonitorFigures | SitlMonitorFigures
@@ -172,6 +176,7 @@ class WorldMonitorJson(TypedDict):
     uavs_left_area: int
     roles: dict[str, RoleMonitorJson]
     config: NotRequired[dict[str, object]]
+    adjusted_time_fraction: NotRequired[float]
 
 
 class SitlMonitorJson(TypedDict):
@@ -189,6 +194,7 @@ class SitlMonitorJson(TypedDict):
     uavs_left_area: int | None
     guarantee: bool
     scope: str | None
+    adjusted_time_fraction: NotRequired[float | None]
 
 
 class FlownDynamicsJson(TypedDict):
@@ -340,6 +346,7 @@ def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJso
             "uavs_left_area": monitor.uavs_left_area,
             "guarantee": monitor.guarantee,
             "scope": monitor.scope,
+            "adjusted_time_fraction": monitor.adjusted_time_fraction,
         }
     out: WorldMonitorJson = {
         "interventions_per_uav_mission": monitor.interventions_per_uav_mission,
@@ -356,6 +363,7 @@ def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJso
             }
             for role, r in monitor.roles.items()
         },
+        "adjusted_time_fraction": monitor.adjusted_time_fraction,
     }
     if monitor.config is not None:
         out["config"] = copy.deepcopy(monitor.config)  # as dataclasses.asdict copied it

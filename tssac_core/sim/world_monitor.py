@@ -13,6 +13,7 @@ from the state and the world's wind, until the policy flies again.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,8 @@ class MonitorCounts:
     """Steps flown with no passing action and no clear backup (no guarantee)."""
     switches: np.ndarray
     """Hand-overs either way."""
+    adjusted_steps: np.ndarray
+    """World steps flown under the monitor's adjusted action (:attr:`ShieldConfig.adjust`)."""
 
 
 class WorldMonitor:
@@ -89,8 +92,9 @@ class WorldMonitor:
         self._layout_version = -1
         self._hazards: Hazards | None = None
         zeros = np.zeros((n, N_ROLES), dtype=np.int64)
-        self.counts = MonitorCounts(zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy())
+        self.counts = MonitorCounts(*(zeros.copy() for _ in dataclasses.fields(MonitorCounts)))
         self._engaged = np.zeros((n, N_ROLES), dtype=bool)
+        self._adjusted = np.zeros((n, N_ROLES), dtype=bool)
         self._unprotected = np.zeros((n, N_ROLES), dtype=bool)
         self._loiter_sign = np.zeros((n, N_ROLES))
         """+1 / -1: the vehicle flies its backup's loiter, counter-clockwise / clockwise; 0: it does not."""
@@ -126,6 +130,7 @@ class WorldMonitor:
             self._fly_loiter(world, moving & (self._loiter_sign != 0))
         self.counts.flown_steps += moving
         self.counts.backup_steps += moving & self._engaged
+        self.counts.adjusted_steps += moving & self._adjusted
         self.counts.unprotected_steps += moving & self._unprotected
         return np.where(moving[..., None], self._flying, proposed)
 
@@ -202,6 +207,7 @@ class WorldMonitor:
         self._turn[w, j] = d.turn
         self._turn_at[w, j] = np.where(d.straight_steps < steps, world.steps[w] + d.straight_steps, -1)
         self._engaged[w, j] = d.engaged
+        self._adjusted[w, j] = d.adjusted
         self._unprotected[w, j] = d.unprotected
         self.counts.interventions[w, j] += d.engaged_now
         self.counts.switches[w, j] += d.engaged_now.astype(np.int64) + d.released_now

@@ -1,0 +1,18 @@
+"""The monitor's command-line options shared by ``fly``, the companion and the benchmarks: ``--shield-adjust``."""
+
+from __future__ import annotations
+
+from tssac_core.common.cli import UsageError
+
+SHIELD_ADJUST_HELP = (
+    "with --shield: when the pilot's action fails the monitor's check, fly the passing action nearest it (its turn "
+    "rate or one of -1, -0.75 .. 1 of the limit, at its acceleration or braking) before the backup takes over "
+    "(docs/runtime_assurance.md, 'Adjusted actions')"
+)
+
+
+def adjust_option(adjust: bool, shield: bool) -> bool:
+    """``--shield-adjust``, checked: it changes the monitor, so it needs ``--shield`` (one :class:`UsageError` line)."""
+    if adjust and not shield:
+        raise UsageError("--shield-adjust changes what the monitor flies: it needs --shield")
+    return adjust
