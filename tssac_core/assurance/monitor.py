@@ -689,10 +689,11 @@ ADJUST_TURNS = np.linspace(-1.0, 1.0, 9)
 
 def adjusted_candidates(proposed: np.ndarray) -> np.ndarray:
     """The actions the monitor tries when a proposal (M, 2) fails, (M, C, 2): the proposal's turn rate and every one of
-    :data:`ADJUST_TURNS`, each at the proposal's acceleration and braking at the limit."""
+    :data:`ADJUST_TURNS`, each at the proposal's acceleration, at constant speed (a constant-speed backup's first
+    command is one of them) and braking at the limit."""
     m = len(proposed)
     turns = np.concatenate([proposed[:, :1], np.repeat(ADJUST_TURNS[None, :], m, axis=0)], axis=1)
-    accels = np.stack([proposed[:, 1], np.full(m, -1.0)], axis=1)
+    accels = np.stack([proposed[:, 1], np.zeros(m), np.full(m, -1.0)], axis=1)
     grid = np.broadcast_arrays(turns[:, :, None], accels[:, None, :])
     return np.stack(grid, axis=-1).reshape(m, -1, 2)
 
