@@ -23,6 +23,9 @@ the success rate; writes them as JSON.
                                                                # constant turn (the negative control)
     python benchmarks/bench_adversaries.py --episodes 200 --sitl-missions 2 --json benchmarks/results/adversaries.json
 
+Any of these with ``--shield-adjust``: the monitors fly the passing action nearest a failing proposal before the
+backup (``fly --shield-adjust``); the rows' places end in "adjusted".
+
 Seeds: the adversaries' own range, used for nothing else. Mission k of a batched scenario flies seed
 ``--seed + offset + k`` (random.yaml offset 10,000, corner.yaml 20,000; SITL random.yaml 30,000, degraded.yaml
 40,000), so each adversary flies the same layouts as the others, and any row's mission can be flown again alone
@@ -56,6 +59,7 @@ from tqdm import tqdm
 import tssac_core
 from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP
 from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
@@ -107,6 +111,13 @@ class BenchConfig:
     mission, and the monitors' backups end in the ground loiter sized for it."""
     no_loiter: bool = False
     """With ``wind_m_s``: the backups end in calm air's constant turn all the same (the negative control)."""
+    shield_adjust: bool = False
+    """The monitors fly the passing action nearest a failing proposal before the backup (``fly --shield-adjust``)."""
+
+    @property
+    def shield(self) -> ShieldConfig:
+        """The monitor every row flies."""
+        return ShieldConfig(adjust=self.shield_adjust)
 
     def settings(self) -> dict[str, Any]:
         """What a row depends on: rows written under other settings are never reused by ``--resume``."""
@@ -115,7 +126,7 @@ class BenchConfig:
             "sitl_missions": self.sitl_missions,
             "seed": self.seed,
             "episode_steps": self.episode_steps,
-            "shield": dataclasses.asdict(ShieldConfig()),
+            "shield": dataclasses.asdict(self.shield),
         }
         if self.sitl_dynamics != "kinematic":  # only when set: files written before these options still resume
             settings["sitl_dynamics"] = self.sitl_dynamics
@@ -176,6 +187,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         action="store_true",
         help="with --wind-m-s: the backups end in calm air's constant turn all the same (the negative control)",
     )
+    p.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")
@@ -221,6 +233,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         eq5_monitor=a.eq5_monitor,
         wind_m_s=a.wind_m_s,
         no_loiter=a.no_loiter,
+        shield_adjust=a.shield_adjust,
     )
 
 
@@ -236,7 +249,7 @@ def seed_of(kind: str, name: str, cfg: BenchConfig) -> int:
 def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig, bar: tqdm) -> dict[str, Any]:
     scenario, seed = scenario_of(name, cfg), seed_of("batched", name, cfg)
     pilots = [AdversaryPilot(adversary)] * 3
-    monitor = ShieldConfig() if shield else None
+    monitor = cfg.shield if shield else None
     t0 = time.monotonic()
     results: MissionResults
     if cfg.airframe_response is not None:  # on airframes drawn from the response's spans: one process
@@ -303,6 +316,8 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
     argv += ["--dynamics", cfg.sitl_dynamics]
     if cfg.airframe_response is not None and not cfg.eq5_monitor:
         argv += ["--airframe-response", str(cfg.airframe_response)]
+    if cfg.shield_adjust:
+        argv += ["--shield-adjust"]
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv],
@@ -363,17 +378,18 @@ def sitl_where(name: str, cfg: BenchConfig) -> str:
         where += f" {cfg.sitl_dynamics}"
     if cfg.airframe_response is not None:
         where += " eq5" if cfg.eq5_monitor else " response"
-    return where
+    return where + (" adjusted" if cfg.shield_adjust else "")
 
 
 def batched_where(name: str, cfg: BenchConfig) -> str:
     """A batched row's place: the scenario, and on varied airframes the monitor's model."""
+    adjusted = " adjusted" if cfg.shield_adjust else ""
     if cfg.airframe_response is None:
-        return f"batched {name}"
+        return f"batched {name}{adjusted}"
     where = f"batched {name} airframes" + (" eq5" if cfg.eq5_monitor else "")
     if cfg.wind_m_s:
         where += f" wind {cfg.wind_m_s:g}" + (" turn" if cfg.no_loiter else " loiter")
-    return where
+    return where + adjusted
 
 
 def print_table(rows: list[dict[str, Any]]) -> None:
@@ -419,7 +435,7 @@ def write_rows(cfg: BenchConfig, argv: Sequence[str] | None, rows: list[dict[str
             "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
             "settings": cfg.settings(),
             "episode_steps": cfg.episode_steps,
-            "shield": dataclasses.asdict(ShieldConfig()),
+            "shield": dataclasses.asdict(cfg.shield),
             "rows": rows,
             "wall_time_s": round(sum(r["wall_time_s"] for r in rows), 1),
         },

@@ -53,28 +53,31 @@ def head_on(cfg: ShieldConfig, decisions: int = 150) -> list[tuple[np.ndarray, o
     return out
 
 
-def test_head_on_the_adjusted_monitor_turns_away_by_the_nearest_passing_action_and_never_engages():
-    adjusted = head_on(ShieldConfig(adjust=True))
-    plain = head_on(ShieldConfig())
-    assert any(d.engaged[0] for _, d in plain)  # the negative control: the plain monitor's backup takes over
-    assert not any(d.engaged[0] for _, d in adjusted)
-    flown = [(s, d) for s, d in adjusted if d.adjusted[0]]
-    assert flown and not any(d.adjusted[0] for _, d in plain)
-    # The first adjusted decision against every candidate, each checked on its own as a proposal would be.
-    state, d = flown[0]
-    first = np.flatnonzero([dd.adjusted[0] for _, dd in adjusted])[0]
-    memory = adjusted[first - 1][1].memory
+def passing_candidates(state: np.ndarray, memory: Memory) -> list[np.ndarray]:
+    """The candidates for the proposal [0, 1] that pass when each is checked on its own, as a proposal is."""
     cfg = ShieldConfig()
     candidates = adjusted_candidates(np.array([[0.0, 1.0]]))[0]
-    passing = [
-        c
-        for c in candidates
-        if not decide(state, c[None, :], memory, HZ, LIM, DT, STEPS, cfg.margin_m, cfg).engaged[0]
-    ]
-    assert passing, "some candidate passes"
-    nearest = min(passing, key=lambda c: abs(c[0]) + abs(c[1] - 1.0) / 2)
-    assert np.allclose(d.action[0], nearest)
-    assert not np.allclose(d.action[0], [0.0, 1.0])
+    return [c for c in candidates if not decide(state, c[None, :], memory, HZ, LIM, DT, STEPS, 100.0, cfg).engaged[0]]
+
+
+def test_head_on_the_adjusted_monitor_flies_the_nearest_passing_action_and_the_backup_only_when_none_passes():
+    adjusted = head_on(ShieldConfig(adjust=True))
+    plain = head_on(ShieldConfig())
+    first_plain = next(k for k, (_, d) in enumerate(plain) if d.engaged[0])
+    assert not any(d.adjusted[0] for _, d in plain)  # the negative control: the plain monitor engages its backup
+    assert not any(d.engaged[0] for _, d in adjusted[: first_plain + 1])  # ... where the adjusted one turns away
+    memory = Memory.initial(1)
+    for state, d in adjusted:
+        if d.adjusted[0] or d.engaged_now[0]:
+            passing = passing_candidates(state, memory)
+            if d.engaged_now[0]:
+                assert not passing  # the backup takes over only when no candidate passes
+            else:
+                nearest = min(passing, key=lambda c: abs(c[0]) + abs(c[1] - 1.0) / 2)
+                assert np.allclose(d.action[0], nearest) and not np.allclose(d.action[0], [0.0, 1.0])
+        memory = d.memory
+    assert sum(d.adjusted[0] for _, d in adjusted) >= 5
+    assert sum(d.engaged[0] for _, d in adjusted) < sum(d.engaged[0] for _, d in plain)
 
 
 def test_a_flying_backup_goes_back_to_the_proposal_alone():
@@ -97,7 +100,8 @@ def test_a_non_finite_proposal_is_never_adjusted():
 def test_the_candidates_are_the_proposals_turn_and_the_grid_at_its_acceleration_constant_speed_and_braking():
     c = adjusted_candidates(np.array([[0.3, 0.6]]))[0]
     assert c.shape == (30, 2)
-    assert {tuple(np.round(a, 3)) for a in c} >= {(0.3, 0.6), (0.3, 0.0), (0.3, -1.0), (-1.0, 0.6), (1.0, -1.0), (0.25, 0.0)}
+    expected = {(0.3, 0.6), (0.3, 0.0), (0.3, -1.0), (-1.0, 0.6), (1.0, -1.0), (0.25, 0.0)}
+    assert {tuple(np.round(a, 3)) for a in c} >= expected
 
 
 # --------------------------------------------------------------------------------- the batched world
@@ -116,8 +120,13 @@ def test_adversaries_through_the_adjusted_monitor_stay_out(adversary: Adversary,
     variation = AirframeVariation.from_response(load_response(response_path("f16"))) if varied else None
     flown = {
         adjust: fly_missions(
-            scenario, [AdversaryPilot(adversary)] * 3, 0, LAYOUT_SEED, layouts=layouts,
-            shield=ShieldConfig(adjust=adjust), airframes=variation,
+            scenario,
+            [AdversaryPilot(adversary)] * 3,
+            0,
+            LAYOUT_SEED,
+            layouts=layouts,
+            shield=ShieldConfig(adjust=adjust),
+            airframes=variation,
         )  # fmt: skip
         for adjust in (False, True)
     }
@@ -128,7 +137,6 @@ def test_adversaries_through_the_adjusted_monitor_stay_out(adversary: Adversary,
     adjusted, plain = flown[True].monitor, flown[False].monitor
     assert adjusted is not None and plain is not None
     assert adjusted.adjusted_steps.sum() > 0 and plain.adjusted_steps.sum() == 0
-    assert adjusted.interventions.sum() < plain.interventions.sum()
 
 
 # --------------------------------------------------------------------------------- the command line and SITL
