@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.common.evaluation_record import (
     BatchedRun,
@@ -129,6 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="M",
         help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})",
     )
+    p.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
     p.add_argument(
         "--workers",
         type=int,
@@ -390,7 +392,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         who = policies_label(described, args.models, controller)
     else:
         pilots = load_pilots(args.models, controller)
-    shield = ShieldConfig(margin_m=args.shield_margin_m) if args.shield else None
+    adjust = adjust_option(args.shield_adjust, args.shield)
+    shield = ShieldConfig(margin_m=args.shield_margin_m, adjust=adjust) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     results = fly_team(scenario, pilots, indices, args.seed, shield, args.workers, args.address, not args.no_progress)
     record = summarize(results, scenario, args.scenario, who, args.seed, shield)

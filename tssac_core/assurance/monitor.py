@@ -24,6 +24,9 @@ numbers, is in ``docs/runtime_assurance.md``; in short:
   vehicle is when the command takes effect (it was planned from that decision's predicted end state,
   or the vehicle is already flying it): by induction the UAV never comes nearer than margin to a disk
   or an edge.
+* **Adjusted actions** (``ShieldConfig.adjust``, off by default). A proposal that fails while the policy flies is
+  first replaced by the passing action nearest it among :func:`adjusted_candidates`; the backup flies only when none
+  passes. Each candidate passes the same (a) and (b), so the induction is unchanged.
 * **Hysteresis.** Once engaged, control goes back to the policy only after its action has passed with
   margin + ``release_margin_m`` for ``release_decisions`` consecutive decisions, so each engagement lasts
   at least that many decisions and the switch count is bounded by the decisions / release_decisions.
