@@ -342,3 +342,42 @@ def test_the_filter_starts_from_the_known_straight_start_until_a_turn_reaches_th
     assert shield.straight_start_turn_rate(3 + delay - 1) == (0.0, STRAIGHT_START_TURN_SIGMA_RAD_S)
     assert shield.straight_start_turn_rate(3 + delay) is None
     assert eq5.straight_start_turn_rate(0) is None
+
+
+def test_attitudes_body_rates_give_the_heading_rate_of_a_banked_pitched_turn():
+    """Euler kinematics: a turn at psi' with bank phi and pitch theta has q = psi' sin phi cos theta and
+    r = psi' cos phi cos theta (no roll rate); the companion reads psi' back from them."""
+    from tssac_core.wire import units
+
+    psi_dot, roll, pitch = math.radians(4.0), math.radians(62.0), math.radians(8.0)
+    q, r = psi_dot * math.sin(roll) * math.cos(pitch), psi_dot * math.cos(roll) * math.cos(pitch)
+    assert units.heading_rate_from_body_rates(roll, pitch, q, r) == pytest.approx(psi_dot)
+    assert units.heading_rate_from_body_rates(roll, pitch, 0.0, psi_dot) != pytest.approx(psi_dot, rel=0.1)
+
+
+def test_the_monitor_takes_the_turn_rate_from_the_attitude_of_the_decisions_tick(random_path):
+    """Predicting with a response, the lag starts from ATTITUDE's heading rate of the decision's very tick (sigma: the
+    scenario's gyro noise through the bank), where it is surer than the filter's; an older one, a non-finite one, or
+    one less sure than the filter's is not used."""
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.sim.airframe_response import load_response
+
+    s = load(random_path)
+    world = World(s, 1)
+    world.reset([0], [sample_layout(s, np.random.default_rng(35))])
+    shield = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(), True, load_response(response_path("f16")))
+    filtered = (0.02, math.radians(0.4))
+    assert shield._turn_rate_now(7, filtered) == filtered  # no ATTITUDE yet
+    roll = math.radians(60.0)
+    psi_dot = math.radians(3.0)  # clockwise: a right turn, omega = -psi'
+    shield.set_attitude(700, roll, 0.0, psi_dot * math.sin(roll), psi_dot * math.cos(roll))
+    rate, sigma = shield._turn_rate_now(7, filtered)
+    assert rate == pytest.approx(-psi_dot)
+    spread = abs(math.sin(roll)) + abs(math.cos(roll))
+    assert sigma == pytest.approx(math.radians(s.link.attitude_rate_sigma_deg_s) * spread)
+    assert shield.counters.gyro_decisions == 1
+    assert shield._turn_rate_now(8, filtered) == filtered  # the next tick's decision: that ATTITUDE is old
+    assert shield._turn_rate_now(7, (0.02, sigma / 2)) == (0.02, sigma / 2)  # the filter is surer
+    shield.set_attitude(800, float("nan"), 0.0, 0.0, 0.0)
+    assert shield._turn_rate_now(8, filtered) == filtered
+    assert shield.counters.gyro_decisions == 1
