@@ -59,9 +59,6 @@ def test_at_radar_over_jsbsim_is_kept_out_by_the_lagged_monitor_and_not_by_eq5(
         # The filter starts from the known straight start: no first fix's prior of 5 deg/s (a margin of ~5 km then),
         # and no control step without a clear backup.
         assert shield["max_margin_m"] < 2000.0 and shield["unprotected_time_fraction"] == 0.0, shield
-        # The lag starts from ATTITUDE's heading rate of the decision's tick: at every decision but the first.
-        counts = [c["shield"] for c in results["missions"][0]["companions"].values()]
-        assert all(c["gyro_decisions"] >= c["decisions"] - 1 for c in counts), counts
     else:  # the negative control: eq. 5's backups miss the F-16's paths, into the radar
         assert shield["uav_missions_with_cost"] >= 1, shield
 
