@@ -285,7 +285,7 @@ class WorldRunner:
         self, i: int, role: Role, seed: np.random.SeedSequence, truth: VehicleTruth
     ) -> tuple[Vehicle, VehicleLink]:
         """Vehicle ``i`` of the mission (:meth:`_begin`), at its start state ``truth``, with its link (its random
-        streams from ``seed``: what goes out, what comes in, its GPS, its gyro) and its tlog."""
+        streams from ``seed``: what goes out, what comes in, its GPS) and its tlog."""
         config, s, c = self.config, self.scenario, self.world.c
         endpoint = self._endpoints[i]
         start = self.layout.starts[role.value]
@@ -304,8 +304,7 @@ class WorldRunner:
             link=s.link,
             setpoint_timeout_s=config.setpoint_timeout_s,
         )
-        # The fourth stream (the gyro) was added last: the first three are the ones every earlier run drew.
-        tx, rx, gps, gyro = (np.random.default_rng(q) for q in seed.spawn(4))
+        tx, rx, gps = (np.random.default_rng(q) for q in seed.spawn(3))
         tlog = None
         if config.tlog_dir is not None:
             path = Path(config.tlog_dir) / f"{role.value}.tlog"
@@ -314,7 +313,7 @@ class WorldRunner:
             except OSError as exc:
                 raise SitlError(f"cannot write tlog {path}: {exc.strerror or exc}") from None
             self._tlogs.append(tlog)
-        vehicle = Vehicle(setup, self.clock, self.flags, gps, gyro, self._vehicle_event)
+        vehicle = Vehicle(setup, self.clock, self.flags, gps, self._vehicle_event)
         link = VehicleLink(vehicle, endpoint, tx, rx, tlog)
         link.add_outputs(config.outputs)
         link.handler = CommandHandler(vehicle, link)

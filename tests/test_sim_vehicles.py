@@ -28,7 +28,6 @@ from sim_vehicles.world_runner import WorldRunner
 from tssac_core.sim.scenario import Layout, LinkModel, Origin, Radar, Start, load, sample_layout
 from tssac_core.sim.sitl_config import SitlConfig
 from tssac_core.sim.world import World
-from tssac_core.wire import units
 from tssac_core.wire.geodetic import (
     geodetic_to_local,
     heading_cdeg,
@@ -40,13 +39,6 @@ from tssac_core.wire.signing import SigningKeyError, load_key
 from tssac_core.wire.truth_log_schema import read_truth_log
 
 M = mavlink2
-GYRO_TOLERANCE = math.radians(0.1) * 6
-"""ATTITUDE's heading rate within six sigmas of the gyro's noise (the scenarios' 0.1 deg/s per axis, two axes)."""
-
-
-def heading_rate(att: object) -> float:
-    """The NED heading's rate an ATTITUDE reports (clockwise-positive, rad/s)."""
-    return units.heading_rate_from_body_rates(att.roll, att.pitch, att.pitchspeed, att.yawspeed)  # type: ignore[attr-defined]
 
 
 # ------------------------------------------------------------------------------- pure models
@@ -551,8 +543,7 @@ def test_guided_setpoints_fly_eq5_exactly(tmp_path: Path) -> None:
     assert lpn.x == pytest.approx(y, abs=0.05) and lpn.y == pytest.approx(x, abs=0.05)
     assert lpn.vx == pytest.approx(v * math.sin(phi), abs=1e-3) and lpn.vy == pytest.approx(v * math.cos(phi), abs=1e-3)
     assert att.yaw == pytest.approx(yaw_ned_from_phi(phi), abs=1e-5)
-    # A clipped right turn, read through the gyro's noise (0.1 deg/s per axis).
-    assert heading_rate(att) == pytest.approx(w.c.turn_rate_max_rad_s[0], abs=GYRO_TOLERANCE)
+    assert att.yawspeed == pytest.approx(w.c.turn_rate_max_rad_s[0], abs=1e-6)  # clipped right turn
     assert hud.groundspeed == pytest.approx(v, abs=1e-3)
     # The truth log has the exact states, and the other (unarmed) vehicles flew straight.
     steps = [r for r in read_truth_log(truth) if r["type"] == "step"]
@@ -587,13 +578,12 @@ def test_setpoints_refused_unless_armed_in_guided() -> None:
         assert v.counters.setpoints_ignored >= 5 and v.counters.setpoints_accepted == 0
         assert ignored_texts(msgs) == 1
         atts = [m for m in msgs if m.get_type() == "ATTITUDE"]
-        assert atts and all(abs(heading_rate(m)) < GYRO_TOLERANCE for m in atts)
-        assert len({round(m.yaw, 9) for m in atts}) == 1
+        assert atts and all(m.yawspeed == 0.0 for m in atts) and len({round(m.yaw, 9) for m in atts}) == 1
         # Armed in MANUAL: still ignored (one more STATUSTEXT for the new state).
         c.arm()
         msgs = fly_and_watch(0.4)
         assert v.counters.setpoints_accepted == 0 and ignored_texts(msgs) == 1
-        assert all(abs(heading_rate(m)) < GYRO_TOLERANCE for m in msgs if m.get_type() == "ATTITUDE")
+        assert all(m.yawspeed == 0.0 for m in msgs if m.get_type() == "ATTITUDE")
         # Unsupported frame or mask: rejected whatever the mode.
         c.setpoint(0.05, 5.0, frame=M.MAV_FRAME_LOCAL_NED)
         c.setpoint(0.05, 5.0, mask=0b0000110111111000)
@@ -602,8 +592,7 @@ def test_setpoints_refused_unless_armed_in_guided() -> None:
         assert c.set_mode(GUIDED).result == M.MAV_RESULT_ACCEPTED
         msgs = fly_and_watch(0.4)
         assert v.counters.setpoints_accepted > 0
-        rates = [heading_rate(m) for m in msgs if m.get_type() == "ATTITUDE"]
-        assert any(r == pytest.approx(0.05, abs=GYRO_TOLERANCE) for r in rates), rates
+        assert any(m.get_type() == "ATTITUDE" and m.yawspeed == pytest.approx(0.05, abs=1e-6) for m in msgs)
         assert v.counters.setpoints_rejected == 2
         s.stop()
 
@@ -627,7 +616,7 @@ def test_setpoint_timeout_failsafe_and_recovery(tmp_path: Path) -> None:
         # Holding heading and speed now.
         now_ms = c.latest_ms
         att = c.wait(lambda m: m.get_type() == "ATTITUDE" and m.time_boot_ms > now_ms, 1.0)
-        assert att is not None and abs(heading_rate(att)) < GYRO_TOLERANCE
+        assert att is not None and att.yawspeed == 0.0
         # Setpoints return: failsafe cleared, ACTIVE again, turning again.
         c.setpoint(0.03, 0.0)
         assert c.wait(lambda m: m.get_type() == "STATUSTEXT" and "cleared" in m.text, 1.0) is not None
@@ -1152,14 +1141,3 @@ def test_truth_log_step_lines_are_the_bytes_json_dumps_writes() -> None:
         record = {"type": STEP, "step": step, "t_s": round(t_s, 6), **flags}
         record[VEHICLES_KEY] = {r.role: r.as_dict() for r in rows}
         assert encode_step(step, t_s, flags, rows) == encode(record)
-
-
-def test_the_rate_gyro_adds_the_scenarios_noise_and_none_at_zero() -> None:
-    from sim_vehicles.link.link_model import RateGyro
-
-    noisy = RateGyro(LinkModel(attitude_rate_sigma_deg_s=0.2), np.random.default_rng(3))
-    reads = np.array([noisy.read(0.1, -0.2, 0.3) for _ in range(4000)])
-    assert reads.mean(axis=0) == pytest.approx([0.1, -0.2, 0.3], abs=2e-4)
-    assert reads.std(axis=0) == pytest.approx([math.radians(0.2)] * 3, rel=0.05)
-    exact = RateGyro(LinkModel(attitude_rate_sigma_deg_s=0.0), np.random.default_rng(3))
-    assert exact.read(0.1, -0.2, 0.3) == (0.1, -0.2, 0.3)

@@ -173,8 +173,7 @@ class CompanionConfig:
             baud = parse_serial(self.connection).baud
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        attitude = self.shield is not None and self.airframe_response is not None
-        streams = companion_streams(self.scenario.dt_s, self.lockstep, self.setpoints, attitude)
+        streams = companion_streams(self.scenario.dt_s, self.lockstep, self.setpoints)
         return line_budget(baud, streams, self.signing_key is not None)
 
     @property

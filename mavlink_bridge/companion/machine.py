@@ -241,8 +241,6 @@ class Companion:
         intervals = {"LOCAL_POSITION_NED": self.cfg.scenario.dt_s}
         if cfg.lean_telemetry or link.baud is not None:  # a serial port is the companion's own: nobody else reads it
             intervals.update({name: -1.0 for name in LEAN_OFF})
-        if self.pilot_step.shield is not None and self.pilot_step.shield.response is not None:
-            intervals["ATTITUDE"] = self.cfg.scenario.dt_s  # the monitor's turn rate, every tick
         for name, interval_s in intervals.items():
             # Position at the step rate; an autopilot that cannot do it keeps its default (logged).
             try:
@@ -286,10 +284,6 @@ class Companion:
             self._on_statustext(str(msg.text).rstrip("\x00"))
         elif mtype == "COMMAND_ACK" and msg.command in SLEW_COMMANDS:
             self._on_slew_ack(int(msg.command), int(msg.result))
-        elif mtype == "ATTITUDE" and self.pilot_step.shield is not None:
-            self.pilot_step.shield.set_attitude(
-                int(msg.time_boot_ms), float(msg.roll), float(msg.pitch), float(msg.pitchspeed), float(msg.yawspeed)
-            )
         elif mtype == "WIND" and self.pilot_step.shield is not None:
             # The wind the vehicle reports, blowing FROM ``direction`` (deg clockwise from north): the air's velocity.
             towards = math.radians(float(msg.direction)) + math.pi

@@ -14,10 +14,8 @@ the proposed action goes through :class:`tssac_core.sim.world_monitor.VehicleMon
   about 2 x ``link.latency_ms`` after t, off lockstep and in lockstep alike (there the link runs on simulated
   time). Before the first command reached the vehicle it flew the hold (straight on): the queue starts with it;
 * with an airframe's response (``--airframe-response``), the paths predicted with its lag
-  (:class:`~tssac_core.assurance.lagged_prediction.LaggedPrediction`) instead of eq. 5: from the turn rate of the
-  decision's tick, ATTITUDE's (the nose's heading rate from the body rates, sigma from the scenario's
-  ``link.attitude_rate_sigma_deg_s``) where the vehicle sent one for that tick, else the filter's; with the turn
-  commands the airframe has not yet followed (its delay, before the link's round trip); the turn
+  (:class:`~tssac_core.assurance.lagged_prediction.LaggedPrediction`) instead of eq. 5: from the filter's turn rate,
+  with the turn commands the airframe has not yet followed (its delay, before the link's round trip); the turn
   rate's error, ``sigma_k`` standard deviations, turns the path by at most that times the longer time constant
   (the lag closes an error in the rate as it closes a gap to the command);
 * in a scenario that promises wind, with a response whose ground loiter was fitted (``loiter_*``), the backups end in
@@ -62,10 +60,7 @@ from tssac_core.sim.lagged_starts import STRAIGHT_START_TURN_SIGMA_RAD_S
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world_monitor import VehicleMonitor
 from tssac_core.sim.world_state import WorldState
-from tssac_core.wire import units
 
-GYRO_SIGMA_FLOOR_DEG_S = 0.01
-"""The least body-rate noise the monitor believes a scenario's ATTITUDE has (a scenario may state 0 for exact rates)."""
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
 _TURN_NAMES = ("left", "right", "left braking", "right braking")
@@ -96,9 +91,6 @@ class ShieldCounters:
     """The most clearance a backup had to keep: the margin and the largest error bound over the backups."""
     nonfinite_proposals: int = 0
     """Decisions whose proposal was not finite (a non-finite action, or none in a telemetry gap): the backup flew."""
-    gyro_decisions: int = 0
-    """Decisions whose turn rate was ATTITUDE's of the decision's tick (predicting with a response), not the
-    filter's."""
 
 
 class CompanionShield:
@@ -145,10 +137,6 @@ class CompanionShield:
         """The loiter flying now: its centre (x, y), radius and direction (+1 counter-clockwise); None: none."""
         self._tick = 0
         """The last tick :meth:`action` was asked for."""
-        self.gyro_sigma_rad_s = math.radians(max(scenario.link.attitude_rate_sigma_deg_s, GYRO_SIGMA_FLOOR_DEG_S))
-        """ATTITUDE's body-rate noise per axis, as the scenario states it (floored)."""
-        self._gyro: tuple[int, float, float] | None = None
-        """The newest ATTITUDE's tick, heading rate (CCW) and that rate's sigma (:meth:`set_attitude`)."""
 
     def reset(self) -> None:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""
@@ -224,7 +212,6 @@ class CompanionShield:
             error = companion_error(self.cfg, lim, self.dt_s, *sigmas, lossy=self.lossy)
             prediction: Prediction = KINEMATIC
             if self.response is not None:
-                turn_rate, turn_sigma = self._turn_rate_now(step, (turn_rate, turn_sigma))
                 airframe = self._airframe(state[2])
                 wind = None
                 if self.loiter is not None:
@@ -324,27 +311,6 @@ class CompanionShield:
             self.monitor.limits.turn_rate_max_rad_s, self.loiter.law,
         )  # fmt: skip
         return action[0]
-
-    def set_attitude(self, t_ms: int, roll_rad: float, pitch_rad: float, q_rad_s: float, r_rad_s: float) -> None:
-        """An ATTITUDE of tick ``t_ms``: the nose's heading rate (the Euler kinematics of the body rates,
-        :func:`~tssac_core.wire.units.heading_rate_from_body_rates`) and its sigma, the gyro's per axis carried
-        through them (|sin roll| + |cos roll|) / cos pitch. Not finite, or pitched beyond 60 deg: ignored."""
-        values = (roll_rad, pitch_rad, q_rad_s, r_rad_s)
-        if not all(math.isfinite(v) for v in values) or abs(pitch_rad) > math.radians(60.0):
-            return
-        rate = units.omega_from_yaw_rate(units.heading_rate_from_body_rates(*values))
-        spread = (abs(math.sin(roll_rad)) + abs(math.cos(roll_rad))) / math.cos(pitch_rad)
-        self._gyro = (round(t_ms / (self.dt_s * 1000.0)), rate, self.gyro_sigma_rad_s * spread)
-
-    def _turn_rate_now(self, step: int, filtered: tuple[float, float]) -> tuple[float, float]:
-        """The heading rate the lag starts from at the decision of tick ``step``: ATTITUDE's of that very tick where it
-        is surer than the filter's ``filtered`` (rate, sigma), else the filter's. The nose's rate is the air's
-        heading rate the monitor's model turns (in wind as in calm air, with no sideslip)."""
-        gyro = self._gyro
-        if gyro is None or gyro[0] != step or gyro[2] >= filtered[1]:
-            return filtered
-        self.counters.gyro_decisions += 1
-        return gyro[1], gyro[2]
 
     def _airframe(self, speed_m_s: float) -> AirframeLag:
         """The airframe's response at ``speed_m_s`` (held to the fitted span: the limits keep the speed inside it)."""

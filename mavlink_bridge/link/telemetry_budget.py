@@ -6,11 +6,10 @@ MAVLink 2 cuts trailing zero bytes, so frames on the wire are never longer and t
 
 What the companion needs (:func:`companion_streams`): from the vehicle, the streams it asks for and reads —
 LOCAL_POSITION_NED at the step rate (MAV_CMD_SET_MESSAGE_INTERVAL), SYSTEM_TIME (every step under lockstep, where
-it is the step's tick; else once a second), HEARTBEAT and the mission flags (NAMED_VALUE_INT) once a second, ATTITUDE
-at the step rate for a monitor predicting with an airframe's response; to the vehicle, one setpoint per step in its
-dialect (a SET_POSITION_TARGET_LOCAL_NED, or ArduPlane's GUIDED_CHANGE_HEADING and GUIDED_CHANGE_SPEED as
-COMMAND_INT) and its HEARTBEAT. On a serial line it asks for no more than :data:`LINE_SHARE` of the line either way
-(:func:`check_line`): the rest is the vehicle's other streams, command
+it is the step's tick; else once a second), HEARTBEAT and the mission flags (NAMED_VALUE_INT) once a second; to the
+vehicle, one setpoint per step in its dialect (a SET_POSITION_TARGET_LOCAL_NED, or ArduPlane's GUIDED_CHANGE_HEADING
+and GUIDED_CHANGE_SPEED as COMMAND_INT) and its HEARTBEAT. On a serial line it asks for no more than
+:data:`LINE_SHARE` of the line either way (:func:`check_line`): the rest is the vehicle's other streams, command
 acknowledgements and STATUSTEXTs.
 """
 
@@ -53,12 +52,8 @@ class CompanionStreams:
     to_vehicle: dict[str, float]
 
 
-def companion_streams(
-    dt_s: float, lockstep: bool, setpoints: SetpointDialect, attitude: bool = False
-) -> CompanionStreams:
-    """The streams a companion asks for and reads, and what it sends, at a step of ``dt_s`` (module docstring);
-    ``attitude``: ATTITUDE at the step rate too (a monitor predicting with an airframe's response reads its turn rate
-    there)."""
+def companion_streams(dt_s: float, lockstep: bool, setpoints: SetpointDialect) -> CompanionStreams:
+    """The streams a companion asks for and reads, and what it sends, at a step of ``dt_s`` (module docstring)."""
     step_hz = 1.0 / dt_s
     from_vehicle = {
         "LOCAL_POSITION_NED": step_hz,
@@ -66,8 +61,6 @@ def companion_streams(
         "HEARTBEAT": 1.0,
         "NAMED_VALUE_INT": 1.0,
     }
-    if attitude:
-        from_vehicle["ATTITUDE"] = step_hz
     if setpoints is SetpointDialect.ARDUPLANE:
         to_vehicle = {"COMMAND_INT": 2.0 * step_hz, "HEARTBEAT": 1.0}
     else:

@@ -20,7 +20,7 @@ from typing import TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim_vehicles.link.link_model import GpsFix, RateGyro
+from sim_vehicles.link.link_model import GpsFix
 from tssac_core.sim.scenario import Origin
 from tssac_core.wire import units
 from tssac_core.wire.geodetic import heading_cdeg, local_to_geodetic, yaw_ned_from_phi
@@ -183,21 +183,24 @@ def gps_raw_int(
     )
 
 
-def attitude(mav: MAV, truth: VehicleTruth, time_boot_ms: int, gyro: RateGyro) -> Msg:
+def attitude(mav: MAV, truth: VehicleTruth, time_boot_ms: int) -> Msg:
     """ATTITUDE: the airframe's own where the dynamics model it; in the kinematic model in calm air yaw = pi/2 - phi
-    (wrapped), roll the coordinated-turn bank angle and the body rates of that level turn (q = psi' sin roll,
-    r = psi' cos roll, psi' = -omega). The body rates as the ``gyro`` reads them (the scenario's
-    ``link.attitude_rate_sigma_deg_s``)."""
+    (wrapped), yawspeed = -omega and roll the coordinated-turn bank angle."""
     air = truth.air
     if air is not None:
-        p, q, r = gyro.read(air.roll_rate_rad_s, air.pitch_rate_rad_s, air.yaw_rate_rad_s)
         yaw = yaw_ned_from_phi(air.heading_rad)
-        return mav.attitude_encode(time_boot_ms, air.roll_rad, air.pitch_rad, yaw, p, q, r)
-    yaw_rate = units.yaw_rate_from_omega(truth.turn_rate_rad_s)
-    roll = math.atan(truth.speed_m_s * yaw_rate / GRAVITY_M_S2)
-    # A level coordinated turn's body rates: the heading's rate about the vertical, seen in the banked axes.
-    p, q, r = gyro.read(0.0, yaw_rate * math.sin(roll), yaw_rate * math.cos(roll))
-    return mav.attitude_encode(time_boot_ms, roll, 0.0, yaw_ned_from_phi(truth.phi_rad), p, q, r)
+        return mav.attitude_encode(
+            time_boot_ms,
+            air.roll_rad,
+            air.pitch_rad,
+            yaw,
+            air.roll_rate_rad_s,
+            air.pitch_rate_rad_s,
+            air.yaw_rate_rad_s,
+        )
+    yawspeed = units.yaw_rate_from_omega(truth.turn_rate_rad_s)
+    roll = math.atan(truth.speed_m_s * yawspeed / GRAVITY_M_S2)
+    return mav.attitude_encode(time_boot_ms, roll, 0.0, yaw_ned_from_phi(truth.phi_rad), 0.0, 0.0, yawspeed)
 
 
 def vfr_hud(mav: MAV, truth: VehicleTruth, alt_m: float, accel_cmd: float) -> Msg:

@@ -49,7 +49,7 @@ from sim_vehicles.autopilot.modes import AUTONOMOUS, FlightMode
 from sim_vehicles.autopilot.params import ParamTable, vehicle_params
 from sim_vehicles.autopilot.setpoints import Demand, Refusal, SetpointForm, accel_command
 from sim_vehicles.autopilot.telemetry import VehicleTruth
-from sim_vehicles.link.link_model import GpsReceiver, RateGyro
+from sim_vehicles.link.link_model import GpsReceiver
 from tssac_core.sim.scenario import LinkModel, Origin
 from tssac_core.wire import units
 
@@ -189,7 +189,6 @@ class Vehicle:
         clock: Clock,
         flags: WorldFlags,
         gps_rng: np.random.Generator,
-        gyro_rng: np.random.Generator,
         on_event: EventSink | None = None,
     ) -> None:
         self.setup = setup
@@ -200,7 +199,6 @@ class Vehicle:
         self.clock = clock
         self.flags = flags
         self.gps = GpsReceiver(setup.link, gps_rng)
-        self.gyro = RateGyro(setup.link, gyro_rng)
         self.params: ParamTable = vehicle_params(
             setup.sysid,
             setup.setpoint_timeout_s,

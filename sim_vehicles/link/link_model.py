@@ -6,8 +6,6 @@ rate is at most 1 / dt). Each due fix is lost with probability ``gps_dropout_pro
 the true position and velocity plus independent zero-mean Gaussian noise per horizontal axis,
 sigma ``gps_position_sigma_m`` and ``gps_velocity_sigma_m_s`` (white: no correlation between fixes).
 
-:class:`RateGyro` — ATTITUDE's body rates, with noise of sigma ``attitude_rate_sigma_deg_s`` per axis.
-
 :class:`LinkChannel` — one direction of one vehicle's datalink, applied to whole UDP datagrams:
 
 * loss: each datagram is dropped with probability ``packet_loss``;
@@ -102,20 +100,6 @@ class GpsReceiver:
         if self.last_fix is None:
             return False
         return time_s - self.last_fix.time_s <= max(0.5, 2.0 * self._period_s) + _EPS_S
-
-
-class RateGyro:
-    """The body rates ATTITUDE reports: the airframe's own plus independent zero-mean Gaussian noise per axis, sigma
-    ``attitude_rate_sigma_deg_s`` (white: no correlation between messages)."""
-
-    def __init__(self, model: LinkModel, rng: np.random.Generator) -> None:
-        self._sigma = math.radians(model.attitude_rate_sigma_deg_s)
-        self._rng = rng
-
-    def read(self, p: float, q: float, r: float) -> tuple[float, float, float]:
-        """The rates (rad/s) as reported."""
-        n = self._rng.standard_normal(3).tolist()
-        return p + self._sigma * n[0], q + self._sigma * n[1], r + self._sigma * n[2]
 
 
 @dataclass

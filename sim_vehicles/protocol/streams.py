@@ -159,7 +159,7 @@ def build(mid: int, v: Vehicle, mav: mavlink2.MAVLink, errors_comm: int) -> list
     if mid == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
         return [] if fix is None else [telemetry.global_position_int(mav, o, fix, t)]
     if mid == M.MAVLINK_MSG_ID_ATTITUDE:
-        return [telemetry.attitude(mav, t, ms, v.gyro)]
+        return [telemetry.attitude(mav, t, ms)]
     if mid == M.MAVLINK_MSG_ID_VFR_HUD:
         return [telemetry.vfr_hud(mav, t, o.alt_m, v.last_action[1])]
     if mid == M.MAVLINK_MSG_ID_WIND:

@@ -189,9 +189,6 @@ class LinkModel:
     """GPS fix rate."""
     gps_dropout_prob: float = 0.0
     """Probability that a fix is missing."""
-    attitude_rate_sigma_deg_s: float = 0.1
-    """ATTITUDE's body-rate noise, 1 sigma per axis (the AHRS's error in the rates a companion's monitor reads the
-    turn rate from when it predicts with an airframe's response)."""
     packet_loss: float = 0.0
     """Probability that a MAVLink packet is lost, each direction."""
     latency_ms: float = 0.0
@@ -498,7 +495,7 @@ def _validate_link(lk: LinkModel, source: str) -> None:
         f"each way (a frame held behind a later one is a replay to signing): at most {MAX_LINK_LOSS:.0%} may be lost, "
         "or no command gets through reliably",
     )
-    for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s", "attitude_rate_sigma_deg_s"):
+    for name in ("gps_position_sigma_m", "gps_velocity_sigma_m_s"):
         check(getattr(lk, name) >= 0, f"link.{name}", "must be >= 0")
     check(0 <= lk.latency_ms <= MAX_LATENCY_MS, "link.latency_ms", f"must be in [0, {MAX_LATENCY_MS:g}] ms")
     check(0 < lk.gps_rate_hz <= 100, "link.gps_rate_hz", "must be in (0, 100] Hz")

@@ -138,12 +138,6 @@ def omega_from_yaw_rate(yaw_rate_rad_s: float) -> float:
     return -yaw_rate_rad_s
 
 
-def heading_rate_from_body_rates(roll_rad: float, pitch_rad: float, q_rad_s: float, r_rad_s: float) -> float:
-    """The NED heading's rate (clockwise-positive) of ATTITUDE's body rates: the Euler kinematics
-    psi' = (q sin roll + r cos roll) / cos pitch."""
-    return (q_rad_s * math.sin(roll_rad) + r_rad_s * math.cos(roll_rad)) / math.cos(pitch_rad)
-
-
 # -------------------------------------------------------------------------------- the action
 
 
