@@ -59,8 +59,8 @@ from tqdm import tqdm
 import tssac_core
 from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP
 from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP
 from tssac_core.parallel.mission_shards import fly_missions_sharded
 from tssac_core.parallel.ray_cluster import RayTarget, ray_session
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot

@@ -43,7 +43,6 @@ from pathlib import Path
 from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.common.evaluation_record import (
     BatchedRun,
@@ -51,6 +50,7 @@ from tssac_core.common.evaluation_record import (
     EvaluationRecordJson,
     WorldMonitorFigures,
 )
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot

@@ -15,10 +15,10 @@ from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_gra
 from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
-from tssac_core.assurance.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.common.cli import SEED_MAX, UsageError, UsageParser, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import create_exclusively
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target

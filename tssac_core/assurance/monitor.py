@@ -214,7 +214,8 @@ class Decision:
     unprotected: np.ndarray
     """No passing action and no clear backup: flying the best backup without a guarantee."""
     clearance_m: np.ndarray
-    """The proposed action's clearance: min((a) its path's, (b) its best backup's), in metres."""
+    """The proposed action's clearance (the adjusted action's when one flies): min((a) its path's, (b) its best
+    backup's), in metres."""
     straight_steps: np.ndarray
     """World steps of the interval to fly ``action`` before a flying backup's lead ends (the interval's ``steps``
     when nothing changes in it): from then on the backup flies ``turn``."""
@@ -630,20 +631,13 @@ def decide(
     finite = np.all(np.isfinite(np.asarray(proposed, dtype=np.float64)), axis=1)
     proposed, excess, best_end = prediction.proposal_excess(x, y, v, phi, proposed, steps, err_end, scene)
     engaged, protected = memory.engaged, memory.protected
-    adjusted = np.zeros(m, bool)
-    if cfg.adjust:
-        # A finite proposal that fails while the policy flies: the nearest passing candidate before the backup.
-        rows = finite & (excess < 0) & ~engaged
-        idx, found, action, near_excess, near_end = _nearest_passing(
-            prediction, x, y, v, phi, proposed, steps, err_end, scene, rows
-        )
-        take = idx[found]
-        proposed, excess, best_end = proposed.copy(), excess.copy(), best_end.copy()
-        proposed[take], excess[take], best_end[take] = action[found], near_excess[found], near_end[found]
-        adjusted[take] = True
-    passes = excess >= 0
-    passes_release = excess >= cfg.release_margin_m
-
+    # A finite proposal that fails while the policy flies: the nearest passing candidate first (cfg.adjust).
+    rows = finite & (excess < 0) & ~engaged & cfg.adjust
+    flown = (proposed, excess, best_end)
+    proposed, excess, best_end, adjusted = _nearest_passing(
+        prediction, x, y, v, phi, flown, steps, err_end, scene, rows
+    )
+    passes, passes_release = excess >= 0, excess >= cfg.release_margin_m
     backup, lead_left = memory.backup.copy(), memory.lead_left.copy()
     count = np.where(engaged & passes_release, memory.passes + 1, 0)
     # An unprotected vehicle has no guarantee to keep: any passing action is better than its backup.
@@ -654,13 +648,7 @@ def decide(
     lost = ~fly_proposed & ~protected
     protected = protected.copy()
     if lost.any():
-        here = prediction.select(lost).backup_excess(
-            x[lost], y[lost], v[lost], phi[lost], err_here.select(lost), scene.select(lost)
-        )
-        pick = choose_backup(here)
-        backup[lost] = pick
-        lead_left[lost] = leads[pick // N_TURNS]
-        protected[lost] = here[np.arange(len(here)), pick] >= 0
+        backup[lost], lead_left[lost], protected[lost] = _clearest(prediction, lost, (x, y, v, phi), err_here, scene)
     now_engaged = ~fly_proposed
     action = np.where(now_engaged[:, None], backup_action(backup, lead_left), proposed)
     straight_steps = np.where(now_engaged, np.minimum(lead_left, steps), steps)
@@ -707,31 +695,55 @@ def _nearest_passing(
     y: np.ndarray,
     v: np.ndarray,
     phi: np.ndarray,
-    proposed: np.ndarray,
+    flown: tuple[np.ndarray, np.ndarray, np.ndarray],
     steps: int,
     err_end: EstimateError,
     scene: Scene,
     rows: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """For the vehicles ``rows`` (a bool mask): the passing candidate (:func:`adjusted_candidates`) nearest the
-    proposal, nearness |d omega| + |d u| / 2. Returns the rows' indices (R,), whether one
-    passed, its action (R, 2), excess and best backup."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The proposals as flown, their excesses and best backups (``flown``), with the passing candidate
+    (:func:`adjusted_candidates`) nearest the proposal in place for the vehicles ``rows`` (a bool mask) where one
+    passes, nearness |d omega| + |d u| / 2; and which vehicles those are."""
+    proposed, excess, best_end = (a.copy() for a in flown)
+    adjusted = np.zeros(len(proposed), bool)
     idx = np.flatnonzero(rows)
     if not len(idx):
-        return idx, np.zeros(0, bool), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
+        return proposed, excess, best_end, adjusted
     cand = adjusted_candidates(proposed[idx])
     r, c = cand.shape[:2]
     rep = np.repeat(idx, c)
-    sub = prediction.select(rep)
-    _, excess, best = sub.proposal_excess(
+    _, cand_excess, cand_best = prediction.select(rep).proposal_excess(
         x[rep], y[rep], v[rep], phi[rep], cand.reshape(-1, 2), steps, err_end.select(rep), scene.select(rep)
     )
-    excess, best = excess.reshape(r, c), best.reshape(r, c)
+    cand_excess, cand_best = cand_excess.reshape(r, c), cand_best.reshape(r, c)
     distance = np.abs(cand - proposed[idx, None, :]) @ np.array([1.0, 0.5])
-    key = np.where(excess >= 0, distance, np.inf)
+    key = np.where(cand_excess >= 0, distance, np.inf)
     pick = np.argmin(key, axis=1)
     at = np.arange(r)
-    return idx, np.isfinite(key[at, pick]), cand[at, pick], excess[at, pick], best[at, pick]
+    found = np.isfinite(key[at, pick])
+    take = idx[found]
+    proposed[take], excess[take], best_end[take] = (
+        cand[at, pick][found],
+        cand_excess[at, pick][found],
+        cand_best[at, pick][found],
+    )
+    adjusted[take] = True
+    return proposed, excess, best_end, adjusted
+
+
+def _clearest(
+    prediction: Prediction,
+    rows: np.ndarray,
+    state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    err: EstimateError,
+    scene: Scene,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For the vehicles ``rows`` (a bool mask), which have no known backup: the clearest one from where each is (the
+    monitor's choice among every backup's excess), its lead's steps, and whether it clears."""
+    x, y, v, phi = (a[rows] for a in state)
+    here = prediction.select(rows).backup_excess(x, y, v, phi, err.select(rows), scene.select(rows))
+    pick = choose_backup(here)
+    return pick, lead_steps(scene.cfg, scene.dt_s)[pick // N_TURNS], here[np.arange(len(here)), pick] >= 0
 
 
 def _backup_excess_here(
