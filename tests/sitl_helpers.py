@@ -263,3 +263,14 @@ def running(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:
         return False
+
+
+def kept_out(results: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A shielded ``fly`` JSON's first mission and its monitor's figures, after checking the guarantee: no cost for any
+    UAV, none out of the area, and the monitor's counts saying so."""
+    mission = results["missions"][0]
+    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
+    assert not any(mission["left_area"].values()), mission["left_area"]
+    shield = results["shield"]
+    assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0, shield
+    return mission, shield

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sitl_helpers import kept_out
 
 from tssac_core.assurance.monitor import (
     Hazards,
@@ -172,12 +173,7 @@ def test_a_straight_pilot_into_a_radar_is_turned_by_adjusted_actions_over_sitl(t
     proc = fly(["--scenario", str(path), "--pilot", "straight", "--shield", "--shield-adjust", "--json", str(out)])
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "adjusted" in proc.stdout
-    results = json.loads(out.read_text())
-    mission = results["missions"][0]
-    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
-    assert not any(mission["left_area"].values())
-    shield = results["shield"]
-    assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0
+    mission, shield = kept_out(json.loads(out.read_text()))
     assert shield["adjusted_time_fraction"] > 0
     counts = [c["shield"] for c in mission["companions"].values()]
     assert all(c["adjusted_steps"] > 0 for c in counts), counts

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sitl_helpers import kept_out
 
 from mavlink_bridge.fly.mission_log import read_mission
 from tssac_core.sim.missions import fly_missions
@@ -114,12 +115,7 @@ def test_a_nan_policy_is_flown_by_the_backup_over_sitl(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"
     proc = fly(["--scenario", str(path), "--models", str(nan_team(tmp_path / "nan")), "--json", str(out)])
     assert proc.returncode == 0, proc.stderr[-2000:]
-    results = json.loads(out.read_text())
-    mission = results["missions"][0]
-    assert all(c == 0 for c in mission["cost"].values()), mission["cost"]
-    assert not any(mission["left_area"].values())
-    shield = results["shield"]
-    assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0
+    _, shield = kept_out(json.loads(out.read_text()))
     assert shield["backup_time_fraction"] > 0.99  # the policy never flies: the backup does, from the first decision
     assert shield["interventions_per_uav_mission"] >= 1
 
