@@ -177,3 +177,17 @@ def test_a_straight_pilot_into_a_radar_is_turned_by_adjusted_actions_over_sitl(t
     assert shield["adjusted_time_fraction"] > 0
     counts = [c["shield"] for c in mission["companions"].values()]
     assert all(c["adjusted_steps"] > 0 for c in counts), counts
+
+
+def test_evaluate_reports_the_adjusted_share(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tssac_core.evaluate import main
+
+    path = tmp_path / "strike60.yaml"
+    dump(dataclasses.replace(load(REPO / "scenarios" / "strike.yaml"), episode_steps=600), path)
+    argv = ["--controller", "at_radar", "--scenario", str(path), "--episodes", "2", "--seed", "1", "--no-progress"]
+    assert main([*argv, "--shield", "--shield-adjust"]) == 0
+    line = next(t for t in capsys.readouterr().out.splitlines() if t.startswith("shield:"))
+    assert "% adjusted" in line and "0 UAV-missions with cost" in line
+    assert main([*argv, "--shield"]) == 0
+    line = next(t for t in capsys.readouterr().out.splitlines() if t.startswith("shield:"))
+    assert "adjusted" not in line

@@ -9,6 +9,7 @@ from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_log import MissionRecord
 from mavlink_bridge.fly.scoring import CampaignResults
 from tssac_core.common.evaluation_record import SitlMonitorFigures
+from tssac_core.common.shield_options import adjusted_text
 from tssac_core.sim.scenario import Dynamics, DynamicsModel, Layout, Scenario
 
 
@@ -140,8 +141,3 @@ def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: M
     )
     with PYPLOT_LOCK:
         return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix), cfg.progress)
-
-
-def adjusted_text(fraction: float | None) -> str:
-    """ ", x% adjusted" when the monitor flew adjusted actions (``--shield-adjust``), else nothing."""
-    return f", {fraction:.2%} adjusted" if fraction else ""

@@ -1,4 +1,5 @@
-"""The monitor's command-line options shared by ``fly``, the companion and the benchmarks: ``--shield-adjust``."""
+"""The monitor's command-line option shared by ``fly``, the companion, ``evaluate`` and the benchmarks,
+``--shield-adjust``, and the reports' words for what it did."""
 
 from __future__ import annotations
 
@@ -9,6 +10,12 @@ SHIELD_ADJUST_HELP = (
     "rate or one of -1, -0.75 .. 1 of the limit, at its acceleration or braking) before the backup takes over "
     "(docs/runtime_assurance.md, 'Adjusted actions')"
 )
+
+
+def adjusted_text(fraction: float | None) -> str:
+    """The report's words for the share of time under adjusted actions: ", 1.23% adjusted", or nothing when none
+    flew."""
+    return f", {fraction:.2%} adjusted" if fraction else ""
 
 
 def adjust_option(adjust: bool, shield: bool) -> bool:
