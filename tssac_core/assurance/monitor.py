@@ -704,11 +704,11 @@ def _nearest_passing(
     """The proposals as flown, their excesses and best backups (``flown``), with the passing candidate
     (:func:`adjusted_candidates`) nearest the proposal in place for the vehicles ``rows`` (a bool mask) where one
     passes, nearness |d omega| + |d u| / 2; and which vehicles those are."""
-    proposed, excess, best_end = (a.copy() for a in flown)
-    adjusted = np.zeros(len(proposed), bool)
+    adjusted = np.zeros(len(flown[0]), bool)
     idx = np.flatnonzero(rows)
-    if not len(idx):
-        return proposed, excess, best_end, adjusted
+    if not len(idx):  # the plain monitor, or nothing failed: no copies on the hot path
+        return (*flown, adjusted)
+    proposed, excess, best_end = (a.copy() for a in flown)
     cand = adjusted_candidates(proposed[idx])
     r, c = cand.shape[:2]
     rep = np.repeat(idx, c)
