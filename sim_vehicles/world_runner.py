@@ -87,6 +87,7 @@ from tssac_core.sim.world import World
 from tssac_core.wire.mission_events import MissionEnd
 from tssac_core.wire.signing import StreamKey
 from tssac_core.wire.truth_log_schema import SCHEMA_VERSION, AirRow, VehicleRow
+from tssac_core.wire.vehicle_limits import Achievable
 
 _log = logging.getLogger(__name__)
 
@@ -273,7 +274,7 @@ class WorldRunner:
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         initial = self.dynamics.truths()
         for i, role in enumerate(ROLES):
-            vehicle, link = self._make_vehicle(i, role, seeds[i], initial[i])
+            vehicle, link = self._make_vehicle(i, role, seeds[i], initial[i], self.dynamics.achievable[i])
             self.vehicles.append(vehicle)
             self.links.append(link)
         self.clock_policy: ClockPolicy = clock_policy(config, self.clock, self.links, self._step)
@@ -282,10 +283,11 @@ class WorldRunner:
             self._open_truth_log(config, Path(config.truth_log), self.dynamics.name)
 
     def _make_vehicle(
-        self, i: int, role: Role, seed: np.random.SeedSequence, truth: VehicleTruth
+        self, i: int, role: Role, seed: np.random.SeedSequence, truth: VehicleTruth, achievable: Achievable
     ) -> tuple[Vehicle, VehicleLink]:
         """Vehicle ``i`` of the mission (:meth:`_begin`), at its start state ``truth``, with its link (its random
-        streams from ``seed``: what goes out, what comes in, its GPS) and its tlog."""
+        streams from ``seed``: what goes out, what comes in, its GPS), its tlog, and what it achieves (``achievable``:
+        its ACHV_* parameters)."""
         config, s, c = self.config, self.scenario, self.world.c
         endpoint = self._endpoints[i]
         start = self.layout.starts[role.value]
@@ -303,6 +305,7 @@ class WorldRunner:
             home_north_m=start.position_km[1] * 1000.0,
             link=s.link,
             setpoint_timeout_s=config.setpoint_timeout_s,
+            achievable=achievable,
         )
         tx, rx, gps = (np.random.default_rng(q) for q in seed.spawn(3))
         tlog = None

@@ -25,6 +25,7 @@ from mavlink_bridge.companion.mission_end import EndWatch
 from mavlink_bridge.companion.pilot_step import PilotStep
 from mavlink_bridge.companion.status import CompanionCounters, CompanionResult, MissionFlags
 from mavlink_bridge.companion.tick_clock import TickClock
+from mavlink_bridge.companion.vehicle_limits import describe, read_achievable
 from mavlink_bridge.estimation.state_filter import FilterNoise, VehicleStateFilter
 from mavlink_bridge.link.connection import CommandError, LinkError, M, MavLink, Message
 from mavlink_bridge.link.frames import (
@@ -112,6 +113,8 @@ class Companion:
         self._last_control_cpu_s = 0.0
         self.phase = Phase.CONNECT
         self._stop_requested = False
+        self._limits_read = False
+        """The vehicle's achievable limits were asked for in this run (a monitored flight asks once, before it arms)."""
         self._link: MavLink | None = None
         self._ends = EndWatch()
         self._reset_vehicle_state()
@@ -155,6 +158,7 @@ class Companion:
             except LinkError as exc:
                 raise UsageError(str(exc)) from None
         self._link = link
+        self._limits_read = False
         self.last_rx_s = time.monotonic()
         self._next_heartbeat_s = 0.0
         self._last_silence_hold_s = -math.inf
@@ -227,6 +231,14 @@ class Companion:
         link, cfg = self._link, self.cfg
         assert link is not None
         role = cfg.role.value
+        shield = self.pilot_step.shield
+        if shield is not None and not self._limits_read:
+            achievable = read_achievable(link, cfg.command_timeout_s, cfg.attempts)
+            self._limits_read = True
+            _log.info("%s: the vehicle %s", role, describe(achievable))
+            refusal = shield.use_achievable(achievable)
+            if refusal is not None:
+                raise _Stop("refused", refusal)
         try:
             link.arm(cfg.command_timeout_s, cfg.attempts)
             _log.info("%s: armed", role)
@@ -582,5 +594,8 @@ class Companion:
             flags=dict(self.flags.values),
             latency_samples_ms=[round(float(x), 4) for x in lat],
             shield=None if self.pilot_step.shield is None else asdict(self.pilot_step.shield.counters),
+            vehicle_limits=None
+            if self.pilot_step.shield is None or self.pilot_step.shield.achievable is None
+            else asdict(self.pilot_step.shield.achievable),
             write_error=None if link is None else link.tlog_error,
         )

@@ -32,6 +32,7 @@ Each hand-over is said to the vehicle in a STATUSTEXT (``"<role>: shield on, bac
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Callable
@@ -40,6 +41,7 @@ from typing import TypeAlias
 
 import numpy as np
 
+from mavlink_bridge.companion.vehicle_limits import monitor_fit
 from tssac_core.assurance.ground_loiter import LoiterBound, loiter_action, loiter_centre
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
@@ -60,6 +62,7 @@ from tssac_core.sim.lagged_starts import STRAIGHT_START_TURN_SIGMA_RAD_S
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.world_monitor import VehicleMonitor
 from tssac_core.sim.world_state import WorldState
+from tssac_core.wire.vehicle_limits import Achievable
 
 ENGAGED_TEXT = "shield on"
 RELEASED_TEXT = "shield off"
@@ -137,6 +140,19 @@ class CompanionShield:
         """The loiter flying now: its centre (x, y), radius and direction (+1 counter-clockwise); None: none."""
         self._tick = 0
         """The last tick :meth:`action` was asked for."""
+        self.achievable: Achievable | None = None
+        """What the vehicle said it achieves (:meth:`use_achievable`; None: it did not say, or was not asked)."""
+
+    def use_achievable(self, achievable: Achievable | None) -> str | None:
+        """Hold the monitor to what the vehicle says it achieves (None: it does not say; the scenario's limits stand):
+        why it cannot fly the backups (one line), or None (:mod:`mavlink_bridge.companion.vehicle_limits`)."""
+        lim = self.monitor.limits
+        fit = monitor_fit(achievable, float(lim.turn_rate_max_rad_s[0]), float(lim.accel_max_m_s2[0]))
+        self.achievable = achievable
+        self.monitor.cfg = dataclasses.replace(
+            self.cfg, braking_backups=self.cfg.braking_backups and fit.braking_backups
+        )
+        return fit.refusal
 
     def reset(self) -> None:
         """Forget the backup and the queue (a vehicle restart: a new flight)."""

@@ -72,6 +72,9 @@ class CompanionResult:
     """Every control step's latency (for benchmarks that pool several companions)."""
     shield: dict[str, float] | None = None
     """The runtime-assurance monitor's counts (``ShieldCounters`` of the companion's shield), when it flew."""
+    vehicle_limits: dict[str, float] | None = None
+    """What the vehicle said it achieves (:class:`~tssac_core.wire.vehicle_limits.Achievable`), when the monitor flew
+    and the vehicle said it."""
     write_error: str | None = None
     """What the run failed to write (its tlog cut by a full disk); None: nothing was lost. Not in the dict when None."""
 

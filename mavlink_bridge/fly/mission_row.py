@@ -42,6 +42,8 @@ class CompanionStatus(TypedDict):
     latency_p50_ms: NotRequired[float | None]
     latency_p99_ms: NotRequired[float | None]
     shield: NotRequired[ShieldCounts | None]
+    vehicle_limits: NotRequired[dict[str, float]]
+    """What the vehicle said it achieves, when the monitor flew and it said it (``ACHV_*``)."""
     write_error: NotRequired[str]
     """Set when the companion lost a write (its tlog is cut)."""
 

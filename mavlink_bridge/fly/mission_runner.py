@@ -575,6 +575,8 @@ class MissionRunner:
             "latency_p99_ms": lat.get("p99"),
             "shield": data.get("shield"),
         }
+        if isinstance(said := data.get("vehicle_limits"), dict):
+            out["vehicle_limits"] = said
         if data.get("write_error") is not None:
             out["write_error"] = str(data["write_error"])
         return out

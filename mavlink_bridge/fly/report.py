@@ -5,12 +5,14 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+from mavlink_bridge.companion.vehicle_limits import describe
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_log import MissionRecord
 from mavlink_bridge.fly.scoring import CampaignResults
 from tssac_core.common.evaluation_record import SitlMonitorFigures
 from tssac_core.common.shield_options import adjusted_text
 from tssac_core.sim.scenario import Dynamics, DynamicsModel, Layout, Scenario
+from tssac_core.wire.vehicle_limits import Achievable
 
 
 def print_report(results: CampaignResults, cfg: FlyConfig) -> None:
@@ -41,16 +43,8 @@ def print_report(results: CampaignResults, cfg: FlyConfig) -> None:
         print(f"dynamics: {physics_text(cfg.scenario)}")
     sh = r.monitor
     assert sh is None or isinstance(sh, SitlMonitorFigures), "fly's monitor is its companions'"
-    if sh is not None and sh.scope:
-        print(f"shield: {sh.scope}")
-    if sh is not None and sh.uav_missions:
-        print(
-            f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission "
-            f"(max {sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of control steps under the "
-            f"backup{adjusted_text(sh.adjusted_time_fraction)}, margin up to {sh.max_margin_m:.0f} m, "
-            f"{sh.uav_missions_with_cost} UAV-missions with cost, "
-            f"{sh.uavs_left_area} UAVs left the area"
-        )
+    if sh is not None:
+        print_monitor(sh)
     for w in r.worst_missions:
         print(
             f"  worst: mission {w.mission} (seed {w.seed}) {w.role} cost {w.cost:.0f}: fly again with --seed "
@@ -141,3 +135,27 @@ def animate_mission_record(cfg: FlyConfig, index: int, layout: Layout, record: M
     )
     with PYPLOT_LOCK:
         return write_film(film, mission_file(cfg, cfg.animate_path, index, cfg.animate_path.suffix), cfg.progress)
+
+
+def print_monitor(sh: SitlMonitorFigures) -> None:
+    """The monitor's lines of the report: its scope, what the vehicles said they achieve, its counts."""
+    if sh.scope:
+        print(f"shield: {sh.scope}")
+    if sh.vehicle_limits:
+        print(f"shield: {achieved_text(sh.vehicle_limits)}")
+    if sh.uav_missions:
+        print(
+            f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission "
+            f"(max {sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of control steps under the "
+            f"backup{adjusted_text(sh.adjusted_time_fraction)}, margin up to {sh.max_margin_m:.0f} m, "
+            f"{sh.uav_missions_with_cost} UAV-missions with cost, "
+            f"{sh.uavs_left_area} UAVs left the area"
+        )
+
+
+def achieved_text(limits: dict[str, dict[str, float] | None]) -> str:
+    """What the vehicles said they achieve (:attr:`SitlMonitorFigures.vehicle_limits`), one line."""
+    said = {role: describe(None if v is None else Achievable(**v)) for role, v in limits.items()}
+    if len(set(said.values())) == 1:
+        return f"every vehicle {next(iter(said.values()))}"
+    return "; ".join(f"the {role} vehicle {text}" for role, text in said.items())

@@ -75,6 +75,7 @@ def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFig
         max_interventions_per_uav_mission=max((c["interventions"] for c in counts), default=None),
         backup_time_fraction=sum(c["backup_steps"] for c in counts) / max(1, control) if counts else None,
         adjusted_time_fraction=sum(c.get("adjusted_steps", 0) for c in counts) / max(1, control) if counts else None,
+        vehicle_limits=vehicle_limits(rows) if counts else None,
         unprotected_time_fraction=sum(c["unprotected_steps"] for c in counts) / max(1, control) if counts else None,
         decisions=sum(c["decisions"] for c in counts),
         resets=sum(c["resets"] for c in counts),
@@ -84,6 +85,17 @@ def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFig
         guarantee=scope is None,
         scope=scope,
     )
+
+
+def vehicle_limits(rows: list[MissionRow]) -> dict[str, dict[str, float] | None]:
+    """Per role, the achievable limits its vehicle published to the first companion that read them (None: none did)."""
+    seen: dict[str, dict[str, float] | None] = {}
+    for r in rows:
+        for role, status in r.get("companions", {}).items():
+            said = status.get("vehicle_limits")
+            if seen.get(role) is None and status.get("shield"):
+                seen[role] = said if isinstance(said, dict) else None
+    return seen
 
 
 def role_figures(

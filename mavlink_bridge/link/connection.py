@@ -51,7 +51,7 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, TypeAlias
@@ -765,6 +765,43 @@ class MavLink:
         return self.command_checked(
             M.MAV_CMD_SET_MESSAGE_INTERVAL, (float(message_id), interval_us), timeout_s, retries
         )
+
+    def read_params(self, names: Sequence[str], timeout_s: float = 1.0, retries: int = 3) -> dict[str, float]:
+        """The vehicle's values of the parameters ``names`` (PARAM_REQUEST_READ by name, PARAM_VALUE back), asking
+        again for those still unanswered ``retries`` times, ``timeout_s`` each. A name the vehicle says it does not
+        have (PARAM_ERROR) or never answers is left out of the result. Other messages received meanwhile stay
+        queued for :meth:`recv`."""
+        values: dict[str, float] = {}
+        refused: set[str] = set()
+        skipped: list[tuple[Message, float]] = []
+        try:
+            for _ in range(max(1, retries)):
+                asked = [n for n in names if n not in values and n not in refused]
+                if not asked:
+                    break
+                for name in asked:
+                    self.send(
+                        self.mav.param_request_read_encode(
+                            self.target_system, self.target_component, name.encode("ascii"), -1
+                        )
+                    )
+                deadline = time.monotonic() + timeout_s
+                while any(n not in values and n not in refused for n in asked) and (
+                    (remaining := deadline - time.monotonic()) > 0.0
+                ):
+                    msg = self.recv(remaining)
+                    if msg is None:
+                        continue
+                    kind = msg.get_type() if self.from_vehicle(msg) else None
+                    if kind == "PARAM_VALUE" and msg.param_id in asked:
+                        values[msg.param_id] = float(msg.param_value)
+                    elif kind == "PARAM_ERROR" and msg.param_id in asked:
+                        refused.add(msg.param_id)
+                    else:
+                        skipped.append((msg, self.last_rx_s))
+        finally:
+            self._push_back(skipped)
+        return values
 
     def _ack_for_us(self, ack: Message) -> bool:
         # MAVLink 2 COMMAND_ACK carries target fields; an autopilot that leaves them 0 addresses everyone.

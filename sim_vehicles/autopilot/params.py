@@ -10,6 +10,9 @@ name               type    access     meaning
 ``SIM_ACCEL_MAX``  REAL32  read-only  acceleration limit (|afx| is clipped to it), m/s/s
 ``SIM_SPD_MIN``    REAL32  read-only  minimum speed, m/s
 ``SIM_SPD_MAX``    REAL32  read-only  maximum speed, m/s
+``ACHV_TURN_MAX``  REAL32  read-only  the turn rate the vehicle achieves anywhere in its envelope, deg/s
+``ACHV_ACCEL_MAX`` REAL32  read-only  the forward acceleration it achieves anywhere in it, m/s/s
+``ACHV_DECEL_MAX`` REAL32  read-only  the deceleration it achieves anywhere in it, m/s/s (a magnitude)
 ``WP_LOITER_RAD``  REAL32  settable   loiter / RTL circle radius, m (1 .. 32767; ArduPlane's name and
                                       default 60: the radius flown is at least v / (0.8 turn limit))
 ``FS_GCS_ENABL``   INT32   settable   datalink failsafe: 0 off (ArduPlane's default), 1 on
@@ -19,7 +22,9 @@ name               type    access     meaning
 =================  ======  =========  ==========================================================
 
 The limits are read-only because they are the world's physics (the scenario's ``vehicles:``
-section, which the policies were trained on). Values travel as floats; INT32 values are the
+section, which the policies were trained on); the ``ACHV_*`` ones are what the physics backend achieves of
+them (:mod:`tssac_core.wire.vehicle_limits`: the point mass all of them, an airframe what its file declares),
+which a companion's monitor reads before it flies. Values travel as floats; INT32 values are the
 integer cast to float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST, as ArduPilot does). A PARAM_SET
 that is refused (read-only, out of range, not finite) is answered as ArduPilot 4.6 does: a PARAM_ERROR
 (PERMISSION_DENIED, VALUE_OUT_OF_RANGE: MAVSDK returns that error at once), a STATUSTEXT saying why (one
@@ -34,6 +39,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from tssac_core.wire.vehicle_limits import Achievable
 
 
 @dataclass(frozen=True)
@@ -103,8 +110,11 @@ def vehicle_params(
     accel_max_m_s2: float,
     speed_min_m_s: float,
     speed_max_m_s: float,
+    achievable: Achievable | None = None,
 ) -> ParamTable:
+    """The table of the module docstring; ``achievable`` None: the limits themselves (the point mass)."""
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
+    achieved = achievable or Achievable(turn_max_deg_s, accel_max_m_s2, accel_max_m_s2)
     return ParamTable(
         [
             Param("SYSID_THISMAV", float(sysid), int32),
@@ -114,6 +124,7 @@ def vehicle_params(
             Param("SIM_ACCEL_MAX", accel_max_m_s2, real),
             Param("SIM_SPD_MIN", speed_min_m_s, real),
             Param("SIM_SPD_MAX", speed_max_m_s, real),
+            *(Param(name.value, value, real) for name, value in achieved.values().items()),
             Param("WP_LOITER_RAD", 60.0, real, writable=True, low=1.0, high=32767.0),
             Param("FS_GCS_ENABL", 0.0, int32, writable=True, low=0.0, high=1.0),
             Param("FS_LONG_TIMEOUT", 5.0, real, writable=True, low=1.0, high=300.0),

@@ -52,6 +52,7 @@ from sim_vehicles.autopilot.telemetry import VehicleTruth
 from sim_vehicles.link.link_model import GpsReceiver
 from tssac_core.sim.scenario import LinkModel, Origin
 from tssac_core.wire import units
+from tssac_core.wire.vehicle_limits import Achievable
 
 _log = logging.getLogger(__name__)
 
@@ -84,6 +85,8 @@ class VehicleSetup:
     home_north_m: float
     link: LinkModel
     setpoint_timeout_s: float
+    achievable: Achievable | None = None
+    """What the physics achieves of the limits (published as ACHV_*); None: the limits themselves."""
 
 
 @dataclass(frozen=True)
@@ -207,6 +210,7 @@ class Vehicle:
             setup.accel_max_m_s2,
             setup.speed_min_m_s,
             setup.speed_max_m_s,
+            setup.achievable,
         )
         self.counters = VehicleCounters()
         self._on_event = on_event

@@ -17,6 +17,7 @@ from sim_vehicles.dynamics.kinematic import KinematicDynamics
 from tssac_core.sim.airframe_response import ResponseFileError, load_response
 from tssac_core.sim.scenario import Dynamics, DynamicsModel
 from tssac_core.sim.world import World
+from tssac_core.wire.vehicle_limits import Achievable
 
 
 class DynamicsError(Exception):
@@ -29,6 +30,9 @@ class VehicleDynamics(Protocol):
 
     name: str
     """What flies, for logs and reports ("kinematic", "jsbsim f16")."""
+    achievable: list[Achievable]
+    """What each vehicle achieves anywhere in its speed envelope (its ACHV_* parameters,
+    :mod:`tssac_core.wire.vehicle_limits`)."""
 
     def truths(self) -> list[VehicleTruth]:
         """The vehicles' true states now (after the last step, or at the start)."""

@@ -16,6 +16,8 @@ import numpy as np
 
 from sim_vehicles.autopilot.telemetry import AirData, VehicleTruth
 from sim_vehicles.dynamics.jsbsim_airframe import (
+    G_M_S2,
+    AirframeError,
     AirframeSpec,
     AirframeState,
     JsbsimAirframe,
@@ -24,6 +26,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
 )
 from tssac_core.sim.scenario import ROLES, Scenario
 from tssac_core.sim.world import World
+from tssac_core.wire.vehicle_limits import Achievable
 
 
 def _clip_unit(x: float) -> float:
@@ -35,6 +38,26 @@ def airframe_wind(scenario: Scenario) -> Wind:
     """The scenario's wind as the airframe's atmosphere takes it (calm without a ``wind:`` section)."""
     w = scenario.wind
     return Wind() if w is None else Wind(speed_m_s=w.speed_m_s, from_deg=w.from_deg, turbulence=w.turbulence)
+
+
+def airframe_achievable(
+    spec: AirframeSpec, turn_rate_max_rad_s: float, accel_max_m_s2: float, speed_max_m_s: float
+) -> Achievable:
+    """What a vehicle of airframe ``spec`` achieves with the scenario's limits: the scenario's turn rate, if a level
+    coordinated turn at the bank limit gives it at the top speed (omega = g tan(bank) / v, the slowest turn of the
+    envelope; else :class:`AirframeError`, one line: the scenario asks for a turn the airframe cannot fly), and the
+    scenario's acceleration both ways, held to what the airframe file declares for its envelope."""
+    turn_max = G_M_S2 * math.tan(math.radians(spec.limits.bank_limit_deg)) / speed_max_m_s
+    if turn_max < turn_rate_max_rad_s:
+        raise AirframeError(
+            f"{spec.name}: turns at most {math.degrees(turn_max):.2f} deg/s at {speed_max_m_s:g} m/s (bank limit "
+            f"{spec.limits.bank_limit_deg:g} deg); the scenario asks {math.degrees(turn_rate_max_rad_s):g} deg/s"
+        )
+    return Achievable(
+        math.degrees(turn_rate_max_rad_s),
+        min(accel_max_m_s2, spec.limits.max_accel_m_s2),
+        min(accel_max_m_s2, -spec.limits.max_decel_m_s2),
+    )
 
 
 def truth_of(s: AirframeState) -> VehicleTruth:
@@ -67,6 +90,13 @@ class JsbsimDynamics:
         self._dt_s = c.dt_s
         self._turn_rate_max_rad_s: list[float] = c.turn_rate_max_rad_s.tolist()
         self._accel_max_m_s2: list[float] = c.accel_max_m_s2.tolist()
+        self.achievable = [
+            airframe_achievable(spec, turn, accel, v_max)
+            for turn, accel, v_max in zip(
+                self._turn_rate_max_rad_s, self._accel_max_m_s2, c.speed_max_m_s.tolist(), strict=True
+            )
+        ]
+        """Each vehicle's achievable limits (:func:`airframe_achievable`)."""
         wind = airframe_wind(world.scenario)
         alt_m = world.scenario.origin.alt_m
         seeds = np.random.SeedSequence(seed).generate_state(len(ROLES)).tolist()

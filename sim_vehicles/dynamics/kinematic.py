@@ -16,6 +16,7 @@ import numpy as np
 from sim_vehicles.autopilot.telemetry import GRAVITY_M_S2, AirData, VehicleTruth
 from tssac_core.sim.world import World
 from tssac_core.wire import units
+from tssac_core.wire.vehicle_limits import Achievable
 
 
 def _clip_unit(x: float) -> float:
@@ -38,6 +39,11 @@ class KinematicDynamics:
         self._alt_m = world.scenario.origin.alt_m
         self._truths: list[VehicleTruth] = []
         self._truths = self._measure([0.0] * len(self._turn_rate_max_rad_s), [0.0, 0.0, 0.0], None)
+        self.achievable = [
+            Achievable(math.degrees(turn), accel, accel)
+            for turn, accel in zip(self._turn_rate_max_rad_s, c.accel_max_m_s2.tolist(), strict=True)
+        ]
+        """Each vehicle's achievable limits: eq. 6's, exactly (it flies the command at once, both ways)."""
 
     def truths(self) -> list[VehicleTruth]:
         """The vehicles' true states now (after the last step, or at the start)."""

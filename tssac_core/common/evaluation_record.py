@@ -105,6 +105,9 @@ class SitlMonitorFigures:
     scope: str | None = None
     adjusted_time_fraction: float | None = None
     """The share of control steps under the monitor's adjusted action (None: not counted)."""
+    vehicle_limits: dict[str, dict[str, float] | None] | None = None
+    """Per role, what its vehicle said it achieves (``ACHV_*``: turn_rate_max_deg_s, accel_max_m_s2, decel_max_m_s2),
+    as its companion read it first; None for a role whose vehicle said nothing (None: not counted)."""
 
 
 RecordedMonitor = WorldMonitorFigures | SitlMonitorFigures
@@ -195,6 +198,7 @@ class SitlMonitorJson(TypedDict):
     guarantee: bool
     scope: str | None
     adjusted_time_fraction: NotRequired[float | None]
+    vehicle_limits: NotRequired[dict[str, dict[str, float] | None] | None]
 
 
 class FlownDynamicsJson(TypedDict):
@@ -347,6 +351,7 @@ def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJso
             "guarantee": monitor.guarantee,
             "scope": monitor.scope,
             "adjusted_time_fraction": monitor.adjusted_time_fraction,
+            "vehicle_limits": copy.deepcopy(monitor.vehicle_limits),
         }
     out: WorldMonitorJson = {
         "interventions_per_uav_mission": monitor.interventions_per_uav_mission,
