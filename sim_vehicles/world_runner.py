@@ -274,7 +274,9 @@ class WorldRunner:
         seeds = np.random.SeedSequence(config.seed).spawn(len(ROLES))
         initial = self.dynamics.truths()
         for i, role in enumerate(ROLES):
-            vehicle, link = self._make_vehicle(i, role, seeds[i], initial[i], self.dynamics.achievable[i])
+            vehicle, link = self._make_vehicle(
+                i, role, seeds[i], initial[i], self.dynamics.achievable[i], self.dynamics.bank_limits_deg[i]
+            )
             self.vehicles.append(vehicle)
             self.links.append(link)
         self.clock_policy: ClockPolicy = clock_policy(config, self.clock, self.links, self._step)
@@ -283,11 +285,17 @@ class WorldRunner:
             self._open_truth_log(config, Path(config.truth_log), self.dynamics.name)
 
     def _make_vehicle(
-        self, i: int, role: Role, seed: np.random.SeedSequence, truth: VehicleTruth, achievable: Achievable
+        self,
+        i: int,
+        role: Role,
+        seed: np.random.SeedSequence,
+        truth: VehicleTruth,
+        achievable: Achievable,
+        bank_limit_deg: float,
     ) -> tuple[Vehicle, VehicleLink]:
         """Vehicle ``i`` of the mission (:meth:`_begin`), at its start state ``truth``, with its link (its random
         streams from ``seed``: what goes out, what comes in, its GPS), its tlog, and what it achieves (``achievable``:
-        its ACHV_* parameters)."""
+        its ACHV_* parameters; ``bank_limit_deg``: its ROLL_LIMIT_DEG)."""
         config, s, c = self.config, self.scenario, self.world.c
         endpoint = self._endpoints[i]
         start = self.layout.starts[role.value]
@@ -306,6 +314,7 @@ class WorldRunner:
             link=s.link,
             setpoint_timeout_s=config.setpoint_timeout_s,
             achievable=achievable,
+            bank_limit_deg=bank_limit_deg,
         )
         tx, rx, gps = (np.random.default_rng(q) for q in seed.spawn(3))
         tlog = None

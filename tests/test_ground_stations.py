@@ -50,7 +50,7 @@ def test_mavproxy_lists_parameters_at_once_arms_and_switches_to_loiter(tmp_path:
         console = _Console(s.ports[0], tmp_path)
         try:
             detected = console.wait_line("Detected vehicle 1:1", 60.0)
-            listed = console.wait_line("Received 14 parameters", 30.0)
+            listed = console.wait_line("Received 16 parameters", 30.0)
             assert detected is not None and listed is not None, console.lines[-10:]
             print(
                 f"MAVProxy: vehicle detected {detected:.2f} s after start, parameters listed {listed - detected:.2f} s "

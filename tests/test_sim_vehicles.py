@@ -416,7 +416,7 @@ def test_parameter_protocol() -> None:
             "SIM_SPD_MIN",
             "SIM_SPD_MAX",
         }
-        names |= {"ACHV_TURN_MAX", "ACHV_ACCEL_MAX", "ACHV_DECEL_MAX"}
+        names |= {"ACHV_TURN_MAX", "ACHV_ACCEL_MAX", "ACHV_DECEL_MAX", "ROLL_LIMIT_DEG", "AIRSPEED_MAX"}
         names |= {"WP_LOITER_RAD", "FS_GCS_ENABL", "FS_LONG_TIMEOUT", "FS_LONG_ACTN"}
         while time.monotonic() < deadline and len(values) < len(names):
             m = c.wait_type("PARAM_VALUE", 0.5)
@@ -430,6 +430,8 @@ def test_parameter_protocol() -> None:
         assert values["SYSID_THISMAV"].param_value == 2 and values["SYSID_THISMAV"].param_type == M.MAV_PARAM_TYPE_INT32
         assert values["SIM_TURN_MAX"].param_value == pytest.approx(5.0)
         assert values["ACHV_DECEL_MAX"].param_value == values["SIM_ACCEL_MAX"].param_value  # the point mass brakes so
+        # A coordinated turn at 5 deg/s at the top speed, 300 m/s: 69.5 deg of bank.
+        assert values["ROLL_LIMIT_DEG"].param_value == pytest.approx(69.46, abs=0.01)
         c.mav.param_request_read_send(2, 1, b"SIM_DT", -1)
         assert c.wait_type("PARAM_VALUE", 1.0, param_id="SIM_DT").param_value == pytest.approx(0.1)
         c.mav.param_set_send(2, 1, b"GUID_TIMEOUT", 2.5, M.MAV_PARAM_TYPE_REAL32)

@@ -7,12 +7,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import socket
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
 from sitl_helpers import REPO, lockstep, scenario, sitl
 
 from mavlink_bridge.companion.cli import build_companion
@@ -157,3 +161,68 @@ def test_fly_refuses_a_turn_the_airframe_cannot_fly_in_one_line(tmp_path: Path) 
     assert proc.returncode == 2 and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert "f16: turns at most 6.99 deg/s at 300 m/s (bank limit 75 deg); the scenario asks 7.5 deg/s" in lines[0]
     assert not out.exists()
+
+
+def test_a_stock_arduplanes_turn_is_its_bank_limit_at_its_top_airspeed() -> None:
+    arduplane = {"ROLL_LIMIT_DEG": 45.0, "AIRSPEED_MAX": 22.0}  # ArduPlane's defaults
+    achieved = Achievable.of(arduplane)
+    assert achieved is not None and achieved.accel_max_m_s2 is None and achieved.decel_max_m_s2 is None
+    assert achieved.turn_rate_max_deg_s == pytest.approx(math.degrees(9.80665 / 22.0))  # tan 45 = 1
+    assert achieved.source == "ROLL_LIMIT_DEG 45 at AIRSPEED_MAX 22 m/s"
+    assert Achievable.of({"ROLL_LIMIT_DEG": 45.0}) is None and Achievable.of({}) is None
+    with pytest.raises(ValueError, match="bound no turn"):
+        Achievable.of({"ROLL_LIMIT_DEG": 90.0, "AIRSPEED_MAX": 22.0})
+    # At an F-16's speed its default bank gives 1.87 deg/s: a 5 deg/s scenario's backups cannot be flown.
+    fast = Achievable.of({"ROLL_LIMIT_DEG": 45.0, "AIRSPEED_MAX": 300.0})
+    refusal = monitor_fit(fast, TURN, 10.0).refusal
+    assert refusal == (
+        "the vehicle turns at most 1.87 deg/s (ROLL_LIMIT_DEG 45 at AIRSPEED_MAX 300 m/s): the monitor's backups turn "
+        "at the scenario's 5 deg/s"
+    )
+    assert monitor_fit(achieved, TURN, 10.0) == MonitorFit(None, True)  # braking unknown: the scenario's stands
+    assert Achievable.from_dict(dataclasses.asdict(achieved)) == achieved
+
+
+@pytest.mark.timeout(30)
+def test_the_companion_reads_a_stock_arduplanes_limits_over_udp() -> None:
+    """A peer that answers as ArduPilot 4.6 does: PARAM_VALUE for its own parameters, PARAM_ERROR DOES_NOT_EXIST for
+    the ACHV_* names it does not have."""
+    own = {"ROLL_LIMIT_DEG": 45.0, "AIRSPEED_MAX": 22.0}
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(0.2)
+    mav = M.MAVLink(None, srcSystem=1, srcComponent=1)
+    stop = threading.Event()
+
+    def answer() -> None:
+        asked = 0
+        while not stop.is_set() and asked < 20:
+            try:
+                data, peer = vehicle.recvfrom(4096)
+            except TimeoutError:
+                continue
+            for msg in mav.parse_buffer(data) or []:
+                if msg.get_type() != "PARAM_REQUEST_READ":
+                    continue
+                asked += 1
+                name = msg.param_id
+                if name in own:
+                    index = list(own).index(name)
+                    reply = mav.param_value_encode(name.encode(), own[name], M.MAV_PARAM_TYPE_REAL32, len(own), index)
+                else:
+                    reply = mav.param_error_encode(255, 0, name.encode(), -1, M.MAV_PARAM_ERROR_DOES_NOT_EXIST)
+                vehicle.sendto(reply.pack(mav), peer)
+
+    responder = threading.Thread(target=answer, daemon=True)
+    responder.start()
+    try:
+        with MavLink(f"udpout:127.0.0.1:{vehicle.getsockname()[1]}", target_system=1) as link:
+            started = time.monotonic()
+            achieved = read_achievable(link, 1.0, 3)
+            took = time.monotonic() - started
+    finally:
+        stop.set()
+        responder.join(2.0)
+        vehicle.close()
+    assert achieved == Achievable.of(own)
+    assert took < 0.9  # every name answered at once: no attempt waited out its timeout

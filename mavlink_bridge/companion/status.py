@@ -72,7 +72,7 @@ class CompanionResult:
     """Every control step's latency (for benchmarks that pool several companions)."""
     shield: dict[str, float] | None = None
     """The runtime-assurance monitor's counts (``ShieldCounters`` of the companion's shield), when it flew."""
-    vehicle_limits: dict[str, float] | None = None
+    vehicle_limits: dict[str, object] | None = None
     """What the vehicle said it achieves (:class:`~tssac_core.wire.vehicle_limits.Achievable`), when the monitor flew
     and the vehicle said it."""
     write_error: str | None = None

@@ -42,7 +42,7 @@ class CompanionStatus(TypedDict):
     latency_p50_ms: NotRequired[float | None]
     latency_p99_ms: NotRequired[float | None]
     shield: NotRequired[ShieldCounts | None]
-    vehicle_limits: NotRequired[dict[str, float]]
+    vehicle_limits: NotRequired[dict[str, object]]
     """What the vehicle said it achieves, when the monitor flew and it said it (``ACHV_*``)."""
     write_error: NotRequired[str]
     """Set when the companion lost a write (its tlog is cut)."""

@@ -153,9 +153,9 @@ def print_monitor(sh: SitlMonitorFigures) -> None:
         )
 
 
-def achieved_text(limits: dict[str, dict[str, float] | None]) -> str:
+def achieved_text(limits: dict[str, dict[str, object] | None]) -> str:
     """What the vehicles said they achieve (:attr:`SitlMonitorFigures.vehicle_limits`), one line."""
-    said = {role: describe(None if v is None else Achievable(**v)) for role, v in limits.items()}
+    said = {role: describe(None if v is None else Achievable.from_dict(v)) for role, v in limits.items()}
     if len(set(said.values())) == 1:
         return f"every vehicle {next(iter(said.values()))}"
     return "; ".join(f"the {role} vehicle {text}" for role, text in said.items())

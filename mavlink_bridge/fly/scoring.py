@@ -87,9 +87,9 @@ def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFig
     )
 
 
-def vehicle_limits(rows: list[MissionRow]) -> dict[str, dict[str, float] | None]:
+def vehicle_limits(rows: list[MissionRow]) -> dict[str, dict[str, object] | None]:
     """Per role, the achievable limits its vehicle published to the first companion that read them (None: none did)."""
-    seen: dict[str, dict[str, float] | None] = {}
+    seen: dict[str, dict[str, object] | None] = {}
     for r in rows:
         for role, status in r.get("companions", {}).items():
             said = status.get("vehicle_limits")

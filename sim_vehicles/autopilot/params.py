@@ -13,6 +13,9 @@ name               type    access     meaning
 ``ACHV_TURN_MAX``  REAL32  read-only  the turn rate the vehicle achieves anywhere in its envelope, deg/s
 ``ACHV_ACCEL_MAX`` REAL32  read-only  the forward acceleration it achieves anywhere in it, m/s/s
 ``ACHV_DECEL_MAX`` REAL32  read-only  the deceleration it achieves anywhere in it, m/s/s (a magnitude)
+``ROLL_LIMIT_DEG`` REAL32  read-only  the largest bank it flies, deg (ArduPlane's name; the point mass: the bank of
+                                      a coordinated turn at the turn-rate limit at the top speed)
+``AIRSPEED_MAX``   REAL32  read-only  the top airspeed, m/s (ArduPlane's name; the same as SIM_SPD_MAX)
 ``WP_LOITER_RAD``  REAL32  settable   loiter / RTL circle radius, m (1 .. 32767; ArduPlane's name and
                                       default 60: the radius flown is at least v / (0.8 turn limit))
 ``FS_GCS_ENABL``   INT32   settable   datalink failsafe: 0 off (ArduPlane's default), 1 on
@@ -40,7 +43,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.wire.vehicle_limits import Achievable
+from tssac_core.wire.vehicle_limits import STANDARD_GRAVITY_M_S2, Achievable, ArduPlaneParam
 
 
 @dataclass(frozen=True)
@@ -111,10 +114,14 @@ def vehicle_params(
     speed_min_m_s: float,
     speed_max_m_s: float,
     achievable: Achievable | None = None,
+    bank_limit_deg: float | None = None,
 ) -> ParamTable:
-    """The table of the module docstring; ``achievable`` None: the limits themselves (the point mass)."""
+    """The table of the module docstring; ``achievable`` None: the limits themselves, ``bank_limit_deg`` None: a
+    coordinated turn's at them (the point mass)."""
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
     achieved = achievable or Achievable(turn_max_deg_s, accel_max_m_s2, accel_max_m_s2)
+    if bank_limit_deg is None:
+        bank_limit_deg = math.degrees(math.atan(speed_max_m_s * math.radians(turn_max_deg_s) / STANDARD_GRAVITY_M_S2))
     return ParamTable(
         [
             Param("SYSID_THISMAV", float(sysid), int32),
@@ -125,6 +132,8 @@ def vehicle_params(
             Param("SIM_SPD_MIN", speed_min_m_s, real),
             Param("SIM_SPD_MAX", speed_max_m_s, real),
             *(Param(name.value, value, real) for name, value in achieved.values().items()),
+            Param(ArduPlaneParam.ROLL_LIMIT.value, bank_limit_deg, real),
+            Param(ArduPlaneParam.AIRSPEED_MAX.value, speed_max_m_s, real),
             Param("WP_LOITER_RAD", 60.0, real, writable=True, low=1.0, high=32767.0),
             Param("FS_GCS_ENABL", 0.0, int32, writable=True, low=0.0, high=1.0),
             Param("FS_LONG_TIMEOUT", 5.0, real, writable=True, low=1.0, high=300.0),

@@ -87,6 +87,8 @@ class VehicleSetup:
     setpoint_timeout_s: float
     achievable: Achievable | None = None
     """What the physics achieves of the limits (published as ACHV_*); None: the limits themselves."""
+    bank_limit_deg: float | None = None
+    """Its largest bank (published as ROLL_LIMIT_DEG); None: a coordinated turn's at the limits."""
 
 
 @dataclass(frozen=True)
@@ -211,6 +213,7 @@ class Vehicle:
             setup.speed_min_m_s,
             setup.speed_max_m_s,
             setup.achievable,
+            setup.bank_limit_deg,
         )
         self.counters = VehicleCounters()
         self._on_event = on_event

@@ -33,6 +33,8 @@ class VehicleDynamics(Protocol):
     achievable: list[Achievable]
     """What each vehicle achieves anywhere in its speed envelope (its ACHV_* parameters,
     :mod:`tssac_core.wire.vehicle_limits`)."""
+    bank_limits_deg: list[float]
+    """Each vehicle's largest bank (its ROLL_LIMIT_DEG, ArduPlane's name)."""
 
     def truths(self) -> list[VehicleTruth]:
         """The vehicles' true states now (after the last step, or at the start)."""

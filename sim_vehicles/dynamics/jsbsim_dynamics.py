@@ -97,6 +97,7 @@ class JsbsimDynamics:
             )
         ]
         """Each vehicle's achievable limits (:func:`airframe_achievable`)."""
+        self.bank_limits_deg = [spec.limits.bank_limit_deg] * len(ROLES)
         wind = airframe_wind(world.scenario)
         alt_m = world.scenario.origin.alt_m
         seeds = np.random.SeedSequence(seed).generate_state(len(ROLES)).tolist()

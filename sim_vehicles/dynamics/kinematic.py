@@ -44,6 +44,11 @@ class KinematicDynamics:
             for turn, accel in zip(self._turn_rate_max_rad_s, c.accel_max_m_s2.tolist(), strict=True)
         ]
         """Each vehicle's achievable limits: eq. 6's, exactly (it flies the command at once, both ways)."""
+        self.bank_limits_deg = [
+            math.degrees(math.atan(v_max * turn / GRAVITY_M_S2))
+            for v_max, turn in zip(c.speed_max_m_s.tolist(), self._turn_rate_max_rad_s, strict=True)
+        ]
+        """The bank of a coordinated turn at the turn-rate limit at the top speed: the most it reports banking."""
 
     def truths(self) -> list[VehicleTruth]:
         """The vehicles' true states now (after the last step, or at the start)."""

@@ -105,7 +105,7 @@ class SitlMonitorFigures:
     scope: str | None = None
     adjusted_time_fraction: float | None = None
     """The share of control steps under the monitor's adjusted action (None: not counted)."""
-    vehicle_limits: dict[str, dict[str, float] | None] | None = None
+    vehicle_limits: dict[str, dict[str, object] | None] | None = None
     """Per role, what its vehicle said it achieves (``ACHV_*``: turn_rate_max_deg_s, accel_max_m_s2, decel_max_m_s2),
     as its companion read it first; None for a role whose vehicle said nothing (None: not counted)."""
 
@@ -198,7 +198,7 @@ class SitlMonitorJson(TypedDict):
     guarantee: bool
     scope: str | None
     adjusted_time_fraction: NotRequired[float | None]
-    vehicle_limits: NotRequired[dict[str, dict[str, float] | None] | None]
+    vehicle_limits: NotRequired[dict[str, dict[str, object] | None] | None]
 
 
 class FlownDynamicsJson(TypedDict):
