@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from tssac_core.wire.vehicle_limits import STANDARD_GRAVITY_M_S2, Achievable, ArduPlaneParam
+from tssac_core.wire.vehicle_limits import Achievable, ArduPlaneParam, coordinated_bank_deg
 
 
 @dataclass(frozen=True)
@@ -121,7 +121,7 @@ def vehicle_params(
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
     achieved = achievable or Achievable(turn_max_deg_s, accel_max_m_s2, accel_max_m_s2)
     if bank_limit_deg is None:
-        bank_limit_deg = math.degrees(math.atan(speed_max_m_s * math.radians(turn_max_deg_s) / STANDARD_GRAVITY_M_S2))
+        bank_limit_deg = coordinated_bank_deg(turn_max_deg_s, speed_max_m_s)
     return ParamTable(
         [
             Param("SYSID_THISMAV", float(sysid), int32),

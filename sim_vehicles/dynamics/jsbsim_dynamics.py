@@ -16,7 +16,6 @@ import numpy as np
 
 from sim_vehicles.autopilot.telemetry import AirData, VehicleTruth
 from sim_vehicles.dynamics.jsbsim_airframe import (
-    G_M_S2,
     AirframeError,
     AirframeSpec,
     AirframeState,
@@ -26,7 +25,7 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
 )
 from tssac_core.sim.scenario import ROLES, Scenario
 from tssac_core.sim.world import World
-from tssac_core.wire.vehicle_limits import Achievable
+from tssac_core.wire.vehicle_limits import Achievable, bank_limited_turn_deg_s
 
 
 def _clip_unit(x: float) -> float:
@@ -47,7 +46,7 @@ def airframe_achievable(
     coordinated turn at the bank limit gives it at the top speed (omega = g tan(bank) / v, the slowest turn of the
     envelope; else :class:`AirframeError`, one line: the scenario asks for a turn the airframe cannot fly), and the
     scenario's acceleration both ways, held to what the airframe file declares for its envelope."""
-    turn_max = G_M_S2 * math.tan(math.radians(spec.limits.bank_limit_deg)) / speed_max_m_s
+    turn_max = math.radians(bank_limited_turn_deg_s(spec.limits.bank_limit_deg, speed_max_m_s))
     if turn_max < turn_rate_max_rad_s:
         raise AirframeError(
             f"{spec.name}: turns at most {math.degrees(turn_max):.2f} deg/s at {speed_max_m_s:g} m/s (bank limit "

@@ -16,7 +16,7 @@ import numpy as np
 from sim_vehicles.autopilot.telemetry import GRAVITY_M_S2, AirData, VehicleTruth
 from tssac_core.sim.world import World
 from tssac_core.wire import units
-from tssac_core.wire.vehicle_limits import Achievable
+from tssac_core.wire.vehicle_limits import Achievable, coordinated_bank_deg
 
 
 def _clip_unit(x: float) -> float:
@@ -45,7 +45,7 @@ class KinematicDynamics:
         ]
         """Each vehicle's achievable limits: eq. 6's, exactly (it flies the command at once, both ways)."""
         self.bank_limits_deg = [
-            math.degrees(math.atan(v_max * turn / GRAVITY_M_S2))
+            coordinated_bank_deg(math.degrees(turn), v_max)
             for v_max, turn in zip(c.speed_max_m_s.tolist(), self._turn_rate_max_rad_s, strict=True)
         ]
         """The bank of a coordinated turn at the turn-rate limit at the top speed: the most it reports banking."""

@@ -51,6 +51,11 @@ def bank_limited_turn_deg_s(roll_limit_deg: float, airspeed_m_s: float) -> float
     return math.degrees(STANDARD_GRAVITY_M_S2 * math.tan(math.radians(roll_limit_deg)) / airspeed_m_s)
 
 
+def coordinated_bank_deg(turn_rate_deg_s: float, airspeed_m_s: float) -> float:
+    """The bank of a level coordinated turn at ``turn_rate_deg_s`` and ``airspeed_m_s``: atan(V omega / g)."""
+    return math.degrees(math.atan(airspeed_m_s * math.radians(turn_rate_deg_s) / STANDARD_GRAVITY_M_S2))
+
+
 @dataclass(frozen=True)
 class Achievable:
     """One vehicle's achievable limits (module docstring); every given field finite and > 0."""
