@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.output import add_json_option, write_figures  # noqa: E402
 from sim_vehicles.dynamics.jsbsim_airframe import JsbsimAirframe, StartState, airframe_path, load_airframe  # noqa: E402
-from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step  # noqa: E402
+from tssac_core.assurance.lagged_backups import LagState, lagged_rollout  # noqa: E402
+from tssac_core.assurance.monitor import Limits  # noqa: E402
 from tssac_core.common.cli import command_description  # noqa: E402
 from tssac_core.sim.airframe_response import AirframeResponse, airframe_lag, load_response  # noqa: E402
 
@@ -61,17 +62,18 @@ def fly(aircraft: str, speed_m_s: float, rng: np.random.Generator) -> np.ndarray
 
 
 def model_rates(response: AirframeResponse, speed_m_s: float, commands: np.ndarray) -> np.ndarray:
-    """The lag model's mean heading rate over each step, from a straight start, under ``commands`` (rad/s, one a
-    step): what the monitor would know of the rate from what it sent alone."""
+    """The lag model's mean heading rate over each step, from straight flight, under ``commands`` (rad/s, one a step):
+    what the monitor would know of the rate from what it sent alone (the monitor's own rollout, its heading's change
+    over each step)."""
     lag = airframe_lag(response, np.array([speed_m_s]), DT_S)
-    delay = int(lag.delay_steps[0])
-    gains_in, gains_out = lag_gains(lag.tau_s, DT_S), lag_gains(lag.rollout_tau_s, DT_S)
-    followed = np.concatenate([np.zeros(delay), commands])[: len(commands)]
-    omega, means = np.zeros(1), np.empty(len(commands))
-    for k, command in enumerate(followed):
-        mean, omega = switched_lag_step(omega, np.array([command]), gains_in, gains_out)
-        means[k] = mean[0]
-    return means
+    speed = np.array([speed_m_s])
+    lim = Limits(speed, speed, np.array([TURN_RATE_MAX_RAD_S]), np.array([10.0]))
+    straight = LagState.steady(np.zeros(1), int(lag.delay_steps[0]))
+    path = lagged_rollout(
+        np.zeros(1), np.zeros(1), speed, np.zeros(1), straight, commands[None, :], np.zeros((1, len(commands))), lag,
+        lim, DT_S,
+    )  # fmt: skip
+    return np.diff(path.headings[0], prepend=0.0) / DT_S
 
 
 def figures(rows: np.ndarray, model: np.ndarray) -> dict[str, float]:

@@ -119,7 +119,7 @@ def vehicle_params(
     """The table of the module docstring; ``achievable`` None: the limits themselves, ``bank_limit_deg`` None: a
     coordinated turn's at them (the point mass)."""
     real, int32 = mavlink2.MAV_PARAM_TYPE_REAL32, mavlink2.MAV_PARAM_TYPE_INT32
-    achieved = achievable or Achievable(turn_max_deg_s, accel_max_m_s2, accel_max_m_s2)
+    achieved = achievable or Achievable.point_mass(turn_max_deg_s, accel_max_m_s2)
     if bank_limit_deg is None:
         bank_limit_deg = coordinated_bank_deg(turn_max_deg_s, speed_max_m_s)
     return ParamTable(

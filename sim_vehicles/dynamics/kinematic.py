@@ -40,7 +40,7 @@ class KinematicDynamics:
         self._truths: list[VehicleTruth] = []
         self._truths = self._measure([0.0] * len(self._turn_rate_max_rad_s), [0.0, 0.0, 0.0], None)
         self.achievable = [
-            Achievable(math.degrees(turn), accel, accel)
+            Achievable.point_mass(math.degrees(turn), accel)
             for turn, accel in zip(self._turn_rate_max_rad_s, c.accel_max_m_s2.tolist(), strict=True)
         ]
         """Each vehicle's achievable limits: eq. 6's, exactly (it flies the command at once, both ways)."""

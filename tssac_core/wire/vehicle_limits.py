@@ -74,6 +74,11 @@ class Achievable:
             if value is not None and not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
 
+    @staticmethod
+    def point_mass(turn_rate_max_deg_s: float, accel_max_m_s2: float) -> Achievable:
+        """A vehicle that achieves its limits exactly (eq. 6: the command at once, both ways)."""
+        return Achievable(turn_rate_max_deg_s, accel_max_m_s2, accel_max_m_s2)
+
     @property
     def turn_rate_max_rad_s(self) -> float:
         return math.radians(self.turn_rate_max_deg_s)
