@@ -42,7 +42,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import math
 import os
 import subprocess
 import sys
@@ -53,7 +52,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm import tqdm
 
 import tssac_core
@@ -300,10 +298,7 @@ def varied_airframes(cfg: BenchConfig, scenario: Scenario) -> tuple[AirframeVari
     variation = dataclasses.replace(variation, wind_m_s=(cfg.wind_m_s, cfg.wind_m_s))
     if cfg.no_loiter:
         return variation, None
-    spec = next(iter(scenario.vehicles.values()))
-    speeds = tuple(float(v) for v in np.arange(spec.speed_min_m_s, spec.speed_max_m_s + 1.0, 25.0))
-    turn_rate = math.radians(spec.turn_rate_max_deg_s)
-    return variation, variation.loiter_bound(response.loiter_law(), speeds, turn_rate, scenario.dt_s)
+    return variation, variation.envelope_loiter_bound(response.loiter_law(), scenario)
 
 
 def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar: tqdm) -> dict[str, Any]:

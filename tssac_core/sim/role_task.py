@@ -14,15 +14,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.assurance.ground_loiter import LoiterBound
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.hard_layouts import HardLayouts, LayoutSource
 from tssac_core.sim.observation import ObservationMode, observe
-from tssac_core.sim.pilots import GUIDANCE, LEARNER, PilotSpec, check_pilot
+from tssac_core.sim.pilots import GUIDANCE, LEARNER, PilotSpec, check_pilot, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
 from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.team import Team
 from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
 from tssac_core.sim.world import StepResult, World
+from tssac_core.sim.world_monitor import WorldMonitor
 from tssac_core.sim.world_state import snapshot
 
 Teammates = str | Mapping[str, PilotSpec] | None
@@ -55,6 +58,22 @@ def resolve_pilots(role: Role, teammates: Teammates) -> list[PilotSpec]:
             check_pilot(pilot, r.value)
             pilots.append(pilot)
     return pilots
+
+
+@dataclass(frozen=True)
+class MonitorInTraining:
+    """The runtime-assurance monitor flying in the training worlds (:class:`~tssac_core.sim.world_monitor.WorldMonitor`,
+    off unless asked for): every UAV, the learner's teammates too, flies through it as it would in a deployment, with
+    the world's true state, predicting with each vehicle's varied airframe where the task has them. A world step it
+    flies something other than the learner's proposal (its backup, or its adjusted action) costs the learner 1, as a
+    step in a radar does: the Lagrangian then teaches a team that leaves the monitor room to prove its backups, so
+    that a monitored deployment loses little to its interventions (issue 58)."""
+
+    shield: ShieldConfig
+    learner_repeat: int
+    """World steps between the learner's decisions (the training's action repeat)."""
+    loiter: LoiterBound | None = None
+    """In wind, the backups end in the ground loiter this bounds (needs the task's varied airframes)."""
 
 
 @dataclass
@@ -96,6 +115,7 @@ class RoleTask:
         cost_margin_m: float = 0.0,
         hard_layouts: HardLayouts = HardLayouts(),
         airframes: AirframeVariation | None = None,
+        monitor: MonitorInTraining | None = None,
     ) -> None:
         self.scenario = scenario
         self.layouts = LayoutSource(scenario, hard_layouts)
@@ -118,6 +138,8 @@ class RoleTask:
         self.rng = np.random.default_rng(seed)
         self.airframes = VariedAirframes(airframes, self.world) if airframes is not None else None
         """Varied airframes (tssac_core.sim.varied_airframes), or None: eq. 5-6 exactly."""
+        self.monitor = None if monitor is None else self._monitor(monitor)
+        """The monitor every UAV flies through (:class:`MonitorInTraining`), or None: the actions as proposed."""
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
         self.detour_m = np.zeros(n)
@@ -127,6 +149,12 @@ class RoleTask:
     @property
     def n(self) -> int:
         return self.world.n
+
+    def _monitor(self, monitor: MonitorInTraining) -> WorldMonitor:
+        if monitor.loiter is not None and self.airframes is None:
+            raise ValueError("the monitor's ground loiter is bounded for varied airframes: train on them too")
+        repeats = [monitor.learner_repeat if p == LEARNER else decision_interval(p) for p in self.pilots]
+        return WorldMonitor(self.world, repeats, monitor.shield, self.airframes, monitor.loiter)
 
     def reset(
         self,
@@ -148,6 +176,8 @@ class RoleTask:
             self.world.reset(idx, layouts, self.active)
             for i in idx if self.airframes is not None else ():
                 self.airframes.reset(np.array([i]), rng[int(i)])  # type: ignore[union-attr]
+        if self.monitor is not None:
+            self.monitor.reset(idx)
         self.ep_return[idx] = 0.0
         self.ep_cost[idx] = 0.0
         self._measure_detours()
@@ -157,7 +187,10 @@ class RoleTask:
         """The task's state (worlds, layout generator, running episode sums) for a resume file, as the learners'
         ``state()``."""
         state = (self.world, self.rng, self.ep_return, self.ep_cost)
-        # Varied airframes add their draws and lag state; without them the state is what it was before they existed.
+        # Varied airframes add their draws and lag state, a monitor its memory; without them the state is what it was
+        # before they existed.
+        if self.monitor is not None:
+            return pickle.dumps((*state, self.airframes, self.monitor))
         return pickle.dumps(state if self.airframes is None else (*state, self.airframes))
 
     def restore(self, state: bytes) -> None:
@@ -165,6 +198,10 @@ class RoleTask:
         saved = pickle.loads(state)
         self.world, self.rng, self.ep_return, self.ep_cost = saved[:4]
         self.airframes = saved[4] if len(saved) > 4 else None  # states written before varied airframes: none
+        if self.monitor is not None:
+            if len(saved) < 6:
+                raise ValueError("a resume state without the monitor's memory, for a task that flies the monitor")
+            self.monitor = saved[5]
         self._measure_detours()
 
     def _measure_detours(self) -> None:
@@ -175,6 +212,8 @@ class RoleTask:
         """Step all worlds with the learner's ``action`` (N, 2); no reset. Returns (result, reward, cost)."""
         actions = self.team.actions(self.world, skip=self.j)
         actions[:, self.j] = action
+        if self.monitor is not None:
+            actions = self.monitor.actions(self.world, actions)
         if self.airframes is not None:
             actions = self.airframes.shape(actions, self.rng)
         detour_prev = self.detour_m
@@ -185,6 +224,8 @@ class RoleTask:
         cost = result.cost[:, self.j]
         if self.cost_margin_m > 0:
             cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
+        if self.monitor is not None:  # MonitorInTraining: a step the monitor flies instead of the learner costs 1
+            cost = np.maximum(cost, self.monitor.overruled[:, self.j] & moving[:, self.j])
         # Afresh, not in place: an in-place update of a one-element array (N = 1) takes numpy's slow path.
         self.ep_return = self.ep_return + r
         self.ep_cost = self.ep_cost + cost

@@ -33,6 +33,7 @@ import numpy as np
 from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw, model_excursion_m
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, switched_lag_step
 from tssac_core.sim.airframe_response import AirframeResponse
+from tssac_core.sim.scenario import Scenario
 from tssac_core.sim.world import World
 
 Range = tuple[float, float]
@@ -115,6 +116,13 @@ class AirframeVariation:
             self.corners(turn_rate_max_rad_s, dt_s), speeds_m_s, wind, law, turn_rate_max_rad_s, dt_s
         )
         return LoiterBound(wind, law, speeds_m_s, excursion)
+
+    def envelope_loiter_bound(self, law: LoiterLaw, scenario: Scenario) -> LoiterBound:
+        """:meth:`loiter_bound` over the scenario's speed envelope every 25 m/s, at its turn-rate limit (the first
+        vehicle's: the scenarios give the three the same)."""
+        spec = next(iter(scenario.vehicles.values()))
+        speeds = tuple(float(v) for v in np.arange(spec.speed_min_m_s, spec.speed_max_m_s + 1.0, 25.0))
+        return self.loiter_bound(law, speeds, math.radians(spec.turn_rate_max_deg_s), scenario.dt_s)
 
 
 class VariedAirframes:

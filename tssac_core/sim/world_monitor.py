@@ -106,6 +106,26 @@ class WorldMonitor:
         """(N, 3): the backup flies."""
         return self._engaged
 
+    @property
+    def overruled(self) -> np.ndarray:
+        """(N, 3): the monitor flies something other than the pilot's proposal (its backup, or with
+        :attr:`ShieldConfig.adjust` the passing action nearest the proposal)."""
+        return self._engaged | self._adjusted
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Forget everything about the vehicles of ``worlds`` (indices): their worlds start new missions."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        flat = (worlds[:, None] * N_ROLES + np.arange(N_ROLES)[None, :]).reshape(-1)
+        self.memory = self.memory.merged(flat, Memory.initial(len(flat)))
+        for held in (self._flying, self._turn):
+            held[worlds] = 0.0
+        self._turn_at[worlds] = -1
+        for flag in (self._engaged, self._adjusted, self._unprotected):
+            flag[worlds] = False
+        self._loiter_sign[worlds] = 0.0
+        for field in dataclasses.fields(MonitorCounts):
+            getattr(self.counts, field.name)[worlds] = 0
+
     def hazards(self, world: World) -> Hazards:
         """The layout per vehicle (each world's radars repeated for its three UAVs), rebuilt on a new layout."""
         if self._hazards is None or self._layout_version != world.layout_version:

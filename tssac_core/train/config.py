@@ -150,6 +150,18 @@ class TrainConfig:
         minimum=0,
         maximum=90,
     )
+    train_monitor: str = option(
+        "off",
+        "on: every training UAV flies through the runtime-assurance monitor (adjusted; with --airframe-response "
+        "predicting with each airframe's lag, in wind ending in the ground loiter), and a step it flies instead of "
+        "the learner costs 1 like a step in a radar (tssac_core.sim.role_task.MonitorInTraining)",
+        choices=("off", "on"),
+    )
+    train_monitor_margin_m: float = option(
+        100.0, "with --train-monitor on: the clearance its paths keep from radars and edges (m)", minimum=0
+    )
+    """A companion's monitor adds its estimate's error bound to the margin (under JSBSim in wind up to about 1 km);
+    the training's sees the true state."""
     selection: Selection | None = option(
         None,
         "which validated epoch a role ships: the best mission success among the epochs within the cost limit "

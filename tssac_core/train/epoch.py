@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from tssac_core.algos.sac_lagrangian import UpdateStats
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.errors import CheckpointError
 from tssac_core.deploy.export import export_actor
 from tssac_core.deploy.manifest import record
@@ -22,6 +23,7 @@ from tssac_core.sim.env import RoleTask, TaskStep
 from tssac_core.sim.hard_layouts import HardLayouts
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import PilotSpec
+from tssac_core.sim.role_task import MonitorInTraining
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.varied_airframes import AirframeVariation
 from tssac_core.train.config import TrainConfig, reward_config
@@ -54,6 +56,7 @@ def make_task(
         cost_margin_m=cfg.cost_margin_km * 1000.0,
         hard_layouts=HardLayouts(cfg.hard_layouts, cfg.hard_detour_km),
         airframes=airframe_variation(cfg),
+        monitor=monitor_in_training(cfg, scenario),
     )
 
 
@@ -63,6 +66,19 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
         return None
     response = load_response(cfg.airframe_response)
     return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
+
+
+def monitor_in_training(cfg: TrainConfig, scenario: Scenario) -> MonitorInTraining | None:
+    """The monitor the training worlds fly through (TrainConfig.train_monitor), or None. In wind its backups end in the
+    ground loiter, bounded on the lag model at the corners of the varied airframes' spans."""
+    if cfg.train_monitor == "off":
+        return None
+    shield = ShieldConfig(margin_m=cfg.train_monitor_margin_m, adjust=True)
+    variation = airframe_variation(cfg)
+    loiter = None
+    if variation is not None and variation.wind_m_s[1] > 0:
+        loiter = variation.envelope_loiter_bound(load_response(cfg.airframe_response).loiter_law(), scenario)
+    return MonitorInTraining(shield, cfg.action_repeat, loiter)
 
 
 def reached_stop(cfg: TrainConfig, row: MetricsRow) -> bool:
