@@ -74,3 +74,20 @@ def test_a_sitl_row_counts_the_companions_unprotected_steps() -> None:
     assert unprotected_steps([mission(0, 3, 0), mission(2, 0, None)]) == 5
     assert unprotected_steps([mission(None, None, None)]) is None
     assert unprotected_steps([]) is None
+
+
+def test_the_monitored_team_benchmark_flies_the_same_missions_alone_and_through_the_monitor(tmp_path: Path) -> None:
+    """bench_monitored_team: per team and wind a row alone and a row through the monitor, on the same layouts and
+    airframes; the file written after every row; a bad wind is one line."""
+    import json
+
+    from benchmarks.bench_monitored_team import main
+    from tssac_core.common.cli import run
+
+    out = tmp_path / "m.json"
+    args = ["--models", str(ROOT / "models" / "tssac"), "--episodes", "2", "--seed", "5", "--wind-m-s", "0"]
+    assert run(main, [*args, "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["wind_m_s"], r["monitor"], r["missions"]) for r in rows] == [(0.0, False, 2), (0.0, True, 2)]
+    assert "interventions_per_uav_mission" in rows[1] and "interventions_per_uav_mission" not in rows[0]
+    assert run(main, [*args[:-1], "80", "--json", str(out)]) == 2
