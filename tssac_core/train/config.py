@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +43,14 @@ def _roles(text: str) -> tuple[str, ...]:
 def _path(text: str) -> str:
     """A path as the command writes it ("" stays: none)."""
     return str(Path(text)) if text else ""
+
+
+class TrainMonitor(enum.StrEnum):
+    """``--train-monitor``: whether the training worlds fly through the runtime-assurance monitor."""
+
+    OFF = "off"
+    ON = "on"
+    """tssac_core.sim.role_task.MonitorInTraining."""
 
 
 @dataclass(frozen=True)
@@ -150,12 +159,12 @@ class TrainConfig:
         minimum=0,
         maximum=90,
     )
-    train_monitor: str = option(
-        "off",
+    train_monitor: TrainMonitor = option(
+        TrainMonitor.OFF,
         "on: every training UAV flies through the runtime-assurance monitor (adjusted; with --airframe-response "
         "predicting with each airframe's lag, in wind ending in the ground loiter), and a step it flies instead of "
         "the learner costs 1 like a step in a radar (tssac_core.sim.role_task.MonitorInTraining)",
-        choices=("off", "on"),
+        choices=tuple(TrainMonitor),
     )
     train_monitor_margin_m: float = option(
         100.0, "with --train-monitor on: the clearance its paths keep from radars and edges (m)", minimum=0
@@ -179,6 +188,7 @@ class TrainConfig:
         # Words from the command line or a config.json become their enums.
         object.__setattr__(self, "algo", Algo(self.algo))
         object.__setattr__(self, "selection", Selection(self.selection) if self.selection else None)
+        object.__setattr__(self, "train_monitor", TrainMonitor(self.train_monitor))
         object.__setattr__(self, "observation", ObservationMode(self.observation))
         object.__setattr__(self, "roles", tuple(self.roles))
         # The rules between fields.

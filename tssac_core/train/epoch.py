@@ -26,7 +26,7 @@ from tssac_core.sim.pilots import PilotSpec
 from tssac_core.sim.role_task import MonitorInTraining
 from tssac_core.sim.scenario import ROLES, Role, Scenario
 from tssac_core.sim.varied_airframes import AirframeVariation
-from tssac_core.train.config import TrainConfig, reward_config
+from tssac_core.train.config import TrainConfig, TrainMonitor, reward_config
 from tssac_core.train.rundir import MetricsRow, role_checkpoint
 from tssac_core.train.validation import EpochSelector
 
@@ -71,7 +71,7 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
 def monitor_in_training(cfg: TrainConfig, scenario: Scenario) -> MonitorInTraining | None:
     """The monitor the training worlds fly through (TrainConfig.train_monitor), or None. In wind its backups end in the
     ground loiter, bounded on the lag model at the corners of the varied airframes' spans."""
-    if cfg.train_monitor == "off":
+    if cfg.train_monitor is TrainMonitor.OFF:
         return None
     shield = ShieldConfig(margin_m=cfg.train_monitor_margin_m, adjust=True)
     variation = airframe_variation(cfg)
