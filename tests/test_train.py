@@ -196,6 +196,21 @@ def test_stop_at_task_success_ends_the_role_at_the_first_epoch_that_reaches_it(t
     assert "--stop-at-task-success: expected a fraction in [0, 1], got 1.5" in capsys.readouterr().err
 
 
+def test_init_from_a_teams_directory_starts_each_role_from_its_own_checkpoint(tmp_path, caplog):
+    """--init-from DIR: the strike role starts from DIR/strike.pt (its actor, before any update, is that one's)."""
+    caplog.set_level("INFO")
+    models = Path(__file__).resolve().parent.parent / "results" / "shipped-team" / "tail-s2"
+    out = tmp_path / "tuned"
+    args = ["--roles", "strike", "--teammates", str(models), "--init-from", str(models), "--epochs", "1"]
+    args += ["--steps-per-epoch", "50", "--envs", "1", "--update-after", "100000", "--validation-episodes", "0"]
+    args += ["--set", "hidden_sizes=[128,128]", "--threads", "1", "--no-progress"]
+    assert main(["--algo", "sac_lag", "--out", str(out), *args]) == 0
+    assert "initialised" in caplog.text and str(models / "strike.pt") in caplog.text
+    a = torch.load(models / "strike.pt", weights_only=False)["actor"]
+    b = torch.load(out / "strike.pt", weights_only=False)["actor"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_checkpoint_round_trip_and_team(trained):
     team = load_team(trained)
     obs = np.random.default_rng(0).uniform(0, 1, (5, team[0].info.obs_dim)).astype(np.float32)

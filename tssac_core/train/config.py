@@ -125,7 +125,8 @@ class TrainConfig:
     )
     init_from: str = option(
         "",
-        "initialise the learner of every trained role from this role checkpoint (fine-tuning; the SAC family)",
+        "initialise the learner of every trained role from this role checkpoint, or each from its own checkpoint in "
+        "this team's directory, e.g. models/tssac (fine-tuning; the SAC family)",
         parse=_path,
     )
     teammates: str = option(

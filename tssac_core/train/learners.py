@@ -63,15 +63,16 @@ from tssac_core.train.algorithms import algorithm
 from tssac_core.train.config import TrainConfig, onpolicy_config, sac_config
 from tssac_core.train.epoch import EpochLog
 from tssac_core.train.resume import LearnerResume, OffPolicyResume, OnPolicyResume, pcg64_state
-from tssac_core.train.rundir import MetricsRow, role_checkpoint
+from tssac_core.train.rundir import MetricsRow, init_checkpoint, role_checkpoint
 
 logger = logging.getLogger("tssac_core.train")
 
 
 def transfer_source(cfg: TrainConfig, role: Role, out: Path) -> Path | None:
-    """The checkpoint a fresh role starts from: --init-from, TSSAC's previous role (N_k -> N_k+1), or none."""
+    """The checkpoint a fresh role starts from: --init-from (a checkpoint, or a team's directory: its checkpoint of the
+    role), TSSAC's previous role (N_k -> N_k+1), or none."""
     if cfg.init_from:
-        return Path(cfg.init_from)
+        return init_checkpoint(cfg, role)
     if algorithm(cfg.algo).transfers and role.index > 0:
         return role_checkpoint(cfg, out, ROLES[role.index - 1])
     return None

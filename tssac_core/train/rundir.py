@@ -192,7 +192,7 @@ def check_inputs(cfg: TrainConfig, out: Path) -> None:
     paths = {role_checkpoint(cfg, out, earlier) for role in map(Role, cfg.roles) for earlier in ROLES[: role.index]}
     paths = {p for p in paths if p.parent != out and p.is_file()}
     if cfg.init_from:
-        paths.add(Path(cfg.init_from))
+        paths |= {init_checkpoint(cfg, Role(role)) for role in cfg.roles}
     for path in sorted(paths):
         warn_once(check_model_file(path))
 
@@ -246,17 +246,24 @@ def write_plots(out: Path, cost_limit: float) -> None:
     plot_training(out / "metrics.csv", out, cost_limit)
 
 
+def init_checkpoint(cfg: TrainConfig, role: Role) -> Path:
+    """The checkpoint --init-from starts ``role`` from: the file it names, or the role's in the team directory it
+    names."""
+    source = Path(cfg.init_from)
+    return source / f"{role.value}.pt" if source.is_dir() else source
+
+
 def check_init_from(cfg: TrainConfig, scenario: Scenario) -> None:
-    """--init-from: a role checkpoint with the learner state and networks of this run's sizes (CheckpointError, one
-    line, before any work otherwise)."""
-    state = learner_state(cfg.init_from)
+    """--init-from: for every trained role a role checkpoint with the learner state and networks of this run's sizes
+    (CheckpointError, one line, before any work otherwise)."""
     hidden = sac_config(cfg, scenario).hidden_sizes
     with torch.random.fork_rng():  # a throwaway actor, only for its shapes: the run's random streams stay untouched
         wanted = SquashedGaussianActor(ObservationMode(cfg.observation).size, 2, hidden).state_dict()
-    have = state.get("actor", {})
-    shapes = {k: tuple(v.shape) for k, v in have.items()} if isinstance(have, dict) else {}
-    if shapes != {k: tuple(v.shape) for k, v in wanted.items()}:
-        raise CheckpointError(
-            f"--init-from {cfg.init_from}: its actor's layers {sorted(set(shapes.values()))} do not fit this "
-            f"run's (hidden_sizes {list(hidden)}, observation {cfg.observation})"
-        )
+    for source in sorted({init_checkpoint(cfg, Role(role)) for role in cfg.roles}):
+        have = learner_state(source).get("actor", {})
+        shapes = {k: tuple(v.shape) for k, v in have.items()} if isinstance(have, dict) else {}
+        if shapes != {k: tuple(v.shape) for k, v in wanted.items()}:
+            raise CheckpointError(
+                f"--init-from {source}: its actor's layers {sorted(set(shapes.values()))} do not fit this "
+                f"run's (hidden_sizes {list(hidden)}, observation {cfg.observation})"
+            )
