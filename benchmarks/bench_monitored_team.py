@@ -57,9 +57,16 @@ def airframes_in(
 
 
 def fly_row(
-    models: Path, wind_m_s: float, shield: ShieldConfig | None, args: Any, scenario: Scenario
+    models: Path,
+    airframes: tuple[AirframeVariation, LoiterBound | None],
+    shield: ShieldConfig | None,
+    args: Any,
+    scenario: Scenario,
 ) -> dict[str, Any]:
-    variation, loiter = airframes_in(args.airframe_response, wind_m_s, scenario)
+    """One row: the team of ``models`` on ``airframes`` (:func:`airframes_in`), through the monitor ``shield`` or
+    alone (None)."""
+    variation, loiter = airframes
+    wind_m_s = variation.wind_m_s[1]
     t0 = time.monotonic()
     pilots = load_team(models)
     results = fly_missions(
@@ -123,10 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     shield = ShieldConfig(margin_m=args.margin_m, adjust=True)
     rows: list[dict[str, Any]] = []
     out: dict[str, Any] = {"episodes": args.episodes, "seed": args.seed, "scenario": str(args.scenario), "rows": rows}
+    airframes = {wind: airframes_in(args.airframe_response, wind, scenario) for wind in winds}  # a loiter fit each
     for models in args.models:
         for wind in winds:
             for monitor in (None, shield):
-                rows.append(fly_row(models, wind, monitor, args, scenario))
+                rows.append(fly_row(models, airframes[wind], monitor, args, scenario))
                 print(describe(rows[-1]), flush=True)
                 args.json.parent.mkdir(parents=True, exist_ok=True)
                 write_json(args.json, out)  # again after every row: a run stopped part-way keeps what it flew

@@ -45,6 +45,7 @@ def make_task(
     cfg: TrainConfig, scenario: Scenario, role: Role, mode: ObservationMode, teammates: dict[str, PilotSpec]
 ) -> RoleTask:
     """The training worlds of one role: its reward, its (tightened) cost, its teammates, its seed."""
+    variation = airframe_variation(cfg)
     return RoleTask(
         scenario,
         role,
@@ -55,8 +56,8 @@ def make_task(
         reward_config=reward_config(cfg),
         cost_margin_m=cfg.cost_margin_km * 1000.0,
         hard_layouts=HardLayouts(cfg.hard_layouts, cfg.hard_detour_km),
-        airframes=airframe_variation(cfg),
-        monitor=monitor_in_training(cfg, scenario),
+        airframes=variation,
+        monitor=monitor_in_training(cfg, scenario, variation),
     )
 
 
@@ -68,13 +69,15 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
     return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
 
 
-def monitor_in_training(cfg: TrainConfig, scenario: Scenario) -> MonitorInTraining | None:
-    """The monitor the training worlds fly through (TrainConfig.train_monitor), or None. In wind its backups end in the
-    ground loiter, bounded on the lag model at the corners of the varied airframes' spans."""
+def monitor_in_training(
+    cfg: TrainConfig, scenario: Scenario, variation: AirframeVariation | None
+) -> MonitorInTraining | None:
+    """The monitor the training worlds fly through (TrainConfig.train_monitor), or None. In wind (the run's varied
+    airframes, ``variation``) its backups end in the ground loiter, bounded on the lag model at the corners of their
+    spans."""
     if cfg.train_monitor is TrainMonitor.OFF:
         return None
     shield = ShieldConfig(margin_m=cfg.train_monitor_margin_m, adjust=True)
-    variation = airframe_variation(cfg)
     loiter = None
     if variation is not None and variation.wind_m_s[1] > 0:
         loiter = variation.envelope_loiter_bound(load_response(cfg.airframe_response).loiter_law(), scenario)
