@@ -54,7 +54,9 @@ def test_wind_needs_more_room_than_calm_air() -> None:
     lay = toward_radar(calm, 5.0)
     calm_excess = lagged_start_excess_m(calm, lay, RESPONSE, ShieldConfig())[0]
     wind_excess = lagged_start_excess_m(wind, lay, RESPONSE, ShieldConfig())[0]
-    assert calm_excess - wind_excess > 300.0  # the loiter's circle is sized for airspeed plus wind
+    # The loiter's circle is sized for airspeed plus wind, and its disk carries the heading's residual at the turn-in's
+    # end (calm air's turn: the instantaneous centre's small disk).
+    assert calm_excess - wind_excess > 150.0
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
@@ -108,15 +110,19 @@ def test_fly_refuses_a_start_its_monitors_cannot_protect_in_one_line(tmp_path: P
 
 @pytest.mark.parametrize("given", [False, True], ids=["drawn-and-checked", "eq5-layouts"])
 def test_batched_missions_on_varied_airframes_start_where_their_monitor_protects(given: bool) -> None:
-    """corner.yaml's first 100 layouts of seed 2,120,001 on airframes drawn from the F-16's spans in a 10 m/s wind:
-    the ``nan`` pilot (the backup flies from the first decision) is never unprotected on the layouts fly_missions draws,
-    two of which it drew again for their airframes; on the same seeds' eq. 5 layouts, given as they are (no second
-    check), some start has no clear backup at the first decision (the negative control)."""
+    """corner.yaml's first 100 layouts of seed 2,120,001, its starts drawn 0.3-1.5 km from the corner (corner.yaml's
+    own 1-4 km all leave room for the loiter), on airframes drawn from the F-16's spans in a 10 m/s wind: the ``nan``
+    pilot (the backup flies from the first decision) is never unprotected on the layouts fly_missions draws, a few of
+    which it drew again for their airframes; on the same seeds' eq. 5 layouts, given as they are (no second check),
+    some start has no clear backup at the first decision (the negative control)."""
     from tssac_core.sim.adversaries import Adversary, AdversaryPilot
     from tssac_core.sim.missions import fly_missions, mission_layout
     from tssac_core.sim.varied_airframes import AirframeVariation
 
-    scenario = dataclasses.replace(load(REPO / "scenarios" / "corner.yaml"), episode_steps=300)
+    corner = load(REPO / "scenarios" / "corner.yaml")
+    assert corner.random is not None
+    nearer = dataclasses.replace(corner.random, start_x_km=(0.3, 1.5), start_y_km=(0.3, 1.5))
+    scenario = dataclasses.replace(corner, random=nearer, episode_steps=300)
     seed, n = 2_120_001, 100
     variation = dataclasses.replace(AirframeVariation.from_response(RESPONSE, wind_max_m_s=10.0), wind_m_s=(10.0, 10.0))
     eq5 = [mission_layout(scenario, seed, k) for k in range(n)]
@@ -130,4 +136,4 @@ def test_batched_missions_on_varied_airframes_start_where_their_monitor_protects
         assert unprotected > 0
     else:
         assert unprotected == 0 and float(results.cost.sum()) == 0.0 and not results.out_of_area.any()
-        assert 1 <= sum(a != b for a, b in zip(results.layouts, eq5, strict=True)) <= 5
+        assert 1 <= sum(a != b for a, b in zip(results.layouts, eq5, strict=True)) <= 10

@@ -149,29 +149,46 @@ def test_inconsistent_tables_are_refused() -> None:
 
 
 LOITER = {
-    "schema": 3,
+    "schema": 4,
     "turn_heading_residual_deg": (6.0, 4.0, 2.0),
     "loiter_wind_max_m_s": 10.0,
-    "loiter_excursion_m": (550.0, 520.0, 540.0),
+    "loiter_excursion_m": (5.0, 3.0, 4.0),
+    "loiter_turn_in_s": 8.0,
+    "loiter_residual_m": (30.0, 50.0, 40.0),
+    "loiter_heading_residual_deg": (3.0, 1.0, 1.5),
 }
 
 
-def test_the_loiter_fit_round_trips_reads_between_speeds_and_a_version_2_file_has_none(tmp_path: Path) -> None:
+def test_the_loiter_fit_round_trips_reads_between_speeds_and_older_files_fall_back(tmp_path: Path) -> None:
     path = tmp_path / "x.response.yaml"
     r = response(**LOITER)
     path.write_text(dump_response(r))
     assert load_response(path) == r
-    at = r.at(250.0)  # between 200 and 300: the worse neighbour's excursion and heading residual
-    assert (at.loiter_excursion_m, at.heading_residual_deg) == (540.0, 4.0)
+    assert r.at(250.0).loiter_excursion_m == 4.0  # between 200 and 300: the worse neighbour's
     bound = r.loiter_bound()
     assert bound is not None and bound.max_m_s == 10.0 and bound.law == r.loiter_law()
-    np.testing.assert_allclose(bound.wind(np.zeros(1), np.zeros(1), np.array([250.0])).heading_residual_rad,
-                               [math.radians(4.0)])  # fmt: skip
+    assert bound.turn_in_s == 8.0 and bound.turn_in_steps(0.1) == 80 and bound.turn_in_steps(0.3) == 27
+    windy = bound.wind(np.zeros(2), np.zeros(2), np.array([250.0, 150.0]))
+    np.testing.assert_allclose(windy.heading_residual_rad, np.radians([1.5, 3.0]))  # the loiter's own, not the turns'
+    np.testing.assert_allclose(windy.residual_m, [50.0, 30.0])
+    assert windy.turn_in_s == 8.0
+    # A version 3 file: the loiter starts where the lead ends, with the turns' residuals.
+    three = {k: v for k, v in LOITER.items() if not k.startswith(("loiter_turn_in", "loiter_residual", "loiter_head"))}
+    path.write_text(dump_response(response(**(three | {"schema": 3}))))
+    old = load_response(path).loiter_bound()
+    assert old is not None and old.turn_in_s == 0.0
+    windy = old.wind(np.zeros(1), np.zeros(1), np.array([250.0]))
+    np.testing.assert_allclose(windy.heading_residual_rad, [math.radians(4.0)])
+    np.testing.assert_allclose(windy.residual_m, [max(response().turn_residual_m[1:])])
     path.write_text(dump_response(response()))  # a version 2 file: no loiter, no heading residual
-    old = load_response(path)
-    assert old.loiter_bound() is None and old.at(250.0).loiter_excursion_m is None
+    older = load_response(path)
+    assert older.loiter_bound() is None and older.at(250.0).loiter_excursion_m is None
     with pytest.raises(ValueError, match="one entry per speed"):
         response(**(LOITER | {"loiter_excursion_m": (1.0, 2.0)}))
+    with pytest.raises(ValueError, match="one entry per speed"):
+        response(**(LOITER | {"loiter_residual_m": (1.0, 2.0)}))
+    with pytest.raises(ValueError, match=">= 0"):
+        response(**(LOITER | {"loiter_turn_in_s": -1.0}))
 
 
 def test_a_wind_stronger_than_the_loiter_was_measured_in_is_refused() -> None:

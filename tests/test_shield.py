@@ -342,3 +342,49 @@ def test_the_filter_starts_from_the_known_straight_start_until_a_turn_reaches_th
     assert shield.straight_start_turn_rate(3 + delay - 1) == (0.0, STRAIGHT_START_TURN_SIGMA_RAD_S)
     assert shield.straight_start_turn_rate(3 + delay) is None
     assert eq5.straight_start_turn_rate(0) is None
+
+
+def test_in_wind_the_companions_backup_turns_in_for_its_turn_in_then_loiters_from_where_it_ends(random_path):
+    """The companion's monitor flies a backup in wind as its prediction does: after the lead, exactly the turn-in's
+    ticks of the maximum-rate turn its way, then the loiter law on the circle fixed from the estimate at the tick the
+    turn-in ends (a pilot whose proposals are not finite: the backup flies from the first decision)."""
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.assurance.ground_loiter import loiter_action, loiter_centre
+    from tssac_core.sim.airframe_response import load_response
+    from tssac_core.sim.scenario import Wind
+
+    s = dataclasses.replace(load(random_path), wind=Wind(speed_m_s=10.0, from_deg=200.0))
+    world = World(s, 1)
+    world.reset([0], [sample_layout(s, np.random.default_rng(35))])
+    shield = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(), True, load_response(response_path("f16")))
+    assert shield.loiter is not None
+    turn_in = shield.loiter.turn_in_steps(s.dt_s)
+    limit = float(shield.monitor.limits.turn_rate_max_rad_s[0])
+    x, y, ground, course = float(world.x_m[0, 0]), float(world.y_m[0, 0]), 260.0, float(world.phi_rad[0, 0])
+    commands, estimates = [], []
+    for tick in range(turn_in + 400):
+        estimate = ((x, y, ground, course), (0.0, 0.0, 0.0), (0.0, 0.0))
+        action, _ = shield.action(True, 1, np.full(2, np.nan), lambda e=estimate: e, tick)
+        shield.sent(action, tick)
+        commands.append(float(action[0]))
+        estimates.append(estimate[0])
+        course += action[0] * limit * s.dt_s  # the estimate turns as commanded (enough for the timing)
+        x, y = x + ground * math.cos(course) * s.dt_s, y + ground * math.sin(course) * s.dt_s
+    omega = np.array(commands)
+    lead = int(np.argmax(omega != 0.0))
+    assert np.all(omega[:lead] == 0.0)
+    turn = omega[lead : lead + turn_in]
+    assert np.all(np.abs(turn) == 1.0) and np.all(turn == turn[0])
+    start = lead + turn_in
+    we, wn = shield.wind_m_s
+    cx0, cy0, g0, c0 = estimates[start]
+    gx, gy = g0 * math.cos(c0), g0 * math.sin(c0)
+    radius = shield.loiter.radius_m(np.array([math.hypot(gx - we, gy - wn)]), np.array([limit]))
+    centre = loiter_centre(np.array([cx0]), np.array([cy0]), np.array([gx]), np.array([gy]), turn[0], radius)
+    for k in range(start, start + 5):
+        ex, ey, eg, ec = estimates[k]
+        law = loiter_action(
+            np.array([ex]), np.array([ey]), np.array([eg * math.cos(ec)]), np.array([eg * math.sin(ec)]), we, wn,
+            (*centre, radius, turn[0]), np.array([limit]), shield.loiter.law,
+        )  # fmt: skip
+        assert omega[k] == pytest.approx(law[0, 0], rel=1e-9, abs=1e-12)

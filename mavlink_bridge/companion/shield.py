@@ -138,6 +138,8 @@ class CompanionShield:
         """The steady wind (east, north), m/s: the scenario's until the vehicle reports one (:meth:`set_wind`)."""
         self._circle: tuple[float, float, float, float] | None = None
         """The loiter flying now: its centre (x, y), radius and direction (+1 counter-clockwise); None: none."""
+        self._loiter_step: int | None = None
+        """The tick at which the flying backup's loiter starts, after its turn-in (None: none scheduled)."""
         self._tick = 0
         """The last tick :meth:`action` was asked for."""
         self.achievable: Achievable | None = None
@@ -162,6 +164,7 @@ class CompanionShield:
         self._unprotected = False
         self._turn_step = None
         self._circle = None
+        self._loiter_step = None
         self._sent.clear()
         self._before_fix.clear()
         self.counters.resets += 1
@@ -191,6 +194,8 @@ class CompanionShield:
         loiter flies, the next tick), if any."""
         if self._circle is not None:
             return self._tick + 1
+        if self._loiter_step is not None:
+            return self._loiter_step
         return self._turn_step
 
     def set_wind(self, east_m_s: float, north_m_s: float) -> None:
@@ -218,7 +223,7 @@ class CompanionShield:
         if not decision and self._turn_step is not None and step >= self._turn_step:
             self._held, self._turn_step = self._turn.copy(), None
             if self.loiter is not None and self.engaged:
-                self._begin_loiter(estimate())
+                self._loiter_step = step + self.loiter.turn_in_steps(self.dt_s)
         if decision:
             state, sigmas, (turn_rate, turn_sigma) = estimate()
             if self.loiter is not None:
@@ -266,9 +271,11 @@ class CompanionShield:
             self._adjusted = bool(d.adjusted[0])
             self._unprotected = bool(d.unprotected[0])
             if not self.engaged:
-                self._circle = None
-            elif self.loiter is not None and straight == 0 and self._circle is None:
-                self._begin_loiter(estimate())
+                self._circle, self._loiter_step = None, None
+            elif self.loiter is not None and straight == 0 and self._circle is None and self._loiter_step is None:
+                self._loiter_step = step + self.loiter.turn_in_steps(self.dt_s)
+        if self._circle is None and self._loiter_step is not None and step >= self._loiter_step:
+            self._begin_loiter(estimate())
         if self._circle is not None:
             self._held = self._loiter_action(estimate())
         self._count_tick()
@@ -305,7 +312,7 @@ class CompanionShield:
         return x, y, float(gx), float(gy), float(np.hypot(gx - we, gy - wn))
 
     def _begin_loiter(self, estimate: Estimate) -> None:
-        """Fix the loiter's circle where the flying backup's lead ends: at R from the estimate on the turn's side of
+        """Fix the loiter's circle where the flying backup's turn-in ends: at R from the estimate on the turn's side of
         its ground track."""
         assert self.loiter is not None
         x, y, gx, gy, air = self._ground_and_air(estimate)

@@ -17,10 +17,12 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
   margin; the largest difference of heading over each run's first ``ROLLOUT_S``, the heading residual.
 * **Acceleration.** Full and no throttle (commands of +-``ACCEL_COMMAND_M_S2``) from the speed, the airspeed's mean
   rate over ``--accel-window-s``; the inner loop's speed reference is not clipped during these runs.
-* **The ground loiter's excursion** (the wind's backup): how far beyond its radius the airframe and the lag model just
-  fitted fly the loiter, from a reversal at full bank and from straight flight, in calm air and in
-  ``--wind-max-m-s`` from 16 directions (:mod:`sim_vehicles.dynamics.loiter_fit`), at each speed and halfway to its
-  neighbours (``--wind-max-m-s 0`` fits calm air only).
+* **The ground loiter** (the wind's backup): its turn-in (the delay and four of the longest time constant, up to a
+  whole second), and how far beyond its radius the airframe and the lag model just fitted fly the loiter after a
+  lead and the turn-in, from a reversal at full bank, straight flight and a turn its way, in calm air and in
+  ``--wind-max-m-s`` from 16 directions, with how far the airframe's path and heading leave the model's on the way
+  (:mod:`sim_vehicles.dynamics.loiter_fit`), at each speed and halfway to its neighbours (``--wind-max-m-s 0`` fits
+  calm air only).
 
 Everything is deterministic (JSBSim, steady winds, no turbulence): ``--check`` refits and compares with the file at
 1e-9.
@@ -47,8 +49,15 @@ from sim_vehicles.dynamics.jsbsim_airframe import (
     airframe_path,
     load_airframe,
 )
-from sim_vehicles.dynamics.loiter_fit import fly_loiter, loiter_cases, loiter_excursion_m
-from tssac_core.assurance.ground_loiter import LoiterLaw
+from sim_vehicles.dynamics.loiter_fit import (
+    FitFlight,
+    LoiterFigures,
+    LoiterRun,
+    fly_loiter,
+    loiter_cases,
+    loiter_figures,
+)
+from tssac_core.assurance.ground_loiter import LoiterLaw, settled_turn_in_s
 from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
 from tssac_core.common.cli import UsageError, run
 from tssac_core.sim.airframe_response import (
@@ -297,31 +306,38 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
         loiter_lookahead_share=law.lookahead_share,
         loiter_track_gain_1_s=law.track_gain_1_s,
     )
-    excursions = fit_loiter(spec, provisional, settings)
-    return dataclasses.replace(provisional, loiter_wind_max_m_s=settings.wind_max_m_s, loiter_excursion_m=excursions)
+    turn_in = settled_turn_in_s(max(table["delay"]), max(table["tau"] + table["rollout"]))
+    figures = fit_loiter(spec, provisional, settings, turn_in)
+    return dataclasses.replace(
+        provisional,
+        loiter_wind_max_m_s=settings.wind_max_m_s,
+        loiter_turn_in_s=turn_in,
+        loiter_excursion_m=tuple(f.excursion_m for f in figures),
+        loiter_residual_m=tuple(f.path_residual_m for f in figures),
+        loiter_heading_residual_deg=tuple(round(math.degrees(f.heading_residual_rad), 4) for f in figures),
+    )
 
 
-def fit_loiter(spec: AirframeSpec, lag: AirframeResponse, settings: FitSettings) -> tuple[float, ...]:
-    """The loiter's excursion per tabled speed (module docstring): the largest of the runs at the speed and halfway to
+def fit_loiter(
+    spec: AirframeSpec, lag: AirframeResponse, settings: FitSettings, turn_in_s: float
+) -> tuple[LoiterFigures, ...]:
+    """The loiter's figures per tabled speed (module docstring): the largest of the runs at the speed and halfway to
     each tabled neighbour (so that the worse neighbour's figure covers every speed between two), each run flown with
     the lag just fitted (interpolated between tabled speeds, as the monitor reads it)."""
     speeds = settings.speeds_m_s
     halfway = [(a + b) / 2.0 for a, b in zip(speeds, speeds[1:])]
-    envelope = (speeds[0], speeds[-1])
-    runs: dict[float, float] = {}
+    flight = FitFlight(
+        spec, settings.wind_max_m_s, settings.loiter_law, lag.turn_rate_max_rad_s, settings.altitude_m,
+        settings.dt_s, (speeds[0], speeds[-1]), turn_in_s,
+    )  # fmt: skip
+    runs: dict[float, list[LoiterRun]] = {}
     for v in sorted(set(speeds) | set(halfway)):
         air = airframe_lag(lag, np.array([v]), settings.dt_s)
-        runs[v] = loiter_excursion_m(
-            [
-                fly_loiter(spec, case, air, settings.wind_max_m_s, settings.loiter_law, lag.turn_rate_max_rad_s,
-                           settings.altitude_m, settings.dt_s, envelope)
-                for case in loiter_cases(v, settings.wind_max_m_s)
-            ]
-        )  # fmt: skip
+        runs[v] = [fly_loiter(flight, case, air) for case in loiter_cases(v, settings.wind_max_m_s)]
     out = []
     for k, v in enumerate(speeds):
         band = [v] + halfway[max(k - 1, 0) : k + 1]
-        out.append(max(runs[b] for b in band))
+        out.append(loiter_figures([run for b in band for run in runs[b]]))
     return tuple(out)
 
 

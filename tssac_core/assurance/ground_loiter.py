@@ -19,7 +19,7 @@ so a ground circle of radius R needs psi' = |g|^3 / (R V (V + w . h)), the most 
 
     R = (V + W_max)^2 / (authority V omega_max)          (:func:`loiter_radius_m`)
 
-(300 m/s in 10 m/s of wind at 5 deg/s, authority 0.85: 4.32 km; the calm air's maximum-rate circle: 3.44 km).
+(300 m/s in 10 m/s of wind at 5 deg/s, authority 0.95: 3.86 km; the calm air's maximum-rate circle: 3.44 km).
 
 **The law** (:func:`loiter_turn_rate`). A vector field on the ground: at distance d from the centre c, the desired
 track chi_d is the circle's tangent (the loiter's direction, ``sign`` +1 counter-clockwise) turned toward the circle
@@ -32,12 +32,15 @@ track rate commanded is the field's own rate along the path plus a gain on the t
 psi'_cmd = chi'_cmd |g|^2 / (V (V + w . h)), clipped to the turn-rate limit. Its inputs are what a companion knows:
 position, ground velocity and the wind (the heading follows: h = (g - w) / V).
 
-**Its bound.** The loiter starts where a backup's lead ends, with its centre at R from the vehicle on the turn's side
-of its ground track (:func:`loiter_centre`); from there, whatever the turn rate it had (a reversal at full bank is the
-worst), it stays within R + E of the centre for ever, E the *excursion* measured against the airframe (JSBSim) at
-the declared maximum wind from every direction and the speeds of the envelope, kept as data beside the airframe's
-response. On the airframe's lag model (:func:`fly_loiter_on_model`) the loop settles on its circle within a lap
-and its excursion does not grow from one lap to the next.
+**Its bound.** A backup in wind flies straight for its lead, then its *turn-in*: a maximum-rate turn the loiter's way
+for long enough that the airframe turns at its limit whatever it did before (its delay and four time constants), and
+then the loiter, its centre at R from the vehicle on the turn's side of its ground track (:func:`loiter_centre`).
+Entered from a turn at the limit its way, tighter than the circle needs anywhere, the loiter starts inside its circle
+and stays within R + E of the centre for ever, E the *excursion* measured against the airframe (JSBSim) at the
+declared maximum wind from every direction and the speeds of the envelope, kept as data beside the airframe's
+response; entered from a turn the other way it would first swing out by hundreds of metres (a reversal at full bank),
+which is what the turn-in spends its few seconds to avoid. On the airframe's lag model (:func:`fly_loiter_on_model`)
+the loop settles on its circle within a lap and its excursion does not grow from one lap to the next.
 """
 
 from __future__ import annotations
@@ -47,15 +50,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, lead_samples, switched_lag_step
-from tssac_core.assurance.monitor import N_TURNS, EstimateError, Hazards, Limits, circle_clearance
+from tssac_core.assurance.lagged_backups import (
+    SETTLE_TIME_CONSTANTS,
+    AirframeLag,
+    LagState,
+    lag_gains,
+    lagged_rollout,
+    lead_end_lags,
+    lead_samples,
+    switched_lag_step,
+)
+from tssac_core.assurance.monitor import N_TURNS, EstimateError, Hazards, Limits, circle_clearance, point_clearance
 
 
 @dataclass(frozen=True)
 class LoiterLaw:
     """The ground loiter's gains (module docstring)."""
 
-    authority: float = 0.85
+    authority: float = 0.95
     """The share of the turn-rate limit the steady circle needs at its most (the rest corrects errors), in (0, 1]."""
     lookahead_share: float = 0.5
     """The vector field's lookahead L as a share of the radius."""
@@ -212,6 +224,12 @@ class WindLoiter:
     heading_residual_rad: np.ndarray
     """How far the airframe's heading may lie from the model's where the loiter starts (0 where the model is the
     truth, as in the batched world's varied airframes)."""
+    residual_m: np.ndarray
+    """How far the airframe's path may lie from the model's over a backup's lead and turn-in (0 where the model is the
+    truth): taken off the backups' clearance in wind."""
+    turn_in_s: float = 0.0
+    """How long a backup's maximum-rate turn flies between its lead and its loiter (module docstring; 0: the loiter
+    starts where the lead ends)."""
 
     def select(self, rows: np.ndarray) -> WindLoiter:
         return WindLoiter(
@@ -221,7 +239,13 @@ class WindLoiter:
             self.law,
             self.excursion_m[rows],
             self.heading_residual_rad[rows],
+            self.residual_m[rows],
+            self.turn_in_s,
         )
+
+    def turn_in_steps(self, dt_s: float) -> int:
+        """The turn-in in world steps (rounded up)."""
+        return turn_in_steps(self.turn_in_s, dt_s)
 
     def drift(self, steps: int, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
         """(M, steps) how far the air mass carries a vehicle after steps 1..``steps``: w k dt."""
@@ -266,26 +290,34 @@ def loiter_backup_clearance(
     leads: np.ndarray,
     wind: WindLoiter,
 ) -> np.ndarray:
-    """Clearance of every backup in wind flown for ever from each state, less the airframe's residual, (M, L * 2)
+    """Clearance of every backup in wind flown for ever from each state, less the airframe's residual over a lead and
+    turn-in (:attr:`WindLoiter.residual_m`), (M, L * 2)
     (candidate lead * 2 + loiter; 0 left, 1 right, as the monitor's first two ``TURNS``).
 
     A backup flies straight (heading-rate command 0, speed held) for its lead of ``leads`` world steps under the lag
-    model, carried by the wind, then the ground loiter for ever: the lead's samples (less half a step's ground
-    distance, (v_max + W_max) dt / 2, each) and the loiter's disk from the lead's end (:func:`loiter_keep_out`)."""
+    model, carried by the wind, then its maximum-rate turn for the turn-in (:attr:`WindLoiter.turn_in_s`), then the
+    ground loiter for ever: the lead's and the turn-in's samples (less half a step's ground distance,
+    (v_max + W_max) dt / 2, each) and the loiter's disk from the turn-in's end (:func:`loiter_keep_out`)."""
     m, n_leads = len(x), len(leads)
     half_step = (lim.speed_max_m_s + wind.max_m_s) * dt_s / 2
-    longest = int(leads.max(initial=0))
     carried = (wind.east_m_s, wind.north_m_s)
-    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, longest, half_step, carried)
-    rows = np.repeat(np.arange(m), n_leads)
-    pick = np.tile(np.asarray(leads, dtype=np.int64), m)
+    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, int(leads.max(initial=0)), half_step, carried)
+    rows, pick, lag = lead_end_lags(lead, lag_state, leads)
     ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
+    sign = np.tile([1.0, -1.0], m * n_leads)
     r_wind, r_hz, r_lim = wind.select(rows), hz.select(rows), lim.select(rows)
-    out = np.empty((m * n_leads, 2))
-    for turn, sign in enumerate((1.0, -1.0)):
-        cx, cy, radius = loiter_keep_out(ex, ey, ev, ep, sign, r_wind, r_lim.turn_rate_max_rad_s)
-        out[:, turn] = np.minimum(lead.least_m[rows, pick], circle_clearance(cx, cy, radius, r_hz))
-    return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
+    least = lead.least_m[rows, pick]
+    steps = wind.turn_in_steps(dt_s)
+    if steps:
+        command = np.repeat((sign * r_lim.turn_rate_max_rad_s)[:, None], steps, axis=1)
+        path = lagged_rollout(ex, ey, ev, ep, lag, command, np.zeros_like(command), airframe.select(rows), r_lim, dt_s)
+        t = dt_s * np.arange(1, steps + 1)[None, :]
+        xs, ys = path.xs + r_wind.east_m_s[:, None] * t, path.ys + r_wind.north_m_s[:, None] * t
+        least = np.minimum(least, point_clearance(xs, ys, r_hz).min(axis=1) - half_step[rows])
+        ex, ey, ev, ep = xs[:, -1], ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
+    cx, cy, radius = loiter_keep_out(ex, ey, ev, ep, sign, r_wind, r_lim.turn_rate_max_rad_s)
+    out = np.minimum(least, circle_clearance(cx, cy, radius, r_hz)).reshape(m, n_leads * 2)
+    return out - wind.residual_m[:, None]
 
 
 def loiter_backup_error_m(
@@ -294,13 +326,14 @@ def loiter_backup_error_m(
     """How much of each backup's clearance in wind the state's error can take away, (M, L * N_TURNS), in metres (as
     :func:`~tssac_core.assurance.monitor.backup_error_m` for the calm air's backups).
 
-    Flown from a state off by (d_p, d_phi, d_v), the lead (time T) moves by at most d_p + v_max T d_phi + T d_v; the
-    loiter's centre, at R from the lead's end normal to its ground track, by that plus R_max d_track + dR/dV d_v,
+    Flown from a state off by (d_p, d_phi, d_v), the lead and the turn-in (open loop, time T in all) move by at most
+    d_p + v_max T d_phi + T d_v; the loiter's centre, at R from the turn-in's end normal to its ground track, by that
+    plus R_max d_track + dR/dV d_v,
     where a heading error turns the ground track by at most d_phi v_max / (v_min - W_max) and
     dR/dV = (V + W)(V - W) / (authority omega_max V^2) <= 1 / (authority omega_max); its radius by dR/dV d_v. The
     loiter is a closed loop on the flier's estimate of its position, which may be off by d_p again: the circle it
     holds moves by that much too (2 d_p in all)."""
-    t = leads.astype(np.float64)[None, :] * dt_s
+    t = (leads.astype(np.float64)[None, :] + wind.turn_in_steps(dt_s)) * dt_s
     w, vmax = lim.turn_rate_max_rad_s[:, None], lim.speed_max_m_s[:, None]
     r_max = wind.radius_m(lim.speed_max_m_s, lim.turn_rate_max_rad_s)[:, None]
     track_per_heading = vmax / (lim.speed_min_m_s[:, None] - wind.max_m_s)
@@ -322,11 +355,19 @@ class LoiterBound:
     excursion_m: tuple[float, ...]
     heading_residual_rad: tuple[float, ...] = ()
     """Per speed, how far the airframe's heading may lie from the model's (:class:`WindLoiter`); empty: 0."""
+    residual_m: tuple[float, ...] = ()
+    """Per speed, how far the airframe's path may lie from the model's over a lead and turn-in
+    (:class:`WindLoiter`); empty: 0."""
+    turn_in_s: float = 0.0
+    """The turn-in the excursion was measured after (:attr:`WindLoiter.turn_in_s`)."""
 
     def __post_init__(self) -> None:
         n = len(self.speeds_m_s)
-        if not n or len(self.excursion_m) != n or len(self.heading_residual_rad) not in (0, n):
-            raise ValueError(f"a loiter bound needs one excursion (and heading residual) per speed: {self}")
+        optional = (self.heading_residual_rad, self.residual_m)
+        if not n or len(self.excursion_m) != n or any(len(t) not in (0, n) for t in optional):
+            raise ValueError(f"a loiter bound needs one excursion (and residual) per speed: {self}")
+        if not (math.isfinite(self.turn_in_s) and self.turn_in_s >= 0.0):
+            raise ValueError(f"a loiter bound's turn-in must be a time >= 0: {self.turn_in_s}")
 
     def _worse_neighbour(self, values: tuple[float, ...], speed_m_s: np.ndarray) -> np.ndarray:
         """(M,) a table's value at each speed: the worse of its two tabled neighbours (the nearest end outside)."""
@@ -340,6 +381,10 @@ class LoiterBound:
         """The loiter circle's radius at each airspeed, sized for the promised wind (:func:`loiter_radius_m`)."""
         return loiter_radius_m(speed_m_s, self.max_m_s, turn_rate_max_rad_s, self.law.authority)
 
+    def turn_in_steps(self, dt_s: float) -> int:
+        """The turn-in in world steps (rounded up)."""
+        return turn_in_steps(self.turn_in_s, dt_s)
+
     def excursion_at(self, speed_m_s: np.ndarray) -> np.ndarray:
         """(M,) the excursion at each speed (the worse neighbour's between two tabled speeds)."""
         return self._worse_neighbour(self.excursion_m, speed_m_s)
@@ -347,15 +392,28 @@ class LoiterBound:
     def wind(self, east_m_s: np.ndarray, north_m_s: np.ndarray, speed_m_s: np.ndarray) -> WindLoiter:
         """The monitor's :class:`WindLoiter` for vehicles in these winds at these speeds."""
         speeds = np.asarray(speed_m_s, dtype=np.float64)
-        headings = self.heading_residual_rad or (0.0,) * len(self.speeds_m_s)
+        zeros = (0.0,) * len(self.speeds_m_s)
         return WindLoiter(
             np.asarray(east_m_s),
             np.asarray(north_m_s),
             self.max_m_s,
             self.law,
             self.excursion_at(speeds),
-            self._worse_neighbour(headings, speeds),
+            self._worse_neighbour(self.heading_residual_rad or zeros, speeds),
+            self._worse_neighbour(self.residual_m or zeros, speeds),
+            self.turn_in_s,
         )
+
+
+def turn_in_steps(turn_in_s: float, dt_s: float) -> int:
+    """A turn-in of ``turn_in_s`` in world steps of ``dt_s``, rounded up (a float's last digit aside)."""
+    return math.ceil(turn_in_s / dt_s - 1e-9)
+
+
+def settled_turn_in_s(delay_s: float, tau_s: float) -> float:
+    """The turn-in an airframe needs to settle into its maximum-rate turn from anything (a reversal at full bank the
+    slowest): its delay and ``SETTLE_TIME_CONSTANTS`` of its longest time constant, up to the next whole second."""
+    return float(math.ceil(delay_s + SETTLE_TIME_CONSTANTS * tau_s - 1e-9))
 
 
 MODEL_LAPS = 1.25
@@ -371,11 +429,13 @@ def model_excursion_m(
     turn_rate_max_rad_s: float,
     dt_s: float,
     directions: int = 8,
+    turn_in_s: float = 0.0,
 ) -> tuple[float, ...]:
     """Per speed, the largest distance beyond the radius at which the loiter is flown on the lag model by any of the
     K airframes ``lags`` ((K,) arrays), entered from a maximum-rate turn against it, straight flight and a maximum-rate
-    turn its way, in calm air and in ``wind_max_m_s`` from ``directions`` directions, both ways round (the model's
-    part of the fit, for airframes drawn from ranges: flown at the ranges' corners)."""
+    turn its way, each followed by the turn-in of ``turn_in_s`` (a maximum-rate turn its way), in calm air and in
+    ``wind_max_m_s`` from ``directions`` directions, both ways round (the model's part of the fit, for airframes drawn
+    from ranges: flown at the ranges' corners)."""
     k = len(lags.tau_s)
     winds = [(0.0, 0.0)] + [
         (wind_max_m_s * math.cos(a), wind_max_m_s * math.sin(a))
@@ -395,13 +455,18 @@ def model_excursion_m(
     air = lags.select(grid[:, 5].astype(np.int64))
     m = len(grid)
     limit = np.full(m, turn_rate_max_rad_s)
+    x, y, heading = np.zeros(m), np.zeros(m), np.zeros(m)
+    lag = LagState.steady(entry * sign * turn_rate_max_rad_s, int(air.delay_steps.max(initial=0)))
+    steps_in = turn_in_steps(turn_in_s, dt_s)
+    if steps_in:
+        held = Limits(v, v, limit, np.zeros(m))
+        command = np.repeat((sign * limit)[:, None], steps_in, axis=1)
+        turn = lagged_rollout(x, y, v, heading, lag, command, np.zeros_like(command), air, held, dt_s)
+        x, y = turn.xs[:, -1] + wx * steps_in * dt_s, turn.ys[:, -1] + wy * steps_in * dt_s
+        heading, lag = turn.headings[:, -1], turn.lag_after(steps_in)
     radius = loiter_radius_m(v, wind_max_m_s, limit, law.authority)
-    cx, cy = loiter_centre(np.zeros(m), np.zeros(m), v + wx, wy, sign, radius)
+    cx, cy = loiter_centre(x, y, v * np.cos(heading) + wx, v * np.sin(heading) + wy, sign, radius)
     steps = math.ceil(MODEL_LAPS * 2.0 * math.pi * radius.max() / (min(speeds_m_s) - wind_max_m_s) / dt_s)
-    width = int(air.delay_steps.max(initial=0))
-    lag = LagState.steady(entry * sign * turn_rate_max_rad_s, width)
-    flight = fly_loiter_on_model(
-        np.zeros(m), np.zeros(m), v, np.zeros(m), lag, (wx, wy), (cx, cy), radius, sign, air, limit, law, dt_s, steps
-    )
+    flight = fly_loiter_on_model(x, y, v, heading, lag, (wx, wy), (cx, cy), radius, sign, air, limit, law, dt_s, steps)
     beyond = (np.hypot(flight.xs - cx[:, None], flight.ys - cy[:, None]) - radius[:, None]).max(axis=1)
     return tuple(float(beyond[v == s].max()) for s in speeds_m_s)

@@ -352,8 +352,22 @@ def lagged_backup_clearance(
     m, n_leads = len(x), len(leads)
     half_step = lim.speed_max_m_s * dt_s / 2
     lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, int(leads.max(initial=0)), half_step)
+    rows, pick, lag = lead_end_lags(lead, lag_state, leads)
+    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
+    sign = np.tile([1.0, -1.0], m * n_leads)
+    r_hz, r_air, r_lim = hz.select(rows), airframe.select(rows), lim.select(rows)
+    path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, lag, sign, r_air, r_lim, dt_s)
+    samples = point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows]
+    disk = circle_clearance(cx, cy, radius, r_hz)
+    out = np.minimum.reduce([lead.least_m[rows, pick], samples, disk]).reshape(m, n_leads, 2)
+    return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
+
+
+def lead_end_lags(lead: LeadSamples, lag_state: LagState, leads: np.ndarray) -> tuple[np.ndarray, np.ndarray, LagState]:
+    """Every lead's end, both turns, as one batch of M * L * 2 rows (row = (vehicle * L + lead) * 2 + turn): each
+    row's vehicle, its lead's column in ``lead``'s samples, and the lag's state there."""
+    m, n_leads = len(lag_state.omega_rad_s), len(leads)
     straight = lead.straight
-    # Every lead's end, both turns: one batch of M * L * 2 turns (row = (vehicle * L + lead) * 2 + turn).
     lead_idx = np.asarray(leads, dtype=np.int64)
     rates = lag_state.omega_rad_s[:, None].repeat(n_leads, axis=1)
     width = lag_state.pending_rad_s.shape[1]
@@ -365,12 +379,5 @@ def lagged_backup_clearance(
             pending[:, i] = straight.queue[:, lead_idx[i] : lead_idx[i] + width]
     rows = np.repeat(np.arange(m), n_leads * 2)
     pick = (np.repeat(lead_idx[None, :], m, axis=0).reshape(-1)).repeat(2)
-    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
     lag = LagState(rates.reshape(-1).repeat(2), pending.reshape(m * n_leads, width).repeat(2, axis=0))
-    sign = np.tile([1.0, -1.0], m * n_leads)
-    r_hz, r_air, r_lim = hz.select(rows), airframe.select(rows), lim.select(rows)
-    path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, lag, sign, r_air, r_lim, dt_s)
-    samples = point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows]
-    disk = circle_clearance(cx, cy, radius, r_hz)
-    out = np.minimum.reduce([lead.least_m[rows, pick], samples, disk]).reshape(m, n_leads, 2)
-    return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
+    return rows, pick, lag

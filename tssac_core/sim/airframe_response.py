@@ -51,10 +51,12 @@ from tssac_core.sim.yaml_file import read_yaml, typed_value
 if TYPE_CHECKING:
     from tssac_core.sim.scenario import Scenario
 
-RESPONSE_SCHEMA = 3
+RESPONSE_SCHEMA = 4
 """The file format's version; a newer one is refused (2 added ``turn_rollout_tau_s``; a version 1 file reads with the
 roll-in's time constants for the roll-out; 3 added the ground loiter's fit, ``loiter_*``: a file without it promises
-no loiter, so no wind)."""
+no loiter, so no wind; 4 added the loiter's turn-in and its own residuals, ``loiter_turn_in_s``,
+``loiter_residual_m`` and ``loiter_heading_residual_deg``: a version 3 file's loiter starts where the lead ends, with
+the turns' residuals)."""
 
 
 class ResponseFileError(InputError):
@@ -133,8 +135,19 @@ class AirframeResponse:
     loiter_track_gain_1_s: float = LoiterLaw.track_gain_1_s
     loiter_excursion_m: tuple[float, ...] = ()
     """Per speed, the largest distance beyond the loiter's radius from its centre that the airframe (JSBSim) or its
-    lag model flew (m), from straight flight and from maximum-rate turns either way, in calm air and in
-    ``loiter_wind_max_m_s`` from every direction; empty: no loiter fitted (files before version 3)."""
+    lag model flew (m), after a backup's lead and turn-in from straight flight and from maximum-rate turns either way,
+    in calm air and in ``loiter_wind_max_m_s`` from every direction; empty: no loiter fitted (files before version
+    3)."""
+    loiter_turn_in_s: float = 0.0
+    """How long a backup's maximum-rate turn flies between its lead and its loiter (s; 0 in a version 3 file: the
+    loiter starts where the lead ends)."""
+    loiter_residual_m: tuple[float, ...] = ()
+    """Per speed, the largest distance between the airframe's path and the model's over the loiter fit's leads and
+    turn-ins (m); empty (version 3): ``turn_residual_m``."""
+    loiter_heading_residual_deg: tuple[float, ...] = ()
+    """Per speed, the largest difference between the airframe's heading and the model's where the fit's loiters
+    start (deg; the loiter's centre lies R normal to the ground track there); empty (version 3):
+    ``turn_heading_residual_deg``."""
 
     def loiter_law(self) -> LoiterLaw:
         """The loiter law the excursion was measured with."""
@@ -144,9 +157,16 @@ class AirframeResponse:
         """The ground loiter's fitted figures (None: none fitted, a file before version 3)."""
         if not self.loiter_excursion_m:
             return None
-        headings = tuple(math.radians(d) for d in self.turn_heading_residual_deg) or (0.0,) * len(self.speeds_m_s)
+        degrees = self.loiter_heading_residual_deg or self.turn_heading_residual_deg
+        headings = tuple(math.radians(d) for d in degrees) or (0.0,) * len(self.speeds_m_s)
         return LoiterBound(
-            self.loiter_wind_max_m_s, self.loiter_law(), self.speeds_m_s, self.loiter_excursion_m, headings
+            self.loiter_wind_max_m_s,
+            self.loiter_law(),
+            self.speeds_m_s,
+            self.loiter_excursion_m,
+            headings,
+            self.loiter_residual_m or self.turn_residual_m,
+            self.loiter_turn_in_s,
         )
 
     def rollout_taus(self) -> tuple[float, ...]:
@@ -163,14 +183,20 @@ class AirframeResponse:
             self.accel_max_m_s2,
             self.decel_max_m_s2,
         )
-        optional = (self.loiter_excursion_m, self.turn_heading_residual_deg)
+        optional = (
+            self.loiter_excursion_m,
+            self.turn_heading_residual_deg,
+            self.loiter_residual_m,
+            self.loiter_heading_residual_deg,
+        )
         if n < 1 or any(len(t) != n for t in tables) or any(len(t) not in (0, n) for t in optional):
             raise ValueError(f"response of {self.aircraft}: every table needs one entry per speed ({n})")
         if any(b <= a for a, b in zip(self.speeds_m_s, self.speeds_m_s[1:])) or self.speeds_m_s[0] <= 0.0:
             raise ValueError(f"response of {self.aircraft}: speeds_m_s must be positive and ascending")
         if (
             min(self.turn_delay_s + self.turn_tau_s + self.rollout_taus() + self.turn_residual_m) < 0.0
-            or min(self.loiter_excursion_m + (self.loiter_wind_max_m_s,), default=0.0) < 0.0
+            or min(self.loiter_excursion_m + self.loiter_residual_m + (self.loiter_wind_max_m_s,)) < 0.0
+            or min(self.loiter_heading_residual_deg + (self.loiter_turn_in_s,)) < 0.0
         ):
             raise ValueError(
                 f"response of {self.aircraft}: delays, time constants, residuals and excursions must be >= 0"

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw, model_excursion_m
+from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw, model_excursion_m, settled_turn_in_s
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, switched_lag_step
 from tssac_core.sim.airframe_response import AirframeResponse
 from tssac_core.sim.scenario import Scenario
@@ -111,11 +111,10 @@ class AirframeVariation:
         """The ground loiter's bound for airframes drawn from these ranges in winds up to the range's top: the loiter
         flown on the lag model at the ranges' corners (:func:`tssac_core.assurance.ground_loiter.model_excursion_m`)
         at ``speeds_m_s`` (the vehicles' envelope; between two of them the worse neighbour counts)."""
-        wind = self.wind_m_s[1]
-        excursion = model_excursion_m(
-            self.corners(turn_rate_max_rad_s, dt_s), speeds_m_s, wind, law, turn_rate_max_rad_s, dt_s
-        )
-        return LoiterBound(wind, law, speeds_m_s, excursion)
+        wind, corners = self.wind_m_s[1], self.corners(turn_rate_max_rad_s, dt_s)
+        turn_in = settled_turn_in_s(corners.delay_steps.max() * dt_s, corners.longest_tau_s().max())
+        excursion = model_excursion_m(corners, speeds_m_s, wind, law, turn_rate_max_rad_s, dt_s, turn_in_s=turn_in)
+        return LoiterBound(wind, law, speeds_m_s, excursion, turn_in_s=turn_in)
 
     def envelope_loiter_bound(self, law: LoiterLaw, scenario: Scenario) -> LoiterBound:
         """:meth:`loiter_bound` over the scenario's speed envelope every 25 m/s, at its turn-rate limit (the first

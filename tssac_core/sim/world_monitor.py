@@ -100,6 +100,8 @@ class WorldMonitor:
         """+1 / -1: the vehicle flies its backup's loiter, counter-clockwise / clockwise; 0: it does not."""
         self._loiter_centre = np.zeros((n, N_ROLES, 2))
         self._loiter_radius = np.ones((n, N_ROLES))
+        self._loiter_at = np.full((n, N_ROLES), -1, dtype=np.int64)
+        """The world step at which a flying backup's loiter starts, after its turn-in (-1: none scheduled)."""
 
     @property
     def engaged(self) -> np.ndarray:
@@ -123,6 +125,7 @@ class WorldMonitor:
         for flag in (self._engaged, self._adjusted, self._unprotected):
             flag[worlds] = False
         self._loiter_sign[worlds] = 0.0
+        self._loiter_at[worlds] = -1
         for field in dataclasses.fields(MonitorCounts):
             getattr(self.counts, field.name)[worlds] = 0
 
@@ -141,7 +144,8 @@ class WorldMonitor:
         turning = moving & (self._turn_at == world.steps[:, None])
         self._flying[turning] = self._turn[turning]
         if self.loiter is not None:
-            self._begin_loiter(world, turning)
+            self._schedule_loiter(world, turning)
+            self._begin_loiter(world, moving & (self._loiter_at == world.steps[:, None]))
         for repeat in np.unique(self.repeats):
             due = moving & (world.steps[:, None] % repeat == 0) & (self.repeats[None, :] == repeat)
             if due.any():
@@ -178,8 +182,16 @@ class WorldMonitor:
         limit = np.broadcast_to(world.c.turn_rate_max_rad_s, (world.n, N_ROLES))[w, j]
         return east, north, v, v * np.cos(phi) + east, v * np.sin(phi) + north, limit
 
+    def _schedule_loiter(self, world: World, turning: np.ndarray) -> None:
+        """The ``turning`` (N, 3) vehicles' backups end their lead now: their loiter starts after the turn-in (now, if
+        there is none)."""
+        assert self.loiter is not None
+        self._loiter_at[turning] = np.broadcast_to(world.steps[:, None], turning.shape)[turning]
+        self._loiter_at[turning] += self.loiter.turn_in_steps(world.c.dt_s)
+
     def _begin_loiter(self, world: World, starting: np.ndarray) -> None:
-        """Fix the loiter's circle of the ``starting`` (N, 3) vehicles from their states: their backup's lead ends."""
+        """Fix the loiter's circle of the ``starting`` (N, 3) vehicles from their states: their backup's turn-in
+        ends."""
         if not starting.any():
             return
         assert self.loiter is not None
@@ -233,9 +245,11 @@ class WorldMonitor:
         self.counts.switches[w, j] += d.engaged_now.astype(np.int64) + d.released_now
         if self.loiter is not None:
             self._loiter_sign[w[~d.engaged], j[~d.engaged]] = 0.0
-            starting = np.zeros(due.shape, dtype=bool)
-            starting[w, j] = d.engaged & (d.straight_steps == 0) & (self._loiter_sign[w, j] == 0.0)
-            self._begin_loiter(world, starting)
+            self._loiter_at[w[~d.engaged], j[~d.engaged]] = -1
+            turning = np.zeros(due.shape, dtype=bool)
+            turning[w, j] = d.engaged & (d.straight_steps == 0) & (self._loiter_at[w, j] < 0)
+            self._schedule_loiter(world, turning)
+            self._begin_loiter(world, turning & (self._loiter_at == world.steps[:, None]))
         return d
 
 
