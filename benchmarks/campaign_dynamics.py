@@ -5,10 +5,11 @@ dynamics"), as measured, whatever the figures are. Two more campaigns fly the sh
 ArduPlane's GUIDED dialect (``--setpoints arduplane``, names ending ``-arduplane``) on the same layouts, to set beside
 the body-rate campaigns.
 
-Each campaign is one ``fly`` command writing its JSON into ``--out``; a campaign whose JSON is already there, whole, is
-not flown again, so an interrupted run resumes where it stopped (run the same command again). A JSON that ``fly`` wrote
-when it was stopped part-way (``interrupted``, or fewer missions than asked for) is set aside as ``NAME.partial.json``
-and that campaign is flown again from its first mission, on the same layouts. At the end the script
+Each campaign is one ``fly --resume`` command writing its JSON into ``--out``; a campaign whose JSON is already there,
+whole, is not flown again, and one that ``fly`` stopped part-way (``interrupted``, or fewer missions than asked for)
+flies on from its JSON, only the missions it lacks (:mod:`mavlink_bridge.fly.resume`): run the same command again. A
+part written by a ``fly`` too old to name its settings (no ``resume_key``) is set aside as ``NAME.partial.json`` and
+that campaign is flown from its first mission, on the same layouts. At the end the script
 prints the table (success and mean cost with their 95% intervals) and writes it as ``summary.json`` beside the
 campaigns.
 
@@ -52,7 +53,7 @@ class Campaign:
         argv += ["--models", str(args.models)] if self.pilot == "team" else ["--pilot", "guidance"]
         argv += ["--dynamics", "kinematic" if self.dynamics == "kinematic" else "jsbsim"]
         argv += ["--episodes", str(args.episodes), "--seed", str(args.seed), "--workers", str(args.workers)]
-        argv += ["--setpoints", self.setpoints, "--no-progress", "--json", str(out)]
+        argv += ["--setpoints", self.setpoints, "--no-progress", "--json", str(out), "--resume"]
         return argv + (["--shield"] if self.shield else [])
 
 
@@ -87,13 +88,15 @@ def row(campaign: Campaign, result: dict[str, Any]) -> dict[str, Any]:
 
 
 def complete(out: Path, episodes: int) -> bool:
-    """Whether ``out`` holds a whole campaign of ``episodes`` missions; a partial one is moved aside."""
+    """Whether ``out`` holds a whole campaign of ``episodes`` missions; a part of one without a resume key is moved
+    aside (module docstring)."""
     if not out.is_file():
         return False
     result = json.loads(out.read_text())
     if not result.get("interrupted") and result.get("episodes") == episodes and not result.get("error"):
         return True
-    out.replace(out.with_suffix(".partial.json"))
+    if "resume_key" not in result:
+        out.replace(out.with_suffix(".partial.json"))
     return False
 
 

@@ -34,8 +34,12 @@ when a child crashed or a mission timed out, 130 when interrupted.
 ``--workers N`` flies N missions at once: N crews side by side in the fly process (``side_by_side``), or with
 ``--executor ray`` / ``--address`` N Ray tasks (``workers``); either way the rows are the serial run's.
 
+``--resume`` with ``--json FILE`` flies on from a campaign FILE holds (stopped part-way, or asked for more missions):
+only the missions it lacks, FILE's settings checked against the command's first (``resume``).
+
 Modules: ``config`` (FlyConfig, the command line's arguments) · ``mission_runner`` (starts and watches one
 mission's processes) · ``crew`` (the processes kept across a campaign) · ``side_by_side`` and ``workers``
 (missions at once) · ``scoring`` (a mission's outcome and the results JSON) · ``report`` (the printed
-summary and the plot) · ``pool`` (campaigns pooled) · ``cli`` (``python -m mavlink_bridge.fly``).
+summary and the plot) · ``pool`` (campaigns pooled) · ``resume`` (a campaign flown on) · ``cli``
+(``python -m mavlink_bridge.fly``).
 """

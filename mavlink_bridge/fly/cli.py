@@ -18,6 +18,7 @@ from mavlink_bridge.fly.config import PROG, FlyConfig, config_from_args, make_si
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
+from mavlink_bridge.fly.resume import campaign_key, resumed_rows
 from mavlink_bridge.fly.scoring import CampaignResults, summarise
 from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
@@ -54,7 +55,7 @@ def fly_campaign(
     """Fly the campaign's missions (one crew here, crews side by side, or Ray tasks), each mission's row appended to
     ``rows`` as it ends; the first mission that did not end in time, or whose companion lost a write, ends the
     campaign (MissionTimedOut, WriteFailed). ``made_key``: the signing key fly made for this run, if it made one."""
-    with progress_bar(total=cfg.episodes, desc="missions", unit="mission", disable=not cfg.progress) as bar:
+    with progress_bar(total=len(cfg.indices()), desc="missions", unit="mission", disable=not cfg.progress) as bar:
 
         def record(row: MissionRow) -> None:
             rows.append(row)
@@ -82,12 +83,12 @@ def fly_campaign(
 
 
 def campaign_results(
-    rows: list[MissionRow], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float
+    rows: list[MissionRow], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float, key: str
 ) -> CampaignResults:
     """The results of the missions flown (in mission order: missions flown side by side end in any order), with how
     the campaign ended."""
     rows.sort(key=lambda r: r["index"])
-    return CampaignResults(summarise(rows, cfg), rows, interrupted, error, wall_s)
+    return CampaignResults(summarise(rows, cfg), rows, interrupted, error, wall_s, key)
 
 
 def campaign_error(exc: Exception) -> tuple[str, int] | None:
@@ -134,15 +135,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
     try:
         cfg = config_from_args(argv)
+        key = campaign_key(cfg)
+        rows: list[MissionRow] = resumed_rows(cfg, key) if cfg.resume else []
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BAD_INPUT as exc:
         print(f"{PROG}: error: {bad_input_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if rows:
+        cfg = dataclasses.replace(cfg, done=frozenset(row["index"] for row in rows))
+        print(f"resuming: {len(rows)} missions flown, {len(cfg.indices())} to fly", file=sys.stderr)
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     children = ChildProcesses()
-    rows: list[MissionRow] = []
     error: str | None = None
     interrupted = False
     code = 0
@@ -166,7 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             children.stop_all()
             signal.signal(signal.SIGTERM, previous)
             signal.signal(signal.SIGINT, previous_int)
-            results = campaign_results(rows, cfg, interrupted, error, time.monotonic() - started)
+            results = campaign_results(rows, cfg, interrupted, error, time.monotonic() - started, key)
             cfg, code = write_results(cfg, results, code)
     print_report(results, cfg)
     if interrupted:

@@ -92,9 +92,11 @@ class FlyConfig:
         """fly makes a fresh key for this run: signing on, no key given, a world of its own."""
         return self.signing and self.signing_key_path is None and self.connect is None
 
-    def indices(self) -> range:
-        """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1."""
-        return range(self.mission, self.mission + 1) if self.mission is not None else range(self.episodes)
+    def indices(self) -> Sequence[int]:
+        """The mission indices to fly: ``--mission K`` alone, or 0 .. episodes - 1 but those already flown (``done``;
+        a range, not a list, when there are none: ``--episodes`` may be large)."""
+        every = range(self.mission, self.mission + 1) if self.mission is not None else range(self.episodes)
+        return [i for i in every if i not in self.done] if self.done else every
 
     workers: int = 1
     """Missions at once (1: one after the other, here)."""
@@ -111,6 +113,10 @@ class FlyConfig:
     persistent: bool = True
     """One world and three companions fly every mission of the run (of each worker), reset between missions
     (tssac_core.wire.mission_reset); False (``--fresh-processes``): four new processes per mission."""
+    resume: bool = False
+    """``--resume``: fly on from the ``--json`` file's missions (:mod:`mavlink_bridge.fly.resume`)."""
+    done: frozenset[int] = frozenset()
+    """The mission indices the resumed file already holds: not flown again."""
 
     @property
     def on_ray(self) -> bool:
@@ -281,6 +287,12 @@ def _output_flags(g: argparse._ActionsContainer) -> None:
         "--json", type=Path, metavar="FILE", help="write the results here (also the finished missions when interrupted)"
     )
     g.add_argument(
+        "--resume",
+        action="store_true",
+        help="with --json FILE: keep the missions FILE holds (a campaign stopped part-way, of the same settings) and "
+        "fly only the others",
+    )
+    g.add_argument(
         "--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)"
     )
     g.add_argument(
@@ -382,6 +394,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         executor=executor,
         ray_address=a.address,
         persistent=not a.fresh_processes,
+        resume=a.resume,
         serial_baud=a.serial,
         serial_byte_loss=a.serial_byte_loss,
     )
@@ -401,6 +414,8 @@ def check_numbers(a: argparse.Namespace) -> None:
         raise UsageError(f"--mission must be >= 0, got {a.mission}")
     if a.mission is not None and a.episodes != 1:
         raise UsageError("--mission flies one mission: leave --episodes out")
+    if a.resume and (a.json is None or a.mission is not None):
+        raise UsageError("--resume flies on from a campaign's --json FILE: give --json, and no --mission")
     if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):

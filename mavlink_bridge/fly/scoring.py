@@ -187,6 +187,7 @@ class CampaignJson(EvaluationRecordJson):
     interrupted: bool
     error: str | None
     wall_time_s: float
+    resume_key: str
 
 
 @dataclass(frozen=True)
@@ -198,6 +199,8 @@ class CampaignResults:
     interrupted: bool
     error: str | None
     wall_time_s: float
+    resume_key: str = ""
+    """What ``--resume`` checks a file against (:func:`mavlink_bridge.fly.resume.campaign_key`)."""
 
     def to_json(self) -> CampaignJson:
         return {
@@ -206,4 +209,5 @@ class CampaignResults:
             "interrupted": self.interrupted,
             "error": self.error,
             "wall_time_s": round(self.wall_time_s, 3),
+            "resume_key": self.resume_key,
         }

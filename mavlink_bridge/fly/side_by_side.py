@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,7 +39,7 @@ class _Indices:
     that the memory does not grow with ``--episodes`` (a queue of every index ran out of memory at 10^8 missions
     before the first one flew)."""
 
-    def __init__(self, indices: range) -> None:
+    def __init__(self, indices: Sequence[int]) -> None:
         self._indices = iter(indices)
         self._lock = threading.Lock()
 
