@@ -22,6 +22,8 @@ from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.pool import PoolError, check_campaign, read_campaign
 from tssac_core.common.errors import InputError
+from tssac_core.deploy.numpy_actor import pilot_file
+from tssac_core.sim.scenario import ROLES
 
 
 class ResumeError(InputError):
@@ -33,10 +35,11 @@ def _file_digest(path: Path) -> str:
 
 
 def _pilot_files(models: Path | None) -> dict[str, str] | None:
-    """The digests of the models directory's files, by name (None: no models, a built-in pilot)."""
+    """The digests of the files the team's pilots load, by role (None: no models, a built-in pilot); the directory's
+    other files (evaluations written beside them) do not decide a mission."""
     if models is None:
         return None
-    return {p.name: _file_digest(p) for p in sorted(models.iterdir()) if p.is_file()}
+    return {role.value: _file_digest(pilot_file(models, role)) for role in ROLES}
 
 
 def campaign_key(cfg: FlyConfig) -> str:
