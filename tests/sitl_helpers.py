@@ -26,7 +26,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 mavutil.set_dialect("ardupilotmega")
 
 from sim_vehicles.world_runner import RunResult, WorldRunner  # noqa: E402
-from tssac_core.sim.scenario import LinkModel, Scenario, load  # noqa: E402
+from tssac_core.sim.scenario import Layout, LinkModel, Radar, Scenario, Start, dump, load  # noqa: E402
 from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -274,3 +274,22 @@ def kept_out(results: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     shield = results["shield"]
     assert shield["uav_missions_with_cost"] == 0 and shield["uavs_left_area"] == 0, shield
     return mission, shield
+
+
+def quick_strike_scenario(tmp: Path, strike_km: float = 8.0) -> Path:
+    """The strike scenario with the UAVs starting in their zones (the strike UAV ``strike_km`` east of the SAM): short
+    missions for fly's tests, written to ``tmp``."""
+    base = load(Path(__file__).resolve().parents[1] / "scenarios" / "strike.yaml")
+    layout = Layout(
+        sam_km=(65.0, 65.0),
+        target_km=(66.0, 64.0),
+        radars=(Radar((20.0, 20.0), 12.0), Radar((15.0, 85.0), 12.0), Radar((88.0, 15.0), 10.0)),
+        starts={
+            "decoy": Start((46.5, 65.0), 90.0),
+            "detect": Start((65.0, 53.5), 0.0),
+            "strike": Start((65.0 + strike_km, 65.0), 180.0),
+        },
+    )
+    path = tmp / f"quick-{strike_km:g}.yaml"
+    dump(dataclasses.replace(base, name="quick", layout=layout), path)
+    return path

@@ -4,36 +4,21 @@ fly's, is refused in one line and left as it is."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 from typing import Any
 
 import pytest
+from sitl_helpers import quick_strike_scenario
 
 from mavlink_bridge.fly import cli as fly
-from tssac_core.sim.scenario import Layout, Radar, Start, dump, load
 
-REPO = Path(__file__).resolve().parents[1]
 KEYS = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_done")
 
 
 def quick_scenario(tmp: Path) -> Path:
-    """The strike scenario with its UAVs starting in their zones: one short mission per seed."""
-    base = load(REPO / "scenarios" / "strike.yaml")
-    layout = Layout(
-        sam_km=(65.0, 65.0),
-        target_km=(66.0, 64.0),
-        radars=(Radar((20.0, 20.0), 12.0), Radar((15.0, 85.0), 12.0), Radar((88.0, 15.0), 10.0)),
-        starts={
-            "decoy": Start((46.5, 65.0), 90.0),
-            "detect": Start((65.0, 53.5), 0.0),
-            "strike": Start((90.0, 65.0), 180.0),
-        },
-    )
-    path = tmp / "quick.yaml"
-    dump(dataclasses.replace(base, name="quick", layout=layout), path)
-    return path
+    """One short mission per seed (the strike UAV 25 km east of the SAM)."""
+    return quick_strike_scenario(tmp, strike_km=25.0)
 
 
 def flown(path: Path) -> list[dict[str, Any]]:

@@ -114,7 +114,7 @@ class Crew:
             assert stdin is not None, f"{reader.child.name}: standard input is not piped"
             stdin.write(line.encode())
             stdin.flush()
-        except (BrokenPipeError, OSError) as exc:
+        except (OSError, ValueError) as exc:  # ValueError: its pipe already closed (a stop in progress)
             raise CrewError(
                 f"{reader.child.name} (pid {reader.child.pid}) cannot take the next mission: {exc}", reader.child
             ) from None
