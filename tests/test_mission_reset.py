@@ -27,8 +27,8 @@ from tssac_core.wire.truth_log_schema import HEADER, STEP, SUMMARY
 REPO = Path(__file__).resolve().parents[1]
 RANDOM = REPO / "scenarios" / "random.yaml"
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sitl_helpers import parent_pid  # noqa: E402
-from test_fly import _alive, _quick_scenario  # noqa: E402
+from sitl_helpers import parent_pid, quick_strike_scenario  # noqa: E402
+from test_fly import _alive  # noqa: E402
 
 # ------------------------------------------------------------------------------ the lines
 
@@ -116,7 +116,7 @@ class _Lines:
 @pytest.mark.timeout(120)
 def test_a_serving_world_flies_the_next_mission_it_is_told_and_refuses_a_bad_line(tmp_path: Path) -> None:
     """Real time at 2,000x with nobody in the loop: each mission flies itself to its end in a moment."""
-    scenario = _quick_scenario(tmp_path)
+    scenario = quick_strike_scenario(tmp_path)
     argv = [sys.executable, "-m", "sim_vehicles", "--scenario", str(scenario), "--speedup", "2000", "--serve"]
     argv += ["--base-port", "0", "--linger-s", "0", "--truth-log", str(tmp_path / "t0.jsonl")]
     proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
@@ -210,7 +210,8 @@ def test_a_crew_process_whose_death_fly_learns_by_a_broken_pipe_is_named_with_it
     """A companion dies just as fly tells it the next mission: its exit status has not reached fly yet (the check
     before telling sees it running), the pipe breaks, and the mission's error still says what killed it. The
     companions already told the mission stop at fly's SIGTERM, though it came while they set the mission up."""
-    cfg = config_from_args(["--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--episodes", "2"])
+    quick = quick_strike_scenario(tmp_path)
+    cfg = config_from_args(["--scenario", str(quick), "--pilot", "guidance", "--episodes", "2"])
     children = ChildProcesses()
     runner = MissionRunner(cfg, children, tmp_path / "work")
     try:
@@ -241,7 +242,8 @@ def test_a_crew_process_whose_death_fly_learns_by_a_broken_pipe_is_named_with_it
 def test_a_crew_process_that_died_between_missions_is_replaced(tmp_path: Path) -> None:
     """A companion killed between missions, then the fork server the crew came from: each time the next mission
     flies with a new crew (and a new server), and nothing is left running."""
-    cfg = config_from_args(["--scenario", str(_quick_scenario(tmp_path)), "--pilot", "guidance", "--episodes", "3"])
+    quick = quick_strike_scenario(tmp_path)
+    cfg = config_from_args(["--scenario", str(quick), "--pilot", "guidance", "--episodes", "3"])
     children = ChildProcesses()
     runner = MissionRunner(cfg, children, tmp_path / "work")
     servers = []
