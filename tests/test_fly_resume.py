@@ -45,9 +45,11 @@ def test_a_resumed_campaign_flies_only_what_it_lacks_and_ends_as_one_run(
     assert "resuming: 2 missions flown, 1 to fly" in capsys.readouterr().err
     assert flown(part) == flown(whole) and sitl_pids(part)[:2] == before
     assert json.loads(part.read_text())["episodes"] == 3
-    # A campaign interrupted after missions 0 and 2 (the one between was still flying): only mission 1 flies again.
+    # A campaign interrupted after missions 0 and 2 whose mission 1 crashed (a row without its cost, which pooling
+    # refuses): only mission 1 flies again.
     data = json.loads(whole.read_text())
-    stopped = dict(data, missions=[data["missions"][0], data["missions"][2]], interrupted=True, episodes=2)
+    crashed = {"index": 1, "seed": 42, "success": False, "end": "error", "cost": None}
+    stopped = dict(data, missions=[data["missions"][0], crashed, data["missions"][2]], interrupted=True, episodes=3)
     part.write_text(json.dumps(stopped))
     assert fly.main([*args, "--episodes", "3", "--json", str(part), "--resume"]) == 0
     resumed = json.loads(part.read_text())

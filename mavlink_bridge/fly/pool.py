@@ -169,8 +169,9 @@ def check_campaign(data: object, name: str) -> Campaign:
     return Campaign(name, data, rows, stopped)
 
 
-def read_campaign(path: Path) -> Campaign:
-    """A results file read and checked (PoolError: one line naming the file)."""
+def read_results(path: Path) -> dict[str, Any]:
+    """A results file parsed, a JSON object holding a list of missions, its rows not yet checked (PoolError: one line
+    naming the file)."""
     text = _read_text(path)
     try:
         data = json.loads(text)
@@ -178,7 +179,16 @@ def read_campaign(path: Path) -> Campaign:
         raise PoolError(f"{path}: not a fly results file (not JSON: {exc})") from None
     except RecursionError:
         raise PoolError(f"{path}: not a fly results file (nested too deeply)") from None
-    return check_campaign(data, str(path))
+    if not isinstance(data, dict):
+        raise PoolError(f"{path}: not a fly results file (a JSON object expected)")
+    if not isinstance(data.get("missions"), list):
+        raise PoolError(f"{path}: not a fly results file (no list of missions)")
+    return data
+
+
+def read_campaign(path: Path) -> Campaign:
+    """A results file read and checked (PoolError: one line naming the file)."""
+    return check_campaign(read_results(path), str(path))
 
 
 def _flight_settings(data: dict[str, Any]) -> tuple[object, object, object]:

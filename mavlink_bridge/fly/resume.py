@@ -20,7 +20,7 @@ from typing import Any
 
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
-from mavlink_bridge.fly.pool import PoolError, check_campaign, read_campaign
+from mavlink_bridge.fly.pool import PoolError, check_campaign, read_results
 from tssac_core.common.errors import InputError
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES
@@ -78,17 +78,15 @@ def resumed_rows(cfg: FlyConfig, key: str) -> list[MissionRow]:
     if not path.exists():
         return []
     try:
-        raw = read_campaign(path).data
+        raw = read_results(path)
     except PoolError as exc:
-        if "no missions to pool" not in str(exc):
-            raise ResumeError(f"--resume: {exc}") from None
-        raw = json.loads(path.read_text(encoding="utf-8"))  # a campaign stopped before its first mission ended
+        raise ResumeError(f"--resume: {exc}") from None
     if raw.get("resume_key") != key:
         raise ResumeError(
             f"--resume: {path} was flown with other settings than this command's (or by a fly without a resume key): "
             "give another --json, or remove the file to fly from the start"
         )
-    rows = [row for row in raw["missions"] if _ended(row)]
+    rows: list[MissionRow] = [row for row in raw["missions"] if _ended(row)]
     if rows:
         try:
             check_campaign({**raw, "missions": rows, "episodes": len(rows)}, str(path))
@@ -99,5 +97,4 @@ def resumed_rows(cfg: FlyConfig, key: str) -> list[MissionRow]:
         raise ResumeError(
             f"--resume: {path} holds missions up to index {max(beyond)}: --episodes must be at least {max(beyond) + 1}"
         )
-    flown: list[MissionRow] = rows
-    return flown
+    return rows
