@@ -31,13 +31,14 @@ import numpy as np
 from sim_vehicles.dynamics.jsbsim_airframe import AirframeSpec, AirframeState, JsbsimAirframe, StartState, Wind
 from tssac_core.assurance.ground_loiter import (
     LoiterLaw,
+    carried_rollout,
     fly_loiter_on_model,
     loiter_centre,
     loiter_radius_m,
     loiter_turn_rate,
     turn_in_steps,
 )
-from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, lagged_rollout, switched_lag_step
+from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lag_gains, switched_lag_step
 from tssac_core.assurance.monitor import Limits
 
 ENTRY_HOLD_S = 10.0
@@ -170,10 +171,9 @@ def _predicted(
     if steps == 0:
         return x, y, heading, v, lag_state
     held = Limits(v, v, np.array([flight.turn_rate_max_rad_s]), np.zeros(1))
-    path = lagged_rollout(x, y, v, heading, lag_state, commands[None, :], np.zeros((1, steps)), lag, held, flight.dt_s)
-    t = flight.dt_s * np.arange(1, steps + 1)
-    xs, ys = path.xs[0] + case.wind.east_m_s * t, path.ys[0] + case.wind.north_m_s * t
-    return xs, ys, path.headings[:, -1], v, path.lag_after(steps)
+    drift = (case.wind.east_m_s, case.wind.north_m_s)
+    path = carried_rollout(x, y, v, heading, lag_state, commands[None, :], lag, held, flight.dt_s, drift)
+    return path.xs[0], path.ys[0], path.headings[:, -1], v, path.lag_after(steps)
 
 
 def fly_loiter(flight: FitFlight, case: LoiterCase, lag: AirframeLag) -> LoiterRun:

@@ -45,6 +45,7 @@ the loop settles on its circle within a lap and its excursion does not grow from
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -54,6 +55,7 @@ from tssac_core.assurance.lagged_backups import (
     SETTLE_TIME_CONSTANTS,
     AirframeLag,
     LagState,
+    Rollout,
     lag_gains,
     lagged_rollout,
     lead_end_lags,
@@ -257,6 +259,29 @@ class WindLoiter:
         return loiter_radius_m(speed_m_s, self.max_m_s, turn_rate_max_rad_s, self.law.authority)
 
 
+def carried_rollout(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    turn_commands_rad_s: np.ndarray,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+    wind_m_s: tuple[np.ndarray | float, np.ndarray | float],
+) -> Rollout:
+    """:func:`lagged_rollout` of the (M, S) heading-rate commands at constant speed (acceleration 0) through the air,
+    its positions carried over the ground by the wind (east, north; per state or one for all): where a backup's lead
+    and turn-in are predicted to fly in wind."""
+    path = lagged_rollout(
+        x, y, v, phi, lag_state, turn_commands_rad_s, np.zeros_like(turn_commands_rad_s), airframe, lim, dt_s
+    )
+    t = dt_s * np.arange(1, turn_commands_rad_s.shape[1] + 1)[None, :]
+    east, north = (np.asarray(w, dtype=np.float64).reshape(-1, 1) for w in wind_m_s)
+    return dataclasses.replace(path, xs=path.xs + east * t, ys=path.ys + north * t)
+
+
 def loiter_keep_out(
     x: np.ndarray,
     y: np.ndarray,
@@ -310,11 +335,10 @@ def loiter_backup_clearance(
     steps = wind.turn_in_steps(dt_s)
     if steps:
         command = np.repeat((sign * r_lim.turn_rate_max_rad_s)[:, None], steps, axis=1)
-        path = lagged_rollout(ex, ey, ev, ep, lag, command, np.zeros_like(command), airframe.select(rows), r_lim, dt_s)
-        t = dt_s * np.arange(1, steps + 1)[None, :]
-        xs, ys = path.xs + r_wind.east_m_s[:, None] * t, path.ys + r_wind.north_m_s[:, None] * t
-        least = np.minimum(least, point_clearance(xs, ys, r_hz).min(axis=1) - half_step[rows])
-        ex, ey, ev, ep = xs[:, -1], ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
+        drift = (r_wind.east_m_s, r_wind.north_m_s)
+        path = carried_rollout(ex, ey, ev, ep, lag, command, airframe.select(rows), r_lim, dt_s, drift)
+        least = np.minimum(least, point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows])
+        ex, ey, ev, ep = path.xs[:, -1], path.ys[:, -1], path.speeds[:, -1], path.headings[:, -1]
     cx, cy, radius = loiter_keep_out(ex, ey, ev, ep, sign, r_wind, r_lim.turn_rate_max_rad_s)
     out = np.minimum(least, circle_clearance(cx, cy, radius, r_hz)).reshape(m, n_leads * 2)
     return out - wind.residual_m[:, None]
@@ -461,9 +485,8 @@ def model_excursion_m(
     if steps_in:
         held = Limits(v, v, limit, np.zeros(m))
         command = np.repeat((sign * limit)[:, None], steps_in, axis=1)
-        turn = lagged_rollout(x, y, v, heading, lag, command, np.zeros_like(command), air, held, dt_s)
-        x, y = turn.xs[:, -1] + wx * steps_in * dt_s, turn.ys[:, -1] + wy * steps_in * dt_s
-        heading, lag = turn.headings[:, -1], turn.lag_after(steps_in)
+        turn = carried_rollout(x, y, v, heading, lag, command, air, held, dt_s, (wx, wy))
+        x, y, heading, lag = turn.xs[:, -1], turn.ys[:, -1], turn.headings[:, -1], turn.lag_after(steps_in)
     radius = loiter_radius_m(v, wind_max_m_s, limit, law.authority)
     cx, cy = loiter_centre(x, y, v * np.cos(heading) + wx, v * np.sin(heading) + wy, sign, radius)
     steps = math.ceil(MODEL_LAPS * 2.0 * math.pi * radius.max() / (min(speeds_m_s) - wind_max_m_s) / dt_s)
