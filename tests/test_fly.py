@@ -450,6 +450,33 @@ def test_sigterm_stops_both_crews_and_writes_the_finished_missions(tmp_path: Pat
 
 
 @pytest.mark.sitl
+@pytest.mark.timeout(300)
+def test_a_campaign_killed_outright_keeps_its_finished_missions_and_resume_completes_it(tmp_path: Path) -> None:
+    """SIGKILL leaves fly no time to write: what it wrote as the missions ended (``--checkpoint-s 0``: after each) is
+    what survives, a campaign not yet whole, and ``--resume`` flies only the rest."""
+    out = tmp_path / "fly.json"
+    args = ["--scenario", str(quick_strike_scenario(tmp_path, strike_km=25.0)), "--pilot", "guidance"]
+    args += ["--episodes", "4", "--json", str(out), "--no-progress"]
+    proc = _start_fly([*args, "--checkpoint-s", "0"])
+    try:
+        log, _ = _read_until(proc, r"mission 1: \w+ sitl=", 150)  # mission 0 ended (and was written) before it
+        proc.kill()
+        proc.wait(10)
+    finally:
+        _stop(proc)
+    kept = json.loads(out.read_text())
+    assert 1 <= kept["episodes"] < 4 and kept["episodes_requested"] == 4 and kept["interrupted"] is False, log
+    crew = list(kept["missions"][0]["pids"].values())
+    deadline = time.monotonic() + 30  # the crew follows its parent (PR_SET_PDEATHSIG)
+    while time.monotonic() < deadline and [pid for pid in crew if _alive(pid)]:
+        time.sleep(0.1)
+    assert fly.main([*args, "--resume"]) == 0
+    resumed = json.loads(out.read_text())
+    assert [m["index"] for m in resumed["missions"]] == [0, 1, 2, 3] and all(m["success"] for m in resumed["missions"])
+    assert resumed["missions"][: kept["episodes"]] == kept["missions"]
+
+
+@pytest.mark.sitl
 @pytest.mark.timeout(240)
 def test_a_crash_in_one_crew_stops_both(tmp_path: Path) -> None:
     out = tmp_path / "fly.json"

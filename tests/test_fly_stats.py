@@ -38,6 +38,14 @@ def test_mission_flies_one_mission_of_the_seed():
         config_from_args(["--scenario", str(RANDOM), "--pilot", "guidance", "--mission", "2", "--episodes", "4"])
 
 
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_checkpoint_s_must_be_a_finite_time_of_zero_or_more(value: str) -> None:
+    base = ["--scenario", str(RANDOM), "--pilot", "guidance"]
+    assert config_from_args([*base, "--checkpoint-s", "0"]).checkpoint_s == 0.0
+    with pytest.raises(UsageError, match="--checkpoint-s must be a number of seconds >= 0"):
+        config_from_args([*base, "--checkpoint-s", value])
+
+
 def _row(index: int, seed: int, success: bool, decoy: float = 0.0, strike: float = 0.0) -> dict:
     cost = {"decoy": decoy, "detect": 0.0, "strike": strike}
     return {

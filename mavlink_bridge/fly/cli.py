@@ -8,18 +8,19 @@ import signal
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
 
 import numpy as np
 
+from mavlink_bridge.fly.checkpoint import Checkpoint
 from mavlink_bridge.fly.config import PROG, FlyConfig, config_from_args, make_signing_key
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.mission_runner import ChildFailed, MissionRunner, WorldRefused
 from mavlink_bridge.fly.report import print_report
 from mavlink_bridge.fly.resume import campaign_key, resumed_rows
-from mavlink_bridge.fly.scoring import CampaignResults, summarise
+from mavlink_bridge.fly.scoring import CampaignResults, campaign_results
 from mavlink_bridge.fly.side_by_side import fly_side_by_side
 from mavlink_bridge.fly.workers import fly_on_workers
 from mavlink_bridge.processes.children import ChildProcesses
@@ -50,15 +51,22 @@ def _on_sigterm(signum: int, _frame: FrameType | None) -> None:
 
 
 def fly_campaign(
-    cfg: FlyConfig, children: ChildProcesses, work: Path, made_key: Path | None, rows: list[MissionRow]
+    cfg: FlyConfig,
+    children: ChildProcesses,
+    work: Path,
+    made_key: Path | None,
+    rows: list[MissionRow],
+    checkpoint: Callable[[list[MissionRow]], None] = lambda rows: None,
 ) -> None:
     """Fly the campaign's missions (one crew here, crews side by side, or Ray tasks), each mission's row appended to
     ``rows`` as it ends; the first mission that did not end in time, or whose companion lost a write, ends the
-    campaign (MissionTimedOut, WriteFailed). ``made_key``: the signing key fly made for this run, if it made one."""
+    campaign (MissionTimedOut, WriteFailed). ``made_key``: the signing key fly made for this run, if it made one;
+    ``checkpoint`` is called with the rows after each (:class:`~mavlink_bridge.fly.checkpoint.Checkpoint`)."""
     with progress_bar(total=len(cfg.indices()), desc="missions", unit="mission", disable=not cfg.progress) as bar:
 
         def record(row: MissionRow) -> None:
             rows.append(row)
+            checkpoint(rows)
             bar.update(1)
             bar.set_postfix(success=f"{np.mean([bool(r.get('success')) for r in rows]):.0%}")
             if row.get("end") == "timeout":
@@ -80,15 +88,6 @@ def fly_campaign(
                     record(row)
             finally:
                 runner.close()
-
-
-def campaign_results(
-    rows: list[MissionRow], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float, key: str
-) -> CampaignResults:
-    """The results of the missions flown (in mission order: missions flown side by side end in any order), with how
-    the campaign ended."""
-    rows.sort(key=lambda r: r["index"])
-    return CampaignResults(summarise(rows, cfg), rows, interrupted, error, wall_s, key)
 
 
 def campaign_error(exc: Exception) -> tuple[str, int] | None:
@@ -155,7 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="tssac-fly-") as tmp:
         try:
             cfg, work, made_key = prepare(cfg, Path(tmp))
-            fly_campaign(cfg, children, work, made_key, rows)
+            fly_campaign(cfg, children, work, made_key, rows, Checkpoint(cfg, key, started))
         except KeyboardInterrupt:
             interrupted, code = True, EXIT_INTERRUPTED
         except Exception as exc:

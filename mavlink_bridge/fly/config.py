@@ -117,6 +117,9 @@ class FlyConfig:
     """``--resume``: fly on from the ``--json`` file's missions (:mod:`mavlink_bridge.fly.resume`)."""
     done: frozenset[int] = frozenset()
     """The mission indices the resumed file already holds: not flown again."""
+    checkpoint_s: float = 30.0
+    """``--checkpoint-s S``: the ``--json`` file is written with the missions flown so far at most every S seconds of
+    wall time (:mod:`mavlink_bridge.fly.checkpoint`)."""
 
     @property
     def on_ray(self) -> bool:
@@ -293,6 +296,14 @@ def _output_flags(g: argparse._ActionsContainer) -> None:
         "fly only the others",
     )
     g.add_argument(
+        "--checkpoint-s",
+        type=float,
+        default=FlyConfig.checkpoint_s,
+        metavar="S",
+        help="while flying, write --json FILE with the missions flown so far at most every S seconds of wall time "
+        "(a killed campaign loses at most that much; --resume flies on from it; 0: after every mission; default 30)",
+    )
+    g.add_argument(
         "--tlog", type=Path, metavar="DIR", help="write DIR/mission-NNN/<role>.tlog (each companion's MAVLink traffic)"
     )
     g.add_argument(
@@ -395,6 +406,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         ray_address=a.address,
         persistent=not a.fresh_processes,
         resume=a.resume,
+        checkpoint_s=a.checkpoint_s,
         serial_baud=a.serial,
         serial_byte_loss=a.serial_byte_loss,
     )
@@ -416,6 +428,8 @@ def check_numbers(a: argparse.Namespace) -> None:
         raise UsageError("--mission flies one mission: leave --episodes out")
     if a.resume and (a.json is None or a.mission is not None):
         raise UsageError("--resume flies on from a campaign's --json FILE: give --json, and no --mission")
+    if not (math.isfinite(a.checkpoint_s) and a.checkpoint_s >= 0):
+        raise UsageError(f"--checkpoint-s must be a number of seconds >= 0, got {a.checkpoint_s}")
     if a.speedup is not None and not (math.isfinite(a.speedup) and a.speedup > 0):
         raise UsageError(f"--speedup must be a positive number, got {a.speedup}")
     if not (math.isfinite(a.mission_timeout_s) and a.mission_timeout_s > 0):

@@ -211,3 +211,12 @@ class CampaignResults:
             "wall_time_s": round(self.wall_time_s, 3),
             "resume_key": self.resume_key,
         }
+
+
+def campaign_results(
+    rows: list[MissionRow], cfg: FlyConfig, interrupted: bool, error: str | None, wall_s: float, key: str
+) -> CampaignResults:
+    """The results of the missions flown (in mission order: missions flown side by side end in any order), with how
+    the campaign ended."""
+    rows.sort(key=lambda r: r["index"])
+    return CampaignResults(summarise(rows, cfg), rows, interrupted, error, wall_s, key)
