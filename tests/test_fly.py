@@ -450,6 +450,19 @@ def test_sigterm_stops_both_crews_and_writes_the_finished_missions(tmp_path: Pat
 
 
 @pytest.mark.sitl
+@pytest.mark.timeout(120)
+def test_every_uav_that_leaves_the_area_is_counted_out(tmp_path: Path) -> None:
+    """Straight pilots on the quick layout: the decoy (heading north) and the detect UAV (heading east) both reach the
+    area's edge 35 km out at the same step, which ends the mission; each is counted out, whatever its index (a FENCE
+    event's value is the UAV's index: counting only values of 1 counted the detect UAV alone)."""
+    out = tmp_path / "fly.json"
+    args = ["--scenario", str(quick_strike_scenario(tmp_path, strike_km=25.0)), "--pilot", "straight"]
+    assert fly.main([*args, "--episodes", "1", "--no-progress", "--json", str(out)]) == 0
+    mission = json.loads(out.read_text())["missions"][0]
+    assert mission["end"] == "geofence" and mission["left_area"] == {"decoy": 1, "detect": 1, "strike": 0}
+
+
+@pytest.mark.sitl
 @pytest.mark.timeout(300)
 def test_a_campaign_killed_outright_keeps_its_finished_missions_and_resume_completes_it(tmp_path: Path) -> None:
     """SIGKILL leaves fly no time to write: what it wrote as the missions ended (``--checkpoint-s 0``: after each) is

@@ -91,9 +91,10 @@ class MissionRecord:
         return {role: ev in seen for role, ev in TASK_EVENTS.items()}
 
     def event_count(self, name: str) -> dict[str, int]:
+        """Per role, how many events ``name`` of a UAV (HAZARD, FENCE: their ``vehicle``) the log holds."""
         out = {r.value: 0 for r in ROLES}
         for e in self.events:
-            if e.get("event") == name and e.get("vehicle") in out and e.get("value") == 1:
+            if e.get("event") == name and e.get("vehicle") in out:
                 out[str(e["vehicle"])] += 1
         return out
 
