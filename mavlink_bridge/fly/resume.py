@@ -22,7 +22,7 @@ from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.pool import PoolError, check_campaign, read_results
 from tssac_core.common.errors import InputError
-from tssac_core.deploy.numpy_actor import pilot_file
+from tssac_core.deploy.numpy_actor import pilot_file, sha256_file
 from tssac_core.sim.scenario import ROLES
 
 
@@ -30,16 +30,12 @@ class ResumeError(InputError):
     """A results file the campaign cannot resume from; ``str()`` is one line."""
 
 
-def _file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _pilot_files(models: Path | None) -> dict[str, str] | None:
     """The digests of the files the team's pilots load, by role (None: no models, a built-in pilot); the directory's
     other files (evaluations written beside them) do not decide a mission."""
     if models is None:
         return None
-    return {role.value: _file_digest(pilot_file(models, role)) for role in ROLES}
+    return {role.value: sha256_file(pilot_file(models, role)) for role in ROLES}
 
 
 def campaign_key(cfg: FlyConfig) -> str:
@@ -53,7 +49,7 @@ def campaign_key(cfg: FlyConfig) -> str:
         "lockstep_grant_s": cfg.lockstep_grant_s,
         "shield": cfg.shield,
         "shield_adjust": cfg.shield_adjust,
-        "airframe_response": None if cfg.airframe_response is None else _file_digest(cfg.airframe_response),
+        "airframe_response": None if cfg.airframe_response is None else sha256_file(cfg.airframe_response),
         "setpoints": cfg.setpoints.value,
         "lean_telemetry": cfg.lean_telemetry,
         "serial": [cfg.serial_baud, cfg.serial_byte_loss],
