@@ -5,6 +5,7 @@ a directory others can write is refused for logs (tssac_core.common.files)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import stat
@@ -18,7 +19,7 @@ import pytest
 from mavlink_bridge.fly import cli as fly
 from mavlink_bridge.fly.config import make_signing_key
 from tssac_core.common.cli import write_json
-from tssac_core.common.files import create_exclusively, private_directory
+from tssac_core.common.files import create_exclusively, private_directory, sha256_file
 
 REPO = Path(__file__).resolve().parents[1]
 STRIKE = REPO / "scenarios" / "strike.yaml"
@@ -226,3 +227,14 @@ def test_json_to_a_descriptor_redirected_to_a_file_lands_in_order(tmp_path: Path
         )
     lines = out.read_text().splitlines()
     assert lines[0] == "before" and lines[-1] == "after" and json.loads("\n".join(lines[1:-1])) == {"a": 1}
+
+
+def test_a_files_digest_is_sha256_of_all_its_bytes(tmp_path: Path) -> None:
+    """The one digest the manifests, the actors' sources, the response files and fly's resume key use: all of a file
+    larger than one read block, and an empty one."""
+    data = os.urandom(3 * 65536 + 17)
+    (tmp_path / "big").write_bytes(data)
+    (tmp_path / "empty").write_bytes(b"")
+    assert sha256_file(tmp_path / "big") == hashlib.sha256(data).hexdigest()
+    assert sha256_file(str(tmp_path / "empty")) == hashlib.sha256(b"").hexdigest()
+    assert sha256_file(tmp_path / "big") != hashlib.sha256(data[:-1]).hexdigest()

@@ -22,7 +22,8 @@ from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.pool import PoolError, check_campaign, read_results
 from tssac_core.common.errors import InputError
-from tssac_core.deploy.numpy_actor import pilot_file, sha256_file
+from tssac_core.common.files import sha256_file
+from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES
 
 

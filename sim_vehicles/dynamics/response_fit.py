@@ -60,13 +60,13 @@ from sim_vehicles.dynamics.loiter_fit import (
 from tssac_core.assurance.ground_loiter import LoiterLaw, settled_turn_in_s
 from tssac_core.assurance.lagged_backups import lag_gains, switched_lag_step
 from tssac_core.common.cli import UsageError, run
+from tssac_core.common.files import sha256_file
 from tssac_core.sim.airframe_response import (
     RESPONSE_SCHEMA,
     AirframeResponse,
     ResponseFileError,
     airframe_lag,
     dump_response,
-    file_sha256,
     load_response,
 )
 
@@ -287,7 +287,7 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
     provisional = AirframeResponse(
         schema=RESPONSE_SCHEMA,
         aircraft=path.stem,
-        airframe_sha256=file_sha256(path),
+        airframe_sha256=sha256_file(path),
         jsbsim_version=jsbsim.__version__,
         command=command,
         altitude_m=settings.altitude_m,

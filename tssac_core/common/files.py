@@ -1,13 +1,21 @@
-"""Writing files so that a crash, a kill -9 or a power cut leaves the old file or the new one, never a torn one."""
+"""Files: writing them so that a crash, a kill -9 or a power cut leaves the old file or the new one, never a torn one;
+and a file's digest."""
 
 from __future__ import annotations
 
 import errno
+import hashlib
 import os
 import stat
 import sys
 import tempfile
 from pathlib import Path
+
+
+def sha256_file(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, hex (read in blocks, not whole into memory)."""
+    with Path(path).open("rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def fsync_path(path: Path) -> None:

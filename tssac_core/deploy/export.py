@@ -29,7 +29,7 @@ import numpy as np
 
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import CheckpointError
-from tssac_core.common.files import replace_durably
+from tssac_core.common.files import replace_durably, sha256_file
 from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import MANIFEST, check_models, record, warn_once
 from tssac_core.deploy.numpy_actor import (
@@ -39,7 +39,6 @@ from tssac_core.deploy.numpy_actor import (
     holds_onnx,
     pilot_file,
     read_actor,
-    sha256_file,
 )
 from tssac_core.deploy.onnx_actor import INSTALL
 from tssac_core.sim.scenario import ROLES, Role

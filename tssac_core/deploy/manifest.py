@@ -23,14 +23,13 @@ from __future__ import annotations
 
 import argparse
 import functools
-import hashlib
 import logging
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from tssac_core.common.errors import CheckpointError
-from tssac_core.common.files import replace_durably
+from tssac_core.common.files import replace_durably, sha256_file
 from tssac_core.sim.scenario import ROLES
 
 MANIFEST = "SHA256SUMS"
@@ -40,12 +39,6 @@ MODEL_SUFFIXES = (".pt", ".npz", ".onnx")
 _LINE = re.compile(r"([0-9a-f]{64}) [ *](.+)")  # sha256sum's text (two spaces) and binary (" *") forms
 
 logger = logging.getLogger(__name__)
-
-
-def sha256_of(path: Path) -> str:
-    """The file's SHA-256, hex."""
-    with path.open("rb") as fh:
-        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def model_files(directory: Path) -> list[str]:
@@ -90,7 +83,7 @@ def record(directory: Path, names: Iterable[str]) -> Path:
     there is none; the other entries are kept). Called by whatever has just written those files."""
     entries = read_manifest(directory) or {}
     for name in names:
-        entries[name] = sha256_of(directory / name)
+        entries[name] = sha256_file(directory / name)
     return write_manifest(directory, entries)
 
 
@@ -103,7 +96,7 @@ def problems(directory: Path, entries: Mapping[str, str], names: Iterable[str] |
         path = directory / name
         if not path.is_file():
             found.append(f"{path}: listed in {directory / MANIFEST} but missing")
-        elif sha256_of(path) != digest:
+        elif sha256_file(path) != digest:
             found.append(f"{path}: its sha256 differs from {directory / MANIFEST} (changed after it was written)")
     return found
 
@@ -117,7 +110,7 @@ def check_recorded(directory: Path, names: Iterable[str]) -> None:
     for name in names:
         if name not in entries:
             raise CheckpointError(f"{directory / name}: not recorded in {directory / MANIFEST}")
-        if sha256_of(directory / name) != entries[name]:
+        if sha256_file(directory / name) != entries[name]:
             raise CheckpointError(f"{directory / name}: its sha256 differs from {directory / MANIFEST}")
 
 
@@ -168,7 +161,7 @@ def write_command(directory: Path, force: bool, every_file: bool = False) -> str
     found = problems(directory, entries) if entries is not None else []
     if found and not force:
         raise CheckpointError(f"{found[0]}; --force records the files as they are now")
-    path = write_manifest(directory, {name: sha256_of(directory / name) for name in names})
+    path = write_manifest(directory, {name: sha256_file(directory / name) for name in names})
     return f"wrote {path} ({len(names)} files)"
 
 

@@ -24,7 +24,6 @@ directory of ONNX actors (``export --format onnx``, :mod:`tssac_core.deploy.onnx
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import zipfile
@@ -35,6 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from tssac_core.common.errors import CheckpointError, check_action_repeat
+from tssac_core.common.files import sha256_file
 from tssac_core.deploy.actor_meta import ActorMeta
 from tssac_core.deploy.manifest import check_model_file, warn_once
 from tssac_core.sim.observation import ObservationMode
@@ -58,10 +58,6 @@ class Actor(Protocol):
     def predict(self, obs: np.ndarray) -> np.ndarray: ...
 
     def __call__(self, obs: np.ndarray) -> np.ndarray: ...
-
-
-def sha256_file(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 class NumpyPolicy:

@@ -33,7 +33,6 @@ measured, not assumed: ``tests/test_lagged_backups.py`` flies the F-16 there.
 from __future__ import annotations
 
 import bisect
-import hashlib
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -46,6 +45,7 @@ from tssac_core.assurance.ground_loiter import LoiterBound, LoiterLaw
 from tssac_core.assurance.lagged_backups import AirframeLag, lag_gains
 from tssac_core.common.cli import UsageError
 from tssac_core.common.errors import InputError
+from tssac_core.common.files import sha256_file
 from tssac_core.sim.yaml_file import read_yaml, typed_value
 
 if TYPE_CHECKING:
@@ -255,11 +255,6 @@ class AirframeResponse:
         )
 
 
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
 def load_response(path: str | Path, airframe_path: str | Path | None = None) -> AirframeResponse:
     """Read a response file; with ``airframe_path``, refuse one fitted to another version of that airframe file.
     Every problem is one :class:`ResponseFileError` line."""
@@ -272,7 +267,7 @@ def load_response(path: str | Path, airframe_path: str | Path | None = None) -> 
         raise error(str(path), "schema", f"version {raw['schema']} is newer than this program's ({RESPONSE_SCHEMA})")
     response = typed_value(AirframeResponse, raw, "", str(path), error)
     if airframe_path is not None:
-        actual = file_sha256(airframe_path)
+        actual = sha256_file(airframe_path)
         if actual != response.airframe_sha256:
             raise ResponseFileError(
                 f"{path}: fitted to another version of {airframe_path} (sha256 {response.airframe_sha256[:12]}..., "
