@@ -138,8 +138,9 @@ def test_a_serving_world_flies_the_next_mission_it_is_told_and_refuses_a_bad_lin
             proc.kill()
             proc.wait(10)
     assert proc.returncode == 2
-    errors = err.decode().strip().splitlines()
-    assert len(errors) == 1 and errors[0].startswith("python -m sim_vehicles: error: mission line is not JSON")
+    # On a loaded machine the world may fall behind its 2,000x clock and say so (a pacing warning): not the error.
+    said = [line for line in err.decode().strip().splitlines() if "sim_vehicles.clock.pacing WARNING" not in line]
+    assert len(said) == 1 and said[0].startswith("python -m sim_vehicles: error: mission line is not JSON"), said
     records = [[json.loads(line) for line in (tmp_path / f"t{i}.jsonl").read_text().splitlines()] for i in (0, 1, 2)]
     headers = [r[0] for r in records]
     assert [h["type"] for h in headers] == [HEADER] * 3 and [h["seed"] for h in headers] == [0, 41, 42]
