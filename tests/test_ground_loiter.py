@@ -322,6 +322,8 @@ def test_in_wind_the_world_monitors_backup_turns_in_for_its_turn_in_then_loiters
         for w, j in zip(*np.nonzero(on.any(axis=0))):
             first = int(np.argmax(on[:, w, j]))
             after = omega[first:, w, j]
+            if not np.any(after != 0.0):  # its lead still flies: nothing to check yet
+                continue
             lead = int(np.argmax(after != 0.0))
             turn = after[lead : lead + turn_in]
             loiter = first + lead + turn_in
