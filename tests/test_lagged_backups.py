@@ -6,6 +6,7 @@ control on the fitted residual."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -14,13 +15,21 @@ import pytest
 from tssac_core.assurance.lagged_backups import (
     AirframeLag,
     LagState,
+    held_rollout,
     lag_gains,
     lagged_backup_clearance,
     lagged_rollout,
     straight_rollout,
     turn_keep_out,
 )
-from tssac_core.assurance.monitor import Hazards, Limits, constant_rollout, point_clearance
+from tssac_core.assurance.monitor import (
+    EstimateError,
+    Hazards,
+    Limits,
+    backup_error_m,
+    constant_rollout,
+    point_clearance,
+)
 
 DT = 0.1
 W = math.radians(5.0)
@@ -112,6 +121,60 @@ def test_straight_flight_in_closed_form_is_the_step_by_step_path(steps: int) -> 
                     slow.headings, slow.rates)):  # fmt: skip
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
     np.testing.assert_array_equal(fast.queue, slow.queue)
+
+
+def test_a_held_lead_is_the_open_lead_up_to_its_hold_then_the_line_along_the_course_it_has_there() -> None:
+    rng = np.random.default_rng(11)
+    m, held_from, steps = 30, 320, 1280
+    x, y, v, phi = random_states(rng, m)
+    lim, air = limits(m), random_airframes(rng, m)
+    lag = LagState(rng.uniform(-W, W, m), rng.uniform(-W, W, (m, 2)))  # mid-roll, turns still pending
+    held = held_rollout(x, y, v, phi, lag, steps, held_from, air, lim, DT)
+    open_ = straight_rollout(x, y, v, phi, lag, held_from, air, lim, DT)
+    np.testing.assert_array_equal(held.xs[:, :held_from], open_.xs)
+    np.testing.assert_array_equal(held.headings[:, :held_from], open_.headings)
+    x0, y0, p0, v0 = open_.xs[:, -1:], open_.ys[:, -1:], open_.headings[:, -1:], open_.speeds[:, -1:]
+    along = v0 * DT * np.arange(1, steps - held_from + 1)[None, :]
+    np.testing.assert_allclose(held.xs[:, held_from:], x0 + along * np.cos(p0), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(held.ys[:, held_from:], y0 + along * np.sin(p0), rtol=0, atol=1e-6)
+    assert np.all(held.headings[:, held_from:] == p0) and np.all(held.rates[:, held_from:] == 0.0)
+    after = held.lag_after(steps)  # where the turn starts: straight and steady, nothing pending
+    assert np.all(after.omega_rad_s == 0.0) and np.all(after.pending_rad_s == 0.0)
+    # The open lead's own rate at the hold is not quite 0: flown on open, its path would bend off the line.
+    assert np.abs(open_.rates[:, -1]).max() > 0.0
+
+
+def test_held_leads_take_the_held_residual_and_shorter_ones_the_turns() -> None:
+    rng = np.random.default_rng(12)
+    m = 40
+    x, y, v, phi = random_states(rng, m)
+    lim = limits(m)
+    z = np.zeros(m)
+    tau = np.full(m, 0.05)
+    none = AirframeLag(np.zeros(m, np.int64), tau, tau, np.full(m, 10.0), np.full(m, -10.0), np.full(m, 37.0))
+    held = dataclasses.replace(none, held_residual_m=np.full(m, 500.0), held_after_s=32.0)
+    hz = Hazards(np.stack([x[:, None] + 9_000.0, y[:, None]], axis=2), np.full((m, 1), 3_000.0), 100_000.0)
+    lag = LagState.steady(z, 0)  # straight and steady: the held line is the open lead itself
+    leads = np.array([0, 40, 320, 640, 1280])
+    a = lagged_backup_clearance(x, y, v, phi, lag, hz, none, lim, DT, leads).reshape(m, len(leads), 2)
+    b = lagged_backup_clearance(x, y, v, phi, lag, hz, held, lim, DT, leads).reshape(m, len(leads), 2)
+    np.testing.assert_allclose(a[:, :3], b[:, :3], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a[:, 3:] - b[:, 3:], 463.0, rtol=0, atol=1e-6)
+
+
+def test_a_held_leads_heading_error_turns_only_its_open_part() -> None:
+    m = 1
+    lim = limits(m)
+    leads = np.array([0, 320, 640, 1280])
+    heading = EstimateError(np.zeros(m), np.full(m, 0.01), np.zeros(m))
+    speed = EstimateError(np.zeros(m), np.zeros(m), np.full(m, 1.0))
+    turned = backup_error_m(heading, lim, DT, leads, turned_steps_max=320).reshape(len(leads), -1)[:, 0]
+    open_ = backup_error_m(heading, lim, DT, leads).reshape(len(leads), -1)[:, 0]
+    np.testing.assert_allclose(turned[:2], open_[:2])
+    np.testing.assert_allclose(turned[1:], turned[1])  # no longer turned after the hold ...
+    assert open_[3] > open_[1] + 0.01 * 300.0 * 90.0  # ... where an open lead is turned all the way
+    stretched = backup_error_m(speed, lim, DT, leads, turned_steps_max=320).reshape(len(leads), -1)[:, 0]
+    np.testing.assert_allclose(np.diff(stretched), 1.0 * 32.0 * np.array([1.0, 1.0, 2.0]))  # the speed's error runs on
 
 
 def test_a_turn_never_leaves_its_keep_out_disk_and_half_the_disks_growth_is_not_enough() -> None:

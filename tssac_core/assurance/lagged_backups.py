@@ -102,6 +102,12 @@ class AirframeLag:
     """The largest deceleration it achieves (< 0)."""
     residual_m: np.ndarray
     """How far the airframe's path may lie from the model's (m)."""
+    held_residual_m: np.ndarray | None = None
+    """How far the airframe's path may lie from the model's over a backup whose lead holds its course after
+    ``held_after_s`` (m; None: no held leads, every lead flown open loop)."""
+    held_after_s: float = 32.0
+    """A lead longer than this holds, from this time on, the ground line through where the vehicle is then along the
+    course the model predicts there (:func:`held_rollout`); shorter leads are flown open loop."""
 
     def select(self, idx: np.ndarray) -> AirframeLag:
         return AirframeLag(
@@ -111,7 +117,24 @@ class AirframeLag:
             self.accel_m_s2[idx],
             self.decel_m_s2[idx],
             self.residual_m[idx],
+            None if self.held_residual_m is None else self.held_residual_m[idx],
+            self.held_after_s,
         )
+
+    def held_from_steps(self, dt_s: float) -> int | None:
+        """The world step from which a long lead holds its course (None: no held leads)."""
+        return None if self.held_residual_m is None else round(self.held_after_s / dt_s)
+
+    def lead_residual_m(self, leads: np.ndarray, dt_s: float) -> np.ndarray:
+        """The residual of each backup with each lead of ``leads`` (world steps), (M, L): the held one for the leads
+        that hold their course, the turns' for the rest."""
+        held_from = self.held_from_steps(dt_s)
+        out = np.repeat(self.residual_m[:, None], len(leads), axis=1)
+        if held_from is not None:
+            assert self.held_residual_m is not None
+            held = np.asarray(leads) > held_from
+            out[:, held] = self.held_residual_m[:, None]
+        return out
 
     def longest_tau_s(self) -> np.ndarray:
         """The longer of the two time constants, (M,)."""
@@ -251,6 +274,48 @@ def straight_rollout(
     )
 
 
+def held_rollout(
+    x: np.ndarray,
+    y: np.ndarray,
+    v: np.ndarray,
+    phi: np.ndarray,
+    lag_state: LagState,
+    steps: int,
+    held_from: int,
+    airframe: AirframeLag,
+    lim: Limits,
+    dt_s: float,
+) -> Rollout:
+    """A lead of ``steps`` steps that flies straight open loop (:func:`straight_rollout`) for its first ``held_from``
+    steps and then holds its course: the ground line through where the model is at step ``held_from``, along the
+    model's heading there, flown at that speed, the lag steady and straight (rate 0, nothing pending). The airframe
+    follows it under a line-following law; how far it may lie off is the fitted ``held_residual_m``."""
+    first = min(steps, held_from)
+    head = straight_rollout(x, y, v, phi, lag_state, first, airframe, lim, dt_s)
+    rest = steps - first
+    if rest == 0:
+        return head
+    m = len(x)
+    if first:
+        x0, y0, v0, p0 = (a[:, -1] for a in (head.xs, head.ys, head.speeds, head.headings))
+    else:
+        x0, y0, p0 = x, y, phi
+        v0 = np.clip(v, lim.speed_min_m_s, lim.speed_max_m_s)
+    along = v0[:, None] * dt_s * np.arange(1, rest + 1)[None, :]  # (M, rest)
+    tail = (
+        x0[:, None] + along * np.cos(p0)[:, None],
+        y0[:, None] + along * np.sin(p0)[:, None],
+        np.repeat(v0[:, None], rest, axis=1),
+        np.repeat(p0[:, None], rest, axis=1),
+        np.zeros((m, rest)),
+    )
+    xs, ys, speeds, headings, rates = (
+        np.concatenate([a, b], axis=1) if first else b
+        for a, b in zip((head.xs, head.ys, head.speeds, head.headings, head.rates), tail)
+    )
+    return Rollout(xs, ys, speeds, headings, rates, np.concatenate([head.queue, np.zeros((m, rest))], axis=1))
+
+
 def turn_keep_out(
     x: np.ndarray,
     y: np.ndarray,
@@ -316,7 +381,13 @@ def lead_samples(
     xs, ys, speeds, headings = (a[:, None] for a in (x, y, v, phi))
     straight = None
     if longest:
-        straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
+        held_from = airframe.held_from_steps(dt_s)
+        if held_from is not None and longest > held_from and wind_m_s is not None:
+            raise ValueError("a lead that holds its course is predicted for calm air only")
+        if held_from is None or longest <= held_from:
+            straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
+        else:
+            straight = held_rollout(x, y, v, phi, lag_state, longest, held_from, airframe, lim, dt_s)
         sx, sy = straight.xs, straight.ys
         if wind_m_s is not None:
             t = dt_s * np.arange(1, longest + 1)[None, :]
@@ -360,7 +431,7 @@ def lagged_backup_clearance(
     samples = point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows]
     disk = circle_clearance(cx, cy, radius, r_hz)
     out = np.minimum.reduce([lead.least_m[rows, pick], samples, disk]).reshape(m, n_leads, 2)
-    return out.reshape(m, n_leads * 2) - airframe.residual_m[:, None]
+    return (out - airframe.lead_residual_m(leads, dt_s)[:, :, None]).reshape(m, n_leads * 2)
 
 
 def lead_end_lags(lead: LeadSamples, lag_state: LagState, leads: np.ndarray) -> tuple[np.ndarray, np.ndarray, LagState]:

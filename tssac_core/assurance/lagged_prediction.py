@@ -115,7 +115,9 @@ class LaggedPrediction:
         lim, dt_s = scene.lim, scene.dt_s
         leads = lead_steps(scene.cfg, dt_s)
         if self.wind is None:
-            error = backup_error_m(err, lim, dt_s, leads + self.airframe.settle_steps(dt_s))
+            settle, held_from = self.airframe.settle_steps(dt_s), self.airframe.held_from_steps(dt_s)
+            turned_max = None if held_from is None else held_from + settle
+            error = backup_error_m(err, lim, dt_s, leads + settle, turned_max)
         else:
             error = loiter_backup_error_m(err, lim, dt_s, leads, self.wind)
         per_turn = error.reshape(len(error), len(leads), N_TURNS).copy()

@@ -409,7 +409,9 @@ def choose_backup(excess: np.ndarray) -> np.ndarray:
     return np.where(clear.any(axis=1), np.argmin(key, axis=1), np.argmax(excess, axis=1))
 
 
-def backup_error_m(err: EstimateError, lim: Limits, dt_s: float, leads: np.ndarray) -> np.ndarray:
+def backup_error_m(
+    err: EstimateError, lim: Limits, dt_s: float, leads: np.ndarray, turned_steps_max: int | None = None
+) -> np.ndarray:
     """How much of each backup's clearance the state's error can take away, (M, L * N_TURNS), in metres.
 
     A backup is open loop (a fixed sequence of commands in time), so flown from a state off by (d_p, d_phi, d_v)
@@ -425,14 +427,20 @@ def backup_error_m(err: EstimateError, lim: Limits, dt_s: float, leads: np.ndarr
 
     The clearance of a moved path is at least the clearance of the predicted one less the largest move, which
     is what this returns per backup (candidate lead * N_TURNS + turn, as :func:`backup_clearance`).
+
+    With ``turned_steps_max``, a backup whose lead holds its course after that many steps
+    (:func:`~tssac_core.assurance.lagged_backups.held_rollout`) is turned by d_phi over those steps only: the line it
+    then holds keeps the course the check predicted, so it is the predicted one moved, not turned further; d_p and
+    d_v move it as before.
     """
     t = leads.astype(np.float64) * dt_s  # (L,)
+    turned = t if turned_steps_max is None else np.minimum(t, turned_steps_max * dt_s)
     w, vmax = lim.turn_rate_max_rad_s[:, None], lim.speed_max_m_s[:, None]
     t_brake = ((lim.speed_max_m_s - lim.speed_min_m_s) / lim.accel_max_m_s2)[:, None]
     r_min = (lim.speed_min_m_s / lim.turn_rate_max_rad_s)[:, None]
-    lever_const = vmax * t[None, :] + vmax / w  # (M, L) metres of path per radian of heading error
+    lever_const = vmax * turned[None, :] + vmax / w  # (M, L) metres of path per radian of heading error
     time_const = t[None, :] + 2.0 / w  # metres per m/s of speed error (centre and radius)
-    lever_brake = vmax * (t[None, :] + t_brake) + r_min
+    lever_brake = vmax * (turned[None, :] + t_brake) + r_min
     time_brake = t[None, :] + t_brake
     out = np.empty((len(err.position_m), len(leads), N_TURNS))
     for j in range(N_TURNS):
