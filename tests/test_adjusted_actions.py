@@ -84,7 +84,9 @@ def test_head_on_the_adjusted_monitor_flies_the_nearest_passing_action_and_the_b
 def test_a_flying_backup_goes_back_to_the_proposal_alone():
     """Engaged, a failing proposal is not adjusted: the backup flies on (the release rule is the proposal's)."""
     cfg = ShieldConfig(adjust=True)
-    engaged = Memory(np.array([True]), np.array([True]), np.array([1]), np.array([0]), np.array([0]))
+    engaged = Memory(
+        np.array([True]), np.array([True]), np.array([1]), np.array([0]), np.array([0]), np.full(1, np.nan)
+    )
     state = np.array([[36_000.0, 50_000.0, 300.0, 0.0]])  # 2 km from the disk, heading at it
     d = decide(state, np.array([[0.0, 1.0]]), engaged, HZ, LIM, DT, STEPS, cfg.margin_m, cfg)
     assert d.engaged[0] and not d.adjusted[0]

@@ -264,7 +264,7 @@ def test_a_backups_turn_follows_its_lead_between_two_decisions():
     m = 1
     state = np.array([[50_000.0, 20_000.0, 250.0, math.pi / 2]])
     backup = np.array([2 * len(TURNS) + 1])  # lead 8 s, right turn, 37 steps of its lead still to fly
-    memory = Memory(np.array([True]), np.array([True]), backup, np.array([37]), np.zeros(1, int))
+    memory = Memory(np.array([True]), np.array([True]), backup, np.array([37]), np.zeros(1, int), np.full(1, np.nan))
     d = decide(state, np.full((m, 2), np.nan), memory, hazards(m), limits(m), DT, 400, CFG.margin_m, CFG)
     assert d.engaged[0] and d.straight_steps[0] == 37
     assert d.action_at(36)[0].tolist() == [0.0, 0.0] and d.action_at(37)[0].tolist() == TURNS[1].tolist()

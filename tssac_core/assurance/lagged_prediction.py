@@ -17,7 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.assurance.ground_loiter import WindLoiter, loiter_backup_clearance, loiter_backup_error_m
-from tssac_core.assurance.lagged_backups import AirframeLag, LagState, Rollout, lagged_backup_clearance, lagged_rollout
+from tssac_core.assurance.lagged_backups import (
+    AirframeLag,
+    LagState,
+    Rollout,
+    lagged_backup_clearance,
+    lagged_rollout,
+    straight_rollout,
+)
 from tssac_core.assurance.monitor import (
     N_TURNS,
     EstimateError,
@@ -108,6 +115,27 @@ class LaggedPrediction:
         out = np.full((m, len(leads), N_TURNS), -np.inf)
         out[:, :, :2] = clear.reshape(m, len(leads), 2)
         return out.reshape(m, len(leads) * N_TURNS) - scene.margin[:, None] - self.backup_error(err, scene)
+
+    def held_from_steps(self, dt_s: float) -> int | None:
+        """Held leads in calm air only (in wind every lead is flown open loop into the loiter's turn-in)."""
+        return None if self.wind is not None else self.airframe.held_from_steps(dt_s)
+
+    def held_course(
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, backup: np.ndarray, scene: Scene
+    ) -> np.ndarray:
+        """The model's heading where each held lead's open part ends (NaN: a lead flown open to its end)."""
+        held_from = self.held_from_steps(scene.dt_s)
+        out = np.full(len(x), np.nan)
+        if held_from is None:
+            return out
+        rows = lead_steps(scene.cfg, scene.dt_s)[np.asarray(backup) // N_TURNS] > held_from
+        if rows.any():
+            path = straight_rollout(
+                x[rows], y[rows], v[rows], phi[rows], self.lag.select(rows), held_from,
+                self.airframe.select(rows), scene.lim.select(rows), scene.dt_s,
+            )  # fmt: skip
+            out[rows] = path.headings[:, -1] if held_from else phi[rows]
+        return out
 
     def backup_error(self, err: EstimateError, scene: Scene) -> np.ndarray:
         """In calm air each lead K steps longer (the turn's samples), in wind the loiter's

@@ -142,23 +142,38 @@ class Memory:
     """World steps of the backup's straight lead still to fly."""
     passes: np.ndarray
     """While engaged: consecutive decisions whose proposed action passed with the release margin."""
+    held_course: np.ndarray
+    """The course the backup's lead holds after its open part, as the check predicted it (rad; NaN: a lead flown open
+    loop to its end, :func:`tssac_core.assurance.lagged_backups.held_rollout`)."""
 
     @staticmethod
     def initial(m: int) -> Memory:
         """Before the first decision: nothing known, nothing engaged."""
         z = np.zeros(m, np.int64)
-        return Memory(np.zeros(m, bool), np.zeros(m, bool), z, z.copy(), z.copy())
+        return Memory(np.zeros(m, bool), np.zeros(m, bool), z, z.copy(), z.copy(), np.full(m, np.nan))
 
     def select(self, idx: np.ndarray) -> Memory:
-        return Memory(self.engaged[idx], self.protected[idx], self.backup[idx], self.lead_left[idx], self.passes[idx])
+        return Memory(
+            self.engaged[idx],
+            self.protected[idx],
+            self.backup[idx],
+            self.lead_left[idx],
+            self.passes[idx],
+            self.held_course[idx],
+        )
 
     def merged(self, idx: np.ndarray, part: Memory) -> Memory:
         """A copy with vehicles ``idx`` replaced by ``part``."""
         out = Memory(
-            self.engaged.copy(), self.protected.copy(), self.backup.copy(), self.lead_left.copy(), self.passes.copy()
+            self.engaged.copy(),
+            self.protected.copy(),
+            self.backup.copy(),
+            self.lead_left.copy(),
+            self.passes.copy(),
+            self.held_course.copy(),
         )
         out.engaged[idx], out.protected[idx], out.backup[idx] = part.engaged, part.protected, part.backup
-        out.lead_left[idx], out.passes[idx] = part.lead_left, part.passes
+        out.lead_left[idx], out.passes[idx], out.held_course[idx] = part.lead_left, part.passes, part.held_course
         return out
 
 
@@ -515,6 +530,17 @@ class Prediction(Protocol):
         backup not offered)."""
         ...
 
+    def held_from_steps(self, dt_s: float) -> int | None:
+        """The step of a lead from which it holds its course (None: every lead is flown open loop)."""
+        ...
+
+    def held_course(
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, backup: np.ndarray, scene: Scene
+    ) -> np.ndarray:
+        """The course each ``backup`` (candidate index) flown from the states holds after its lead's open part, (M,)
+        rad; NaN where its lead is flown open loop to its end."""
+        ...
+
 
 class KinematicPrediction:
     """Eq. 5-6, as the batched world and the kinematic SITL fly: the module docstring's proof."""
@@ -551,6 +577,14 @@ class KinematicPrediction:
 
     def backup_error(self, err: EstimateError, scene: Scene) -> np.ndarray:
         return backup_error_m(err, scene.lim, scene.dt_s, lead_steps(scene.cfg, scene.dt_s))
+
+    def held_from_steps(self, dt_s: float) -> int | None:
+        return None  # eq. 5's straight leads are exact: every one is flown open loop
+
+    def held_course(
+        self, x: np.ndarray, y: np.ndarray, v: np.ndarray, phi: np.ndarray, backup: np.ndarray, scene: Scene
+    ) -> np.ndarray:
+        return np.full(len(x), np.nan)
 
 
 KINEMATIC = KinematicPrediction()
@@ -657,6 +691,9 @@ def decide(
     protected = protected.copy()
     if lost.any():
         backup[lost], lead_left[lost], protected[lost] = _clearest(prediction, lost, (x, y, v, phi), err_here, scene)
+    held_course = _held_courses(
+        prediction, (x, y, v, phi), proposed, steps, (backup, best_end, lost, fly_proposed), memory, scene
+    )
     now_engaged = ~fly_proposed
     action = np.where(now_engaged[:, None], backup_action(backup, lead_left), proposed)
     straight_steps = np.where(now_engaged, np.minimum(lead_left, steps), steps)
@@ -667,6 +704,7 @@ def decide(
         backup=np.where(fly_proposed, best_end, backup),
         lead_left=lead_left,
         passes=np.where(now_engaged, count, 0),
+        held_course=held_course,
     )
     return Decision(
         action=action,
@@ -737,6 +775,41 @@ def _nearest_passing(
     )
     adjusted[take] = True
     return proposed, excess, best_end, adjusted
+
+
+def _held_courses(
+    prediction: Prediction,
+    state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    proposed: np.ndarray,
+    steps: int,
+    chosen: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    memory: Memory,
+    scene: Scene,
+) -> np.ndarray:
+    """The course each vehicle's backup holds after its lead's open part, as its check predicted it (NaN: none):
+    ``chosen`` = (the backup kept for a flying or lost vehicle, the best backup from the end of the proposal's interval,
+    the lost vehicles, the vehicles whose proposal flies), bool masks the last two. A lost vehicle's backup starts
+    where it is; a flying proposal's, where its interval ends; a flying backup keeps its course. Computed only where a
+    held lead was chosen (none with eq. 5)."""
+    backup, best_end, lost, fly_proposed = chosen
+    out = memory.held_course.copy()
+    held_from = prediction.held_from_steps(scene.dt_s)
+    if held_from is None:
+        return np.where(fly_proposed | lost, np.nan, out)
+    leads = lead_steps(scene.cfg, scene.dt_s)
+    out[lost | fly_proposed] = np.nan
+    x, y, v, phi = state
+    rows = lost & (leads[backup // N_TURNS] > held_from)
+    if rows.any():
+        sub = prediction.select(rows)
+        out[rows] = sub.held_course(x[rows], y[rows], v[rows], phi[rows], backup[rows], scene.select(rows))
+    rows = fly_proposed & (leads[best_end // N_TURNS] > held_from)
+    if rows.any():
+        sub, sub_scene = prediction.select(rows), scene.select(rows)
+        flown = np.repeat(np.asarray(proposed, dtype=np.float64)[rows][:, None, :], steps, axis=1)
+        ex, ey, ev, ep, end = sub.after(x[rows], y[rows], v[rows], phi[rows], flown, sub_scene)
+        out[rows] = end.held_course(ex, ey, ev, ep, best_end[rows], sub_scene)
+    return out
 
 
 def _clearest(
