@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tssac_core.assurance.ground_loiter import LoiterBound, loiter_action, loiter_centre
+from tssac_core.assurance.held_course import LineLaw, line_turn_rate
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
@@ -102,6 +103,13 @@ class WorldMonitor:
         self._loiter_radius = np.ones((n, N_ROLES))
         self._loiter_at = np.full((n, N_ROLES), -1, dtype=np.int64)
         """The world step at which a flying backup's loiter starts, after its turn-in (-1: none scheduled)."""
+        self.line_law = LineLaw()
+        """How a held lead holds its line (:mod:`tssac_core.assurance.held_course`)."""
+        self._hold_at = np.full((n, N_ROLES), -1, dtype=np.int64)
+        """The world step at which a flying backup's lead begins to hold its course (-1: none scheduled)."""
+        self._line = np.zeros((n, N_ROLES, 3))
+        """The held line: a point on it (x, y) and its course, fixed where the hold begins."""
+        self._holding = np.zeros((n, N_ROLES), dtype=bool)
 
     @property
     def engaged(self) -> np.ndarray:
@@ -126,6 +134,8 @@ class WorldMonitor:
             flag[worlds] = False
         self._loiter_sign[worlds] = 0.0
         self._loiter_at[worlds] = -1
+        self._hold_at[worlds] = -1
+        self._holding[worlds] = False
         for field in dataclasses.fields(MonitorCounts):
             getattr(self.counts, field.name)[worlds] = 0
 
@@ -143,6 +153,7 @@ class WorldMonitor:
         moving = world.active & world.running[:, None]
         turning = moving & (self._turn_at == world.steps[:, None])
         self._flying[turning] = self._turn[turning]
+        self._holding[turning] = False  # the lead ends: its turn flies
         if self.loiter is not None:
             self._schedule_loiter(world, turning)
             self._begin_loiter(world, moving & (self._loiter_at == world.steps[:, None]))
@@ -152,6 +163,8 @@ class WorldMonitor:
                 self._decide(world, proposed, due, int(repeat))
         if self.loiter is not None:
             self._fly_loiter(world, moving & (self._loiter_sign != 0))
+        self._begin_hold(world, moving & self._engaged & (self._hold_at == world.steps[:, None]))
+        self._fly_hold(world, moving & self._holding)
         self.counts.flown_steps += moving
         self.counts.backup_steps += moving & self._engaged
         self.counts.adjusted_steps += moving & self._adjusted
@@ -217,8 +230,48 @@ class WorldMonitor:
         x, y = world.x_m[w, j], world.y_m[w, j]
         self._flying[w, j] = loiter_action(x, y, gx, gy, east, north, circle, limit, self.loiter.law)
 
+    def _begin_hold(self, world: World, starting: np.ndarray) -> None:
+        """Fix the held line of the ``starting`` (N, 3) vehicles: through where each is, along the course its backup's
+        check predicted for this moment (:attr:`Memory.held_course`)."""
+        if not starting.any():
+            return
+        w, j = np.nonzero(starting)
+        course = self.memory.held_course.reshape(world.n, N_ROLES)[w, j]
+        self._line[w, j] = np.stack([world.x_m[w, j], world.y_m[w, j], course], axis=-1)
+        self._holding[w, j] = True
+        self._hold_at[w, j] = -1
+
+    def _fly_hold(self, world: World, holding: np.ndarray) -> None:
+        """This step's command of the ``holding`` (N, 3) vehicles: the line law's heading rate, the lead's speed
+        command kept."""
+        if not holding.any():
+            return
+        w, j = np.nonzero(holding)
+        east, north, _, gx, gy, limit = self._over_the_ground(world, w, j)
+        line = self._line[w, j]
+        rate = line_turn_rate(
+            world.x_m[w, j], world.y_m[w, j], gx, gy, (line[:, 0], line[:, 1], line[:, 2]), limit, self.line_law
+        )
+        self._flying[w, j, 0] = rate / limit
+
+    def _schedule_hold(self, world: World, w: np.ndarray, j: np.ndarray, d: Decision, started: np.ndarray) -> None:
+        """The vehicles (w, j) decided now: a backup that started now with a held lead holds its course from the end
+        of the lead's open part; one that stopped flying holds nothing."""
+        self._holding[w[~d.engaged], j[~d.engaged]] = False
+        self._hold_at[w[~d.engaged], j[~d.engaged]] = -1
+        if self.airframes is None:
+            return
+        held_from = self.airframes.airframe(np.arange(1)).held_from_steps(world.c.dt_s)
+        course = d.memory.held_course
+        new = started & np.isfinite(course)
+        if held_from is None or not new.any():
+            return
+        self._holding[w[new], j[new]] = False
+        self._hold_at[w[new], j[new]] = world.steps[w[new]] + held_from
+
     def _decide(self, world: World, proposed: np.ndarray, due: np.ndarray, steps: int) -> Decision:
         flat = np.flatnonzero(due.reshape(-1))
+        before = self.memory.select(flat)
         state = np.stack([world.x_m, world.y_m, world.v_m_s, world.phi_rad], axis=-1).reshape(-1, 4)[flat]
         prediction = self._prediction(world, flat, state[:, 2])
         d = decide(
@@ -243,6 +296,8 @@ class WorldMonitor:
         self._unprotected[w, j] = d.unprotected
         self.counts.interventions[w, j] += d.engaged_now
         self.counts.switches[w, j] += d.engaged_now.astype(np.int64) + d.released_now
+        # A backup starts now when the monitor engages, or when a vehicle without a known backup takes a new one.
+        self._schedule_hold(world, w, j, d, d.engaged & (~before.engaged | ~before.protected))
         if self.loiter is not None:
             self._loiter_sign[w[~d.engaged], j[~d.engaged]] = 0.0
             self._loiter_at[w[~d.engaged], j[~d.engaged]] = -1
