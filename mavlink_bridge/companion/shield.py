@@ -43,12 +43,15 @@ import numpy as np
 
 from mavlink_bridge.companion.vehicle_limits import monitor_fit
 from tssac_core.assurance.ground_loiter import LoiterBound, loiter_action, loiter_centre
+from tssac_core.assurance.held_course import LineLaw, line_turn_rate
 from tssac_core.assurance.lagged_backups import AirframeLag, LagState, lagged_rollout
 from tssac_core.assurance.lagged_prediction import LaggedPrediction
 from tssac_core.assurance.monitor import (
     KINEMATIC,
     N_TURNS,
+    Decision,
     EstimateError,
+    Memory,
     Prediction,
     Scene,
     ShieldConfig,
@@ -140,6 +143,12 @@ class CompanionShield:
         """The loiter flying now: its centre (x, y), radius and direction (+1 counter-clockwise); None: none."""
         self._loiter_step: int | None = None
         """The tick at which the flying backup's loiter starts, after its turn-in (None: none scheduled)."""
+        self.line_law = LineLaw()
+        """How a held lead holds its line (:mod:`tssac_core.assurance.held_course`)."""
+        self._line: tuple[float, float, float] | None = None
+        """The line a flying backup's lead holds now: a point on it (x, y) and its course; None: none."""
+        self._hold_step: int | None = None
+        """The tick at which the flying backup's lead begins to hold its course (None: none scheduled)."""
         self._tick = 0
         """The last tick :meth:`action` was asked for."""
         self.achievable: Achievable | None = None
@@ -165,6 +174,8 @@ class CompanionShield:
         self._turn_step = None
         self._circle = None
         self._loiter_step = None
+        self._line = None
+        self._hold_step = None
         self._sent.clear()
         self._before_fix.clear()
         self.counters.resets += 1
@@ -192,11 +203,12 @@ class CompanionShield:
     def next_change_step(self) -> int | None:
         """The tick before the next decision at which the command changes (a backup's turn after its lead; while a
         loiter flies, the next tick), if any."""
-        if self._circle is not None:
+        if self._circle is not None or self._line is not None:
             return self._tick + 1
         if self._loiter_step is not None:
             return self._loiter_step
-        return self._turn_step
+        scheduled = [t for t in (self._hold_step, self._turn_step) if t is not None]
+        return min(scheduled, default=None)
 
     def set_wind(self, east_m_s: float, north_m_s: float) -> None:
         """The wind the vehicle reports (WIND), as the air's velocity east and north (m/s); a report that is not finite
@@ -222,6 +234,7 @@ class CompanionShield:
         self._tick = step
         if not decision and self._turn_step is not None and step >= self._turn_step:
             self._held, self._turn_step = self._turn.copy(), None
+            self._line, self._hold_step = None, None  # the lead ends: its turn flies
             if self.loiter is not None and self.engaged:
                 self._loiter_step = step + self.loiter.turn_in_steps(self.dt_s)
         if decision:
@@ -243,6 +256,7 @@ class CompanionShield:
                 error = error + EstimateError(np.zeros(1), turned, np.zeros(1))
             if not np.all(np.isfinite(proposed)):
                 self.counters.nonfinite_proposals += 1
+            before = self.monitor.memory
             d = self.monitor.decide(
                 *state,
                 proposed=proposed,
@@ -274,10 +288,8 @@ class CompanionShield:
                 self._circle, self._loiter_step = None, None
             elif self.loiter is not None and straight == 0 and self._circle is None and self._loiter_step is None:
                 self._loiter_step = step + self.loiter.turn_in_steps(self.dt_s)
-        if self._circle is None and self._loiter_step is not None and step >= self._loiter_step:
-            self._begin_loiter(estimate())
-        if self._circle is not None:
-            self._held = self._loiter_action(estimate())
+            self._schedule_hold(d, before, step, straight, prediction)
+        self._closed_loop(step, estimate)
         self._count_tick()
         return self._held, text
 
@@ -303,6 +315,44 @@ class CompanionShield:
         rate = turn_rate * ground**2 / (air * along) if along > 0 else turn_rate
         position, heading, speed = sigmas
         return (x, y, air, float(np.arctan2(ay, ax))), (position, heading * ground / air, speed), float(rate)
+
+    def _closed_loop(self, step: int, estimate: Callable[[], Estimate]) -> None:
+        """The closed-loop parts of a flying backup: the held lead's line and the loiter's circle, each fixed from the
+        estimate when its tick comes, then flown every tick."""
+        if self._circle is None and self._loiter_step is not None and step >= self._loiter_step:
+            self._begin_loiter(estimate())
+        if self._line is None and self._hold_step is not None and step >= self._hold_step:
+            self._begin_hold(estimate())
+        if self._line is not None:
+            self._held = self._hold_action(estimate())
+        if self._circle is not None:
+            self._held = self._loiter_action(estimate())
+
+    def _schedule_hold(self, d: Decision, before: Memory, step: int, straight: int, prediction: Prediction) -> None:
+        """After a decision: a backup that started now with a held lead holds its course from the end of the lead's
+        open part (its first command is sent now); a backup no longer flying, or whose lead has ended, holds nothing."""
+        started = bool(d.engaged[0]) and not (bool(before.engaged[0]) and bool(before.protected[0]))
+        if not self.engaged or straight == 0 or started:
+            self._line, self._hold_step = None, None
+        held_from = prediction.held_from_steps(self.dt_s)
+        if started and held_from is not None and math.isfinite(float(d.memory.held_course[0])):
+            self._hold_step = step + held_from
+
+    def _begin_hold(self, estimate: Estimate) -> None:
+        """Fix the held line: through the estimate's position, along the course the backup's check predicted."""
+        (x, y, _, _), _, _ = estimate
+        self._line = (x, y, float(self.monitor.memory.held_course[0]))
+        self._hold_step = None
+
+    def _hold_action(self, estimate: Estimate) -> np.ndarray:
+        """This tick's command of the held lead: the line law's heading rate from the estimate, the speed held."""
+        assert self._line is not None
+        x, y, gx, gy, _ = self._ground_and_air(estimate)
+        lx, ly, course = self._line
+        limit = self.monitor.limits.turn_rate_max_rad_s
+        line = (np.array([lx]), np.array([ly]), np.array([course]))
+        rate = line_turn_rate(np.array([x]), np.array([y]), np.array([gx]), np.array([gy]), line, limit, self.line_law)
+        return np.array([float(rate[0] / limit[0]), 0.0])
 
     def _ground_and_air(self, estimate: Estimate) -> tuple[float, float, float, float, float]:
         """The estimate's position, ground velocity (east, north) and airspeed (the ground velocity less the wind)."""
