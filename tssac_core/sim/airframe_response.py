@@ -51,12 +51,13 @@ from tssac_core.sim.yaml_file import read_yaml, typed_value
 if TYPE_CHECKING:
     from tssac_core.sim.scenario import Scenario
 
-RESPONSE_SCHEMA = 4
+RESPONSE_SCHEMA = 5
 """The file format's version; a newer one is refused (2 added ``turn_rollout_tau_s``; a version 1 file reads with the
 roll-in's time constants for the roll-out; 3 added the ground loiter's fit, ``loiter_*``: a file without it promises
 no loiter, so no wind; 4 added the loiter's turn-in and its own residuals, ``loiter_turn_in_s``,
 ``loiter_residual_m`` and ``loiter_heading_residual_deg``: a version 3 file's loiter starts where the lead ends, with
-the turns' residuals)."""
+the turns' residuals; 5 added the held leads, ``held_after_s``, ``held_leads_s`` and ``held_residual_m``: an older file
+offers none)."""
 
 
 class ResponseFileError(InputError):
@@ -77,6 +78,8 @@ class ResponseAt:
     """How far beyond its radius the ground loiter may fly (m); None: no loiter fitted."""
     heading_residual_deg: float = 0.0
     """How far the airframe's course may lie from the model's heading (deg)."""
+    held_residual_m: float | None = None
+    """How far a held backup's path may lie from the prediction (m); None: no held leads fitted."""
 
     def delay_steps(self, dt_s: float) -> int:
         """The delay in whole world steps of ``dt_s``."""
@@ -148,6 +151,15 @@ class AirframeResponse:
     """Per speed, the largest difference between the airframe's heading and the model's where the fit's loiters
     start (deg; the loiter's centre lies R normal to the ground track there); empty (version 3):
     ``turn_heading_residual_deg``."""
+    held_after_s: float = 32.0
+    """How long a held lead flies open loop before it holds its course (s): the longest open lead the turns' fit
+    covers (:func:`tssac_core.assurance.lagged_backups.held_rollout`)."""
+    held_leads_s: tuple[float, ...] = ()
+    """The held leads the fit flew (s, each longer than ``held_after_s``): a monitor predicting with this file offers
+    these in calm air beside its open ones; empty (files before version 5): none."""
+    held_residual_m: tuple[float, ...] = ()
+    """Per speed, how far a held backup's path may lie from the monitor's prediction (m), the largest over the fit's
+    JSBSim and lag-model runs (:mod:`sim_vehicles.dynamics.held_fit`); empty when ``held_leads_s`` is."""
 
     def loiter_law(self) -> LoiterLaw:
         """The loiter law the excursion was measured with."""
@@ -188,7 +200,14 @@ class AirframeResponse:
             self.turn_heading_residual_deg,
             self.loiter_residual_m,
             self.loiter_heading_residual_deg,
+            self.held_residual_m,
         )
+        if bool(self.held_leads_s) != bool(self.held_residual_m) or any(
+            t <= self.held_after_s for t in self.held_leads_s
+        ):
+            raise ValueError(
+                f"response of {self.aircraft}: held leads need their residuals, each longer than held_after_s"
+            )
         if n < 1 or any(len(t) != n for t in tables) or any(len(t) not in (0, n) for t in optional):
             raise ValueError(f"response of {self.aircraft}: every table needs one entry per speed ({n})")
         if any(b <= a for a, b in zip(self.speeds_m_s, self.speeds_m_s[1:])) or self.speeds_m_s[0] <= 0.0:
@@ -235,6 +254,7 @@ class AirframeResponse:
             heading_residual_deg=max((self.turn_heading_residual_deg[k] for k in pair), default=0.0)
             if self.turn_heading_residual_deg
             else 0.0,
+            held_residual_m=max(self.held_residual_m[k] for k in pair) if self.held_residual_m else None,
         )
 
     def worst(self, speed_min_m_s: float, speed_max_m_s: float) -> ResponseAt:
@@ -252,6 +272,7 @@ class AirframeResponse:
                 (r.loiter_excursion_m for r in inside if r.loiter_excursion_m is not None), default=None
             ),
             heading_residual_deg=max(r.heading_residual_deg for r in inside),
+            held_residual_m=max((r.held_residual_m for r in inside if r.held_residual_m is not None), default=None),
         )
 
 
@@ -302,6 +323,8 @@ def airframe_lag(response: AirframeResponse, speeds_m_s: np.ndarray, dt_s: float
         accel_m_s2=np.array([r.accel_max_m_s2 for r in at]),
         decel_m_s2=np.array([r.decel_max_m_s2 for r in at]),
         residual_m=np.array([r.turn_residual_m for r in at]),
+        held_residual_m=np.array([r.held_residual_m for r in at]) if response.held_leads_s else None,
+        held_after_s=response.held_after_s,
     )
 
 
