@@ -111,6 +111,11 @@ class CompanionShield:
         lockstep: bool,
         response: AirframeResponse | None = None,
     ) -> None:
+        promised = 0.0 if scenario.wind is None else scenario.wind.promised_max_m_s
+        if response is not None and response.held_leads_s and promised == 0.0:  # calm air: the held leads as well
+            cfg = dataclasses.replace(
+                cfg, straight_leads_s=tuple(sorted({*cfg.straight_leads_s, *response.held_leads_s}))
+            )
         self.cfg = cfg
         self.role = role
         self.response = response
@@ -133,7 +138,6 @@ class CompanionShield:
         self._before_fix: list[tuple[int, tuple[float, float]]] = []
         """(tick, command) of every command sent before the first position fix: what the vehicle flies from its start,
         for :meth:`dead_reckoned`."""
-        promised = 0.0 if scenario.wind is None else scenario.wind.promised_max_m_s
         self.loiter: LoiterBound | None = None if response is None or promised == 0.0 else response.loiter_bound()
         """The backups end in the ground loiter bounded by this (None: calm air's constant turn)."""
         wind = (0.0, 0.0) if scenario.wind is None else scenario.wind.velocity_m_s()
