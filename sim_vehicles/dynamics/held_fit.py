@@ -96,9 +96,10 @@ Step = Callable[[float], tuple[float, float, float, float]]
 
 def _residual(
     step: Step, start: tuple[float, float], predicted: tuple[np.ndarray, np.ndarray, float, tuple[float, float, float]],
-    case: HeldCase, held_from: int, dt_s: float, limit: float, law: LineLaw,
+    case: HeldCase, held_from: int, dt_s: float, limit: float, law: LineLaw | None,
 ) -> float:  # fmt: skip
-    """Fly the backup with ``step`` from ``start`` and measure it against ``predicted`` (module docstring)."""
+    """Fly the backup with ``step`` from ``start`` and measure it against ``predicted`` (module docstring); ``law``
+    None: the lead flown open loop to its end (the negative control)."""
     xs, ys, course, (cx, cy, radius) = predicted
     lead = round(case.lead_s / dt_s)
     line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -106,11 +107,11 @@ def _residual(
     gx, gy = 0.0, 0.0
     worst = 0.0
     for k in range(lead + round(TURN_S / dt_s)):
-        if k == held_from:
+        if k == held_from and law is not None:
             line = (np.array([x]), np.array([y]), np.array([course]))
         if k >= lead:
             command = case.turn_sign * limit
-        elif line is not None:
+        elif line is not None and law is not None:
             args = (np.array([x]), np.array([y]), np.array([gx]), np.array([gy]), line, np.array([limit]), law)
             command = float(line_turn_rate(*args)[0])
         else:
@@ -124,9 +125,9 @@ def _residual(
 
 
 def fly_held(spec: AirframeSpec, case: HeldCase, lag: AirframeLag, dt_s: float, altitude_m: float,
-             speed_limits_m_s: tuple[float, float], law: LineLaw = LineLaw()) -> HeldRun:  # fmt: skip
+             speed_limits_m_s: tuple[float, float], law: LineLaw | None = LineLaw()) -> HeldRun:  # fmt: skip
     """One run (module docstring), on JSBSim and on the lag model ``lag`` (at the case's speed, with its
-    ``held_after_s``)."""
+    ``held_after_s``); ``law`` None flies the lead open loop instead (the negative control)."""
     limit = math.radians(5.0)
     entry = [case.before_sign * limit] * round(ENTRY_HOLD_S / dt_s) + [-case.before_sign * limit] * round(
         case.reversal_s / dt_s
@@ -159,7 +160,7 @@ def fly_held(spec: AirframeSpec, case: HeldCase, lag: AirframeLag, dt_s: float, 
 def _model_residual(
     start: tuple[float, float, float, float], lag_state: LagState, lag: AirframeLag,
     predicted: tuple[np.ndarray, np.ndarray, float, tuple[float, float, float]], case: HeldCase, dt_s: float,
-    law: LineLaw,
+    law: LineLaw | None,
 ) -> float:  # fmt: skip
     """The same backup flown on the lag model itself, the law steering it."""
     x, y, v, phi = start
