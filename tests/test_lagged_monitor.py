@@ -151,3 +151,28 @@ def test_on_varied_airframes_the_lagged_monitor_keeps_adversaries_out_and_eq5_do
 @pytest.mark.parametrize("adversary", list(Adversary), ids=str)
 def test_on_varied_airframes_no_adversary_gets_in_on_forty_layouts(adversary: Adversary) -> None:
     assert batched_hazards(adversary, 40, monitor_sees_airframes=True) == (0, 0, 0)
+
+
+def test_on_the_model_itself_a_held_lead_is_its_prediction_so_held_backups_fly_as_open_ones() -> None:
+    """Calm air, airframes drawn from the F-16's spans, every UAV flying at a radar, the monitor offered only
+    leads of 64 and 128 s: with the airframes' held leads (open for 32 s, then the line law) the backups fly exactly
+    where the same leads flown open loop do (the lag model has no residual to correct: the line is its own path), so
+    every mission's cost and time under the backup are the same, and the hold flew. An executor that held on past its
+    lead's end (the turn never flown) let UAVs in here."""
+    from sim_vehicles.dynamics.response_fit import response_path
+
+    base = AirframeVariation.from_response(load_response(response_path("f16")))
+    scenario = dataclasses.replace(load(REPO / "scenarios" / "random.yaml"), episode_steps=1500)
+    layouts = [mission_layout(scenario, LAYOUT_SEED, k) for k in range(6)]
+    runs = {}
+    for held in ((64.0, 128.0), ()):
+        variation = dataclasses.replace(base, held_leads_s=held)
+        cfg = ShieldConfig(straight_leads_s=(64.0, 128.0))
+        pilots = [AdversaryPilot(Adversary.AT_RADAR)] * 3
+        runs[held] = fly_missions(scenario, pilots, 0, LAYOUT_SEED, layouts=layouts, shield=cfg, airframes=variation)
+    held, open_ = runs[(64.0, 128.0)], runs[()]
+    assert held.monitor is not None and open_.monitor is not None
+    assert held.monitor.held_steps.sum() > 1000 and open_.monitor.held_steps.sum() == 0
+    np.testing.assert_allclose(held.cost, open_.cost)
+    np.testing.assert_array_equal(held.monitor.backup_steps, open_.monitor.backup_steps)
+    assert held.out_of_area.sum() == 0

@@ -388,3 +388,59 @@ def test_in_wind_the_companions_backup_turns_in_for_its_turn_in_then_loiters_fro
             (*centre, radius, turn[0]), np.array([limit]), shield.loiter.law,
         )  # fmt: skip
         assert omega[k] == pytest.approx(law[0, 0], rel=1e-9, abs=1e-12)
+
+
+def _fly_first_backup(shield: CompanionShield, world: World, ticks: int, unmodelled_turn_rad: float) -> tuple:
+    """Ticks of a companion whose pilot never proposes (its backup flies from the first decision), the vehicle turning
+    as commanded and by ``unmodelled_turn_rad`` more, spread over its first seconds (a roll-out the model did not
+    predict); the estimate is the truth: (commands, positions (x, y), courses)."""
+    limit = float(shield.monitor.limits.turn_rate_max_rad_s[0])
+    x, y, course = float(world.x_m[0, 0]), float(world.y_m[0, 0]), float(world.phi_rad[0, 0])
+    commands, xy, courses = [], [], []
+    for tick in range(ticks):
+        estimate = ((x, y, 250.0, course), (0.0, 0.0, 0.0), (0.0, 0.0))
+        action, _ = shield.action(True, 1, np.full(2, np.nan), lambda e=estimate: e, tick)
+        shield.sent(action, tick)
+        commands.append(float(action[0]))
+        course += action[0] * limit * 0.1 + unmodelled_turn_rad / 3.0 * math.exp(-0.1 * tick / 3.0) * 0.1
+        x, y = x + 250.0 * math.cos(course) * 0.1, y + 250.0 * math.sin(course) * 0.1
+        xy.append((x, y))
+        courses.append(course)
+    return np.array(commands), np.array(xy), np.array(courses)
+
+
+def test_in_calm_air_the_companions_held_lead_flies_open_then_holds_its_line_and_an_open_one_drifts(random_path):
+    """A response with held leads, calm air, the monitor offered only leads of 64 and 128 s: the backup's lead flies
+    straight for ``held_after_s``, then the line law on the line through where the vehicle is then, along the course the
+    check predicted, until its turn; a vehicle that turns 3 degrees the model did not predict comes back to that
+    line. The same backup from a response without held leads (flown open to its end) ends hundreds of metres off
+    it (the negative control)."""
+    from sim_vehicles.dynamics.response_fit import response_path
+    from tssac_core.assurance.held_course import cross_track_m
+    from tssac_core.sim.airframe_response import load_response
+
+    s = load(random_path)
+    world = World(s, 1)
+    world.reset([0], [sample_layout(s, np.random.default_rng(35))])
+    fitted = load_response(response_path("f16"))
+    held = dataclasses.replace(fitted, held_leads_s=(64.0, 128.0), held_residual_m=fitted.turn_residual_m)
+    open_ = dataclasses.replace(fitted, held_leads_s=(), held_residual_m=())
+    cfg = ShieldConfig(straight_leads_s=(64.0,))
+    shield = CompanionShield(snapshot(world), Role.DECOY, s, cfg, True, held)
+    assert shield.cfg.straight_leads_s == (64.0, 128.0)
+    hold_from = round(held.held_after_s / s.dt_s)
+    omega, xy, _ = _fly_first_backup(shield, world, 640 + 20, math.radians(3.0))
+    lead = int(np.argmax(np.abs(omega) == 1.0))
+    assert lead == 640 and np.all(omega[lead:] == omega[lead])  # the 64 s lead's backup, then its turn
+    assert np.all(omega[:hold_from] == 0.0) and np.any(omega[hold_from:lead] != 0.0)  # open, then the law steers
+    assert shield.counters.held_steps == lead - hold_from and shield._line is None  # the turn ended the hold
+    line_x, line_y = xy[hold_from - 1]  # the estimate where the hold began
+    line_course = float(shield.monitor.memory.held_course[0])
+    off = cross_track_m(*(np.array([a]) for a in (*xy[lead - 1], line_x, line_y, line_course)))
+    assert abs(float(off[0])) < 50.0  # back on the line
+
+    control = CompanionShield(snapshot(world), Role.DECOY, s, ShieldConfig(straight_leads_s=(64.0,)), True, open_)
+    omega_open, xy_open, _ = _fly_first_backup(control, world, 640, math.radians(3.0))
+    assert np.all(omega_open[:639] == 0.0) and control.counters.held_steps == 0
+    drift = cross_track_m(*(np.array([a]) for a in (*xy_open[-1], line_x, line_y, line_course)))
+    assert abs(float(drift[0])) > 300.0  # 3 degrees over 32 s flown open

@@ -50,7 +50,7 @@ from tssac_core.common.evaluation_record import (
     EvaluationRecordJson,
     WorldMonitorFigures,
 )
-from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option, adjusted_text
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option, adjusted_text, held_text
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -429,7 +429,7 @@ def print_summary(record: EvaluationRecord, cost_limit: float) -> None:
         print(
             f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission (max "
             f"{sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of flight time under the backup"
-            f"{adjusted_text(sh.adjusted_time_fraction)}, "
+            f"{adjusted_text(sh.adjusted_time_fraction)}{held_text(sh.held_time_fraction)}, "
             f"{sh.uav_missions_with_cost} UAV-missions with cost, {sh.uavs_left_area} UAVs left the area"
         )
 

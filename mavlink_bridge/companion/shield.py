@@ -89,6 +89,8 @@ class ShieldCounters:
     """Control steps flown under the backup."""
     adjusted_steps: int = 0
     """Control steps flown under the monitor's adjusted action (``ShieldConfig.adjust``)."""
+    held_steps: int = 0
+    """Control steps a backup's lead flew holding its line (:mod:`tssac_core.assurance.held_course`)."""
     unprotected_steps: int = 0
     """Control steps with no passing action and no clear backup."""
     resets: int = 0
@@ -113,9 +115,7 @@ class CompanionShield:
     ) -> None:
         promised = 0.0 if scenario.wind is None else scenario.wind.promised_max_m_s
         if response is not None and response.held_leads_s and promised == 0.0:  # calm air: the held leads as well
-            cfg = dataclasses.replace(
-                cfg, straight_leads_s=tuple(sorted({*cfg.straight_leads_s, *response.held_leads_s}))
-            )
+            cfg = cfg.with_leads(response.held_leads_s)
         self.cfg = cfg
         self.role = role
         self.response = response
@@ -300,6 +300,7 @@ class CompanionShield:
     def _count_tick(self) -> None:
         """One control step under the adjusted action, the backup, or without a clear backup."""
         self.counters.adjusted_steps += self._adjusted
+        self.counters.held_steps += self._line is not None
         self.counters.backup_steps += self.engaged
         self.counters.unprotected_steps += self.engaged and self._unprotected
 

@@ -19,6 +19,7 @@ class ShieldCounts(TypedDict):
     releases: int
     backup_steps: int
     adjusted_steps: NotRequired[int]
+    held_steps: NotRequired[int]
     unprotected_steps: int
     resets: int
     max_margin_m: float

@@ -10,7 +10,7 @@ from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_log import MissionRecord
 from mavlink_bridge.fly.scoring import CampaignResults
 from tssac_core.common.evaluation_record import SitlMonitorFigures
-from tssac_core.common.shield_options import adjusted_text
+from tssac_core.common.shield_options import adjusted_text, held_text
 from tssac_core.sim.scenario import Dynamics, DynamicsModel, Layout, Scenario
 from tssac_core.wire.vehicle_limits import Achievable
 
@@ -147,7 +147,8 @@ def print_monitor(sh: SitlMonitorFigures) -> None:
         print(
             f"shield: {sh.interventions_per_uav_mission:.2f} interventions per UAV-mission "
             f"(max {sh.max_interventions_per_uav_mission}), {sh.backup_time_fraction:.2%} of control steps under the "
-            f"backup{adjusted_text(sh.adjusted_time_fraction)}, margin up to {sh.max_margin_m:.0f} m, "
+            f"backup{adjusted_text(sh.adjusted_time_fraction)}{held_text(sh.held_time_fraction)}, "
+            f"margin up to {sh.max_margin_m:.0f} m, "
             f"{sh.uav_missions_with_cost} UAV-missions with cost, "
             f"{sh.uavs_left_area} UAVs left the area"
         )

@@ -75,6 +75,7 @@ def monitor_figures(rows: list[MissionRow], scope: str | None) -> SitlMonitorFig
         max_interventions_per_uav_mission=max((c["interventions"] for c in counts), default=None),
         backup_time_fraction=sum(c["backup_steps"] for c in counts) / max(1, control) if counts else None,
         adjusted_time_fraction=sum(c.get("adjusted_steps", 0) for c in counts) / max(1, control) if counts else None,
+        held_time_fraction=sum(c.get("held_steps", 0) for c in counts) / max(1, control) if counts else None,
         vehicle_limits=vehicle_limits(rows) if counts else None,
         unprotected_time_fraction=sum(c["unprotected_steps"] for c in counts) / max(1, control) if counts else None,
         decisions=sum(c["decisions"] for c in counts),

@@ -125,10 +125,11 @@ def _residual(
 
 
 def fly_held(spec: AirframeSpec, case: HeldCase, lag: AirframeLag, dt_s: float, altitude_m: float,
-             speed_limits_m_s: tuple[float, float], law: LineLaw | None = LineLaw()) -> HeldRun:  # fmt: skip
+             speed_limits_m_s: tuple[float, float], law: LineLaw | None = LineLaw(),
+             turn_rate_max_rad_s: float = math.radians(5.0)) -> HeldRun:  # fmt: skip
     """One run (module docstring), on JSBSim and on the lag model ``lag`` (at the case's speed, with its
     ``held_after_s``); ``law`` None flies the lead open loop instead (the negative control)."""
-    limit = math.radians(5.0)
+    limit = turn_rate_max_rad_s
     entry = [case.before_sign * limit] * round(ENTRY_HOLD_S / dt_s) + [-case.before_sign * limit] * round(
         case.reversal_s / dt_s
     )
@@ -153,14 +154,15 @@ def fly_held(spec: AirframeSpec, case: HeldCase, lag: AirframeLag, dt_s: float, 
             )
 
         flown = _residual(jsbsim_step, (state.east_m, state.north_m), predicted, case, held_from, dt_s, limit, law)
-        model = _model_residual((state.east_m, state.north_m, v, heading), lag_state, lag, predicted, case, dt_s, law)
+        start = (state.east_m, state.north_m, v, heading)
+        model = _model_residual(start, lag_state, lag, predicted, case, dt_s, law, limit)
     return HeldRun(case, flown, model)
 
 
 def _model_residual(
     start: tuple[float, float, float, float], lag_state: LagState, lag: AirframeLag,
     predicted: tuple[np.ndarray, np.ndarray, float, tuple[float, float, float]], case: HeldCase, dt_s: float,
-    law: LineLaw | None,
+    law: LineLaw | None, limit: float,
 ) -> float:  # fmt: skip
     """The same backup flown on the lag model itself, the law steering it."""
     x, y, v, phi = start
@@ -178,7 +180,7 @@ def _model_residual(
         return x, y, v * math.cos(phi), v * math.sin(phi)
 
     held_from = round(lag.held_after_s / dt_s)
-    return _residual(model_step, (x, y), predicted, case, held_from, dt_s, math.radians(5.0), law)
+    return _residual(model_step, (x, y), predicted, case, held_from, dt_s, limit, law)
 
 
 def held_residual_m(runs: Sequence[HeldRun]) -> float:

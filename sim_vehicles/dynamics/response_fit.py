@@ -23,6 +23,11 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
   ``--wind-max-m-s`` from 16 directions, with how far the airframe's path and heading leave the model's on the way
   (:mod:`sim_vehicles.dynamics.loiter_fit`), at each speed and halfway to its neighbours (``--wind-max-m-s 0`` fits
   calm air only).
+* **Held leads.** A backup whose lead is longer than the open roll-out the turns' fit covers holds its course after
+  ``held_after_s`` (:func:`tssac_core.assurance.lagged_backups.held_rollout`): flown from states in and after a
+  reversal, with each of ``held_leads_s`` and both turns after it, on JSBSim and on the lag model just fitted, the
+  largest distance from the monitor's prediction is the held residual (:mod:`sim_vehicles.dynamics.held_fit`), at each
+  speed and halfway to its neighbours (``--held-leads-s`` with no value: no held leads).
 
 Everything is deterministic (JSBSim, steady winds, no turbulence): ``--check`` refits and compares with the file at
 1e-9.
@@ -41,6 +46,7 @@ from pathlib import Path
 import jsbsim
 import numpy as np
 
+from sim_vehicles.dynamics.held_fit import fly_held, held_cases, held_residual_m
 from sim_vehicles.dynamics.jsbsim_airframe import (
     AirframeError,
     AirframeSpec,
@@ -257,6 +263,10 @@ class FitSettings:
     wind_max_m_s: float = 10.0
     """The steady wind the loiter's excursion is measured in (0: calm air only)."""
     loiter_law: LoiterLaw = LoiterLaw()
+    held_leads_s: tuple[float, ...] = (64.0, 128.0)
+    """The leads that hold their course after ``held_after_s`` (s; empty: none fitted, none offered)."""
+    held_after_s: float = 32.0
+    """The open part of a held lead (s): the monitor's longest open lead, which the turns' fit covers."""
 
 
 def fit_response(aircraft: str, settings: FitSettings, command: str) -> AirframeResponse:
@@ -315,7 +325,38 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
         loiter_excursion_m=tuple(f.excursion_m for f in figures),
         loiter_residual_m=tuple(f.path_residual_m for f in figures),
         loiter_heading_residual_deg=tuple(round(math.degrees(f.heading_residual_rad), 4) for f in figures),
+        held_after_s=settings.held_after_s,
+        held_leads_s=settings.held_leads_s,
+        held_residual_m=fit_held(spec, provisional, settings),
     )
+
+
+def _neighbour_bands(speeds: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+    """Every speed a fit flies (the tabled ones and halfway between neighbours, ascending) and, per tabled speed, the
+    ones its figure covers: itself and halfway to each neighbour (so that the worse neighbour's figure covers every
+    speed between two)."""
+    halfway = [(a + b) / 2.0 for a, b in zip(speeds, speeds[1:])]
+    bands = [[v] + halfway[max(k - 1, 0) : k + 1] for k, v in enumerate(speeds)]
+    return sorted(set(speeds) | set(halfway)), bands
+
+
+def fit_held(spec: AirframeSpec, lag: AirframeResponse, settings: FitSettings) -> tuple[float, ...]:
+    """The held residual per tabled speed (module docstring; empty without held leads): the largest of the runs at
+    the speed and halfway to each neighbour, each flown with the lag just fitted (interpolated as the monitor reads
+    it)."""
+    if not settings.held_leads_s:
+        return ()
+    flown, bands = _neighbour_bands(settings.speeds_m_s)
+    limits = (settings.speeds_m_s[0], settings.speeds_m_s[-1])
+    runs = {}
+    for v in flown:
+        air = dataclasses.replace(airframe_lag(lag, np.array([v]), settings.dt_s), held_after_s=settings.held_after_s)
+        cases = held_cases(v, settings.held_leads_s)
+        w = lag.turn_rate_max_rad_s
+        runs[v] = [
+            fly_held(spec, c, air, settings.dt_s, settings.altitude_m, limits, turn_rate_max_rad_s=w) for c in cases
+        ]
+    return tuple(held_residual_m([run for b in band for run in runs[b]]) for band in bands)
 
 
 def fit_loiter(
@@ -325,20 +366,16 @@ def fit_loiter(
     each tabled neighbour (so that the worse neighbour's figure covers every speed between two), each run flown with
     the lag just fitted (interpolated between tabled speeds, as the monitor reads it)."""
     speeds = settings.speeds_m_s
-    halfway = [(a + b) / 2.0 for a, b in zip(speeds, speeds[1:])]
+    flown, bands = _neighbour_bands(speeds)
     flight = FitFlight(
         spec, settings.wind_max_m_s, settings.loiter_law, lag.turn_rate_max_rad_s, settings.altitude_m,
         settings.dt_s, (speeds[0], speeds[-1]), turn_in_s,
     )  # fmt: skip
     runs: dict[float, list[LoiterRun]] = {}
-    for v in sorted(set(speeds) | set(halfway)):
+    for v in flown:
         air = airframe_lag(lag, np.array([v]), settings.dt_s)
         runs[v] = [fly_loiter(flight, case, air) for case in loiter_cases(v, settings.wind_max_m_s)]
-    out = []
-    for k, v in enumerate(speeds):
-        band = [v] + halfway[max(k - 1, 0) : k + 1]
-        out.append(loiter_figures([run for b in band for run in runs[b]]))
-    return tuple(out)
+    return tuple(loiter_figures([run for b in band for run in runs[b]]) for band in bands)
 
 
 def differences(fitted: AirframeResponse, stored: AirframeResponse, tolerance: float = 1e-9) -> list[str]:
@@ -384,6 +421,13 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         default=FitSettings.wind_max_m_s,
         help="the steady wind the ground loiter is measured in, from 16 directions (m/s; 0: calm air only)",
     )
+    p.add_argument(
+        "--held-leads-s",
+        type=float,
+        nargs="*",
+        default=list(FitSettings.held_leads_s),
+        help=f"the leads that hold their course after {FitSettings.held_after_s:g} s (s; none given: no held leads)",
+    )
     args = p.parse_args(argv)
     speeds = args.speeds
     if any(not (math.isfinite(v) and 0 < v < 1000) for v in speeds) or sorted(set(speeds)) != speeds:
@@ -394,13 +438,24 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         )
     if not 0 <= args.wind_max_m_s < 0.5 * speeds[0]:
         raise UsageError(f"--wind-max-m-s must be in [0, {0.5 * speeds[0]:g}) (half the slowest speed)")
+    held = args.held_leads_s
+    if any(not (math.isfinite(t) and FitSettings.held_after_s < t <= 600.0) for t in held) or sorted(set(held)) != held:
+        raise UsageError(
+            f"--held-leads-s: give distinct leads in ascending order, each in ({FitSettings.held_after_s:g}, 600] s"
+        )
     return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     settings = FitSettings(
-        tuple(args.speeds), args.turn_rate_deg_s, args.altitude_m, 0.1, args.accel_window_s, args.wind_max_m_s
+        tuple(args.speeds),
+        args.turn_rate_deg_s,
+        args.altitude_m,
+        0.1,
+        args.accel_window_s,
+        args.wind_max_m_s,
+        held_leads_s=tuple(args.held_leads_s),
     )
     try:
         out = args.out or response_path(args.aircraft)
@@ -408,7 +463,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if settings != FitSettings():
             words += ["--speeds", *(f"{v:g}" for v in args.speeds), "--turn-rate-deg-s", f"{args.turn_rate_deg_s:g}"]
             words += ["--altitude-m", f"{args.altitude_m:g}", "--accel-window-s", f"{args.accel_window_s:g}"]
-            words += ["--wind-max-m-s", f"{args.wind_max_m_s:g}"]
+            words += [
+                "--wind-max-m-s",
+                f"{args.wind_max_m_s:g}",
+                "--held-leads-s",
+                *(f"{t:g}" for t in args.held_leads_s),
+            ]
         stored = load_response(out, airframe_path(args.aircraft)) if args.check else None
         fitted = fit_response(args.aircraft, settings, " ".join(words))
         if stored is not None:

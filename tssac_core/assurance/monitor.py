@@ -41,6 +41,7 @@ the vehicle's limits (eq. 8).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -96,6 +97,10 @@ class ShieldConfig:
             raise ValueError(f"ShieldConfig.release_decisions must be >= 1, got {self.release_decisions}")
         if self.handover_ticks < 0:
             raise ValueError(f"ShieldConfig.handover_ticks must be >= 0, got {self.handover_ticks}")
+
+    def with_leads(self, leads_s: tuple[float, ...]) -> ShieldConfig:
+        """This configuration offering ``leads_s`` as well (an airframe's held leads in calm air)."""
+        return dataclasses.replace(self, straight_leads_s=tuple(sorted({*self.straight_leads_s, *leads_s})))
 
 
 @dataclass(frozen=True)

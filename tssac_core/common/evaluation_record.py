@@ -83,6 +83,8 @@ class WorldMonitorFigures:
     """The monitor's settings (``ShieldConfig`` as a dict), when the writer states them."""
     adjusted_time_fraction: float = 0.0
     """The share of flight time under the monitor's adjusted action (``ShieldConfig.adjust``)."""
+    held_time_fraction: float = 0.0
+    """The share of flight time a backup's lead flew holding its line."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,8 @@ class SitlMonitorFigures:
     scope: str | None = None
     adjusted_time_fraction: float | None = None
     """The share of control steps under the monitor's adjusted action (None: not counted)."""
+    held_time_fraction: float | None = None
+    """The share of control steps a backup's lead flew holding its line (None: not counted)."""
     vehicle_limits: dict[str, dict[str, object] | None] | None = None
     """Per role, what its vehicle said it achieves (``ACHV_*``: turn_rate_max_deg_s, accel_max_m_s2, decel_max_m_s2),
     as its companion read it first; None for a role whose vehicle said nothing (None: not counted)."""
@@ -180,6 +184,7 @@ class WorldMonitorJson(TypedDict):
     roles: dict[str, RoleMonitorJson]
     config: NotRequired[dict[str, object]]
     adjusted_time_fraction: NotRequired[float]
+    held_time_fraction: NotRequired[float]
 
 
 class SitlMonitorJson(TypedDict):
@@ -198,6 +203,7 @@ class SitlMonitorJson(TypedDict):
     guarantee: bool
     scope: str | None
     adjusted_time_fraction: NotRequired[float | None]
+    held_time_fraction: NotRequired[float | None]
     vehicle_limits: NotRequired[dict[str, dict[str, object] | None] | None]
 
 
@@ -351,6 +357,7 @@ def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJso
             "guarantee": monitor.guarantee,
             "scope": monitor.scope,
             "adjusted_time_fraction": monitor.adjusted_time_fraction,
+            "held_time_fraction": monitor.held_time_fraction,
             "vehicle_limits": copy.deepcopy(monitor.vehicle_limits),
         }
     out: WorldMonitorJson = {
@@ -369,6 +376,7 @@ def _monitor_json(monitor: RecordedMonitor) -> WorldMonitorJson | SitlMonitorJso
             for role, r in monitor.roles.items()
         },
         "adjusted_time_fraction": monitor.adjusted_time_fraction,
+        "held_time_fraction": monitor.held_time_fraction,
     }
     if monitor.config is not None:
         out["config"] = copy.deepcopy(monitor.config)  # as dataclasses.asdict copied it

@@ -18,6 +18,12 @@ def adjusted_text(fraction: float | None) -> str:
     return f", {fraction:.2%} adjusted" if fraction else ""
 
 
+def held_text(fraction: float | None) -> str:
+    """The report's words for the share of time a backup's lead held its line: ", 1.23% holding a line", or nothing
+    when none did."""
+    return f", {fraction:.2%} holding a line" if fraction else ""
+
+
 def adjust_option(adjust: bool, shield: bool) -> bool:
     """``--shield-adjust``, checked: it changes the monitor, so it needs ``--shield`` (one :class:`UsageError` line)."""
     if adjust and not shield:

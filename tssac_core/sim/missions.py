@@ -130,6 +130,7 @@ def monitor_figures(counts: MonitorCounts, cost: np.ndarray, out_of_area: np.nda
         max_switches_per_uav_mission=int(counts.switches.max()),
         backup_time_fraction=float(counts.backup_steps.sum() / max(1, flown)),
         adjusted_time_fraction=float(counts.adjusted_steps.sum() / max(1, flown)),
+        held_time_fraction=float(counts.held_steps.sum() / max(1, flown)),
         unprotected_time_fraction=float(counts.unprotected_steps.sum() / max(1, flown)),
         uav_missions_with_cost=int((cost > 0).sum()),
         uavs_left_area=int(out_of_area.sum()),

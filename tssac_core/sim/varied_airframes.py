@@ -56,6 +56,10 @@ class AirframeVariation:
     """Wind speed per world (m/s), from a direction drawn uniformly."""
     turn_noise_deg_s: float = 0.0
     """Standard deviation of the heading-rate disturbance per step (deg/s)."""
+    held_leads_s: tuple[float, ...] = ()
+    """The backups' leads that hold their course after ``held_after_s`` (s; the airframe's fitted ones): the world's
+    monitor offers them in calm air (:func:`tssac_core.assurance.lagged_backups.held_rollout`); empty: none."""
+    held_after_s: float = 32.0
 
     def __post_init__(self) -> None:
         ranges = {"turn_delay_s": self.turn_delay_s, "turn_tau_s": self.turn_tau_s, "wind_m_s": self.wind_m_s}
@@ -74,6 +78,8 @@ class AirframeVariation:
             raise ValueError(f"airframe variation turn_delay_s: at most 10 s, got {self.turn_delay_s}")
         if not (math.isfinite(self.turn_noise_deg_s) and 0.0 <= self.turn_noise_deg_s <= 90.0):
             raise ValueError(f"airframe variation turn_noise_deg_s must be in [0, 90], got {self.turn_noise_deg_s}")
+        if any(not (math.isfinite(t) and t > self.held_after_s) for t in self.held_leads_s):
+            raise ValueError(f"airframe variation held_leads_s must be longer than held_after_s, got {self}")
 
     @classmethod
     def from_response(
@@ -88,6 +94,8 @@ class AirframeVariation:
             decel_max_m_s2=(min(response.decel_max_m_s2), max(response.decel_max_m_s2)),
             wind_m_s=(0.0, wind_max_m_s),
             turn_noise_deg_s=turn_noise_deg_s,
+            held_leads_s=response.held_leads_s,
+            held_after_s=response.held_after_s,
         )
 
     def corners(self, turn_rate_max_rad_s: float, dt_s: float) -> AirframeLag:
@@ -198,9 +206,15 @@ class VariedAirframes:
         out[..., 1] = np.clip(out[..., 1], self._low, self._high)
         return out
 
+    @property
+    def held_leads_s(self) -> tuple[float, ...]:
+        """The held leads the monitor offers: the variation's, in calm air only (none when a wind blows)."""
+        return self.variation.held_leads_s if self.variation.wind_m_s[1] == 0.0 else ()
+
     def airframe(self, flat: np.ndarray) -> AirframeLag:
         """The airframes drawn for vehicles ``flat`` (indices into the (N, 3) vehicles, row-major) as the runtime-
-        assurance monitor's model of them: exactly what they fly without turbulence (so no residual)."""
+        assurance monitor's model of them: exactly what they fly without turbulence (so no residual; a held lead,
+        flown by the line law on the model itself, is its prediction: no residual either)."""
         n = self.world.n
         a_max = np.broadcast_to(self.world.c.accel_max_m_s2, (n, 3)).reshape(-1)[flat]
         return AirframeLag(
@@ -210,6 +224,8 @@ class VariedAirframes:
             accel_m_s2=self._high.reshape(-1)[flat] * a_max,
             decel_m_s2=self._low.reshape(-1)[flat] * a_max,
             residual_m=np.zeros(len(flat)),
+            held_residual_m=np.zeros(len(flat)) if self.held_leads_s else None,
+            held_after_s=self.variation.held_after_s,
         )
 
     def lag_state(self, flat: np.ndarray) -> LagState:

@@ -54,6 +54,8 @@ class MonitorCounts:
     """Hand-overs either way."""
     adjusted_steps: np.ndarray
     """World steps flown under the monitor's adjusted action (:attr:`ShieldConfig.adjust`)."""
+    held_steps: np.ndarray
+    """World steps a backup's lead flew holding its line (:mod:`tssac_core.assurance.held_course`)."""
 
 
 class WorldMonitor:
@@ -71,6 +73,8 @@ class WorldMonitor:
             raise ValueError(f"one decision interval per role, got {repeats}")
         if loiter is not None and airframes is None:
             raise ValueError("the loiter's bound is measured for airframes: give the airframes it holds for")
+        if airframes is not None and loiter is None and airframes.held_leads_s:
+            cfg = cfg.with_leads(airframes.held_leads_s)  # calm air: the airframes' held leads as well
         self.cfg = cfg
         self.airframes = airframes
         """The world's vehicles fly these airframes (None: eq. 5-6): the monitor predicts with their lag."""
@@ -168,6 +172,7 @@ class WorldMonitor:
         self.counts.flown_steps += moving
         self.counts.backup_steps += moving & self._engaged
         self.counts.adjusted_steps += moving & self._adjusted
+        self.counts.held_steps += moving & self._holding
         self.counts.unprotected_steps += moving & self._unprotected
         return np.where(moving[..., None], self._flying, proposed)
 
@@ -256,9 +261,10 @@ class WorldMonitor:
 
     def _schedule_hold(self, world: World, w: np.ndarray, j: np.ndarray, d: Decision, started: np.ndarray) -> None:
         """The vehicles (w, j) decided now: a backup that started now with a held lead holds its course from the end
-        of the lead's open part; one that stopped flying holds nothing."""
-        self._holding[w[~d.engaged], j[~d.engaged]] = False
-        self._hold_at[w[~d.engaged], j[~d.engaged]] = -1
+        of the lead's open part; one that stopped flying, or whose lead has ended (its turn flies), holds nothing."""
+        done = ~d.engaged | (d.straight_steps == 0)
+        self._holding[w[done], j[done]] = False
+        self._hold_at[w[done], j[done]] = -1
         if self.airframes is None:
             return
         held_from = self.airframes.airframe(np.arange(1)).held_from_steps(world.c.dt_s)
