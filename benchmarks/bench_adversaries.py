@@ -280,6 +280,9 @@ def batched_row(adversary: Adversary, name: str, shield: bool, cfg: BenchConfig,
         "backup_time_fraction": None
         if counts is None
         else float(counts.backup_steps.sum() / max(1, counts.flown_steps.sum())),
+        "held_time_fraction": None
+        if counts is None
+        else float(counts.held_steps.sum() / max(1, counts.flown_steps.sum())),
         "unprotected_steps": None if counts is None else int(counts.unprotected_steps.sum()),
         "success_rate": float(results.success.mean()),
         "unsafe_missions": [int(k) for k in ((results.cost > 0) | results.out_of_area).any(axis=1).nonzero()[0]][:20],
@@ -343,6 +346,7 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
         "interventions": None if per_uav is None else round(per_uav * uav_missions),
         "interventions_per_uav_mission": per_uav,
         "backup_time_fraction": shield.get("backup_time_fraction"),
+        "held_time_fraction": shield.get("held_time_fraction"),
         "unprotected_steps": unprotected_steps(missions),
         "success_rate": summary.get("success_rate"),
         "unsafe_missions": [
