@@ -661,12 +661,10 @@ def decide(
     batched world); ``margin_m`` scalar or (M,) the clearance to keep (:attr:`ShieldConfig.margin_m`, plus the
     timing slack off lockstep); ``error`` the bounds on the estimate's error (None: the true state, as in the
     batched world), taken off every path's and backup's clearance as :func:`backup_error_m` says; ``prediction`` how
-    the paths are predicted (eq. 5-6 unless an airframe's response is given).
-    """
-    m = len(state)
-    margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (m,))
+    the paths are predicted (eq. 5-6 unless an airframe's response is given)."""
+    margin = np.broadcast_to(np.asarray(margin_m, dtype=np.float64), (len(state),))
     scene = Scene(hz, lim, dt_s, margin, cfg)
-    err_now = EstimateError.zero(m) if error is None else error
+    err_now = EstimateError.zero(len(state)) if error is None else error
     x, y, v, phi = (np.asarray(state[:, i], dtype=np.float64) for i in range(4))
     n_pending = 0 if pending is None else pending.shape[1]
     if n_pending:
@@ -680,9 +678,8 @@ def decide(
     engaged, protected = memory.engaged, memory.protected
     # A finite proposal that fails while the policy flies: the nearest passing candidate first (cfg.adjust).
     rows = finite & (excess < 0) & ~engaged & cfg.adjust
-    flown = (proposed, excess, best_end)
     proposed, excess, best_end, adjusted = _nearest_passing(
-        prediction, x, y, v, phi, flown, steps, err_end, scene, rows
+        prediction, x, y, v, phi, (proposed, excess, best_end), steps, err_end, scene, rows
     )
     passes, passes_release = excess >= 0, excess >= cfg.release_margin_m
     backup, lead_left = memory.backup.copy(), memory.lead_left.copy()
@@ -690,7 +687,6 @@ def decide(
     # An unprotected vehicle has no guarantee to keep: any passing action is better than its backup.
     release = engaged & ((count >= cfg.release_decisions) | (passes & ~protected))
     fly_proposed = (~engaged & passes) | release
-    engage = ~engaged & ~passes
     # A vehicle with no known backup (its first decision failed) takes the clearest one from where it is.
     lost = ~fly_proposed & ~protected
     protected = protected.copy()
@@ -716,7 +712,7 @@ def decide(
         memory=new_memory,
         engaged=now_engaged,
         adjusted=fly_proposed & adjusted,
-        engaged_now=engage,
+        engaged_now=~engaged & ~passes,
         released_now=release,
         unprotected=now_engaged & ~new_memory.protected,
         clearance_m=excess + margin,
