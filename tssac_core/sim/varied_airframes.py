@@ -211,6 +211,11 @@ class VariedAirframes:
         """The held leads the monitor offers: the variation's, in calm air only (none when a wind blows)."""
         return self.variation.held_leads_s if self.variation.wind_m_s[1] == 0.0 else ()
 
+    def held_from_steps(self, dt_s: float) -> int | None:
+        """The world step from which a held lead holds its course (None: no held leads offered), as
+        :meth:`AirframeLag.held_from_steps` of :meth:`airframe` says, without building one."""
+        return round(self.variation.held_after_s / dt_s) if self.held_leads_s else None
+
     def airframe(self, flat: np.ndarray) -> AirframeLag:
         """The airframes drawn for vehicles ``flat`` (indices into the (N, 3) vehicles, row-major) as the runtime-
         assurance monitor's model of them: exactly what they fly without turbulence (so no residual; a held lead,

@@ -267,7 +267,7 @@ class WorldMonitor:
         self._hold_at[w[done], j[done]] = -1
         if self.airframes is None:
             return
-        held_from = self.airframes.airframe(np.arange(1)).held_from_steps(world.c.dt_s)
+        held_from = self.airframes.held_from_steps(world.c.dt_s)
         course = d.memory.held_course
         new = started & np.isfinite(course)
         if held_from is None or not new.any():
