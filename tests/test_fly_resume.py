@@ -17,8 +17,8 @@ KEYS = ("index", "seed", "success", "end", "steps", "sim_time_s", "cost", "task_
 
 
 def quick_scenario(tmp: Path) -> Path:
-    """One short mission per seed (the strike UAV 25 km east of the SAM)."""
-    return quick_strike_scenario(tmp, strike_km=25.0)
+    """One short mission per seed."""
+    return quick_strike_scenario(tmp)
 
 
 def flown(path: Path) -> list[dict[str, Any]]:

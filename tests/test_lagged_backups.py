@@ -19,6 +19,7 @@ from tssac_core.assurance.lagged_backups import (
     lag_gains,
     lagged_backup_clearance,
     lagged_rollout,
+    lead_ends,
     straight_rollout,
     turn_keep_out,
 )
@@ -142,6 +143,31 @@ def test_a_held_lead_is_the_open_lead_up_to_its_hold_then_the_line_along_the_cou
     assert np.all(after.omega_rad_s == 0.0) and np.all(after.pending_rad_s == 0.0)
     # The open lead's own rate at the hold is not quite 0: flown on open, its path would bend off the line.
     assert np.abs(open_.rates[:, -1]).max() > 0.0
+
+
+def test_a_held_leads_ends_are_its_flown_samples_without_flying_them() -> None:
+    """:func:`lead_ends` finds a held lead's least clearance in closed form (the sample nearest each radar's foot of
+    the perpendicular, the area's edges at the line's ends): the same as the held rollout's samples, flown."""
+    rng = np.random.default_rng(13)
+    m, held_from = 200, 320
+    x, y, v, phi = random_states(rng, m)
+    lim = limits(m)
+    air = dataclasses.replace(random_airframes(rng, m), held_residual_m=np.zeros(m), held_after_s=32.0)
+    lag = LagState(rng.uniform(-W, W, m), rng.uniform(-W, W, (m, 2)))
+    near = rng.uniform(-60_000.0, 60_000.0, (2, m, 5))
+    hz = Hazards(np.stack([x[:, None] + near[0], y[:, None] + near[1]], axis=2), rng.uniform(0.0, 9_000.0, (m, 5)),
+                 100_000.0)  # fmt: skip
+    half = np.full(m, 15.0)
+    leads = np.array([0, 40, 320, 500, 1280])
+    ends = lead_ends(x, y, v, phi, lag, hz, air, lim, DT, leads, half)
+    flown = held_rollout(x, y, v, phi, lag, 1280, held_from, air, lim, DT)
+    samples = point_clearance(np.concatenate([x[:, None], flown.xs], 1), np.concatenate([y[:, None], flown.ys], 1), hz)
+    for i, lead in enumerate(leads):
+        np.testing.assert_array_equal(ends.least_m[:, i], samples[:, : lead + 1].min(axis=1) - half)
+        if lead:
+            np.testing.assert_array_equal(ends.xs[:, i], flown.xs[:, lead - 1])
+            np.testing.assert_array_equal(ends.ys[:, i], flown.ys[:, lead - 1])
+    assert (ends.least_m[:, 4] < ends.least_m[:, 2]).sum() > 20  # the held part's samples do decide some
 
 
 def test_held_leads_take_the_held_residual_and_shorter_ones_the_turns() -> None:

@@ -17,12 +17,14 @@ import pytest
 from sim_vehicles.dynamics.jsbsim_airframe import load_airframe
 from sim_vehicles.dynamics.response_fit import (
     ROLLOUT_S,
+    FitSettings,
     Turn,
     fit_lag,
     fly_turn,
     lag_rates,
     mean_accel,
     model_paths,
+    refit_held,
     response_path,
     switched_lag_rates,
 )
@@ -295,7 +297,14 @@ def test_check_refuses_a_response_of_another_airframe_version(tmp_path: Path) ->
 
 
 @pytest.mark.parametrize(
-    "argv, words", [(["--speeds", "300", "200"], "ascending"), (["--altitude-m", "0"], "altitude")]
+    "argv, words",
+    [
+        (["--speeds", "300", "200"], "ascending"),
+        (["--altitude-m", "0"], "altitude"),
+        (["--held-after-s", "0.5"], "--held-after-s must be in [1, 120] s"),
+        (["--held-after-s", "64"], "each in (64, 600] s"),
+        (["--held-only"], "--held-only rewrites the held leads of a file"),
+    ],
 )
 def test_bad_arguments_are_one_line_exit_2(argv: list[str], words: str) -> None:
     proc = subprocess.run(
@@ -305,3 +314,11 @@ def test_bad_arguments_are_one_line_exit_2(argv: list[str], words: str) -> None:
         timeout=60,
     )
     assert proc.returncode == 2 and words in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_refitting_the_held_leads_alone_refuses_a_file_fitted_at_other_speeds(f16_response: AirframeResponse) -> None:
+    """``--held-only`` keeps the file's turns: a file fitted at other speeds (or turn rate, altitude, step) than the
+    command asks for is refused before anything flies."""
+    settings = FitSettings(speeds_m_s=(150.0, 300.0), held_after_s=8.0, held_leads_s=(16.0, 64.0))
+    with pytest.raises(ResponseFileError, match="fitted at speeds"):
+        refit_held("f16", f16_response, settings, "test")

@@ -27,7 +27,8 @@ At each speed of ``--speeds`` (calm air, level at ``--altitude-m``, world steps 
   ``held_after_s`` (:func:`tssac_core.assurance.lagged_backups.held_rollout`): flown from states in and after a
   reversal, with each of ``held_leads_s`` and both turns after it, on JSBSim and on the lag model just fitted, the
   largest distance from the monitor's prediction is the held residual (:mod:`sim_vehicles.dynamics.held_fit`), at each
-  speed and halfway to its neighbours (``--held-leads-s`` with no value: no held leads).
+  speed and halfway to its neighbours (``--held-leads-s`` with no value: no held leads). ``--held-only`` flies only
+  these runs and takes the rest from the file it rewrites (the same file a whole fit with these settings writes).
 
 Everything is deterministic (JSBSim, steady winds, no turbulence): ``--check`` refits and compares with the file at
 1e-9.
@@ -331,6 +332,28 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
     )
 
 
+def refit_held(aircraft: str, stored: AirframeResponse, settings: FitSettings, command: str) -> AirframeResponse:
+    """``stored`` with its held leads fitted again under ``settings`` (what :func:`fit_response` would write, the
+    turns' and the loiter's runs not flown again: the file must come from a fit of the same speeds, turn rate,
+    altitude and step)."""
+    fitted_as = (stored.speeds_m_s, stored.turn_rate_max_rad_s, stored.altitude_m, stored.dt_s)
+    asked = (settings.speeds_m_s, math.radians(settings.turn_rate_max_deg_s), settings.altitude_m, settings.dt_s)
+    if fitted_as != asked:
+        raise ResponseFileError(
+            f"--held-only: the file was fitted at speeds {list(stored.speeds_m_s)} m/s, turn rate "
+            f"{math.degrees(stored.turn_rate_max_rad_s):g} deg/s, altitude {stored.altitude_m:g} m, step "
+            f"{stored.dt_s:g} s; this command asks for other ones: fit it whole"
+        )
+    spec = load_airframe(airframe_path(aircraft))
+    return dataclasses.replace(
+        stored,
+        command=command,
+        held_after_s=settings.held_after_s,
+        held_leads_s=settings.held_leads_s,
+        held_residual_m=fit_held(spec, stored, settings),
+    )
+
+
 def _neighbour_bands(speeds: Sequence[float]) -> tuple[list[float], list[list[float]]]:
     """Every speed a fit flies (the tabled ones and halfway between neighbours, ascending) and, per tabled speed, the
     ones its figure covers: itself and halfway to each neighbour (so that the worse neighbour's figure covers every
@@ -426,7 +449,18 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         type=float,
         nargs="*",
         default=list(FitSettings.held_leads_s),
-        help=f"the leads that hold their course after {FitSettings.held_after_s:g} s (s; none given: no held leads)",
+        help="the leads that hold their course after --held-after-s (s; none given: no held leads)",
+    )
+    p.add_argument(
+        "--held-after-s",
+        type=float,
+        default=FitSettings.held_after_s,
+        help="the open part of a held lead (s; default %(default)g)",
+    )
+    p.add_argument(
+        "--held-only",
+        action="store_true",
+        help="fly only the held leads' runs; the turns, accelerations and loiter come from the file this rewrites",
     )
     args = p.parse_args(argv)
     speeds = args.speeds
@@ -438,11 +472,13 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         )
     if not 0 <= args.wind_max_m_s < 0.5 * speeds[0]:
         raise UsageError(f"--wind-max-m-s must be in [0, {0.5 * speeds[0]:g}) (half the slowest speed)")
-    held = args.held_leads_s
-    if any(not (math.isfinite(t) and FitSettings.held_after_s < t <= 600.0) for t in held) or sorted(set(held)) != held:
-        raise UsageError(
-            f"--held-leads-s: give distinct leads in ascending order, each in ({FitSettings.held_after_s:g}, 600] s"
-        )
+    held, after = args.held_leads_s, args.held_after_s
+    if not (math.isfinite(after) and 1.0 <= after <= 120.0):
+        raise UsageError("--held-after-s must be in [1, 120] s")
+    if any(not (math.isfinite(t) and after < t <= 600.0) for t in held) or sorted(set(held)) != held:
+        raise UsageError(f"--held-leads-s: give distinct leads in ascending order, each in ({after:g}, 600] s")
+    if args.held_only and args.check:
+        raise UsageError("--held-only rewrites the held leads of a file; --check compares a whole fit with one")
     return args
 
 
@@ -456,6 +492,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.accel_window_s,
         args.wind_max_m_s,
         held_leads_s=tuple(args.held_leads_s),
+        held_after_s=args.held_after_s,
     )
     try:
         out = args.out or response_path(args.aircraft)
@@ -468,9 +505,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.wind_max_m_s:g}",
                 "--held-leads-s",
                 *(f"{t:g}" for t in args.held_leads_s),
+                "--held-after-s",
+                f"{args.held_after_s:g}",
             ]
-        stored = load_response(out, airframe_path(args.aircraft)) if args.check else None
-        fitted = fit_response(args.aircraft, settings, " ".join(words))
+        stored = load_response(out, airframe_path(args.aircraft)) if args.check or args.held_only else None
+        if args.held_only:
+            assert stored is not None
+            fitted = refit_held(args.aircraft, stored, settings, " ".join(words))
+            stored = None
+        else:
+            fitted = fit_response(args.aircraft, settings, " ".join(words))
         if stored is not None:
             diff = differences(fitted, stored)
             if diff:

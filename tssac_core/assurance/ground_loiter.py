@@ -58,8 +58,7 @@ from tssac_core.assurance.lagged_backups import (
     Rollout,
     lag_gains,
     lagged_rollout,
-    lead_end_lags,
-    lead_samples,
+    lead_ends,
     switched_lag_step,
 )
 from tssac_core.assurance.monitor import N_TURNS, EstimateError, Hazards, Limits, circle_clearance, point_clearance
@@ -326,12 +325,13 @@ def loiter_backup_clearance(
     m, n_leads = len(x), len(leads)
     half_step = (lim.speed_max_m_s + wind.max_m_s) * dt_s / 2
     carried = (wind.east_m_s, wind.north_m_s)
-    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, int(leads.max(initial=0)), half_step, carried)
-    rows, pick, lag = lead_end_lags(lead, lag_state, leads)
-    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
+    ends = lead_ends(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, leads, half_step, carried)
+    rows, both = np.repeat(np.arange(m), n_leads * 2), np.arange(m * n_leads).repeat(2)
+    ex, ey, ev, ep = (a.reshape(-1)[both] for a in (ends.xs, ends.ys, ends.speeds, ends.headings))
+    lag = ends.lag.select(both)
     sign = np.tile([1.0, -1.0], m * n_leads)
     r_wind, r_hz, r_lim = wind.select(rows), hz.select(rows), lim.select(rows)
-    least = lead.least_m[rows, pick]
+    least = ends.least_m.reshape(-1)[both]
     steps = wind.turn_in_steps(dt_s)
     if steps:
         command = np.repeat((sign * r_lim.turn_rate_max_rad_s)[:, None], steps, axis=1)

@@ -346,21 +346,20 @@ def turn_keep_out(
 
 
 @dataclass(frozen=True)
-class LeadSamples:
-    """The straight leads flown from each state under the model, sampled at every step (column 0: the start), (M,
-    longest + 1) each."""
+class LeadEnds:
+    """The candidate leads flown straight from each state under the model, at their ends, (M, L) each."""
 
     least_m: np.ndarray
-    """The least clearance of the samples up to each step, each less half a step's distance."""
+    """The least clearance of the lead's samples, every step's and the start's, each less half a step's distance."""
     xs: np.ndarray
     ys: np.ndarray
     speeds: np.ndarray
     headings: np.ndarray
-    straight: Rollout | None
-    """The lead's rollout (None: no lead longer than 0)."""
+    lag: LagState
+    """The lag's state where each lead ends, M * L rows (row = vehicle * L + lead)."""
 
 
-def lead_samples(
+def lead_ends(
     x: np.ndarray,
     y: np.ndarray,
     v: np.ndarray,
@@ -370,36 +369,87 @@ def lead_samples(
     airframe: AirframeLag,
     lim: Limits,
     dt_s: float,
-    longest: int,
+    leads: np.ndarray,
     half_step_m: np.ndarray,
     wind_m_s: tuple[np.ndarray, np.ndarray] | None = None,
-) -> LeadSamples:
-    """Straight flight (heading-rate command 0, speed held) for ``longest`` steps under the model, carried by the steady
-    ``wind_m_s`` ((M,) east and north; None: calm air), and the least clearance of its samples up to each step, the
-    start included (the arc of a step lies within ``half_step_m`` of one of its ends)."""
-    least = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step_m[:, None], longest + 1, axis=1)
+) -> LeadEnds:
+    """Straight flight (heading-rate command 0, speed held) under the model for each lead of ``leads`` (world steps),
+    carried by the steady ``wind_m_s`` ((M,) east and north; None: calm air): where each ends and the least clearance
+    of its samples, the start included (the arc of a step lies within ``half_step_m`` of one of its ends).
+
+    The open part is flown step by step; a held lead's part on its line (:func:`held_rollout`) is a row of equally
+    spaced samples on a straight line, whose least clearance :class:`HeldLine` finds without flying them."""
+    leads = np.asarray(leads, dtype=np.int64)
+    m, width = len(x), lag_state.pending_rad_s.shape[1]
+    longest = int(leads.max(initial=0))
+    held_from = airframe.held_from_steps(dt_s)
+    if held_from is not None and longest > held_from and wind_m_s is not None:
+        raise ValueError("a lead that holds its course is predicted for calm air only")
+    open_steps = longest if held_from is None else min(longest, held_from)
+    least = np.repeat(point_clearance(x[:, None], y[:, None], hz) - half_step_m[:, None], open_steps + 1, axis=1)
     xs, ys, speeds, headings = (a[:, None] for a in (x, y, v, phi))
-    straight = None
-    if longest:
-        held_from = airframe.held_from_steps(dt_s)
-        if held_from is not None and longest > held_from and wind_m_s is not None:
-            raise ValueError("a lead that holds its course is predicted for calm air only")
-        if held_from is None or longest <= held_from:
-            straight = straight_rollout(x, y, v, phi, lag_state, longest, airframe, lim, dt_s)
-        else:
-            straight = held_rollout(x, y, v, phi, lag_state, longest, held_from, airframe, lim, dt_s)
+    rates, queue = lag_state.omega_rad_s[:, None], lag_state.pending_rad_s
+    if open_steps:
+        straight = straight_rollout(x, y, v, phi, lag_state, open_steps, airframe, lim, dt_s)
         sx, sy = straight.xs, straight.ys
         if wind_m_s is not None:
-            t = dt_s * np.arange(1, longest + 1)[None, :]
+            t = dt_s * np.arange(1, open_steps + 1)[None, :]
             sx, sy = sx + wind_m_s[0][:, None] * t, sy + wind_m_s[1][:, None] * t
         along = np.minimum.accumulate(point_clearance(sx, sy, hz) - half_step_m[:, None], axis=1)
         least[:, 1:] = np.minimum(least[:, 1:], along)
-        xs, ys = np.concatenate([xs, sx], 1), np.concatenate([ys, sy], 1)
-        speeds, headings = (
-            np.concatenate([speeds, straight.speeds], 1),
-            np.concatenate([headings, straight.headings], 1),
-        )
-    return LeadSamples(least, xs, ys, speeds, headings, straight)
+        start = (xs, ys, speeds, headings, rates)
+        flown = (sx, sy, straight.speeds, straight.headings, straight.rates)
+        xs, ys, speeds, headings, rates = (np.concatenate([a, b], 1) for a, b in zip(start, flown))
+        queue = straight.queue
+    opened = np.minimum(leads, open_steps)
+    ends_least, ex, ey, ev, ep, er = (a[:, opened] for a in (least, xs, ys, speeds, headings, rates))
+    pending = np.stack([queue[:, k : k + width] for k in opened], axis=1)  # (M, L, D)
+    held = np.flatnonzero(leads > open_steps)
+    if len(held):  # on the line through the open part's end, along its heading, at its speed
+        v_line = speeds[:, -1] if open_steps else np.clip(v, lim.speed_min_m_s, lim.speed_max_m_s)
+        line = HeldLine(xs[:, -1], ys[:, -1], v_line * dt_s, headings[:, -1])
+        for i in held:
+            steps = int(leads[i]) - open_steps
+            ends_least[:, i] = np.minimum(least[:, -1], line.least_clearance(steps, hz) - half_step_m)
+            ex[:, i], ey[:, i] = line.sample(np.full(m, float(steps)))
+            er[:, i] = 0.0  # straight and steady on the line, nothing pending
+            pending[:, i] = 0.0
+    lag = LagState(er.reshape(-1), pending.reshape(m * len(leads), width))
+    return LeadEnds(ends_least, ex, ey, ev, ep, lag)
+
+
+@dataclass(frozen=True)
+class HeldLine:
+    """A held lead's line (the held part of :func:`held_rollout`, the same arithmetic): its sample k >= 1 lies at
+    (x0, y0) + k step (cos phi, sin phi), (M,) each."""
+
+    x0: np.ndarray
+    y0: np.ndarray
+    step_m: np.ndarray
+    """v dt: the distance between samples."""
+    heading: np.ndarray
+
+    def sample(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Samples ``k``, (M,) or (M, K)."""
+        col = (slice(None),) + (None,) * (np.ndim(k) - 1)
+        along = self.step_m[col] * k
+        return self.x0[col] + along * np.cos(self.heading)[col], self.y0[col] + along * np.sin(self.heading)[col]
+
+    def least_clearance(self, steps: int, hz: Hazards) -> np.ndarray:
+        """The least clearance of samples 1..``steps`` (:func:`~tssac_core.assurance.monitor.point_clearance`'s),
+        (M,): from the area's edges at an end (the distance to an edge is linear along the line), from each radar
+        at the sample nearest the foot of its centre's perpendicular (the squared distance is a parabola in k)."""
+        m, a = len(self.x0), hz.area_m
+        edge = np.full(m, np.inf)
+        for k in (1.0, float(steps)):
+            px, py = self.sample(np.full(m, k))
+            edge = np.minimum.reduce([edge, px, a - px, py, a - py])
+        dx, dy = hz.centres_m[:, :, 0] - self.x0[:, None], hz.centres_m[:, :, 1] - self.y0[:, None]
+        foot = (dx * np.cos(self.heading)[:, None] + dy * np.sin(self.heading)[:, None]) / self.step_m[:, None]
+        sx, sy = self.sample(np.clip(np.rint(foot), 1.0, float(steps)))
+        radar = np.hypot(sx - hz.centres_m[:, :, 0], sy - hz.centres_m[:, :, 1]) - hz.radii_m
+        radar = np.where(hz.radii_m > 0, radar, np.inf)
+        return np.minimum(edge, radar.min(axis=1, initial=np.inf))
 
 
 def lagged_backup_clearance(
@@ -422,33 +472,13 @@ def lagged_backup_clearance(
     rest stays in (module docstring)."""
     m, n_leads = len(x), len(leads)
     half_step = lim.speed_max_m_s * dt_s / 2
-    lead = lead_samples(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, int(leads.max(initial=0)), half_step)
-    rows, pick, lag = lead_end_lags(lead, lag_state, leads)
-    ex, ey, ev, ep = (a[rows, pick] for a in (lead.xs, lead.ys, lead.speeds, lead.headings))
+    ends = lead_ends(x, y, v, phi, lag_state, hz, airframe, lim, dt_s, leads, half_step)
+    rows, both = np.repeat(np.arange(m), n_leads * 2), np.arange(m * n_leads).repeat(2)
+    ex, ey, ev, ep = (a.reshape(-1)[both] for a in (ends.xs, ends.ys, ends.speeds, ends.headings))
     sign = np.tile([1.0, -1.0], m * n_leads)
     r_hz, r_air, r_lim = hz.select(rows), airframe.select(rows), lim.select(rows)
-    path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, lag, sign, r_air, r_lim, dt_s)
+    path, cx, cy, radius = turn_keep_out(ex, ey, ev, ep, ends.lag.select(both), sign, r_air, r_lim, dt_s)
     samples = point_clearance(path.xs, path.ys, r_hz).min(axis=1) - half_step[rows]
     disk = circle_clearance(cx, cy, radius, r_hz)
-    out = np.minimum.reduce([lead.least_m[rows, pick], samples, disk]).reshape(m, n_leads, 2)
+    out = np.minimum.reduce([ends.least_m.reshape(-1)[both], samples, disk]).reshape(m, n_leads, 2)
     return (out - airframe.lead_residual_m(leads, dt_s)[:, :, None]).reshape(m, n_leads * 2)
-
-
-def lead_end_lags(lead: LeadSamples, lag_state: LagState, leads: np.ndarray) -> tuple[np.ndarray, np.ndarray, LagState]:
-    """Every lead's end, both turns, as one batch of M * L * 2 rows (row = (vehicle * L + lead) * 2 + turn): each
-    row's vehicle, its lead's column in ``lead``'s samples, and the lag's state there."""
-    m, n_leads = len(lag_state.omega_rad_s), len(leads)
-    straight = lead.straight
-    lead_idx = np.asarray(leads, dtype=np.int64)
-    rates = lag_state.omega_rad_s[:, None].repeat(n_leads, axis=1)
-    width = lag_state.pending_rad_s.shape[1]
-    pending = np.repeat(lag_state.pending_rad_s[:, None, :], n_leads, axis=1)
-    if straight is not None:
-        after = lead_idx > 0
-        rates[:, after] = straight.rates[:, lead_idx[after] - 1]
-        for i in np.flatnonzero(after):
-            pending[:, i] = straight.queue[:, lead_idx[i] : lead_idx[i] + width]
-    rows = np.repeat(np.arange(m), n_leads * 2)
-    pick = (np.repeat(lead_idx[None, :], m, axis=0).reshape(-1)).repeat(2)
-    lag = LagState(rates.reshape(-1).repeat(2), pending.reshape(m * n_leads, width).repeat(2, axis=0))
-    return rows, pick, lag
