@@ -451,12 +451,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         default=list(FitSettings.held_leads_s),
         help="the leads that hold their course after --held-after-s (s; none given: no held leads)",
     )
-    p.add_argument(
-        "--held-after-s",
-        type=float,
-        default=FitSettings.held_after_s,
-        help="the open part of a held lead (s; default %(default)g)",
-    )
+    p.add_argument("--held-after-s", type=float, default=FitSettings.held_after_s, help="a held lead's open part (s)")
     p.add_argument(
         "--held-only",
         action="store_true",
