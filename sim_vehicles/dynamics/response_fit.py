@@ -335,14 +335,21 @@ def fit_response(aircraft: str, settings: FitSettings, command: str) -> Airframe
 def refit_held(aircraft: str, stored: AirframeResponse, settings: FitSettings, command: str) -> AirframeResponse:
     """``stored`` with its held leads fitted again under ``settings`` (what :func:`fit_response` would write, the
     turns' and the loiter's runs not flown again: the file must come from a fit of the same speeds, turn rate,
-    altitude and step)."""
-    fitted_as = (stored.speeds_m_s, stored.turn_rate_max_rad_s, stored.altitude_m, stored.dt_s)
-    asked = (settings.speeds_m_s, math.radians(settings.turn_rate_max_deg_s), settings.altitude_m, settings.dt_s)
+    altitude, step, acceleration window and loiter wind)."""
+    fitted_as = (
+        stored.speeds_m_s, stored.turn_rate_max_rad_s, stored.altitude_m, stored.dt_s, stored.accel_window_s,
+        stored.loiter_wind_max_m_s,
+    )  # fmt: skip
+    asked = (
+        settings.speeds_m_s, math.radians(settings.turn_rate_max_deg_s), settings.altitude_m, settings.dt_s,
+        settings.accel_window_s, settings.wind_max_m_s,
+    )  # fmt: skip
     if fitted_as != asked:
         raise ResponseFileError(
             f"--held-only: the file was fitted at speeds {list(stored.speeds_m_s)} m/s, turn rate "
             f"{math.degrees(stored.turn_rate_max_rad_s):g} deg/s, altitude {stored.altitude_m:g} m, step "
-            f"{stored.dt_s:g} s; this command asks for other ones: fit it whole"
+            f"{stored.dt_s:g} s, acceleration window {stored.accel_window_s:g} s, loiter wind "
+            f"{stored.loiter_wind_max_m_s:g} m/s; this command asks for other ones: fit it whole"
         )
     spec = load_airframe(airframe_path(aircraft))
     return dataclasses.replace(
