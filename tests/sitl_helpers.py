@@ -234,6 +234,12 @@ class Client:
                 out.append(msg)
         return out
 
+    def drain(self, quiet_s: float = 0.3, max_s: float = 10.0) -> None:
+        """Read until nothing has come for ``quiet_s`` (a backlog in the socket buffer included), ``max_s`` at most."""
+        deadline = time.monotonic() + max_s
+        while time.monotonic() < deadline and self.collect(min(quiet_s, deadline - time.monotonic())):
+            pass
+
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.01) -> bool:
     deadline = time.monotonic() + timeout_s
