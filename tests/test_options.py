@@ -25,11 +25,13 @@ CASES = [
     ({"epochs": 0}, "epochs", "must be >= 1, got 0"),
     ({"action_repeat": 20000}, "action_repeat", "expected a value in [1, 10000], got 20000"),
     ({"vary_turn_noise_deg_s": 91.0}, "vary_turn_noise_deg_s", "expected a value in [0, 90], got 91"),
+    ({"vary_nominal_fraction": 1.5}, "vary_nominal_fraction", "expected a fraction in [0, 1], got 1.5"),
     ({"roles": ["strike", "foo"]}, "roles", "unknown role 'foo' (the roles: decoy, detect, strike)"),
     ({"roles": ["strike", "decoy"]}, "roles", "must follow the curriculum order decoy, detect, strike"),
     ({"observation": "pixels"}, "observation", "expected one of paper, extended, route, got 'pixels'"),
     # Rules between fields:
     ({"vary_wind_m_s": 5.0}, "vary_wind_m_s", "varies the airframes of airframe_response (--airframe-response)"),
+    ({"vary_nominal_fraction": 0.5}, "vary_nominal_fraction", "varies the airframes of airframe_response"),
     ({"algo": "tssac", "penalty": -10.0}, "penalty", "only sac_penalty takes a penalty, not tssac"),
     ({"algo": "ppo", "init_from": "models/tssac/decoy.pt"}, "init_from", "ppo trains every role from scratch"),
 ]

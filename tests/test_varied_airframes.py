@@ -124,8 +124,30 @@ def test_turbulence_is_seeded_noise_on_the_turn_rate(scenario: Scenario) -> None
     assert math.radians(0.7) < rates.std() < math.radians(1.3)
 
 
+def test_the_mix_flies_its_nominal_worlds_as_eq_5_and_the_rest_varied(scenario: Scenario) -> None:
+    """nominal_fraction 0.5 on the F-16's spans in wind with turbulence: about half the worlds fly exactly what the
+    plain world flies (no lag, +-a_max, no wind, no noise), every other world does not; fraction 1 is eq. 5 in every
+    world, and without the mix no world is."""
+    response = load_response(F16_RESPONSE)
+
+    def run(fraction: float | None) -> np.ndarray:
+        variation = None
+        if fraction is not None:
+            variation = AirframeVariation.from_response(response, 10.0, 0.5, nominal_fraction=fraction)
+        task = RoleTask(scenario, Role.STRIKE, n=64, teammates="none", seed=4, airframes=variation)
+        task.reset()
+        return fly(task, actions(80, seed=3))
+
+    plain = run(None)
+    same = [np.array_equal(run(f)[:, w], plain[:, w]) for f in (0.0, 0.5, 1.0) for w in range(64)]
+    none, half, every = np.array(same).reshape(3, 64).sum(axis=1)
+    assert none == 0 and every == 64
+    assert 20 <= half <= 44  # binomial(64, 0.5): outside this about once in 2,000 draws; seeded, so fixed
+
+
 def test_a_resumed_task_flies_on_with_the_same_airframes(scenario: Scenario) -> None:
-    variation = AirframeVariation.from_response(load_response(F16_RESPONSE), wind_max_m_s=10.0, turn_noise_deg_s=0.5)
+    response = load_response(F16_RESPONSE)
+    variation = AirframeVariation.from_response(response, wind_max_m_s=10.0, turn_noise_deg_s=0.5, nominal_fraction=0.5)
     task = RoleTask(scenario, Role.STRIKE, n=3, teammates="none", seed=7, airframes=variation)
     task.reset()
     fly(task, actions(30, seed=1))
@@ -146,6 +168,8 @@ def test_ranges_from_the_f16_response_and_bad_ranges() -> None:
         AirframeVariation(turn_tau_s=(2.0, 1.0))
     with pytest.raises(ValueError, match="decel_max_m_s2 must be < 0"):
         AirframeVariation(decel_max_m_s2=(-1.0, 0.0))
+    with pytest.raises(ValueError, match="nominal_fraction must be in"):
+        AirframeVariation(nominal_fraction=-0.1)
 
 
 @pytest.mark.parametrize(

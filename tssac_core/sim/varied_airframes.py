@@ -17,7 +17,9 @@ Per world and vehicle, drawn at each reset from :class:`AirframeVariation`'s ran
 * turbulence: a zero-mean normal heading-rate disturbance per step (``turn_noise_deg_s``, its standard deviation);
 
 and per world a constant wind (speed uniform in the range, direction uniform), carried by the world's own wind drift
-(:meth:`tssac_core.sim.world.World.set_wind`). Vehicles start each episode in straight flight (omega 0).
+(:meth:`tssac_core.sim.world.World.set_wind`). Vehicles start each episode in straight flight (omega 0). A share of
+the worlds (``nominal_fraction``, drawn per world and episode) flies eq. 5-6 exactly instead: no lag, the scenario's
++-a_max, no wind, no turbulence, so that a team trained on the mix keeps what it flies on the model it is judged on.
 
 :meth:`AirframeVariation.from_response` reads the ranges from an airframe's fitted response
 (``python -m sim_vehicles.dynamics.response_fit``): the spans of its table over the speeds.
@@ -60,6 +62,8 @@ class AirframeVariation:
     """The backups' leads that hold their course after ``held_after_s`` (s; the airframe's fitted ones): the world's
     monitor offers them in calm air (:func:`tssac_core.assurance.lagged_backups.held_rollout`); empty: none."""
     held_after_s: float = 32.0
+    nominal_fraction: float = 0.0
+    """The share of worlds that fly eq. 5-6 exactly in an episode (drawn per world at each reset; 0: none)."""
 
     def __post_init__(self) -> None:
         ranges = {"turn_delay_s": self.turn_delay_s, "turn_tau_s": self.turn_tau_s, "wind_m_s": self.wind_m_s}
@@ -78,14 +82,21 @@ class AirframeVariation:
             raise ValueError(f"airframe variation turn_delay_s: at most 10 s, got {self.turn_delay_s}")
         if not (math.isfinite(self.turn_noise_deg_s) and 0.0 <= self.turn_noise_deg_s <= 90.0):
             raise ValueError(f"airframe variation turn_noise_deg_s must be in [0, 90], got {self.turn_noise_deg_s}")
+        if not (math.isfinite(self.nominal_fraction) and 0.0 <= self.nominal_fraction <= 1.0):
+            raise ValueError(f"airframe variation nominal_fraction must be in [0, 1], got {self.nominal_fraction}")
         if any(not (math.isfinite(t) and t > self.held_after_s) for t in self.held_leads_s):
             raise ValueError(f"airframe variation held_leads_s must be longer than held_after_s, got {self}")
 
     @classmethod
     def from_response(
-        cls, response: AirframeResponse, wind_max_m_s: float = 0.0, turn_noise_deg_s: float = 0.0
+        cls,
+        response: AirframeResponse,
+        wind_max_m_s: float = 0.0,
+        turn_noise_deg_s: float = 0.0,
+        nominal_fraction: float = 0.0,
     ) -> AirframeVariation:
-        """The spans of a fitted response's tables, a wind up to ``wind_max_m_s`` and the given turbulence."""
+        """The spans of a fitted response's tables, a wind up to ``wind_max_m_s`` and the given turbulence, in all
+        but ``nominal_fraction`` of the worlds."""
         return cls(
             turn_delay_s=(min(response.turn_delay_s), max(response.turn_delay_s)),
             turn_tau_s=(min(response.turn_tau_s), max(response.turn_tau_s)),
@@ -96,6 +107,7 @@ class AirframeVariation:
             turn_noise_deg_s=turn_noise_deg_s,
             held_leads_s=response.held_leads_s,
             held_after_s=response.held_after_s,
+            nominal_fraction=nominal_fraction,
         )
 
     def corners(self, turn_rate_max_rad_s: float, dt_s: float) -> AirframeLag:
@@ -134,6 +146,9 @@ class AirframeVariation:
 
 class VariedAirframes:
     """The per-episode airframes of N worlds and their turn-lag state (module docstring)."""
+
+    _nominal: np.ndarray | None = None
+    """Per world, whether it flies eq. 5-6 exactly this episode (None: every world varied, as before the mix)."""
 
     def __init__(self, variation: AirframeVariation, world: World) -> None:
         self.variation = variation
@@ -188,7 +203,22 @@ class VariedAirframes:
         speed = rng.uniform(*v.wind_m_s, size=k)
         towards = rng.uniform(0.0, 2.0 * math.pi, size=k)
         self._wind[:, idx] = speed * np.stack([np.cos(towards), np.sin(towards)])
+        if v.nominal_fraction > 0.0:  # drawn last: without the mix, a run's draws are what they were
+            self._draw_nominal(idx, rng.random(k) < v.nominal_fraction)
         self.world.set_wind(self._wind if v.wind_m_s[1] > 0.0 else None)
+
+    def _draw_nominal(self, idx: np.ndarray, nominal: np.ndarray) -> None:
+        """Worlds ``idx[nominal]`` fly eq. 5-6 this episode: no delay, no lag either way, +-a_max, no wind."""
+        if self._nominal is None:
+            self._nominal = np.zeros(self.world.n, dtype=bool)
+        self._nominal[idx] = nominal
+        eq5 = idx[nominal]
+        self._delay[eq5] = 0
+        self._tau[eq5] = self._out_tau[eq5] = 0.0
+        self._gain[eq5] = self._out_gain[eq5] = 1.0
+        self._hold[eq5] = self._out_hold[eq5] = 0.0
+        self._high[eq5], self._low[eq5] = 1.0, -1.0
+        self._wind[:, eq5] = 0.0
 
     def shape(self, action: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """The actions (N, 3, 2) in [-1, 1] the airframes fly when commanded ``action``: the heading rate delayed,
@@ -201,6 +231,8 @@ class VariedAirframes:
         flown, self._omega = switched_lag_step(self._omega, delayed, gains_in, gains_out)
         if self.variation.turn_noise_deg_s > 0.0:
             noise = rng.normal(0.0, math.radians(self.variation.turn_noise_deg_s), size=flown.shape)
+            if self._nominal is not None:
+                noise[self._nominal] = 0.0
             flown = flown + noise / self.world.c.turn_rate_max_rad_s[None, :]
         out[..., 0] = np.clip(flown, -1.0, 1.0)
         out[..., 1] = np.clip(out[..., 1], self._low, self._high)

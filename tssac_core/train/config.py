@@ -160,6 +160,14 @@ class TrainConfig:
         minimum=0,
         maximum=90,
     )
+    vary_nominal_fraction: float = option(
+        0.0,
+        "with --airframe-response: this share of the training worlds flies eq. 5-6 exactly each episode (no lag, "
+        "the scenario's acceleration, no wind), the rest the varied airframes",
+        minimum=0,
+        maximum=1,
+        metavar="FRACTION",
+    )
     train_monitor: TrainMonitor = option(
         TrainMonitor.OFF,
         "on: every training UAV flies through the runtime-assurance monitor (adjusted; with --airframe-response "
@@ -193,8 +201,9 @@ class TrainConfig:
         object.__setattr__(self, "observation", ObservationMode(self.observation))
         object.__setattr__(self, "roles", tuple(self.roles))
         # The rules between fields.
-        if (self.vary_wind_m_s or self.vary_turn_noise_deg_s) and not self.airframe_response:
-            varied = "vary_wind_m_s" if self.vary_wind_m_s else "vary_turn_noise_deg_s"
+        varies = ("vary_wind_m_s", "vary_turn_noise_deg_s", "vary_nominal_fraction")
+        varied = next((name for name in varies if getattr(self, name)), None)
+        if varied and not self.airframe_response:
             raise OptionError(varied, "varies the airframes of airframe_response (--airframe-response): give it too")
         if self.penalty != 0.0 and self.algo != Algo.SAC_PENALTY:
             raise OptionError("penalty", f"only sac_penalty takes a penalty, not {self.algo}")

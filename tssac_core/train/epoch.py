@@ -66,7 +66,9 @@ def airframe_variation(cfg: TrainConfig) -> AirframeVariation | None:
     if not cfg.airframe_response:
         return None
     response = load_response(cfg.airframe_response)
-    return AirframeVariation.from_response(response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s)
+    return AirframeVariation.from_response(
+        response, cfg.vary_wind_m_s, cfg.vary_turn_noise_deg_s, cfg.vary_nominal_fraction
+    )
 
 
 def monitor_in_training(
