@@ -155,9 +155,14 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         "--batched",
         nargs="*",
         default=list(BATCHED),
-        help="batched scenarios (default random corner; none: none)",
+        help="batched scenarios (default random corner; the flag alone: no batched rows)",
     )
-    p.add_argument("--sitl", nargs="*", default=list(SITL), help="SITL scenarios (default random degraded; none: none)")
+    p.add_argument(
+        "--sitl",
+        nargs="*",
+        default=list(SITL),
+        help="SITL scenarios (default random degraded; the flag alone: no SITL rows)",
+    )
     p.add_argument(
         "--sitl-dynamics", choices=["kinematic", "jsbsim"], default="kinematic", help="the SITL vehicles' physics"
     )
