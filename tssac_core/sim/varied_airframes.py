@@ -148,7 +148,8 @@ class VariedAirframes:
     """The per-episode airframes of N worlds and their turn-lag state (module docstring)."""
 
     _nominal: np.ndarray | None = None
-    """Per world, whether it flies eq. 5-6 exactly this episode (None: every world varied, as before the mix)."""
+    """Per world, whether it flies eq. 5-6 exactly this episode (None: every world varied). A class default, so that
+    a resume state pickled before the mix restores with none."""
 
     def __init__(self, variation: AirframeVariation, world: World) -> None:
         self.variation = variation
@@ -215,8 +216,8 @@ class VariedAirframes:
         eq5 = idx[nominal]
         self._delay[eq5] = 0
         self._tau[eq5] = self._out_tau[eq5] = 0.0
-        self._gain[eq5] = self._out_gain[eq5] = 1.0
-        self._hold[eq5] = self._out_hold[eq5] = 0.0
+        self._gain[eq5], self._hold[eq5] = lag_gains(self._tau[eq5], self._dt)  # tau 0: g = 1, h = 0, no lag
+        self._out_gain[eq5], self._out_hold[eq5] = self._gain[eq5], self._hold[eq5]
         self._high[eq5], self._low[eq5] = 1.0, -1.0
         self._wind[:, eq5] = 0.0
 
