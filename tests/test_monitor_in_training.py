@@ -46,9 +46,11 @@ def f16_in_wind() -> tuple[AirframeVariation, LoiterBound]:
     return variation, variation.envelope_loiter_bound(response.loiter_law(), load(ROOT / "scenarios" / "random.yaml"))
 
 
-def task_for(scenario: Scenario, monitored: bool, in_wind: bool, seed: int = 3) -> RoleTask:
+def task_for(
+    scenario: Scenario, monitored: bool, in_wind: bool, seed: int = 3, costs_overrule: bool = True
+) -> RoleTask:
     variation, loiter = f16_in_wind() if in_wind else (None, None)
-    monitor = MonitorInTraining(ShieldConfig(adjust=True), 10, loiter) if monitored else None
+    monitor = MonitorInTraining(ShieldConfig(adjust=True), 10, loiter, costs_overrule) if monitored else None
     return RoleTask(scenario, Role.DECOY, n=4, teammates="none", seed=seed, airframes=variation, monitor=monitor)
 
 
@@ -79,6 +81,17 @@ def test_a_learner_steering_into_radars_pays_for_every_step_the_monitor_flies_an
     overruled = counts.backup_steps[:, 0] + counts.adjusted_steps[:, 0]
     assert (overruled > 0).all()
     np.testing.assert_array_equal(cost, overruled)  # 1 per world step the monitor flew instead of the learner
+
+
+def test_as_a_shield_the_monitor_flies_the_same_and_the_learner_pays_only_the_hazards_cost(scenario: Scenario) -> None:
+    costed = task_for(scenario, True, False)
+    costed_cost, _ = fly_into_radars(costed, 200)
+    shielded = task_for(scenario, True, False, costs_overrule=False)
+    cost, hazard = fly_into_radars(shielded, 200)
+    assert costed.monitor is not None and shielded.monitor is not None
+    np.testing.assert_array_equal(shielded.world.phi_rad, costed.world.phi_rad)  # the same monitor, the same flight
+    assert (costed_cost > 0).all() and (hazard == 0).all()
+    np.testing.assert_array_equal(cost, np.zeros(shielded.n))  # what was flown never entered a radar: no cost
 
 
 def test_the_monitor_forgets_only_the_worlds_that_start_anew(scenario: Scenario) -> None:
@@ -127,5 +140,5 @@ def test_a_preset_with_a_bad_train_monitor_word_is_one_line(tmp_path: Path, caps
     preset.write_text(f"train_monitor: {value}\n")  # YAML 1.1 reads an unquoted yes as true: a word is refused too
     assert run(main, ["--preset", str(preset), "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "train_monitor: expected one of off, on" in err
+    assert err.count("\n") == 0 and "train_monitor: expected one of off, on, shield" in err
     assert not (tmp_path / "run").exists()

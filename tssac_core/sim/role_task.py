@@ -67,13 +67,18 @@ class MonitorInTraining:
     the world's true state, predicting with each vehicle's varied airframe where the task has them. A world step it
     flies something other than the learner's proposal (its backup, or its adjusted action) costs the learner 1, as a
     step in a radar does: the Lagrangian then teaches a team that leaves the monitor room to prove its backups, so
-    that a monitored deployment loses little to its interventions (issue 58)."""
+    that a monitored deployment loses little to its interventions (issue 58). Without that cost
+    (``costs_overrule`` False) the monitor is a shield in the learner's world: the learner meets what its proposals
+    lead to where the monitor turns them away (a gap it refuses, a backup's turn) and learns from the reward what
+    to do next, its cost only the hazard's."""
 
     shield: ShieldConfig
     learner_repeat: int
     """World steps between the learner's decisions (the training's action repeat)."""
     loiter: LoiterBound | None = None
     """In wind, the backups end in the ground loiter this bounds (needs the task's varied airframes)."""
+    costs_overrule: bool = True
+    """A world step the monitor flies instead of the learner costs the learner 1."""
 
 
 @dataclass
@@ -140,6 +145,7 @@ class RoleTask:
         """Varied airframes (tssac_core.sim.varied_airframes), or None: eq. 5-6 exactly."""
         self.monitor = None if monitor is None else self._monitor(monitor)
         """The monitor every UAV flies through (:class:`MonitorInTraining`), or None: the actions as proposed."""
+        self.costs_overrule = monitor is not None and monitor.costs_overrule
         self.ep_return = np.zeros(n)
         self.ep_cost = np.zeros(n)
         self.detour_m = np.zeros(n)
@@ -224,7 +230,7 @@ class RoleTask:
         cost = result.cost[:, self.j]
         if self.cost_margin_m > 0:
             cost = (self.world.near_radar(self.cost_margin_m)[:, self.j] & moving[:, self.j]).astype(np.float64)
-        if self.monitor is not None:  # MonitorInTraining: a step the monitor flies instead of the learner costs 1
+        if self.monitor is not None and self.costs_overrule:  # a step the monitor flies instead of the learner
             cost = np.maximum(cost, self.monitor.overruled[:, self.j] & moving[:, self.j])
         # Afresh, not in place: an in-place update of a one-element array (N = 1) takes numpy's slow path.
         self.ep_return = self.ep_return + r

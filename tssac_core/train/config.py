@@ -50,7 +50,9 @@ class TrainMonitor(enum.StrEnum):
 
     OFF = "off"
     ON = "on"
-    """tssac_core.sim.role_task.MonitorInTraining."""
+    """tssac_core.sim.role_task.MonitorInTraining: a step the monitor flies instead of the learner costs 1."""
+    SHIELD = "shield"
+    """The same monitor, its steps costing only what the step flown costs (a shield in the learner's world)."""
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,8 @@ class TrainConfig:
         TrainMonitor.OFF,
         "on: every training UAV flies through the runtime-assurance monitor (adjusted; with --airframe-response "
         "predicting with each airframe's lag, in wind ending in the ground loiter), and a step it flies instead of "
-        "the learner costs 1 like a step in a radar (tssac_core.sim.role_task.MonitorInTraining)",
+        "the learner costs 1 like a step in a radar (tssac_core.sim.role_task.MonitorInTraining); shield: the same "
+        "monitor, its steps costing only what the step flown costs",
         choices=tuple(TrainMonitor),
     )
     train_monitor_margin_m: float = option(

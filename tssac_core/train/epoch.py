@@ -83,7 +83,7 @@ def monitor_in_training(
     loiter = None
     if variation is not None and variation.wind_m_s[1] > 0:
         loiter = variation.envelope_loiter_bound(load_response(cfg.airframe_response).loiter_law(), scenario)
-    return MonitorInTraining(shield, cfg.action_repeat, loiter)
+    return MonitorInTraining(shield, cfg.action_repeat, loiter, costs_overrule=cfg.train_monitor is TrainMonitor.ON)
 
 
 def reached_stop(cfg: TrainConfig, row: MetricsRow) -> bool:
