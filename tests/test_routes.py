@@ -7,7 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from tssac_core.sim.routes import KING_MOVES, KNIGHT_MOVES, RouteConfig, RouteMap, sample_bilinear, wavefront
+from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.sim.routes import (
+    KING_MOVES,
+    KNIGHT_MOVES,
+    RouteConfig,
+    RouteMap,
+    pilot_route,
+    sample_bilinear,
+    wavefront,
+)
 from tssac_core.sim.scenario import Layout, Radar, Role, Start, load
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
@@ -117,3 +126,22 @@ def test_field_cache_rebuilds_only_for_new_layouts():
     other = one_radar_world((30.0, 80.0), (10.0, 50.0))
     routes.detour_m(snapshot(other))
     assert builds == [0, 0]
+
+
+def test_an_edge_margin_makes_the_band_inside_the_area_edge_a_hazard_and_nothing_else():
+    plain = RouteMap(RouteConfig(margin_m=0.0))
+    banded = RouteMap(RouteConfig(margin_m=0.0, edge_margin_m=3000.0))
+    # In the band (1 km from the west edge): the way out of it, about 2 km, costs 5 times its length (the grid: 1.5-2).
+    edge = snapshot(one_radar_world((30.0, 85.0), (1.0, 50.0)))
+    assert banded.detour_m(edge)[0, 0] >= plain.detour_m(edge)[0, 0] + 4 * 1500
+    # Away from the edges, on a free line to the SAM, the way is the same.
+    middle = snapshot(one_radar_world((30.0, 85.0), (20.0, 50.0)))
+    np.testing.assert_allclose(banded.detour_m(middle)[0, 0], plain.detour_m(middle)[0, 0])
+
+
+def test_the_pilots_route_is_the_trained_one_unless_the_monitor_asks_for_its_room_at_the_edge():
+    assert pilot_route(None) == RouteConfig()
+    assert pilot_route(ShieldConfig()) == RouteConfig()
+    assert pilot_route(ShieldConfig(route_edge_margin_m=3000.0)) == RouteConfig(edge_margin_m=3000.0)
+    with pytest.raises(ValueError, match="route_edge_margin_m"):
+        ShieldConfig(route_edge_margin_m=-1.0)

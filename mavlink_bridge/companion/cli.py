@@ -31,7 +31,12 @@ from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
-from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
+from tssac_core.common.shield_options import (
+    SHIELD_ADJUST_HELP,
+    SHIELD_ROUTE_EDGE_HELP,
+    adjust_option,
+    route_edge_option,
+)
 from tssac_core.sim.airframe_response import response_option
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.sim.settings_json import SettingsError
@@ -43,6 +48,13 @@ if TYPE_CHECKING:
 _log = logging.getLogger("mavlink_bridge.companion")
 
 PROG = "python -m mavlink_bridge.companion"
+
+
+def shield_config(args: argparse.Namespace) -> ShieldConfig | None:
+    """The monitor ``--shield`` asks for, with ``--shield-adjust`` and ``--shield-route-edge-km``; None without it."""
+    adjust = adjust_option(args.shield_adjust, args.shield)
+    edge_m = route_edge_option(args.shield_route_edge_km, args.shield)
+    return ShieldConfig(adjust=adjust, route_edge_margin_m=edge_m) if args.shield else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -88,6 +100,7 @@ def _pilot_flags(g: argparse._ActionsContainer) -> None:
         "(sim_vehicles/dynamics/airframes/<name>.response.yaml) instead of eq. 5 (docs/runtime_assurance.md)",
     )
     g.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
+    g.add_argument("--shield-route-edge-km", type=float, default=0.0, metavar="KM", help=SHIELD_ROUTE_EDGE_HELP)
     g.add_argument(
         "--source-system",
         type=int,
@@ -228,7 +241,7 @@ def config_from_args(args: argparse.Namespace) -> CompanionConfig:
         filter_model=FilterModel(args.filter),
         lean_telemetry=args.lean_telemetry,
         pilot=args.pilot or "",
-        shield=ShieldConfig(adjust=adjust_option(args.shield_adjust, args.shield)) if args.shield else None,
+        shield=shield_config(args),
         airframe_response=response_option(args.airframe_response, args.shield, scenario),
         setpoints=SetpointDialect(args.setpoints),
         source_system=args.source_system,

@@ -18,6 +18,7 @@ from mavlink_bridge.companion.config import STRAIGHT, CompanionConfig
 from tssac_core.deploy.numpy_actor import load_actor
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
 from tssac_core.sim.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
+from tssac_core.sim.routes import RouteConfig, RouteMap, pilot_route
 from tssac_core.sim.scenario import Role
 from tssac_core.sim.world_state import WorldState
 
@@ -83,17 +84,17 @@ class HeldPilot:
         return max(step + 1, self._clock.next_step)
 
 
-def policy_pilot(path: Path, role: Role) -> PolicyPilot:
+def policy_pilot(path: Path, role: Role, route: RouteConfig = RouteConfig()) -> PolicyPilot:
     """The trained policy in ``path`` (<role>.npz: numpy only; <role>.onnx: onnxruntime; <role>.pt: imports torch),
-    named by its path."""
-    return PolicyPilot(load_actor(path, role), name=str(path))
+    named by its path, observing the route field ``route``."""
+    return PolicyPilot(load_actor(path, role), routes=RouteMap(route), name=str(path))
 
 
 def make_pilot(config: CompanionConfig) -> HeldPilot:
     """The pilot a configuration names: its model, else ``--pilot`` (guidance by default)."""
     pilot: Pilot
     if config.model is not None:
-        pilot = policy_pilot(config.model, config.role)
+        pilot = policy_pilot(config.model, config.role, pilot_route(config.shield))
     elif config.pilot == STRAIGHT:
         pilot = StraightPilot()
     elif config.pilot in ADVERSARY_NAMES:

@@ -74,7 +74,9 @@ def companion_config(
         scenario=scenario,
         model=None if cfg.models is None else pilot_file(cfg.models, role),
         pilot="" if cfg.models is not None else cfg.pilot,
-        shield=ShieldConfig(adjust=cfg.shield_adjust) if cfg.shield else None,
+        shield=ShieldConfig(adjust=cfg.shield_adjust, route_edge_margin_m=cfg.shield_route_edge_m)
+        if cfg.shield
+        else None,
         airframe_response=cfg.airframe_response,
         setpoints=cfg.setpoints,
         lockstep=cfg.lockstep,

@@ -50,6 +50,7 @@ def campaign_key(cfg: FlyConfig) -> str:
         "lockstep_grant_s": cfg.lockstep_grant_s,
         "shield": cfg.shield,
         "shield_adjust": cfg.shield_adjust,
+        **({"shield_route_edge_m": cfg.shield_route_edge_m} if cfg.shield_route_edge_m else {}),
         "airframe_response": None if cfg.airframe_response is None else sha256_file(cfg.airframe_response),
         "setpoints": cfg.setpoints.value,
         "lean_telemetry": cfg.lean_telemetry,

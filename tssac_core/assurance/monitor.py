@@ -85,9 +85,13 @@ class ShieldConfig:
     """When the proposed action fails and the backup is not flying: first the passing action nearest the proposal among
     :func:`adjusted_candidates` flies; the backup takes over only when none passes (False: the backup at once). A
     flying backup still goes back to the proposal alone, by the release rule."""
+    route_edge_margin_m: float = 0.0
+    """Asked of the pilot, not checked by the monitor: the route field a policy observes treats this band inside the
+    area's edge as a hazard, so that the way it is shown round the radars leaves the backups their room at the
+    geofence (``tssac_core.sim.routes.pilot_route``; 0: the route as trained)."""
 
     def __post_init__(self) -> None:
-        for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s"):
+        for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s", "route_edge_margin_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"ShieldConfig.{name} must be a finite number >= 0, got {value}")

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.world import cached_constant, constant_operand
 from tssac_core.sim.world_state import WorldState
 
@@ -300,6 +301,18 @@ class RouteConfig:
     """Flying a metre inside a radar counts as this many metres of route, so a way around the radars is
     shorter unless it is more than this many times as long (finite, so the field has no jumps and a UAV
     inside a radar still has a way out)."""
+    edge_margin_m: float = 0.0
+    """Cells within this distance of the area's edge count as hazards too (0: the edge is only the grid's end):
+    the route a monitored pilot follows leaves the monitor's backups their room at the geofence
+    (:func:`pilot_route`)."""
+
+
+def pilot_route(shield: ShieldConfig | None) -> RouteConfig:
+    """The route field the pilots observe: the default, or with the monitor the one that keeps
+    ``shield.route_edge_margin_m`` from the area's edge."""
+    if shield is None or shield.route_edge_margin_m == 0:
+        return RouteConfig()
+    return RouteConfig(edge_margin_m=shield.route_edge_margin_m)
 
 
 class RouteMap:
@@ -319,6 +332,9 @@ class RouteMap:
         cx, cy = cell_centres(state.c.area_m, cfg.grid_m)
         goals = np.stack([sam_disk(state, int(k), cx, cy) for k in worlds])
         inside = np.stack([radar_depth(state, int(k), cx, cy, cfg.margin_m) > 0 for k in worlds])
+        if cfg.edge_margin_m > 0:
+            area, edge = state.c.area_m, cfg.edge_margin_m
+            inside |= (np.minimum(cx, cy) < edge) | (np.maximum(cx, cy) > area - edge)
         return wavefronts(goals, np.where(inside, cfg.hazard_weight, 1.0), KNIGHT_MOVES) * cfg.grid_m
 
     def detour_m(self, state: WorldState, vehicle: int | None = None) -> np.ndarray:

@@ -15,7 +15,7 @@ import numpy as np
 
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import GuidancePilot, PilotSpec, as_pilot
-from tssac_core.sim.routes import RouteMap
+from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
@@ -24,12 +24,15 @@ from tssac_core.sim.world_state import snapshot
 class Team:
     """The pilots of the three vehicles of a World; holds actions of pilots with an action_repeat."""
 
-    def __init__(self, pilots: Sequence[PilotSpec], default_mode: ObservationMode) -> None:
+    def __init__(
+        self, pilots: Sequence[PilotSpec], default_mode: ObservationMode, route: RouteConfig = RouteConfig()
+    ) -> None:
         self.pilots = list(pilots)
         self.default_mode = default_mode
         self.guidance = GuidancePilot()
-        self.routes = RouteMap()
-        """Route fields for pilots that observe in route mode."""
+        self.routes = RouteMap(route)
+        """Route fields for pilots that observe in route mode (``route``: as trained unless the monitor asks for its
+        room at the edge, :func:`~tssac_core.sim.routes.pilot_route`)."""
         self._flown = [
             (j, pilot)
             for j, spec in enumerate(self.pilots)
