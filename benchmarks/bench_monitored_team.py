@@ -33,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.output import add_json_option  # noqa: E402
 from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
-from tssac_core.common.shield_options import SHIELD_ROUTE_EDGE_HELP, route_edge_option
 from tssac_core.deploy.policy import load_team
 from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.missions import fly_missions
@@ -119,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--airframe-response", type=Path, default=F16_RESPONSE)
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO)
     p.add_argument("--margin-m", type=float, default=ShieldConfig.margin_m, help="the monitor's clearance (m)")
-    p.add_argument("--shield-route-edge-km", type=float, default=0.0, metavar="KM", help=SHIELD_ROUTE_EDGE_HELP)
+    add_tuning_options(p)
     add_json_option(p, "monitored_team")
     args = p.parse_args(argv)
     if args.episodes < 1:
@@ -129,8 +129,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise UsageError(f"--wind-m-s must be in [0, 75), got {winds}")
     torch.set_num_threads(1)  # the team's forward passes are small: one core each, the other for whatever runs beside
     scenario = load(args.scenario)
-    edge_m = route_edge_option(args.shield_route_edge_km, True)
-    shield = ShieldConfig(margin_m=args.margin_m, adjust=True, route_edge_margin_m=edge_m)
+    shield = tuning_option(args, True).config(adjust=True, margin_m=args.margin_m)
     rows: list[dict[str, Any]] = []
     out: dict[str, Any] = {"episodes": args.episodes, "seed": args.seed, "scenario": str(args.scenario), "rows": rows}
     airframes = {wind: airframes_in(args.airframe_response, wind, scenario) for wind in winds}  # a loiter fit each

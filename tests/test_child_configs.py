@@ -28,6 +28,7 @@ from mavlink_bridge.link.guided_commands import SetpointDialect
 from sim_vehicles import __main__ as sitl_cli
 from sim_vehicles import from_config as sitl_from_config
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_tuning import ShieldTuning
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, DynamicsModel, Role, Scenario, ScenarioError, dump, load, sample_layout
 from tssac_core.sim.settings_json import SettingsError, from_json, to_json
@@ -142,6 +143,7 @@ def _fly_config(*extra: str) -> FlyConfig:
 FLY_VARIANTS = [
     [],
     ["--pilot", "straight", "--shield"],
+    ["--shield", "--shield-release-m", "300", "--shield-release-decisions", "1", "--shield-route-edge-km", "3"],
     ["--models", str(DEFAULT_MODELS), "--setpoints", "arduplane"],
     ["--speedup", "10"],
     ["--lockstep-grant-s", "0"],
@@ -166,6 +168,14 @@ def test_fly_configures_a_companion_as_the_equivalent_command_line_would(tmp_pat
         argv += ["--status-json", str(status)]
         argv += ["--model", str(pilot_file(cfg.models, role))] if cfg.models is not None else ["--pilot", cfg.pilot]
         argv += ["--shield"] if cfg.shield else []
+        tuning = cfg.shield_tuning
+        argv += [
+            "--shield-release-m",
+            repr(tuning.release_m),
+            "--shield-release-decisions",
+            str(tuning.release_decisions),
+        ]
+        argv += ["--shield-route-edge-km", repr(tuning.route_edge_m / 1000.0)] if tuning.route_edge_m else []
         argv += ["--setpoints", cfg.setpoints.value]
         argv += ["--lockstep", "--lockstep-grant-s", repr(cfg.lockstep_grant_s)] if cfg.lockstep else []
         argv += ["--lean-telemetry"] if cfg.lean_telemetry else []
@@ -173,6 +183,16 @@ def test_fly_configures_a_companion_as_the_equivalent_command_line_would(tmp_pat
         flags = companion_cli.config_from_args(companion_cli.build_parser().parse_args(argv))
         assert given == flags
         assert CompanionConfig.from_json(given.to_json()) == flags
+
+
+def test_fly_hands_its_companions_the_monitors_tuning(tmp_path: Path) -> None:
+    cfg = _fly_config("--shield", "--shield-release-m", "300", "--shield-release-decisions", "1")
+    cfg = dataclasses.replace(cfg, shield_tuning=dataclasses.replace(cfg.shield_tuning, route_edge_m=2500.0))
+    given = companion_config(cfg, ROLES[0], "udpout:127.0.0.1:9", _fixed_scenario(), tmp_path / "s.json", None, None)
+    assert given.shield is not None
+    assert (given.shield.release_margin_m, given.shield.release_decisions) == (300.0, 1)
+    assert given.shield.route_edge_margin_m == 2500.0
+    assert _fly_config("--shield").shield_tuning == ShieldTuning()  # untuned: the monitor's defaults
 
 
 # ------------------------------------------------------------------------------ the companion's front end

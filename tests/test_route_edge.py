@@ -1,6 +1,7 @@
-"""A route that leaves the monitor's backups their room at the geofence (``--shield-route-edge-km``,
-``ShieldConfig.route_edge_margin_m``): with it the policies' route observation treats a band inside the area's edge as
-a hazard, in the batched world and in the companion alike; the option needs the monitor and a width >= 0."""
+"""Giving the team its way back (:mod:`tssac_core.assurance.shield_tuning`): a route that leaves the monitor's backups
+their room at the geofence (``--shield-route-edge-km``: the policies' route observation treats a band inside the area's
+edge as a hazard, in the batched world and in the companion alike) and a quicker hand-back (``--shield-release-m``,
+``--shield-release-decisions``), each safe; the options need the monitor and sane values."""
 
 from __future__ import annotations
 
@@ -62,18 +63,23 @@ def test_the_companion_shows_its_policy_the_route_its_monitor_asks_for() -> None
         assert pilot.routes.cfg == RouteConfig(edge_margin_m=edge)
 
 
+NEEDS_SHIELD = (
+    "--shield-release-m, --shield-release-decisions and --shield-route-edge-km tune the monitor: they need --shield"
+)
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (
-            ["--shield-route-edge-km", "3"],
-            "--shield-route-edge-km asks the pilot for the monitor's room: it needs --shield",
-        ),
-        (["--shield", "--shield-route-edge-km", "-1"], "--shield-route-edge-km must be a finite width >= 0, got -1"),
-        (["--shield", "--shield-route-edge-km", "nan"], "--shield-route-edge-km must be a finite width >= 0, got nan"),
+        (["--shield-route-edge-km", "3"], NEEDS_SHIELD),
+        (["--shield-release-m", "300"], NEEDS_SHIELD),
+        (["--shield", "--shield-route-edge-km", "-1"], "--shield-route-edge-km must be a finite number >= 0, got -1"),
+        (["--shield", "--shield-route-edge-km", "nan"], "--shield-route-edge-km must be a finite number >= 0, got nan"),
+        (["--shield", "--shield-release-m", "inf"], "--shield-release-m must be a finite number >= 0, got inf"),
+        (["--shield", "--shield-release-decisions", "0"], "--shield-release-decisions must be >= 1, got 0"),
     ],
 )
-def test_a_bad_route_edge_is_one_line_before_anything_flies(capsys, argv: list[str], message: str) -> None:
+def test_a_bad_tuning_is_one_line_before_anything_flies(capsys, argv: list[str], message: str) -> None:
     for main, base in (
         (evaluate_main, ["--models", str(SHIPPED), "--episodes", "1"]),
         (

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.common.evaluation_record import (
     BatchedRun,
@@ -50,14 +51,7 @@ from tssac_core.common.evaluation_record import (
     EvaluationRecordJson,
     WorldMonitorFigures,
 )
-from tssac_core.common.shield_options import (
-    SHIELD_ADJUST_HELP,
-    SHIELD_ROUTE_EDGE_HELP,
-    adjust_option,
-    adjusted_text,
-    held_text,
-    route_edge_option,
-)
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option, adjusted_text, held_text
 from tssac_core.deploy.policy_spec import PolicyError, PolicySpec, check_policy
 from tssac_core.reporting.progress import MissionBar, ShardsBar
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
@@ -138,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"with --shield: clearance kept from every radar and edge (default {ShieldConfig.margin_m:g})",
     )
     p.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
-    p.add_argument("--shield-route-edge-km", type=float, default=0.0, metavar="KM", help=SHIELD_ROUTE_EDGE_HELP)
+    add_tuning_options(p)
     p.add_argument(
         "--workers",
         type=int,
@@ -401,10 +395,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         pilots = load_pilots(args.models, controller)
     adjust = adjust_option(args.shield_adjust, args.shield)
-    edge_m = route_edge_option(args.shield_route_edge_km, args.shield)
-    shield = (
-        ShieldConfig(margin_m=args.shield_margin_m, adjust=adjust, route_edge_margin_m=edge_m) if args.shield else None
-    )
+    tuning = tuning_option(args, args.shield)
+    shield = tuning.config(adjust, args.shield_margin_m) if args.shield else None
     indices = [args.mission] if args.mission is not None else list(range(args.episodes))
     results = fly_team(scenario, pilots, indices, args.seed, shield, args.workers, args.address, not args.no_progress)
     record = summarize(results, scenario, args.scenario, who, args.seed, shield)

@@ -29,14 +29,10 @@ from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
+from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
-from tssac_core.common.shield_options import (
-    SHIELD_ADJUST_HELP,
-    SHIELD_ROUTE_EDGE_HELP,
-    adjust_option,
-    route_edge_option,
-)
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.sim.airframe_response import response_option
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.sim.settings_json import SettingsError
@@ -51,10 +47,10 @@ PROG = "python -m mavlink_bridge.companion"
 
 
 def shield_config(args: argparse.Namespace) -> ShieldConfig | None:
-    """The monitor ``--shield`` asks for, with ``--shield-adjust`` and ``--shield-route-edge-km``; None without it."""
+    """The monitor ``--shield`` asks for, with ``--shield-adjust`` and its tuning; None without it."""
     adjust = adjust_option(args.shield_adjust, args.shield)
-    edge_m = route_edge_option(args.shield_route_edge_km, args.shield)
-    return ShieldConfig(adjust=adjust, route_edge_margin_m=edge_m) if args.shield else None
+    tuning = tuning_option(args, args.shield)
+    return tuning.config(adjust) if args.shield else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -100,7 +96,7 @@ def _pilot_flags(g: argparse._ActionsContainer) -> None:
         "(sim_vehicles/dynamics/airframes/<name>.response.yaml) instead of eq. 5 (docs/runtime_assurance.md)",
     )
     g.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
-    g.add_argument("--shield-route-edge-km", type=float, default=0.0, metavar="KM", help=SHIELD_ROUTE_EDGE_HELP)
+    add_tuning_options(g)
     g.add_argument(
         "--source-system",
         type=int,

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, CompanionConfig, default_command_timeout_s
 from mavlink_bridge.fly.config import FlyConfig
-from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import Role, Scenario
 from tssac_core.sim.sitl_config import ClockMode, SitlConfig
@@ -74,9 +73,7 @@ def companion_config(
         scenario=scenario,
         model=None if cfg.models is None else pilot_file(cfg.models, role),
         pilot="" if cfg.models is not None else cfg.pilot,
-        shield=ShieldConfig(adjust=cfg.shield_adjust, route_edge_margin_m=cfg.shield_route_edge_m)
-        if cfg.shield
-        else None,
+        shield=cfg.shield_tuning.config(cfg.shield_adjust) if cfg.shield else None,
         airframe_response=cfg.airframe_response,
         setpoints=cfg.setpoints,
         lockstep=cfg.lockstep,

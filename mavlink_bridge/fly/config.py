@@ -15,15 +15,11 @@ from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_gra
 from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
+from tssac_core.assurance.shield_tuning import ShieldTuning, add_tuning_options, tuning_option
 from tssac_core.common.cli import SEED_MAX, UsageError, UsageParser, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import create_exclusively
-from tssac_core.common.shield_options import (
-    SHIELD_ADJUST_HELP,
-    SHIELD_ROUTE_EDGE_HELP,
-    adjust_option,
-    route_edge_option,
-)
+from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.deploy.manifest import check_models as check_manifest
 from tssac_core.deploy.numpy_actor import load_actor, pilot_file
 from tssac_core.reporting.mission_animation import AnimationFormatError, check_target
@@ -84,8 +80,8 @@ class FlyConfig:
     """The airframe's fitted response their monitors predict with (``--airframe-response``); None: eq. 5."""
     shield_adjust: bool = False
     """The monitors fly the passing action nearest a failing proposal before the backup (``--shield-adjust``)."""
-    shield_route_edge_m: float = 0.0
-    """The policies' route keeps this band inside the area's edge (``--shield-route-edge-km``; 0: as trained)."""
+    shield_tuning: ShieldTuning = ShieldTuning()
+    """The monitors' hand-back and the policies' route (``--shield-release-m`` and the rest)."""
     setpoints: SetpointDialect = SetpointDialect.BODY_RATES
     """How the companions command GUIDED (``--setpoints``: body rates, or ArduPlane's GUIDED_CHANGE_* commands)."""
     mission: int | None = None
@@ -181,7 +177,7 @@ def _mission_flags(g: argparse._ActionsContainer) -> None:
         "(sim_vehicles/dynamics/airframes/f16.response.yaml for --dynamics jsbsim's f16) instead of eq. 5",
     )
     g.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
-    g.add_argument("--shield-route-edge-km", type=float, default=0.0, metavar="KM", help=SHIELD_ROUTE_EDGE_HELP)
+    add_tuning_options(g)
     g.add_argument(
         "--dynamics",
         choices=[m.value for m in DynamicsModel],
@@ -407,7 +403,7 @@ def config_from_args(argv: Sequence[str] | None) -> FlyConfig:
         shield=a.shield,
         airframe_response=airframe_response_of(a, scenario),
         shield_adjust=adjust_option(a.shield_adjust, a.shield),
-        shield_route_edge_m=route_edge_option(a.shield_route_edge_km, a.shield),
+        shield_tuning=tuning_option(a, a.shield),
         setpoints=SetpointDialect(a.setpoints),
         signing=not a.no_signing,
         workers=a.workers,

@@ -21,6 +21,7 @@ from typing import Any
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.pool import PoolError, check_campaign, read_results
+from tssac_core.assurance.shield_tuning import ShieldTuning
 from tssac_core.common.errors import InputError
 from tssac_core.common.files import sha256_file
 from tssac_core.deploy.numpy_actor import pilot_file
@@ -50,7 +51,7 @@ def campaign_key(cfg: FlyConfig) -> str:
         "lockstep_grant_s": cfg.lockstep_grant_s,
         "shield": cfg.shield,
         "shield_adjust": cfg.shield_adjust,
-        **({"shield_route_edge_m": cfg.shield_route_edge_m} if cfg.shield_route_edge_m else {}),
+        **({"shield_tuning": dataclasses.asdict(cfg.shield_tuning)} if cfg.shield_tuning != ShieldTuning() else {}),
         "airframe_response": None if cfg.airframe_response is None else sha256_file(cfg.airframe_response),
         "setpoints": cfg.setpoints.value,
         "lean_telemetry": cfg.lean_telemetry,
