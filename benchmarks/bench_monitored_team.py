@@ -33,12 +33,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.output import add_json_option  # noqa: E402
 from tssac_core.assurance.ground_loiter import LoiterBound
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, UsageParser, command_description, run, write_json
 from tssac_core.deploy.policy import load_team
 from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, Scenario, load
+from tssac_core.sim.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.sim.varied_airframes import AirframeVariation
 
 ROOT = Path(__file__).resolve().parents[1]

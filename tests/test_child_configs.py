@@ -28,10 +28,10 @@ from mavlink_bridge.link.guided_commands import SetpointDialect
 from sim_vehicles import __main__ as sitl_cli
 from sim_vehicles import from_config as sitl_from_config
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_tuning import ShieldTuning
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES, DynamicsModel, Role, Scenario, ScenarioError, dump, load, sample_layout
 from tssac_core.sim.settings_json import SettingsError, from_json, to_json
+from tssac_core.sim.shield_tuning import ShieldTuning
 from tssac_core.sim.sitl_config import ClockMode, LockstepStart, SitlConfig
 from tssac_core.wire.mission_reset import MissionInput, NextMission
 

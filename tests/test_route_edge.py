@@ -1,4 +1,4 @@
-"""Giving the team its way back (:mod:`tssac_core.assurance.shield_tuning`): a route that leaves the monitor's backups
+"""Giving the team its way back (:mod:`tssac_core.sim.shield_tuning`): a route that leaves the monitor's backups
 their room at the geofence (``--shield-route-edge-km``: the policies' route observation treats a band inside the area's
 edge as a hazard, in the batched world and in the companion alike) and a quicker hand-back (``--shield-release-m``,
 ``--shield-release-decisions``), each safe; the options need the monitor and sane values."""

@@ -43,7 +43,6 @@ from pathlib import Path
 from typing import NotRequired, TypedDict
 
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, command_description, run, seed_arg, write_json
 from tssac_core.common.evaluation_record import (
     BatchedRun,
@@ -59,6 +58,7 @@ from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.observation import ObservationMode
 from tssac_core.sim.pilots import GUIDANCE, PilotSpec
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, ROLES, Role, Scenario, load_for_batched_world
+from tssac_core.sim.shield_tuning import add_tuning_options, tuning_option
 
 POLICY_KINDS = ("sb3", "onnx", "torch")
 """``--policy KIND:FILE``: a Stable-Baselines3 model, an ONNX actor, a whole torch module."""

@@ -29,13 +29,13 @@ from mavlink_bridge.estimation.filter_model import FilterModel
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
 from tssac_core.assurance.monitor import ShieldConfig
-from tssac_core.assurance.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.common.cli import UsageError, UsageParser, bad_input_line
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.shield_options import SHIELD_ADJUST_HELP, adjust_option
 from tssac_core.sim.airframe_response import response_option
 from tssac_core.sim.scenario import Role, ScenarioError, load
 from tssac_core.sim.settings_json import SettingsError
+from tssac_core.sim.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.wire.mission_reset import MissionInput, NextMission, ResetError, redirect_stderr
 
 if TYPE_CHECKING:

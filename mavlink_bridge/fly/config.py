@@ -15,7 +15,6 @@ from mavlink_bridge.companion.config import LOCKSTEP_GRANT_S, check_lockstep_gra
 from mavlink_bridge.link.connection import SerialSpec, parse_connection
 from mavlink_bridge.link.guided_commands import SetpointDialect, add_setpoints_argument
 from mavlink_bridge.link.signing_key import read_signing_key
-from tssac_core.assurance.shield_tuning import ShieldTuning, add_tuning_options, tuning_option
 from tssac_core.common.cli import SEED_MAX, UsageError, UsageParser, seed_arg
 from tssac_core.common.errors import CheckpointError
 from tssac_core.common.files import create_exclusively
@@ -28,6 +27,7 @@ from tssac_core.sim.airframe_response import load_response, response_option
 from tssac_core.sim.lagged_starts import lagged_start_check
 from tssac_core.sim.pilots import GUIDANCE, STRAIGHT
 from tssac_core.sim.scenario import ROLES, Dynamics, DynamicsModel, Scenario, load
+from tssac_core.sim.shield_tuning import ShieldTuning, add_tuning_options, tuning_option
 from tssac_core.wire.uart import BaudError, check_baud
 
 PROG = "python -m mavlink_bridge.fly"

@@ -21,11 +21,11 @@ from typing import Any
 from mavlink_bridge.fly.config import FlyConfig
 from mavlink_bridge.fly.mission_row import MissionRow
 from mavlink_bridge.fly.pool import PoolError, check_campaign, read_results
-from tssac_core.assurance.shield_tuning import ShieldTuning
 from tssac_core.common.errors import InputError
 from tssac_core.common.files import sha256_file
 from tssac_core.deploy.numpy_actor import pilot_file
 from tssac_core.sim.scenario import ROLES
+from tssac_core.sim.shield_tuning import ShieldTuning
 
 
 class ResumeError(InputError):

@@ -1,6 +1,6 @@
 """The monitor's command-line option shared by ``fly``, the companion, ``evaluate`` and the benchmarks,
 ``--shield-adjust``, and the reports' words for what it did (its tuning's options:
-:mod:`tssac_core.assurance.shield_tuning`)."""
+:mod:`tssac_core.sim.shield_tuning`)."""
 
 from __future__ import annotations
 
