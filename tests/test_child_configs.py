@@ -143,7 +143,8 @@ def _fly_config(*extra: str) -> FlyConfig:
 FLY_VARIANTS = [
     [],
     ["--pilot", "straight", "--shield"],
-    ["--shield", "--shield-release-m", "300", "--shield-release-decisions", "1", "--shield-route-edge-km", "3"],
+    ["--shield", "--shield-release-m", "300", "--shield-release-decisions", "1", "--shield-route-edge-km", "3"]
+    + ["--shield-radar-view-km", "1"],
     ["--models", str(DEFAULT_MODELS), "--setpoints", "arduplane"],
     ["--speedup", "10"],
     ["--lockstep-grant-s", "0"],
@@ -176,6 +177,7 @@ def test_fly_configures_a_companion_as_the_equivalent_command_line_would(tmp_pat
             str(tuning.release_decisions),
         ]
         argv += ["--shield-route-edge-km", repr(tuning.route_edge_m / 1000.0)] if tuning.route_edge_m else []
+        argv += ["--shield-radar-view-km", repr(tuning.radar_view_m / 1000.0)] if tuning.radar_view_m else []
         argv += ["--setpoints", cfg.setpoints.value]
         argv += ["--lockstep", "--lockstep-grant-s", repr(cfg.lockstep_grant_s)] if cfg.lockstep else []
         argv += ["--lean-telemetry"] if cfg.lean_telemetry else []
@@ -187,11 +189,12 @@ def test_fly_configures_a_companion_as_the_equivalent_command_line_would(tmp_pat
 
 def test_fly_hands_its_companions_the_monitors_tuning(tmp_path: Path) -> None:
     cfg = _fly_config("--shield", "--shield-release-m", "300", "--shield-release-decisions", "1")
-    cfg = dataclasses.replace(cfg, shield_tuning=dataclasses.replace(cfg.shield_tuning, route_edge_m=2500.0))
+    tuned = dataclasses.replace(cfg.shield_tuning, route_edge_m=2500.0, radar_view_m=1000.0)
+    cfg = dataclasses.replace(cfg, shield_tuning=tuned)
     given = companion_config(cfg, ROLES[0], "udpout:127.0.0.1:9", _fixed_scenario(), tmp_path / "s.json", None, None)
     assert given.shield is not None
     assert (given.shield.release_margin_m, given.shield.release_decisions) == (300.0, 1)
-    assert given.shield.route_edge_margin_m == 2500.0
+    assert (given.shield.route_edge_margin_m, given.shield.radar_view_margin_m) == (2500.0, 1000.0)
     assert _fly_config("--shield").shield_tuning == ShieldTuning()  # untuned: the monitor's defaults
 
 

@@ -7,13 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.routes import (
     KING_MOVES,
     KNIGHT_MOVES,
     RouteConfig,
     RouteMap,
-    pilot_route,
     sample_bilinear,
     wavefront,
 )
@@ -137,11 +135,3 @@ def test_an_edge_margin_makes_the_band_inside_the_area_edge_a_hazard_and_nothing
     # Away from the edges, on a free line to the SAM, the way is the same.
     middle = snapshot(one_radar_world((30.0, 85.0), (20.0, 50.0)))
     np.testing.assert_allclose(banded.detour_m(middle)[0, 0], plain.detour_m(middle)[0, 0])
-
-
-def test_the_pilots_route_is_the_trained_one_unless_the_monitor_asks_for_its_room_at_the_edge():
-    assert pilot_route(None) == RouteConfig()
-    assert pilot_route(ShieldConfig()) == RouteConfig()
-    assert pilot_route(ShieldConfig(route_edge_margin_m=3000.0)) == RouteConfig(edge_margin_m=3000.0)
-    with pytest.raises(ValueError, match="route_edge_margin_m"):
-        ShieldConfig(route_edge_margin_m=-1.0)

@@ -17,8 +17,9 @@ import numpy as np
 from mavlink_bridge.companion.config import STRAIGHT, CompanionConfig
 from tssac_core.deploy.numpy_actor import load_actor
 from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilot
+from tssac_core.sim.pilot_view import PilotView
 from tssac_core.sim.pilots import GuidancePilot, Pilot, PolicyPilot, StraightPilot
-from tssac_core.sim.routes import RouteConfig, RouteMap, pilot_route
+from tssac_core.sim.routes import RouteConfig, RouteMap
 from tssac_core.sim.scenario import Role
 from tssac_core.sim.world_state import WorldState
 
@@ -94,7 +95,7 @@ def make_pilot(config: CompanionConfig) -> HeldPilot:
     """The pilot a configuration names: its model, else ``--pilot`` (guidance by default)."""
     pilot: Pilot
     if config.model is not None:
-        pilot = policy_pilot(config.model, config.role, pilot_route(config.shield))
+        pilot = policy_pilot(config.model, config.role, PilotView.asked_by(config.shield).route())
     elif config.pilot == STRAIGHT:
         pilot = StraightPilot()
     elif config.pilot in ADVERSARY_NAMES:

@@ -26,6 +26,7 @@ from mavlink_bridge.companion.status import CompanionCounters, MissionFlags
 from mavlink_bridge.estimation.state_filter import VehicleStateFilter
 from mavlink_bridge.link.frames import HOLD, Setpoint, action_to_setpoint, setpoint_to_action
 from tssac_core.sim.airframe_response import load_response
+from tssac_core.sim.pilot_view import PilotView
 from tssac_core.sim.scenario import VehicleSpec
 from tssac_core.sim.world_state import WorldState, initial_state
 from tssac_core.wire.mission_events import EventName
@@ -70,7 +71,8 @@ class PilotStep:
         self.shield = shield
         """The runtime-assurance monitor; None: the pilot alone."""
         self.layout_state = layout_state
-        """The mission's start as the pilots see it; each tick the filter's estimate replaces this vehicle's state."""
+        """The mission's start as the pilot is shown it (:mod:`tssac_core.sim.pilot_view`; the monitor has the truth);
+        each tick the filter's estimate replaces this vehicle's state."""
         self.spec = spec
         self.role_index = role_index
         self.dt_ms = dt_ms
@@ -99,11 +101,12 @@ class PilotStep:
                 None if config.airframe_response is None else load_response(config.airframe_response),
             )
         )
-        pilot.action(lambda: layout_state, config.role.index, 0)  # warm up: the guidance plans its route
+        shown = PilotView.asked_by(config.shield).of(layout_state)  # the monitor's room asked of the pilot
+        pilot.action(lambda: shown, config.role.index, 0)  # warm up: the guidance plans its route
         pilot.reset()
         spec = s.vehicle(config.role)
         dt_ms = int(round(s.dt_s * 1000.0))
-        return cls(pilot, shield, layout_state, spec, config.role.index, dt_ms, config.hold_after_s, counters)
+        return cls(pilot, shield, shown, spec, config.role.index, dt_ms, config.hold_after_s, counters)
 
     def reset(self) -> None:
         """Forget the flight (at the start and after a vehicle restart): the pilot's held action and the decision

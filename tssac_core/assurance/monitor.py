@@ -88,10 +88,20 @@ class ShieldConfig:
     route_edge_margin_m: float = 0.0
     """Asked of the pilot, not checked by the monitor: the route field a policy observes treats this band inside the
     area's edge as a hazard, so that the way it is shown round the radars leaves the backups their room at the
-    geofence (``tssac_core.sim.routes.pilot_route``; 0: the route as trained)."""
+    geofence (``tssac_core.sim.pilot_view``; 0: the route as trained)."""
+    radar_view_margin_m: float = 0.0
+    """Asked of the pilot, not checked by the monitor: the pilot is shown every radar this much larger than it is, so
+    that it keeps the backups' room from the radars itself (``tssac_core.sim.pilot_view``; 0: as they are)."""
 
     def __post_init__(self) -> None:
-        for name in ("margin_m", "release_margin_m", "sigma_k", "timing_slack_s", "route_edge_margin_m"):
+        for name in (
+            "margin_m",
+            "release_margin_m",
+            "sigma_k",
+            "timing_slack_s",
+            "route_edge_margin_m",
+            "radar_view_margin_m",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"ShieldConfig.{name} must be a finite number >= 0, got {value}")

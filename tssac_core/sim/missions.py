@@ -30,9 +30,10 @@ from tssac_core.common.stats import (
 )
 from tssac_core.sim.lagged_starts import varied_start_check
 from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.pilot_view import PilotView
 from tssac_core.sim.pilots import PilotSpec, decision_interval
 from tssac_core.sim.reward import RewardConfig, reward
-from tssac_core.sim.routes import RouteConfig, RouteMap, pilot_route
+from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES, Layout, Scenario, StartCheck, sample_layout
 from tssac_core.sim.team import Team
 from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
@@ -292,9 +293,9 @@ def iter_missions(
     out = np.zeros((world.n, len(ROLES)), dtype=bool)
     track: list[np.ndarray] = []
     cfg = RewardConfig()
-    team = Team(pilots, mode, pilot_route(shield))
-    # The reward's route fields are the route observation's when both are RouteConfig(): one field per layout, not two.
-    routes = team.routes if team.routes.cfg == RouteConfig() else RouteMap()
+    team = Team(pilots, mode, PilotView.asked_by(shield))
+    # The reward's route fields are the route observation's when the pilots see the truth: one field per layout.
+    routes = team.routes if team.view.is_truth else RouteMap()
     varied, airframe_rng = _varied_airframes(world, airframes, seed)
     seen = varied if monitor_sees_airframes else None
     if shield is not None and seen is not None and index_list:

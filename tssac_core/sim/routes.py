@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tssac_core.assurance.monitor import ShieldConfig
 from tssac_core.sim.world import cached_constant, constant_operand
 from tssac_core.sim.world_state import WorldState
 
@@ -304,15 +303,7 @@ class RouteConfig:
     edge_margin_m: float = 0.0
     """Cells within this distance of the area's edge count as hazards too (0: the edge is only the grid's end):
     the route a monitored pilot follows leaves the monitor's backups their room at the geofence
-    (:func:`pilot_route`)."""
-
-
-def pilot_route(shield: ShieldConfig | None) -> RouteConfig:
-    """The route field the pilots observe: the default, or with the monitor the one that keeps
-    ``shield.route_edge_margin_m`` from the area's edge."""
-    if shield is None or shield.route_edge_margin_m == 0:
-        return RouteConfig()
-    return RouteConfig(edge_margin_m=shield.route_edge_margin_m)
+    (:class:`~tssac_core.sim.pilot_view.PilotView`)."""
 
 
 class RouteMap:

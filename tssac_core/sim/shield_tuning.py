@@ -1,7 +1,8 @@
-"""How the runtime-assurance monitor hands control back and what it asks of the pilot's route, with the command-line
-options shared by ``fly``, the companion, ``evaluate`` and the benchmarks (``--shield-release-m``,
-``--shield-release-decisions``, ``--shield-route-edge-km``). None of it enters the guarantee: every action the monitor
-accepts and every backup it flies earns it on its own (docs/runtime_assurance.md, "Giving the team its way back")."""
+"""How the runtime-assurance monitor hands control back and what it asks the pilot to be shown
+(:mod:`tssac_core.sim.pilot_view`), with the command-line options shared by ``fly``, the companion, ``evaluate`` and
+the benchmarks (``--shield-release-m``, ``--shield-release-decisions``, ``--shield-radar-view-km``,
+``--shield-route-edge-km``). None of it enters the guarantee: every action the monitor accepts and every backup it
+flies earns it on its own (docs/runtime_assurance.md, "Giving the team its way back")."""
 
 from __future__ import annotations
 
@@ -15,11 +16,13 @@ from tssac_core.common.cli import UsageError
 
 @dataclass(frozen=True)
 class ShieldTuning:
-    """How the monitor hands control back and what it asks of the pilot's route (``--shield-release-m``,
-    ``--shield-release-decisions``, ``--shield-route-edge-km``): none of it enters the guarantee, which every
-    accepted action and backup earns on its own (docs/runtime_assurance.md, 'Giving the team its way back')."""
+    """How the monitor hands control back and what it asks the pilot to be shown (``--shield-release-m``,
+    ``--shield-release-decisions``, ``--shield-radar-view-km``, ``--shield-route-edge-km``): none of it enters the
+    guarantee, which every accepted action and backup earns on its own (docs/runtime_assurance.md, 'Giving the team
+    its way back')."""
 
     route_edge_m: float = 0.0
+    radar_view_m: float = 0.0
     release_m: float = ShieldConfig.release_margin_m
     release_decisions: int = ShieldConfig.release_decisions
 
@@ -29,6 +32,7 @@ class ShieldTuning:
             margin_m=margin_m,
             adjust=adjust,
             route_edge_margin_m=self.route_edge_m,
+            radar_view_margin_m=self.radar_view_m,
             release_margin_m=self.release_m,
             release_decisions=self.release_decisions,
         )
@@ -53,6 +57,14 @@ def add_tuning_options(g: argparse._ActionsContainer) -> None:
         f"{ShieldConfig.release_decisions})",
     )
     g.add_argument(
+        "--shield-radar-view-km",
+        type=float,
+        default=0.0,
+        metavar="KM",
+        help="with --shield: the pilot is shown every radar this much larger than it is, so that it keeps the "
+        "backups' room from the radars itself (default 0: as they are)",
+    )
+    g.add_argument(
         "--shield-route-edge-km",
         type=float,
         default=0.0,
@@ -66,18 +78,21 @@ def add_tuning_options(g: argparse._ActionsContainer) -> None:
 def tuning_option(args: argparse.Namespace, shield: bool) -> ShieldTuning:
     """The tuning the options ask for, checked: finite and >= 0 (a count >= 1), and only with ``--shield`` (one
     :class:`UsageError` line)."""
-    tuning = ShieldTuning(1000.0 * args.shield_route_edge_km, args.shield_release_m, args.shield_release_decisions)
-    for flag, value in (
-        ("--shield-route-edge-km", args.shield_route_edge_km),
-        ("--shield-release-m", tuning.release_m),
-    ):
+    for flag in ("--shield-route-edge-km", "--shield-radar-view-km", "--shield-release-m"):
+        value = getattr(args, flag[2:].replace("-", "_"))
         if not (math.isfinite(value) and value >= 0):
             raise UsageError(f"{flag} must be a finite number >= 0, got {value:g}")
-    if tuning.release_decisions < 1:
-        raise UsageError(f"--shield-release-decisions must be >= 1, got {tuning.release_decisions}")
+    if args.shield_release_decisions < 1:
+        raise UsageError(f"--shield-release-decisions must be >= 1, got {args.shield_release_decisions}")
+    tuning = ShieldTuning(
+        route_edge_m=1000.0 * args.shield_route_edge_km,
+        radar_view_m=1000.0 * args.shield_radar_view_km,
+        release_m=args.shield_release_m,
+        release_decisions=args.shield_release_decisions,
+    )
     if tuning != ShieldTuning() and not shield:
         raise UsageError(
-            "--shield-release-m, --shield-release-decisions and --shield-route-edge-km tune the monitor: "
-            "they need --shield"
+            "the --shield-release-*, --shield-radar-view-km and --shield-route-edge-km options tune the "
+            "monitor: they need --shield"
         )
     return tuning

@@ -14,8 +14,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from tssac_core.sim.observation import ObservationMode
+from tssac_core.sim.pilot_view import PilotView
 from tssac_core.sim.pilots import GuidancePilot, PilotSpec, as_pilot
-from tssac_core.sim.routes import RouteConfig, RouteMap
+from tssac_core.sim.routes import RouteMap
 from tssac_core.sim.scenario import ROLES
 from tssac_core.sim.world import World
 from tssac_core.sim.world_state import snapshot
@@ -25,14 +26,15 @@ class Team:
     """The pilots of the three vehicles of a World; holds actions of pilots with an action_repeat."""
 
     def __init__(
-        self, pilots: Sequence[PilotSpec], default_mode: ObservationMode, route: RouteConfig = RouteConfig()
+        self, pilots: Sequence[PilotSpec], default_mode: ObservationMode, view: PilotView = PilotView()
     ) -> None:
         self.pilots = list(pilots)
         self.default_mode = default_mode
+        self.view = view
+        """What the pilots are shown: the truth, unless a monitor asks for room (:mod:`tssac_core.sim.pilot_view`)."""
         self.guidance = GuidancePilot()
-        self.routes = RouteMap(route)
-        """Route fields for pilots that observe in route mode (``route``: as trained unless the monitor asks for its
-        room at the edge, :func:`~tssac_core.sim.routes.pilot_route`)."""
+        self.routes = RouteMap(view.route())
+        """Route fields for pilots that observe in route mode."""
         self._flown = [
             (j, pilot)
             for j, spec in enumerate(self.pilots)
@@ -46,7 +48,7 @@ class Team:
         if self._held is None or self._held.shape[0] != world.n:
             self._held = np.zeros((world.n, len(ROLES), 2))
         actions = np.zeros((world.n, len(ROLES), 2))
-        state = snapshot(world)
+        state = self.view.of(snapshot(world))
         for j, pilot in self._flown:
             if j == skip:
                 continue
