@@ -65,6 +65,7 @@ from tssac_core.sim.adversaries import ADVERSARY_NAMES, Adversary, AdversaryPilo
 from tssac_core.sim.airframe_response import load_response
 from tssac_core.sim.missions import MissionResults, fly_missions
 from tssac_core.sim.scenario import Scenario, dump, load
+from tssac_core.sim.shield_tuning import ShieldTuning, add_tuning_options, tuning_argv, tuning_option
 from tssac_core.sim.varied_airframes import AirframeVariation
 
 ROOT = Path(tssac_core.__file__).resolve().parents[1]
@@ -111,11 +112,22 @@ class BenchConfig:
     """With ``wind_m_s``: the backups end in calm air's constant turn all the same (the negative control)."""
     shield_adjust: bool = False
     """The monitors fly the passing action nearest a failing proposal before the backup (``fly --shield-adjust``)."""
+    shield_tuning: ShieldTuning = ShieldTuning()
+    """The monitors' hand-back and what they ask the pilots to be shown (``fly --shield-release-m`` and the rest)."""
 
     @property
     def shield(self) -> ShieldConfig:
         """The monitor every row flies."""
-        return ShieldConfig(adjust=self.shield_adjust)
+        return self.shield_tuning.config(self.shield_adjust)
+
+    def shield_settings(self) -> dict[str, Any]:
+        """The monitor's settings as a row records them; what the pilots are shown only when set, so that files
+        written before those settings existed still resume."""
+        shield = dataclasses.asdict(self.shield)
+        for name in ("route_edge_margin_m", "radar_view_margin_m"):
+            if not shield[name]:
+                del shield[name]
+        return shield
 
     def settings(self) -> dict[str, Any]:
         """What a row depends on: rows written under other settings are never reused by ``--resume``."""
@@ -124,7 +136,7 @@ class BenchConfig:
             "sitl_missions": self.sitl_missions,
             "seed": self.seed,
             "episode_steps": self.episode_steps,
-            "shield": dataclasses.asdict(self.shield),
+            "shield": self.shield_settings(),
         }
         if self.sitl_dynamics != "kinematic":  # only when set: files written before these options still resume
             settings["sitl_dynamics"] = self.sitl_dynamics
@@ -191,6 +203,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         help="with --wind-m-s: the backups end in calm air's constant turn all the same (the negative control)",
     )
     p.add_argument("--shield-adjust", action="store_true", help=SHIELD_ADJUST_HELP)
+    add_tuning_options(p)
     p.add_argument("--json", type=Path, help="write the rows here")
     p.add_argument("--resume", action="store_true", help="keep the rows --json holds from the same settings")
     p.add_argument("--no-progress", action="store_true")
@@ -237,6 +250,7 @@ def parse_args(argv: Sequence[str] | None) -> BenchConfig:
         wind_m_s=a.wind_m_s,
         no_loiter=a.no_loiter,
         shield_adjust=a.shield_adjust,
+        shield_tuning=tuning_option(a, True),
     )
 
 
@@ -321,6 +335,7 @@ def sitl_row(adversary: Adversary, name: str, cfg: BenchConfig, work: Path, bar:
         argv += ["--airframe-response", str(cfg.airframe_response)]
     if cfg.shield_adjust:
         argv += ["--shield-adjust"]
+    argv += tuning_argv(cfg.shield_tuning)
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "mavlink_bridge.fly", *argv],
@@ -382,7 +397,12 @@ def sitl_where(name: str, cfg: BenchConfig) -> str:
         where += f" {cfg.sitl_dynamics}"
     if cfg.airframe_response is not None:
         where += " eq5" if cfg.eq5_monitor else " response"
-    return where + (" adjusted" if cfg.shield_adjust else "")
+    return where + (" adjusted" if cfg.shield_adjust else "") + tuned_text(cfg.shield_tuning)
+
+
+def tuned_text(tuning: ShieldTuning) -> str:
+    """A row's place ends in "tuned" when the monitor's hand-back or the pilots' view is not the default."""
+    return "" if tuning == ShieldTuning() else " tuned"
 
 
 def batched_where(name: str, cfg: BenchConfig) -> str:
@@ -393,7 +413,7 @@ def batched_where(name: str, cfg: BenchConfig) -> str:
     where = f"batched {name} airframes" + (" eq5" if cfg.eq5_monitor else "")
     if cfg.wind_m_s:
         where += f" wind {cfg.wind_m_s:g}" + (" turn" if cfg.no_loiter else " loiter")
-    return where + adjusted
+    return where + adjusted + tuned_text(cfg.shield_tuning)
 
 
 def print_table(rows: list[dict[str, Any]]) -> None:
@@ -439,7 +459,7 @@ def write_rows(cfg: BenchConfig, argv: Sequence[str] | None, rows: list[dict[str
             "command": "python benchmarks/bench_adversaries.py " + " ".join(sys.argv[1:] if argv is None else argv),
             "settings": cfg.settings(),
             "episode_steps": cfg.episode_steps,
-            "shield": dataclasses.asdict(cfg.shield),
+            "shield": cfg.shield_settings(),
             "rows": rows,
             "wall_time_s": round(sum(r["wall_time_s"] for r in rows), 1),
         },

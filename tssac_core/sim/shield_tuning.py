@@ -96,3 +96,19 @@ def tuning_option(args: argparse.Namespace, shield: bool) -> ShieldTuning:
             "monitor: they need --shield"
         )
     return tuning
+
+
+def tuning_argv(tuning: ShieldTuning) -> list[str]:
+    """The options that ask for ``tuning`` (none for the default), for a command started with them."""
+    if tuning == ShieldTuning():
+        return []
+    return [
+        "--shield-route-edge-km",
+        repr(tuning.route_edge_m / 1000.0),
+        "--shield-radar-view-km",
+        repr(tuning.radar_view_m / 1000.0),
+        "--shield-release-m",
+        repr(tuning.release_m),
+        "--shield-release-decisions",
+        str(tuning.release_decisions),
+    ]
