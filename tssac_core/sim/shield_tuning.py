@@ -39,7 +39,8 @@ class ShieldTuning:
 
 
 def add_tuning_options(g: argparse._ActionsContainer) -> None:
-    """``--shield-release-m``, ``--shield-release-decisions`` and ``--shield-route-edge-km``."""
+    """The four options: ``--shield-release-m``, ``--shield-release-decisions``, ``--shield-radar-view-km``,
+    ``--shield-route-edge-km``."""
     g.add_argument(
         "--shield-release-m",
         type=float,
