@@ -16,6 +16,7 @@ import pytest
 from tssac_core.assurance.ground_loiter import (
     LoiterLaw,
     WindLoiter,
+    centre_per_heading_m,
     fly_loiter_on_model,
     loiter_centre,
     loiter_radius_m,
@@ -113,6 +114,36 @@ def test_on_the_lag_model_the_loop_settles_on_its_circle_and_does_not_drift() ->
     assert np.abs(beyond[:, lap:]).max() < 10.0
     assert np.all(beyond[:, 3 * lap :].max(axis=1) <= beyond[:, lap : 2 * lap].max(axis=1) + 1.0)
     assert beyond[:, :lap].max() > 200.0  # the entry from a reversal at full bank: the excursion the fit measures
+
+
+def centre_moves_per_heading_m(speeds: np.ndarray, wind_m_s: float, heading_error_rad: float) -> np.ndarray:
+    """How far a heading error moves the loiter's centre, per radian, over a sweep of airspeeds, winds from every
+    direction, headings and both turns: the centre from the air velocity turned by the error against the centre from
+    the air velocity as it is (the same ground position; the radius sized for the speed, as the monitor sizes it)."""
+    v, wind_dir, heading, sign = (
+        a.ravel() for a in np.meshgrid(speeds, np.radians(np.arange(0, 360, 5)), np.radians(np.arange(0, 360, 15)),
+                                       [-1.0, 1.0], indexing="ij")
+    )  # fmt: skip
+    we, wn = wind_m_s * np.cos(wind_dir), wind_m_s * np.sin(wind_dir)
+    radius = loiter_radius_m(v, wind_m_s, np.full_like(v, W), LAW.authority)
+    moved = []
+    for phi in (heading, heading + heading_error_rad):
+        gx, gy = v * np.cos(phi) + we, v * np.sin(phi) + wn
+        moved.append(np.stack(loiter_centre(np.zeros_like(v), np.zeros_like(v), gx, gy, sign, radius)))
+    return np.hypot(*(moved[1] - moved[0])).reshape(len(speeds), -1).max(axis=1) / heading_error_rad
+
+
+def test_a_heading_error_moves_the_loiters_centre_by_at_most_the_monitors_lever_and_the_sweep_reaches_it() -> None:
+    """The lever of ``loiter_backup_error_m``'s heading term on the circle's centre, ``centre_per_heading_m``, is the
+    largest move over the envelope's airspeeds and every wind direction (a 10 m/s wind, 150-300 m/s), reached at the
+    fast end in a headwind: no sweep point exceeds it, and the sweep reaches it within 1% (the lever is no looser than it
+    must be; the one it replaced, R(v_max) v_max / (v_min - W), was twice this)."""
+    speeds = np.linspace(150.0, 300.0, 16)
+    lever = float(centre_per_heading_m(np.array([150.0]), np.array([300.0]), 10.0, np.array([W]), LAW)[0])
+    moves = centre_moves_per_heading_m(speeds, 10.0, 1e-4)
+    assert moves.max() <= lever * 1.0001
+    assert moves.max() >= 0.99 * lever
+    assert moves.argmax() == len(speeds) - 1
 
 
 def test_a_constant_turn_in_the_same_wind_drifts_without_bound() -> None:

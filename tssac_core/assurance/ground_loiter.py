@@ -344,6 +344,22 @@ def loiter_backup_clearance(
     return out - wind.residual_m[:, None]
 
 
+def centre_per_heading_m(
+    speed_min_m_s: np.ndarray, speed_max_m_s: np.ndarray, wind_max_m_s: float, turn_rate_max_rad_s: np.ndarray,
+    law: LoiterLaw,
+) -> np.ndarray:
+    """(M,) how far the loiter's centre moves per radian of heading error at the turn-in's end, at the worst airspeed
+    of the envelope: max over V of R(V) V / (V - W) = (V + W)^2 / (authority omega_max (V - W)), a function with one
+    minimum (at V = 3 W), so its largest value on [v_min, v_max] is at one of the two ends."""
+    w = np.asarray(turn_rate_max_rad_s, dtype=np.float64)
+
+    def at(v: np.ndarray) -> np.ndarray:
+        v = np.asarray(v, dtype=np.float64)
+        return (v + wind_max_m_s) ** 2 / (law.authority * w * (v - wind_max_m_s))
+
+    return np.maximum(at(speed_min_m_s), at(speed_max_m_s))
+
+
 def loiter_backup_error_m(
     err: EstimateError, lim: Limits, dt_s: float, leads: np.ndarray, wind: WindLoiter
 ) -> np.ndarray:
@@ -352,16 +368,17 @@ def loiter_backup_error_m(
 
     Flown from a state off by (d_p, d_phi, d_v), the lead and the turn-in (open loop, time T in all) move by at most
     d_p + v_max T d_phi + T d_v; the loiter's centre, at R from the turn-in's end normal to its ground track, by that
-    plus R_max d_track + dR/dV d_v,
-    where a heading error turns the ground track by at most d_phi v_max / (v_min - W_max) and
+    plus R(V) d_track + dR/dV d_v,
+    where a heading error turns the ground track at airspeed V by at most d_phi V / (V - W_max) (the air velocity
+    turned by d_phi moves the ground velocity by V d_phi, and |g| >= V - W_max), so the centre by
+    d_phi R(V) V / (V - W_max) = d_phi (V + W)^2 / (authority omega_max (V - W)) (:func:`centre_per_heading_m`), and
     dR/dV = (V + W)(V - W) / (authority omega_max V^2) <= 1 / (authority omega_max); its radius by dR/dV d_v. The
     loiter is a closed loop on the flier's estimate of its position, which may be off by d_p again: the circle it
     holds moves by that much too (2 d_p in all)."""
     t = (leads.astype(np.float64)[None, :] + wind.turn_in_steps(dt_s)) * dt_s
     w, vmax = lim.turn_rate_max_rad_s[:, None], lim.speed_max_m_s[:, None]
-    r_max = wind.radius_m(lim.speed_max_m_s, lim.turn_rate_max_rad_s)[:, None]
-    track_per_heading = vmax / (lim.speed_min_m_s[:, None] - wind.max_m_s)
-    lever = vmax * t + r_max * track_per_heading
+    centre = centre_per_heading_m(lim.speed_min_m_s, lim.speed_max_m_s, wind.max_m_s, lim.turn_rate_max_rad_s, wind.law)
+    lever = vmax * t + centre[:, None]
     secs = t + 2.0 / (wind.law.authority * w)
     one = 2.0 * err.position_m[:, None] + err.heading_rad[:, None] * lever + err.speed_m_s[:, None] * secs
     return np.repeat(one[:, :, None], N_TURNS, axis=2).reshape(len(err.position_m), len(leads) * N_TURNS)
