@@ -136,8 +136,8 @@ def centre_moves_per_heading_m(speeds: np.ndarray, wind_m_s: float, heading_erro
 def test_a_heading_error_moves_the_loiters_centre_by_at_most_the_monitors_lever_and_the_sweep_reaches_it() -> None:
     """The lever of ``loiter_backup_error_m``'s heading term on the circle's centre, ``centre_per_heading_m``, is the
     largest move over the envelope's airspeeds and every wind direction (a 10 m/s wind, 150-300 m/s), reached at the
-    fast end in a headwind: no sweep point exceeds it, and the sweep reaches it within 1% (the lever is no looser than it
-    must be; the one it replaced, R(v_max) v_max / (v_min - W), was twice this)."""
+    fast end in a headwind: no sweep point exceeds it, and the sweep reaches it within 1% (no looser than it must be;
+    the lever it replaced, R(v_max) v_max / (v_min - W), was twice this)."""
     speeds = np.linspace(150.0, 300.0, 16)
     lever = float(centre_per_heading_m(np.array([150.0]), np.array([300.0]), 10.0, np.array([W]), LAW)[0])
     moves = centre_moves_per_heading_m(speeds, 10.0, 1e-4)

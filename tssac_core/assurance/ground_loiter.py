@@ -345,7 +345,10 @@ def loiter_backup_clearance(
 
 
 def centre_per_heading_m(
-    speed_min_m_s: np.ndarray, speed_max_m_s: np.ndarray, wind_max_m_s: float, turn_rate_max_rad_s: np.ndarray,
+    speed_min_m_s: np.ndarray,
+    speed_max_m_s: np.ndarray,
+    wind_max_m_s: float,
+    turn_rate_max_rad_s: np.ndarray,
     law: LoiterLaw,
 ) -> np.ndarray:
     """(M,) how far the loiter's centre moves per radian of heading error at the turn-in's end, at the worst airspeed
