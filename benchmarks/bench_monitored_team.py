@@ -7,7 +7,10 @@ achievable acceleration and braking; ``--airframe-response``), in a steady wind 
 per mission, flown twice on the same layouts and airframes: alone, and through the adjusted monitor predicting with
 each airframe's lag (in wind its backups end in the ground loiter, bounded on the lag model at the spans' corners).
 The monitor decides from the world's true state (no estimate error, no link): the SITL's companions add those, so
-this is the monitor's own cost, an upper bound on what it can leave to a team. Prints one row per (team, wind,
+this is the monitor's own cost, an upper bound on what it can leave to a team. ``--decision-error POS HEADING SPEED``
+makes it keep a companion's error bound off every decision's clearance (metres, degrees, m/s; the figures a companion
+reports, e.g. 1.6 2.0 1.31 for a JSBSim F-16's steady flight): what the clearance the filter asks for costs the team,
+apart from the filter's own noise and the link. Prints one row per (team, wind,
 monitor): success and mean cost per UAV with their 95% intervals, interventions per UAV-mission, the flight time
 under the backup; writes them as JSON.
 
@@ -20,6 +23,7 @@ Every figure with the seed it was flown on: choose on one seed, report on anothe
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -40,6 +44,7 @@ from tssac_core.sim.missions import fly_missions
 from tssac_core.sim.scenario import DEFAULT_SCENARIO, Scenario, load
 from tssac_core.sim.shield_tuning import add_tuning_options, tuning_option
 from tssac_core.sim.varied_airframes import AirframeVariation
+from tssac_core.sim.world_monitor import DecisionError
 
 ROOT = Path(__file__).resolve().parents[1]
 F16_RESPONSE = ROOT / "sim_vehicles" / "dynamics" / "airframes" / "f16.response.yaml"
@@ -70,8 +75,16 @@ def fly_row(
     wind_m_s = variation.wind_m_s[1]
     t0 = time.monotonic()
     pilots = load_team(models)
+    error = args.decision_error if shield is not None else None
     results = fly_missions(
-        scenario, pilots, args.episodes, args.seed, shield=shield, airframes=variation, loiter=loiter
+        scenario,
+        pilots,
+        args.episodes,
+        args.seed,
+        shield=shield,
+        airframes=variation,
+        loiter=loiter,
+        decision_error=error,
     )
     record = results.record(scenario.cost_limit)
     row: dict[str, Any] = {
@@ -79,6 +92,7 @@ def fly_row(
         "wind_m_s": wind_m_s,
         "monitor": shield is not None,
         "missions": record.episodes,
+        "decision_error": None if error is None else dataclasses.asdict(error),
         "success_rate": record.success_rate,
         "success_interval95": record.success_interval95,
         "mean_cost": record.mean_cost,
@@ -119,6 +133,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--airframe-response", type=Path, default=F16_RESPONSE)
     p.add_argument("--scenario", type=Path, default=DEFAULT_SCENARIO)
     p.add_argument("--margin-m", type=float, default=ShieldConfig.margin_m, help="the monitor's clearance (m)")
+    p.add_argument(
+        "--decision-error",
+        type=float,
+        nargs=3,
+        metavar=("POS_M", "HEADING_DEG", "SPEED_M_S"),
+        help="the monitor keeps this estimate error bound off every decision's clearance, as a companion would "
+        "(default: none, the true state)",
+    )
     add_tuning_options(p)
     add_json_option(p, "monitored_team")
     args = p.parse_args(argv)
@@ -127,6 +149,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     winds = args.wind_m_s if args.wind_m_s is not None else [0.0, 10.0]
     if any(not (0.0 <= w < 75.0) for w in winds):
         raise UsageError(f"--wind-m-s must be in [0, 75), got {winds}")
+    if args.decision_error is not None:
+        pos, heading_deg, speed = args.decision_error
+        try:
+            args.decision_error = DecisionError(pos, math.radians(heading_deg), speed)
+        except ValueError as e:
+            raise UsageError(f"--decision-error: {e}") from None
     torch.set_num_threads(1)  # the team's forward passes are small: one core each, the other for whatever runs beside
     scenario = load(args.scenario)
     shield = tuning_option(args, True).config(adjust=True, margin_m=args.margin_m)

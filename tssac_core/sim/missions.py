@@ -38,7 +38,7 @@ from tssac_core.sim.scenario import ROLES, Layout, Scenario, StartCheck, sample_
 from tssac_core.sim.team import Team
 from tssac_core.sim.varied_airframes import AirframeVariation, VariedAirframes
 from tssac_core.sim.world import World
-from tssac_core.sim.world_monitor import MonitorCounts, WorldMonitor
+from tssac_core.sim.world_monitor import DecisionError, MonitorCounts, WorldMonitor
 from tssac_core.sim.world_state import snapshot
 
 WORST_MISSIONS = 10
@@ -170,6 +170,7 @@ def fly_missions(
     airframes: AirframeVariation | None = None,
     monitor_sees_airframes: bool = True,
     loiter: LoiterBound | None = None,
+    decision_error: DecisionError | None = None,
 ) -> MissionResults:
     """Fly missions at once (one world each): missions ``indices`` (default ``range(episodes)``) of the run
     seeded ``seed``, each on its own layout (`mission_layout`), or the given ``layouts``.
@@ -187,6 +188,8 @@ def fly_missions(
     negative control); None: eq. 5-6. ``loiter``: with them, the monitor's backups end in the ground loiter that this
     bounds (the wind's backup, :mod:`tssac_core.assurance.ground_loiter`; e.g.
     :meth:`~tssac_core.sim.varied_airframes.AirframeVariation.loiter_bound`), not in a constant turn.
+    ``decision_error``: the monitor keeps this error bound off every decision's clearance, as a companion deciding from
+    its filter's estimate would (:class:`~tssac_core.sim.world_monitor.DecisionError`; None: the true state's 0).
     """
     missions = iter_missions(
         scenario,
@@ -203,6 +206,7 @@ def fly_missions(
         airframes,
         monitor_sees_airframes,
         loiter,
+        decision_error,
     )
     try:
         while True:
@@ -220,11 +224,14 @@ def world_monitor(
     shield: ShieldConfig,
     airframes: VariedAirframes | None,
     loiter: LoiterBound | None,
+    decision_error: DecisionError | None = None,
 ) -> WorldMonitor:
     """The monitor of a batch of missions: deciding at each pilot's decisions, predicting with the ``airframes`` the
-    vehicles fly (None: eq. 5), its backups ending in the ground loiter ``loiter`` bounds where it sees them."""
+    vehicles fly (None: eq. 5), its backups ending in the ground loiter ``loiter`` bounds where it sees them, keeping
+    ``decision_error`` off its clearance."""
     repeats = [decision_interval(p) for p in pilots]
-    return WorldMonitor(world, repeats, shield, airframes, loiter if airframes is not None else None)
+    seen_loiter = loiter if airframes is not None else None
+    return WorldMonitor(world, repeats, shield, airframes, seen_loiter, decision_error)
 
 
 def _varied_airframes(
@@ -276,6 +283,7 @@ def iter_missions(
     airframes: AirframeVariation | None = None,
     monitor_sees_airframes: bool = True,
     loiter: LoiterBound | None = None,
+    decision_error: DecisionError | None = None,
 ) -> Generator[int, None, MissionResults]:
     """:func:`fly_missions` as a generator: it yields the number of missions that finished whenever some did, and
     returns the results (``yield from`` hands them on; a Ray task streams the counts to its driver)."""
@@ -300,7 +308,7 @@ def iter_missions(
     seen = varied if monitor_sees_airframes else None
     if shield is not None and seen is not None and index_list:
         _admit_starts(scenario, seed, index_list, layouts, world, seen, loiter, check or ShieldConfig(), active)
-    monitor = None if shield is None else world_monitor(world, pilots, shield, seen, loiter)
+    monitor = None if shield is None else world_monitor(world, pilots, shield, seen, loiter, decision_error)
     backup_track: list[np.ndarray] = []
     while world.running.any():
         if record:

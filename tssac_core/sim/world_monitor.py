@@ -38,6 +38,29 @@ from tssac_core.sim.world import N_ROLES, World
 from tssac_core.sim.world_state import WorldState
 
 
+@dataclass(frozen=True)
+class DecisionError:
+    """An error bound the batched monitor keeps as if it decided from an estimate, the same for every vehicle and
+    decision (it still decides from the true state): what a companion's filter costs the team in clearance, measured
+    apart from the filter itself (``benchmarks/bench_monitored_team.py --decision-error``). The figures are a
+    companion's :func:`~tssac_core.assurance.monitor.companion_error` before a decision's interval: position (m),
+    heading (rad, the turn rate's share included) and speed (m/s)."""
+
+    position_m: float
+    heading_rad: float
+    speed_m_s: float
+
+    def __post_init__(self) -> None:
+        for name in ("position_m", "heading_rad", "speed_m_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"a decision error's {name} must be a finite number >= 0, got {value}")
+
+    def rows(self, m: int) -> EstimateError:
+        """The bound for ``m`` vehicles."""
+        return EstimateError(np.full(m, self.position_m), np.full(m, self.heading_rad), np.full(m, self.speed_m_s))
+
+
 @dataclass
 class MonitorCounts:
     """Per world and vehicle, (N, 3)."""
@@ -68,6 +91,7 @@ class WorldMonitor:
         cfg: ShieldConfig,
         airframes: VariedAirframes | None = None,
         loiter: LoiterBound | None = None,
+        decision_error: DecisionError | None = None,
     ) -> None:
         if len(repeats) != N_ROLES:
             raise ValueError(f"one decision interval per role, got {repeats}")
@@ -80,6 +104,8 @@ class WorldMonitor:
         """The world's vehicles fly these airframes (None: eq. 5-6): the monitor predicts with their lag."""
         self.loiter = loiter
         """The backups end in the ground loiter, bounded by this (None: a constant turn, calm air's backup)."""
+        self.decision_error = decision_error
+        """Kept off every decision's clearance as a companion's estimate error would be (None: the true state's 0)."""
         self.repeats = np.asarray(repeats, dtype=np.int64)
         n = world.n
         c = world.c
@@ -290,6 +316,7 @@ class WorldMonitor:
             steps,
             self.cfg.margin_m,
             self.cfg,
+            error=None if self.decision_error is None else self.decision_error.rows(len(flat)),
             prediction=prediction,
         )
         self.memory = self.memory.merged(flat, d.memory)
